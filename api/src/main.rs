@@ -1,0 +1,2 @@
+//! The `icms` command-line tool.
+fn main() {}

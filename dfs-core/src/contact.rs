@@ -1,0 +1,303 @@
+//! Contacts: detection between fingertip spheres and the object, contact frames, the contact
+//! models of the paper's Table 1 (eq. 15-16, 20) and the Coulomb friction model (eq. 17-18).
+//!
+//! **Contact frame rule.** z is the surface normal pointing *into* the object (a finger that
+//! pushes has a positive normal intensity). x is the component of the object-frame axis least
+//! aligned with z (ties broken by the lower index x < y < z) that is orthogonal to z,
+//! normalised; y = z × x. The rule is deterministic but arbitrary: compare only quantities
+//! that do not depend on it (normal component, tangential magnitude).
+//!
+//! **Intensities** are stored as a 4-vector `(c_x, c_y, c_z, c_τ)`: tangential forces along x
+//! and y (N), the normal force along z (N) and the torsional moment about z (N·m). A contact
+//! model uses a subset: frictionless `c_z`; point with friction `c_x, c_y, c_z`; soft finger all
+//! four. Unused components are zero in every transmitted quantity.
+
+use crate::math::{Real, Rotation, Vector, Wrench};
+use nalgebra::{Matrix3, Vector4};
+use serde::{Deserialize, Serialize};
+
+/// Contact wrench intensities `(c_x, c_y, c_z, c_τ)` in the contact frame (N, N, N, N·m).
+pub type Intensity = Vector4<Real>;
+
+/// The contact models of Table 1 (MuJoCo's condim 1 / 3 / 4).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize, Default)]
+#[serde(rename_all = "snake_case")]
+pub enum ContactModel {
+    /// One unit wrench: the normal force.
+    Frictionless,
+    /// Three unit wrenches: two tangential forces and the normal force.
+    #[default]
+    PointWithFriction,
+    /// Four: point with friction plus the torsional moment about the normal.
+    SoftFinger,
+}
+
+impl ContactModel {
+    /// Number of unit wrenches `k_i` the model transmits.
+    pub fn dim(self) -> usize {
+        match self {
+            ContactModel::Frictionless => 1,
+            ContactModel::PointWithFriction => 3,
+            ContactModel::SoftFinger => 4,
+        }
+    }
+
+    /// Which of the four intensity components the model transmits.
+    pub fn mask(self) -> Intensity {
+        match self {
+            ContactModel::Frictionless => Intensity::new(0.0, 0.0, 1.0, 0.0),
+            ContactModel::PointWithFriction => Intensity::new(1.0, 1.0, 1.0, 0.0),
+            ContactModel::SoftFinger => Intensity::new(1.0, 1.0, 1.0, 1.0),
+        }
+    }
+
+    /// The model's intensities as a plain list in Table 1's order (length [`dim`](Self::dim)).
+    pub fn components(self, c: &Intensity) -> ([Real; 4], usize) {
+        match self {
+            ContactModel::Frictionless => ([c[2], 0.0, 0.0, 0.0], 1),
+            ContactModel::PointWithFriction => ([c[0], c[1], c[2], 0.0], 3),
+            ContactModel::SoftFinger => ([c[0], c[1], c[2], c[3]], 4),
+        }
+    }
+
+    /// Name as used in files and the API.
+    pub fn name(self) -> &'static str {
+        match self {
+            ContactModel::Frictionless => "frictionless",
+            ContactModel::PointWithFriction => "point_with_friction",
+            ContactModel::SoftFinger => "soft_finger",
+        }
+    }
+}
+
+/// Coulomb friction parameters.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct Friction {
+    /// Coulomb coefficient μ (dimensionless), ≥ 0. Default 0.8.
+    pub mu: Real,
+    /// Torsional coefficient μ_t (m): `|c_τ| ≤ μ_t c_z` for the soft finger. Default 0.005.
+    pub mu_torsion: Real,
+}
+
+impl Default for Friction {
+    fn default() -> Self {
+        Friction { mu: 0.8, mu_torsion: 0.005 }
+    }
+}
+
+/// The geometry of one contact on the object: point and frame in B.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ContactFrame {
+    /// Contact point in B (m).
+    pub p_b: Vector,
+    /// Rotation of the contact frame C in B; its third column is the inward normal.
+    pub rot_b: Rotation,
+}
+
+impl ContactFrame {
+    /// A contact at `p_b` with inward normal `z_b` (unit), tangents by the module's rule.
+    pub fn from_normal(p_b: Vector, z_b: Vector) -> Self {
+        let z = z_b.normalize();
+        let mut k = 0;
+        for i in 1..3 {
+            if z[i].abs() < z[k].abs() - 1e-12 {
+                k = i;
+            }
+        }
+        let mut e = Vector::zeros();
+        e[k] = 1.0;
+        let x = (e - z * z.dot(&e)).normalize();
+        let y = z.cross(&x);
+        let m = Matrix3::from_columns(&[x, y, z]);
+        ContactFrame { p_b, rot_b: Rotation::from_matrix_eps(&m, 1e-12, 8, Rotation::identity()) }
+    }
+
+    /// Inward normal in B.
+    pub fn normal_b(&self) -> Vector {
+        self.rot_b * Vector::z()
+    }
+
+    /// The pose `V_i⁻¹` of C in B, whose wrench map is `Λ_i`.
+    pub fn pose_in_b(&self) -> crate::math::Isometry {
+        crate::math::Isometry::from_parts(self.p_b.into(), self.rot_b)
+    }
+
+    /// Wrench in B produced by intensities `c` (the columns of `ᴮW` for this contact, eq. 22).
+    #[inline]
+    pub fn wrench_b(&self, c: &Intensity) -> Wrench {
+        let f = self.rot_b * Vector::new(c[0], c[1], c[2]);
+        let m = self.p_b.cross(&f) + self.rot_b * Vector::new(0.0, 0.0, c[3]);
+        crate::math::wrench(&f, &m)
+    }
+
+    /// Contact-frame intensities of a force (N) expressed in B acting at the contact point.
+    #[inline]
+    pub fn intensities_of_force_b(&self, f_b: &Vector) -> Intensity {
+        let f_c = self.rot_b.inverse() * f_b;
+        Intensity::new(f_c.x, f_c.y, f_c.z, 0.0)
+    }
+}
+
+/// Unit wrenches `ᶜw_ij` of a contact model in the contact frame (Table 1), as the columns of
+/// a 6x4 matrix in the `(c_x, c_y, c_z, c_τ)` layout (unused columns zero).
+pub fn unit_wrenches_c(model: ContactModel) -> nalgebra::Matrix6x4<Real> {
+    let mask = model.mask();
+    let mut w = nalgebra::Matrix6x4::zeros();
+    w[(0, 0)] = mask[0];
+    w[(1, 1)] = mask[1];
+    w[(2, 2)] = mask[2];
+    w[(5, 3)] = mask[3];
+    w
+}
+
+/// Split of a contact's intensities by the friction model (eq. 17-18).
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct FrictionSplit {
+    /// `c̃`: what acts on the object.
+    pub transmitted: Intensity,
+    /// `ĉ` plus the rest force `ᶜf̂`: what does not (accelerates the finger).
+    pub rest: Intensity,
+    /// The requested intensities were outside the cone (the contact slips).
+    pub slip: bool,
+    /// The normal intensity was not positive: the finger does not push (no contact force).
+    pub separating: bool,
+}
+
+/// Applies the contact model and the exact, unilateral Coulomb cone to intensities `c`
+/// (eq. 15-18): components the model does not transmit go to the rest; `c_z ≤ 0` transmits
+/// nothing; a tangential part beyond `μ c_z` is scaled back onto the cone (direction kept) and
+/// the excess joins the rest; likewise `|c_τ| ≤ μ_t c_z` for the soft finger.
+pub fn apply_friction(model: ContactModel, friction: &Friction, c: &Intensity) -> FrictionSplit {
+    let masked = c.component_mul(&model.mask());
+    let mut t = masked;
+    let mut slip = false;
+    if masked[2] <= 0.0 {
+        return FrictionSplit { transmitted: Intensity::zeros(), rest: *c, slip: false, separating: true };
+    }
+    let n = masked[2];
+    let tan = (masked[0] * masked[0] + masked[1] * masked[1]).sqrt();
+    let limit = friction.mu.max(0.0) * n;
+    if tan > limit {
+        let s = if tan > 0.0 { limit / tan } else { 0.0 };
+        t[0] *= s;
+        t[1] *= s;
+        slip = true;
+    }
+    let tl = friction.mu_torsion.max(0.0) * n;
+    if t[3].abs() > tl {
+        t[3] = t[3].signum() * tl;
+        slip = true;
+    }
+    FrictionSplit { transmitted: t, rest: c - t, slip, separating: false }
+}
+
+/// True when `c` is inside the model's cone (with a relative tolerance for rounding).
+pub fn in_cone(model: ContactModel, friction: &Friction, c: &Intensity) -> bool {
+    let s = apply_friction(model, friction, c);
+    let scale = 1e-9 * (1.0 + c.norm());
+    !s.separating && (s.transmitted - c.component_mul(&model.mask())).norm() <= scale
+}
+
+/// Normal force (N) and tangential magnitude (N) of intensities.
+pub fn normal_and_tangential(c: &Intensity) -> (Real, Real) {
+    (c[2], (c[0] * c[0] + c[1] * c[1]).sqrt())
+}
+
+/// A detected contact between a fingertip sphere and the object.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Detection {
+    /// Contact geometry on the object surface, in B.
+    pub frame: ContactFrame,
+    /// Penetration depth (m): positive when the tip overlaps the object, negative for a gap.
+    pub penetration: Real,
+}
+
+/// Detects a contact between a fingertip sphere (centre `centre_b` in B, radius `radius`) and
+/// the object's shape. Returns the closest surface point with its frame when the gap is at most
+/// `margin` (m); `None` otherwise.
+pub fn detect(shape: &crate::object::Shape, centre_b: &Vector, radius: Real, margin: Real) -> Option<Detection> {
+    let (d, c, n_out) = shape.closest(centre_b);
+    let gap = d - radius;
+    if gap > margin {
+        return None;
+    }
+    Some(Detection { frame: ContactFrame::from_normal(c, -n_out), penetration: -gap })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::object::Shape;
+    use proptest::prelude::*;
+
+    fn f() -> Friction {
+        Friction { mu: 0.5, mu_torsion: 0.01 }
+    }
+
+    #[test]
+    fn contact_frames_are_right_handed_with_z_into_the_object() {
+        let s = Shape::Sphere { radius: 0.1 };
+        let d = detect(&s, &Vector::new(0.0, 0.0, -0.11), 0.01, 1e-3).unwrap();
+        assert!((d.frame.normal_b() - Vector::z()).norm() < 1e-12);
+        let m = d.frame.rot_b.to_rotation_matrix().into_inner();
+        assert!((m.determinant() - 1.0).abs() < 1e-12);
+        assert!(d.penetration.abs() < 1e-12);
+        assert!(detect(&s, &Vector::new(0.0, 0.0, -0.2), 0.01, 1e-3).is_none());
+    }
+
+    #[test]
+    fn a_pulling_finger_transmits_nothing() {
+        let s = apply_friction(ContactModel::PointWithFriction, &f(), &Intensity::new(0.1, 0.0, -1.0, 0.0));
+        assert!(s.separating);
+        assert_eq!(s.transmitted, Intensity::zeros());
+    }
+
+    #[test]
+    fn frictionless_contacts_pass_only_the_normal() {
+        let s = apply_friction(ContactModel::Frictionless, &f(), &Intensity::new(0.3, 0.2, 1.0, 0.1));
+        assert_eq!(s.transmitted, Intensity::new(0.0, 0.0, 1.0, 0.0));
+        assert_eq!(s.rest, Intensity::new(0.3, 0.2, 0.0, 0.1));
+        assert!(!s.slip);
+    }
+
+    #[test]
+    fn soft_finger_torsion_is_limited() {
+        let s = apply_friction(ContactModel::SoftFinger, &f(), &Intensity::new(0.0, 0.0, 2.0, 0.5));
+        assert!((s.transmitted[3] - 0.02).abs() < 1e-12);
+        assert!(s.slip);
+    }
+
+    proptest! {
+        #[test]
+        fn the_friction_split_is_inside_the_cone_and_adds_up(
+            c in prop::array::uniform4(-5.0..5.0f64), mu in 0.0..2.0f64, model in 0usize..3
+        ) {
+            let model = [ContactModel::Frictionless, ContactModel::PointWithFriction, ContactModel::SoftFinger][model];
+            let fr = Friction { mu, mu_torsion: 0.01 };
+            let c = Intensity::from_row_slice(&c);
+            let s = apply_friction(model, &fr, &c);
+            prop_assert!((s.transmitted + s.rest - c).norm() < 1e-12);
+            let (n, t) = normal_and_tangential(&s.transmitted);
+            prop_assert!(n >= 0.0);
+            prop_assert!(t <= mu * n + 1e-12);
+            prop_assert!(s.transmitted[3].abs() <= 0.01 * n + 1e-12);
+            if !s.separating && !s.slip {
+                prop_assert!(in_cone(model, &fr, &c));
+            }
+        }
+
+        #[test]
+        fn intensities_of_a_force_reproduce_it(p in prop::array::uniform3(-1.0..1.0f64), n in prop::array::uniform3(-1.0..1.0f64), fv in prop::array::uniform3(-3.0..3.0f64)) {
+            let n = Vector::from(n);
+            prop_assume!(n.norm() > 0.1);
+            let fr = ContactFrame::from_normal(Vector::from(p), n);
+            let force = Vector::from(fv);
+            let c = fr.intensities_of_force_b(&force);
+            let w = fr.wrench_b(&c);
+            prop_assert!((crate::math::force_of(&w) - force).norm() < 1e-9);
+            prop_assert!((crate::math::moment_of(&w) - fr.p_b.cross(&force)).norm() < 1e-9);
+            let m = fr.rot_b.to_rotation_matrix().into_inner();
+            prop_assert!((m.determinant() - 1.0).abs() < 1e-9);
+        }
+    }
+}

@@ -1,0 +1,1 @@
+//! The DFS tick (paper Fig. 6).

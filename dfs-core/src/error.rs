@@ -1,0 +1,60 @@
+//! The one error type of dfs-core.
+
+use thiserror::Error;
+
+/// Everything that can go wrong in dfs-core. Bad input is reported, never a panic.
+#[derive(Debug, Error, Clone, PartialEq)]
+pub enum DfsError {
+    /// A joint angle or torque (or other input) is NaN or infinite.
+    #[error("{what} is not finite (index {index}: {value})")]
+    NotFinite {
+        /// Which input (for example "joint angle").
+        what: &'static str,
+        /// Index of the offending element.
+        index: usize,
+        /// The value found.
+        value: f64,
+    },
+    /// An input is finite but outside its allowed range.
+    #[error("{what} {index} = {value} is outside [{lower}, {upper}]")]
+    OutOfRange {
+        /// Which input (for example "joint angle").
+        what: &'static str,
+        /// Index of the offending element.
+        index: usize,
+        /// The value found.
+        value: f64,
+        /// Lower bound.
+        lower: f64,
+        /// Upper bound.
+        upper: f64,
+    },
+    /// A vector has the wrong number of elements.
+    #[error("{what} has {got} elements, expected {expected}")]
+    WrongLength {
+        /// Which input.
+        what: &'static str,
+        /// Number of elements given.
+        got: usize,
+        /// Number expected.
+        expected: usize,
+    },
+    /// A model or parameter is invalid; the message names the field.
+    #[error("invalid {field}: {reason}")]
+    Invalid {
+        /// The field (for example "object.mass").
+        field: String,
+        /// What is wrong with it.
+        reason: String,
+    },
+}
+
+impl DfsError {
+    /// Shorthand for [`DfsError::Invalid`].
+    pub fn invalid(field: impl Into<String>, reason: impl Into<String>) -> Self {
+        DfsError::Invalid { field: field.into(), reason: reason.into() }
+    }
+}
+
+/// Result alias of dfs-core.
+pub type Result<T> = std::result::Result<T, DfsError>;

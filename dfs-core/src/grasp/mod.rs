@@ -1,0 +1,154 @@
+//! The grasp matrix `ᴮW` (eq. 22), object force `ᴮf̃ = ᴮW c̃` (eq. 23), the minimum-norm
+//! distribution `c_o = W⁺ f` (eq. 27), grasp force optimisation and grasp quality.
+//!
+//! `W` has a fixed capacity of four columns per contact (layout of
+//! [`Intensity`](crate::contact::Intensity)); columns a contact model does not transmit are
+//! zero, so they carry no intensity. `W⁺ f = Wᵀ (W Wᵀ)⁺ f` with a tolerance on the 6x6
+//! `W Wᵀ`: finite for one contact or collinear contacts, allocation-free.
+
+pub mod optimise;
+pub mod quality;
+
+use crate::contact::{ContactFrame, ContactModel, Intensity};
+use crate::hand::MAX_TIPS;
+use crate::math::{sym_pinv6, sym_rank6, Mat6, Real, Wrench};
+use nalgebra::SMatrix;
+
+/// Most contacts a grasp can have (one per fingertip).
+pub const MAX_CONTACTS: usize = MAX_TIPS;
+/// Columns of `W` at capacity.
+pub const MAX_COLUMNS: usize = 4 * MAX_CONTACTS;
+/// Relative eigenvalue tolerance of the pseudo-inverse.
+pub const PINV_TOLERANCE: Real = 1e-9;
+
+/// The grasp matrix of up to [`MAX_CONTACTS`] contacts.
+#[derive(Debug, Clone, Copy)]
+pub struct GraspMatrix {
+    /// `ᴮW`: six rows, four columns per contact (unused columns zero).
+    pub w: SMatrix<Real, 6, MAX_COLUMNS>,
+    /// Number of contacts.
+    pub n: usize,
+    /// `(W Wᵀ)⁺`.
+    wwt_pinv: Mat6,
+    /// Rank of `W`.
+    pub rank: usize,
+}
+
+impl GraspMatrix {
+    /// Builds `ᴮW` for the contacts (at most [`MAX_CONTACTS`]; extra contacts are ignored).
+    pub fn new(contacts: &[ContactFrame], model: ContactModel) -> Self {
+        let mut w = SMatrix::<Real, 6, MAX_COLUMNS>::zeros();
+        let n = contacts.len().min(MAX_CONTACTS);
+        let mask = model.mask();
+        for (i, c) in contacts.iter().take(n).enumerate() {
+            for k in 0..4 {
+                if mask[k] != 0.0 {
+                    let mut e = Intensity::zeros();
+                    e[k] = 1.0;
+                    w.set_column(4 * i + k, &c.wrench_b(&e));
+                }
+            }
+        }
+        let wwt = w * w.transpose();
+        GraspMatrix { w, n, wwt_pinv: sym_pinv6(&wwt, PINV_TOLERANCE), rank: sym_rank6(&wwt, PINV_TOLERANCE) }
+    }
+
+    /// `ᴮf̃ = ᴮW c̃` (eq. 23) for per-contact intensities.
+    pub fn wrench(&self, c: &[Intensity]) -> Wrench {
+        let mut f = Wrench::zeros();
+        for (i, ci) in c.iter().take(self.n).enumerate() {
+            f += self.w.fixed_view::<6, 4>(0, 4 * i) * ci;
+        }
+        f
+    }
+
+    /// The minimum-norm intensities `W⁺ f` (eq. 27), written into `out[..n]`.
+    pub fn distribute(&self, f: &Wrench, out: &mut [Intensity]) {
+        let y = self.wwt_pinv * f;
+        for (i, o) in out.iter_mut().take(self.n).enumerate() {
+            *o = self.w.fixed_view::<6, 4>(0, 4 * i).transpose() * y;
+        }
+    }
+
+    /// True when `W` spans all six wrench directions (necessary for force closure).
+    pub fn full_rank(&self) -> bool {
+        self.rank == 6
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::math::Vector;
+    use proptest::prelude::*;
+
+    /// The paper's §3.4 sphere contacts.
+    pub(crate) fn paper_contacts() -> Vec<ContactFrame> {
+        [[0.054, 0.054, -0.059], [0.0, 0.076, -0.059], [-0.054, 0.054, -0.059], [0.0, -0.076, -0.059]]
+            .iter()
+            .map(|p| {
+                let p = Vector::from(*p);
+                let on_surface = p.normalize() * 0.1;
+                let _ = on_surface;
+                ContactFrame::from_normal(p, -p.normalize())
+            })
+            .collect()
+    }
+
+    #[test]
+    fn the_paper_sphere_example_reproduces_the_notes_table() {
+        let contacts = paper_contacts();
+        let g = GraspMatrix::new(&contacts, ContactModel::PointWithFriction);
+        let mut c = [Intensity::zeros(); 4];
+        g.distribute(&Wrench::new(0.0, 0.0, 9.81, 0.0, 0.0, 0.0), &mut c);
+        let expected = [(1.197, 1.550), (0.954, 1.229), (1.197, 1.550), (2.660, 3.427)];
+        for (ci, (n, t)) in c.iter().zip(expected) {
+            let (cn, ct) = crate::contact::normal_and_tangential(ci);
+            assert!((cn - n).abs() / n < 0.01, "normal {cn} vs {n}");
+            assert!((ct - t).abs() / t < 0.01, "tangential {ct} vs {t}");
+        }
+        let f = g.wrench(&c);
+        assert!((f - Wrench::new(0.0, 0.0, 9.81, 0.0, 0.0, 0.0)).norm() < 1e-9);
+    }
+
+    #[test]
+    fn one_contact_and_collinear_contacts_stay_finite() {
+        let one = [ContactFrame::from_normal(Vector::new(0.0, 0.0, -0.1), Vector::z())];
+        let g = GraspMatrix::new(&one, ContactModel::PointWithFriction);
+        assert_eq!(g.rank, 3);
+        let mut c = [Intensity::zeros(); 1];
+        g.distribute(&Wrench::new(0.0, 0.0, 9.81, 0.3, 0.0, 0.0), &mut c);
+        assert!(c[0].iter().all(|v| v.is_finite()));
+        assert!((c[0][2] - 9.81).abs() < 1e-6);
+        let line = [
+            ContactFrame::from_normal(Vector::new(-0.1, 0.0, 0.0), Vector::x()),
+            ContactFrame::from_normal(Vector::new(0.1, 0.0, 0.0), -Vector::x()),
+        ];
+        let g = GraspMatrix::new(&line, ContactModel::PointWithFriction);
+        assert_eq!(g.rank, 5);
+        assert!(!g.full_rank());
+    }
+
+    proptest! {
+        #[test]
+        fn w_times_w_pinv_reproduces_any_wrench_in_its_range(
+            pts in prop::collection::vec(prop::array::uniform3(-1.0..1.0f64), 3..6),
+            f in prop::array::uniform6(-10.0..10.0f64)
+        ) {
+            let contacts: Vec<_> = pts.iter().filter(|p| Vector::from(**p).norm() > 0.1)
+                .map(|p| { let p = Vector::from(*p).normalize() * 0.1; ContactFrame::from_normal(p, -p) }).collect();
+            let g = GraspMatrix::new(&contacts, ContactModel::SoftFinger);
+            let f = Wrench::from_row_slice(&f);
+            let mut c = [Intensity::zeros(); MAX_CONTACTS];
+            g.distribute(&f, &mut c);
+            let back = g.wrench(&c[..contacts.len()]);
+            // The projection of f onto range(W) is reproduced exactly; a second pass is idempotent.
+            let mut c2 = [Intensity::zeros(); MAX_CONTACTS];
+            g.distribute(&back, &mut c2);
+            prop_assert!((g.wrench(&c2[..contacts.len()]) - back).norm() < 1e-6 * (1.0 + f.norm()));
+            if g.full_rank() {
+                prop_assert!((back - f).norm() < 1e-6 * (1.0 + f.norm()));
+            }
+        }
+    }
+}

@@ -1,0 +1,19 @@
+//! # dfs-core: the Dynamic Force Simulator
+//!
+//! Pure, synchronous physics after Buss and Hashimoto, *Intelligent Cooperative Manipulation
+//! Using Dynamic Force Simulator* (§3): frames and wrench maps, hand kinematics, contact and
+//! Coulomb friction models, the grasp matrix, Newton-Euler object dynamics, force feedback to
+//! the glove, grasp force optimisation, and the DFS tick that strings them together.
+//!
+//! No I/O, no async, no database. The tick ([`dfs::Dfs::step`]) allocates nothing.
+
+pub mod contact;
+pub mod dfs;
+pub mod error;
+pub mod frames;
+pub mod grasp;
+pub mod hand;
+pub mod math;
+pub mod object;
+
+pub use error::{DfsError, Result};

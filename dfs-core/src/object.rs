@@ -1,0 +1,317 @@
+//! Objects: shapes with mass properties, their state, and the Newton-Euler step (eq. 24-26).
+//!
+//! Formulation (NOTES.md, "eq. 25-26 mix frames"): the object frame B sits at the centre of
+//! mass; position and linear velocity are in the world frame, angular velocity in B. Wrenches
+//! on the object are given in B at its origin, as the paper does. Newton-Euler:
+//! `m v̇ = R f_B + m g`, `H ω̇ = m_B − ω × Hω`; orientation is integrated as a unit quaternion.
+
+use crate::error::{DfsError, Result};
+use crate::math::{force_of, moment_of, wrench, Isometry, Mat3, Real, Rotation, Vector, Wrench};
+use serde::{Deserialize, Serialize};
+
+/// Geometric shape of an object, centred at the object frame B.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(tag = "shape", rename_all = "snake_case", deny_unknown_fields)]
+pub enum Shape {
+    /// A sphere of `radius` (m).
+    Sphere {
+        /// Radius (m), > 0.
+        radius: Real,
+    },
+    /// A box with half extents along B's x, y, z (m).
+    Box {
+        /// Half extents (m), each > 0.
+        half_extents: [Real; 3],
+    },
+    /// A cylinder with its axis along B's z.
+    Cylinder {
+        /// Radius (m), > 0.
+        radius: Real,
+        /// Half of the height (m), > 0.
+        half_height: Real,
+    },
+}
+
+impl Shape {
+    /// Name of the shape ("sphere", "box", "cylinder").
+    pub fn name(&self) -> &'static str {
+        match self {
+            Shape::Sphere { .. } => "sphere",
+            Shape::Box { .. } => "box",
+            Shape::Cylinder { .. } => "cylinder",
+        }
+    }
+
+    /// Checks that every dimension is finite and positive; the error names the field.
+    pub fn validate(&self) -> Result<()> {
+        let check = |field: &str, v: Real| {
+            if v.is_finite() && v > 0.0 {
+                Ok(())
+            } else {
+                Err(DfsError::invalid(format!("object.{field}"), format!("must be a finite number > 0, got {v}")))
+            }
+        };
+        match *self {
+            Shape::Sphere { radius } => check("radius", radius),
+            Shape::Box { half_extents } => {
+                for (i, h) in half_extents.iter().enumerate() {
+                    check(&format!("half_extents[{i}]"), *h)?;
+                }
+                Ok(())
+            }
+            Shape::Cylinder { radius, half_height } => {
+                check("radius", radius)?;
+                check("half_height", half_height)
+            }
+        }
+    }
+
+    /// Rotational inertia about the centre for a uniform solid of mass `mass` (kg·m²).
+    pub fn inertia(&self, mass: Real) -> Mat3 {
+        match *self {
+            Shape::Sphere { radius } => Mat3::identity() * (0.4 * mass * radius * radius),
+            Shape::Box { half_extents: [a, b, c] } => {
+                let (x, y, z) = ((2.0 * a).powi(2), (2.0 * b).powi(2), (2.0 * c).powi(2));
+                Mat3::from_diagonal(&Vector::new(y + z, x + z, x + y)) * (mass / 12.0)
+            }
+            Shape::Cylinder { radius, half_height } => {
+                let h2 = (2.0 * half_height).powi(2);
+                let ixx = mass * (3.0 * radius * radius + h2) / 12.0;
+                Mat3::from_diagonal(&Vector::new(ixx, ixx, 0.5 * mass * radius * radius))
+            }
+        }
+    }
+
+    /// Signed distance from a point in B to the surface (negative inside), the closest surface
+    /// point, and the outward unit normal there.
+    pub fn closest(&self, p_b: &Vector) -> (Real, Vector, Vector) {
+        match *self {
+            Shape::Sphere { radius } => {
+                let n = p_b.norm();
+                let dir = if n > 1e-12 { p_b / n } else { Vector::z() };
+                (n - radius, dir * radius, dir)
+            }
+            Shape::Box { half_extents } => closest_on_box(p_b, &Vector::from(half_extents)),
+            Shape::Cylinder { radius, half_height } => closest_on_cylinder(p_b, radius, half_height),
+        }
+    }
+
+    /// Bounding radius about the centre (m).
+    pub fn bounding_radius(&self) -> Real {
+        match *self {
+            Shape::Sphere { radius } => radius,
+            Shape::Box { half_extents } => Vector::from(half_extents).norm(),
+            Shape::Cylinder { radius, half_height } => (radius * radius + half_height * half_height).sqrt(),
+        }
+    }
+}
+
+fn closest_on_box(p: &Vector, h: &Vector) -> (Real, Vector, Vector) {
+    let q = p.abs() - h;
+    let outside = Vector::new(q.x.max(0.0), q.y.max(0.0), q.z.max(0.0));
+    if outside.norm() > 0.0 {
+        // Outside: clamp to the box.
+        let c = Vector::new(p.x.clamp(-h.x, h.x), p.y.clamp(-h.y, h.y), p.z.clamp(-h.z, h.z));
+        let d = p - c;
+        let dist = d.norm();
+        (dist, c, d / dist)
+    } else {
+        // Inside: the nearest face.
+        let mut axis = 0;
+        for k in 1..3 {
+            if q[k] > q[axis] {
+                axis = k;
+            }
+        }
+        let s = if p[axis] >= 0.0 { 1.0 } else { -1.0 };
+        let mut c = *p;
+        c[axis] = s * h[axis];
+        let mut n = Vector::zeros();
+        n[axis] = s;
+        (q[axis], c, n)
+    }
+}
+
+fn closest_on_cylinder(p: &Vector, r: Real, hh: Real) -> (Real, Vector, Vector) {
+    let rho = (p.x * p.x + p.y * p.y).sqrt();
+    let radial = if rho > 1e-12 { Vector::new(p.x / rho, p.y / rho, 0.0) } else { Vector::x() };
+    let dr = rho - r;
+    let dz = p.z.abs() - hh;
+    let sz = if p.z >= 0.0 { 1.0 } else { -1.0 };
+    if dr > 0.0 && dz > 0.0 {
+        // Outside near the rim: closest point on the rim circle.
+        let c = radial * r + Vector::new(0.0, 0.0, sz * hh);
+        let d = p - c;
+        let dist = d.norm();
+        (dist, c, d / dist)
+    } else if dr > dz {
+        // Closest to the curved side.
+        let c = radial * r + Vector::new(0.0, 0.0, p.z.clamp(-hh, hh));
+        (dr, c, radial)
+    } else {
+        // Closest to a cap.
+        let c = Vector::new(p.x, p.y, sz * hh) - if rho > r { radial * (rho - r) } else { Vector::zeros() };
+        (dz, c, Vector::new(0.0, 0.0, sz))
+    }
+}
+
+/// A rigid object: shape, mass properties and friction.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct RigidObject {
+    /// Geometry, centred at B.
+    pub shape: Shape,
+    /// Mass (kg), > 0.
+    pub mass: Real,
+    /// Rotational inertia about the centre of mass in B (kg·m²).
+    pub inertia: Mat3,
+    /// Its inverse.
+    pub inertia_inv: Mat3,
+}
+
+impl RigidObject {
+    /// A uniform solid of the given shape and mass; validates both.
+    pub fn new(shape: Shape, mass: Real) -> Result<Self> {
+        shape.validate()?;
+        if !(mass.is_finite() && mass > 0.0) {
+            return Err(DfsError::invalid("object.mass", format!("must be a finite number > 0 kg, got {mass}")));
+        }
+        let inertia = shape.inertia(mass);
+        let inertia_inv = inertia.try_inverse().ok_or_else(|| DfsError::invalid("object", "singular inertia"))?;
+        Ok(RigidObject { shape, mass, inertia, inertia_inv })
+    }
+
+    /// Spatial inertia `M* = diag(m I, H)` applied to an acceleration (v̇, ω̇).
+    pub fn spatial_inertia_times(&self, acc: &Wrench) -> Wrench {
+        wrench(&(force_of(acc) * self.mass), &(self.inertia * moment_of(acc)))
+    }
+}
+
+/// State of an object: pose of B in the world, world linear velocity, body angular velocity.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ObjectState {
+    /// Pose of B in the world frame.
+    pub pose: Isometry,
+    /// Velocity of B's origin in the world frame (m/s).
+    pub linear_velocity: Vector,
+    /// Angular velocity in B (rad/s).
+    pub angular_velocity_b: Vector,
+}
+
+impl ObjectState {
+    /// At rest at `pose`.
+    pub fn at_rest(pose: Isometry) -> Self {
+        ObjectState { pose, linear_velocity: Vector::zeros(), angular_velocity_b: Vector::zeros() }
+    }
+
+    /// Twist in B (linear velocity rotated into B, angular velocity in B).
+    pub fn twist_b(&self) -> Wrench {
+        wrench(&(self.pose.rotation.inverse() * self.linear_velocity), &self.angular_velocity_b)
+    }
+
+    /// Velocity (world frame) of a point given in B.
+    pub fn point_velocity(&self, p_b: &Vector) -> Vector {
+        self.linear_velocity + self.pose.rotation * self.angular_velocity_b.cross(p_b)
+    }
+}
+
+/// The gravity wrench `M* [ᴮg; 0]` in B (eq. 24) for gravity `g_world`.
+pub fn gravity_wrench_b(obj: &RigidObject, rotation: &Rotation, g_world: &Vector) -> Wrench {
+    wrench(&(rotation.inverse() * g_world * obj.mass), &Vector::zeros())
+}
+
+/// `f_ext` (eq. 26): the wrench in B that accelerates the object, from the hand's wrench
+/// `f_hand_b`, gravity, and the gyroscopic term `ω × Hω`. (The paper's `ω × m v` term is the
+/// body-frame linear formulation; with world-frame linear motion it vanishes.)
+pub fn external_wrench_b(obj: &RigidObject, state: &ObjectState, f_hand_b: &Wrench, g_world: &Vector) -> Wrench {
+    let w = state.angular_velocity_b;
+    let gyro = w.cross(&(obj.inertia * w));
+    let g = gravity_wrench_b(obj, &state.pose.rotation, g_world);
+    f_hand_b + g - wrench(&Vector::zeros(), &gyro)
+}
+
+/// Accelerations from `f_ext` in B: (world linear acceleration, body angular acceleration).
+/// `f_ext` already contains gravity and the gyroscopic term (see [`external_wrench_b`]).
+pub fn accelerations(obj: &RigidObject, state: &ObjectState, f_ext_b: &Wrench) -> (Vector, Vector) {
+    let a_world = state.pose.rotation * force_of(f_ext_b) / obj.mass;
+    let alpha_b = obj.inertia_inv * moment_of(f_ext_b);
+    (a_world, alpha_b)
+}
+
+/// One semi-implicit Euler step of length `dt` (s) under `f_ext` in B. Velocities first,
+/// then pose with the new velocities; orientation by the exponential map, renormalised.
+pub fn integrate(obj: &RigidObject, state: &mut ObjectState, f_ext_b: &Wrench, dt: Real) {
+    let (a, alpha) = accelerations(obj, state, f_ext_b);
+    state.linear_velocity += a * dt;
+    state.angular_velocity_b += alpha * dt;
+    state.pose.translation.vector += state.linear_velocity * dt;
+    let dq = Rotation::from_scaled_axis(state.angular_velocity_b * dt);
+    state.pose.rotation = Rotation::new_normalize((state.pose.rotation * dq).into_inner());
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn an_object_with_no_hand_falls_at_g() {
+        let obj = RigidObject::new(Shape::Sphere { radius: 0.1 }, 1.0).unwrap();
+        let mut s = ObjectState::at_rest(Isometry::identity());
+        let g = Vector::new(0.0, 0.0, -9.81);
+        for _ in 0..1000 {
+            let f = external_wrench_b(&obj, &s, &Wrench::zeros(), &g);
+            integrate(&obj, &mut s, &f, 1e-3);
+        }
+        assert!((s.linear_velocity.z + 9.81).abs() < 1e-9);
+        // Semi-implicit Euler: z = -g dt² n(n+1)/2.
+        assert!((s.pose.translation.z + 9.81 * 1e-6 * 1000.0 * 1001.0 / 2.0).abs() < 1e-9);
+    }
+
+    #[test]
+    fn a_torque_free_spinning_box_keeps_its_angular_momentum_and_unit_quaternion() {
+        let obj = RigidObject::new(Shape::Box { half_extents: [0.05, 0.1, 0.2] }, 2.0).unwrap();
+        let mut s = ObjectState::at_rest(Isometry::identity());
+        s.angular_velocity_b = Vector::new(0.1, 3.0, 0.1);
+        let l0 = s.pose.rotation * (obj.inertia * s.angular_velocity_b);
+        for _ in 0..2000 {
+            let f = external_wrench_b(&obj, &s, &Wrench::zeros(), &Vector::zeros());
+            integrate(&obj, &mut s, &f, 1e-4);
+        }
+        let l1 = s.pose.rotation * (obj.inertia * s.angular_velocity_b);
+        assert!((l1 - l0).norm() / l0.norm() < 1e-2);
+        assert!((s.pose.rotation.into_inner().norm() - 1.0).abs() < 1e-12);
+    }
+
+    #[test]
+    fn closest_points_lie_on_the_surface_for_every_shape() {
+        let shapes = [
+            Shape::Sphere { radius: 0.1 },
+            Shape::Box { half_extents: [0.05, 0.03, 0.08] },
+            Shape::Cylinder { radius: 0.04, half_height: 0.1 },
+        ];
+        let pts = [
+            Vector::new(0.2, 0.01, -0.03),
+            Vector::new(0.0, 0.0, 0.3),
+            Vector::new(0.01, 0.005, 0.002),
+            Vector::new(-0.1, 0.1, 0.2),
+        ];
+        for s in shapes {
+            for p in pts {
+                let (d, c, n) = s.closest(&p);
+                let (d_c, _, _) = s.closest(&c);
+                assert!(d_c.abs() < 1e-9, "{s:?} {p:?}");
+                assert!((n.norm() - 1.0).abs() < 1e-9);
+                if d > 0.0 {
+                    assert!(((p - c).norm() - d).abs() < 1e-9);
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn bad_shapes_and_masses_name_the_field() {
+        let e = RigidObject::new(Shape::Sphere { radius: 0.1 }, -1.0).unwrap_err();
+        assert!(e.to_string().contains("object.mass"));
+        let e = RigidObject::new(Shape::Box { half_extents: [0.1, f64::NAN, 0.1] }, 1.0).unwrap_err();
+        assert!(e.to_string().contains("half_extents[1]"));
+    }
+}

@@ -1,0 +1,1 @@
+//! ICMS services: recording, segmentation, store.

@@ -1,0 +1,1 @@
+//! End-to-end test support for ICMS (tests live in `tests/tests/`).
