@@ -59,41 +59,107 @@ pub fn all_finite<I: IntoIterator<Item = Real>>(values: I) -> bool {
     values.into_iter().all(Real::is_finite)
 }
 
-/// Pseudo-inverse of a symmetric positive semi-definite 6x6 matrix by eigen-decomposition:
-/// eigenvalues below `rel_tol` times the largest are treated as zero, so the result stays
-/// finite for rank-deficient input (collinear contacts, a stretched finger). Allocation-free.
-pub fn sym_pinv6(a: &Mat6, rel_tol: Real) -> Mat6 {
+/// Pseudo-inverse and rank of a symmetric positive semi-definite 6x6 matrix. Eigenvalues
+/// below `rel_tol` times the largest count as zero, so the result stays finite for
+/// rank-deficient input (collinear contacts, a stretched finger). A well-conditioned matrix
+/// takes the fast Cholesky path; otherwise a symmetric eigen-decomposition. Allocation-free.
+pub fn sym_pinv6(a: &Mat6, rel_tol: Real) -> (Mat6, usize) {
+    if let Some(ch) = nalgebra::Cholesky::new(*a) {
+        let l = ch.l_dirty();
+        let (mut lo, mut hi) = (Real::INFINITY, 0.0_f64);
+        for i in 0..6 {
+            let d = l[(i, i)] * l[(i, i)];
+            lo = lo.min(d);
+            hi = hi.max(d);
+        }
+        // The squared pivots bracket the eigenvalues loosely; demand a wide safety factor.
+        if hi.is_finite() && lo > hi * rel_tol * 1e3 {
+            return (ch.inverse(), 6);
+        }
+    }
     let eig = nalgebra::SymmetricEigen::new(*a);
     let max = eig.eigenvalues.iter().fold(0.0_f64, |m, &v| m.max(v.abs()));
     if max <= 0.0 || !max.is_finite() {
-        return Mat6::zeros();
+        return (Mat6::zeros(), 0);
     }
     let tol = max * rel_tol;
     let mut inv = Mat6::zeros();
+    let mut rank = 0;
     for k in 0..6 {
         let l = eig.eigenvalues[k];
         if l > tol {
             let v = eig.eigenvectors.column(k);
             inv += (v * v.transpose()) / l;
+            rank += 1;
         }
     }
-    inv
+    (inv, rank)
 }
 
-/// Rank of a symmetric positive semi-definite 6x6 matrix with the same tolerance rule as
-/// [`sym_pinv6`].
-pub fn sym_rank6(a: &Mat6, rel_tol: Real) -> usize {
-    let eig = nalgebra::SymmetricEigen::new(*a);
-    let max = eig.eigenvalues.iter().fold(0.0_f64, |m, &v| m.max(v.abs()));
-    if max <= 0.0 || !max.is_finite() {
-        return 0;
+/// Solves `A x = b` in place for the symmetric positive definite top-left `n × n` block of a
+/// fixed-capacity square matrix by Cholesky factorisation (`a` is overwritten by the factor,
+/// `b` by `x`). Returns `false`, leaving `b` unspecified, when the block is not positive
+/// definite. Allocation-free; the hot-path solver for joint-space systems.
+pub fn cholesky_solve_in_place<const N: usize>(
+    a: &mut nalgebra::SMatrix<Real, N, N>,
+    n: usize,
+    b: &mut [Real],
+) -> bool {
+    debug_assert!(n <= N && b.len() >= n);
+    for j in 0..n {
+        let mut d = a[(j, j)];
+        for k in 0..j {
+            d -= a[(j, k)] * a[(j, k)];
+        }
+        if d <= 0.0 || !d.is_finite() {
+            return false;
+        }
+        let d = d.sqrt();
+        a[(j, j)] = d;
+        for i in (j + 1)..n {
+            let mut s = a[(i, j)];
+            for k in 0..j {
+                s -= a[(i, k)] * a[(j, k)];
+            }
+            a[(i, j)] = s / d;
+        }
     }
-    eig.eigenvalues.iter().filter(|&&l| l > max * rel_tol).count()
+    for i in 0..n {
+        let mut s = b[i];
+        for k in 0..i {
+            s -= a[(i, k)] * b[k];
+        }
+        b[i] = s / a[(i, i)];
+    }
+    for i in (0..n).rev() {
+        let mut s = b[i];
+        for k in (i + 1)..n {
+            s -= a[(k, i)] * b[k];
+        }
+        b[i] = s / a[(i, i)];
+    }
+    true
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn cholesky_solves_the_top_left_block_only() {
+        let mut a = nalgebra::SMatrix::<f64, 4, 4>::identity() * 7.0;
+        a[(0, 0)] = 4.0;
+        a[(0, 1)] = 1.0;
+        a[(1, 0)] = 1.0;
+        a[(1, 1)] = 3.0;
+        let mut b = [1.0, 2.0, 99.0, 99.0];
+        assert!(cholesky_solve_in_place(&mut a, 2, &mut b));
+        assert!((4.0 * b[0] + b[1] - 1.0).abs() < 1e-12);
+        assert!((b[0] + 3.0 * b[1] - 2.0).abs() < 1e-12);
+        assert_eq!(b[2], 99.0);
+        let mut bad = nalgebra::SMatrix::<f64, 2, 2>::new(1.0, 2.0, 2.0, 1.0);
+        assert!(!cholesky_solve_in_place(&mut bad, 2, &mut [1.0, 1.0]));
+    }
 
     #[test]
     fn skew_matrix_is_the_cross_product() {
@@ -107,9 +173,13 @@ mod tests {
         let mut a = Mat6::zeros();
         a[(0, 0)] = 2.0;
         a[(1, 1)] = 4.0;
-        let p = sym_pinv6(&a, 1e-9);
+        let (p, rank) = sym_pinv6(&a, 1e-9);
         assert!(p.iter().all(|v| v.is_finite()));
         assert!((a * p * a - a).norm() < 1e-12);
-        assert_eq!(sym_rank6(&a, 1e-9), 2);
+        assert_eq!(rank, 2);
+        let full = Mat6::identity() * 3.0;
+        let (p, rank) = sym_pinv6(&full, 1e-9);
+        assert_eq!(rank, 6);
+        assert!((p * full - Mat6::identity()).norm() < 1e-12);
     }
 }

@@ -11,7 +11,7 @@ pub mod quality;
 
 use crate::contact::{ContactFrame, ContactModel, Intensity};
 use crate::hand::MAX_TIPS;
-use crate::math::{sym_pinv6, sym_rank6, Mat6, Real, Wrench};
+use crate::math::{sym_pinv6, Mat6, Real, Wrench};
 use nalgebra::SMatrix;
 
 /// Most contacts a grasp can have (one per fingertip).
@@ -49,8 +49,8 @@ impl GraspMatrix {
                 }
             }
         }
-        let wwt = w * w.transpose();
-        GraspMatrix { w, n, wwt_pinv: sym_pinv6(&wwt, PINV_TOLERANCE), rank: sym_rank6(&wwt, PINV_TOLERANCE) }
+        let (wwt_pinv, rank) = sym_pinv6(&(w * w.transpose()), PINV_TOLERANCE);
+        GraspMatrix { w, n, wwt_pinv, rank }
     }
 
     /// `ᴮf̃ = ᴮW c̃` (eq. 23) for per-contact intensities.
