@@ -1,1 +1,619 @@
-//! The DFS tick (paper Fig. 6).
+//! The DFS tick (paper Fig. 6): one [`Dfs::step`] over named stages,
+//!
+//! 1. [`glove`](Dfs::stage_glove): validate the glove sample (θ, τ, hand base pose), forward
+//!    kinematics, fingertip Jacobians and M(θ);
+//! 2. [`contacts`](Dfs::stage_contacts): fingertip spheres against the object, contact frames;
+//! 3. [`forces`](Dfs::stage_forces): fingertip forces from joint torques through the damped
+//!    `(Jᵀ)⁺` (eq. 14), intensities in each contact frame, the contact model and Coulomb cone
+//!    (eq. 15-18);
+//! 4. [`object`](Dfs::stage_object): `ᴮf̃ = W c̃_h` (eq. 22-23), support by the table, gravity
+//!    and Newton-Euler (eq. 24-26), integration;
+//! 5. [`feedback`](Dfs::stage_feedback): `c_o = W⁺ f_ext`, friction-limited (eq. 27), the
+//!    feedback `c̃_h − c̃_o` per finger, finger dynamics `M θ̈ = τ − Σ Jᵀ f_fb` (eq. 19-21, in
+//!    joint space so wrist torques take part) integrated to the glove motor commands.
+//!
+//! **Departure from the paper, documented.** The paper integrates θ̈ open-loop. A real glove
+//! finger cannot enter the object because the operator's finger meets the motor's position
+//! command; in simulation the commanded fingertip is kept on the object's surface by a stiff
+//! spring-damper acting *on the finger only* (never on the object), integrated implicitly:
+//! along the normal for every touching finger, and also tangentially to an anchor point for a
+//! sticking contact. It adds no force to the object, so a held object does not creep.
+//!
+//! **Table.** An optional horizontal support plane carries the object before it is grasped
+//! and after it is placed: it cancels downward force and velocity of a resting object and
+//! limits horizontal force by Coulomb friction. Objects rest as a whole (no tipping on the
+//! table); the paper has no table at all.
+//!
+//! Deterministic: the same inputs give bit-identical outputs. Allocation-free per tick.
+
+use crate::contact::{apply_friction, detect, ContactFrame, ContactModel, Friction, Intensity};
+use crate::error::{DfsError, Result};
+use crate::grasp::{GraspMatrix, MAX_CONTACTS};
+use crate::hand::{DofMatrix, HandModel, Kinematics, MAX_DOF, MAX_TIPS};
+use crate::math::{cholesky_solve_in_place, force_of, moment_of, wrench, Isometry, Point, Real, Vector, Wrench};
+use crate::object::{external_wrench_b, integrate, ObjectState, RigidObject, Shape};
+
+/// Parameters of the DFS. Units SI.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct DfsParams {
+    /// Tick length (s). Default 0.001 (1 kHz haptic rate).
+    pub dt: Real,
+    /// Gravity in the world frame (m/s²). Default (0, 0, −9.81).
+    pub gravity: Vector,
+    /// Contact model. Default point with friction.
+    pub contact_model: ContactModel,
+    /// Friction between fingertips and object. Default μ = 0.8, μ_t = 0.005 m.
+    pub friction: Friction,
+    /// Gap (m) up to which a fingertip counts as touching. Default 0.001.
+    pub contact_margin: Real,
+    /// Damping λ (m) of the pseudo-inverse `J (JᵀJ + λ²I)⁻¹` that resolves joint torques into
+    /// fingertip forces; keeps it finite for a stretched finger. Default 1e-3.
+    pub tip_force_damping: Real,
+    /// Viscous damping of the glove joints (N·m·s/rad). Default 0.02.
+    pub joint_damping: Real,
+    /// Stiffness (N/m) keeping a touching fingertip on the surface (finger side only).
+    /// Default 3000.
+    pub surface_stiffness: Real,
+    /// Damping (N·s/m) of the same. Default 30.
+    pub surface_damping: Real,
+    /// Joint angles may exceed their limits by this much (rad or m) before a sample is refused.
+    /// Default 0.05.
+    pub angle_slack: Real,
+    /// Joint torques may reach this multiple of the hand's torque limit before a sample is
+    /// refused (the glove's sensor range). Default 2.
+    pub torque_range: Real,
+    /// Height (m, world z) of a horizontal table supporting the object; `None` for no table.
+    pub table_height: Option<Real>,
+    /// Coulomb coefficient between object and table. Default 0.5.
+    pub table_mu: Real,
+}
+
+impl Default for DfsParams {
+    fn default() -> Self {
+        DfsParams {
+            dt: 1e-3,
+            gravity: Vector::new(0.0, 0.0, -crate::math::STANDARD_GRAVITY),
+            contact_model: ContactModel::PointWithFriction,
+            friction: Friction::default(),
+            contact_margin: 1e-3,
+            tip_force_damping: 1e-3,
+            joint_damping: 0.02,
+            surface_stiffness: 3000.0,
+            surface_damping: 30.0,
+            angle_slack: 0.05,
+            torque_range: 2.0,
+            table_height: None,
+            table_mu: 0.5,
+        }
+    }
+}
+
+impl DfsParams {
+    /// Checks every parameter; the error names the field.
+    pub fn validate(&self) -> Result<()> {
+        let pos = |f: &str, v: Real| {
+            if v.is_finite() && v > 0.0 {
+                Ok(())
+            } else {
+                Err(DfsError::invalid(f, format!("must be a finite number > 0, got {v}")))
+            }
+        };
+        let nonneg = |f: &str, v: Real| {
+            if v.is_finite() && v >= 0.0 {
+                Ok(())
+            } else {
+                Err(DfsError::invalid(f, format!("must be a finite number ≥ 0, got {v}")))
+            }
+        };
+        pos("dt", self.dt)?;
+        if !self.gravity.iter().all(|v| v.is_finite()) {
+            return Err(DfsError::invalid("gravity", "must be finite"));
+        }
+        nonneg("friction.mu", self.friction.mu)?;
+        nonneg("friction.mu_torsion", self.friction.mu_torsion)?;
+        nonneg("contact_margin", self.contact_margin)?;
+        pos("tip_force_damping", self.tip_force_damping)?;
+        nonneg("joint_damping", self.joint_damping)?;
+        nonneg("surface_stiffness", self.surface_stiffness)?;
+        nonneg("surface_damping", self.surface_damping)?;
+        nonneg("angle_slack", self.angle_slack)?;
+        pos("torque_range", self.torque_range)?;
+        nonneg("table_mu", self.table_mu)?;
+        if let Some(h) = self.table_height {
+            if !h.is_finite() {
+                return Err(DfsError::invalid("table_height", "must be finite"));
+            }
+        }
+        Ok(())
+    }
+}
+
+/// One glove sample: measured joint angles θ, the operator's joint torques τ and the pose of
+/// the hand base (from the arm tracker) in the world.
+#[derive(Debug, Clone, Copy)]
+pub struct GloveSample<'a> {
+    /// Joint angles (rad or m), one per DOF.
+    pub q: &'a [Real],
+    /// Operator joint torques (N·m or N), one per DOF.
+    pub tau: &'a [Real],
+    /// Pose of the hand's base link in the world.
+    pub base: Isometry,
+}
+
+/// Contact state of one fingertip after a tick.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct TipContact {
+    /// The fingertip is within the contact margin of the object surface.
+    pub touching: bool,
+    /// Touching and pushing: the contact transmits force (it is a column block of `W`).
+    pub in_contact: bool,
+    /// Contact geometry in B (valid when touching).
+    pub frame: Option<ContactFrame>,
+    /// Penetration (m), negative for a gap (valid when touching).
+    pub penetration: Real,
+    /// The operator's intensities `c_h` in the contact frame.
+    pub intensity: Intensity,
+    /// What acts on the object, `c̃_h`.
+    pub transmitted: Intensity,
+    /// The object's reaction `c̃_o = W⁺ f_ext`, friction-limited.
+    pub reaction: Intensity,
+    /// Fed back to the operator: `c̃_h − c̃_o`.
+    pub feedback: Intensity,
+    /// The requested intensities were outside the friction cone.
+    pub slip: bool,
+    /// The operator's fingertip force from τ (world frame, N).
+    pub tip_force_world: Vector,
+    /// Force of the object on the fingertip (world frame, N): minus the feedback.
+    pub feedback_force_world: Vector,
+}
+
+/// Everything a tick produces. Fixed capacity; entries beyond the hand's tips are default.
+#[derive(Debug, Clone, Copy)]
+pub struct TickOutput {
+    /// Per fingertip.
+    pub tips: [TipContact; MAX_TIPS],
+    /// Number of fingertips of the hand.
+    pub n_tips: usize,
+    /// Number of transmitting contacts.
+    pub n_contacts: usize,
+    /// Rank of the grasp matrix of the transmitting contacts.
+    pub grasp_rank: usize,
+    /// `ᴮf̃` (N, N·m) in B.
+    pub object_force_b: Wrench,
+    /// `f_ext` in B (includes gravity, table and the gyroscopic term).
+    pub f_ext_b: Wrench,
+    /// Table wrench on the object in B.
+    pub table_force_b: Wrench,
+    /// Object state after the tick.
+    pub object: ObjectState,
+    /// Glove motor position commands θ (the integrated finger dynamics).
+    pub motor_q: [Real; MAX_DOF],
+    /// Their velocities.
+    pub motor_qd: [Real; MAX_DOF],
+    /// Feedback joint torques `Σ Jᵀ f_fb` (N·m) the glove motors render.
+    pub feedback_torque: [Real; MAX_DOF],
+    /// Fingertip centres in the world (m).
+    pub tip_centres: [Point; MAX_TIPS],
+}
+
+impl Default for TickOutput {
+    fn default() -> Self {
+        TickOutput {
+            tips: [TipContact::default(); MAX_TIPS],
+            n_tips: 0,
+            n_contacts: 0,
+            grasp_rank: 0,
+            object_force_b: Wrench::zeros(),
+            f_ext_b: Wrench::zeros(),
+            table_force_b: Wrench::zeros(),
+            object: ObjectState::at_rest(Isometry::identity()),
+            motor_q: [0.0; MAX_DOF],
+            motor_qd: [0.0; MAX_DOF],
+            feedback_torque: [0.0; MAX_DOF],
+            tip_centres: [Point::origin(); MAX_TIPS],
+        }
+    }
+}
+
+/// The Dynamic Force Simulator for one hand and one object.
+#[derive(Debug, Clone)]
+pub struct Dfs {
+    hand: HandModel,
+    object: RigidObject,
+    params: DfsParams,
+    state: ObjectState,
+    q: [Real; MAX_DOF],
+    qd: [Real; MAX_DOF],
+    initialised: bool,
+    kin: Kinematics,
+    mass: DofMatrix,
+    anchors_b: [Option<Vector>; MAX_TIPS],
+    prev_tip_points: [Option<Vector>; MAX_TIPS],
+    frames: [ContactFrame; MAX_CONTACTS],
+    transmitted: [Intensity; MAX_CONTACTS],
+    contact_tip: [usize; MAX_CONTACTS],
+    grasp: Option<GraspMatrix>,
+    out: TickOutput,
+}
+
+impl Dfs {
+    /// A DFS for `hand` and `object`, the object at `state`. Validates the hand and parameters.
+    pub fn new(hand: HandModel, object: RigidObject, state: ObjectState, params: DfsParams) -> Result<Self> {
+        hand.validate()?;
+        params.validate()?;
+        if hand.fingertips.len() > MAX_CONTACTS {
+            return Err(DfsError::invalid("hand.fingertips", format!("at most {MAX_CONTACTS} fingertips")));
+        }
+        let mut out = TickOutput { n_tips: hand.fingertips.len(), object: state, ..TickOutput::default() };
+        out.object = state;
+        Ok(Dfs {
+            hand,
+            object,
+            params,
+            state,
+            q: [0.0; MAX_DOF],
+            qd: [0.0; MAX_DOF],
+            initialised: false,
+            kin: Kinematics::default(),
+            mass: DofMatrix::identity(),
+            anchors_b: [None; MAX_TIPS],
+            prev_tip_points: [None; MAX_TIPS],
+            frames: [ContactFrame::from_normal(Vector::zeros(), Vector::z()); MAX_CONTACTS],
+            transmitted: [Intensity::zeros(); MAX_CONTACTS],
+            contact_tip: [0; MAX_CONTACTS],
+            grasp: None,
+            out,
+        })
+    }
+
+    /// The hand model.
+    pub fn hand(&self) -> &HandModel {
+        &self.hand
+    }
+
+    /// The object.
+    pub fn object(&self) -> &RigidObject {
+        &self.object
+    }
+
+    /// The object's current state.
+    pub fn object_state(&self) -> &ObjectState {
+        &self.state
+    }
+
+    /// Parameters.
+    pub fn params(&self) -> &DfsParams {
+        &self.params
+    }
+
+    /// The last tick's output.
+    pub fn output(&self) -> &TickOutput {
+        &self.out
+    }
+
+    /// Kinematics of the last tick (link poses, tip centres, Jacobians).
+    pub fn kinematics(&self) -> &Kinematics {
+        &self.kin
+    }
+
+    /// Replaces the object's state (for example to place it at a scenario's start pose).
+    pub fn set_object_state(&mut self, state: ObjectState) {
+        self.state = state;
+        self.out.object = state;
+    }
+
+    /// One DFS tick. On an error (bad sample) nothing changes and no output is produced.
+    pub fn step(&mut self, sample: &GloveSample<'_>) -> Result<&TickOutput> {
+        self.stage_glove(sample)?;
+        self.stage_contacts();
+        self.stage_forces(sample.tau);
+        self.stage_object();
+        self.stage_feedback(sample.tau);
+        Ok(&self.out)
+    }
+
+    /// Stage 1: validate the sample; kinematics, Jacobians and M(θ).
+    pub fn stage_glove(&mut self, s: &GloveSample<'_>) -> Result<()> {
+        let n = self.hand.dof();
+        if s.tau.len() != n {
+            return Err(DfsError::WrongLength { what: "joint torques", got: s.tau.len(), expected: n });
+        }
+        self.hand.check_angles(s.q, self.params.angle_slack)?;
+        for (i, &t) in s.tau.iter().enumerate() {
+            if !t.is_finite() {
+                return Err(DfsError::NotFinite { what: "joint torque", index: i, value: t });
+            }
+            let lim = self.hand.torque_limit[i] * self.params.torque_range;
+            if t.abs() > lim {
+                return Err(DfsError::OutOfRange { what: "joint torque", index: i, value: t, lower: -lim, upper: lim });
+            }
+        }
+        let b = &s.base;
+        if !(b.translation.vector.iter().all(|v| v.is_finite()) && b.rotation.coords.iter().all(|v| v.is_finite())) {
+            return Err(DfsError::invalid("base", "hand base pose is not finite"));
+        }
+        if !self.initialised {
+            self.q[..n].copy_from_slice(s.q);
+            self.initialised = true;
+        }
+        self.hand.forward_kinematics(&s.base, s.q, &mut self.kin);
+        self.hand.tip_jacobians(&mut self.kin);
+        self.hand.mass_matrix(&self.kin, &mut self.mass);
+        Ok(())
+    }
+
+    /// Stage 2: contact detection between fingertip spheres and the object.
+    pub fn stage_contacts(&mut self) {
+        let inv = self.state.pose.inverse();
+        for (k, tip) in self.hand.fingertips.iter().enumerate() {
+            let c_world = self.kin.tip_centres[k];
+            self.out.tip_centres[k] = c_world;
+            let c_b = (inv * c_world).coords;
+            let t = &mut self.out.tips[k];
+            *t = TipContact::default();
+            if let Some(d) = detect(&self.object.shape, &c_b, tip.radius, self.params.contact_margin) {
+                t.touching = true;
+                t.frame = Some(d.frame);
+                t.penetration = d.penetration;
+            }
+        }
+    }
+
+    /// Stage 3: fingertip forces from joint torques (eq. 14), intensities, friction (eq. 15-18).
+    pub fn stage_forces(&mut self, tau: &[Real]) {
+        let lam2 = self.params.tip_force_damping * self.params.tip_force_damping;
+        for g in &self.hand.finger_groups {
+            let m = g.dofs.len();
+            if m == 0 {
+                continue;
+            }
+            // A = Σ_tips J_gᵀ J_g + λ² I over the group's DOFs; y = A⁻¹ τ_g; f_tip = J_tip y.
+            let mut a = DofMatrix::identity();
+            let mut y = [0.0; MAX_DOF];
+            for (ia, &da) in g.dofs.iter().enumerate() {
+                y[ia] = tau[da];
+                for (ib, &db) in g.dofs.iter().enumerate() {
+                    let mut s = if ia == ib { lam2 } else { 0.0 };
+                    for &tip in &g.tips {
+                        let j = &self.kin.tip_jacobians[tip];
+                        s += j[(0, da)] * j[(0, db)] + j[(1, da)] * j[(1, db)] + j[(2, da)] * j[(2, db)];
+                    }
+                    a[(ia, ib)] = s;
+                }
+            }
+            if !cholesky_solve_in_place(&mut a, m, &mut y) {
+                continue;
+            }
+            for &tip in &g.tips {
+                let j = &self.kin.tip_jacobians[tip];
+                let mut f = Vector::zeros();
+                for (ia, &da) in g.dofs.iter().enumerate() {
+                    f += Vector::new(j[(0, da)], j[(1, da)], j[(2, da)]) * y[ia];
+                }
+                self.out.tips[tip].tip_force_world = f;
+            }
+        }
+        let rot_inv = self.state.pose.rotation.inverse();
+        let mut n = 0;
+        for k in 0..self.hand.fingertips.len() {
+            let t = &mut self.out.tips[k];
+            let Some(frame) = t.frame else { continue };
+            let c = frame.intensities_of_force_b(&(rot_inv * t.tip_force_world));
+            let split = apply_friction(self.params.contact_model, &self.params.friction, &c);
+            t.intensity = c;
+            t.transmitted = split.transmitted;
+            t.slip = split.slip;
+            t.in_contact = !split.separating;
+            if t.in_contact && n < MAX_CONTACTS {
+                self.frames[n] = frame;
+                self.transmitted[n] = split.transmitted;
+                self.contact_tip[n] = k;
+                n += 1;
+            }
+        }
+        self.out.n_contacts = n;
+    }
+
+    /// Stage 4: object wrench (eq. 22-23), table support, Newton-Euler (eq. 24-26), integration.
+    pub fn stage_object(&mut self) {
+        let n = self.out.n_contacts;
+        let (f_hand, rank) = if n > 0 {
+            let g = GraspMatrix::new(&self.frames[..n], self.params.contact_model);
+            let f = g.wrench(&self.transmitted[..n]);
+            let r = g.rank;
+            self.grasp = Some(g);
+            (f, r)
+        } else {
+            self.grasp = None;
+            (Wrench::zeros(), 0)
+        };
+        self.out.grasp_rank = rank;
+        self.out.object_force_b = f_hand;
+        let mut f_ext = external_wrench_b(&self.object, &self.state, &f_hand, &self.params.gravity);
+        let table = self.table_wrench_b(&f_ext);
+        f_ext += table;
+        self.out.table_force_b = table;
+        self.out.f_ext_b = f_ext;
+        integrate(&self.object, &mut self.state, &f_ext, self.params.dt);
+        self.clamp_to_table();
+        self.out.object = self.state;
+    }
+
+    /// Stage 5: reaction `c_o = W⁺ f_ext` (eq. 27), friction-limited; feedback per finger;
+    /// finger dynamics (eq. 19-21) integrated implicitly to the motor commands.
+    pub fn stage_feedback(&mut self, tau: &[Real]) {
+        let n = self.out.n_contacts;
+        let rot = self.state.pose.rotation;
+        if let Some(g) = &self.grasp {
+            // The reaction is distributed over the transmitting contacts only; the table's
+            // share of f_ext is not the fingers' to carry.
+            let f_fingers = self.out.f_ext_b - self.out.table_force_b;
+            let mut c_o = [Intensity::zeros(); MAX_CONTACTS];
+            g.distribute(&f_fingers, &mut c_o);
+            for i in 0..n {
+                let k = self.contact_tip[i];
+                let t = &mut self.out.tips[k];
+                t.reaction = apply_friction(self.params.contact_model, &self.params.friction, &c_o[i]).transmitted;
+                t.feedback = t.transmitted - t.reaction;
+                let frame = self.frames[i];
+                let fb = frame.rot_b * Vector::new(t.feedback[0], t.feedback[1], t.feedback[2]);
+                t.feedback_force_world = -(rot * fb);
+            }
+        }
+        self.integrate_fingers(tau);
+    }
+
+    fn integrate_fingers(&mut self, tau: &[Real]) {
+        let ndof = self.hand.dof();
+        let p = &self.params;
+        let dt = p.dt;
+        let mut a = self.mass;
+        let mut rhs = [0.0; MAX_DOF];
+        for i in 0..ndof {
+            a[(i, i)] += dt * p.joint_damping;
+            let mut s = 0.0;
+            for j in 0..ndof {
+                s += self.mass[(i, j)] * self.qd[j];
+            }
+            rhs[i] = s + dt * tau[i];
+        }
+        let mut fb_torque = [0.0; MAX_DOF];
+        let inv = self.state.pose.inverse();
+        for k in 0..self.hand.fingertips.len() {
+            let t = self.out.tips[k];
+            let j = self.kin.tip_jacobians[k];
+            // Finger-side force: feedback plus surface stabilisation.
+            let mut f = t.feedback_force_world;
+            for d in 0..ndof {
+                fb_torque[d] += j[(0, d)] * f.x + j[(1, d)] * f.y + j[(2, d)] * f.z;
+            }
+            let Some(frame) = t.frame else {
+                self.anchors_b[k] = None;
+                self.prev_tip_points[k] = None;
+                continue;
+            };
+            let radius = self.hand.fingertips[k].radius;
+            let z_world = self.state.pose.rotation * frame.normal_b();
+            let tip_point = self.out.tip_centres[k].coords + z_world * radius;
+            let stick = t.in_contact && !t.slip;
+            let tip_b = (inv * Point::from(tip_point)).coords;
+            let anchor_b = match (stick, self.anchors_b[k]) {
+                (true, Some(a)) => a,
+                _ => tip_b,
+            };
+            self.anchors_b[k] = if stick { Some(anchor_b) } else { None };
+            let anchor_world = (self.state.pose * Point::from(anchor_b)).coords;
+            let mut err = tip_point - anchor_world;
+            err -= z_world * err.dot(&z_world);
+            err += z_world * t.penetration;
+            let v_obj = self.state.point_velocity(&(tip_b));
+            let v_tip_fd = self.prev_tip_points[k].map(|prev| (tip_point - prev) / dt).unwrap_or(v_obj);
+            self.prev_tip_points[k] = Some(tip_point);
+            // Tip velocity not explained by joint motion (base motion), relative to the object.
+            let mut v_joint = Vector::zeros();
+            for d in 0..ndof {
+                v_joint += Vector::new(j[(0, d)], j[(1, d)], j[(2, d)]) * self.qd[d];
+            }
+            let v_other = v_tip_fd - v_joint - v_obj;
+            let (proj_err, proj_v) = if stick {
+                (err, v_other)
+            } else {
+                (z_world * err.dot(&z_world), z_world * v_other.dot(&z_world))
+            };
+            f = -proj_err * p.surface_stiffness - proj_v * p.surface_damping;
+            let c = dt * p.surface_damping + dt * dt * p.surface_stiffness;
+            for d1 in 0..ndof {
+                let col1 = Vector::new(j[(0, d1)], j[(1, d1)], j[(2, d1)]);
+                rhs[d1] += dt * col1.dot(&f);
+                let pc1 = if stick { col1 } else { z_world * z_world.dot(&col1) };
+                for d2 in 0..ndof {
+                    let col2 = Vector::new(j[(0, d2)], j[(1, d2)], j[(2, d2)]);
+                    a[(d1, d2)] += c * pc1.dot(&col2);
+                }
+            }
+        }
+        for d in 0..ndof {
+            rhs[d] += dt * fb_torque[d];
+            self.out.feedback_torque[d] = fb_torque[d];
+        }
+        if cholesky_solve_in_place(&mut a, ndof, &mut rhs) {
+            for d in 0..ndof {
+                let mut v = rhs[d];
+                let mut q = self.q[d] + dt * v;
+                let (lo, hi) = (self.hand.dof_lower[d], self.hand.dof_upper[d]);
+                if q < lo {
+                    q = lo;
+                    v = v.max(0.0);
+                } else if q > hi {
+                    q = hi;
+                    v = v.min(0.0);
+                }
+                self.q[d] = q;
+                self.qd[d] = v;
+            }
+        }
+        self.out.motor_q[..ndof].copy_from_slice(&self.q[..ndof]);
+        self.out.motor_qd[..ndof].copy_from_slice(&self.qd[..ndof]);
+    }
+
+    /// Distance (m) from the object's centre to its lowest point, for its current orientation.
+    fn support_depth(&self) -> Real {
+        let r = self.state.pose.rotation.to_rotation_matrix();
+        let m = r.matrix();
+        match self.object.shape {
+            Shape::Sphere { radius } => radius,
+            Shape::Box { half_extents } => (0..3).map(|i| m[(2, i)].abs() * half_extents[i]).sum(),
+            Shape::Cylinder { radius, half_height } => {
+                let az = m[(2, 2)].abs();
+                radius * (1.0 - az * az).max(0.0).sqrt() + half_height * az
+            }
+        }
+    }
+
+    fn resting_on_table(&self) -> bool {
+        match self.params.table_height {
+            Some(h) => self.state.pose.translation.z - self.support_depth() <= h + 1e-6,
+            None => false,
+        }
+    }
+
+    /// The table's wrench on the object (B) given the other forces `f_b` on it: cancels a
+    /// downward force and velocity, resists horizontal force up to μ N, damps rotation.
+    fn table_wrench_b(&self, f_b: &Wrench) -> Wrench {
+        if !self.resting_on_table() {
+            return Wrench::zeros();
+        }
+        let rot = self.state.pose.rotation;
+        let dt = self.params.dt;
+        let m = self.object.mass;
+        let f_w = rot * force_of(f_b);
+        let v = self.state.linear_velocity;
+        // Force needed to stop downward motion and cancel a downward net force this tick.
+        let fz_needed = -(f_w.z + m * v.z.min(0.0) / dt);
+        if fz_needed <= 0.0 {
+            return Wrench::zeros();
+        }
+        let normal = fz_needed;
+        let want = -(Vector::new(f_w.x, f_w.y, 0.0) + Vector::new(v.x, v.y, 0.0) * (m / dt));
+        let limit = self.params.table_mu * normal;
+        let tangential = if want.norm() > limit { want * (limit / want.norm()) } else { want };
+        let force_w = tangential + Vector::new(0.0, 0.0, normal);
+        // Resting objects do not spin or tip: cancel the moment and angular velocity.
+        let h = self.object.inertia * self.state.angular_velocity_b / dt;
+        let moment_b = -(moment_of(f_b) + h);
+        wrench(&(rot.inverse() * force_w), &moment_b)
+    }
+
+    fn clamp_to_table(&mut self) {
+        if let Some(h) = self.params.table_height {
+            let depth = self.support_depth();
+            let z = self.state.pose.translation.z;
+            if z - depth < h {
+                self.state.pose.translation.z = h + depth;
+                if self.state.linear_velocity.z < 0.0 {
+                    self.state.linear_velocity.z = 0.0;
+                }
+            }
+        }
+    }
+}

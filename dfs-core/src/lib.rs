@@ -15,5 +15,6 @@ pub mod grasp;
 pub mod hand;
 pub mod math;
 pub mod object;
+pub mod statics;
 
 pub use error::{DfsError, Result};
