@@ -30,7 +30,9 @@ use crate::contact::{apply_friction, detect, ContactFrame, ContactModel, Frictio
 use crate::error::{DfsError, Result};
 use crate::grasp::{GraspMatrix, MAX_CONTACTS};
 use crate::hand::{DofMatrix, HandModel, Kinematics, MAX_DOF, MAX_TIPS};
-use crate::math::{cholesky_solve_in_place, force_of, moment_of, wrench, Isometry, Point, Real, Vector, Wrench};
+use crate::math::{
+    cholesky_solve_in_place, force_of, moment_of, wrench, Isometry, Point, Real, Vector, Wrench,
+};
 use crate::object::{external_wrench_b, integrate, ObjectState, RigidObject, Shape};
 
 /// Parameters of the DFS. Units SI.
@@ -95,14 +97,20 @@ impl DfsParams {
             if v.is_finite() && v > 0.0 {
                 Ok(())
             } else {
-                Err(DfsError::invalid(f, format!("must be a finite number > 0, got {v}")))
+                Err(DfsError::invalid(
+                    f,
+                    format!("must be a finite number > 0, got {v}"),
+                ))
             }
         };
         let nonneg = |f: &str, v: Real| {
             if v.is_finite() && v >= 0.0 {
                 Ok(())
             } else {
-                Err(DfsError::invalid(f, format!("must be a finite number ≥ 0, got {v}")))
+                Err(DfsError::invalid(
+                    f,
+                    format!("must be a finite number ≥ 0, got {v}"),
+                ))
             }
         };
         pos("dt", self.dt)?;
@@ -238,13 +246,25 @@ pub struct Dfs {
 
 impl Dfs {
     /// A DFS for `hand` and `object`, the object at `state`. Validates the hand and parameters.
-    pub fn new(hand: HandModel, object: RigidObject, state: ObjectState, params: DfsParams) -> Result<Self> {
+    pub fn new(
+        hand: HandModel,
+        object: RigidObject,
+        state: ObjectState,
+        params: DfsParams,
+    ) -> Result<Self> {
         hand.validate()?;
         params.validate()?;
         if hand.fingertips.len() > MAX_CONTACTS {
-            return Err(DfsError::invalid("hand.fingertips", format!("at most {MAX_CONTACTS} fingertips")));
+            return Err(DfsError::invalid(
+                "hand.fingertips",
+                format!("at most {MAX_CONTACTS} fingertips"),
+            ));
         }
-        let mut out = TickOutput { n_tips: hand.fingertips.len(), object: state, ..TickOutput::default() };
+        let mut out = TickOutput {
+            n_tips: hand.fingertips.len(),
+            object: state,
+            ..TickOutput::default()
+        };
         out.object = state;
         Ok(Dfs {
             hand,
@@ -316,20 +336,36 @@ impl Dfs {
     pub fn stage_glove(&mut self, s: &GloveSample<'_>) -> Result<()> {
         let n = self.hand.dof();
         if s.tau.len() != n {
-            return Err(DfsError::WrongLength { what: "joint torques", got: s.tau.len(), expected: n });
+            return Err(DfsError::WrongLength {
+                what: "joint torques",
+                got: s.tau.len(),
+                expected: n,
+            });
         }
         self.hand.check_angles(s.q, self.params.angle_slack)?;
         for (i, &t) in s.tau.iter().enumerate() {
             if !t.is_finite() {
-                return Err(DfsError::NotFinite { what: "joint torque", index: i, value: t });
+                return Err(DfsError::NotFinite {
+                    what: "joint torque",
+                    index: i,
+                    value: t,
+                });
             }
             let lim = self.hand.torque_limit[i] * self.params.torque_range;
             if t.abs() > lim {
-                return Err(DfsError::OutOfRange { what: "joint torque", index: i, value: t, lower: -lim, upper: lim });
+                return Err(DfsError::OutOfRange {
+                    what: "joint torque",
+                    index: i,
+                    value: t,
+                    lower: -lim,
+                    upper: lim,
+                });
             }
         }
         let b = &s.base;
-        if !(b.translation.vector.iter().all(|v| v.is_finite()) && b.rotation.coords.iter().all(|v| v.is_finite())) {
+        if !(b.translation.vector.iter().all(|v| v.is_finite())
+            && b.rotation.coords.iter().all(|v| v.is_finite()))
+        {
             return Err(DfsError::invalid("base", "hand base pose is not finite"));
         }
         if !self.initialised {
@@ -351,7 +387,12 @@ impl Dfs {
             let c_b = (inv * c_world).coords;
             let t = &mut self.out.tips[k];
             *t = TipContact::default();
-            if let Some(d) = detect(&self.object.shape, &c_b, tip.radius, self.params.contact_margin) {
+            if let Some(d) = detect(
+                &self.object.shape,
+                &c_b,
+                tip.radius,
+                self.params.contact_margin,
+            ) {
                 t.touching = true;
                 t.frame = Some(d.frame);
                 t.penetration = d.penetration;
@@ -376,7 +417,9 @@ impl Dfs {
                     let mut s = if ia == ib { lam2 } else { 0.0 };
                     for &tip in &g.tips {
                         let j = &self.kin.tip_jacobians[tip];
-                        s += j[(0, da)] * j[(0, db)] + j[(1, da)] * j[(1, db)] + j[(2, da)] * j[(2, db)];
+                        s += j[(0, da)] * j[(0, db)]
+                            + j[(1, da)] * j[(1, db)]
+                            + j[(2, da)] * j[(2, db)];
                     }
                     a[(ia, ib)] = s;
                 }
@@ -453,7 +496,9 @@ impl Dfs {
             for i in 0..n {
                 let k = self.contact_tip[i];
                 let t = &mut self.out.tips[k];
-                t.reaction = apply_friction(self.params.contact_model, &self.params.friction, &c_o[i]).transmitted;
+                t.reaction =
+                    apply_friction(self.params.contact_model, &self.params.friction, &c_o[i])
+                        .transmitted;
                 t.feedback = t.transmitted - t.reaction;
                 let frame = self.frames[i];
                 let fb = frame.rot_b * Vector::new(t.feedback[0], t.feedback[1], t.feedback[2]);
@@ -507,7 +552,9 @@ impl Dfs {
             err -= z_world * err.dot(&z_world);
             err += z_world * t.penetration;
             let v_obj = self.state.point_velocity(&(tip_b));
-            let v_tip_fd = self.prev_tip_points[k].map(|prev| (tip_point - prev) / dt).unwrap_or(v_obj);
+            let v_tip_fd = self.prev_tip_points[k]
+                .map(|prev| (tip_point - prev) / dt)
+                .unwrap_or(v_obj);
             self.prev_tip_points[k] = Some(tip_point);
             // Tip velocity not explained by joint motion (base motion), relative to the object.
             let mut v_joint = Vector::zeros();
@@ -525,7 +572,11 @@ impl Dfs {
             for d1 in 0..ndof {
                 let col1 = Vector::new(j[(0, d1)], j[(1, d1)], j[(2, d1)]);
                 rhs[d1] += dt * col1.dot(&f);
-                let pc1 = if stick { col1 } else { z_world * z_world.dot(&col1) };
+                let pc1 = if stick {
+                    col1
+                } else {
+                    z_world * z_world.dot(&col1)
+                };
                 for d2 in 0..ndof {
                     let col2 = Vector::new(j[(0, d2)], j[(1, d2)], j[(2, d2)]);
                     a[(d1, d2)] += c * pc1.dot(&col2);
@@ -563,7 +614,10 @@ impl Dfs {
         match self.object.shape {
             Shape::Sphere { radius } => radius,
             Shape::Box { half_extents } => (0..3).map(|i| m[(2, i)].abs() * half_extents[i]).sum(),
-            Shape::Cylinder { radius, half_height } => {
+            Shape::Cylinder {
+                radius,
+                half_height,
+            } => {
                 let az = m[(2, 2)].abs();
                 radius * (1.0 - az * az).max(0.0).sqrt() + half_height * az
             }
@@ -596,7 +650,11 @@ impl Dfs {
         let normal = fz_needed;
         let want = -(Vector::new(f_w.x, f_w.y, 0.0) + Vector::new(v.x, v.y, 0.0) * (m / dt));
         let limit = self.params.table_mu * normal;
-        let tangential = if want.norm() > limit { want * (limit / want.norm()) } else { want };
+        let tangential = if want.norm() > limit {
+            want * (limit / want.norm())
+        } else {
+            want
+        };
         let force_w = tangential + Vector::new(0.0, 0.0, normal);
         // Resting objects do not spin or tip: cancel the moment and angular velocity.
         let h = self.object.inertia * self.state.angular_velocity_b / dt;

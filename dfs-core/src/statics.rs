@@ -15,7 +15,9 @@
 //! With the paper's sphere and `scale = 1.5`, `f_ext = (0, 0, 4.905, 0, 0, 0)` and the feedback
 //! equals the static case: the operator feels the sphere's weight.
 
-use crate::contact::{apply_friction, in_cone, normal_and_tangential, ContactFrame, ContactModel, Friction, Intensity};
+use crate::contact::{
+    apply_friction, in_cone, normal_and_tangential, ContactFrame, ContactModel, Friction, Intensity,
+};
 use crate::error::{DfsError, Result};
 use crate::grasp::optimise::{optimise, OptimiseParams};
 use crate::grasp::{GraspMatrix, MAX_CONTACTS};
@@ -48,11 +50,19 @@ impl ObjectSpec {
     /// The object, validated; errors name the field (`object.radius`, ...).
     pub fn to_object(&self) -> Result<RigidObject> {
         let need = |v: Option<Real>, field: &str| {
-            v.ok_or_else(|| DfsError::invalid(format!("object.{field}"), format!("missing (required for a {})", self.shape)))
+            v.ok_or_else(|| {
+                DfsError::invalid(
+                    format!("object.{field}"),
+                    format!("missing (required for a {})", self.shape),
+                )
+            })
         };
         let unexpected = |present: bool, field: &str| {
             if present {
-                Err(DfsError::invalid(format!("object.{field}"), format!("not a parameter of a {}", self.shape)))
+                Err(DfsError::invalid(
+                    format!("object.{field}"),
+                    format!("not a parameter of a {}", self.shape),
+                ))
             } else {
                 Ok(())
             }
@@ -61,19 +71,33 @@ impl ObjectSpec {
             "sphere" => {
                 unexpected(self.half_extents.is_some(), "half_extents")?;
                 unexpected(self.half_height.is_some(), "half_height")?;
-                Shape::Sphere { radius: need(self.radius, "radius")? }
+                Shape::Sphere {
+                    radius: need(self.radius, "radius")?,
+                }
             }
             "box" => {
                 unexpected(self.radius.is_some(), "radius")?;
                 unexpected(self.half_height.is_some(), "half_height")?;
-                Shape::Box { half_extents: self.half_extents.ok_or_else(|| DfsError::invalid("object.half_extents", "missing (required for a box)"))? }
+                Shape::Box {
+                    half_extents: self.half_extents.ok_or_else(|| {
+                        DfsError::invalid("object.half_extents", "missing (required for a box)")
+                    })?,
+                }
             }
             "cylinder" => {
                 unexpected(self.half_extents.is_some(), "half_extents")?;
-                Shape::Cylinder { radius: need(self.radius, "radius")?, half_height: need(self.half_height, "half_height")? }
+                Shape::Cylinder {
+                    radius: need(self.radius, "radius")?,
+                    half_height: need(self.half_height, "half_height")?,
+                }
             }
             other => {
-                return Err(DfsError::invalid("object.shape", format!("unknown shape {other:?}; expected \"sphere\", \"box\" or \"cylinder\"")))
+                return Err(DfsError::invalid(
+                    "object.shape",
+                    format!(
+                        "unknown shape {other:?}; expected \"sphere\", \"box\" or \"cylinder\""
+                    ),
+                ))
             }
         };
         RigidObject::new(shape, self.mass)
@@ -81,11 +105,20 @@ impl ObjectSpec {
 
     /// The spec of an object.
     pub fn from_shape(shape: &Shape, mass: Real) -> Self {
-        let mut s = ObjectSpec { shape: shape.name().into(), radius: None, half_extents: None, half_height: None, mass };
+        let mut s = ObjectSpec {
+            shape: shape.name().into(),
+            radius: None,
+            half_extents: None,
+            half_height: None,
+            mass,
+        };
         match *shape {
             Shape::Sphere { radius } => s.radius = Some(radius),
             Shape::Box { half_extents } => s.half_extents = Some(half_extents),
-            Shape::Cylinder { radius, half_height } => {
+            Shape::Cylinder {
+                radius,
+                half_height,
+            } => {
                 s.radius = Some(radius);
                 s.half_height = Some(half_height);
             }
@@ -138,7 +171,10 @@ pub struct GraspSpec {
 
 fn finite_field(field: String, values: &[Real]) -> Result<()> {
     match values.iter().position(|v| !v.is_finite()) {
-        Some(i) => Err(DfsError::invalid(field, format!("component {i} is not a finite number"))),
+        Some(i) => Err(DfsError::invalid(
+            field,
+            format!("component {i} is not a finite number"),
+        )),
         None => Ok(()),
     }
 }
@@ -147,14 +183,25 @@ impl GraspSpec {
     /// The paper's §3.4 example: a 1 kg sphere of radius 0.1 m on four point contacts with
     /// friction, μ = 1.5 (the minimum-norm solution needs μ ≥ 1.3, NOTES.md).
     pub fn paper_sphere() -> Self {
-        let pts = [[0.054, 0.054, -0.059], [0.0, 0.076, -0.059], [-0.054, 0.054, -0.059], [0.0, -0.076, -0.059]];
+        let pts = [
+            [0.054, 0.054, -0.059],
+            [0.0, 0.076, -0.059],
+            [-0.054, 0.054, -0.059],
+            [0.0, -0.076, -0.059],
+        ];
         GraspSpec {
             object: ObjectSpec::from_shape(&Shape::Sphere { radius: 0.1 }, 1.0),
             gravity: default_gravity(),
             contact_model: ContactModel::PointWithFriction,
             mu: 1.5,
             mu_torsion: 0.0,
-            contacts: pts.iter().map(|p| ContactSpec { position: *p, normal: None }).collect(),
+            contacts: pts
+                .iter()
+                .map(|p| ContactSpec {
+                    position: *p,
+                    normal: None,
+                })
+                .collect(),
             object_acceleration: [0.0; 6],
         }
     }
@@ -176,13 +223,25 @@ impl GraspSpec {
         finite_field("gravity".into(), &self.gravity)?;
         finite_field("object_acceleration".into(), &self.object_acceleration)?;
         if !(self.mu.is_finite() && self.mu >= 0.0) {
-            return Err(DfsError::invalid("mu", format!("must be a finite number ≥ 0, got {}", self.mu)));
+            return Err(DfsError::invalid(
+                "mu",
+                format!("must be a finite number ≥ 0, got {}", self.mu),
+            ));
         }
         if !(self.mu_torsion.is_finite() && self.mu_torsion >= 0.0) {
-            return Err(DfsError::invalid("mu_torsion", format!("must be a finite number ≥ 0, got {}", self.mu_torsion)));
+            return Err(DfsError::invalid(
+                "mu_torsion",
+                format!("must be a finite number ≥ 0, got {}", self.mu_torsion),
+            ));
         }
         if self.contacts.is_empty() || self.contacts.len() > MAX_CONTACTS {
-            return Err(DfsError::invalid("contacts", format!("need 1 to {MAX_CONTACTS} contacts, got {}", self.contacts.len())));
+            return Err(DfsError::invalid(
+                "contacts",
+                format!(
+                    "need 1 to {MAX_CONTACTS} contacts, got {}",
+                    self.contacts.len()
+                ),
+            ));
         }
         let mut frames = Vec::with_capacity(self.contacts.len());
         for (i, c) in self.contacts.iter().enumerate() {
@@ -193,7 +252,10 @@ impl GraspSpec {
                     finite_field(format!("contacts[{i}].normal"), &n)?;
                     let n = Vector::from(n);
                     if n.norm() < 1e-9 {
-                        return Err(DfsError::invalid(format!("contacts[{i}].normal"), "must not be the zero vector"));
+                        return Err(DfsError::invalid(
+                            format!("contacts[{i}].normal"),
+                            "must not be the zero vector",
+                        ));
                     }
                     n.normalize()
                 }
@@ -231,7 +293,14 @@ pub struct ContactResult {
 }
 
 impl ContactResult {
-    fn new(frame: &ContactFrame, model: ContactModel, friction: &Friction, c: &Intensity, t: &Intensity, fb: &Intensity) -> Self {
+    fn new(
+        frame: &ContactFrame,
+        model: ContactModel,
+        friction: &Friction,
+        c: &Intensity,
+        t: &Intensity,
+        fb: &Intensity,
+    ) -> Self {
         let (n, tan) = normal_and_tangential(&c.component_mul(&model.mask()));
         let list = |v: &Intensity| {
             let (a, k) = model.components(v);
@@ -286,11 +355,17 @@ pub struct StaticAnalysis {
 /// holding intensities (see the module docs).
 pub fn analyse(spec: &GraspSpec, scale: Real) -> Result<StaticAnalysis> {
     if !scale.is_finite() {
-        return Err(DfsError::invalid("scale", format!("must be finite, got {scale}")));
+        return Err(DfsError::invalid(
+            "scale",
+            format!("must be finite, got {scale}"),
+        ));
     }
     let (object, frames) = spec.resolve()?;
     let model = spec.contact_model;
-    let friction = Friction { mu: spec.mu, mu_torsion: spec.mu_torsion };
+    let friction = Friction {
+        mu: spec.mu,
+        mu_torsion: spec.mu_torsion,
+    };
     let n = frames.len();
     let g = GraspMatrix::new(&frames, model);
     let gravity_b = gravity_wrench_b(&object, &Rotation::identity(), &Vector::from(spec.gravity));
@@ -307,14 +382,20 @@ pub fn analyse(spec: &GraspSpec, scale: Real) -> Result<StaticAnalysis> {
         let split = apply_friction(model, &friction, &c_h[i]);
         c_t[i] = split.transmitted;
         if split.separating && c_h[i].norm() > 1e-12 {
-            warnings.push(format!("contact {i} would have to pull (normal intensity {:.4} N): it transmits nothing", c_h[i][2]));
+            warnings.push(format!(
+                "contact {i} would have to pull (normal intensity {:.4} N): it transmits nothing",
+                c_h[i][2]
+            ));
         } else if split.slip {
             warnings.push(format!("contact {i} is outside its friction cone: it slips and transmits only the cone's part"));
         }
     }
     let object_force = g.wrench(&c_t[..n]);
     let f_ext = object_force + gravity_b;
-    let a = wrench(&(force_of(&f_ext) / object.mass), &(object.inertia_inv * moment_of(&f_ext)));
+    let a = wrench(
+        &(force_of(&f_ext) / object.mass),
+        &(object.inertia_inv * moment_of(&f_ext)),
+    );
     let mut c_o = [Intensity::zeros(); MAX_CONTACTS];
     g.distribute(&f_ext, &mut c_o);
     let contacts: Vec<ContactResult> = (0..n)
@@ -325,7 +406,8 @@ pub fn analyse(spec: &GraspSpec, scale: Real) -> Result<StaticAnalysis> {
         })
         .collect();
     if n == 1 {
-        warnings.push("a single contact cannot resist every wrench: the grasp is degenerate".into());
+        warnings
+            .push("a single contact cannot resist every wrench: the grasp is degenerate".into());
     } else if g.rank < 6 {
         warnings.push(format!("the grasp matrix has rank {} < 6 (for example collinear contacts): some wrenches cannot be resisted", g.rank));
     }
@@ -336,7 +418,10 @@ pub fn analyse(spec: &GraspSpec, scale: Real) -> Result<StaticAnalysis> {
         residual_load -= g.wrench(&back[..n]);
     }
     if residual_load.norm() > 1e-9 * (1.0 + load.norm()) {
-        warnings.push(format!("the contacts cannot balance the load exactly (residual {:.4} N or N·m)", residual_load.norm()));
+        warnings.push(format!(
+            "the contacts cannot balance the load exactly (residual {:.4} N or N·m)",
+            residual_load.norm()
+        ));
     }
 
     let params = OptimiseParams::default();
@@ -349,7 +434,14 @@ pub fn analyse(spec: &GraspSpec, scale: Real) -> Result<StaticAnalysis> {
                 .map(|(c, f)| ContactResult::new(f, model, &friction, c, c, c))
                 .collect();
             let total = contacts.iter().map(|c| c.normal_force).sum();
-            (Some(OptimisedResult { margin: params.margin, contacts, total_normal_force: total }), None)
+            (
+                Some(OptimisedResult {
+                    margin: params.margin,
+                    contacts,
+                    total_normal_force: total,
+                }),
+                None,
+            )
         }
         Err(e) => (None, Some(e.reason)),
     };
@@ -376,9 +468,18 @@ mod tests {
     #[test]
     fn the_paper_sphere_balances_gravity_and_reproduces_the_notes_table() {
         let r = analyse(&GraspSpec::paper_sphere(), 1.0).unwrap();
-        assert!(close(&r.object_force, &[0.0, 0.0, 9.81, 0.0, 0.0, 0.0], 1e-9));
+        assert!(close(
+            &r.object_force,
+            &[0.0, 0.0, 9.81, 0.0, 0.0, 0.0],
+            1e-9
+        ));
         assert!(close(&r.f_ext, &[0.0; 6], 1e-9));
-        let table = [(1.197, 1.550), (0.954, 1.229), (1.197, 1.550), (2.660, 3.427)];
+        let table = [
+            (1.197, 1.550),
+            (0.954, 1.229),
+            (1.197, 1.550),
+            (2.660, 3.427),
+        ];
         for (c, (n, t)) in r.contacts.iter().zip(table) {
             assert!((c.normal_force - n).abs() / n < 0.01);
             assert!((c.tangential_force - t).abs() / t < 0.01);
@@ -392,9 +493,17 @@ mod tests {
     fn pushing_one_and_a_half_times_harder_lifts_the_sphere_at_half_g_and_feeds_back_its_weight() {
         let s = analyse(&GraspSpec::paper_sphere(), 1.0).unwrap();
         let r = analyse(&GraspSpec::paper_sphere(), 1.5).unwrap();
-        assert!(close(&r.object_force, &[0.0, 0.0, 14.715, 0.0, 0.0, 0.0], 1e-9));
+        assert!(close(
+            &r.object_force,
+            &[0.0, 0.0, 14.715, 0.0, 0.0, 0.0],
+            1e-9
+        ));
         assert!(close(&r.f_ext, &[0.0, 0.0, 4.905, 0.0, 0.0, 0.0], 1e-9));
-        assert!(close(&r.object_acceleration, &[0.0, 0.0, 4.905, 0.0, 0.0, 0.0], 1e-9));
+        assert!(close(
+            &r.object_acceleration,
+            &[0.0, 0.0, 4.905, 0.0, 0.0, 0.0],
+            1e-9
+        ));
         for (a, b) in r.contacts.iter().zip(&s.contacts) {
             assert!(close(&a.feedback, &b.feedback, 1e-9));
             assert!(close(&b.feedback, &b.intensity, 1e-9));
@@ -418,16 +527,28 @@ mod tests {
         assert!(analyse(&spec, 1.0).unwrap_err().to_string().contains("mu"));
         let mut spec = GraspSpec::paper_sphere();
         spec.object.shape = "torus".into();
-        assert!(analyse(&spec, 1.0).unwrap_err().to_string().contains("object.shape"));
+        assert!(analyse(&spec, 1.0)
+            .unwrap_err()
+            .to_string()
+            .contains("object.shape"));
         let mut spec = GraspSpec::paper_sphere();
         spec.contacts[2].position[1] = Real::NAN;
-        assert!(analyse(&spec, 1.0).unwrap_err().to_string().contains("contacts[2].position"));
+        assert!(analyse(&spec, 1.0)
+            .unwrap_err()
+            .to_string()
+            .contains("contacts[2].position"));
         let mut spec = GraspSpec::paper_sphere();
         spec.contacts.clear();
-        assert!(analyse(&spec, 1.0).unwrap_err().to_string().contains("contacts"));
+        assert!(analyse(&spec, 1.0)
+            .unwrap_err()
+            .to_string()
+            .contains("contacts"));
         let mut spec = GraspSpec::paper_sphere();
         spec.object.radius = None;
-        assert!(analyse(&spec, 1.0).unwrap_err().to_string().contains("object.radius"));
+        assert!(analyse(&spec, 1.0)
+            .unwrap_err()
+            .to_string()
+            .contains("object.radius"));
     }
 
     #[test]
@@ -439,11 +560,20 @@ mod tests {
         assert!(r.object_force.iter().chain(&r.f_ext).all(|v| v.is_finite()));
         let mut spec = GraspSpec::paper_sphere();
         spec.contacts = vec![
-            ContactSpec { position: [-0.1, 0.0, 0.0], normal: None },
-            ContactSpec { position: [0.1, 0.0, 0.0], normal: None },
+            ContactSpec {
+                position: [-0.1, 0.0, 0.0],
+                normal: None,
+            },
+            ContactSpec {
+                position: [0.1, 0.0, 0.0],
+                normal: None,
+            },
         ];
         let r = analyse(&spec, 1.0).unwrap();
         assert!(r.warnings.iter().any(|w| w.contains("rank")));
-        assert!(r.contacts.iter().all(|c| c.intensity.iter().all(|v| v.is_finite())));
+        assert!(r
+            .contacts
+            .iter()
+            .all(|c| c.intensity.iter().all(|v| v.is_finite())));
     }
 }

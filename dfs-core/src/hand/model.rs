@@ -64,7 +64,11 @@ pub struct Inertial {
 impl Default for Inertial {
     /// No mass.
     fn default() -> Self {
-        Inertial { mass: 0.0, com: Vector::zeros(), inertia: Mat3::zeros() }
+        Inertial {
+            mass: 0.0,
+            com: Vector::zeros(),
+            inertia: Mat3::zeros(),
+        }
     }
 }
 

@@ -1,0 +1,57 @@
+//! Command-line parsing (clap) and the subcommands.
+
+mod bench;
+mod dfs_static;
+
+use clap::{Parser, Subcommand};
+use std::process::ExitCode;
+
+/// ICMS: the Dynamic Force Simulator and its skill service.
+#[derive(Debug, Parser)]
+#[command(name = "icms", version, about, long_about = None)]
+pub struct Cli {
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Debug, Subcommand)]
+enum Command {
+    /// Static force analysis of a grasp (paper §3.4): contact intensities, object force,
+    /// f_ext, feedback and the optimised force distribution.
+    DfsStatic(dfs_static::Args),
+    /// Benchmarks whose figures BENCHMARKS.md quotes.
+    #[command(subcommand)]
+    Bench(bench::BenchCommand),
+}
+
+/// An error for the user: printed as `error: ...` with exit code 1 (2 for usage errors).
+#[derive(Debug)]
+pub struct CliError(pub String);
+
+impl<E: std::fmt::Display> From<E> for CliError {
+    fn from(e: E) -> Self {
+        CliError(e.to_string())
+    }
+}
+
+/// Parses the command line and runs the subcommand.
+pub fn run() -> ExitCode {
+    let cli = Cli::parse();
+    let result = match cli.command {
+        Command::DfsStatic(a) => dfs_static::run(a),
+        Command::Bench(b) => bench::run(b),
+    };
+    match result {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(CliError(msg)) => {
+            eprintln!("error: {msg}");
+            ExitCode::FAILURE
+        }
+    }
+}
+
+/// Prints a value as pretty JSON on stdout.
+pub fn print_json<T: serde::Serialize>(v: &T) -> Result<(), CliError> {
+    println!("{}", serde_json::to_string_pretty(v)?);
+    Ok(())
+}
