@@ -15,6 +15,7 @@ pub mod grasp;
 pub mod hand;
 pub mod math;
 pub mod object;
+pub mod scenario;
 pub mod statics;
 
 pub use error::{DfsError, Result};

@@ -1,0 +1,393 @@
+//! Operator scenarios: an object on a table and a script of task phases, as built-ins or from a
+//! JSON scenario file. Validated at the boundary: every error names its field.
+//!
+//! ```json
+//! { "name": "my-lift",
+//!   "object": { "shape": "box", "half_extents": [0.03, 0.03, 0.05], "mass": 0.3,
+//!               "mu": 0.8, "position": [0.0, 0.0, 0.05], "yaw": 0.0 },
+//!   "grasp": "pinch",
+//!   "tasks": [ { "phase": "approach", "duration": 0.6 }, { "phase": "preshape", "duration": 0.4 },
+//!              { "phase": "grasp", "duration": 0.6 }, { "phase": "lift", "duration": 0.8, "height": 0.1 },
+//!              { "phase": "hold", "duration": 1.0 } ],
+//!   "seed": 1 }
+//! ```
+//! The table's top is at the object's lowest point at its start pose. Durations in s,
+//! lengths in m, angles in rad.
+
+use crate::error::{DfsError, Result};
+use crate::math::Real;
+use crate::object::{RigidObject, Shape};
+use crate::statics::ObjectSpec;
+use serde::{Deserialize, Serialize};
+
+/// The phases of a grasp task, in the order they usually come.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Phase {
+    /// The hand moves towards the object, fingers open.
+    Approach,
+    /// The fingers take the shape of the grasp, just off the surface.
+    Preshape,
+    /// The fingers close on the object and the grip force ramps up.
+    Grasp,
+    /// The object is lifted off the table.
+    Lift,
+    /// The object is held still.
+    Hold,
+    /// The object is carried (and optionally turned).
+    Transport,
+    /// The object is set down on the table.
+    Place,
+    /// The grip force ramps down and the fingers open.
+    Release,
+    /// The hand moves away.
+    Retreat,
+}
+
+impl Phase {
+    /// Every phase, in task order.
+    pub const ALL: [Phase; 9] = [
+        Phase::Approach,
+        Phase::Preshape,
+        Phase::Grasp,
+        Phase::Lift,
+        Phase::Hold,
+        Phase::Transport,
+        Phase::Place,
+        Phase::Release,
+        Phase::Retreat,
+    ];
+
+    /// Lower-case name, as in files.
+    pub fn name(self) -> &'static str {
+        match self {
+            Phase::Approach => "approach",
+            Phase::Preshape => "preshape",
+            Phase::Grasp => "grasp",
+            Phase::Lift => "lift",
+            Phase::Hold => "hold",
+            Phase::Transport => "transport",
+            Phase::Place => "place",
+            Phase::Release => "release",
+            Phase::Retreat => "retreat",
+        }
+    }
+
+    /// The phase of a name.
+    pub fn from_name(s: &str) -> Option<Phase> {
+        Phase::ALL.iter().copied().find(|p| p.name() == s)
+    }
+}
+
+/// How the operator grasps the object.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, Default)]
+#[serde(rename_all = "snake_case")]
+pub enum GraspStyle {
+    /// Chosen from the object's size: pinch for small, power for larger objects.
+    #[default]
+    Auto,
+    /// Thumb against index (and middle) fingertip, from above.
+    Pinch,
+    /// All fingers wrapped around the object against the thumb, from above.
+    Power,
+}
+
+/// The object of a scenario: shape, mass, friction and start pose.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ScenarioObject {
+    /// "sphere", "box" or "cylinder".
+    pub shape: String,
+    /// Radius (m), sphere or cylinder.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub radius: Option<Real>,
+    /// Half extents (m), box.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub half_extents: Option<[Real; 3]>,
+    /// Half height (m), cylinder (axis vertical at the start pose).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub half_height: Option<Real>,
+    /// Mass (kg), > 0.
+    pub mass: Real,
+    /// Coulomb friction coefficient between fingertips and object, ≥ 0.
+    pub mu: Real,
+    /// Torsional friction coefficient (m), ≥ 0. Default 0.005.
+    #[serde(default = "default_mu_torsion")]
+    pub mu_torsion: Real,
+    /// Start position of the object's centre in the world (m). Default: resting on a table
+    /// whose top is at z = 0, at the origin.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub position: Option<[Real; 3]>,
+    /// Start rotation about the world z axis (rad). Default 0.
+    #[serde(default)]
+    pub yaw: Real,
+}
+
+fn default_mu_torsion() -> Real {
+    0.005
+}
+
+impl ScenarioObject {
+    fn spec(&self) -> ObjectSpec {
+        ObjectSpec {
+            shape: self.shape.clone(),
+            radius: self.radius,
+            half_extents: self.half_extents,
+            half_height: self.half_height,
+            mass: self.mass,
+        }
+    }
+
+    /// The rigid object, validated.
+    pub fn to_object(&self) -> Result<RigidObject> {
+        self.spec().to_object()
+    }
+}
+
+/// One task of the script.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Task {
+    /// Which phase (`approach`, `preshape`, `grasp`, `lift`, `hold`, `transport`, `place`,
+    /// `release`, `retreat`).
+    pub phase: String,
+    /// Duration (s), > 0 and ≤ 600.
+    pub duration: Real,
+    /// `lift`: height (m) to raise the object. Default 0.10.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub height: Option<Real>,
+    /// `transport`: displacement of the object (m, world). Default (0, 0.15, 0).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub offset: Option<[Real; 3]>,
+    /// `transport`: rotation of the object about the world z axis (rad). Default 0.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub turn: Option<Real>,
+}
+
+/// A scenario file.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Scenario {
+    /// Name.
+    pub name: String,
+    /// The object.
+    pub object: ScenarioObject,
+    /// Grasp style. Default auto.
+    #[serde(default)]
+    pub grasp: GraspStyle,
+    /// The task script.
+    pub tasks: Vec<Task>,
+    /// Seed of the operator's tremor and the sensor noise. Default 0.
+    #[serde(default)]
+    pub seed: u64,
+    /// The friction coefficient the operator expects and grips for. Default: the object's μ
+    /// (a person adapts the grip to the surface after the first touch).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub operator_mu: Option<Real>,
+}
+
+/// A task with its phase resolved and defaults filled in.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ResolvedTask {
+    /// The phase.
+    pub phase: Phase,
+    /// Duration (s).
+    pub duration: Real,
+    /// Lift height (m).
+    pub height: Real,
+    /// Transport displacement (m).
+    pub offset: [Real; 3],
+    /// Transport turn about z (rad).
+    pub turn: Real,
+}
+
+fn check(field: String, ok: bool, reason: impl Into<String>) -> Result<()> {
+    if ok {
+        Ok(())
+    } else {
+        Err(DfsError::invalid(field, reason))
+    }
+}
+
+impl Scenario {
+    /// Validates the scenario and resolves its tasks; every error names the field.
+    pub fn resolve(&self) -> Result<(RigidObject, Vec<ResolvedTask>)> {
+        let o = &self.object;
+        let object = o.to_object()?;
+        check("object.mu".into(), o.mu.is_finite() && o.mu >= 0.0, format!("must be a finite number ≥ 0, got {}", o.mu))?;
+        check(
+            "object.mu_torsion".into(),
+            o.mu_torsion.is_finite() && o.mu_torsion >= 0.0,
+            format!("must be a finite number ≥ 0, got {}", o.mu_torsion),
+        )?;
+        if let Some(p) = o.position {
+            check("object.position".into(), p.iter().all(|v| v.is_finite() && v.abs() < 10.0), "must be finite and within 10 m")?;
+        }
+        check("object.yaw".into(), o.yaw.is_finite(), "must be finite")?;
+        if let Some(mu) = self.operator_mu {
+            check("operator_mu".into(), mu.is_finite() && mu > 0.0, format!("must be a finite number > 0, got {mu}"))?;
+        }
+        check("tasks".into(), !self.tasks.is_empty(), "needs at least one task")?;
+        let mut out = Vec::with_capacity(self.tasks.len());
+        for (i, t) in self.tasks.iter().enumerate() {
+            let phase = Phase::from_name(&t.phase).ok_or_else(|| {
+                let names: Vec<_> = Phase::ALL.iter().map(|p| p.name()).collect();
+                DfsError::invalid(format!("tasks[{i}].phase"), format!("unknown phase {:?}; expected one of {}", t.phase, names.join(", ")))
+            })?;
+            check(
+                format!("tasks[{i}].duration"),
+                t.duration.is_finite() && t.duration > 0.0 && t.duration <= 600.0,
+                format!("must be a number of seconds in (0, 600], got {}", t.duration),
+            )?;
+            let height = t.height.unwrap_or(0.10);
+            check(format!("tasks[{i}].height"), height.is_finite() && (0.0..=1.0).contains(&height), "must be within [0, 1] m")?;
+            let offset = t.offset.unwrap_or([0.0, 0.15, 0.0]);
+            check(format!("tasks[{i}].offset"), offset.iter().all(|v| v.is_finite() && v.abs() <= 1.0), "must be finite and within 1 m")?;
+            let turn = t.turn.unwrap_or(0.0);
+            check(format!("tasks[{i}].turn"), turn.is_finite() && turn.abs() <= std::f64::consts::PI, "must be within [-π, π] rad")?;
+            out.push(ResolvedTask { phase, duration: t.duration, height, offset, turn });
+        }
+        Ok((object, out))
+    }
+
+    /// Total duration of the script (s).
+    pub fn duration(&self) -> Real {
+        self.tasks.iter().map(|t| t.duration).sum()
+    }
+
+    /// Names of the built-in scenarios.
+    pub const BUILTINS: &'static [&'static str] =
+        &["sphere-lift", "box-pinch-lift", "cylinder-power-grasp", "sphere-rotate", "box-slip", "two-grasps"];
+
+    /// A built-in scenario by name, with the given seed.
+    pub fn builtin(name: &str, seed: u64) -> Option<Scenario> {
+        let sphere = |mu: Real| ScenarioObject {
+            shape: "sphere".into(),
+            radius: Some(0.1),
+            half_extents: None,
+            half_height: None,
+            mass: 1.0,
+            mu,
+            mu_torsion: 0.005,
+            position: None,
+            yaw: 0.0,
+        };
+        let small_box = |mu: Real| ScenarioObject {
+            shape: "box".into(),
+            radius: None,
+            half_extents: Some([0.025, 0.025, 0.04]),
+            half_height: None,
+            mass: 0.2,
+            mu,
+            mu_torsion: 0.003,
+            position: None,
+            yaw: 0.0,
+        };
+        let t = |phase: &str, duration: Real| Task { phase: phase.into(), duration, height: None, offset: None, turn: None };
+        let pick = || vec![t("approach", 0.8), t("preshape", 0.5), t("grasp", 0.8), t("lift", 1.0)];
+        let put = || vec![t("place", 1.0), t("release", 0.6), t("retreat", 0.6)];
+        let (object, grasp, tasks, operator_mu) = match name {
+            "sphere-lift" => {
+                let mut v = pick();
+                v.push(t("hold", 2.0));
+                v.extend(put());
+                (sphere(0.8), GraspStyle::Power, v, None)
+            }
+            "box-pinch-lift" => {
+                let mut v = pick();
+                v.push(t("hold", 1.0));
+                v.extend(put());
+                (small_box(0.8), GraspStyle::Pinch, v, None)
+            }
+            "cylinder-power-grasp" => {
+                let cyl = ScenarioObject {
+                    shape: "cylinder".into(),
+                    radius: Some(0.035),
+                    half_extents: None,
+                    half_height: Some(0.09),
+                    mass: 0.5,
+                    mu: 0.7,
+                    mu_torsion: 0.005,
+                    position: None,
+                    yaw: 0.0,
+                };
+                let mut v = pick();
+                v.push(t("hold", 1.0));
+                v.push(t("transport", 1.5));
+                v.extend(put());
+                (cyl, GraspStyle::Power, v, None)
+            }
+            "sphere-rotate" => {
+                let mut v = pick();
+                v.push(t("hold", 0.5));
+                v.push(Task { phase: "transport".into(), duration: 2.0, height: None, offset: Some([0.0, 0.0, 0.0]), turn: Some(0.8) });
+                v.push(t("hold", 0.5));
+                v.extend(put());
+                (sphere(0.8), GraspStyle::Power, v, None)
+            }
+            "box-slip" => {
+                let mut v = pick();
+                v.push(t("hold", 1.0));
+                v.push(t("retreat", 0.6));
+                // The operator grips for μ = 0.8 but the surface is slippery: the box slides
+                // out of the grasp while it is lifted and falls back to the table.
+                (small_box(0.12), GraspStyle::Pinch, v, Some(0.8))
+            }
+            "two-grasps" => {
+                let mut v = pick();
+                v.push(t("transport", 1.0));
+                v.extend(put());
+                v.extend(pick());
+                v.push(t("hold", 0.5));
+                v.extend(put());
+                (small_box(0.8), GraspStyle::Pinch, v, None)
+            }
+            _ => return None,
+        };
+        Some(Scenario { name: name.into(), object, grasp, tasks, seed, operator_mu })
+    }
+}
+
+impl Shape {
+    /// Size of the object along the world x axis at yaw 0 (m): what a grasp must span.
+    pub fn width_x(&self) -> Real {
+        match *self {
+            Shape::Sphere { radius } => 2.0 * radius,
+            Shape::Box { half_extents } => 2.0 * half_extents[0],
+            Shape::Cylinder { radius, .. } => 2.0 * radius,
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn every_builtin_scenario_resolves() {
+        for name in Scenario::BUILTINS {
+            let s = Scenario::builtin(name, 3).unwrap();
+            s.resolve().unwrap();
+            assert!(s.duration() > 3.0);
+        }
+    }
+
+    #[test]
+    fn bad_scenarios_name_the_field() {
+        let mut s = Scenario::builtin("sphere-lift", 0).unwrap();
+        s.object.mass = -1.0;
+        assert!(s.resolve().unwrap_err().to_string().contains("object.mass"));
+        let mut s = Scenario::builtin("sphere-lift", 0).unwrap();
+        s.object.mu = -0.2;
+        assert!(s.resolve().unwrap_err().to_string().contains("object.mu"));
+        let mut s = Scenario::builtin("sphere-lift", 0).unwrap();
+        s.tasks[2].phase = "juggle".into();
+        assert!(s.resolve().unwrap_err().to_string().contains("tasks[2].phase"));
+        let mut s = Scenario::builtin("sphere-lift", 0).unwrap();
+        s.object.shape = "torus".into();
+        assert!(s.resolve().unwrap_err().to_string().contains("object.shape"));
+        let mut s = Scenario::builtin("sphere-lift", 0).unwrap();
+        s.tasks[0].duration = 0.0;
+        assert!(s.resolve().unwrap_err().to_string().contains("tasks[0].duration"));
+    }
+}
