@@ -81,7 +81,10 @@ pub struct Friction {
 
 impl Default for Friction {
     fn default() -> Self {
-        Friction { mu: 0.8, mu_torsion: 0.005 }
+        Friction {
+            mu: 0.8,
+            mu_torsion: 0.005,
+        }
     }
 }
 
@@ -109,7 +112,10 @@ impl ContactFrame {
         let x = (e - z * z.dot(&e)).normalize();
         let y = z.cross(&x);
         let m = Matrix3::from_columns(&[x, y, z]);
-        ContactFrame { p_b, rot_b: Rotation::from_matrix_eps(&m, 1e-12, 8, Rotation::identity()) }
+        ContactFrame {
+            p_b,
+            rot_b: Rotation::from_matrix_eps(&m, 1e-12, 8, Rotation::identity()),
+        }
     }
 
     /// Inward normal in B.
@@ -172,7 +178,12 @@ pub fn apply_friction(model: ContactModel, friction: &Friction, c: &Intensity) -
     let mut t = masked;
     let mut slip = false;
     if masked[2] <= 0.0 {
-        return FrictionSplit { transmitted: Intensity::zeros(), rest: *c, slip: false, separating: true };
+        return FrictionSplit {
+            transmitted: Intensity::zeros(),
+            rest: *c,
+            slip: false,
+            separating: true,
+        };
     }
     let n = masked[2];
     let tan = (masked[0] * masked[0] + masked[1] * masked[1]).sqrt();
@@ -188,7 +199,12 @@ pub fn apply_friction(model: ContactModel, friction: &Friction, c: &Intensity) -
         t[3] = t[3].signum() * tl;
         slip = true;
     }
-    FrictionSplit { transmitted: t, rest: c - t, slip, separating: false }
+    FrictionSplit {
+        transmitted: t,
+        rest: c - t,
+        slip,
+        separating: false,
+    }
 }
 
 /// True when `c` is inside the model's cone (with a relative tolerance for rounding).
@@ -215,13 +231,21 @@ pub struct Detection {
 /// Detects a contact between a fingertip sphere (centre `centre_b` in B, radius `radius`) and
 /// the object's shape. Returns the closest surface point with its frame when the gap is at most
 /// `margin` (m); `None` otherwise.
-pub fn detect(shape: &crate::object::Shape, centre_b: &Vector, radius: Real, margin: Real) -> Option<Detection> {
+pub fn detect(
+    shape: &crate::object::Shape,
+    centre_b: &Vector,
+    radius: Real,
+    margin: Real,
+) -> Option<Detection> {
     let (d, c, n_out) = shape.closest(centre_b);
     let gap = d - radius;
     if gap > margin {
         return None;
     }
-    Some(Detection { frame: ContactFrame::from_normal(c, -n_out), penetration: -gap })
+    Some(Detection {
+        frame: ContactFrame::from_normal(c, -n_out),
+        penetration: -gap,
+    })
 }
 
 #[cfg(test)]
@@ -231,7 +255,10 @@ mod tests {
     use proptest::prelude::*;
 
     fn f() -> Friction {
-        Friction { mu: 0.5, mu_torsion: 0.01 }
+        Friction {
+            mu: 0.5,
+            mu_torsion: 0.01,
+        }
     }
 
     #[test]
@@ -247,14 +274,22 @@ mod tests {
 
     #[test]
     fn a_pulling_finger_transmits_nothing() {
-        let s = apply_friction(ContactModel::PointWithFriction, &f(), &Intensity::new(0.1, 0.0, -1.0, 0.0));
+        let s = apply_friction(
+            ContactModel::PointWithFriction,
+            &f(),
+            &Intensity::new(0.1, 0.0, -1.0, 0.0),
+        );
         assert!(s.separating);
         assert_eq!(s.transmitted, Intensity::zeros());
     }
 
     #[test]
     fn frictionless_contacts_pass_only_the_normal() {
-        let s = apply_friction(ContactModel::Frictionless, &f(), &Intensity::new(0.3, 0.2, 1.0, 0.1));
+        let s = apply_friction(
+            ContactModel::Frictionless,
+            &f(),
+            &Intensity::new(0.3, 0.2, 1.0, 0.1),
+        );
         assert_eq!(s.transmitted, Intensity::new(0.0, 0.0, 1.0, 0.0));
         assert_eq!(s.rest, Intensity::new(0.3, 0.2, 0.0, 0.1));
         assert!(!s.slip);
@@ -262,7 +297,11 @@ mod tests {
 
     #[test]
     fn soft_finger_torsion_is_limited() {
-        let s = apply_friction(ContactModel::SoftFinger, &f(), &Intensity::new(0.0, 0.0, 2.0, 0.5));
+        let s = apply_friction(
+            ContactModel::SoftFinger,
+            &f(),
+            &Intensity::new(0.0, 0.0, 2.0, 0.5),
+        );
         assert!((s.transmitted[3] - 0.02).abs() < 1e-12);
         assert!(s.slip);
     }

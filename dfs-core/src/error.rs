@@ -52,7 +52,10 @@ pub enum DfsError {
 impl DfsError {
     /// Shorthand for [`DfsError::Invalid`].
     pub fn invalid(field: impl Into<String>, reason: impl Into<String>) -> Self {
-        DfsError::Invalid { field: field.into(), reason: reason.into() }
+        DfsError::Invalid {
+            field: field.into(),
+            reason: reason.into(),
+        }
     }
 }
 

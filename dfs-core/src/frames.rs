@@ -85,7 +85,10 @@ mod tests {
     }
 
     fn arb_iso() -> impl Strategy<Value = Isometry> {
-        (prop::array::uniform3(-1.0..1.0f64), prop::array::uniform3(-3.0..3.0f64))
+        (
+            prop::array::uniform3(-1.0..1.0f64),
+            prop::array::uniform3(-3.0..3.0f64),
+        )
             .prop_map(|(t, r)| iso(t, r))
     }
 
@@ -126,8 +129,12 @@ mod tests {
         let r = u.rotation.to_rotation_matrix().into_inner();
         let g = gamma(&u);
         let mut expected = Mat6::zeros();
-        expected.fixed_view_mut::<3, 3>(0, 0).copy_from(&r.transpose());
-        expected.fixed_view_mut::<3, 3>(3, 3).copy_from(&r.transpose());
+        expected
+            .fixed_view_mut::<3, 3>(0, 0)
+            .copy_from(&r.transpose());
+        expected
+            .fixed_view_mut::<3, 3>(3, 3)
+            .copy_from(&r.transpose());
         assert!((g - expected).norm() < 1e-12);
     }
 

@@ -88,7 +88,10 @@ pub fn sym_rank6(a: &Mat6, rel_tol: Real) -> usize {
     if max <= 0.0 || !max.is_finite() {
         return 0;
     }
-    eig.eigenvalues.iter().filter(|&&l| l > max * rel_tol).count()
+    eig.eigenvalues
+        .iter()
+        .filter(|&&l| l > max * rel_tol)
+        .count()
 }
 
 #[cfg(test)]

@@ -48,7 +48,10 @@ impl Shape {
             if v.is_finite() && v > 0.0 {
                 Ok(())
             } else {
-                Err(DfsError::invalid(format!("object.{field}"), format!("must be a finite number > 0, got {v}")))
+                Err(DfsError::invalid(
+                    format!("object.{field}"),
+                    format!("must be a finite number > 0, got {v}"),
+                ))
             }
         };
         match *self {
@@ -59,7 +62,10 @@ impl Shape {
                 }
                 Ok(())
             }
-            Shape::Cylinder { radius, half_height } => {
+            Shape::Cylinder {
+                radius,
+                half_height,
+            } => {
                 check("radius", radius)?;
                 check("half_height", half_height)
             }
@@ -70,11 +76,16 @@ impl Shape {
     pub fn inertia(&self, mass: Real) -> Mat3 {
         match *self {
             Shape::Sphere { radius } => Mat3::identity() * (0.4 * mass * radius * radius),
-            Shape::Box { half_extents: [a, b, c] } => {
+            Shape::Box {
+                half_extents: [a, b, c],
+            } => {
                 let (x, y, z) = ((2.0 * a).powi(2), (2.0 * b).powi(2), (2.0 * c).powi(2));
                 Mat3::from_diagonal(&Vector::new(y + z, x + z, x + y)) * (mass / 12.0)
             }
-            Shape::Cylinder { radius, half_height } => {
+            Shape::Cylinder {
+                radius,
+                half_height,
+            } => {
                 let h2 = (2.0 * half_height).powi(2);
                 let ixx = mass * (3.0 * radius * radius + h2) / 12.0;
                 Mat3::from_diagonal(&Vector::new(ixx, ixx, 0.5 * mass * radius * radius))
@@ -92,7 +103,10 @@ impl Shape {
                 (n - radius, dir * radius, dir)
             }
             Shape::Box { half_extents } => closest_on_box(p_b, &Vector::from(half_extents)),
-            Shape::Cylinder { radius, half_height } => closest_on_cylinder(p_b, radius, half_height),
+            Shape::Cylinder {
+                radius,
+                half_height,
+            } => closest_on_cylinder(p_b, radius, half_height),
         }
     }
 
@@ -101,7 +115,10 @@ impl Shape {
         match *self {
             Shape::Sphere { radius } => radius,
             Shape::Box { half_extents } => Vector::from(half_extents).norm(),
-            Shape::Cylinder { radius, half_height } => (radius * radius + half_height * half_height).sqrt(),
+            Shape::Cylinder {
+                radius,
+                half_height,
+            } => (radius * radius + half_height * half_height).sqrt(),
         }
     }
 }
@@ -111,7 +128,11 @@ fn closest_on_box(p: &Vector, h: &Vector) -> (Real, Vector, Vector) {
     let outside = Vector::new(q.x.max(0.0), q.y.max(0.0), q.z.max(0.0));
     if outside.norm() > 0.0 {
         // Outside: clamp to the box.
-        let c = Vector::new(p.x.clamp(-h.x, h.x), p.y.clamp(-h.y, h.y), p.z.clamp(-h.z, h.z));
+        let c = Vector::new(
+            p.x.clamp(-h.x, h.x),
+            p.y.clamp(-h.y, h.y),
+            p.z.clamp(-h.z, h.z),
+        );
         let d = p - c;
         let dist = d.norm();
         (dist, c, d / dist)
@@ -134,7 +155,11 @@ fn closest_on_box(p: &Vector, h: &Vector) -> (Real, Vector, Vector) {
 
 fn closest_on_cylinder(p: &Vector, r: Real, hh: Real) -> (Real, Vector, Vector) {
     let rho = (p.x * p.x + p.y * p.y).sqrt();
-    let radial = if rho > 1e-12 { Vector::new(p.x / rho, p.y / rho, 0.0) } else { Vector::x() };
+    let radial = if rho > 1e-12 {
+        Vector::new(p.x / rho, p.y / rho, 0.0)
+    } else {
+        Vector::x()
+    };
     let dr = rho - r;
     let dz = p.z.abs() - hh;
     let sz = if p.z >= 0.0 { 1.0 } else { -1.0 };
@@ -150,7 +175,12 @@ fn closest_on_cylinder(p: &Vector, r: Real, hh: Real) -> (Real, Vector, Vector) 
         (dr, c, radial)
     } else {
         // Closest to a cap.
-        let c = Vector::new(p.x, p.y, sz * hh) - if rho > r { radial * (rho - r) } else { Vector::zeros() };
+        let c = Vector::new(p.x, p.y, sz * hh)
+            - if rho > r {
+                radial * (rho - r)
+            } else {
+                Vector::zeros()
+            };
         (dz, c, Vector::new(0.0, 0.0, sz))
     }
 }
@@ -173,16 +203,29 @@ impl RigidObject {
     pub fn new(shape: Shape, mass: Real) -> Result<Self> {
         shape.validate()?;
         if !(mass.is_finite() && mass > 0.0) {
-            return Err(DfsError::invalid("object.mass", format!("must be a finite number > 0 kg, got {mass}")));
+            return Err(DfsError::invalid(
+                "object.mass",
+                format!("must be a finite number > 0 kg, got {mass}"),
+            ));
         }
         let inertia = shape.inertia(mass);
-        let inertia_inv = inertia.try_inverse().ok_or_else(|| DfsError::invalid("object", "singular inertia"))?;
-        Ok(RigidObject { shape, mass, inertia, inertia_inv })
+        let inertia_inv = inertia
+            .try_inverse()
+            .ok_or_else(|| DfsError::invalid("object", "singular inertia"))?;
+        Ok(RigidObject {
+            shape,
+            mass,
+            inertia,
+            inertia_inv,
+        })
     }
 
     /// Spatial inertia `M* = diag(m I, H)` applied to an acceleration (v̇, ω̇).
     pub fn spatial_inertia_times(&self, acc: &Wrench) -> Wrench {
-        wrench(&(force_of(acc) * self.mass), &(self.inertia * moment_of(acc)))
+        wrench(
+            &(force_of(acc) * self.mass),
+            &(self.inertia * moment_of(acc)),
+        )
     }
 }
 
@@ -200,12 +243,19 @@ pub struct ObjectState {
 impl ObjectState {
     /// At rest at `pose`.
     pub fn at_rest(pose: Isometry) -> Self {
-        ObjectState { pose, linear_velocity: Vector::zeros(), angular_velocity_b: Vector::zeros() }
+        ObjectState {
+            pose,
+            linear_velocity: Vector::zeros(),
+            angular_velocity_b: Vector::zeros(),
+        }
     }
 
     /// Twist in B (linear velocity rotated into B, angular velocity in B).
     pub fn twist_b(&self) -> Wrench {
-        wrench(&(self.pose.rotation.inverse() * self.linear_velocity), &self.angular_velocity_b)
+        wrench(
+            &(self.pose.rotation.inverse() * self.linear_velocity),
+            &self.angular_velocity_b,
+        )
     }
 
     /// Velocity (world frame) of a point given in B.
@@ -222,7 +272,12 @@ pub fn gravity_wrench_b(obj: &RigidObject, rotation: &Rotation, g_world: &Vector
 /// `f_ext` (eq. 26): the wrench in B that accelerates the object, from the hand's wrench
 /// `f_hand_b`, gravity, and the gyroscopic term `ω × Hω`. (The paper's `ω × m v` term is the
 /// body-frame linear formulation; with world-frame linear motion it vanishes.)
-pub fn external_wrench_b(obj: &RigidObject, state: &ObjectState, f_hand_b: &Wrench, g_world: &Vector) -> Wrench {
+pub fn external_wrench_b(
+    obj: &RigidObject,
+    state: &ObjectState,
+    f_hand_b: &Wrench,
+    g_world: &Vector,
+) -> Wrench {
     let w = state.angular_velocity_b;
     let gyro = w.cross(&(obj.inertia * w));
     let g = gravity_wrench_b(obj, &state.pose.rotation, g_world);
@@ -268,7 +323,13 @@ mod tests {
 
     #[test]
     fn a_torque_free_spinning_box_keeps_its_angular_momentum_and_unit_quaternion() {
-        let obj = RigidObject::new(Shape::Box { half_extents: [0.05, 0.1, 0.2] }, 2.0).unwrap();
+        let obj = RigidObject::new(
+            Shape::Box {
+                half_extents: [0.05, 0.1, 0.2],
+            },
+            2.0,
+        )
+        .unwrap();
         let mut s = ObjectState::at_rest(Isometry::identity());
         s.angular_velocity_b = Vector::new(0.1, 3.0, 0.1);
         let l0 = s.pose.rotation * (obj.inertia * s.angular_velocity_b);
@@ -285,8 +346,13 @@ mod tests {
     fn closest_points_lie_on_the_surface_for_every_shape() {
         let shapes = [
             Shape::Sphere { radius: 0.1 },
-            Shape::Box { half_extents: [0.05, 0.03, 0.08] },
-            Shape::Cylinder { radius: 0.04, half_height: 0.1 },
+            Shape::Box {
+                half_extents: [0.05, 0.03, 0.08],
+            },
+            Shape::Cylinder {
+                radius: 0.04,
+                half_height: 0.1,
+            },
         ];
         let pts = [
             Vector::new(0.2, 0.01, -0.03),
@@ -311,7 +377,13 @@ mod tests {
     fn bad_shapes_and_masses_name_the_field() {
         let e = RigidObject::new(Shape::Sphere { radius: 0.1 }, -1.0).unwrap_err();
         assert!(e.to_string().contains("object.mass"));
-        let e = RigidObject::new(Shape::Box { half_extents: [0.1, f64::NAN, 0.1] }, 1.0).unwrap_err();
+        let e = RigidObject::new(
+            Shape::Box {
+                half_extents: [0.1, f64::NAN, 0.1],
+            },
+            1.0,
+        )
+        .unwrap_err();
         assert!(e.to_string().contains("half_extents[1]"));
     }
 }

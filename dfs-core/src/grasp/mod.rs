@@ -50,7 +50,12 @@ impl GraspMatrix {
             }
         }
         let wwt = w * w.transpose();
-        GraspMatrix { w, n, wwt_pinv: sym_pinv6(&wwt, PINV_TOLERANCE), rank: sym_rank6(&wwt, PINV_TOLERANCE) }
+        GraspMatrix {
+            w,
+            n,
+            wwt_pinv: sym_pinv6(&wwt, PINV_TOLERANCE),
+            rank: sym_rank6(&wwt, PINV_TOLERANCE),
+        }
     }
 
     /// `ᴮf̃ = ᴮW c̃` (eq. 23) for per-contact intensities.
@@ -84,15 +89,20 @@ mod tests {
 
     /// The paper's §3.4 sphere contacts.
     pub(crate) fn paper_contacts() -> Vec<ContactFrame> {
-        [[0.054, 0.054, -0.059], [0.0, 0.076, -0.059], [-0.054, 0.054, -0.059], [0.0, -0.076, -0.059]]
-            .iter()
-            .map(|p| {
-                let p = Vector::from(*p);
-                let on_surface = p.normalize() * 0.1;
-                let _ = on_surface;
-                ContactFrame::from_normal(p, -p.normalize())
-            })
-            .collect()
+        [
+            [0.054, 0.054, -0.059],
+            [0.0, 0.076, -0.059],
+            [-0.054, 0.054, -0.059],
+            [0.0, -0.076, -0.059],
+        ]
+        .iter()
+        .map(|p| {
+            let p = Vector::from(*p);
+            let on_surface = p.normalize() * 0.1;
+            let _ = on_surface;
+            ContactFrame::from_normal(p, -p.normalize())
+        })
+        .collect()
     }
 
     #[test]
@@ -101,7 +111,12 @@ mod tests {
         let g = GraspMatrix::new(&contacts, ContactModel::PointWithFriction);
         let mut c = [Intensity::zeros(); 4];
         g.distribute(&Wrench::new(0.0, 0.0, 9.81, 0.0, 0.0, 0.0), &mut c);
-        let expected = [(1.197, 1.550), (0.954, 1.229), (1.197, 1.550), (2.660, 3.427)];
+        let expected = [
+            (1.197, 1.550),
+            (0.954, 1.229),
+            (1.197, 1.550),
+            (2.660, 3.427),
+        ];
         for (ci, (n, t)) in c.iter().zip(expected) {
             let (cn, ct) = crate::contact::normal_and_tangential(ci);
             assert!((cn - n).abs() / n < 0.01, "normal {cn} vs {n}");
@@ -113,7 +128,10 @@ mod tests {
 
     #[test]
     fn one_contact_and_collinear_contacts_stay_finite() {
-        let one = [ContactFrame::from_normal(Vector::new(0.0, 0.0, -0.1), Vector::z())];
+        let one = [ContactFrame::from_normal(
+            Vector::new(0.0, 0.0, -0.1),
+            Vector::z(),
+        )];
         let g = GraspMatrix::new(&one, ContactModel::PointWithFriction);
         assert_eq!(g.rank, 3);
         let mut c = [Intensity::zeros(); 1];

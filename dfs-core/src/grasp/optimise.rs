@@ -17,7 +17,10 @@ pub struct OptimiseParams {
 
 impl Default for OptimiseParams {
     fn default() -> Self {
-        OptimiseParams { margin: 0.1, min_normal: 0.0 }
+        OptimiseParams {
+            margin: 0.1,
+            min_normal: 0.0,
+        }
     }
 }
 

@@ -64,7 +64,11 @@ pub struct Inertial {
 impl Default for Inertial {
     /// No mass.
     fn default() -> Self {
-        Inertial { mass: 0.0, com: Vector::zeros(), inertia: Mat3::zeros() }
+        Inertial {
+            mass: 0.0,
+            com: Vector::zeros(),
+            inertia: Mat3::zeros(),
+        }
     }
 }
 
@@ -193,7 +197,9 @@ impl JointDrive {
         match *self {
             JointDrive::Fixed => None,
             JointDrive::Dof(d) => Some((d, 1.0)),
-            JointDrive::Mimic { dof, multiplier, .. } => Some((dof, multiplier)),
+            JointDrive::Mimic {
+                dof, multiplier, ..
+            } => Some((dof, multiplier)),
         }
     }
 
@@ -203,7 +209,11 @@ impl JointDrive {
         match *self {
             JointDrive::Fixed => 0.0,
             JointDrive::Dof(d) => at(d),
-            JointDrive::Mimic { dof, multiplier, offset } => multiplier * at(dof) + offset,
+            JointDrive::Mimic {
+                dof,
+                multiplier,
+                offset,
+            } => multiplier * at(dof) + offset,
         }
     }
 }
@@ -246,7 +256,10 @@ fn check_limits(field: String, lower: f64, upper: f64) -> Result<()> {
         return Err(DfsError::invalid(field, "limit is NaN"));
     }
     if lower > upper {
-        return Err(DfsError::invalid(field, format!("lower {lower} > upper {upper}")));
+        return Err(DfsError::invalid(
+            field,
+            format!("lower {lower} > upper {upper}"),
+        ));
     }
     Ok(())
 }
@@ -286,11 +299,18 @@ impl HandModel {
             return Err(DfsError::invalid("links", reason));
         }
         if self.joints.len() >= self.links.len() {
-            let reason = format!("{} joints for {} links (a tree has one fewer)", self.joints.len(), self.links.len());
+            let reason = format!(
+                "{} joints for {} links (a tree has one fewer)",
+                self.joints.len(),
+                self.links.len()
+            );
             return Err(DfsError::invalid("joints", reason));
         }
         if n > MAX_DOF {
-            return Err(DfsError::invalid("dof_names", format!("{n} DOFs > {MAX_DOF}")));
+            return Err(DfsError::invalid(
+                "dof_names",
+                format!("{n} DOFs > {MAX_DOF}"),
+            ));
         }
         if self.fingertips.len() > MAX_TIPS {
             let reason = format!("{} tips > {MAX_TIPS}", self.fingertips.len());
@@ -304,11 +324,17 @@ impl HandModel {
         ];
         for (field, len) in per_dof {
             if len != n {
-                return Err(DfsError::invalid(field, format!("{len} entries for {n} DOFs")));
+                return Err(DfsError::invalid(
+                    field,
+                    format!("{len} entries for {n} DOFs"),
+                ));
             }
         }
         if self.root >= self.links.len() {
-            return Err(DfsError::invalid("root", format!("link {} does not exist", self.root)));
+            return Err(DfsError::invalid(
+                "root",
+                format!("link {} does not exist", self.root),
+            ));
         }
         Ok(())
     }
@@ -316,16 +342,25 @@ impl HandModel {
     /// Link names and mass properties.
     fn validate_links(&self) -> Result<()> {
         if let Some(i) = first_duplicate(self.links.iter().map(|l| l.name.as_str())) {
-            return Err(DfsError::invalid(format!("links[{i}].name"), "duplicate name"));
+            return Err(DfsError::invalid(
+                format!("links[{i}].name"),
+                "duplicate name",
+            ));
         }
         for (i, link) in self.links.iter().enumerate() {
             let m = &link.inertial;
             if !(m.mass.is_finite() && m.mass >= 0.0) {
                 let reason = format!("mass {} must be finite and ≥ 0", m.mass);
-                return Err(DfsError::invalid(format!("links[{i}].inertial.mass"), reason));
+                return Err(DfsError::invalid(
+                    format!("links[{i}].inertial.mass"),
+                    reason,
+                ));
             }
             if !finite3(&m.com) {
-                return Err(DfsError::invalid(format!("links[{i}].inertial.com"), "not finite"));
+                return Err(DfsError::invalid(
+                    format!("links[{i}].inertial.com"),
+                    "not finite",
+                ));
             }
             if !m.inertia.iter().all(|x| x.is_finite()) {
                 let field = format!("links[{i}].inertial.inertia");
@@ -338,10 +373,17 @@ impl HandModel {
     /// DOF names, limits, torque limits and armature.
     fn validate_dofs(&self) -> Result<()> {
         if let Some(i) = first_duplicate(self.dof_names.iter().map(String::as_str)) {
-            return Err(DfsError::invalid(format!("dof_names[{i}]"), "duplicate name"));
+            return Err(DfsError::invalid(
+                format!("dof_names[{i}]"),
+                "duplicate name",
+            ));
         }
         for i in 0..self.dof() {
-            check_limits(format!("dof_lower[{i}]"), self.dof_lower[i], self.dof_upper[i])?;
+            check_limits(
+                format!("dof_lower[{i}]"),
+                self.dof_lower[i],
+                self.dof_upper[i],
+            )?;
             let t = self.torque_limit[i];
             if t.is_nan() || t <= 0.0 {
                 let reason = format!("torque limit {t} must be > 0");
@@ -360,7 +402,10 @@ impl HandModel {
     /// order (so no loops).
     fn validate_tree(&self) -> Result<()> {
         if let Some(i) = first_duplicate(self.joints.iter().map(|j| j.name.as_str())) {
-            return Err(DfsError::invalid(format!("joints[{i}].name"), "duplicate name"));
+            return Err(DfsError::invalid(
+                format!("joints[{i}].name"),
+                "duplicate name",
+            ));
         }
         let nl = self.links.len();
         let mut reached: u64 = 1 << self.root;
@@ -397,38 +442,62 @@ impl HandModel {
         let mut driven: DofSet = 0;
         for (j, joint) in self.joints.iter().enumerate() {
             if !finite_pose(&joint.origin) {
-                return Err(DfsError::invalid(format!("joints[{j}].origin"), "not finite"));
+                return Err(DfsError::invalid(
+                    format!("joints[{j}].origin"),
+                    "not finite",
+                ));
             }
             let axis = joint.axis.into_inner();
             if !finite3(&axis) || (axis.norm() - 1.0).abs() > 1e-6 {
-                return Err(DfsError::invalid(format!("joints[{j}].axis"), "not a unit vector"));
+                return Err(DfsError::invalid(
+                    format!("joints[{j}].axis"),
+                    "not a unit vector",
+                ));
             }
             check_limits(format!("joints[{j}].lower"), joint.lower, joint.upper)?;
             let field = format!("joints[{j}].drive");
             match (joint.kind, joint.drive) {
                 (JointKind::Fixed, JointDrive::Fixed) => {}
                 (JointKind::Fixed, _) => {
-                    return Err(DfsError::invalid(field, "a fixed joint must have a fixed drive"))
+                    return Err(DfsError::invalid(
+                        field,
+                        "a fixed joint must have a fixed drive",
+                    ))
                 }
                 (_, JointDrive::Fixed) => {
-                    return Err(DfsError::invalid(field, "a moving joint needs a DOF or a mimic"))
+                    return Err(DfsError::invalid(
+                        field,
+                        "a moving joint needs a DOF or a mimic",
+                    ))
                 }
-                (_, JointDrive::Mimic { multiplier, offset, .. })
-                    if !(multiplier.is_finite() && offset.is_finite()) =>
-                {
-                    return Err(DfsError::invalid(field, "mimic multiplier/offset not finite"))
+                (
+                    _,
+                    JointDrive::Mimic {
+                        multiplier, offset, ..
+                    },
+                ) if !(multiplier.is_finite() && offset.is_finite()) => {
+                    return Err(DfsError::invalid(
+                        field,
+                        "mimic multiplier/offset not finite",
+                    ))
                 }
                 _ => {}
             }
             if let Some((d, _)) = joint.drive.dof_and_gain() {
                 if d >= n {
-                    return Err(DfsError::invalid(field, format!("DOF {d} does not exist ({n})")));
+                    return Err(DfsError::invalid(
+                        field,
+                        format!("DOF {d} does not exist ({n})"),
+                    ));
                 }
                 driven |= 1 << d;
             }
         }
         if let Some(d) = (0..n).find(|&d| driven & (1 << d) == 0) {
-            return Err(DfsError::invalid(format!("dof_names[{d}]"), "drives no joint"));
+            return Err(DfsError::invalid(
+                format!("dof_names[{d}]"),
+                "drives no joint",
+            ));
         }
         Ok(())
     }
@@ -436,7 +505,10 @@ impl HandModel {
     /// Fingertip links, offsets and radii.
     fn validate_tips(&self) -> Result<()> {
         if let Some(i) = first_duplicate(self.fingertips.iter().map(|t| t.name.as_str())) {
-            return Err(DfsError::invalid(format!("fingertips[{i}].name"), "duplicate name"));
+            return Err(DfsError::invalid(
+                format!("fingertips[{i}].name"),
+                "duplicate name",
+            ));
         }
         for (k, tip) in self.fingertips.iter().enumerate() {
             if tip.link >= self.links.len() {
@@ -444,7 +516,10 @@ impl HandModel {
                 return Err(DfsError::invalid(format!("fingertips[{k}].link"), reason));
             }
             if !finite3(&tip.offset) {
-                return Err(DfsError::invalid(format!("fingertips[{k}].offset"), "not finite"));
+                return Err(DfsError::invalid(
+                    format!("fingertips[{k}].offset"),
+                    "not finite",
+                ));
             }
             if !(tip.radius.is_finite() && tip.radius > 0.0) {
                 let reason = format!("radius {} must be finite and > 0", tip.radius);
@@ -459,11 +534,17 @@ impl HandModel {
         for (g, group) in self.finger_groups.iter().enumerate() {
             if let Some(t) = group.tips.iter().find(|&&t| t >= self.fingertips.len()) {
                 let reason = format!("tip {t} does not exist");
-                return Err(DfsError::invalid(format!("finger_groups[{g}].tips"), reason));
+                return Err(DfsError::invalid(
+                    format!("finger_groups[{g}].tips"),
+                    reason,
+                ));
             }
             if let Some(d) = group.dofs.iter().find(|&&d| d >= self.dof()) {
                 let reason = format!("DOF {d} does not exist");
-                return Err(DfsError::invalid(format!("finger_groups[{g}].dofs"), reason));
+                return Err(DfsError::invalid(
+                    format!("finger_groups[{g}].dofs"),
+                    reason,
+                ));
             }
         }
         Ok(())
@@ -476,7 +557,9 @@ impl HandModel {
         let mut current = link;
         // A valid tree has at most `joints.len()` joints on any path.
         for _ in 0..=self.joints.len() {
-            let Some(joint) = self.joints.iter().find(|j| j.child == current) else { break };
+            let Some(joint) = self.joints.iter().find(|j| j.child == current) else {
+                break;
+            };
             if let Some((d, _)) = joint.drive.dof_and_gain() {
                 set |= 1 << d;
             }
@@ -521,7 +604,9 @@ impl HandModel {
             .map(|first| {
                 let tips: Vec<usize> = (0..nt).filter(|&k| label[k] == first).collect();
                 let set = tips.iter().fold(0, |acc, &k| acc | sets[k]);
-                let dofs = (0..self.dof().min(MAX_DOF)).filter(|&d| set & (1 << d) != 0).collect();
+                let dofs = (0..self.dof().min(MAX_DOF))
+                    .filter(|&d| set & (1 << d) != 0)
+                    .collect();
                 FingerGroup { tips, dofs }
             })
             .collect();
@@ -531,16 +616,30 @@ impl HandModel {
     pub fn check_angles(&self, q: &[f64], slack: f64) -> Result<()> {
         if q.len() != self.dof() {
             let (got, expected) = (q.len(), self.dof());
-            return Err(DfsError::WrongLength { what: "joint angles", got, expected });
+            return Err(DfsError::WrongLength {
+                what: "joint angles",
+                got,
+                expected,
+            });
         }
         for (index, &value) in q.iter().enumerate() {
             if !value.is_finite() {
-                return Err(DfsError::NotFinite { what: "joint angle", index, value });
+                return Err(DfsError::NotFinite {
+                    what: "joint angle",
+                    index,
+                    value,
+                });
             }
             let (lower, upper) = (self.dof_lower[index], self.dof_upper[index]);
             if value < lower - slack || value > upper + slack {
                 let what = "joint angle";
-                return Err(DfsError::OutOfRange { what, index, value, lower, upper });
+                return Err(DfsError::OutOfRange {
+                    what,
+                    index,
+                    value,
+                    lower,
+                    upper,
+                });
             }
         }
         Ok(())
@@ -586,7 +685,13 @@ impl HandModel {
     /// Jacobian of a world point rigidly attached to `link` (rows: linear velocity of the
     /// point, angular velocity of the link; world frame; DOF columns), from the joint frames
     /// of [`forward_kinematics`](Self::forward_kinematics). Allocation-free.
-    pub fn point_jacobian(&self, kin: &Kinematics, link: usize, point: &Point, jac: &mut TipJacobian) {
+    pub fn point_jacobian(
+        &self,
+        kin: &Kinematics,
+        link: usize,
+        point: &Point,
+        jac: &mut TipJacobian,
+    ) {
         jac.fill(0.0);
         let mut current = link;
         // At most one joint per link on the path to the root.
@@ -601,7 +706,10 @@ impl HandModel {
                 let (linear, angular) = match joint.kind {
                     JointKind::Prismatic => (a, Vector::zeros()),
                     JointKind::Fixed => (Vector::zeros(), Vector::zeros()),
-                    _ => (a.cross(&(point - Point::from(kin.joint_frames[j].translation.vector))), a),
+                    _ => (
+                        a.cross(&(point - Point::from(kin.joint_frames[j].translation.vector))),
+                        a,
+                    ),
                 };
                 let mut col = jac.column_mut(d);
                 col.fixed_rows_mut::<3>(0).axpy(gain, &linear, 1.0);
@@ -650,7 +758,13 @@ impl HandModel {
 }
 
 /// Adds `J_vᵀ m J_v + J_ωᵀ I J_ω` of one link to the top-left `n × n` block of `m`.
-fn add_link_inertia(jac: &TipJacobian, mass: f64, inertia_world: &Mat3, n: usize, m: &mut DofMatrix) {
+fn add_link_inertia(
+    jac: &TipJacobian,
+    mass: f64,
+    inertia_world: &Mat3,
+    n: usize,
+    m: &mut DofMatrix,
+) {
     for i in 0..n {
         let vi = jac.fixed_view::<3, 1>(0, i);
         let wi = jac.fixed_view::<3, 1>(3, i);
