@@ -395,25 +395,149 @@ fn add_coupled_fingers(b: &mut Builder, palm: usize) -> [usize; 3] {
 mod tests {
     use super::*;
     use crate::hand::Kinematics;
+    use crate::math::Point;
+
+    fn tips(hand: &HandModel, q: &[f64]) -> Vec<Point> {
+        let mut kin = Kinematics::default();
+        hand.forward_kinematics(&Isometry::identity(), q, &mut kin);
+        kin.tip_centres[..hand.fingertips.len()].to_vec()
+    }
+
+    fn with(dof: usize, value: f64) -> [f64; 10] {
+        let mut q = [0.0; 10];
+        q[dof] = value;
+        q
+    }
 
     #[test]
-    fn print_geometry() {
-        let h = HandModel::glove10();
-        let mut kin = Kinematics::default();
-        h.forward_kinematics(&Isometry::identity(), &[0.0; 10], &mut kin);
-        for (k, t) in h.fingertips.iter().enumerate() {
-            println!("{} {:?}", t.name, kin.tip_centres[k]);
+    fn glove10_is_valid_with_ten_named_dofs_and_five_tips() {
+        let hand = HandModel::glove10();
+        hand.validate().unwrap();
+        let names = [
+            "wrist_roll",
+            "wrist_pitch",
+            "wrist_yaw",
+            "index_mcp",
+            "index_pip",
+            "index_dip",
+            "thumb_cmc",
+            "thumb_mcp",
+            "middle_mcp",
+            "middle_pip",
+        ];
+        assert_eq!(hand.dof_names, names);
+        let tip_names: Vec<&str> = hand.fingertips.iter().map(|t| t.name.as_str()).collect();
+        assert_eq!(tip_names, ["thumb", "index", "middle", "ring", "little"]);
+        assert!(hand
+            .fingertips
+            .iter()
+            .all(|t| (0.008..=0.010).contains(&t.radius)));
+        assert_eq!(hand.links[hand.root].name, "forearm");
+    }
+
+    #[test]
+    fn glove10_groups_index_thumb_and_the_coupled_fingers() {
+        let hand = HandModel::glove10();
+        let groups: Vec<(Vec<usize>, Vec<usize>)> = hand
+            .finger_groups
+            .iter()
+            .map(|g| (g.tips.clone(), g.dofs.clone()))
+            .collect();
+        assert_eq!(
+            groups,
+            [
+                (vec![0], vec![6, 7]),
+                (vec![1], vec![3, 4, 5]),
+                (vec![2, 3, 4], vec![8, 9])
+            ]
+        );
+    }
+
+    #[test]
+    fn stretched_fingers_point_along_palm_x_with_the_thumb_on_plus_y() {
+        let hand = HandModel::glove10();
+        let p = tips(&hand, &[0.0; 10]);
+        let [thumb, index, middle, ring, little] = [p[0], p[1], p[2], p[3], p[4]];
+        assert!(middle.x > index.x && index.x > ring.x && ring.x > little.x);
+        assert!((middle.x - 0.167).abs() < 0.002, "middle tip {middle}");
+        assert!(thumb.y > index.y && index.y > middle.y && middle.y > ring.y && ring.y > little.y);
+        assert!(p[1..].iter().all(|t| t.z == 0.0));
+        // Tip centre plus radius reaches about the hand length from the wrist.
+        let reach = middle.x + hand.fingertips[2].radius;
+        assert!((reach - 0.928 * HAND_LENGTH).abs() < 1e-9);
+    }
+
+    #[test]
+    fn flexion_curls_fingers_and_wrist_toward_the_palm_side() {
+        let hand = HandModel::glove10();
+        for dof in [1, 3, 4, 5, 8, 9] {
+            let p = tips(&hand, &with(dof, 0.5));
+            let moved = if dof == 8 || dof == 9 {
+                2..5
+            } else if dof == 1 {
+                1..5
+            } else {
+                1..2
+            };
+            assert!(p[moved].iter().all(|t| t.z < -0.001), "dof {dof}");
         }
+        // Radial deviation (wrist yaw +) turns the fingers toward the thumb side.
+        assert!(tips(&hand, &with(2, 0.3))[2].y > 0.03);
+    }
+
+    #[test]
+    fn coupled_fingers_copy_the_middle_finger_angles() {
+        let hand = HandModel::glove10();
+        let mut kin = Kinematics::default();
+        let mut q = [0.0; 10];
+        q[8] = 0.6;
+        q[9] = 0.9;
+        hand.forward_kinematics(&Isometry::identity(), &q, &mut kin);
+        let angle = |child: &str| {
+            let j = hand
+                .joints
+                .iter()
+                .position(|j| hand.links[j.child].name == child)
+                .unwrap();
+            let parent = hand.joints[j].parent;
+            (kin.link_poses[parent].inverse() * kin.link_poses[hand.joints[j].child])
+                .rotation
+                .angle()
+        };
+        for finger in ["middle", "ring", "little"] {
+            assert!((angle(&format!("{finger}_proximal")) - 0.6).abs() < 1e-12);
+            assert!((angle(&format!("{finger}_middle")) - 0.9).abs() < 1e-12);
+            assert!((angle(&format!("{finger}_distal")) - 0.6).abs() < 1e-12);
+        }
+    }
+
+    #[test]
+    fn opposition_brings_the_thumb_in_front_of_the_palm_toward_the_fingers() {
+        let hand = HandModel::glove10();
+        let rest = tips(&hand, &[0.0; 10])[0];
         let mut q = [0.0; 10];
         q[6] = 1.2;
-        q[7] = 0.5;
-        h.forward_kinematics(&Isometry::identity(), &q, &mut kin);
-        println!("thumb opposed {:?}", kin.tip_centres[0]);
-        println!("{:?}", h.finger_groups);
-        println!(
-            "mass {}",
-            h.links.iter().map(|l| l.inertial.mass).sum::<f64>()
+        let opposed = tips(&hand, &q)[0];
+        assert!(opposed.z < -0.04 && opposed.y < rest.y - 0.04, "{opposed}");
+        q[7] = 0.8;
+        let flexed = tips(&hand, &q)[0];
+        assert!(
+            flexed.y < opposed.y,
+            "thumb flexion moves toward the little finger"
         );
-        h.validate().unwrap();
+    }
+
+    #[test]
+    fn glove10_masses_match_an_adult_hand() {
+        let hand = HandModel::glove10();
+        let total: f64 = hand.links.iter().map(|l| l.inertial.mass).sum();
+        assert!((0.3..0.5).contains(&total), "hand mass {total} kg");
+        let index_proximal = hand
+            .links
+            .iter()
+            .find(|l| l.name == "index_proximal")
+            .unwrap();
+        assert!((0.01..0.03).contains(&index_proximal.inertial.mass));
+        assert!(hand.torque_limit.iter().all(|&t| (0.3..=5.0).contains(&t)));
     }
 }
