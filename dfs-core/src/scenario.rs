@@ -214,38 +214,82 @@ impl Scenario {
     pub fn resolve(&self) -> Result<(RigidObject, Vec<ResolvedTask>)> {
         let o = &self.object;
         let object = o.to_object()?;
-        check("object.mu".into(), o.mu.is_finite() && o.mu >= 0.0, format!("must be a finite number ≥ 0, got {}", o.mu))?;
+        check(
+            "object.mu".into(),
+            o.mu.is_finite() && o.mu >= 0.0,
+            format!("must be a finite number ≥ 0, got {}", o.mu),
+        )?;
         check(
             "object.mu_torsion".into(),
             o.mu_torsion.is_finite() && o.mu_torsion >= 0.0,
             format!("must be a finite number ≥ 0, got {}", o.mu_torsion),
         )?;
         if let Some(p) = o.position {
-            check("object.position".into(), p.iter().all(|v| v.is_finite() && v.abs() < 10.0), "must be finite and within 10 m")?;
+            check(
+                "object.position".into(),
+                p.iter().all(|v| v.is_finite() && v.abs() < 10.0),
+                "must be finite and within 10 m",
+            )?;
         }
         check("object.yaw".into(), o.yaw.is_finite(), "must be finite")?;
         if let Some(mu) = self.operator_mu {
-            check("operator_mu".into(), mu.is_finite() && mu > 0.0, format!("must be a finite number > 0, got {mu}"))?;
+            check(
+                "operator_mu".into(),
+                mu.is_finite() && mu > 0.0,
+                format!("must be a finite number > 0, got {mu}"),
+            )?;
         }
-        check("tasks".into(), !self.tasks.is_empty(), "needs at least one task")?;
+        check(
+            "tasks".into(),
+            !self.tasks.is_empty(),
+            "needs at least one task",
+        )?;
         let mut out = Vec::with_capacity(self.tasks.len());
         for (i, t) in self.tasks.iter().enumerate() {
             let phase = Phase::from_name(&t.phase).ok_or_else(|| {
                 let names: Vec<_> = Phase::ALL.iter().map(|p| p.name()).collect();
-                DfsError::invalid(format!("tasks[{i}].phase"), format!("unknown phase {:?}; expected one of {}", t.phase, names.join(", ")))
+                DfsError::invalid(
+                    format!("tasks[{i}].phase"),
+                    format!(
+                        "unknown phase {:?}; expected one of {}",
+                        t.phase,
+                        names.join(", ")
+                    ),
+                )
             })?;
             check(
                 format!("tasks[{i}].duration"),
                 t.duration.is_finite() && t.duration > 0.0 && t.duration <= 600.0,
-                format!("must be a number of seconds in (0, 600], got {}", t.duration),
+                format!(
+                    "must be a number of seconds in (0, 600], got {}",
+                    t.duration
+                ),
             )?;
             let height = t.height.unwrap_or(0.10);
-            check(format!("tasks[{i}].height"), height.is_finite() && (0.0..=1.0).contains(&height), "must be within [0, 1] m")?;
+            check(
+                format!("tasks[{i}].height"),
+                height.is_finite() && (0.0..=1.0).contains(&height),
+                "must be within [0, 1] m",
+            )?;
             let offset = t.offset.unwrap_or([0.0, 0.15, 0.0]);
-            check(format!("tasks[{i}].offset"), offset.iter().all(|v| v.is_finite() && v.abs() <= 1.0), "must be finite and within 1 m")?;
+            check(
+                format!("tasks[{i}].offset"),
+                offset.iter().all(|v| v.is_finite() && v.abs() <= 1.0),
+                "must be finite and within 1 m",
+            )?;
             let turn = t.turn.unwrap_or(0.0);
-            check(format!("tasks[{i}].turn"), turn.is_finite() && turn.abs() <= std::f64::consts::PI, "must be within [-π, π] rad")?;
-            out.push(ResolvedTask { phase, duration: t.duration, height, offset, turn });
+            check(
+                format!("tasks[{i}].turn"),
+                turn.is_finite() && turn.abs() <= std::f64::consts::PI,
+                "must be within [-π, π] rad",
+            )?;
+            out.push(ResolvedTask {
+                phase,
+                duration: t.duration,
+                height,
+                offset,
+                turn,
+            });
         }
         Ok((object, out))
     }
@@ -256,8 +300,14 @@ impl Scenario {
     }
 
     /// Names of the built-in scenarios.
-    pub const BUILTINS: &'static [&'static str] =
-        &["sphere-lift", "box-pinch-lift", "cylinder-power-grasp", "sphere-rotate", "box-slip", "two-grasps"];
+    pub const BUILTINS: &'static [&'static str] = &[
+        "sphere-lift",
+        "box-pinch-lift",
+        "cylinder-power-grasp",
+        "sphere-rotate",
+        "box-slip",
+        "two-grasps",
+    ];
 
     /// A built-in scenario by name, with the given seed.
     pub fn builtin(name: &str, seed: u64) -> Option<Scenario> {
@@ -283,8 +333,21 @@ impl Scenario {
             position: None,
             yaw: 0.0,
         };
-        let t = |phase: &str, duration: Real| Task { phase: phase.into(), duration, height: None, offset: None, turn: None };
-        let pick = || vec![t("approach", 0.8), t("preshape", 0.5), t("grasp", 0.8), t("lift", 1.0)];
+        let t = |phase: &str, duration: Real| Task {
+            phase: phase.into(),
+            duration,
+            height: None,
+            offset: None,
+            turn: None,
+        };
+        let pick = || {
+            vec![
+                t("approach", 0.8),
+                t("preshape", 0.5),
+                t("grasp", 0.8),
+                t("lift", 1.0),
+            ]
+        };
         let put = || vec![t("place", 1.0), t("release", 0.6), t("retreat", 0.6)];
         let (object, grasp, tasks, operator_mu) = match name {
             "sphere-lift" => {
@@ -320,7 +383,13 @@ impl Scenario {
             "sphere-rotate" => {
                 let mut v = pick();
                 v.push(t("hold", 0.5));
-                v.push(Task { phase: "transport".into(), duration: 2.0, height: None, offset: Some([0.0, 0.0, 0.0]), turn: Some(0.8) });
+                v.push(Task {
+                    phase: "transport".into(),
+                    duration: 2.0,
+                    height: None,
+                    offset: Some([0.0, 0.0, 0.0]),
+                    turn: Some(0.8),
+                });
                 v.push(t("hold", 0.5));
                 v.extend(put());
                 (sphere(0.8), GraspStyle::Power, v, None)
@@ -344,7 +413,14 @@ impl Scenario {
             }
             _ => return None,
         };
-        Some(Scenario { name: name.into(), object, grasp, tasks, seed, operator_mu })
+        Some(Scenario {
+            name: name.into(),
+            object,
+            grasp,
+            tasks,
+            seed,
+            operator_mu,
+        })
     }
 }
 
@@ -382,12 +458,24 @@ mod tests {
         assert!(s.resolve().unwrap_err().to_string().contains("object.mu"));
         let mut s = Scenario::builtin("sphere-lift", 0).unwrap();
         s.tasks[2].phase = "juggle".into();
-        assert!(s.resolve().unwrap_err().to_string().contains("tasks[2].phase"));
+        assert!(s
+            .resolve()
+            .unwrap_err()
+            .to_string()
+            .contains("tasks[2].phase"));
         let mut s = Scenario::builtin("sphere-lift", 0).unwrap();
         s.object.shape = "torus".into();
-        assert!(s.resolve().unwrap_err().to_string().contains("object.shape"));
+        assert!(s
+            .resolve()
+            .unwrap_err()
+            .to_string()
+            .contains("object.shape"));
         let mut s = Scenario::builtin("sphere-lift", 0).unwrap();
         s.tasks[0].duration = 0.0;
-        assert!(s.resolve().unwrap_err().to_string().contains("tasks[0].duration"));
+        assert!(s
+            .resolve()
+            .unwrap_err()
+            .to_string()
+            .contains("tasks[0].duration"));
     }
 }

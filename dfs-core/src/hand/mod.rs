@@ -7,6 +7,7 @@
 //! [`Kinematics`] of fixed capacity: no heap allocation after construction.
 
 mod glove10;
+pub mod ik;
 mod model;
 
 pub use model::*;

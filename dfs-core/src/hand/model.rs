@@ -1,8 +1,8 @@
 //! Hand model types, forward kinematics, Jacobians and joint-space inertia.
 
 use crate::error::{DfsError, Result};
-use crate::math::{Isometry, Mat3, Point, UnitVector, Vector};
-use nalgebra::{SMatrix, Vector6};
+use crate::math::{Isometry, Mat3, Point, Rotation, UnitVector, Vector};
+use nalgebra::SMatrix;
 
 /// Largest number of generalised coordinates (DOFs) a hand may have.
 pub const MAX_DOF: usize = 24;
@@ -157,6 +157,9 @@ pub struct HandModel {
     pub finger_groups: Vec<FingerGroup>,
 }
 
+/// Marks a link without a parent joint (the root) in [`Kinematics::parent_joint`].
+pub const NO_JOINT: usize = usize::MAX;
+
 /// Forward kinematics results of fixed capacity, reused every tick.
 #[derive(Debug, Clone)]
 pub struct Kinematics {
@@ -164,6 +167,10 @@ pub struct Kinematics {
     pub link_poses: [Isometry; MAX_LINKS],
     /// World pose of every joint frame (after applying the joint value).
     pub joint_frames: [Isometry; MAX_LINKS],
+    /// Axis of every joint in the world frame (unit; only the first `joints.len()` are valid).
+    pub joint_axes: [Vector; MAX_LINKS],
+    /// Index of the joint whose child is each link, [`NO_JOINT`] for the root.
+    pub parent_joint: [usize; MAX_LINKS],
     /// Centre of every fingertip sphere in the world frame.
     pub tip_centres: [Point; MAX_TIPS],
     /// Jacobian of every fingertip centre: (linear, angular) rows, DOF columns, world frame.
@@ -175,15 +182,96 @@ impl Default for Kinematics {
         Kinematics {
             link_poses: [Isometry::identity(); MAX_LINKS],
             joint_frames: [Isometry::identity(); MAX_LINKS],
+            joint_axes: [Vector::zeros(); MAX_LINKS],
+            parent_joint: [NO_JOINT; MAX_LINKS],
             tip_centres: [Point::origin(); MAX_TIPS],
             tip_jacobians: [TipJacobian::zeros(); MAX_TIPS],
         }
     }
 }
 
-/// Unused: keeps `Vector6` imported for implementors.
-#[allow(dead_code)]
-type _Twist = Vector6<f64>;
+impl JointDrive {
+    /// The driving DOF and the gain `∂(joint value)/∂θ[dof]` (1 for an independent joint,
+    /// the multiplier for a mimic joint); `None` for a fixed joint.
+    pub fn dof_and_gain(&self) -> Option<(usize, f64)> {
+        match *self {
+            JointDrive::Fixed => None,
+            JointDrive::Dof(d) => Some((d, 1.0)),
+            JointDrive::Mimic {
+                dof, multiplier, ..
+            } => Some((dof, multiplier)),
+        }
+    }
+
+    /// The joint value (rad or m) for the DOF vector `q`; a missing DOF reads as 0.
+    pub fn value(&self, q: &[f64]) -> f64 {
+        let at = |d: usize| q.get(d).copied().unwrap_or(0.0);
+        match *self {
+            JointDrive::Fixed => 0.0,
+            JointDrive::Dof(d) => at(d),
+            JointDrive::Mimic {
+                dof,
+                multiplier,
+                offset,
+            } => multiplier * at(dof) + offset,
+        }
+    }
+}
+
+impl Joint {
+    /// The motion of the joint frame for joint value `value`: a rotation about `axis` for
+    /// revolute and continuous joints, a translation along `axis` for prismatic ones.
+    pub fn motion(&self, value: f64) -> Isometry {
+        match self.kind {
+            JointKind::Revolute | JointKind::Continuous => Isometry::from_parts(
+                nalgebra::Translation3::identity(),
+                Rotation::from_axis_angle(&self.axis, value),
+            ),
+            JointKind::Prismatic => Isometry::translation(
+                self.axis.x * value,
+                self.axis.y * value,
+                self.axis.z * value,
+            ),
+            JointKind::Fixed => Isometry::identity(),
+        }
+    }
+}
+
+/// Bit set of DOFs (`MAX_DOF` ≤ 32).
+type DofSet = u32;
+
+/// True when every entry of a 3-vector is finite.
+fn finite3(v: &Vector) -> bool {
+    v.iter().all(|x| x.is_finite())
+}
+
+/// True when an isometry has finite entries.
+fn finite_pose(x: &Isometry) -> bool {
+    finite3(&x.translation.vector) && x.rotation.coords.iter().all(|c| c.is_finite())
+}
+
+/// Checks `lower ≤ upper` with neither NaN.
+fn check_limits(field: String, lower: f64, upper: f64) -> Result<()> {
+    if lower.is_nan() || upper.is_nan() {
+        return Err(DfsError::invalid(field, "limit is NaN"));
+    }
+    if lower > upper {
+        return Err(DfsError::invalid(
+            field,
+            format!("lower {lower} > upper {upper}"),
+        ));
+    }
+    Ok(())
+}
+
+/// Index of the first duplicate name, if any.
+fn first_duplicate<'a>(names: impl Iterator<Item = &'a str> + Clone) -> Option<usize> {
+    names
+        .clone()
+        .enumerate()
+        .find(|(i, n)| names.clone().take(*i).any(|m| m == *n))
+        .map(|(i, _)| i)
+}
 
 impl HandModel {
     /// Number of DOFs.
@@ -194,40 +282,1038 @@ impl HandModel {
     /// Checks the model: sizes within capacity, a tree (one root, no loops), valid indices,
     /// limits ordered, masses ≥ 0, radii > 0, torque limits > 0. Names the offending field.
     pub fn validate(&self) -> Result<()> {
-        let _ = DfsError::invalid("", "");
-        todo!("hand model validation")
+        self.validate_sizes()?;
+        self.validate_links()?;
+        self.validate_dofs()?;
+        self.validate_tree()?;
+        self.validate_joints()?;
+        self.validate_tips()?;
+        self.validate_groups()
+    }
+
+    /// Capacities and the lengths of the per-DOF vectors.
+    fn validate_sizes(&self) -> Result<()> {
+        let n = self.dof();
+        if self.links.is_empty() || self.links.len() > MAX_LINKS {
+            let reason = format!("{} links, expected 1..={MAX_LINKS}", self.links.len());
+            return Err(DfsError::invalid("links", reason));
+        }
+        if self.joints.len() >= self.links.len() {
+            let reason = format!(
+                "{} joints for {} links (a tree has one fewer)",
+                self.joints.len(),
+                self.links.len()
+            );
+            return Err(DfsError::invalid("joints", reason));
+        }
+        if n > MAX_DOF {
+            return Err(DfsError::invalid(
+                "dof_names",
+                format!("{n} DOFs > {MAX_DOF}"),
+            ));
+        }
+        if self.fingertips.len() > MAX_TIPS {
+            let reason = format!("{} tips > {MAX_TIPS}", self.fingertips.len());
+            return Err(DfsError::invalid("fingertips", reason));
+        }
+        let per_dof = [
+            ("dof_lower", self.dof_lower.len()),
+            ("dof_upper", self.dof_upper.len()),
+            ("torque_limit", self.torque_limit.len()),
+            ("armature", self.armature.len()),
+        ];
+        for (field, len) in per_dof {
+            if len != n {
+                return Err(DfsError::invalid(
+                    field,
+                    format!("{len} entries for {n} DOFs"),
+                ));
+            }
+        }
+        if self.root >= self.links.len() {
+            return Err(DfsError::invalid(
+                "root",
+                format!("link {} does not exist", self.root),
+            ));
+        }
+        Ok(())
+    }
+
+    /// Link names and mass properties.
+    fn validate_links(&self) -> Result<()> {
+        if let Some(i) = first_duplicate(self.links.iter().map(|l| l.name.as_str())) {
+            return Err(DfsError::invalid(
+                format!("links[{i}].name"),
+                "duplicate name",
+            ));
+        }
+        for (i, link) in self.links.iter().enumerate() {
+            let m = &link.inertial;
+            if !(m.mass.is_finite() && m.mass >= 0.0) {
+                let reason = format!("mass {} must be finite and ≥ 0", m.mass);
+                return Err(DfsError::invalid(
+                    format!("links[{i}].inertial.mass"),
+                    reason,
+                ));
+            }
+            if !finite3(&m.com) {
+                return Err(DfsError::invalid(
+                    format!("links[{i}].inertial.com"),
+                    "not finite",
+                ));
+            }
+            if !m.inertia.iter().all(|x| x.is_finite()) {
+                let field = format!("links[{i}].inertial.inertia");
+                return Err(DfsError::invalid(field, "not finite"));
+            }
+        }
+        Ok(())
+    }
+
+    /// DOF names, limits, torque limits and armature.
+    fn validate_dofs(&self) -> Result<()> {
+        if let Some(i) = first_duplicate(self.dof_names.iter().map(String::as_str)) {
+            return Err(DfsError::invalid(
+                format!("dof_names[{i}]"),
+                "duplicate name",
+            ));
+        }
+        for i in 0..self.dof() {
+            check_limits(
+                format!("dof_lower[{i}]"),
+                self.dof_lower[i],
+                self.dof_upper[i],
+            )?;
+            let t = self.torque_limit[i];
+            if t.is_nan() || t <= 0.0 {
+                let reason = format!("torque limit {t} must be > 0");
+                return Err(DfsError::invalid(format!("torque_limit[{i}]"), reason));
+            }
+            let a = self.armature[i];
+            if !(a.is_finite() && a >= 0.0) {
+                let reason = format!("armature {a} must be finite and ≥ 0");
+                return Err(DfsError::invalid(format!("armature[{i}]"), reason));
+            }
+        }
+        Ok(())
+    }
+
+    /// One root, every other link the child of exactly one joint, joints in topological
+    /// order (so no loops).
+    fn validate_tree(&self) -> Result<()> {
+        if let Some(i) = first_duplicate(self.joints.iter().map(|j| j.name.as_str())) {
+            return Err(DfsError::invalid(
+                format!("joints[{i}].name"),
+                "duplicate name",
+            ));
+        }
+        let nl = self.links.len();
+        let mut reached: u64 = 1 << self.root;
+        for (j, joint) in self.joints.iter().enumerate() {
+            if joint.parent >= nl {
+                let reason = format!("link {} does not exist", joint.parent);
+                return Err(DfsError::invalid(format!("joints[{j}].parent"), reason));
+            }
+            if joint.child >= nl {
+                let reason = format!("link {} does not exist", joint.child);
+                return Err(DfsError::invalid(format!("joints[{j}].child"), reason));
+            }
+            if reached & (1 << joint.parent) == 0 {
+                let reason = "parent link is neither the root nor the child of an earlier joint \
+                              (joints must be in topological order)";
+                return Err(DfsError::invalid(format!("joints[{j}].parent"), reason));
+            }
+            if reached & (1 << joint.child) != 0 {
+                let reason = "child link is the root or already has a parent (loop)";
+                return Err(DfsError::invalid(format!("joints[{j}].child"), reason));
+            }
+            reached |= 1 << joint.child;
+        }
+        if let Some(i) = (0..nl).find(|&i| reached & (1 << i) == 0) {
+            let reason = "link is not connected to the root (a second root)";
+            return Err(DfsError::invalid(format!("links[{i}]"), reason));
+        }
+        Ok(())
+    }
+
+    /// Joint origins, axes, limits and drives; every DOF drives at least one joint.
+    fn validate_joints(&self) -> Result<()> {
+        let n = self.dof();
+        let mut driven: DofSet = 0;
+        for (j, joint) in self.joints.iter().enumerate() {
+            if !finite_pose(&joint.origin) {
+                return Err(DfsError::invalid(
+                    format!("joints[{j}].origin"),
+                    "not finite",
+                ));
+            }
+            let axis = joint.axis.into_inner();
+            if !finite3(&axis) || (axis.norm() - 1.0).abs() > 1e-6 {
+                return Err(DfsError::invalid(
+                    format!("joints[{j}].axis"),
+                    "not a unit vector",
+                ));
+            }
+            check_limits(format!("joints[{j}].lower"), joint.lower, joint.upper)?;
+            let field = format!("joints[{j}].drive");
+            match (joint.kind, joint.drive) {
+                (JointKind::Fixed, JointDrive::Fixed) => {}
+                (JointKind::Fixed, _) => {
+                    return Err(DfsError::invalid(
+                        field,
+                        "a fixed joint must have a fixed drive",
+                    ))
+                }
+                (_, JointDrive::Fixed) => {
+                    return Err(DfsError::invalid(
+                        field,
+                        "a moving joint needs a DOF or a mimic",
+                    ))
+                }
+                (
+                    _,
+                    JointDrive::Mimic {
+                        multiplier, offset, ..
+                    },
+                ) if !(multiplier.is_finite() && offset.is_finite()) => {
+                    return Err(DfsError::invalid(
+                        field,
+                        "mimic multiplier/offset not finite",
+                    ))
+                }
+                _ => {}
+            }
+            if let Some((d, _)) = joint.drive.dof_and_gain() {
+                if d >= n {
+                    return Err(DfsError::invalid(
+                        field,
+                        format!("DOF {d} does not exist ({n})"),
+                    ));
+                }
+                driven |= 1 << d;
+            }
+        }
+        if let Some(d) = (0..n).find(|&d| driven & (1 << d) == 0) {
+            return Err(DfsError::invalid(
+                format!("dof_names[{d}]"),
+                "drives no joint",
+            ));
+        }
+        Ok(())
+    }
+
+    /// Fingertip links, offsets and radii.
+    fn validate_tips(&self) -> Result<()> {
+        if let Some(i) = first_duplicate(self.fingertips.iter().map(|t| t.name.as_str())) {
+            return Err(DfsError::invalid(
+                format!("fingertips[{i}].name"),
+                "duplicate name",
+            ));
+        }
+        for (k, tip) in self.fingertips.iter().enumerate() {
+            if tip.link >= self.links.len() {
+                let reason = format!("link {} does not exist", tip.link);
+                return Err(DfsError::invalid(format!("fingertips[{k}].link"), reason));
+            }
+            if !finite3(&tip.offset) {
+                return Err(DfsError::invalid(
+                    format!("fingertips[{k}].offset"),
+                    "not finite",
+                ));
+            }
+            if !(tip.radius.is_finite() && tip.radius > 0.0) {
+                let reason = format!("radius {} must be finite and > 0", tip.radius);
+                return Err(DfsError::invalid(format!("fingertips[{k}].radius"), reason));
+            }
+        }
+        Ok(())
+    }
+
+    /// Finger group indices.
+    fn validate_groups(&self) -> Result<()> {
+        for (g, group) in self.finger_groups.iter().enumerate() {
+            if let Some(t) = group.tips.iter().find(|&&t| t >= self.fingertips.len()) {
+                let reason = format!("tip {t} does not exist");
+                return Err(DfsError::invalid(
+                    format!("finger_groups[{g}].tips"),
+                    reason,
+                ));
+            }
+            if let Some(d) = group.dofs.iter().find(|&&d| d >= self.dof()) {
+                let reason = format!("DOF {d} does not exist");
+                return Err(DfsError::invalid(
+                    format!("finger_groups[{g}].dofs"),
+                    reason,
+                ));
+            }
+        }
+        Ok(())
+    }
+
+    /// The DOFs that move `link`: those of every joint on the path from the root to it
+    /// (mimic joints count for their source DOF). Needs a valid tree.
+    pub fn dofs_moving_link(&self, link: usize) -> u32 {
+        let mut set: DofSet = 0;
+        let mut current = link;
+        // A valid tree has at most `joints.len()` joints on any path.
+        for _ in 0..=self.joints.len() {
+            let Some(joint) = self.joints.iter().find(|j| j.child == current) else {
+                break;
+            };
+            if let Some((d, _)) = joint.drive.dof_and_gain() {
+                set |= 1 << d;
+            }
+            current = joint.parent;
+        }
+        set
     }
 
     /// Computes the finger groups from the tree (tips sharing non-common DOFs).
+    ///
+    /// The DOFs of tip k are those of the joints on the path from the root to its link.
+    /// With two or more tips, the DOFs shared by every tip (the wrist) are dropped; tips whose
+    /// remaining DOF sets intersect are united (transitively). A tip without DOFs forms its
+    /// own group with no DOFs. Groups are ordered by their first tip; tips and DOFs ascend.
     pub fn compute_finger_groups(&mut self) {
-        todo!("finger groups")
+        let nt = self.fingertips.len().min(MAX_TIPS);
+        let mut sets = [0 as DofSet; MAX_TIPS];
+        for (k, tip) in self.fingertips.iter().take(nt).enumerate() {
+            sets[k] = self.dofs_moving_link(tip.link);
+        }
+        if nt >= 2 {
+            let common = sets[..nt].iter().fold(DofSet::MAX, |acc, s| acc & s);
+            sets[..nt].iter_mut().for_each(|s| *s &= !common);
+        }
+        // Union-find over at most MAX_TIPS tips: label each tip with the smallest tip index
+        // of its group, repeating until no label changes.
+        let mut label: [usize; MAX_TIPS] = core::array::from_fn(|k| k);
+        let mut changed = true;
+        while changed {
+            changed = false;
+            for a in 0..nt {
+                for b in 0..nt {
+                    if sets[a] & sets[b] != 0 && label[b] > label[a] {
+                        label[b] = label[a];
+                        changed = true;
+                    }
+                }
+            }
+        }
+        self.finger_groups = (0..nt)
+            .filter(|&k| label[k] == k)
+            .map(|first| {
+                let tips: Vec<usize> = (0..nt).filter(|&k| label[k] == first).collect();
+                let set = tips.iter().fold(0, |acc, &k| acc | sets[k]);
+                let dofs = (0..self.dof().min(MAX_DOF))
+                    .filter(|&d| set & (1 << d) != 0)
+                    .collect();
+                FingerGroup { tips, dofs }
+            })
+            .collect();
     }
 
     /// Checks a joint-angle vector: right length, finite, within limits (with `slack`).
     pub fn check_angles(&self, q: &[f64], slack: f64) -> Result<()> {
-        let _ = slack;
-        let _ = q;
-        todo!()
+        if q.len() != self.dof() {
+            let (got, expected) = (q.len(), self.dof());
+            return Err(DfsError::WrongLength {
+                what: "joint angles",
+                got,
+                expected,
+            });
+        }
+        for (index, &value) in q.iter().enumerate() {
+            if !value.is_finite() {
+                return Err(DfsError::NotFinite {
+                    what: "joint angle",
+                    index,
+                    value,
+                });
+            }
+            let (lower, upper) = (self.dof_lower[index], self.dof_upper[index]);
+            if value < lower - slack || value > upper + slack {
+                let what = "joint angle";
+                return Err(DfsError::OutOfRange {
+                    what,
+                    index,
+                    value,
+                    lower,
+                    upper,
+                });
+            }
+        }
+        Ok(())
+    }
+
+    /// Clamps `q` (the first `dof` entries) into the DOF limits; a NaN entry becomes the
+    /// limit-clamped zero. Never panics on infinite limits.
+    pub fn clamp_to_limits(&self, q: &mut [f64]) {
+        for (i, x) in q.iter_mut().enumerate().take(self.dof()) {
+            let v = if x.is_nan() { 0.0 } else { *x };
+            *x = v.max(self.dof_lower[i]).min(self.dof_upper[i]);
+        }
     }
 
     /// Forward kinematics: link poses, joint frames and fingertip centres for θ = `q` with the
     /// base link at `base` (world frame). Allocation-free.
+    ///
+    /// The model must be valid ([`validate`](Self::validate)); `q` should have `dof` entries
+    /// (a missing one reads as 0) and be finite ([`check_angles`](Self::check_angles)).
     pub fn forward_kinematics(&self, base: &Isometry, q: &[f64], kin: &mut Kinematics) {
-        let _ = (base, q, kin);
-        todo!()
+        kin.link_poses[self.root] = *base;
+        kin.parent_joint[self.root] = NO_JOINT;
+        for (j, joint) in self.joints.iter().enumerate().take(MAX_LINKS) {
+            let motion = joint.motion(joint.drive.value(q));
+            let frame = kin.link_poses[joint.parent] * joint.origin * motion;
+            kin.joint_frames[j] = frame;
+            kin.joint_axes[j] = frame.rotation * joint.axis.into_inner();
+            kin.link_poses[joint.child] = frame;
+            kin.parent_joint[joint.child] = j;
+        }
+        for (k, tip) in self.fingertips.iter().enumerate().take(MAX_TIPS) {
+            kin.tip_centres[k] = kin.link_poses[tip.link] * Point::from(tip.offset);
+        }
+    }
+
+    /// Pose of fingertip `k` in the world frame: the orientation of its link, the position of
+    /// the sphere centre (the fingertip frame T_k of the paper). Needs forward kinematics.
+    pub fn tip_pose(&self, kin: &Kinematics, k: usize) -> Isometry {
+        let rotation = kin.link_poses[self.fingertips[k].link].rotation;
+        Isometry::from_parts(kin.tip_centres[k].coords.into(), rotation)
+    }
+
+    /// Jacobian of a world point rigidly attached to `link` (rows: linear velocity of the
+    /// point, angular velocity of the link; world frame; DOF columns), from the joint frames
+    /// of [`forward_kinematics`](Self::forward_kinematics). Allocation-free.
+    pub fn point_jacobian(
+        &self,
+        kin: &Kinematics,
+        link: usize,
+        point: &Point,
+        jac: &mut TipJacobian,
+    ) {
+        jac.fill(0.0);
+        let mut current = link;
+        // At most one joint per link on the path to the root.
+        for _ in 0..MAX_LINKS {
+            let j = kin.parent_joint[current];
+            if j == NO_JOINT || current == self.root {
+                break;
+            }
+            let joint = &self.joints[j];
+            if let Some((d, gain)) = joint.drive.dof_and_gain() {
+                let a = kin.joint_axes[j];
+                let (linear, angular) = match joint.kind {
+                    JointKind::Prismatic => (a, Vector::zeros()),
+                    JointKind::Fixed => (Vector::zeros(), Vector::zeros()),
+                    _ => (
+                        a.cross(&(point - Point::from(kin.joint_frames[j].translation.vector))),
+                        a,
+                    ),
+                };
+                let mut col = jac.column_mut(d);
+                col.fixed_rows_mut::<3>(0).axpy(gain, &linear, 1.0);
+                col.fixed_rows_mut::<3>(3).axpy(gain, &angular, 1.0);
+            }
+            current = joint.parent;
+        }
     }
 
     /// Fingertip Jacobians (world frame, at each tip centre) from the joint frames that
     /// [`forward_kinematics`](Self::forward_kinematics) computed. Allocation-free.
     pub fn tip_jacobians(&self, kin: &mut Kinematics) {
-        let _ = kin;
-        todo!()
+        for (k, tip) in self.fingertips.iter().enumerate().take(MAX_TIPS) {
+            let mut jac = TipJacobian::zeros();
+            self.point_jacobian(kin, tip.link, &kin.tip_centres[k], &mut jac);
+            kin.tip_jacobians[k] = jac;
+        }
     }
 
     /// Joint-space inertia M(θ) (top-left `dof × dof` block of `m`, the rest identity) from
     /// the link inertials and the armature, for the kinematics in `kin`. Allocation-free.
+    ///
+    /// M = Σ_links (J_vᵀ m J_v + J_ωᵀ R I Rᵀ J_ω) + diag(armature), with J_v the Jacobian of
+    /// the link's centre of mass and J_ω its angular Jacobian (world frame).
     pub fn mass_matrix(&self, kin: &Kinematics, m: &mut DofMatrix) {
-        let _ = (kin, m);
-        todo!()
+        let n = self.dof().min(MAX_DOF);
+        m.fill_with_identity();
+        m.view_mut((0, 0), (n, n)).fill(0.0);
+        let mut jac = TipJacobian::zeros();
+        for (l, link) in self.links.iter().enumerate() {
+            let inertial = &link.inertial;
+            if l == self.root || (inertial.mass == 0.0 && inertial.inertia == Mat3::zeros()) {
+                continue;
+            }
+            let pose = &kin.link_poses[l];
+            let com = pose * Point::from(inertial.com);
+            self.point_jacobian(kin, l, &com, &mut jac);
+            let r = pose.rotation.to_rotation_matrix();
+            let inertia_world = r.matrix() * inertial.inertia * r.matrix().transpose();
+            add_link_inertia(&jac, inertial.mass, &inertia_world, n, m);
+        }
+        for (i, a) in self.armature.iter().enumerate().take(n) {
+            m[(i, i)] += a;
+        }
+    }
+}
+
+/// Adds `J_vᵀ m J_v + J_ωᵀ I J_ω` of one link to the top-left `n × n` block of `m`.
+fn add_link_inertia(
+    jac: &TipJacobian,
+    mass: f64,
+    inertia_world: &Mat3,
+    n: usize,
+    m: &mut DofMatrix,
+) {
+    for i in 0..n {
+        let vi = jac.fixed_view::<3, 1>(0, i);
+        let wi = jac.fixed_view::<3, 1>(3, i);
+        if vi.iter().chain(wi.iter()).all(|&x| x == 0.0) {
+            continue;
+        }
+        let iwi = inertia_world * wi;
+        for j in i..n {
+            let vj = jac.fixed_view::<3, 1>(0, j);
+            let wj = jac.fixed_view::<3, 1>(3, j);
+            let e = mass * vi.dot(&vj) + iwi.dot(&wj);
+            m[(i, j)] += e;
+            if j != i {
+                m[(j, i)] += e;
+            }
+        }
+    }
+}
+
+#[cfg(test)]
+pub(crate) mod tests {
+    use super::*;
+    use proptest::prelude::*;
+
+    /// A symmetric positive-definite inertia with off-diagonal terms (kg·m²).
+    fn inertia(scale: f64) -> Mat3 {
+        Mat3::new(2.0, 0.3, -0.1, 0.3, 1.5, 0.2, -0.1, 0.2, 1.0) * scale
+    }
+
+    fn link(name: &str, mass: f64, com: [f64; 3]) -> Link {
+        let inertial = Inertial {
+            mass,
+            com: Vector::from(com),
+            inertia: inertia(mass * 1e-4),
+        };
+        Link {
+            name: name.to_owned(),
+            inertial,
+        }
+    }
+
+    #[allow(clippy::too_many_arguments)]
+    fn joint(
+        name: &str,
+        kind: JointKind,
+        parent: usize,
+        child: usize,
+        origin: Isometry,
+        axis: Vector,
+        limits: (f64, f64),
+        drive: JointDrive,
+    ) -> Joint {
+        let axis = UnitVector::new_normalize(axis);
+        let (lower, upper) = limits;
+        Joint {
+            name: name.to_owned(),
+            kind,
+            parent,
+            child,
+            origin,
+            axis,
+            lower,
+            upper,
+            drive,
+        }
+    }
+
+    fn pose(t: [f64; 3], r: [f64; 3]) -> Isometry {
+        Isometry::new(Vector::from(t), Vector::from(r))
+    }
+
+    /// A small hand exercising every joint kind: a prismatic carriage (DOF 0) carrying finger
+    /// "a" (continuous DOF 1, revolute DOF 2, a fixed joint) and finger "b" (revolute DOF 3
+    /// about a skew axis, then a mimic of DOF 3 with multiplier 0.7 and offset 0.1).
+    pub(crate) fn test_hand() -> HandModel {
+        let inf = f64::INFINITY;
+        let links = vec![
+            link("base", 1.0, [0.0; 3]),
+            link("carriage", 0.1, [0.01, 0.0, 0.0]),
+            link("a1", 0.05, [0.02, 0.001, 0.0]),
+            link("a2", 0.03, [0.01, 0.0, -0.002]),
+            link("a_tip", 0.01, [0.005, 0.0, 0.0]),
+            link("b1", 0.04, [0.015, 0.0, 0.0]),
+            link("b2", 0.02, [0.012, 0.002, 0.0]),
+        ];
+        let (p, c, r, f) = (
+            JointKind::Prismatic,
+            JointKind::Continuous,
+            JointKind::Revolute,
+            JointKind::Fixed,
+        );
+        let joints = vec![
+            joint(
+                "slide",
+                p,
+                0,
+                1,
+                pose([0.01, 0.0, 0.02], [0.1, 0.2, 0.3]),
+                Vector::new(1.0, 0.2, 0.0),
+                (-0.05, 0.05),
+                JointDrive::Dof(0),
+            ),
+            joint(
+                "a_spin",
+                c,
+                1,
+                2,
+                pose([0.03, 0.0, 0.0], [0.0, 0.0, 0.4]),
+                Vector::z(),
+                (-inf, inf),
+                JointDrive::Dof(1),
+            ),
+            joint(
+                "a_flex",
+                r,
+                2,
+                3,
+                pose([0.04, 0.0, 0.0], [0.2, 0.0, 0.0]),
+                Vector::y(),
+                (-1.0, 1.5),
+                JointDrive::Dof(2),
+            ),
+            joint(
+                "a_fixed",
+                f,
+                3,
+                4,
+                pose([0.02, 0.0, 0.005], [0.0, 0.3, 0.0]),
+                Vector::x(),
+                (0.0, 0.0),
+                JointDrive::Fixed,
+            ),
+            joint(
+                "b_flex",
+                r,
+                1,
+                5,
+                pose([0.0, 0.02, 0.0], [0.0; 3]),
+                Vector::new(0.0, 1.0, 1.0),
+                (-0.5, 1.2),
+                JointDrive::Dof(3),
+            ),
+            joint(
+                "b_coupled",
+                r,
+                5,
+                6,
+                pose([0.03, 0.0, 0.0], [0.0; 3]),
+                Vector::y(),
+                (-0.25, 0.94),
+                JointDrive::Mimic {
+                    dof: 3,
+                    multiplier: 0.7,
+                    offset: 0.1,
+                },
+            ),
+        ];
+        let mut hand = HandModel {
+            name: "test".to_owned(),
+            links,
+            joints,
+            root: 0,
+            dof_names: ["slide", "a_spin", "a_flex", "b_flex"]
+                .map(String::from)
+                .to_vec(),
+            dof_lower: vec![-0.05, -inf, -1.0, -0.5],
+            dof_upper: vec![0.05, inf, 1.5, 1.2],
+            torque_limit: vec![10.0, 1.0, 1.0, 1.0],
+            armature: vec![1e-5; 4],
+            fingertips: vec![
+                Fingertip {
+                    name: "a".into(),
+                    link: 4,
+                    offset: Vector::new(0.01, 0.0, 0.0),
+                    radius: 0.008,
+                },
+                Fingertip {
+                    name: "b".into(),
+                    link: 6,
+                    offset: Vector::new(0.025, 0.0, 0.0),
+                    radius: 0.008,
+                },
+            ],
+            finger_groups: Vec::new(),
+        };
+        hand.compute_finger_groups();
+        hand
+    }
+
+    /// Joint angles within the limits from unit-interval samples (infinite limits → ±3).
+    pub(crate) fn angles_from_unit(hand: &HandModel, u: &[f64]) -> Vec<f64> {
+        (0..hand.dof())
+            .map(|i| {
+                let lo = hand.dof_lower[i].max(-3.0);
+                let hi = hand.dof_upper[i].min(3.0);
+                lo + u[i] * (hi - lo)
+            })
+            .collect()
+    }
+
+    fn base() -> Isometry {
+        pose([0.1, -0.2, 0.3], [0.3, -0.5, 0.7])
+    }
+
+    fn fk(hand: &HandModel, q: &[f64]) -> Kinematics {
+        let mut kin = Kinematics::default();
+        hand.forward_kinematics(&base(), q, &mut kin);
+        kin
+    }
+
+    fn invalid_field(result: Result<()>) -> String {
+        match result {
+            Err(DfsError::Invalid { field, .. }) => field,
+            other => panic!("expected an invalid-model error, got {other:?}"),
+        }
+    }
+
+    #[test]
+    fn test_hand_and_glove10_are_valid() {
+        test_hand().validate().unwrap();
+        HandModel::glove10().validate().unwrap();
+    }
+
+    #[test]
+    fn validation_names_the_offending_field() {
+        type Corrupt = fn(&mut HandModel);
+        let cases: Vec<(Corrupt, &str)> = vec![
+            (|h| h.root = 99, "root"),
+            (|h| h.joints[1].child = 0, "joints[1].child"),
+            (|h| h.joints[5].child = 3, "joints[5].child"),
+            (|h| h.joints[2].parent = 42, "joints[2].parent"),
+            (|h| h.joints.swap(1, 2), "joints[1].parent"),
+            (
+                |h| {
+                    h.joints[5].drive = JointDrive::Mimic {
+                        dof: 7,
+                        multiplier: 1.0,
+                        offset: 0.0,
+                    }
+                },
+                "joints[5].drive",
+            ),
+            (
+                |h| h.joints[3].drive = JointDrive::Dof(0),
+                "joints[3].drive",
+            ),
+            (|h| h.joints[2].lower = 2.0, "joints[2].lower"),
+            (|h| h.dof_lower[2] = 2.0, "dof_lower[2]"),
+            (
+                |h| h.links[3].inertial.mass = -1.0,
+                "links[3].inertial.mass",
+            ),
+            (
+                |h| h.links[2].inertial.inertia[(0, 1)] = f64::NAN,
+                "links[2].inertial.inertia",
+            ),
+            (|h| h.fingertips[1].radius = 0.0, "fingertips[1].radius"),
+            (|h| h.fingertips[0].link = 9, "fingertips[0].link"),
+            (|h| h.torque_limit[3] = 0.0, "torque_limit[3]"),
+            (|h| h.armature.pop().map(drop).unwrap_or(()), "armature"),
+            (|h| h.dof_names.push("extra".into()), "dof_lower"),
+            (|h| h.joints.pop().map(drop).unwrap_or(()), "links[6]"),
+            (|h| h.links[5].name = "a1".into(), "links[5].name"),
+            (
+                |h| h.finger_groups[0].dofs.push(11),
+                "finger_groups[0].dofs",
+            ),
+        ];
+        for (corrupt, field) in cases {
+            let mut hand = test_hand();
+            corrupt(&mut hand);
+            assert_eq!(invalid_field(hand.validate()), field);
+        }
+    }
+
+    #[test]
+    fn validation_rejects_models_beyond_capacity() {
+        let mut hand = test_hand();
+        hand.fingertips = vec![hand.fingertips[0].clone(); MAX_TIPS + 1];
+        assert_eq!(invalid_field(hand.validate()), "fingertips");
+        let mut hand = test_hand();
+        hand.dof_names = (0..=MAX_DOF).map(|i| format!("d{i}")).collect();
+        assert_eq!(invalid_field(hand.validate()), "dof_names");
+    }
+
+    #[test]
+    fn angle_check_reports_length_non_finite_and_range() {
+        let hand = test_hand();
+        assert!(hand.check_angles(&[0.0, 10.0, 0.2, 0.3], 0.0).is_ok());
+        assert!(matches!(
+            hand.check_angles(&[0.0; 3], 0.0),
+            Err(DfsError::WrongLength {
+                got: 3,
+                expected: 4,
+                ..
+            })
+        ));
+        let nan = hand.check_angles(&[0.0, f64::NAN, 0.0, 0.0], 0.0);
+        assert!(matches!(
+            nan,
+            Err(DfsError::NotFinite {
+                what: "joint angle",
+                index: 1,
+                ..
+            })
+        ));
+        let out = hand.check_angles(&[0.0, 0.0, 1.6, 0.0], 0.05);
+        assert!(matches!(out, Err(DfsError::OutOfRange { index: 2, .. })));
+        assert!(hand.check_angles(&[0.0, 0.0, 1.54, 0.0], 0.05).is_ok());
+    }
+
+    #[test]
+    fn finger_groups_drop_the_dofs_shared_by_every_tip() {
+        let hand = test_hand();
+        let expected = vec![
+            FingerGroup {
+                tips: vec![0],
+                dofs: vec![1, 2],
+            },
+            FingerGroup {
+                tips: vec![1],
+                dofs: vec![3],
+            },
+        ];
+        assert_eq!(hand.finger_groups, expected);
+    }
+
+    #[test]
+    fn a_tip_without_dofs_forms_its_own_empty_group() {
+        let mut hand = test_hand();
+        hand.fingertips.push(Fingertip {
+            name: "palm".into(),
+            link: 0,
+            offset: Vector::zeros(),
+            radius: 0.01,
+        });
+        hand.compute_finger_groups();
+        assert_eq!(hand.finger_groups.len(), 2);
+        // Nothing is shared by all three tips now, so the slide DOF stays with both fingers,
+        // which joins them.
+        assert_eq!(
+            hand.finger_groups[0],
+            FingerGroup {
+                tips: vec![0, 1],
+                dofs: vec![0, 1, 2, 3]
+            }
+        );
+        assert_eq!(
+            hand.finger_groups[1],
+            FingerGroup {
+                tips: vec![2],
+                dofs: vec![]
+            }
+        );
+    }
+
+    #[test]
+    fn forward_kinematics_applies_prismatic_revolute_and_mimic_motion() {
+        let hand = test_hand();
+        let q0 = [0.0; 4];
+        let k0 = fk(&hand, &q0);
+        // The prismatic DOF translates every finger along the world slide axis.
+        let k1 = fk(&hand, &[0.03, 0.0, 0.0, 0.0]);
+        let axis = k0.joint_axes[0];
+        for t in 0..2 {
+            let d = k1.tip_centres[t] - k0.tip_centres[t];
+            assert!((d - axis * 0.03).norm() < 1e-12);
+        }
+        // The mimic joint turns by 0.7 θ + 0.1 about its axis through its origin.
+        let q = [0.0, 0.0, 0.0, 0.4];
+        let k = fk(&hand, &q);
+        let relative = k.link_poses[5].inverse() * k.link_poses[6];
+        let angle = relative.rotation.angle();
+        assert!((angle - (0.7 * 0.4 + 0.1)).abs() < 1e-12);
+        // Fixed joints carry their child rigidly.
+        let fixed = k.link_poses[3].inverse() * k.link_poses[4];
+        assert!((fixed.to_homogeneous() - hand.joints[3].origin.to_homogeneous()).norm() < 1e-12);
+        // The root sits at the base pose.
+        assert_eq!(k.link_poses[0], base());
+    }
+
+    /// World angular velocity from two orientations `h` apart on either side.
+    fn angular_fd(plus: &Isometry, minus: &Isometry, h: f64) -> Vector {
+        (plus.rotation * minus.rotation.inverse()).scaled_axis() / (2.0 * h)
+    }
+
+    fn assert_jacobians_match_finite_differences(hand: &HandModel, q: &[f64]) {
+        let mut kin = fk(hand, q);
+        hand.tip_jacobians(&mut kin);
+        let h = 1e-6;
+        for d in 0..hand.dof() {
+            let (mut qp, mut qm) = (q.to_vec(), q.to_vec());
+            qp[d] += h;
+            qm[d] -= h;
+            let (kp, km) = (fk(hand, &qp), fk(hand, &qm));
+            for (k, tip) in hand.fingertips.iter().enumerate() {
+                let linear = (kp.tip_centres[k] - km.tip_centres[k]) / (2.0 * h);
+                let angular = angular_fd(&kp.link_poses[tip.link], &km.link_poses[tip.link], h);
+                let col = kin.tip_jacobians[k].column(d);
+                let err_v = (col.fixed_rows::<3>(0) - linear).norm();
+                let err_w = (col.fixed_rows::<3>(3) - angular).norm();
+                assert!(
+                    err_v < 1e-7 && err_w < 1e-6,
+                    "tip {k} dof {d}: {err_v} {err_w}"
+                );
+            }
+        }
+        for col in hand.dof()..MAX_DOF {
+            assert!(kin.tip_jacobians[0].column(col).iter().all(|&x| x == 0.0));
+        }
+    }
+
+    /// ½ Σ_links (m |v_com|² + ωᵀ I_world ω) from central differences of the link poses along θ̇.
+    fn link_energy_fd(hand: &HandModel, q: &[f64], qdot: &[f64]) -> f64 {
+        let h = 1e-6;
+        let qp: Vec<f64> = q.iter().zip(qdot).map(|(a, b)| a + h * b).collect();
+        let qm: Vec<f64> = q.iter().zip(qdot).map(|(a, b)| a - h * b).collect();
+        let (k, kp, km) = (fk(hand, q), fk(hand, &qp), fk(hand, &qm));
+        let mut energy = 0.0;
+        for (l, link) in hand.links.iter().enumerate() {
+            let com = Point::from(link.inertial.com);
+            let v = (kp.link_poses[l] * com - km.link_poses[l] * com) / (2.0 * h);
+            let w = angular_fd(&kp.link_poses[l], &km.link_poses[l], h);
+            let r = k.link_poses[l].rotation.to_rotation_matrix();
+            let i_world = r.matrix() * link.inertial.inertia * r.matrix().transpose();
+            energy += 0.5 * (link.inertial.mass * v.norm_squared() + w.dot(&(i_world * w)));
+        }
+        energy
+    }
+
+    fn assert_mass_matrix_is_consistent(hand: &HandModel, q: &[f64], qdot: &[f64]) {
+        let n = hand.dof();
+        let kin = fk(hand, q);
+        let mut m = DofMatrix::zeros();
+        hand.mass_matrix(&kin, &mut m);
+        assert!((m - m.transpose()).amax() < 1e-15);
+        assert!(m.cholesky().is_some(), "M is not positive definite");
+        let mut rest = m;
+        rest.view_mut((0, 0), (n, n)).fill_with_identity();
+        assert_eq!(rest, DofMatrix::identity());
+        let mut qd = nalgebra::SVector::<f64, MAX_DOF>::zeros();
+        qd.as_mut_slice()[..n].copy_from_slice(qdot);
+        let armature: f64 = (0..n)
+            .map(|i| 0.5 * hand.armature[i] * qdot[i] * qdot[i])
+            .sum();
+        let energy = 0.5 * qd.dot(&(m * qd)) - armature;
+        let expected = link_energy_fd(hand, q, qdot);
+        assert!(
+            (energy - expected).abs() < 1e-9 * (1.0 + expected),
+            "{energy} vs {expected}"
+        );
+    }
+
+    proptest! {
+        #[test]
+        fn tip_jacobians_match_finite_differences_of_forward_kinematics(u in prop::collection::vec(0.0..1.0f64, 10)) {
+            let hand = test_hand();
+            assert_jacobians_match_finite_differences(&hand, &angles_from_unit(&hand, &u));
+            let glove = HandModel::glove10();
+            assert_jacobians_match_finite_differences(&glove, &angles_from_unit(&glove, &u));
+        }
+
+        #[test]
+        fn kinetic_energy_of_the_mass_matrix_equals_the_sum_of_link_energies(
+            u in prop::collection::vec(0.0..1.0f64, 10),
+            qdot in prop::collection::vec(-2.0..2.0f64, 10),
+        ) {
+            let hand = test_hand();
+            assert_mass_matrix_is_consistent(&hand, &angles_from_unit(&hand, &u), &qdot[..4]);
+            let glove = HandModel::glove10();
+            assert_mass_matrix_is_consistent(&glove, &angles_from_unit(&glove, &u), &qdot);
+        }
+    }
+
+    #[test]
+    fn a_single_pendulum_has_the_analytic_inertia() {
+        let (mass, length, com) = (0.5, 0.2, 0.08);
+        let izz = mass * length * length / 12.0;
+        let inertial = Inertial {
+            mass,
+            com: Vector::new(com, 0.0, 0.0),
+            inertia: Mat3::from_diagonal(&Vector::new(1e-6, izz, izz)),
+        };
+        let hand = HandModel {
+            name: "pendulum".into(),
+            links: vec![
+                Link {
+                    name: "base".into(),
+                    inertial: Inertial::default(),
+                },
+                Link {
+                    name: "arm".into(),
+                    inertial,
+                },
+            ],
+            joints: vec![joint(
+                "pivot",
+                JointKind::Revolute,
+                0,
+                1,
+                Isometry::identity(),
+                Vector::z(),
+                (-3.0, 3.0),
+                JointDrive::Dof(0),
+            )],
+            root: 0,
+            dof_names: vec!["pivot".into()],
+            dof_lower: vec![-3.0],
+            dof_upper: vec![3.0],
+            torque_limit: vec![1.0],
+            armature: vec![1e-4],
+            fingertips: vec![Fingertip {
+                name: "tip".into(),
+                link: 1,
+                offset: Vector::new(length, 0.0, 0.0),
+                radius: 0.01,
+            }],
+            finger_groups: Vec::new(),
+        };
+        hand.validate().unwrap();
+        for angle in [-1.0, 0.0, 0.7] {
+            let kin = fk(&hand, &[angle]);
+            let mut m = DofMatrix::zeros();
+            hand.mass_matrix(&kin, &mut m);
+            let expected = izz + mass * com * com + 1e-4;
+            assert!((m[(0, 0)] - expected).abs() < 1e-15);
+        }
+    }
+
+    #[test]
+    fn a_stretched_finger_gives_finite_jacobians_and_inertia() {
+        let glove = HandModel::glove10();
+        let mut kin = fk(&glove, &[0.0; 10]);
+        glove.tip_jacobians(&mut kin);
+        let mut m = DofMatrix::zeros();
+        glove.mass_matrix(&kin, &mut m);
+        assert!(kin
+            .tip_jacobians
+            .iter()
+            .all(|j| j.iter().all(|x| x.is_finite())));
+        assert!(m.iter().all(|x| x.is_finite()));
+        assert!(m.cholesky().is_some());
+    }
+
+    #[test]
+    fn clamping_handles_infinite_limits_and_nan() {
+        let hand = test_hand();
+        let mut q = [1.0, 100.0, f64::NAN, -9.0];
+        hand.clamp_to_limits(&mut q);
+        assert_eq!(q, [0.05, 100.0, 0.0, -0.5]);
     }
 }
