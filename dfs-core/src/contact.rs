@@ -112,9 +112,10 @@ impl ContactFrame {
         let x = (e - z * z.dot(&e)).normalize();
         let y = z.cross(&x);
         let m = Matrix3::from_columns(&[x, y, z]);
+        // x, y, z are orthonormal by construction: no iterative orthogonalisation needed.
         ContactFrame {
             p_b,
-            rot_b: Rotation::from_matrix_eps(&m, 1e-12, 8, Rotation::identity()),
+            rot_b: Rotation::from_rotation_matrix(&nalgebra::Rotation3::from_matrix_unchecked(m)),
         }
     }
 

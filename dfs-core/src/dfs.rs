@@ -235,6 +235,7 @@ pub struct Dfs {
     initialised: bool,
     kin: Kinematics,
     mass: DofMatrix,
+    scratch: DofMatrix,
     anchors_b: [Option<Vector>; MAX_TIPS],
     prev_tip_points: [Option<Vector>; MAX_TIPS],
     frames: [ContactFrame; MAX_CONTACTS],
@@ -276,6 +277,7 @@ impl Dfs {
             initialised: false,
             kin: Kinematics::default(),
             mass: DofMatrix::identity(),
+            scratch: DofMatrix::identity(),
             anchors_b: [None; MAX_TIPS],
             prev_tip_points: [None; MAX_TIPS],
             frames: [ContactFrame::from_normal(Vector::zeros(), Vector::z()); MAX_CONTACTS],
@@ -409,7 +411,7 @@ impl Dfs {
                 continue;
             }
             // A = Σ_tips J_gᵀ J_g + λ² I over the group's DOFs; y = A⁻¹ τ_g; f_tip = J_tip y.
-            let mut a = DofMatrix::identity();
+            let a = &mut self.scratch;
             let mut y = [0.0; MAX_DOF];
             for (ia, &da) in g.dofs.iter().enumerate() {
                 y[ia] = tau[da];
@@ -424,7 +426,7 @@ impl Dfs {
                     a[(ia, ib)] = s;
                 }
             }
-            if !cholesky_solve_in_place(&mut a, m, &mut y) {
+            if !cholesky_solve_in_place(a, m, &mut y) {
                 continue;
             }
             for &tip in &g.tips {
@@ -512,7 +514,8 @@ impl Dfs {
         let ndof = self.hand.dof();
         let p = &self.params;
         let dt = p.dt;
-        let mut a = self.mass;
+        let a = &mut self.scratch;
+        a.view_mut((0, 0), (ndof, ndof)).copy_from(&self.mass.view((0, 0), (ndof, ndof)));
         let mut rhs = [0.0; MAX_DOF];
         for i in 0..ndof {
             a[(i, i)] += dt * p.joint_damping;
@@ -587,7 +590,7 @@ impl Dfs {
             rhs[d] += dt * fb_torque[d];
             self.out.feedback_torque[d] = fb_torque[d];
         }
-        if cholesky_solve_in_place(&mut a, ndof, &mut rhs) {
+        if cholesky_solve_in_place(a, ndof, &mut rhs) {
             for d in 0..ndof {
                 let mut v = rhs[d];
                 let mut q = self.q[d] + dt * v;

@@ -10,11 +10,13 @@
 pub mod contact;
 pub mod dfs;
 pub mod error;
+pub mod fixtures;
 pub mod frames;
 pub mod grasp;
 pub mod hand;
 pub mod math;
 pub mod object;
+pub mod operator;
 pub mod scenario;
 pub mod statics;
 

@@ -722,9 +722,11 @@ impl HandModel {
     /// Fingertip Jacobians (world frame, at each tip centre) from the joint frames that
     /// [`forward_kinematics`](Self::forward_kinematics) computed. Allocation-free.
     pub fn tip_jacobians(&self, kin: &mut Kinematics) {
-        for (k, tip) in self.fingertips.iter().enumerate().take(MAX_TIPS) {
-            let mut jac = TipJacobian::zeros();
-            self.point_jacobian(kin, tip.link, &kin.tip_centres[k], &mut jac);
+        for k in 0..self.fingertips.len().min(MAX_TIPS) {
+            let link = self.fingertips[k].link;
+            let centre = kin.tip_centres[k];
+            let mut jac = std::mem::replace(&mut kin.tip_jacobians[k], TipJacobian::zeros());
+            self.point_jacobian(kin, link, &centre, &mut jac);
             kin.tip_jacobians[k] = jac;
         }
     }
@@ -738,7 +740,13 @@ impl HandModel {
         let n = self.dof().min(MAX_DOF);
         m.fill_with_identity();
         m.view_mut((0, 0), (n, n)).fill(0.0);
-        let mut jac = TipJacobian::zeros();
+        // Per link, only the DOFs on its path to the root have non-zero Jacobian columns:
+        // gather those (merging a DOF that drives several joints, as mimic joints do) and add
+        // `m v_aᵀ v_b + ω_aᵀ I ω_b` for each pair.
+        const PATH: usize = 16;
+        let mut dofs = [0usize; PATH];
+        let mut lin = [Vector::zeros(); PATH];
+        let mut ang = [Vector::zeros(); PATH];
         for (l, link) in self.links.iter().enumerate() {
             let inertial = &link.inertial;
             if l == self.root || (inertial.mass == 0.0 && inertial.inertia == Mat3::zeros()) {
@@ -746,10 +754,49 @@ impl HandModel {
             }
             let pose = &kin.link_poses[l];
             let com = pose * Point::from(inertial.com);
-            self.point_jacobian(kin, l, &com, &mut jac);
+            let mut cnt = 0;
+            let mut current = l;
+            for _ in 0..MAX_LINKS {
+                let j = kin.parent_joint[current];
+                if j == NO_JOINT || current == self.root {
+                    break;
+                }
+                let joint = &self.joints[j];
+                if let Some((d, gain)) = joint.drive.dof_and_gain() {
+                    let a = kin.joint_axes[j];
+                    let (v, w) = match joint.kind {
+                        JointKind::Prismatic => (a, Vector::zeros()),
+                        JointKind::Fixed => (Vector::zeros(), Vector::zeros()),
+                        _ => (a.cross(&(com - Point::from(kin.joint_frames[j].translation.vector))), a),
+                    };
+                    match dofs[..cnt].iter().position(|&x| x == d) {
+                        Some(i) => {
+                            lin[i] += v * gain;
+                            ang[i] += w * gain;
+                        }
+                        None if cnt < PATH => {
+                            dofs[cnt] = d;
+                            lin[cnt] = v * gain;
+                            ang[cnt] = w * gain;
+                            cnt += 1;
+                        }
+                        None => {}
+                    }
+                }
+                current = joint.parent;
+            }
             let r = pose.rotation.to_rotation_matrix();
             let inertia_world = r.matrix() * inertial.inertia * r.matrix().transpose();
-            add_link_inertia(&jac, inertial.mass, &inertia_world, n, m);
+            for a in 0..cnt {
+                let iw = inertia_world * ang[a];
+                for b in a..cnt {
+                    let e = inertial.mass * lin[a].dot(&lin[b]) + iw.dot(&ang[b]);
+                    m[(dofs[a], dofs[b])] += e;
+                    if dofs[a] != dofs[b] {
+                        m[(dofs[b], dofs[a])] += e;
+                    }
+                }
+            }
         }
         for (i, a) in self.armature.iter().enumerate().take(n) {
             m[(i, i)] += a;
@@ -757,32 +804,6 @@ impl HandModel {
     }
 }
 
-/// Adds `J_vᵀ m J_v + J_ωᵀ I J_ω` of one link to the top-left `n × n` block of `m`.
-fn add_link_inertia(
-    jac: &TipJacobian,
-    mass: f64,
-    inertia_world: &Mat3,
-    n: usize,
-    m: &mut DofMatrix,
-) {
-    for i in 0..n {
-        let vi = jac.fixed_view::<3, 1>(0, i);
-        let wi = jac.fixed_view::<3, 1>(3, i);
-        if vi.iter().chain(wi.iter()).all(|&x| x == 0.0) {
-            continue;
-        }
-        let iwi = inertia_world * wi;
-        for j in i..n {
-            let vj = jac.fixed_view::<3, 1>(0, j);
-            let wj = jac.fixed_view::<3, 1>(3, j);
-            let e = mass * vi.dot(&vj) + iwi.dot(&wj);
-            m[(i, j)] += e;
-            if j != i {
-                m[(j, i)] += e;
-            }
-        }
-    }
-}
 
 #[cfg(test)]
 pub(crate) mod tests {

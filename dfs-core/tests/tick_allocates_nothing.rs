@@ -1,0 +1,48 @@
+//! A DFS tick allocates nothing: a counting global allocator around many ticks.
+
+use dfs_core::dfs::GloveSample;
+use dfs_core::fixtures::glove10_holding_paper_sphere;
+use stats_alloc::{Region, StatsAlloc, INSTRUMENTED_SYSTEM};
+use std::alloc::System;
+
+#[global_allocator]
+static GLOBAL: &StatsAlloc<System> = &INSTRUMENTED_SYSTEM;
+
+/// The allocator's counters are process-wide: the two measurements run in one test so no
+/// other test thread allocates during them.
+#[test]
+fn dfs_ticks_allocate_nothing() {
+    a_dfs_tick_with_four_contacts_allocates_nothing();
+    a_free_falling_object_tick_and_a_refused_sample_allocate_nothing();
+}
+
+fn a_dfs_tick_with_four_contacts_allocates_nothing() {
+    let (mut dfs, q, tau, base) = glove10_holding_paper_sphere().unwrap();
+    let start = *dfs.object_state();
+    let sample = GloveSample { q: &q, tau: &tau, base };
+    // Warm up outside the measured region.
+    dfs.step(&sample).unwrap();
+    let region = Region::new(GLOBAL);
+    let mut contacts = 0;
+    for _ in 0..1000 {
+        dfs.set_object_state(start);
+        contacts += dfs.step(&sample).unwrap().n_contacts;
+    }
+    let stats = region.change();
+    assert_eq!(contacts, 4000, "every tick must have the four contacts");
+    assert_eq!(stats.allocations, 0, "{stats:?}");
+    assert_eq!(stats.reallocations, 0, "{stats:?}");
+}
+
+fn a_free_falling_object_tick_and_a_refused_sample_allocate_nothing() {
+    let (mut dfs, q, tau, base) = glove10_holding_paper_sphere().unwrap();
+    let mut bad = q.clone();
+    bad[4] = f64::NAN;
+    let far = dfs_core::math::Isometry::translation(0.0, 0.0, -5.0);
+    let region = Region::new(GLOBAL);
+    for _ in 0..100 {
+        assert!(dfs.step(&GloveSample { q: &bad, tau: &tau, base }).is_err());
+        dfs.step(&GloveSample { q: &q, tau: &tau, base: far }).unwrap();
+    }
+    assert_eq!(region.change().allocations, 0);
+}
