@@ -24,7 +24,7 @@ use crate::error::{DfsError, Result};
 use crate::grasp::{GraspMatrix, MAX_CONTACTS};
 use crate::hand::ik::{solve_tips, IkParams};
 use crate::hand::{HandModel, Joint, JointDrive, JointKind, Kinematics, Link, MAX_DOF, MAX_TIPS};
-use crate::math::{force_of, moment_of, wrench, Isometry, Point, Real, Rotation, Vector, Wrench};
+use crate::math::{force_of, moment_of, wrench, Isometry, Point, Real, Rotation, Vector};
 use crate::object::{ObjectState, RigidObject, Shape};
 use crate::scenario::{GraspStyle, Phase, ResolvedTask, Scenario};
 use rand::SeedableRng;
@@ -133,80 +133,113 @@ pub fn plan_grasp(hand: &HandModel, object: &RigidObject, pose: &Isometry, style
     let thumb = tip_index(hand, "thumb").ok_or_else(|| DfsError::invalid("hand", "the operator needs a fingertip named \"thumb\""))?;
     let fingers: Vec<usize> = match style {
         GraspStyle::Pinch => ["index"].iter().filter_map(|n| tip_index(hand, n)).collect(),
-        _ => ["index", "middle", "ring", "little"].iter().filter_map(|n| tip_index(hand, n)).collect(),
+        // Ring and little follow the middle finger on glove10's coupled DOFs: target only the
+        // independent fingers and let the others close until they touch.
+        _ => ["index", "middle"].iter().filter_map(|n| tip_index(hand, n)).collect(),
     };
     if fingers.is_empty() {
         return Err(DfsError::invalid("hand", "the operator needs an \"index\" fingertip"));
     }
-    // Base orientation: palm down, fingers along the object's x axis (yaw only).
-    let yaw = pose.rotation.euler_angles().2;
-    let rot = Rotation::from_euler_angles(0.0, 0.0, yaw);
-    let free = with_free_base(hand, rot);
-    let n = free.dof();
-    let mut kin = Kinematics::default();
-    // Start: base above the object, fingers half flexed.
-    let mut q0 = [0.0; MAX_DOF];
-    for d in 3..n {
-        q0[d] = 0.5 * (free.dof_lower[d].max(-1.0) + free.dof_upper[d].min(1.0)) * 0.8;
-    }
-    let wrist: Vec<usize> = hand.dof_names.iter().enumerate().filter(|(_, s)| s.starts_with("wrist")).map(|(i, _)| i + 3).collect();
+    let obj_yaw = pose.rotation.euler_angles().2;
+    let centre = pose.translation.vector;
+    let n_hand = hand.dof();
+    let wrist: Vec<usize> = (0..n_hand).filter(|&d| hand.dof_names[d].starts_with("wrist")).collect();
     // The fingers not used curl into the palm and stay there.
     let mut frozen: Vec<usize> = wrist.clone();
-    for d in 3..n {
-        if hand.dof_names[d - 3].starts_with("wrist") {
-            q0[d] = 0.0;
+    let mut q_hand0 = [0.0; MAX_DOF];
+    for d in 0..n_hand {
+        if !wrist.contains(&d) {
+            q_hand0[d] = 0.4 * (hand.dof_lower[d].max(-1.0) + hand.dof_upper[d].min(1.0));
         }
     }
     if style == GraspStyle::Pinch {
         for (d, name) in hand.dof_names.iter().enumerate() {
             if ["middle", "ring", "little"].iter().any(|f| name.starts_with(f)) {
-                q0[d + 3] = hand.dof_upper[d] * 0.9;
-                frozen.push(d + 3);
+                q_hand0[d] = hand.dof_upper[d] * 0.9;
+                frozen.push(d);
             }
         }
     }
-    let params = IkParams { max_iterations: 300, tolerance: 2e-4, ..IkParams::default() }.with_frozen(frozen.iter().copied());
-    let centre = pose.translation.vector;
-    let half_x = object.shape.width_x() / 2.0;
-    let x_axis = rot * Vector::x();
-    let y_axis = rot * Vector::y();
-    let mut best: Option<(Real, [Real; MAX_DOF], Real)> = None;
-    // Try a few contact heights; keep the best reachable.
-    let heights: &[Real] = match object.shape {
-        Shape::Sphere { radius } => &[0.0, 0.15 * radius, 0.3 * radius][..],
-        Shape::Box { half_extents } => &[0.0, 0.3 * half_extents[2], -0.3 * half_extents[2]][..],
-        Shape::Cylinder { half_height, .. } => &[0.3 * half_height, 0.0, 0.6 * half_height][..],
+    // Grasp axes (object frame, horizontal) and the half width of the object along them.
+    let axes: &[(Real, Real)] = match object.shape {
+        Shape::Box { half_extents } => &[(0.0, half_extents[0]), (std::f64::consts::FRAC_PI_2, half_extents[1])][..],
+        Shape::Sphere { radius } | Shape::Cylinder { radius, .. } => &[(0.0, radius)][..],
     };
-    for &h in heights {
-        let mut targets: Vec<(usize, Point)> = Vec::new();
-        let surface_x = |y: Real| match object.shape {
-            Shape::Sphere { radius } => ((radius * radius - h * h).max(0.0) - y * y).max(0.0).sqrt(),
-            Shape::Cylinder { radius, .. } => (radius * radius - y * y).max(0.0).sqrt(),
-            Shape::Box { .. } => half_x,
-        };
-        let tip_r = hand.fingertips[thumb].radius;
-        targets.push((thumb, Point::from(centre - x_axis * (surface_x(0.0) + tip_r) + Vector::z() * h)));
-        for (i, &f) in fingers.iter().enumerate() {
-            // Spread the fingertips across y as a hand's fingers lie (≈ 2 cm apart).
-            let y = if fingers.len() == 1 { 0.0 } else { 0.025 - 0.018 * i as Real };
-            let y = y.clamp(-0.8 * half_x, 0.8 * half_x);
-            let r = hand.fingertips[f].radius;
-            targets.push((f, Point::from(centre + x_axis * (surface_x(y) + r) + y_axis * y + Vector::z() * h)));
-        }
-        let mut q_start = q0;
-        q_start[0] = centre.x - x_axis.x * 0.05;
-        q_start[1] = centre.y - x_axis.y * 0.05;
-        q_start[2] = centre.z + 0.08 + h;
-        let mut q = [0.0; MAX_DOF];
-        let r = solve_tips(&free, &Isometry::identity(), &targets, &q_start[..n], &params, &mut kin, &mut q[..n]);
-        if best.as_ref().is_none_or(|b| r.max_error < b.0) {
-            best = Some((r.max_error, q, h));
+    let heights: &[Real] = match object.shape {
+        Shape::Sphere { radius } => &[0.0, 0.2 * radius][..],
+        Shape::Box { half_extents } => &[0.0, 0.3 * half_extents[2]][..],
+        Shape::Cylinder { half_height, .. } => &[0.3 * half_height, 0.0][..],
+    };
+    let mut kin = Kinematics::default();
+    // Best candidate: (score, ik error, q, rotation, axis, height).
+    let mut best: Option<(Real, Real, [Real; MAX_DOF], Rotation, Vector, Real)> = None;
+    let mut best_err = Real::INFINITY;
+    // Try grasp axes × hand orientations (yaw of the palm about the vertical) × heights.
+    let spreads: &[Real] = if fingers.len() > 1 { &[0.02, -0.02][..] } else { &[0.0][..] };
+    for &(axis_angle, half) in axes {
+        for (k, &spread) in (0..12).flat_map(|k| spreads.iter().map(move |s| (k, s))) {
+            let psi = k as Real * std::f64::consts::PI / 6.0;
+            let rot = Rotation::from_euler_angles(0.0, 0.0, obj_yaw + axis_angle + psi);
+            let free = with_free_base(hand, rot);
+            let n = free.dof();
+            let a = Rotation::from_euler_angles(0.0, 0.0, obj_yaw + axis_angle) * Vector::x();
+            let side = Vector::z().cross(&a);
+            let params = IkParams { max_iterations: 150, tolerance: 2e-4, ..IkParams::default() }
+                .with_frozen(frozen.iter().map(|d| d + 3));
+            for &h in heights {
+                let across = |y: Real| match object.shape {
+                    Shape::Sphere { radius } => (radius * radius - h * h - y * y).max(0.0).sqrt(),
+                    Shape::Cylinder { radius, .. } => (radius * radius - y * y).max(0.0).sqrt(),
+                    Shape::Box { .. } => half,
+                };
+                let mut targets: Vec<(usize, Point)> = Vec::new();
+                let up = Vector::z() * h;
+                targets.push((thumb, Point::from(centre - a * (across(0.0) + hand.fingertips[thumb].radius) + up)));
+                for (i, &f) in fingers.iter().enumerate() {
+                    // Fingertips side by side, about 2 cm apart, as a hand's fingers lie.
+                    let y = (spread * (0.5 - i as Real)).clamp(-0.7 * half, 0.7 * half);
+                    let r = hand.fingertips[f].radius;
+                    targets.push((f, Point::from(centre + a * (across(y) + r) + side * y + up)));
+                }
+                let mut q_start = [0.0; MAX_DOF];
+                q_start[3..n].copy_from_slice(&q_hand0[..n - 3]);
+                let back = rot * Vector::x() * -0.12;
+                q_start[0] = centre.x + back.x;
+                q_start[1] = centre.y + back.y;
+                q_start[2] = centre.z + 0.05 + h;
+                let mut q = [0.0; MAX_DOF];
+                let r = solve_tips(&free, &Isometry::identity(), &targets, &q_start[..n], &params, &mut kin, &mut q[..n]);
+                best_err = best_err.min(r.max_error);
+                if r.max_error > 0.008 {
+                    continue;
+                }
+                // Prefer grasps whose fingertips can push along their contact normals: a
+                // finger with few joints only pushes within the range of its Jacobian.
+                free.tip_jacobians(&mut kin);
+                let mut align: Real = 1.0;
+                for &(tip, target) in &targets {
+                    let normal = {
+                        let mut v = centre + Vector::z() * h - target.coords;
+                        v.z = 0.0;
+                        v.normalize()
+                    };
+                    align = align.min(push_alignment(&free, &kin, tip, &normal));
+                }
+                let score = align - r.max_error * 20.0;
+                if best.as_ref().is_none_or(|b| score > b.0 + 1e-9) {
+                    best = Some((score, r.max_error, q, rot, a, h));
+                }
+            }
         }
     }
-    let (err, q, h) = best.expect("at least one height is tried");
-    if err > 0.01 {
-        return Err(DfsError::invalid("object", format!("no grasp of this object is reachable for the hand (fingertips {:.1} mm from the surface)", err * 1e3)));
-    }
+    let Some((_, err, q, rot, axis, h)) = best else {
+        return Err(DfsError::invalid(
+            "object",
+            format!("no grasp of this object is reachable for the hand (fingertips {:.1} mm from the surface)", best_err * 1e3),
+        ));
+    };
+    let n = n_hand + 3;
+    let x_axis = axis;
     let base = Isometry::from_parts(Vector::new(q[0], q[1], q[2]).into(), rot);
     let mut q_grasp = [0.0; MAX_DOF];
     q_grasp[..n - 3].copy_from_slice(&q[3..n]);
@@ -224,14 +257,563 @@ pub fn plan_grasp(hand: &HandModel, object: &RigidObject, pose: &Isometry, style
         pre_targets.push((f, Point::from(c.coords + out * 0.025)));
     }
     let mut q_pre = [0.0; MAX_DOF];
-    let pre_params = IkParams { max_iterations: 200, tolerance: 5e-4, ..IkParams::default() }
-        .with_frozen(frozen.iter().map(|d| d - 3));
+    let pre_params = IkParams { max_iterations: 200, tolerance: 5e-4, ..IkParams::default() }.with_frozen(frozen.iter().copied());
     solve_tips(hand, &base, &pre_targets, &q_grasp[..hand.dof()], &pre_params, &mut kin, &mut q_pre[..hand.dof()]);
     let mut q_open = q_pre;
     for d in 0..hand.dof() {
-        if !hand.dof_names[d].starts_with("wrist") && !frozen.contains(&(d + 3)) {
+        if !frozen.contains(&d) {
             q_open[d] = (q_pre[d] - 0.3).clamp(hand.dof_lower[d], hand.dof_upper[d]);
         }
     }
     Ok(GraspPlan { base, q_grasp, q_pre, q_open, tips, ik_error: err, style })
+}
+
+/// How well fingertip `tip` can push along `normal` (unit, world): the length of the normal's
+/// projection onto the range of the tip's linear Jacobian over its finger group's DOFs
+/// (1 = fully, 0 = not at all).
+fn push_alignment(hand: &HandModel, kin: &Kinematics, tip: usize, normal: &Vector) -> Real {
+    let Some(group) = hand.finger_groups.iter().find(|g| g.tips.contains(&tip)) else {
+        return 0.0;
+    };
+    let j = &kin.tip_jacobians[tip];
+    // Gram-Schmidt over the group's columns.
+    let mut basis: [Vector; 3] = [Vector::zeros(); 3];
+    let mut nb = 0;
+    for &d in &group.dofs {
+        let mut v = Vector::new(j[(0, d)], j[(1, d)], j[(2, d)]);
+        for b in basis.iter().take(nb) {
+            v -= b * b.dot(&v);
+        }
+        if v.norm() > 1e-6 && nb < 3 {
+            basis[nb] = v.normalize();
+            nb += 1;
+        }
+    }
+    basis.iter().take(nb).map(|b| b.dot(normal).powi(2)).sum::<Real>().sqrt()
+}
+
+/// Minimum-jerk profile s(τ) = 10τ³ − 15τ⁴ + 6τ⁵ on [0, 1] (Flash & Hogan 1985), and its
+/// second derivative.
+fn min_jerk(t: Real) -> (Real, Real) {
+    let t = t.clamp(0.0, 1.0);
+    let (t2, t3) = (t * t, t * t * t);
+    (10.0 * t3 - 15.0 * t3 * t + 6.0 * t3 * t2, 60.0 * t - 180.0 * t2 + 120.0 * t3)
+}
+
+/// Parameters of the simulated operator. SI units.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct OperatorParams {
+    /// Joint stiffness around the intention, as a fraction of each DOF's torque limit per
+    /// radian. Default 0.5.
+    pub stiffness: Real,
+    /// Wrist damping (N·m·s/rad). Default 0.05. (The fingers are damped by the glove.)
+    pub wrist_damping: Real,
+    /// Grip safety margin over the slip limit (Johansson & Westling 1984: 1.2-1.6). Default 1.4.
+    pub grip_safety: Real,
+    /// Least normal force per contact while gripping (N). Default 0.5.
+    pub min_normal: Real,
+    /// How firmly the operator corrects the object's position relative to the hand (1/s²).
+    /// Default 150.
+    pub object_stiffness: Real,
+    /// Damping of that correction (1/s). Default 25.
+    pub object_damping: Real,
+    /// Physiological tremor amplitude at the finger joints (rad). Default 1e-4.
+    pub tremor_joint: Real,
+    /// Tremor amplitude of the arm (hand base) (m). Default 5e-6.
+    pub tremor_arm: Real,
+    /// Standard deviation of the glove's angle sensors (rad). Default 5e-5.
+    pub noise_angle: Real,
+    /// Standard deviation of the glove's torque sensors (N·m). Default 2e-4.
+    pub noise_torque: Real,
+    /// How far past the surface the fingers aim when closing, as a fraction of the
+    /// preshape-to-grasp motion. Default 0.25.
+    pub close_overshoot: Real,
+}
+
+impl Default for OperatorParams {
+    fn default() -> Self {
+        OperatorParams {
+            stiffness: 0.5,
+            wrist_damping: 0.05,
+            grip_safety: 1.4,
+            min_normal: 0.5,
+            object_stiffness: 150.0,
+            object_damping: 25.0,
+            tremor_joint: 1e-4,
+            tremor_arm: 5e-6,
+            noise_angle: 5e-5,
+            noise_torque: 2e-4,
+            close_overshoot: 0.25,
+        }
+    }
+}
+
+/// One phase of a session's script with its time span (ns since the session's start).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct PhaseSpan {
+    /// The phase.
+    pub phase: Phase,
+    /// Start (ns).
+    pub start_ns: u64,
+    /// End (ns), exclusive.
+    pub end_ns: u64,
+    /// The task's parameters.
+    pub task: ResolvedTask,
+}
+
+/// Tick length of the closed loop (ns): 1 kHz.
+pub const TICK_NS: u64 = 1_000_000;
+
+/// The closed loop: operator → glove sample (θ, τ) → DFS tick → feedback and motor commands →
+/// glove state, at 1 kHz of simulated time.
+#[derive(Debug, Clone)]
+pub struct Simulation {
+    dfs: Dfs,
+    params: OperatorParams,
+    style: GraspStyle,
+    spans: Vec<PhaseSpan>,
+    span: usize,
+    step: u64,
+    n_steps: u64,
+    table_height: Real,
+    operator_mu: Real,
+    plan: GraspPlan,
+    object_in_base: Option<Isometry>,
+    from_base: Isometry,
+    to_base: Isometry,
+    from_q: [Real; MAX_DOF],
+    to_q: [Real; MAX_DOF],
+    from_grip: Real,
+    to_grip: Real,
+    base: Isometry,
+    base_velocity: Vector,
+    base_acceleration: Vector,
+    q_intent: [Real; MAX_DOF],
+    grip: Real,
+    q_meas: [Real; MAX_DOF],
+    tau_meas: [Real; MAX_DOF],
+    tau: [Real; MAX_DOF],
+    rng: ChaCha8Rng,
+    tremor_freq: [Real; MAX_DOF + 3],
+    tremor_phase: [Real; MAX_DOF + 3],
+}
+
+impl Simulation {
+    /// Sets up a scenario with `hand` (normally glove10). `duration_s`, when given, cuts the
+    /// script short or extends its last phase. Errors name the scenario's field, or say that no
+    /// grasp of the object is reachable.
+    pub fn new(scenario: &Scenario, hand: HandModel, duration_s: Option<Real>) -> Result<Simulation> {
+        let (object, tasks) = scenario.resolve()?;
+        let depth = support_depth(&object.shape, &Rotation::identity());
+        let yaw = Rotation::from_euler_angles(0.0, 0.0, scenario.object.yaw);
+        let position = scenario.object.position.map(Vector::from).unwrap_or(Vector::new(0.0, 0.0, depth));
+        let table_height = position.z - depth;
+        let pose = Isometry::from_parts(position.into(), yaw);
+        let mut spans = Vec::with_capacity(tasks.len());
+        let mut t = 0u64;
+        for task in &tasks {
+            let d = (task.duration * 1e9).round() as u64 / TICK_NS * TICK_NS;
+            spans.push(PhaseSpan { phase: task.phase, start_ns: t, end_ns: t + d.max(TICK_NS), task: *task });
+            t += d.max(TICK_NS);
+        }
+        let mut n_steps = t / TICK_NS;
+        if let Some(d) = duration_s {
+            if !(d.is_finite() && d > 0.0 && d <= 3600.0) {
+                return Err(DfsError::invalid("duration", format!("must be in (0, 3600] s, got {d}")));
+            }
+            n_steps = ((d * 1e9).round() as u64 / TICK_NS).max(1);
+            let end = n_steps * TICK_NS;
+            spans.retain(|s| s.start_ns < end);
+            if let Some(last) = spans.last_mut() {
+                last.end_ns = end;
+            }
+        }
+        let params = DfsParams {
+            contact_model: ContactModel::PointWithFriction,
+            friction: Friction { mu: scenario.object.mu, mu_torsion: scenario.object.mu_torsion },
+            table_height: Some(table_height),
+            ..DfsParams::default()
+        };
+        let plan = plan_grasp(&hand, &object, &pose, scenario.grasp)?;
+        let start_base = raise(&plan.base, 0.15);
+        let q0 = plan.q_open;
+        let mut dfs = Dfs::new(hand, object, ObjectState::at_rest(pose), params)?;
+        let n = dfs.hand().dof();
+        let mut rng = ChaCha8Rng::seed_from_u64(scenario.seed);
+        let mut tremor_freq = [0.0; MAX_DOF + 3];
+        let mut tremor_phase = [0.0; MAX_DOF + 3];
+        for i in 0..MAX_DOF + 3 {
+            tremor_freq[i] = 8.0 + 4.0 * rand::Rng::random::<Real>(&mut rng);
+            tremor_phase[i] = std::f64::consts::TAU * rand::Rng::random::<Real>(&mut rng);
+        }
+        let zeros = [0.0; MAX_DOF];
+        dfs.step(&GloveSample { q: &q0[..n], tau: &zeros[..n], base: start_base })?;
+        dfs.set_object_state(ObjectState::at_rest(pose));
+        let operator_mu = scenario.operator_mu.unwrap_or(scenario.object.mu).max(1e-3);
+        let mut sim = Simulation {
+            dfs,
+            params: OperatorParams::default(),
+            style: scenario.grasp,
+            spans,
+            span: 0,
+            step: 0,
+            n_steps,
+            table_height,
+            operator_mu,
+            plan,
+            object_in_base: None,
+            from_base: start_base,
+            to_base: start_base,
+            from_q: q0,
+            to_q: q0,
+            from_grip: 0.0,
+            to_grip: 0.0,
+            base: start_base,
+            base_velocity: Vector::zeros(),
+            base_acceleration: Vector::zeros(),
+            q_intent: q0,
+            grip: 0.0,
+            q_meas: q0,
+            tau_meas: [0.0; MAX_DOF],
+            tau: [0.0; MAX_DOF],
+            rng,
+            tremor_freq,
+            tremor_phase,
+        };
+        sim.begin_phase()?;
+        Ok(sim)
+    }
+
+    /// The phases of the script with their time spans: the ground truth of the session.
+    pub fn phases(&self) -> &[PhaseSpan] {
+        &self.spans
+    }
+
+    /// The DFS (hand, object, last tick's output and kinematics).
+    pub fn dfs(&self) -> &Dfs {
+        &self.dfs
+    }
+
+    /// Time of the last tick (ns since the start).
+    pub fn time_ns(&self) -> u64 {
+        self.step.saturating_sub(1) * TICK_NS
+    }
+
+    /// Number of ticks done.
+    pub fn ticks(&self) -> u64 {
+        self.step
+    }
+
+    /// Total number of ticks.
+    pub fn total_ticks(&self) -> u64 {
+        self.n_steps
+    }
+
+    /// The phase of the last tick.
+    pub fn phase(&self) -> Phase {
+        self.spans[self.span.min(self.spans.len() - 1)].phase
+    }
+
+    /// The glove sample of the last tick: measured angles, measured operator torques, and the
+    /// hand base pose.
+    pub fn sample(&self) -> (&[Real], &[Real], &Isometry) {
+        let n = self.dfs.hand().dof();
+        (&self.q_meas[..n], &self.tau_meas[..n], &self.base)
+    }
+
+    /// The operator's intended joint angles at the last tick.
+    pub fn intention(&self) -> &[Real] {
+        &self.q_intent[..self.dfs.hand().dof()]
+    }
+
+    /// The last tick's DFS output.
+    pub fn output(&self) -> &TickOutput {
+        self.dfs.output()
+    }
+
+    /// The table's height (m, world z).
+    pub fn table_height(&self) -> Real {
+        self.table_height
+    }
+
+    /// The grasp style in use.
+    pub fn style(&self) -> GraspStyle {
+        self.plan.style.max_style(self.style)
+    }
+
+    /// Runs one tick. Returns `Ok(false)` when the script is over.
+    pub fn step(&mut self) -> Result<bool> {
+        if self.step >= self.n_steps {
+            return Ok(false);
+        }
+        let t = self.step * TICK_NS;
+        while self.span + 1 < self.spans.len() && t >= self.spans[self.span].end_ns {
+            self.end_phase();
+            self.span += 1;
+            self.begin_phase()?;
+        }
+        self.update_intention(t);
+        self.compute_torques();
+        self.measure();
+        let n = self.dfs.hand().dof();
+        let (q, tau) = (self.q_meas, self.tau_meas);
+        self.dfs.step(&GloveSample { q: &q[..n], tau: &tau[..n], base: self.base })?;
+        self.step += 1;
+        Ok(true)
+    }
+
+    fn span_now(&self) -> &PhaseSpan {
+        &self.spans[self.span]
+    }
+
+    fn end_phase(&mut self) {
+        if self.span_now().phase == Phase::Grasp {
+            self.object_in_base = Some(self.base.inverse() * self.dfs.object_state().pose);
+        }
+        if self.span_now().phase == Phase::Release {
+            self.object_in_base = None;
+        }
+    }
+
+    /// Sets the targets of the phase that starts now, from where the hand and object are.
+    fn begin_phase(&mut self) -> Result<()> {
+        let task = self.span_now().task;
+        self.from_base = self.to_base;
+        self.from_q = self.to_q;
+        self.from_grip = self.to_grip;
+        let n = self.dfs.hand().dof();
+        match task.phase {
+            Phase::Approach => {
+                let pose = self.dfs.object_state().pose;
+                self.plan = plan_grasp(self.dfs.hand(), self.dfs.object(), &pose, self.style)?;
+                self.to_base = raise(&self.plan.base, 0.06);
+                self.to_q = self.plan.q_open;
+                self.to_grip = 0.0;
+                self.object_in_base = None;
+            }
+            Phase::Preshape => {
+                self.to_base = self.plan.base;
+                self.to_q = self.plan.q_pre;
+            }
+            Phase::Grasp => {
+                let mut q = self.plan.q_grasp;
+                for d in 0..n {
+                    let delta = self.plan.q_grasp[d] - self.plan.q_pre[d];
+                    let hand = self.dfs.hand();
+                    q[d] = (q[d] + self.params.close_overshoot * delta).clamp(hand.dof_lower[d], hand.dof_upper[d]);
+                }
+                self.to_q = q;
+                self.to_grip = 1.0;
+            }
+            Phase::Lift => {
+                self.to_base = raise(&self.from_base, task.height);
+            }
+            Phase::Hold => {}
+            Phase::Transport => {
+                let centre = self.dfs.object_state().pose.translation.vector;
+                let turn = Rotation::from_euler_angles(0.0, 0.0, task.turn);
+                let b = self.from_base;
+                let p = centre + turn * (b.translation.vector - centre) + Vector::from(task.offset);
+                self.to_base = Isometry::from_parts(p.into(), turn * b.rotation);
+            }
+            Phase::Place => {
+                let obj = self.dfs.object_state().pose;
+                let depth = support_depth(&self.dfs.object().shape, &obj.rotation);
+                let dz = self.table_height + depth - obj.translation.z - 0.002;
+                self.to_base = raise(&self.from_base, dz);
+            }
+            Phase::Release => {
+                self.to_q = self.plan.q_pre;
+                self.to_grip = 0.0;
+            }
+            Phase::Retreat => {
+                self.to_base = raise(&self.from_base, 0.10);
+                self.to_q = self.plan.q_open;
+                self.to_grip = 0.0;
+            }
+        }
+        Ok(())
+    }
+
+    fn update_intention(&mut self, t: u64) {
+        let span = *self.span_now();
+        let dur = (span.end_ns - span.start_ns) as Real * 1e-9;
+        let s = ((t - span.start_ns) as Real * 1e-9 / dur).clamp(0.0, 1.0);
+        let (m, m2) = min_jerk(s);
+        // Fingers and grip: in `grasp` the fingers close first and the grip ramps up after; in
+        // `release` the grip ramps down first and the fingers open after.
+        let (sq, sg) = match span.phase {
+            Phase::Grasp => ((s / 0.6).min(1.0), ((s - 0.5) / 0.5).max(0.0)),
+            Phase::Release => (((s - 0.4) / 0.6).max(0.0), (s / 0.4).min(1.0)),
+            _ => (s, s),
+        };
+        let (mq, _) = min_jerk(sq);
+        let (mg, _) = min_jerk(sg);
+        let dp = self.to_base.translation.vector - self.from_base.translation.vector;
+        let p = self.from_base.translation.vector + dp * m;
+        let r = self.from_base.rotation.slerp(&self.to_base.rotation, m);
+        let time = t as Real * 1e-9;
+        let mut tremor = Vector::zeros();
+        for (k, c) in tremor.iter_mut().enumerate() {
+            let i = MAX_DOF + k;
+            *c = self.params.tremor_arm * (std::f64::consts::TAU * self.tremor_freq[i] * time + self.tremor_phase[i]).sin();
+        }
+        let new_base = Isometry::from_parts((p + tremor).into(), r);
+        let dt = TICK_NS as Real * 1e-9;
+        self.base_velocity = (new_base.translation.vector - self.base.translation.vector) / dt;
+        self.base_acceleration = dp * (m2 / (dur * dur));
+        self.base = new_base;
+        let n = self.dfs.hand().dof();
+        for d in 0..n {
+            let tr = self.params.tremor_joint * (std::f64::consts::TAU * self.tremor_freq[d] * time + self.tremor_phase[d]).sin();
+            self.q_intent[d] = self.from_q[d] + (self.to_q[d] - self.from_q[d]) * mq + tr;
+        }
+        self.grip = self.from_grip + (self.to_grip - self.from_grip) * mg;
+    }
+
+    /// The operator's joint torques: impedance around the intention plus grip torques `Jᵀ f`
+    /// for the contact forces it wants.
+    fn compute_torques(&mut self) {
+        let hand = self.dfs.hand();
+        let n = hand.dof();
+        let out = self.dfs.output();
+        let q = &out.motor_q;
+        let qd = &out.motor_qd;
+        let mut tau = [0.0; MAX_DOF];
+        for d in 0..n {
+            let kp = self.params.stiffness * hand.torque_limit[d];
+            let kd = if hand.dof_names[d].starts_with("wrist") { self.params.wrist_damping } else { 0.0 };
+            tau[d] = kp * (self.q_intent[d] - q[d]) - kd * qd[d];
+        }
+        if self.grip > 0.0 {
+            self.add_grip_torques(&mut tau);
+        }
+        for d in 0..n {
+            let lim = 1.9 * hand.torque_limit[d];
+            self.tau[d] = tau[d].clamp(-lim, lim);
+        }
+    }
+
+    fn add_grip_torques(&self, tau: &mut [Real; MAX_DOF]) {
+        let out = self.dfs.output();
+        let obj = self.dfs.object();
+        let st = self.dfs.object_state();
+        let g = self.dfs.params().gravity;
+        let mut frames = [crate::contact::ContactFrame::from_normal(Vector::zeros(), Vector::z()); MAX_CONTACTS];
+        let mut tips = [0usize; MAX_CONTACTS];
+        let mut nc = 0;
+        for k in 0..out.n_tips {
+            if let (true, Some(f)) = (self.plan.tips[k], out.tips[k].frame) {
+                if nc < MAX_CONTACTS {
+                    frames[nc] = f;
+                    tips[nc] = k;
+                    nc += 1;
+                }
+            }
+        }
+        if nc == 0 {
+            return;
+        }
+        // The wrench the hand must apply (world): carry the weight, follow the hand's
+        // acceleration, and correct the object's pose relative to the hand.
+        let p = &self.params;
+        let mut force = (self.base_acceleration - g) * obj.mass;
+        let mut moment = Vector::zeros();
+        if let Some(rel) = self.object_in_base {
+            let target = self.base * rel;
+            let e = target.translation.vector - st.pose.translation.vector;
+            let ed = self.base_velocity - st.linear_velocity;
+            force += (e * p.object_stiffness + ed * p.object_damping) * obj.mass;
+            let e_rot = (target.rotation * st.pose.rotation.inverse()).scaled_axis();
+            let w_world = st.pose.rotation * st.angular_velocity_b;
+            let inertia = obj.inertia.trace() / 3.0;
+            moment = (e_rot * p.object_stiffness - w_world * p.object_damping) * inertia;
+        } else {
+            // Grasping on the table: take over the weight as the grip ramps up.
+            force *= self.grip;
+        }
+        let rinv = st.pose.rotation.inverse();
+        let load_b = wrench(&(rinv * force), &(rinv * moment));
+        let gm = GraspMatrix::new(&frames[..nc], ContactModel::PointWithFriction);
+        let mut c = [Intensity::zeros(); MAX_CONTACTS];
+        gm.distribute(&load_b, &mut c);
+        // Squeeze: raise every normal force to the safety margin over the slip limit with
+        // internal forces only (projected onto the null space of W).
+        for _ in 0..3 {
+            let mut s = [Intensity::zeros(); MAX_CONTACTS];
+            let mut any = false;
+            for i in 0..nc {
+                let (nf, tf) = crate::contact::normal_and_tangential(&c[i]);
+                let want = (tf * p.grip_safety / self.operator_mu).max(p.min_normal);
+                if want > nf {
+                    s[i][2] = want - nf;
+                    any = true;
+                }
+            }
+            if !any {
+                break;
+            }
+            let net = gm.wrench(&s[..nc]);
+            let mut back = [Intensity::zeros(); MAX_CONTACTS];
+            gm.distribute(&net, &mut back);
+            for i in 0..nc {
+                // Scale the internal part up a little so the projection does not undo it all.
+                c[i] += (s[i] - back[i]) * 1.2;
+            }
+        }
+        let kin = self.dfs.kinematics();
+        let n = self.dfs.hand().dof();
+        for i in 0..nc {
+            let f = st.pose.rotation * (frames[i].rot_b * Vector::new(c[i][0], c[i][1], c[i][2])) * self.grip;
+            let j = &kin.tip_jacobians[tips[i]];
+            for (d, t) in tau.iter_mut().enumerate().take(n) {
+                *t += j[(0, d)] * f.x + j[(1, d)] * f.y + j[(2, d)] * f.z;
+            }
+        }
+        let _ = (force_of(&load_b), moment_of(&load_b));
+    }
+
+    fn measure(&mut self) {
+        let hand = self.dfs.hand();
+        let n = hand.dof();
+        let out = self.dfs.output();
+        let na = Normal::new(0.0, self.params.noise_angle.max(0.0)).expect("finite σ");
+        let nt = Normal::new(0.0, self.params.noise_torque.max(0.0)).expect("finite σ");
+        for d in 0..n {
+            let q = out.motor_q[d] + na.sample(&mut self.rng);
+            self.q_meas[d] = q.clamp(hand.dof_lower[d] - 0.01, hand.dof_upper[d] + 0.01);
+            self.tau_meas[d] = self.tau[d] + nt.sample(&mut self.rng);
+        }
+    }
+}
+
+impl GraspStyle {
+    fn max_style(self, requested: GraspStyle) -> GraspStyle {
+        if self == GraspStyle::Auto {
+            requested
+        } else {
+            self
+        }
+    }
+}
+
+/// The pose raised by `dz` (m) along world z.
+fn raise(x: &Isometry, dz: Real) -> Isometry {
+    let mut y = *x;
+    y.translation.vector.z += dz;
+    y
+}
+
+/// Distance from an object's centre to its lowest point for a rotation (m).
+pub fn support_depth(shape: &Shape, rotation: &Rotation) -> Real {
+    let r = rotation.to_rotation_matrix();
+    let m = r.matrix();
+    match *shape {
+        Shape::Sphere { radius } => radius,
+        Shape::Box { half_extents } => (0..3).map(|i| m[(2, i)].abs() * half_extents[i]).sum(),
+        Shape::Cylinder { radius, half_height } => {
+            let az = m[(2, 2)].abs();
+            radius * (1.0 - az * az).max(0.0).sqrt() + half_height * az
+        }
+    }
 }

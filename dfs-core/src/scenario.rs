@@ -311,9 +311,12 @@ impl Scenario {
 
     /// A built-in scenario by name, with the given seed.
     pub fn builtin(name: &str, seed: u64) -> Option<Scenario> {
+        // The paper's 1 kg sphere, at the size glove10 can span: its 2-DOF thumb reaches about
+        // 0.11 m from the index fingertip, so the paper's 0.2 m diameter cannot be grasped by
+        // opposing fingers (dfs-static and the tick benchmark use the full-size sphere).
         let sphere = |mu: Real| ScenarioObject {
             shape: "sphere".into(),
-            radius: Some(0.1),
+            radius: Some(0.04),
             half_extents: None,
             half_height: None,
             mass: 1.0,
