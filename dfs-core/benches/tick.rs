@@ -1,1 +1,3 @@
+//! Benchmark of the DFS tick (placeholder until the tick benchmark lands).
+
 fn main() {}
