@@ -262,7 +262,11 @@ mod tests {
         ];
         for n in dirs {
             let fr = ContactFrame::from_normal(Vector::zeros(), n);
-            assert!((fr.normal_b() - n.normalize()).norm() < 1e-12, "{n:?} -> {:?}", fr.normal_b());
+            assert!(
+                (fr.normal_b() - n.normalize()).norm() < 1e-12,
+                "{n:?} -> {:?}",
+                fr.normal_b()
+            );
             let m = fr.rot_b.to_rotation_matrix().into_inner();
             assert!((m.transpose() * m - Matrix3::identity()).norm() < 1e-12);
             assert!((m.determinant() - 1.0).abs() < 1e-12);
