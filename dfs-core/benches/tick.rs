@@ -11,7 +11,13 @@ fn tick(c: &mut Criterion) {
     c.bench_function("dfs_tick_glove10_paper_sphere_4_contacts", |b| {
         b.iter(|| {
             dfs.set_object_state(start);
-            let out = dfs.step(black_box(&GloveSample { q: &q, tau: &tau, base })).expect("tick");
+            let out = dfs
+                .step(black_box(&GloveSample {
+                    q: &q,
+                    tau: &tau,
+                    base,
+                }))
+                .expect("tick");
             black_box(out.n_contacts)
         })
     });

@@ -15,9 +15,39 @@ fn main() {
             let (_, tau, base) = sim.sample();
             let rel = base.inverse() * sim.dfs().object_state().pose;
             let phase = sim.phase();
-            if last != Some(phase) { println!("--- {:?}", phase); last = Some(phase); }
-            let cs: Vec<String> = (0..o.n_tips).map(|k| { let c = o.tips[k]; format!("{}{}{:.2}", if c.in_contact {"C"} else if c.touching {"t"} else {"."}, if c.slip {"s"} else {""}, c.intensity[2]) }).collect();
-            println!("t={:.1} obj z={:.4} rel=({:.4},{:.4},{:.4}) v={:.4} n={} [{}] tau_max={:.2}", t as f64/1000.0, p.z, rel.translation.x, rel.translation.y, rel.translation.z, sim.dfs().object_state().linear_velocity.norm(), o.n_contacts, cs.join(" "), tau.iter().fold(0.0f64, |m, v| m.max(v.abs())));
+            if last != Some(phase) {
+                println!("--- {:?}", phase);
+                last = Some(phase);
+            }
+            let cs: Vec<String> = (0..o.n_tips)
+                .map(|k| {
+                    let c = o.tips[k];
+                    format!(
+                        "{}{}{:.2}",
+                        if c.in_contact {
+                            "C"
+                        } else if c.touching {
+                            "t"
+                        } else {
+                            "."
+                        },
+                        if c.slip { "s" } else { "" },
+                        c.intensity[2]
+                    )
+                })
+                .collect();
+            println!(
+                "t={:.1} obj z={:.4} rel=({:.4},{:.4},{:.4}) v={:.4} n={} [{}] tau_max={:.2}",
+                t as f64 / 1000.0,
+                p.z,
+                rel.translation.x,
+                rel.translation.y,
+                rel.translation.z,
+                sim.dfs().object_state().linear_velocity.norm(),
+                o.n_contacts,
+                cs.join(" "),
+                tau.iter().fold(0.0f64, |m, v| m.max(v.abs()))
+            );
         }
     }
     println!("elapsed {:?}", t0.elapsed());

@@ -112,11 +112,11 @@ impl ContactFrame {
         let x = (e - z * z.dot(&e)).normalize();
         let y = z.cross(&x);
         let m = Matrix3::from_columns(&[x, y, z]);
-        // x, y, z are orthonormal by construction: no iterative orthogonalisation needed.
-        ContactFrame {
-            p_b,
-            rot_b: Rotation::from_rotation_matrix(&nalgebra::Rotation3::from_matrix_unchecked(m)),
-        }
+        // m is orthonormal by construction: convert it directly. (An iterative fit such as
+        // `from_matrix_eps` started at the identity does not converge for frames far from it:
+        // a normal of −z came out as +z.)
+        let rot_b = Rotation::from_rotation_matrix(&nalgebra::Rotation3::from_matrix_unchecked(m));
+        ContactFrame { p_b, rot_b }
     }
 
     /// Inward normal in B.
@@ -271,6 +271,30 @@ mod tests {
         assert!((m.determinant() - 1.0).abs() < 1e-12);
         assert!(d.penetration.abs() < 1e-12);
         assert!(detect(&s, &Vector::new(0.0, 0.0, -0.2), 0.01, 1e-3).is_none());
+    }
+
+    #[test]
+    fn contact_frames_have_exactly_the_requested_normal_for_every_direction() {
+        let dirs = [
+            Vector::x(),
+            -Vector::x(),
+            Vector::y(),
+            -Vector::y(),
+            Vector::z(),
+            -Vector::z(),
+            Vector::new(-0.5, -0.5, 0.6),
+        ];
+        for n in dirs {
+            let fr = ContactFrame::from_normal(Vector::zeros(), n);
+            assert!(
+                (fr.normal_b() - n.normalize()).norm() < 1e-12,
+                "{n:?} -> {:?}",
+                fr.normal_b()
+            );
+            let m = fr.rot_b.to_rotation_matrix().into_inner();
+            assert!((m.transpose() * m - Matrix3::identity()).norm() < 1e-12);
+            assert!((m.determinant() - 1.0).abs() < 1e-12);
+        }
     }
 
     #[test]

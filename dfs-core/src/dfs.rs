@@ -515,7 +515,8 @@ impl Dfs {
         let p = &self.params;
         let dt = p.dt;
         let a = &mut self.scratch;
-        a.view_mut((0, 0), (ndof, ndof)).copy_from(&self.mass.view((0, 0), (ndof, ndof)));
+        a.view_mut((0, 0), (ndof, ndof))
+            .copy_from(&self.mass.view((0, 0), (ndof, ndof)));
         let mut rhs = [0.0; MAX_DOF];
         for i in 0..ndof {
             a[(i, i)] += dt * p.joint_damping;

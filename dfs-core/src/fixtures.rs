@@ -31,7 +31,10 @@ pub fn glove10_holding_paper_sphere() -> Result<(Dfs, Vec<Real>, Vec<Real>, Isom
         };
     }
     // Palm up: rotate the palm (which faces −z) by π about x.
-    let base = Isometry::from_parts(Vector::zeros().into(), crate::math::Rotation::from_axis_angle(&Vector::x_axis(), std::f64::consts::PI));
+    let base = Isometry::from_parts(
+        Vector::zeros().into(),
+        crate::math::Rotation::from_axis_angle(&Vector::x_axis(), std::f64::consts::PI),
+    );
     let mut kin = Kinematics::default();
     hand.forward_kinematics(&base, &q, &mut kin);
     let tips: Vec<usize> = ["index", "middle", "ring", "little"]
@@ -40,7 +43,11 @@ pub fn glove10_holding_paper_sphere() -> Result<(Dfs, Vec<Real>, Vec<Real>, Isom
         .collect();
     let radius = 0.1;
     // Gauss-Newton for the centre c with |t_k − c| = r + r_k, started above the fingertips.
-    let mut c = tips.iter().map(|&k| kin.tip_centres[k].coords).sum::<Vector>() / tips.len() as Real;
+    let mut c = tips
+        .iter()
+        .map(|&k| kin.tip_centres[k].coords)
+        .sum::<Vector>()
+        / tips.len() as Real;
     c.z += radius;
     for _ in 0..50 {
         let mut jtj = nalgebra::Matrix3::<Real>::zeros();
@@ -53,7 +60,10 @@ pub fn glove10_holding_paper_sphere() -> Result<(Dfs, Vec<Real>, Vec<Real>, Isom
             jtj += u * u.transpose();
             jtr += u * res;
         }
-        let step = (jtj + nalgebra::Matrix3::identity() * 1e-9).lu().solve(&jtr).unwrap_or_else(Vector::zeros);
+        let step = (jtj + nalgebra::Matrix3::identity() * 1e-9)
+            .lu()
+            .solve(&jtr)
+            .unwrap_or_else(Vector::zeros);
         c -= step;
         if step.norm() < 1e-12 {
             break;
@@ -63,7 +73,10 @@ pub fn glove10_holding_paper_sphere() -> Result<(Dfs, Vec<Real>, Vec<Real>, Isom
     let pose = Isometry::translation(c.x, c.y, c.z);
     let params = DfsParams {
         contact_model: ContactModel::PointWithFriction,
-        friction: Friction { mu: 1.5, mu_torsion: 0.0 },
+        friction: Friction {
+            mu: 1.5,
+            mu_torsion: 0.0,
+        },
         contact_margin: 0.005,
         // Four fingertips on one side carry 1 kg: the torques exceed a person's; this fixture
         // measures computation, so the glove's sensor range is widened.
@@ -73,7 +86,11 @@ pub fn glove10_holding_paper_sphere() -> Result<(Dfs, Vec<Real>, Vec<Real>, Isom
     // Minimum-norm holding forces on the four contacts, mapped to joint torques.
     let mut dfs = Dfs::new(hand.clone(), object, ObjectState::at_rest(pose), params)?;
     let tau0 = vec![0.0; n];
-    dfs.step(&GloveSample { q: &q, tau: &tau0, base })?;
+    dfs.step(&GloveSample {
+        q: &q,
+        tau: &tau0,
+        base,
+    })?;
     dfs.set_object_state(ObjectState::at_rest(pose));
     let out = *dfs.output();
     let mut frames = Vec::new();
@@ -95,7 +112,11 @@ pub fn glove10_holding_paper_sphere() -> Result<(Dfs, Vec<Real>, Vec<Real>, Isom
         }
     }
     let mut dfs = Dfs::new(hand, object, ObjectState::at_rest(pose), params)?;
-    dfs.step(&GloveSample { q: &q, tau: &tau, base })?;
+    dfs.step(&GloveSample {
+        q: &q,
+        tau: &tau,
+        base,
+    })?;
     dfs.set_object_state(ObjectState::at_rest(pose));
     Ok((dfs, q, tau, base))
 }
@@ -107,8 +128,22 @@ mod tests {
     #[test]
     fn glove10_touches_the_paper_sphere_with_four_fingertips() {
         let (mut dfs, q, tau, base) = glove10_holding_paper_sphere().unwrap();
-        let out = dfs.step(&GloveSample { q: &q, tau: &tau, base }).unwrap();
-        assert_eq!(out.n_contacts, 4, "{:?}", out.tips.iter().map(|t| (t.touching, t.in_contact)).collect::<Vec<_>>());
+        let out = dfs
+            .step(&GloveSample {
+                q: &q,
+                tau: &tau,
+                base,
+            })
+            .unwrap();
+        assert_eq!(
+            out.n_contacts,
+            4,
+            "{:?}",
+            out.tips
+                .iter()
+                .map(|t| (t.touching, t.in_contact))
+                .collect::<Vec<_>>()
+        );
         assert!(out.f_ext_b.iter().all(|v| v.is_finite()));
     }
 }

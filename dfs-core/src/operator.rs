@@ -36,9 +36,18 @@ use rand_distr::{Distribution, Normal};
 /// hand's DOFs follow. Used to plan grasps with the base position as unknown.
 pub fn with_free_base(hand: &HandModel, rotation: Rotation) -> HandModel {
     let mut links = vec![
-        Link { name: "__world".into(), inertial: Default::default() },
-        Link { name: "__base_x".into(), inertial: Default::default() },
-        Link { name: "__base_y".into(), inertial: Default::default() },
+        Link {
+            name: "__world".into(),
+            inertial: Default::default(),
+        },
+        Link {
+            name: "__base_x".into(),
+            inertial: Default::default(),
+        },
+        Link {
+            name: "__base_y".into(),
+            inertial: Default::default(),
+        },
     ];
     let off = links.len();
     links.extend(hand.links.iter().cloned());
@@ -51,8 +60,16 @@ pub fn with_free_base(hand: &HandModel, rotation: Rotation) -> HandModel {
             kind: JointKind::Prismatic,
             parent: k,
             child: children[k],
-            origin: if k == 2 { Isometry::from_parts(Vector::zeros().into(), rotation) } else { Isometry::identity() },
-            axis: if k == 2 { rotation.inverse() * axes[2] } else { axes[k] },
+            origin: if k == 2 {
+                Isometry::from_parts(Vector::zeros().into(), rotation)
+            } else {
+                Isometry::identity()
+            },
+            axis: if k == 2 {
+                rotation.inverse() * axes[2]
+            } else {
+                axes[k]
+            },
             lower: -10.0,
             upper: 10.0,
             drive: JointDrive::Dof(k),
@@ -65,7 +82,15 @@ pub fn with_free_base(hand: &HandModel, rotation: Rotation) -> HandModel {
         j.drive = match j.drive {
             JointDrive::Fixed => JointDrive::Fixed,
             JointDrive::Dof(d) => JointDrive::Dof(d + 3),
-            JointDrive::Mimic { dof, multiplier, offset } => JointDrive::Mimic { dof: dof + 3, multiplier, offset },
+            JointDrive::Mimic {
+                dof,
+                multiplier,
+                offset,
+            } => JointDrive::Mimic {
+                dof: dof + 3,
+                multiplier,
+                offset,
+            },
         };
         joints.push(j);
     }
@@ -74,15 +99,34 @@ pub fn with_free_base(hand: &HandModel, rotation: Rotation) -> HandModel {
         links,
         joints,
         root: 0,
-        dof_names: ["__base_x", "__base_y", "__base_z"].iter().map(|s| s.to_string()).chain(hand.dof_names.iter().cloned()).collect(),
-        dof_lower: [-10.0; 3].into_iter().chain(hand.dof_lower.iter().copied()).collect(),
-        dof_upper: [10.0; 3].into_iter().chain(hand.dof_upper.iter().copied()).collect(),
-        torque_limit: [100.0; 3].into_iter().chain(hand.torque_limit.iter().copied()).collect(),
-        armature: [1.0; 3].into_iter().chain(hand.armature.iter().copied()).collect(),
+        dof_names: ["__base_x", "__base_y", "__base_z"]
+            .iter()
+            .map(|s| s.to_string())
+            .chain(hand.dof_names.iter().cloned())
+            .collect(),
+        dof_lower: [-10.0; 3]
+            .into_iter()
+            .chain(hand.dof_lower.iter().copied())
+            .collect(),
+        dof_upper: [10.0; 3]
+            .into_iter()
+            .chain(hand.dof_upper.iter().copied())
+            .collect(),
+        torque_limit: [100.0; 3]
+            .into_iter()
+            .chain(hand.torque_limit.iter().copied())
+            .collect(),
+        armature: [1.0; 3]
+            .into_iter()
+            .chain(hand.armature.iter().copied())
+            .collect(),
         fingertips: hand
             .fingertips
             .iter()
-            .map(|t| crate::hand::Fingertip { link: t.link + off, ..t.clone() })
+            .map(|t| crate::hand::Fingertip {
+                link: t.link + off,
+                ..t.clone()
+            })
             .collect(),
         finger_groups: Vec::new(),
     };
@@ -119,7 +163,12 @@ fn tip_index(hand: &HandModel, name: &str) -> Option<usize> {
 /// the fingers to its +x side, at the height of the object's centre. Pinch uses thumb and index
 /// (the other fingers curled away); power uses every finger. The base position is solved
 /// together with the fingers by inverse kinematics; the wrist stays at zero.
-pub fn plan_grasp(hand: &HandModel, object: &RigidObject, pose: &Isometry, style: GraspStyle) -> Result<GraspPlan> {
+pub fn plan_grasp(
+    hand: &HandModel,
+    object: &RigidObject,
+    pose: &Isometry,
+    style: GraspStyle,
+) -> Result<GraspPlan> {
     let style = match style {
         GraspStyle::Auto => {
             if object.shape.width_x() < 0.06 {
@@ -130,20 +179,33 @@ pub fn plan_grasp(hand: &HandModel, object: &RigidObject, pose: &Isometry, style
         }
         s => s,
     };
-    let thumb = tip_index(hand, "thumb").ok_or_else(|| DfsError::invalid("hand", "the operator needs a fingertip named \"thumb\""))?;
+    let thumb = tip_index(hand, "thumb").ok_or_else(|| {
+        DfsError::invalid("hand", "the operator needs a fingertip named \"thumb\"")
+    })?;
     let fingers: Vec<usize> = match style {
-        GraspStyle::Pinch => ["index"].iter().filter_map(|n| tip_index(hand, n)).collect(),
+        GraspStyle::Pinch => ["index"]
+            .iter()
+            .filter_map(|n| tip_index(hand, n))
+            .collect(),
         // Ring and little follow the middle finger on glove10's coupled DOFs: target only the
         // independent fingers and let the others close until they touch.
-        _ => ["index", "middle"].iter().filter_map(|n| tip_index(hand, n)).collect(),
+        _ => ["index", "middle"]
+            .iter()
+            .filter_map(|n| tip_index(hand, n))
+            .collect(),
     };
     if fingers.is_empty() {
-        return Err(DfsError::invalid("hand", "the operator needs an \"index\" fingertip"));
+        return Err(DfsError::invalid(
+            "hand",
+            "the operator needs an \"index\" fingertip",
+        ));
     }
     let obj_yaw = pose.rotation.euler_angles().2;
     let centre = pose.translation.vector;
     let n_hand = hand.dof();
-    let wrist: Vec<usize> = (0..n_hand).filter(|&d| hand.dof_names[d].starts_with("wrist")).collect();
+    let wrist: Vec<usize> = (0..n_hand)
+        .filter(|&d| hand.dof_names[d].starts_with("wrist"))
+        .collect();
     // The fingers not used curl into the palm and stay there.
     let mut frozen: Vec<usize> = wrist.clone();
     let mut q_hand0 = [0.0; MAX_DOF];
@@ -154,7 +216,10 @@ pub fn plan_grasp(hand: &HandModel, object: &RigidObject, pose: &Isometry, style
     }
     if style == GraspStyle::Pinch {
         for (d, name) in hand.dof_names.iter().enumerate() {
-            if ["middle", "ring", "little"].iter().any(|f| name.starts_with(f)) {
+            if ["middle", "ring", "little"]
+                .iter()
+                .any(|f| name.starts_with(f))
+            {
                 q_hand0[d] = hand.dof_upper[d] * 0.9;
                 frozen.push(d);
             }
@@ -162,7 +227,10 @@ pub fn plan_grasp(hand: &HandModel, object: &RigidObject, pose: &Isometry, style
     }
     // Grasp axes (object frame, horizontal) and the half width of the object along them.
     let axes: &[(Real, Real)] = match object.shape {
-        Shape::Box { half_extents } => &[(0.0, half_extents[0]), (std::f64::consts::FRAC_PI_2, half_extents[1])][..],
+        Shape::Box { half_extents } => &[
+            (0.0, half_extents[0]),
+            (std::f64::consts::FRAC_PI_2, half_extents[1]),
+        ][..],
         Shape::Sphere { radius } | Shape::Cylinder { radius, .. } => &[(0.0, radius)][..],
     };
     let heights: &[Real] = match object.shape {
@@ -175,7 +243,11 @@ pub fn plan_grasp(hand: &HandModel, object: &RigidObject, pose: &Isometry, style
     let mut best: Option<(Real, Real, [Real; MAX_DOF], Rotation, Vector, Real)> = None;
     let mut best_err = Real::INFINITY;
     // Try grasp axes × hand orientations (yaw of the palm about the vertical) × heights.
-    let spreads: &[Real] = if fingers.len() > 1 { &[0.02, -0.02][..] } else { &[0.0][..] };
+    let spreads: &[Real] = if fingers.len() > 1 {
+        &[0.02, -0.02][..]
+    } else {
+        &[0.0][..]
+    };
     for &(axis_angle, half) in axes {
         for (k, &spread) in (0..12).flat_map(|k| spreads.iter().map(move |s| (k, s))) {
             let psi = k as Real * std::f64::consts::PI / 6.0;
@@ -184,8 +256,12 @@ pub fn plan_grasp(hand: &HandModel, object: &RigidObject, pose: &Isometry, style
             let n = free.dof();
             let a = Rotation::from_euler_angles(0.0, 0.0, obj_yaw + axis_angle) * Vector::x();
             let side = Vector::z().cross(&a);
-            let params = IkParams { max_iterations: 150, tolerance: 2e-4, ..IkParams::default() }
-                .with_frozen(frozen.iter().map(|d| d + 3));
+            let params = IkParams {
+                max_iterations: 150,
+                tolerance: 2e-4,
+                ..IkParams::default()
+            }
+            .with_frozen(frozen.iter().map(|d| d + 3));
             for &h in heights {
                 let across = |y: Real| match object.shape {
                     Shape::Sphere { radius } => (radius * radius - h * h - y * y).max(0.0).sqrt(),
@@ -194,7 +270,10 @@ pub fn plan_grasp(hand: &HandModel, object: &RigidObject, pose: &Isometry, style
                 };
                 let mut targets: Vec<(usize, Point)> = Vec::new();
                 let up = Vector::z() * h;
-                targets.push((thumb, Point::from(centre - a * (across(0.0) + hand.fingertips[thumb].radius) + up)));
+                targets.push((
+                    thumb,
+                    Point::from(centre - a * (across(0.0) + hand.fingertips[thumb].radius) + up),
+                ));
                 for (i, &f) in fingers.iter().enumerate() {
                     // Fingertips side by side, about 2 cm apart, as a hand's fingers lie.
                     let y = (spread * (0.5 - i as Real)).clamp(-0.7 * half, 0.7 * half);
@@ -208,7 +287,15 @@ pub fn plan_grasp(hand: &HandModel, object: &RigidObject, pose: &Isometry, style
                 q_start[1] = centre.y + back.y;
                 q_start[2] = centre.z + 0.05 + h;
                 let mut q = [0.0; MAX_DOF];
-                let r = solve_tips(&free, &Isometry::identity(), &targets, &q_start[..n], &params, &mut kin, &mut q[..n]);
+                let r = solve_tips(
+                    &free,
+                    &Isometry::identity(),
+                    &targets,
+                    &q_start[..n],
+                    &params,
+                    &mut kin,
+                    &mut q[..n],
+                );
                 best_err = best_err.min(r.max_error);
                 if r.max_error > 0.008 {
                     continue;
@@ -253,19 +340,44 @@ pub fn plan_grasp(hand: &HandModel, object: &RigidObject, pose: &Isometry, style
         let c = kin.tip_centres[f];
         let mut out = c.coords - centre - Vector::z() * h;
         out.z = 0.0;
-        let out = if out.norm() > 1e-9 { out.normalize() } else { x_axis };
+        let out = if out.norm() > 1e-9 {
+            out.normalize()
+        } else {
+            x_axis
+        };
         pre_targets.push((f, Point::from(c.coords + out * 0.025)));
     }
     let mut q_pre = [0.0; MAX_DOF];
-    let pre_params = IkParams { max_iterations: 200, tolerance: 5e-4, ..IkParams::default() }.with_frozen(frozen.iter().copied());
-    solve_tips(hand, &base, &pre_targets, &q_grasp[..hand.dof()], &pre_params, &mut kin, &mut q_pre[..hand.dof()]);
+    let pre_params = IkParams {
+        max_iterations: 200,
+        tolerance: 5e-4,
+        ..IkParams::default()
+    }
+    .with_frozen(frozen.iter().copied());
+    solve_tips(
+        hand,
+        &base,
+        &pre_targets,
+        &q_grasp[..hand.dof()],
+        &pre_params,
+        &mut kin,
+        &mut q_pre[..hand.dof()],
+    );
     let mut q_open = q_pre;
     for d in 0..hand.dof() {
         if !frozen.contains(&d) {
             q_open[d] = (q_pre[d] - 0.3).clamp(hand.dof_lower[d], hand.dof_upper[d]);
         }
     }
-    Ok(GraspPlan { base, q_grasp, q_pre, q_open, tips, ik_error: err, style })
+    Ok(GraspPlan {
+        base,
+        q_grasp,
+        q_pre,
+        q_open,
+        tips,
+        ik_error: err,
+        style,
+    })
 }
 
 /// How well fingertip `tip` can push along `normal` (unit, world): the length of the normal's
@@ -289,7 +401,12 @@ fn push_alignment(hand: &HandModel, kin: &Kinematics, tip: usize, normal: &Vecto
             nb += 1;
         }
     }
-    basis.iter().take(nb).map(|b| b.dot(normal).powi(2)).sum::<Real>().sqrt()
+    basis
+        .iter()
+        .take(nb)
+        .map(|b| b.dot(normal).powi(2))
+        .sum::<Real>()
+        .sqrt()
 }
 
 /// Minimum-jerk profile s(τ) = 10τ³ − 15τ⁴ + 6τ⁵ on [0, 1] (Flash & Hogan 1985), and its
@@ -297,7 +414,10 @@ fn push_alignment(hand: &HandModel, kin: &Kinematics, tip: usize, normal: &Vecto
 fn min_jerk(t: Real) -> (Real, Real) {
     let t = t.clamp(0.0, 1.0);
     let (t2, t3) = (t * t, t * t * t);
-    (10.0 * t3 - 15.0 * t3 * t + 6.0 * t3 * t2, 60.0 * t - 180.0 * t2 + 120.0 * t3)
+    (
+        10.0 * t3 - 15.0 * t3 * t + 6.0 * t3 * t2,
+        60.0 * t - 180.0 * t2 + 120.0 * t3,
+    )
 }
 
 /// Parameters of the simulated operator. SI units.
@@ -402,24 +522,40 @@ impl Simulation {
     /// Sets up a scenario with `hand` (normally glove10). `duration_s`, when given, cuts the
     /// script short or extends its last phase. Errors name the scenario's field, or say that no
     /// grasp of the object is reachable.
-    pub fn new(scenario: &Scenario, hand: HandModel, duration_s: Option<Real>) -> Result<Simulation> {
+    pub fn new(
+        scenario: &Scenario,
+        hand: HandModel,
+        duration_s: Option<Real>,
+    ) -> Result<Simulation> {
         let (object, tasks) = scenario.resolve()?;
         let depth = support_depth(&object.shape, &Rotation::identity());
         let yaw = Rotation::from_euler_angles(0.0, 0.0, scenario.object.yaw);
-        let position = scenario.object.position.map(Vector::from).unwrap_or(Vector::new(0.0, 0.0, depth));
+        let position = scenario
+            .object
+            .position
+            .map(Vector::from)
+            .unwrap_or(Vector::new(0.0, 0.0, depth));
         let table_height = position.z - depth;
         let pose = Isometry::from_parts(position.into(), yaw);
         let mut spans = Vec::with_capacity(tasks.len());
         let mut t = 0u64;
         for task in &tasks {
             let d = (task.duration * 1e9).round() as u64 / TICK_NS * TICK_NS;
-            spans.push(PhaseSpan { phase: task.phase, start_ns: t, end_ns: t + d.max(TICK_NS), task: *task });
+            spans.push(PhaseSpan {
+                phase: task.phase,
+                start_ns: t,
+                end_ns: t + d.max(TICK_NS),
+                task: *task,
+            });
             t += d.max(TICK_NS);
         }
         let mut n_steps = t / TICK_NS;
         if let Some(d) = duration_s {
             if !(d.is_finite() && d > 0.0 && d <= 3600.0) {
-                return Err(DfsError::invalid("duration", format!("must be in (0, 3600] s, got {d}")));
+                return Err(DfsError::invalid(
+                    "duration",
+                    format!("must be in (0, 3600] s, got {d}"),
+                ));
             }
             n_steps = ((d * 1e9).round() as u64 / TICK_NS).max(1);
             let end = n_steps * TICK_NS;
@@ -430,7 +566,10 @@ impl Simulation {
         }
         let params = DfsParams {
             contact_model: ContactModel::PointWithFriction,
-            friction: Friction { mu: scenario.object.mu, mu_torsion: scenario.object.mu_torsion },
+            friction: Friction {
+                mu: scenario.object.mu,
+                mu_torsion: scenario.object.mu_torsion,
+            },
             table_height: Some(table_height),
             ..DfsParams::default()
         };
@@ -447,7 +586,11 @@ impl Simulation {
             tremor_phase[i] = std::f64::consts::TAU * rand::Rng::random::<Real>(&mut rng);
         }
         let zeros = [0.0; MAX_DOF];
-        dfs.step(&GloveSample { q: &q0[..n], tau: &zeros[..n], base: start_base })?;
+        dfs.step(&GloveSample {
+            q: &q0[..n],
+            tau: &zeros[..n],
+            base: start_base,
+        })?;
         dfs.set_object_state(ObjectState::at_rest(pose));
         let operator_mu = scenario.operator_mu.unwrap_or(scenario.object.mu).max(1e-3);
         let mut sim = Simulation {
@@ -557,7 +700,11 @@ impl Simulation {
         self.measure();
         let n = self.dfs.hand().dof();
         let (q, tau) = (self.q_meas, self.tau_meas);
-        self.dfs.step(&GloveSample { q: &q[..n], tau: &tau[..n], base: self.base })?;
+        self.dfs.step(&GloveSample {
+            q: &q[..n],
+            tau: &tau[..n],
+            base: self.base,
+        })?;
         self.step += 1;
         Ok(true)
     }
@@ -600,7 +747,8 @@ impl Simulation {
                 for d in 0..n {
                     let delta = self.plan.q_grasp[d] - self.plan.q_pre[d];
                     let hand = self.dfs.hand();
-                    q[d] = (q[d] + self.params.close_overshoot * delta).clamp(hand.dof_lower[d], hand.dof_upper[d]);
+                    q[d] = (q[d] + self.params.close_overshoot * delta)
+                        .clamp(hand.dof_lower[d], hand.dof_upper[d]);
                 }
                 self.to_q = q;
                 self.to_grip = 1.0;
@@ -656,7 +804,8 @@ impl Simulation {
         let mut tremor = Vector::zeros();
         for (k, c) in tremor.iter_mut().enumerate() {
             let i = MAX_DOF + k;
-            *c = self.params.tremor_arm * (std::f64::consts::TAU * self.tremor_freq[i] * time + self.tremor_phase[i]).sin();
+            *c = self.params.tremor_arm
+                * (std::f64::consts::TAU * self.tremor_freq[i] * time + self.tremor_phase[i]).sin();
         }
         let new_base = Isometry::from_parts((p + tremor).into(), r);
         let dt = TICK_NS as Real * 1e-9;
@@ -665,7 +814,8 @@ impl Simulation {
         self.base = new_base;
         let n = self.dfs.hand().dof();
         for d in 0..n {
-            let tr = self.params.tremor_joint * (std::f64::consts::TAU * self.tremor_freq[d] * time + self.tremor_phase[d]).sin();
+            let tr = self.params.tremor_joint
+                * (std::f64::consts::TAU * self.tremor_freq[d] * time + self.tremor_phase[d]).sin();
             self.q_intent[d] = self.from_q[d] + (self.to_q[d] - self.from_q[d]) * mq + tr;
         }
         self.grip = self.from_grip + (self.to_grip - self.from_grip) * mg;
@@ -682,7 +832,11 @@ impl Simulation {
         let mut tau = [0.0; MAX_DOF];
         for d in 0..n {
             let kp = self.params.stiffness * hand.torque_limit[d];
-            let kd = if hand.dof_names[d].starts_with("wrist") { self.params.wrist_damping } else { 0.0 };
+            let kd = if hand.dof_names[d].starts_with("wrist") {
+                self.params.wrist_damping
+            } else {
+                0.0
+            };
             tau[d] = kp * (self.q_intent[d] - q[d]) - kd * qd[d];
         }
         if self.grip > 0.0 {
@@ -699,7 +853,8 @@ impl Simulation {
         let obj = self.dfs.object();
         let st = self.dfs.object_state();
         let g = self.dfs.params().gravity;
-        let mut frames = [crate::contact::ContactFrame::from_normal(Vector::zeros(), Vector::z()); MAX_CONTACTS];
+        let mut frames =
+            [crate::contact::ContactFrame::from_normal(Vector::zeros(), Vector::z()); MAX_CONTACTS];
         let mut tips = [0usize; MAX_CONTACTS];
         let mut nc = 0;
         for k in 0..out.n_tips {
@@ -764,7 +919,9 @@ impl Simulation {
         let kin = self.dfs.kinematics();
         let n = self.dfs.hand().dof();
         for i in 0..nc {
-            let f = st.pose.rotation * (frames[i].rot_b * Vector::new(c[i][0], c[i][1], c[i][2])) * self.grip;
+            let f = st.pose.rotation
+                * (frames[i].rot_b * Vector::new(c[i][0], c[i][1], c[i][2]))
+                * self.grip;
             let j = &kin.tip_jacobians[tips[i]];
             for (d, t) in tau.iter_mut().enumerate().take(n) {
                 *t += j[(0, d)] * f.x + j[(1, d)] * f.y + j[(2, d)] * f.z;
@@ -811,7 +968,10 @@ pub fn support_depth(shape: &Shape, rotation: &Rotation) -> Real {
     match *shape {
         Shape::Sphere { radius } => radius,
         Shape::Box { half_extents } => (0..3).map(|i| m[(2, i)].abs() * half_extents[i]).sum(),
-        Shape::Cylinder { radius, half_height } => {
+        Shape::Cylinder {
+            radius,
+            half_height,
+        } => {
             let az = m[(2, 2)].abs();
             radius * (1.0 - az * az).max(0.0).sqrt() + half_height * az
         }

@@ -19,7 +19,11 @@ fn dfs_ticks_allocate_nothing() {
 fn a_dfs_tick_with_four_contacts_allocates_nothing() {
     let (mut dfs, q, tau, base) = glove10_holding_paper_sphere().unwrap();
     let start = *dfs.object_state();
-    let sample = GloveSample { q: &q, tau: &tau, base };
+    let sample = GloveSample {
+        q: &q,
+        tau: &tau,
+        base,
+    };
     // Warm up outside the measured region.
     dfs.step(&sample).unwrap();
     let region = Region::new(GLOBAL);
@@ -41,8 +45,19 @@ fn a_free_falling_object_tick_and_a_refused_sample_allocate_nothing() {
     let far = dfs_core::math::Isometry::translation(0.0, 0.0, -5.0);
     let region = Region::new(GLOBAL);
     for _ in 0..100 {
-        assert!(dfs.step(&GloveSample { q: &bad, tau: &tau, base }).is_err());
-        dfs.step(&GloveSample { q: &q, tau: &tau, base: far }).unwrap();
+        assert!(dfs
+            .step(&GloveSample {
+                q: &bad,
+                tau: &tau,
+                base
+            })
+            .is_err());
+        dfs.step(&GloveSample {
+            q: &q,
+            tau: &tau,
+            base: far,
+        })
+        .unwrap();
     }
     assert_eq!(region.change().allocations, 0);
 }

@@ -60,7 +60,11 @@ pub fn run(c: BenchCommand) -> Result<(), CliError> {
 fn bench_tick(iterations: usize) -> Result<TickBench, CliError> {
     let (mut dfs, q, tau, base) = glove10_holding_paper_sphere()?;
     let start = *dfs.object_state();
-    let sample = GloveSample { q: &q, tau: &tau, base };
+    let sample = GloveSample {
+        q: &q,
+        tau: &tau,
+        base,
+    };
     for _ in 0..iterations / 10 {
         dfs.set_object_state(start);
         black_box(dfs.step(&sample)?);

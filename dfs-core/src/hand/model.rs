@@ -767,7 +767,10 @@ impl HandModel {
                     let (v, w) = match joint.kind {
                         JointKind::Prismatic => (a, Vector::zeros()),
                         JointKind::Fixed => (Vector::zeros(), Vector::zeros()),
-                        _ => (a.cross(&(com - Point::from(kin.joint_frames[j].translation.vector))), a),
+                        _ => (
+                            a.cross(&(com - Point::from(kin.joint_frames[j].translation.vector))),
+                            a,
+                        ),
                     };
                     match dofs[..cnt].iter().position(|&x| x == d) {
                         Some(i) => {
@@ -803,7 +806,6 @@ impl HandModel {
         }
     }
 }
-
 
 #[cfg(test)]
 pub(crate) mod tests {
