@@ -679,3 +679,104 @@ impl Dfs {
         }
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::fixtures::glove10_holding_paper_sphere;
+    use proptest::prelude::*;
+
+    fn all_finite(out: &TickOutput) -> bool {
+        let s = &out.object;
+        out.f_ext_b.iter().chain(out.object_force_b.iter()).all(|v| v.is_finite())
+            && out.motor_q.iter().chain(out.motor_qd.iter()).chain(out.feedback_torque.iter()).all(|v| v.is_finite())
+            && s.pose.translation.vector.iter().chain(s.linear_velocity.iter()).all(|v| v.is_finite())
+            && out.tips.iter().all(|t| t.intensity.iter().chain(t.feedback.iter()).all(|v| v.is_finite()))
+    }
+
+    #[test]
+    fn nan_infinite_and_out_of_range_samples_are_refused_and_change_nothing() {
+        let (mut dfs, q, tau, base) = glove10_holding_paper_sphere().unwrap();
+        let before = *dfs.object_state();
+        let cases: Vec<(Vec<f64>, Vec<f64>)> = vec![
+            ({ let mut v = q.clone(); v[3] = f64::NAN; v }, tau.clone()),
+            ({ let mut v = q.clone(); v[0] = f64::INFINITY; v }, tau.clone()),
+            ({ let mut v = q.clone(); v[5] = 10.0; v }, tau.clone()),
+            (q.clone(), { let mut v = tau.clone(); v[2] = f64::NAN; v }),
+            (q.clone(), { let mut v = tau.clone(); v[4] = 1e6; v }),
+            (q[..5].to_vec(), tau.clone()),
+            (q.clone(), tau[..3].to_vec()),
+        ];
+        for (qq, tt) in cases {
+            assert!(dfs.step(&GloveSample { q: &qq, tau: &tt, base }).is_err());
+            assert_eq!(*dfs.object_state(), before);
+        }
+        let mut bad_base = base;
+        bad_base.translation.vector.x = f64::NAN;
+        assert!(dfs.step(&GloveSample { q: &q, tau: &tau, base: bad_base }).is_err());
+        assert!(all_finite(dfs.output()));
+    }
+
+    #[test]
+    fn with_zero_contacts_the_object_falls_freely() {
+        let (mut dfs, q, tau, _) = glove10_holding_paper_sphere().unwrap();
+        let far = Isometry::translation(0.0, 0.0, -3.0);
+        let z0 = dfs.object_state().pose.translation.z;
+        for _ in 0..100 {
+            let out = dfs.step(&GloveSample { q: &q, tau: &tau, base: far }).unwrap();
+            assert_eq!(out.n_contacts, 0);
+        }
+        let s = dfs.object_state();
+        assert!((s.linear_velocity.z + 9.81 * 0.1).abs() < 1e-9);
+        assert!(s.pose.translation.z < z0);
+    }
+
+    #[test]
+    fn the_same_inputs_give_bit_identical_outputs() {
+        let run = || {
+            let (mut dfs, q, tau, base) = glove10_holding_paper_sphere().unwrap();
+            let mut trace = Vec::new();
+            for i in 0..200 {
+                let mut t = tau.clone();
+                t[3] += 0.01 * (i as f64 * 0.1).sin();
+                let out = dfs.step(&GloveSample { q: &q, tau: &t, base }).unwrap();
+                trace.extend(out.f_ext_b.iter().map(|v| v.to_bits()));
+                trace.extend(out.motor_q.iter().map(|v| v.to_bits()));
+            }
+            trace
+        };
+        assert_eq!(run(), run());
+    }
+
+    #[test]
+    fn an_internal_squeeze_is_fed_back_entirely_and_does_not_move_the_object() {
+        // Operator intensities that sum to zero wrench (a pure squeeze) give f_ext = gravity
+        // only and feedback = the whole squeeze.
+        let (dfs, ..) = glove10_holding_paper_sphere().unwrap();
+        let out = dfs.output();
+        assert_eq!(out.n_contacts, 4);
+        for t in out.tips.iter().filter(|t| t.in_contact) {
+            let sum = t.reaction + t.feedback;
+            assert!((sum - t.transmitted).norm() < 1e-9);
+        }
+    }
+
+    proptest! {
+        #![proptest_config(ProptestConfig::with_cases(24))]
+        #[test]
+        fn random_samples_never_produce_nan(
+            dq in prop::collection::vec(-1.0..1.0f64, 10),
+            dt in prop::collection::vec(-3.0..3.0f64, 10),
+        ) {
+            let (mut dfs, q, _, base) = glove10_holding_paper_sphere().unwrap();
+            let hand = dfs.hand().clone();
+            let q: Vec<f64> = q.iter().zip(&dq).enumerate()
+                .map(|(i, (a, b))| (a + b).clamp(hand.dof_lower[i], hand.dof_upper[i])).collect();
+            let tau: Vec<f64> = dt.iter().enumerate().map(|(i, t)| t.clamp(-hand.torque_limit[i], hand.torque_limit[i])).collect();
+            for _ in 0..20 {
+                let out = dfs.step(&GloveSample { q: &q, tau: &tau, base }).unwrap();
+                prop_assert!(all_finite(out));
+            }
+        }
+    }
+}

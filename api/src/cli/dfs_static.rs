@@ -32,7 +32,7 @@ pub fn load_grasp(name_or_path: &str) -> Result<GraspSpec, CliError> {
     }
     let text =
         std::fs::read_to_string(path).map_err(|e| CliError(format!("{}: {e}", path.display())))?;
-    serde_json::from_str(&text)
+    super::parse_json(&text)
         .map_err(|e| CliError(format!("{}: invalid grasp file: {e}", path.display())))
 }
 

@@ -50,6 +50,20 @@ pub fn run() -> ExitCode {
     }
 }
 
+/// Parses JSON into `T`; the error names the path of the offending field
+/// (`contacts[0].position: invalid length 2, ...`).
+pub fn parse_json<T: serde::de::DeserializeOwned>(text: &str) -> Result<T, String> {
+    let de = &mut serde_json::Deserializer::from_str(text);
+    serde_path_to_error::deserialize(de).map_err(|e| {
+        let path = e.path().to_string();
+        if path == "." {
+            e.inner().to_string()
+        } else {
+            format!("{path}: {}", e.inner())
+        }
+    })
+}
+
 /// Prints a value as pretty JSON on stdout.
 pub fn print_json<T: serde::Serialize>(v: &T) -> Result<(), CliError> {
     println!("{}", serde_json::to_string_pretty(v)?);
