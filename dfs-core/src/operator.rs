@@ -207,7 +207,7 @@ pub fn plan_grasp(
         .filter(|&d| hand.dof_names[d].starts_with("wrist"))
         .collect();
     // The fingers not used curl into the palm and stay there.
-    let mut frozen: Vec<usize> = wrist.clone();
+    let mut frozen: Vec<usize> = Vec::new();
     let mut q_hand0 = [0.0; MAX_DOF];
     for d in 0..n_hand {
         if !wrist.contains(&d) {
@@ -252,17 +252,31 @@ pub fn plan_grasp(
         for (k, &spread) in (0..12).flat_map(|k| spreads.iter().map(move |s| (k, s))) {
             let psi = k as Real * std::f64::consts::PI / 6.0;
             let rot = Rotation::from_euler_angles(0.0, 0.0, obj_yaw + axis_angle + psi);
-            let free = with_free_base(hand, rot);
+            // The planning model: the hand on a free base, its fingertips reduced to the ones
+            // the grasp uses plus, per finger, a virtual tip 2 cm along the distal joint's axis.
+            // Targeting that virtual tip beside the real one turns the finger's flexion plane
+            // to contain the grasp axis: a planar finger pushes only within that plane.
+            let mut free = with_free_base(hand, rot);
+            let real: Vec<usize> = std::iter::once(thumb).chain(fingers.iter().copied()).collect();
+            let mut tips_free: Vec<crate::hand::Fingertip> = real.iter().map(|&k| free.fingertips[k].clone()).collect();
+            for &f in &fingers {
+                let tip = &hand.fingertips[f];
+                let axis = hand.joints.iter().find(|j| j.child == tip.link).map(|j| j.axis.into_inner()).unwrap_or(Vector::y());
+                tips_free.push(crate::hand::Fingertip {
+                    name: format!("{}__axis", tip.name),
+                    link: tip.link + 3,
+                    offset: tip.offset + axis * 0.02,
+                    radius: tip.radius,
+                });
+            }
+            free.fingertips = tips_free;
+            free.compute_finger_groups();
             let n = free.dof();
             let a = Rotation::from_euler_angles(0.0, 0.0, obj_yaw + axis_angle) * Vector::x();
             let side = Vector::z().cross(&a);
-            let params = IkParams {
-                max_iterations: 150,
-                tolerance: 2e-4,
-                ..IkParams::default()
-            }
-            .with_frozen(frozen.iter().map(|d| d + 3));
-            for &h in heights {
+            let params = IkParams { max_iterations: 150, tolerance: 2e-4, ..IkParams::default() }
+                .with_frozen(frozen.iter().map(|d| d + 3));
+            for (&h, sign) in heights.iter().flat_map(|h| [1.0, -1.0].into_iter().map(move |s| (h, s))) {
                 let across = |y: Real| match object.shape {
                     Shape::Sphere { radius } => (radius * radius - h * h - y * y).max(0.0).sqrt(),
                     Shape::Cylinder { radius, .. } => (radius * radius - y * y).max(0.0).sqrt(),
@@ -270,15 +284,14 @@ pub fn plan_grasp(
                 };
                 let mut targets: Vec<(usize, Point)> = Vec::new();
                 let up = Vector::z() * h;
-                targets.push((
-                    thumb,
-                    Point::from(centre - a * (across(0.0) + hand.fingertips[thumb].radius) + up),
-                ));
+                targets.push((0, Point::from(centre - a * (across(0.0) + hand.fingertips[thumb].radius) + up)));
                 for (i, &f) in fingers.iter().enumerate() {
                     // Fingertips side by side, about 2 cm apart, as a hand's fingers lie.
                     let y = (spread * (0.5 - i as Real)).clamp(-0.7 * half, 0.7 * half);
                     let r = hand.fingertips[f].radius;
-                    targets.push((f, Point::from(centre + a * (across(y) + r) + side * y + up)));
+                    let p = centre + a * (across(y) + r) + side * y + up;
+                    targets.push((1 + i, Point::from(p)));
+                    targets.push((1 + fingers.len() + i, Point::from(p + side * (0.02 * sign))));
                 }
                 let mut q_start = [0.0; MAX_DOF];
                 q_start[3..n].copy_from_slice(&q_hand0[..n - 3]);
@@ -287,15 +300,7 @@ pub fn plan_grasp(
                 q_start[1] = centre.y + back.y;
                 q_start[2] = centre.z + 0.05 + h;
                 let mut q = [0.0; MAX_DOF];
-                let r = solve_tips(
-                    &free,
-                    &Isometry::identity(),
-                    &targets,
-                    &q_start[..n],
-                    &params,
-                    &mut kin,
-                    &mut q[..n],
-                );
+                let r = solve_tips(&free, &Isometry::identity(), &targets, &q_start[..n], &params, &mut kin, &mut q[..n]);
                 best_err = best_err.min(r.max_error);
                 if r.max_error > 0.008 {
                     continue;
@@ -304,15 +309,19 @@ pub fn plan_grasp(
                 // finger with few joints only pushes within the range of its Jacobian.
                 free.tip_jacobians(&mut kin);
                 let mut align: Real = 1.0;
-                for &(tip, target) in &targets {
+                for &(tip, target) in targets.iter().filter(|(t, _)| *t < real.len()) {
                     let normal = {
                         let mut v = centre + Vector::z() * h - target.coords;
                         v.z = 0.0;
                         v.normalize()
                     };
+                    // The fingertip must push along the normal and, to lift by friction, along
+                    // the vertical.
                     align = align.min(push_alignment(&free, &kin, tip, &normal));
+                    align = align.min(push_alignment(&free, &kin, tip, &Vector::z()));
                 }
                 let score = align - r.max_error * 20.0;
+                if std::env::var("ICMS_DEBUG").is_ok() { eprintln!("cand psi={k} spread={spread} h={h:.3} err={:.4} align={align:.3}", r.max_error); }
                 if best.as_ref().is_none_or(|b| score > b.0 + 1e-9) {
                     best = Some((score, r.max_error, q, rot, a, h));
                 }
@@ -380,31 +389,28 @@ pub fn plan_grasp(
     })
 }
 
-/// How well fingertip `tip` can push along `normal` (unit, world): the length of the normal's
-/// projection onto the range of the tip's linear Jacobian over its finger group's DOFs
-/// (1 = fully, 0 = not at all).
-fn push_alignment(hand: &HandModel, kin: &Kinematics, tip: usize, normal: &Vector) -> Real {
+/// How well fingertip `tip` can push along `dir` (unit, world): the length of the direction's
+/// projection onto the well-conditioned range of the tip's linear Jacobian over its finger
+/// group's DOFs (1 = fully, 0 = not at all). Directions whose singular value is below a quarter
+/// of the largest do not count: joint torques cannot express a push along a stretched finger.
+fn push_alignment(hand: &HandModel, kin: &Kinematics, tip: usize, dir: &Vector) -> Real {
     let Some(group) = hand.finger_groups.iter().find(|g| g.tips.contains(&tip)) else {
         return 0.0;
     };
     let j = &kin.tip_jacobians[tip];
-    // Gram-Schmidt over the group's columns.
-    let mut basis: [Vector; 3] = [Vector::zeros(); 3];
-    let mut nb = 0;
+    let mut m = nalgebra::Matrix3::<Real>::zeros();
     for &d in &group.dofs {
-        let mut v = Vector::new(j[(0, d)], j[(1, d)], j[(2, d)]);
-        for b in basis.iter().take(nb) {
-            v -= b * b.dot(&v);
-        }
-        if v.norm() > 1e-6 && nb < 3 {
-            basis[nb] = v.normalize();
-            nb += 1;
-        }
+        let c = Vector::new(j[(0, d)], j[(1, d)], j[(2, d)]);
+        m += c * c.transpose();
     }
-    basis
-        .iter()
-        .take(nb)
-        .map(|b| b.dot(normal).powi(2))
+    let eig = nalgebra::SymmetricEigen::new(m);
+    let max = eig.eigenvalues.iter().fold(0.0_f64, |a, &b| a.max(b));
+    if max <= 0.0 {
+        return 0.0;
+    }
+    (0..3)
+        .filter(|&k| eig.eigenvalues[k] > max / 16.0)
+        .map(|k| eig.eigenvectors.column(k).dot(dir).powi(2))
         .sum::<Real>()
         .sqrt()
 }
@@ -509,6 +515,7 @@ pub struct Simulation {
     base_velocity: Vector,
     base_acceleration: Vector,
     q_intent: [Real; MAX_DOF],
+    latched: [Option<Real>; MAX_DOF],
     grip: Real,
     q_meas: [Real; MAX_DOF],
     tau_meas: [Real; MAX_DOF],
@@ -615,6 +622,7 @@ impl Simulation {
             base_velocity: Vector::zeros(),
             base_acceleration: Vector::zeros(),
             q_intent: q0,
+            latched: [None; MAX_DOF],
             grip: 0.0,
             q_meas: q0,
             tau_meas: [0.0; MAX_DOF],
@@ -829,8 +837,24 @@ impl Simulation {
         let out = self.dfs.output();
         let q = &out.motor_q;
         let qd = &out.motor_qd;
+        // A person stops a finger where it meets the object and from then on controls its
+        // force, not its position: while the object is held, the intention of a finger group
+        // that touches follows the finger (no stiffness), and the grip torques do the work.
+        let holding = matches!(
+            self.phase(),
+            Phase::Grasp | Phase::Lift | Phase::Hold | Phase::Transport | Phase::Place
+        );
+        for g in &hand.finger_groups {
+            let touching = g.tips.iter().any(|&k| self.plan.tips[k] && out.tips[k].touching);
+            for &d in &g.dofs {
+                self.latched[d] = if holding && (touching || self.latched[d].is_some()) { Some(q[d]) } else { None };
+            }
+        }
         let mut tau = [0.0; MAX_DOF];
         for d in 0..n {
+            if let Some(l) = self.latched[d] {
+                self.q_intent[d] = l;
+            }
             let kp = self.params.stiffness * hand.torque_limit[d];
             let kd = if hand.dof_names[d].starts_with("wrist") {
                 self.params.wrist_damping
@@ -922,6 +946,7 @@ impl Simulation {
             let f = st.pose.rotation
                 * (frames[i].rot_b * Vector::new(c[i][0], c[i][1], c[i][2]))
                 * self.grip;
+            if std::env::var("ICMS_DEBUG").is_ok() && self.step % 20 == 0 && (2200..2420).contains(&self.step) { let got = out.tips[tips[i]].tip_force_world; let nrm = st.pose.rotation * frames[i].normal_b(); eprintln!("t={} tip {} want {:?} got {:?} n {:?} align {:.3} axes {:?} q {:?}", self.step, tips[i], f.as_slice(), got.as_slice(), nrm.as_slice(), push_alignment(self.dfs.hand(), kin, tips[i], &nrm), (0..12).map(|j| kin.joint_axes[j].as_slice().iter().map(|v| (v*100.0).round()/100.0).collect::<Vec<_>>()).collect::<Vec<_>>(), &out.motor_q[..10]); }
             let j = &kin.tip_jacobians[tips[i]];
             for (d, t) in tau.iter_mut().enumerate().take(n) {
                 *t += j[(0, d)] * f.x + j[(1, d)] * f.y + j[(2, d)] * f.z;
