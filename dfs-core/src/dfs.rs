@@ -238,6 +238,13 @@ pub struct Dfs {
     scratch: DofMatrix,
     anchors_b: [Option<Vector>; MAX_TIPS],
     prev_tip_points: [Option<Vector>; MAX_TIPS],
+    /// Per tip: contact spring deflection (world; tangential from the stick anchor plus the
+    /// penetration along the normal), the tip's velocity not explained by its joints relative to
+    /// the object (world), whether it sticks, and the passive friction force on the object.
+    spring_err: [Vector; MAX_TIPS],
+    spring_vel: [Vector; MAX_TIPS],
+    stick: [bool; MAX_TIPS],
+    passive_world: [Vector; MAX_TIPS],
     frames: [ContactFrame; MAX_CONTACTS],
     transmitted: [Intensity; MAX_CONTACTS],
     contact_tip: [usize; MAX_CONTACTS],
@@ -280,6 +287,10 @@ impl Dfs {
             scratch: DofMatrix::identity(),
             anchors_b: [None; MAX_TIPS],
             prev_tip_points: [None; MAX_TIPS],
+            spring_err: [Vector::zeros(); MAX_TIPS],
+            spring_vel: [Vector::zeros(); MAX_TIPS],
+            stick: [false; MAX_TIPS],
+            passive_world: [Vector::zeros(); MAX_TIPS],
             frames: [ContactFrame::from_normal(Vector::zeros(), Vector::z()); MAX_CONTACTS],
             transmitted: [Intensity::zeros(); MAX_CONTACTS],
             contact_tip: [0; MAX_CONTACTS],
@@ -438,17 +449,56 @@ impl Dfs {
                 self.out.tips[tip].tip_force_world = f;
             }
         }
-        let rot_inv = self.state.pose.rotation.inverse();
+        let rot = self.state.pose.rotation;
+        let rot_inv = rot.inverse();
+        let inv = self.state.pose.inverse();
+        let dt = self.params.dt;
         let mut n = 0;
         for k in 0..self.hand.fingertips.len() {
+            self.passive_world[k] = Vector::zeros();
+            self.stick[k] = false;
+            let Some(frame) = self.out.tips[k].frame else {
+                self.anchors_b[k] = None;
+                self.prev_tip_points[k] = None;
+                continue;
+            };
+            let c = frame.intensities_of_force_b(&(rot_inv * self.out.tips[k].tip_force_world));
+            // Contact spring: the fingertip's deflection from where it stuck on the object.
+            let z_world = rot * frame.normal_b();
+            let tip_point = self.out.tip_centres[k].coords + z_world * self.hand.fingertips[k].radius;
+            let tip_b = (inv * Point::from(tip_point)).coords;
+            let anchor_b = self.anchors_b[k].unwrap_or(tip_b);
+            let mut err = tip_point - (self.state.pose * Point::from(anchor_b)).coords;
+            err -= z_world * err.dot(&z_world);
+            let v_obj = self.state.point_velocity(&tip_b);
+            let v_rel = self.prev_tip_points[k].map(|prev| (tip_point - prev) / dt - v_obj).unwrap_or_else(Vector::zeros);
+            self.prev_tip_points[k] = Some(tip_point);
+            let j = &self.kin.tip_jacobians[k];
+            let mut v_joint = Vector::zeros();
+            for d in 0..self.hand.dof() {
+                v_joint += Vector::new(j[(0, d)], j[(1, d)], j[(2, d)]) * self.qd[d];
+            }
+            self.spring_vel[k] = v_rel - v_joint;
+            // Passive friction: a sticking fingertip drags the object along with it (tangential
+            // spring-damper to the anchor), within the Coulomb cone together with the operator's
+            // own tangential force.
+            let passive_w = err * self.params.surface_stiffness + (v_rel - z_world * v_rel.dot(&z_world)) * self.params.surface_damping;
+            let passive_c = frame.intensities_of_force_b(&(rot_inv * passive_w));
+            let with_passive = if c[2] > 0.0 { c + Intensity::new(passive_c[0], passive_c[1], 0.0, 0.0) } else { c };
+            let split = apply_friction(self.params.contact_model, &self.params.friction, &with_passive);
             let t = &mut self.out.tips[k];
-            let Some(frame) = t.frame else { continue };
-            let c = frame.intensities_of_force_b(&(rot_inv * t.tip_force_world));
-            let split = apply_friction(self.params.contact_model, &self.params.friction, &c);
             t.intensity = c;
             t.transmitted = split.transmitted;
             t.slip = split.slip;
             t.in_contact = !split.separating;
+            let stick = t.in_contact && !t.slip;
+            self.stick[k] = stick;
+            self.anchors_b[k] = if stick { Some(anchor_b) } else { None };
+            self.spring_err[k] = if stick { err } else { Vector::zeros() } + z_world * t.penetration;
+            if t.in_contact {
+                let tangential = split.transmitted - c.component_mul(&self.params.contact_model.mask());
+                self.passive_world[k] = rot * (frame.rot_b * Vector::new(tangential[0], tangential[1], 0.0));
+            }
             if t.in_contact && n < MAX_CONTACTS {
                 self.frames[n] = frame;
                 self.transmitted[n] = split.transmitted;
@@ -527,63 +577,35 @@ impl Dfs {
             rhs[i] = s + dt * tau[i];
         }
         let mut fb_torque = [0.0; MAX_DOF];
-        let inv = self.state.pose.inverse();
         for k in 0..self.hand.fingertips.len() {
             let t = self.out.tips[k];
             let j = self.kin.tip_jacobians[k];
-            // Finger-side force: feedback plus surface stabilisation.
-            let mut f = t.feedback_force_world;
+            // The feedback, less the passive friction part: the contact spring below carries
+            // that on the finger side, implicitly.
+            let f = t.feedback_force_world + self.passive_world[k];
             for d in 0..ndof {
                 fb_torque[d] += j[(0, d)] * f.x + j[(1, d)] * f.y + j[(2, d)] * f.z;
             }
-            let Some(frame) = t.frame else {
-                self.anchors_b[k] = None;
-                self.prev_tip_points[k] = None;
-                continue;
-            };
-            let radius = self.hand.fingertips[k].radius;
+            let Some(frame) = t.frame else { continue };
             let z_world = self.state.pose.rotation * frame.normal_b();
-            let tip_point = self.out.tip_centres[k].coords + z_world * radius;
-            let stick = t.in_contact && !t.slip;
-            let tip_b = (inv * Point::from(tip_point)).coords;
-            let anchor_b = match (stick, self.anchors_b[k]) {
-                (true, Some(a)) => a,
-                _ => tip_b,
-            };
-            self.anchors_b[k] = if stick { Some(anchor_b) } else { None };
-            let anchor_world = (self.state.pose * Point::from(anchor_b)).coords;
-            let mut err = tip_point - anchor_world;
-            err -= z_world * err.dot(&z_world);
-            err += z_world * t.penetration;
-            let v_obj = self.state.point_velocity(&(tip_b));
-            let v_tip_fd = self.prev_tip_points[k]
-                .map(|prev| (tip_point - prev) / dt)
-                .unwrap_or(v_obj);
-            self.prev_tip_points[k] = Some(tip_point);
-            // Tip velocity not explained by joint motion (base motion), relative to the object.
-            let mut v_joint = Vector::zeros();
-            for d in 0..ndof {
-                v_joint += Vector::new(j[(0, d)], j[(1, d)], j[(2, d)]) * self.qd[d];
-            }
-            let v_other = v_tip_fd - v_joint - v_obj;
-            let (proj_err, proj_v) = if stick {
-                (err, v_other)
-            } else {
-                (z_world * err.dot(&z_world), z_world * v_other.dot(&z_world))
-            };
-            f = -proj_err * p.surface_stiffness - proj_v * p.surface_damping;
+            let stick = self.stick[k];
+            let v = self.spring_vel[k];
+            let proj_v = if stick { v } else { z_world * v.dot(&z_world) };
+            let f = -self.spring_err[k] * p.surface_stiffness - proj_v * p.surface_damping;
             let c = dt * p.surface_damping + dt * dt * p.surface_stiffness;
+            let mut cols = [Vector::zeros(); MAX_DOF];
+            for (d, col) in cols.iter_mut().enumerate().take(ndof) {
+                *col = Vector::new(j[(0, d)], j[(1, d)], j[(2, d)]);
+            }
             for d1 in 0..ndof {
-                let col1 = Vector::new(j[(0, d1)], j[(1, d1)], j[(2, d1)]);
+                let col1 = cols[d1];
+                if col1 == Vector::zeros() {
+                    continue;
+                }
                 rhs[d1] += dt * col1.dot(&f);
-                let pc1 = if stick {
-                    col1
-                } else {
-                    z_world * z_world.dot(&col1)
-                };
+                let pc1 = if stick { col1 } else { z_world * z_world.dot(&col1) } * c;
                 for d2 in 0..ndof {
-                    let col2 = Vector::new(j[(0, d2)], j[(1, d2)], j[(2, d2)]);
-                    a[(d1, d2)] += c * pc1.dot(&col2);
+                    a[(d1, d2)] += pc1.dot(&cols[d2]);
                 }
             }
         }

@@ -211,7 +211,8 @@ pub fn plan_grasp(
     let mut q_hand0 = [0.0; MAX_DOF];
     for d in 0..n_hand {
         if !wrist.contains(&d) {
-            q_hand0[d] = 0.4 * (hand.dof_lower[d].max(-1.0) + hand.dof_upper[d].min(1.0));
+            // Start from bent fingers: a stretched finger cannot push along its length.
+            q_hand0[d] = hand.dof_lower[d] + 0.6 * (hand.dof_upper[d] - hand.dof_lower[d]);
         }
     }
     if style == GraspStyle::Pinch {
@@ -220,7 +221,7 @@ pub fn plan_grasp(
                 .iter()
                 .any(|f| name.starts_with(f))
             {
-                q_hand0[d] = hand.dof_upper[d] * 0.9;
+                q_hand0[d] = hand.dof_lower[d].max(0.0);
                 frozen.push(d);
             }
         }
@@ -259,7 +260,7 @@ pub fn plan_grasp(
             let mut free = with_free_base(hand, rot);
             let real: Vec<usize> = std::iter::once(thumb).chain(fingers.iter().copied()).collect();
             let mut tips_free: Vec<crate::hand::Fingertip> = real.iter().map(|&k| free.fingertips[k].clone()).collect();
-            for &f in &fingers {
+            for &f in &real {
                 let tip = &hand.fingertips[f];
                 let axis = hand.joints.iter().find(|j| j.child == tip.link).map(|j| j.axis.into_inner()).unwrap_or(Vector::y());
                 tips_free.push(crate::hand::Fingertip {
@@ -276,7 +277,8 @@ pub fn plan_grasp(
             let side = Vector::z().cross(&a);
             let params = IkParams { max_iterations: 150, tolerance: 2e-4, ..IkParams::default() }
                 .with_frozen(frozen.iter().map(|d| d + 3));
-            for (&h, sign) in heights.iter().flat_map(|h| [1.0, -1.0].into_iter().map(move |s| (h, s))) {
+            let signs = [(1.0, 1.0), (1.0, -1.0), (-1.0, 1.0), (-1.0, -1.0)];
+            for (&h, (sign, thumb_sign)) in heights.iter().flat_map(|h| signs.into_iter().map(move |s| (h, s))) {
                 let across = |y: Real| match object.shape {
                     Shape::Sphere { radius } => (radius * radius - h * h - y * y).max(0.0).sqrt(),
                     Shape::Cylinder { radius, .. } => (radius * radius - y * y).max(0.0).sqrt(),
@@ -284,14 +286,16 @@ pub fn plan_grasp(
                 };
                 let mut targets: Vec<(usize, Point)> = Vec::new();
                 let up = Vector::z() * h;
-                targets.push((0, Point::from(centre - a * (across(0.0) + hand.fingertips[thumb].radius) + up)));
+                let thumb_p = centre - a * (across(0.0) + hand.fingertips[thumb].radius) + up;
+                targets.push((0, Point::from(thumb_p)));
+                targets.push((real.len(), Point::from(thumb_p + side * (0.02 * thumb_sign))));
                 for (i, &f) in fingers.iter().enumerate() {
                     // Fingertips side by side, about 2 cm apart, as a hand's fingers lie.
                     let y = (spread * (0.5 - i as Real)).clamp(-0.7 * half, 0.7 * half);
                     let r = hand.fingertips[f].radius;
                     let p = centre + a * (across(y) + r) + side * y + up;
                     targets.push((1 + i, Point::from(p)));
-                    targets.push((1 + fingers.len() + i, Point::from(p + side * (0.02 * sign))));
+                    targets.push((real.len() + 1 + i, Point::from(p + side * (0.02 * sign))));
                 }
                 let mut q_start = [0.0; MAX_DOF];
                 q_start[3..n].copy_from_slice(&q_hand0[..n - 3]);
@@ -321,7 +325,10 @@ pub fn plan_grasp(
                     align = align.min(push_alignment(&free, &kin, tip, &Vector::z()));
                 }
                 let score = align - r.max_error * 20.0;
-                if std::env::var("ICMS_DEBUG").is_ok() { eprintln!("cand psi={k} spread={spread} h={h:.3} err={:.4} align={align:.3}", r.max_error); }
+                if std::env::var("ICMS_DEBUG").is_ok() {
+                    let per: Vec<String> = targets.iter().filter(|(t, _)| *t < real.len()).map(|&(tip, target)| { let mut v = centre + Vector::z() * h - target.coords; v.z = 0.0; let v = v.normalize(); format!("{}:n{:.2}/z{:.2}", tip, push_alignment(&free, &kin, tip, &v), push_alignment(&free, &kin, tip, &Vector::z())) }).collect();
+                    eprintln!("cand psi={k} s={sign}/{thumb_sign} err={:.4} align={align:.3} {:?} q={:?}", r.max_error, per, q[3..13].iter().map(|v| (v*100.0).round()/100.0).collect::<Vec<_>>());
+                }
                 if best.as_ref().is_none_or(|b| score > b.0 + 1e-9) {
                     best = Some((score, r.max_error, q, rot, a, h));
                 }
@@ -394,8 +401,17 @@ pub fn plan_grasp(
 /// group's DOFs (1 = fully, 0 = not at all). Directions whose singular value is below a quarter
 /// of the largest do not count: joint torques cannot express a push along a stretched finger.
 fn push_alignment(hand: &HandModel, kin: &Kinematics, tip: usize, dir: &Vector) -> Real {
+    let (basis, nb) = push_basis(hand, kin, tip);
+    basis.iter().take(nb).map(|b| b.dot(dir).powi(2)).sum::<Real>().sqrt()
+}
+
+/// The directions (world, orthonormal) in which fingertip `tip` can push: eigenvectors of
+/// `Σ c cᵀ` over its finger group's Jacobian columns whose eigenvalue is at least 1/16 of the
+/// largest (singular value ≥ 1/4 of the largest).
+fn push_basis(hand: &HandModel, kin: &Kinematics, tip: usize) -> ([Vector; 3], usize) {
+    let mut out = [Vector::zeros(); 3];
     let Some(group) = hand.finger_groups.iter().find(|g| g.tips.contains(&tip)) else {
-        return 0.0;
+        return (out, 0);
     };
     let j = &kin.tip_jacobians[tip];
     let mut m = nalgebra::Matrix3::<Real>::zeros();
@@ -405,14 +421,16 @@ fn push_alignment(hand: &HandModel, kin: &Kinematics, tip: usize, dir: &Vector) 
     }
     let eig = nalgebra::SymmetricEigen::new(m);
     let max = eig.eigenvalues.iter().fold(0.0_f64, |a, &b| a.max(b));
-    if max <= 0.0 {
-        return 0.0;
+    let mut nb = 0;
+    if max > 0.0 {
+        for k in 0..3 {
+            if eig.eigenvalues[k] > max / 16.0 {
+                out[nb] = eig.eigenvectors.column(k).into_owned();
+                nb += 1;
+            }
+        }
     }
-    (0..3)
-        .filter(|&k| eig.eigenvalues[k] > max / 16.0)
-        .map(|k| eig.eigenvectors.column(k).dot(dir).powi(2))
-        .sum::<Real>()
-        .sqrt()
+    (out, nb)
 }
 
 /// Minimum-jerk profile s(τ) = 10τ³ − 15τ⁴ + 6τ⁵ on [0, 1] (Flash & Hogan 1985), and its
@@ -837,9 +855,10 @@ impl Simulation {
         let out = self.dfs.output();
         let q = &out.motor_q;
         let qd = &out.motor_qd;
-        // A person stops a finger where it meets the object and from then on controls its
-        // force, not its position: while the object is held, the intention of a finger group
-        // that touches follows the finger (no stiffness), and the grip torques do the work.
+        // A person stops a finger where it meets the object and from then on mostly controls
+        // its force: while the object is held, a finger group that touches is held softly (a
+        // fifth of the stiffness) around its planned contact pose, and the grip torques do the
+        // work.
         let holding = matches!(
             self.phase(),
             Phase::Grasp | Phase::Lift | Phase::Hold | Phase::Transport | Phase::Place
@@ -847,15 +866,20 @@ impl Simulation {
         for g in &hand.finger_groups {
             let touching = g.tips.iter().any(|&k| self.plan.tips[k] && out.tips[k].touching);
             for &d in &g.dofs {
-                self.latched[d] = if holding && (touching || self.latched[d].is_some()) { Some(q[d]) } else { None };
+                self.latched[d] = if holding && (touching || self.latched[d].is_some()) {
+                    Some(self.plan.q_grasp[d])
+                } else {
+                    None
+                };
             }
         }
         let mut tau = [0.0; MAX_DOF];
         for d in 0..n {
+            let mut kp = self.params.stiffness * hand.torque_limit[d];
             if let Some(l) = self.latched[d] {
                 self.q_intent[d] = l;
+                kp *= 0.2;
             }
-            let kp = self.params.stiffness * hand.torque_limit[d];
             let kd = if hand.dof_names[d].starts_with("wrist") {
                 self.params.wrist_damping
             } else {
@@ -911,48 +935,74 @@ impl Simulation {
             // Grasping on the table: take over the weight as the grip ramps up.
             force *= self.grip;
         }
-        let rinv = st.pose.rotation.inverse();
-        let load_b = wrench(&(rinv * force), &(rinv * moment));
-        let gm = GraspMatrix::new(&frames[..nc], ContactModel::PointWithFriction);
-        let mut c = [Intensity::zeros(); MAX_CONTACTS];
-        gm.distribute(&load_b, &mut c);
-        // Squeeze: raise every normal force to the safety margin over the slip limit with
-        // internal forces only (projected onto the null space of W).
-        for _ in 0..3 {
-            let mut s = [Intensity::zeros(); MAX_CONTACTS];
-            let mut any = false;
-            for i in 0..nc {
-                let (nf, tf) = crate::contact::normal_and_tangential(&c[i]);
-                let want = (tf * p.grip_safety / self.operator_mu).max(p.min_normal);
-                if want > nf {
-                    s[i][2] = want - nf;
-                    any = true;
-                }
-            }
-            if !any {
-                break;
-            }
-            let net = gm.wrench(&s[..nc]);
-            let mut back = [Intensity::zeros(); MAX_CONTACTS];
-            gm.distribute(&net, &mut back);
-            for i in 0..nc {
-                // Scale the internal part up a little so the projection does not undo it all.
-                c[i] += (s[i] - back[i]) * 1.2;
+        // Distribute the load over what each fingertip can actually push: the well-conditioned
+        // range of its Jacobian over its finger's DOFs (a planar finger pushes only in its
+        // flexion plane, a stretched one not along its length). Forces outside that range
+        // would be lost in the DFS's (Jᵀ)⁺ anyway.
+        let kin = self.dfs.kinematics();
+        let hand = self.dfs.hand();
+        const COLS: usize = 3 * MAX_CONTACTS;
+        let mut w = nalgebra::SMatrix::<Real, 6, COLS>::zeros();
+        let mut dirs = [Vector::zeros(); COLS];
+        let mut owner = [usize::MAX; COLS];
+        let mut ncol = 0;
+        let mut normals = [Vector::zeros(); MAX_CONTACTS];
+        let centre = st.pose.translation.vector;
+        for i in 0..nc {
+            let frame = frames[i];
+            normals[i] = st.pose.rotation * frame.normal_b();
+            let p = st.pose * Point::from(frame.p_b);
+            let (basis, nb) = push_basis(hand, kin, tips[i]);
+            for u in basis.iter().take(nb) {
+                let m = (p.coords - centre).cross(u);
+                w.set_column(ncol, &wrench(u, &m));
+                dirs[ncol] = *u;
+                owner[ncol] = i;
+                ncol += 1;
             }
         }
-        let kin = self.dfs.kinematics();
-        let n = self.dfs.hand().dof();
+        let (wwt_pinv, _) = crate::math::sym_pinv6(&(w * w.transpose()), 1e-9);
+        let load = wrench(&force, &moment);
+        let mut x = w.transpose() * (wwt_pinv * load);
+        let force_at = |x: &nalgebra::SVector<Real, COLS>, i: usize| {
+            (0..ncol).filter(|&k| owner[k] == i).map(|k| dirs[k] * x[k]).sum::<Vector>()
+        };
+        // Squeeze: raise each normal force to the safety margin over the slip limit with
+        // (nearly) internal forces: the squeeze is projected away from W's strong directions by a
+        // regularised projection, `e − Wᵀ (W Wᵀ + εI)⁻¹ W e`. Two fingers whose push planes do
+        // not share the squeeze line exactly have no exact null space; the small net wrench left
+        // is corrected through the object term of the load on the next tick.
+        let wwt = w * w.transpose();
+        let eps = 1e-2 * wwt.trace().max(1e-12);
+        let reg = nalgebra::Cholesky::new(wwt + crate::math::Mat6::identity() * eps)
+            .map(|c| c.inverse())
+            .unwrap_or_else(crate::math::Mat6::zeros);
+        let mut e = nalgebra::SVector::<Real, COLS>::zeros();
         for i in 0..nc {
-            let f = st.pose.rotation
-                * (frames[i].rot_b * Vector::new(c[i][0], c[i][1], c[i][2]))
-                * self.grip;
-            if std::env::var("ICMS_DEBUG").is_ok() && self.step % 20 == 0 && (2200..2420).contains(&self.step) { let got = out.tips[tips[i]].tip_force_world; let nrm = st.pose.rotation * frames[i].normal_b(); eprintln!("t={} tip {} want {:?} got {:?} n {:?} align {:.3} axes {:?} q {:?}", self.step, tips[i], f.as_slice(), got.as_slice(), nrm.as_slice(), push_alignment(self.dfs.hand(), kin, tips[i], &nrm), (0..12).map(|j| kin.joint_axes[j].as_slice().iter().map(|v| (v*100.0).round()/100.0).collect::<Vec<_>>()).collect::<Vec<_>>(), &out.motor_q[..10]); }
+            let f = force_at(&x, i);
+            let n = normals[i];
+            let nf = f.dot(&n);
+            let tf = (f - n * nf).norm();
+            let want = (tf * p.grip_safety / self.operator_mu).max(p.min_normal);
+            if want > nf {
+                // Push along the part of the normal this fingertip can produce.
+                for k in (0..ncol).filter(|&k| owner[k] == i) {
+                    e[k] = dirs[k].dot(&n) * (want - nf);
+                }
+            }
+        }
+        x += e - w.transpose() * (reg * (w * e));
+        let n = hand.dof();
+        for i in 0..nc {
+            let f = force_at(&x, i) * self.grip;
+            if std::env::var("ICMS_DEBUG").is_ok() && self.step % 50 == 0 && (1800..2400).contains(&self.step) {
+                eprintln!("t={} tip {} want {:?} n {:?} got {:?} grip {:.2}", self.step, tips[i], f.as_slice(), normals[i].as_slice(), self.dfs.output().tips[tips[i]].tip_force_world.as_slice(), self.grip);
+            }
             let j = &kin.tip_jacobians[tips[i]];
             for (d, t) in tau.iter_mut().enumerate().take(n) {
                 *t += j[(0, d)] * f.x + j[(1, d)] * f.y + j[(2, d)] * f.z;
             }
         }
-        let _ = (force_of(&load_b), moment_of(&load_b));
     }
 
     fn measure(&mut self) {

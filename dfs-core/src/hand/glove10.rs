@@ -82,7 +82,9 @@ const FINGERS: [FingerSpec; 4] = [
 
 /// Thumb CMC joint centre in the palm frame (m): radial, palmar and a little distal of the
 /// wrist centre.
-const THUMB_CMC_IN_PALM: [f64; 3] = [0.022, 0.020, -0.010];
+const THUMB_CMC_IN_PALM: [f64; 3] = [0.022, 0.034, -0.012];
+/// Rest direction of the thumb: 30° from palm x toward the palmar side (rad about +y).
+const THUMB_REST_PITCH: f64 = 0.52;
 /// Thumb metacarpal, proximal and distal phalanx length ratios (Buchholz et al. 1992).
 const THUMB_RATIOS: [f64; 3] = [0.251, 0.196, 0.158];
 /// Thumb segment cylinder radii (m).
@@ -225,8 +227,8 @@ impl HandModel {
     ///
     /// DOFs (θ order): `wrist_roll` (about x, pronation +), `wrist_pitch` (about y, flexion
     /// toward the palm +), `wrist_yaw` (about z, radial deviation +), `index_mcp`,
-    /// `index_pip`, `index_dip`, `thumb_cmc` (opposition: swings the thumb from the palm
-    /// plane in front of the palm), `thumb_mcp` (flexion; the thumb IP joint follows it 1:1),
+    /// `index_pip`, `index_dip`, `thumb_cmc` (flexion toward the index, about the palm's y),
+    /// `thumb_mcp` (flexion; the thumb IP joint follows it 1:1),
     /// `middle_mcp`, `middle_pip` (the ring and little MCP and PIP joints copy them 1:1; every
     /// coupled DIP joint follows its PIP at ⅔). See the module documentation for frames and
     /// the sources of the dimensions.
@@ -320,48 +322,33 @@ fn add_index(b: &mut Builder, palm: usize) -> usize {
     b.finger(spec, palm, drives)
 }
 
-/// The thumb: CMC opposition and MCP flexion (IP follows MCP 1:1); returns its distal link.
+/// The thumb: CMC and MCP flexion (IP follows MCP 1:1) in one plane parallel to the index
+/// finger's flexion plane; returns its distal link.
 ///
-/// The CMC joint frame is the palm frame turned 45° about z, so the thumb's x (along its
-/// segments) points distally and radially. Opposition turns it about the palm's −x axis
-/// (expressed in the joint frame), sweeping the thumb from the palm plane to the palmar side
-/// (−z) where it meets the flexed fingers; flexion turns the segments about the joint
-/// frame's −z, toward the fingers.
+/// The glove measures two thumb angles (§2.2). We read them as the two flexions that close the
+/// thumb against the index finger like a pincer: at zero the thumb points distally and 30°
+/// toward the palmar side from a CMC joint radial of the index; positive angles turn it about
+/// the palm's y, like the fingers' flexion, curling its pad toward the flexed fingers. With both axes parallel to the
+/// fingers' flexion axes, the thumb pad can push along the pinch axis *and* along the palm's
+/// z: a thumb that opposes by rotating about the palm's long axis instead pushes in a plane
+/// that cannot hold a pinched object against gravity (NOTES: eq. 14 transmits only forces in
+/// the range of Jᵀ).
 fn add_thumb(b: &mut Builder, palm: usize) -> usize {
-    let cmc = b.dof("thumb_cmc", (0.0, 1.5), 1.0);
-    let mcp = b.dof("thumb_mcp", (-0.2, 1.0), 0.6);
+    let cmc = b.dof("thumb_cmc", (-0.8, 0.9), 1.0);
+    let mcp = b.dof("thumb_mcp", (-0.2, 1.3), 0.6);
     let lengths = THUMB_RATIOS.map(|r| r * HAND_LENGTH);
     let [r0, r1, r2] = THUMB_RADII;
     let metacarpal = b.link("thumb_metacarpal", cylinder(lengths[0], r0));
     let proximal = b.link("thumb_proximal", cylinder(lengths[1], r1));
     let distal = b.link("thumb_distal", cylinder(lengths[2], r2));
-    let turn = Rotation::from_axis_angle(&Vector::z_axis(), FRAC_PI_4);
-    let cmc_origin = Isometry::from_parts(at(THUMB_CMC_IN_PALM).translation, turn);
-    let opposition_axis = turn.inverse() * -Vector::x();
-    b.revolute(
-        "thumb_cmc",
-        palm,
-        metacarpal,
-        cmc_origin,
-        opposition_axis,
-        JointDrive::Dof(cmc),
-    );
-    let flex = -Vector::z();
+    let down = Rotation::from_axis_angle(&Vector::y_axis(), THUMB_REST_PITCH);
+    let cmc_origin = Isometry::from_parts(at(THUMB_CMC_IN_PALM).translation, down);
+    let flex = Vector::y();
+    b.revolute("thumb_cmc", palm, metacarpal, cmc_origin, flex, JointDrive::Dof(cmc));
     let mcp_origin = Isometry::translation(lengths[0], 0.0, 0.0);
-    b.revolute(
-        "thumb_mcp",
-        metacarpal,
-        proximal,
-        mcp_origin,
-        flex,
-        JointDrive::Dof(mcp),
-    );
+    b.revolute("thumb_mcp", metacarpal, proximal, mcp_origin, flex, JointDrive::Dof(mcp));
     let ip_origin = Isometry::translation(lengths[1], 0.0, 0.0);
-    let ip = JointDrive::Mimic {
-        dof: mcp,
-        multiplier: 1.0,
-        offset: 0.0,
-    };
+    let ip = JointDrive::Mimic { dof: mcp, multiplier: 1.0, offset: 0.0 };
     b.revolute("thumb_ip", proximal, distal, ip_origin, flex, ip);
     distal
 }
@@ -512,19 +499,19 @@ mod tests {
     }
 
     #[test]
-    fn opposition_brings_the_thumb_in_front_of_the_palm_toward_the_fingers() {
+    fn thumb_flexion_closes_the_thumb_pad_toward_the_flexed_index() {
         let hand = HandModel::glove10();
-        let rest = tips(&hand, &[0.0; 10])[0];
         let mut q = [0.0; 10];
-        q[6] = 1.2;
-        let opposed = tips(&hand, &q)[0];
-        assert!(opposed.z < -0.04 && opposed.y < rest.y - 0.04, "{opposed}");
-        q[7] = 0.8;
-        let flexed = tips(&hand, &q)[0];
-        assert!(
-            flexed.y < opposed.y,
-            "thumb flexion moves toward the little finger"
-        );
+        q[3] = 1.0;
+        q[4] = 1.0;
+        q[5] = 0.6;
+        let open = tips(&hand, &q);
+        q[6] = 0.4;
+        q[7] = 1.0;
+        let closed = tips(&hand, &q);
+        let gap = |p: &[Point]| (p[0] - p[1]).norm();
+        assert!(gap(&closed) < gap(&open) - 0.02, "{} vs {}", gap(&closed), gap(&open));
+        assert!(open[0].z < 0.0, "the thumb rests on the palmar side");
     }
 
     #[test]
