@@ -408,11 +408,15 @@ pub(crate) fn scan<R: Read>(
     let record_limit = usize::try_from(limits.max_record_bytes).unwrap_or(usize::MAX);
     let mut reader = LinearReader::new_with_options(
         LinearReaderOptions::default()
-            .with_skip_start_magic(true)
             .with_skip_end_magic(true)
             .with_prevalidate_chunk_crcs(true)
+            .with_validate_data_section_crc(true)
+            .with_validate_summary_section_crc(true)
             .with_record_length_limit(record_limit),
     );
+    // The data section CRC covers the magic too.
+    reader.insert(magic.len()).copy_from_slice(&magic);
+    reader.notify_read(magic.len());
     let mut offset = 8u64;
     let mut outcome = ScanOutcome {
         complete: false,
@@ -447,6 +451,13 @@ pub(crate) fn scan<R: Read>(
         }
         let opcode = head[0];
         let len = u64::from_le_bytes(head[1..].try_into().expect("8 bytes"));
+        if !known_or_private(opcode) {
+            outcome.error = Some(RecordingError::Corrupt {
+                offset,
+                detail: format!("reserved record opcode {opcode:#04x}"),
+            });
+            return Ok(outcome);
+        }
         let remaining = total_len.map(|t| t.saturating_sub(offset + OPCODE_LEN_SIZE));
         if let Some(remaining) = remaining {
             if len > remaining {
@@ -499,6 +510,13 @@ pub(crate) fn scan<R: Read>(
                 Ok(LinearReadEvent::ReadRequest(_)) => break,
                 Ok(LinearReadEvent::Record { data, opcode }) => {
                     match mcap::parse_record(opcode, data) {
+                        Ok(Record::Unknown { opcode, .. }) if !known_or_private(opcode) => {
+                            failure = Some(RecordingError::Corrupt {
+                                offset,
+                                detail: format!("reserved record opcode {opcode:#04x} in a chunk"),
+                            });
+                            break;
+                        }
                         Ok(r) => {
                             is_footer |= matches!(r, Record::Footer(_));
                             batch.records.push(r.into_owned());
@@ -541,6 +559,13 @@ pub(crate) fn scan<R: Read>(
     }
 }
 
+/// Opcodes defined by the MCAP spec (0x01..=0x0f) or private (>= 0x80). Anything else is
+/// reserved: in a file we read, it means a damaged opcode byte, and skipping the record (as the
+/// spec allows for unknown records) would silently drop a whole chunk.
+fn known_or_private(opcode: u8) -> bool {
+    (0x01..=0x0f).contains(&opcode) || opcode >= 0x80
+}
+
 fn map_mcap_error(e: McapError, offset: u64, limits: &ReadLimits) -> RecordingError {
     match e {
         McapError::BadChunkCrc { saved, calculated } => RecordingError::ChunkCrcMismatch {
@@ -559,6 +584,18 @@ fn map_mcap_error(e: McapError, offset: u64, limits: &ReadLimits) -> RecordingEr
             opcode: op::CHUNK,
             len,
             limit: limits.max_record_bytes,
+        },
+        McapError::BadDataCrc { saved, calculated } => RecordingError::Corrupt {
+            offset,
+            detail: format!(
+                "data section CRC mismatch (stored {saved:08x}, computed {calculated:08x})"
+            ),
+        },
+        McapError::BadSummaryCrc { saved, calculated } => RecordingError::Corrupt {
+            offset,
+            detail: format!(
+                "summary section CRC mismatch (stored {saved:08x}, computed {calculated:08x})"
+            ),
         },
         McapError::UnexpectedEof => RecordingError::Truncated {
             offset,

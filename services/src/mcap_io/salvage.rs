@@ -81,34 +81,33 @@ pub fn salvage(input: impl AsRef<Path>, output: impl AsRef<Path>) -> Result<Salv
             // Check the whole batch links up before writing any of it.
             let offset = batch.offset;
             let corrupt = |detail: String| RecordingError::Corrupt { offset, detail };
-            let mut new_schemas = HashMap::new();
-            let mut new_channels = HashMap::new();
+            let mut new_schemas = std::collections::HashSet::new();
+            let mut new_channels = std::collections::HashSet::new();
             for r in &batch.records {
                 match r {
                     Record::Schema { header, .. } => {
-                        new_schemas.insert(header.id, ());
+                        new_schemas.insert(header.id);
                     }
                     Record::Channel(c) => {
                         if c.schema_id != 0
                             && !schema_ids.contains_key(&c.schema_id)
-                            && !new_schemas.contains_key(&c.schema_id)
+                            && !new_schemas.contains(&c.schema_id)
                         {
                             return Err(corrupt(format!(
                                 "channel {:?} refers to unknown schema {}",
                                 c.topic, c.schema_id
                             )));
                         }
-                        new_channels.insert(c.id, ());
+                        new_channels.insert(c.id);
                     }
-                    Record::Message { header, .. } => {
+                    Record::Message { header, .. }
                         if !channel_ids.contains_key(&header.channel_id)
-                            && !new_channels.contains_key(&header.channel_id)
-                        {
-                            return Err(corrupt(format!(
-                                "message refers to unknown channel {}",
-                                header.channel_id
-                            )));
-                        }
+                            && !new_channels.contains(&header.channel_id) =>
+                    {
+                        return Err(corrupt(format!(
+                            "message refers to unknown channel {}",
+                            header.channel_id
+                        )));
                     }
                     _ => {}
                 }
