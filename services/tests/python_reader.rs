@@ -122,3 +122,46 @@ fn python_checker_fails_on_a_truncated_file() {
     };
     assert!(!output.status.success(), "a truncated file must fail");
 }
+
+#[test]
+fn a_file_written_by_the_python_writer_reads_in_rust() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("py.mcap");
+    let program = r#"
+import json, sys
+from mcap.writer import Writer, CompressionType
+with open(sys.argv[1], "wb") as f:
+    w = Writer(f, compression=CompressionType.ZSTD)
+    w.start()
+    sid = w.register_schema(name="foxglove.JointStates", encoding="jsonschema", data=b"{}")
+    cid = w.register_channel(topic="/joints", message_encoding="json", schema_id=sid)
+    for i in range(50):
+        msg = {"timestamp": {"sec": 0, "nsec": i}, "joints": [{"name": "j0", "position": i * 0.1}]}
+        w.add_message(channel_id=cid, log_time=i * 1000, publish_time=i * 1000,
+                      data=json.dumps(msg).encode())
+    w.add_metadata("session", {"k": "v"})
+    w.finish()
+"#;
+    let Ok(output) = Command::new("python3")
+        .arg("-c")
+        .arg(program)
+        .arg(&path)
+        .output()
+    else {
+        eprintln!("NOTE: python3 not found; skipping");
+        return;
+    };
+    assert!(
+        output.status.success(),
+        "{}",
+        String::from_utf8_lossy(&output.stderr)
+    );
+    let session = services::mcap_io::read_session_file(&path, &Default::default()).unwrap();
+    let joints = session
+        .decode_topic::<JointStates>("/joints", "foxglove.JointStates")
+        .unwrap();
+    assert_eq!(joints.len(), 50);
+    assert_eq!(joints[7].0, 7000);
+    assert_eq!(joints[7].1.joints[0].position, Some(0.7000000000000001));
+    assert_eq!(session.metadata("session").unwrap()["k"], "v");
+}

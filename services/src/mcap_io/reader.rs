@@ -5,7 +5,9 @@
 //! allocates more than [`ReadLimits::max_record_bytes`], nor more than the bytes actually left in
 //! the input) and hands each complete record to the `mcap` crate's sans-I/O linear reader with
 //! chunk CRC prevalidation and a record length limit: a chunk's records are released only after
-//! the whole chunk decompressed and matched its CRC.
+//! the whole chunk decompressed and matched its CRC. The data section and summary CRCs are
+//! checked too, and reserved opcodes are refused (the spec's "skip unknown records" would turn a
+//! damaged chunk opcode into a silently missing chunk).
 
 use std::collections::{BTreeMap, HashMap};
 use std::fs::File;
