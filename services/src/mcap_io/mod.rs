@@ -23,3 +23,16 @@ pub use reader::{
 pub use salvage::{salvage, SalvageReport};
 pub use schemas::JsonSchema;
 pub use writer::{SessionWriter, WriteSummary, WriterOptions, MESSAGE_ENCODING, SCHEMA_ENCODING};
+
+#[cfg(test)]
+mod tests {
+    /// The recorder runs the writer on its own thread and hands sessions between threads.
+    #[test]
+    fn writer_and_session_types_can_move_between_threads() {
+        fn assert_send<T: Send>() {}
+        fn assert_send_sync<T: Send + Sync>() {}
+        assert_send::<super::SessionWriter>();
+        assert_send_sync::<super::RecordedSession>();
+        assert_send_sync::<crate::RecordingError>();
+    }
+}
