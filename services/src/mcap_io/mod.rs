@@ -10,6 +10,7 @@
 //! The session-specific message types live elsewhere; this module is generic over
 //! `serde::Serialize` messages.
 
+mod bounded_zstd;
 mod finite;
 mod reader;
 mod salvage;

@@ -6,7 +6,7 @@
 //! the input) and hands each complete record to the `mcap` crate's sans-I/O linear reader with
 //! chunk CRC prevalidation and a record length limit: a chunk's records are released only after
 //! the whole chunk decompressed and matched its CRC. The data section and summary CRCs are
-//! checked too, and reserved opcodes are refused (the spec's "skip unknown records" would turn a
+//! checked too, the zstd window is capped at 16 MiB, and reserved opcodes are refused (the spec's "skip unknown records" would turn a
 //! damaged chunk opcode into a silently missing chunk).
 
 use std::collections::{BTreeMap, HashMap};
@@ -19,6 +19,7 @@ use mcap::sans_io::{LinearReadEvent, LinearReader, LinearReaderOptions};
 use mcap::McapError;
 use serde::de::DeserializeOwned;
 
+use super::bounded_zstd::BoundedZstd;
 use super::writer::{MESSAGE_ENCODING, SCHEMA_ENCODING};
 use crate::error::{RecordingError, Result};
 
@@ -416,6 +417,8 @@ pub(crate) fn scan<R: Read>(
             .with_validate_summary_section_crc(true)
             .with_record_length_limit(record_limit),
     );
+    // Replaces the built-in zstd decoder: same decoding, window capped at 16 MiB.
+    reader.add_decompressor(BoundedZstd::default())?;
     // The data section CRC covers the magic too.
     reader.insert(magic.len()).copy_from_slice(&magic);
     reader.notify_read(magic.len());
