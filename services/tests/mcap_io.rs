@@ -630,3 +630,14 @@ fn salvage_stops_at_a_corrupt_chunk_and_keeps_the_ones_before() {
     );
     assert!(report.stop_reason.unwrap().contains("corrupt"));
 }
+
+#[test]
+fn salvage_refuses_to_overwrite_its_input() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("s.mcap");
+    write_file(&path, WriterOptions::default(), 10);
+    let before = std::fs::read(&path).unwrap();
+    let err = salvage(&path, &path).unwrap_err();
+    assert!(matches!(err, RecordingError::Io { .. }), "{err:?}");
+    assert_eq!(std::fs::read(&path).unwrap(), before);
+}

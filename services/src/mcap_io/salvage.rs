@@ -50,6 +50,17 @@ pub fn salvage(input: impl AsRef<Path>, output: impl AsRef<Path>) -> Result<Salv
         .metadata()
         .map_err(|e| RecordingError::io(format!("reading {}", input.display()), e))?
         .len();
+    if let (Ok(a), Ok(b)) = (input.canonicalize(), output.canonicalize()) {
+        if a == b {
+            return Err(RecordingError::io(
+                format!("salvaging {}", input.display()),
+                std::io::Error::new(
+                    std::io::ErrorKind::InvalidInput,
+                    "the output file must not be the input file",
+                ),
+            ));
+        }
+    }
     let out_file = File::create(output)
         .map_err(|e| RecordingError::io(format!("creating {}", output.display()), e))?;
     let mut writer = WriterOptions::default()
