@@ -1,1 +1,11 @@
 //! ICMS services: recording, segmentation, store.
+//!
+//! - [`mcap_io`]: MCAP session files (write, read untrusted, salvage).
+//! - [`foxglove`]: serde types for the Foxglove schemas we record.
+//! - [`error`]: the crate's error type.
+
+pub mod error;
+pub mod foxglove;
+pub mod mcap_io;
+
+pub use error::RecordingError;

@@ -1,0 +1,39 @@
+//! MCAP session files: writing ([`SessionWriter`]), reading untrusted files
+//! ([`read_session_file`], [`read_session_bytes`]) and recovering files whose writer died
+//! ([`salvage`]).
+//!
+//! Layout of the files we write (see `DESIGN.md`, "MCAP sessions"): JSON message encoding, one
+//! channel per topic with a `jsonschema` schema, zstd chunks of about 1 MiB closed at least
+//! every second of log time, message and chunk indexes, a summary, metadata records for session
+//! parameters. No NaN or infinity is ever written.
+//!
+//! The session-specific message types live elsewhere; this module is generic over
+//! `serde::Serialize` messages.
+
+mod bounded_zstd;
+mod finite;
+mod reader;
+mod salvage;
+pub mod schemas;
+mod writer;
+
+pub use reader::{
+    read_session_bytes, read_session_file, MetadataRecord, ReadLimits, RecordedMessage,
+    RecordedSession, SchemaInfo, TopicRecording,
+};
+pub use salvage::{salvage, SalvageReport};
+pub use schemas::JsonSchema;
+pub use writer::{SessionWriter, WriteSummary, WriterOptions, MESSAGE_ENCODING, SCHEMA_ENCODING};
+
+#[cfg(test)]
+mod tests {
+    /// The recorder runs the writer on its own thread and hands sessions between threads.
+    #[test]
+    fn writer_and_session_types_can_move_between_threads() {
+        fn assert_send<T: Send>() {}
+        fn assert_send_sync<T: Send + Sync>() {}
+        assert_send::<super::SessionWriter>();
+        assert_send_sync::<super::RecordedSession>();
+        assert_send_sync::<crate::RecordingError>();
+    }
+}

@@ -1,0 +1,216 @@
+//! [`salvage`]: recover what a dead writer left behind.
+
+use std::collections::HashMap;
+use std::fs::File;
+use std::io::{BufReader, BufWriter, Write};
+use std::path::Path;
+
+use mcap::records::{MessageHeader, Record};
+
+use super::reader::{scan, Batch, ReadLimits};
+use super::writer::WriterOptions;
+use crate::error::{RecordingError, Result};
+
+/// What [`salvage`] recovered.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct SalvageReport {
+    /// Messages copied to the output.
+    pub messages: u64,
+    /// Complete chunks read from the input.
+    pub chunks: u64,
+    /// Largest log time (ns) among the recovered messages.
+    pub last_log_time_ns: Option<u64>,
+    /// Bytes of the input after the last complete record (a partial chunk, a torn record, or
+    /// anything after a corrupt record), not recovered.
+    pub dropped_bytes: u64,
+    /// Schemas recovered.
+    pub schemas: u64,
+    /// Channels recovered.
+    pub channels: u64,
+    /// Metadata records recovered.
+    pub metadata_records: u64,
+    /// The input was a complete MCAP file (footer and end magic present).
+    pub input_was_complete: bool,
+    /// Why reading stopped before the end, if it did (e.g. a truncated chunk or a CRC error).
+    pub stop_reason: Option<String>,
+}
+
+/// Reads `input` (an MCAP file whose writer may have died: no summary, no footer, perhaps a
+/// partial trailing chunk) record by record up to the first incomplete or corrupt record, and
+/// writes every complete message, schema, channel and metadata record to a new, finished MCAP
+/// file at `output` (zstd chunks, indexes, summary). A chunk is recovered whole or not at all:
+/// its CRC must match.
+///
+/// Fails only if `input` is not an MCAP file or a file cannot be opened/written.
+pub fn salvage(input: impl AsRef<Path>, output: impl AsRef<Path>) -> Result<SalvageReport> {
+    let (input, output) = (input.as_ref(), output.as_ref());
+    let file = File::open(input)
+        .map_err(|e| RecordingError::io(format!("opening {}", input.display()), e))?;
+    let total_len = file
+        .metadata()
+        .map_err(|e| RecordingError::io(format!("reading {}", input.display()), e))?
+        .len();
+    if let (Ok(a), Ok(b)) = (input.canonicalize(), output.canonicalize()) {
+        if a == b {
+            return Err(RecordingError::io(
+                format!("salvaging {}", input.display()),
+                std::io::Error::new(
+                    std::io::ErrorKind::InvalidInput,
+                    "the output file must not be the input file",
+                ),
+            ));
+        }
+    }
+    let out_file = File::create(output)
+        .map_err(|e| RecordingError::io(format!("creating {}", output.display()), e))?;
+    let mut writer = WriterOptions::default()
+        .to_mcap()
+        .create(BufWriter::new(out_file))?;
+
+    let mut report = SalvageReport {
+        messages: 0,
+        chunks: 0,
+        last_log_time_ns: None,
+        dropped_bytes: 0,
+        schemas: 0,
+        channels: 0,
+        metadata_records: 0,
+        input_was_complete: false,
+        stop_reason: None,
+    };
+    // Input id -> output id.
+    let mut schema_ids: HashMap<u16, u16> = HashMap::new();
+    let mut channel_ids: HashMap<u16, u16> = HashMap::new();
+    let mut write_error: Option<mcap::McapError> = None;
+
+    let limits = ReadLimits::default();
+    let outcome = scan(
+        BufReader::with_capacity(1 << 16, file),
+        Some(total_len),
+        &limits,
+        |batch: Batch| {
+            // Check the whole batch links up before writing any of it.
+            let offset = batch.offset;
+            let corrupt = |detail: String| RecordingError::Corrupt { offset, detail };
+            let mut new_schemas = std::collections::HashSet::new();
+            let mut new_channels = std::collections::HashSet::new();
+            for r in &batch.records {
+                match r {
+                    Record::Schema { header, .. } => {
+                        new_schemas.insert(header.id);
+                    }
+                    Record::Channel(c) => {
+                        if c.schema_id != 0
+                            && !schema_ids.contains_key(&c.schema_id)
+                            && !new_schemas.contains(&c.schema_id)
+                        {
+                            return Err(corrupt(format!(
+                                "channel {:?} refers to unknown schema {}",
+                                c.topic, c.schema_id
+                            )));
+                        }
+                        new_channels.insert(c.id);
+                    }
+                    Record::Message { header, .. }
+                        if !channel_ids.contains_key(&header.channel_id)
+                            && !new_channels.contains(&header.channel_id) =>
+                    {
+                        return Err(corrupt(format!(
+                            "message refers to unknown channel {}",
+                            header.channel_id
+                        )));
+                    }
+                    _ => {}
+                }
+            }
+            let result: mcap::McapResult<()> = (|| {
+                for r in batch.records {
+                    match r {
+                        Record::Schema { header, data } => {
+                            if let std::collections::hash_map::Entry::Vacant(e) =
+                                schema_ids.entry(header.id)
+                            {
+                                let id =
+                                    writer.add_schema(&header.name, &header.encoding, &data)?;
+                                e.insert(id);
+                                report.schemas += 1;
+                            }
+                        }
+                        Record::Channel(c) => {
+                            if let std::collections::hash_map::Entry::Vacant(e) =
+                                channel_ids.entry(c.id)
+                            {
+                                let schema_id = if c.schema_id == 0 {
+                                    0
+                                } else {
+                                    schema_ids[&c.schema_id]
+                                };
+                                let id = writer.add_channel(
+                                    schema_id,
+                                    &c.topic,
+                                    &c.message_encoding,
+                                    &c.metadata,
+                                )?;
+                                e.insert(id);
+                                report.channels += 1;
+                            }
+                        }
+                        Record::Message { header, data } => {
+                            let out_header = MessageHeader {
+                                channel_id: channel_ids[&header.channel_id],
+                                ..header
+                            };
+                            writer.write_to_known_channel(&out_header, &data)?;
+                            report.messages += 1;
+                            report.last_log_time_ns = Some(
+                                report
+                                    .last_log_time_ns
+                                    .map_or(header.log_time, |t| t.max(header.log_time)),
+                            );
+                        }
+                        Record::Metadata(m) => {
+                            writer.write_metadata(&m)?;
+                            report.metadata_records += 1;
+                        }
+                        _ => {}
+                    }
+                }
+                Ok(())
+            })();
+            if let Err(e) = result {
+                // An output error: stop, and report it as such below.
+                let msg = e.to_string();
+                write_error = Some(e);
+                return Err(RecordingError::Corrupt {
+                    offset,
+                    detail: format!("writing the salvaged file failed: {msg}"),
+                });
+            }
+            if batch.is_chunk {
+                report.chunks += 1;
+            }
+            Ok(())
+        },
+    )?;
+    if let Some(e) = write_error {
+        return Err(e.into());
+    }
+    report.input_was_complete = outcome.complete;
+    report.dropped_bytes = total_len.saturating_sub(outcome.committed_offset);
+    if outcome.complete {
+        // The end magic follows the footer.
+        report.dropped_bytes = report.dropped_bytes.saturating_sub(8);
+    }
+    report.stop_reason = outcome.error.map(|e| e.to_string());
+
+    writer.finish()?;
+    let file = writer.into_inner().into_inner().map_err(|e| {
+        RecordingError::io(format!("flushing {}", output.display()), e.into_error())
+    })?;
+    file.sync_data()
+        .map_err(|e| RecordingError::io(format!("syncing {}", output.display()), e))?;
+    let mut file = file;
+    file.flush()
+        .map_err(|e| RecordingError::io(format!("flushing {}", output.display()), e))?;
+    Ok(report)
+}

@@ -1,0 +1,211 @@
+//! Test helpers shared by the services integration tests: JSON Schema validation against the
+//! embedded Foxglove schemas, example messages, and a top-level MCAP record lister.
+
+#![allow(dead_code)]
+
+use serde_json::Value;
+use services::foxglove::*;
+use services::mcap_io::JsonSchema;
+
+/// Validates `instance` against `schema` (the embedded JSON Schema text); returns every error.
+pub fn validate_against(schema: &JsonSchema, instance: &Value) -> Result<(), Vec<String>> {
+    let schema_json: Value = serde_json::from_str(&schema.data).expect("schema is JSON");
+    let validator = jsonschema::validator_for(&schema_json).expect("schema compiles");
+    let errors: Vec<String> = validator
+        .iter_errors(instance)
+        .map(|e| format!("{} at {}", e, e.instance_path()))
+        .collect();
+    if errors.is_empty() {
+        Ok(())
+    } else {
+        Err(errors)
+    }
+}
+
+/// Serialises `msg` and validates it against `schema`, panicking with the errors.
+pub fn assert_valid<T: serde::Serialize>(schema: &JsonSchema, msg: &T) {
+    let value = serde_json::to_value(msg).expect("serialises");
+    if let Err(errors) = validate_against(schema, &value) {
+        panic!(
+            "{} does not validate against {}:\n{}\n{}",
+            std::any::type_name::<T>(),
+            schema.name,
+            errors.join("\n"),
+            serde_json::to_string_pretty(&value).unwrap()
+        );
+    }
+}
+
+fn pose(x: f64, y: f64, z: f64) -> Pose {
+    Pose {
+        position: Vector3::new(x, y, z),
+        orientation: Quaternion::IDENTITY,
+    }
+}
+
+/// Two transforms: world → object, object → a fingertip.
+pub fn example_frame_transforms(t_ns: u64) -> FrameTransforms {
+    let timestamp = Timestamp::from_nanos(t_ns);
+    FrameTransforms {
+        transforms: vec![
+            FrameTransform {
+                timestamp,
+                parent_frame_id: "world".into(),
+                child_frame_id: "object".into(),
+                translation: Vector3::new(0.0, 0.0, 0.1 + t_ns as f64 * 1e-12),
+                rotation: Quaternion::IDENTITY,
+            },
+            FrameTransform {
+                timestamp,
+                parent_frame_id: "object".into(),
+                child_frame_id: "thumb_tip".into(),
+                translation: Vector3::new(0.054, 0.054, -0.059),
+                rotation: Quaternion {
+                    x: 0.0,
+                    y: 0.0,
+                    z: std::f64::consts::FRAC_1_SQRT_2,
+                    w: std::f64::consts::FRAC_1_SQRT_2,
+                },
+            },
+        ],
+    }
+}
+
+/// A scene with the object sphere, a table cube, a cylinder, a contact force arrow, and a
+/// deletion of all earlier entities.
+pub fn example_scene_update(t_ns: u64) -> SceneUpdate {
+    let timestamp = Timestamp::from_nanos(t_ns);
+    let mut object = SceneEntity::new(timestamp, "object", "object");
+    object.spheres.push(SpherePrimitive {
+        pose: pose(0.0, 0.0, 0.0),
+        size: Vector3::new(0.2, 0.2, 0.2),
+        color: Color::rgba(0.2, 0.4, 0.8, 0.8),
+    });
+    object.cylinders.push(CylinderPrimitive {
+        pose: pose(0.3, 0.0, 0.0),
+        size: Vector3::new(0.05, 0.05, 0.1),
+        bottom_scale: 1.0,
+        top_scale: 1.0,
+        color: Color::rgba(0.5, 0.5, 0.5, 1.0),
+    });
+    object.metadata.push(KeyValuePair {
+        key: "shape".into(),
+        value: "sphere".into(),
+    });
+    let mut table = SceneEntity::new(timestamp, "world", "table");
+    table.cubes.push(CubePrimitive {
+        pose: pose(0.0, 0.0, -0.15),
+        size: Vector3::new(1.0, 1.0, 0.1),
+        color: Color::rgba(0.6, 0.5, 0.4, 1.0),
+    });
+    let mut forces = SceneEntity::new(timestamp, "object", "contact_forces");
+    forces.lifetime = Duration {
+        sec: 0,
+        nsec: 20_000_000,
+    };
+    forces.arrows.push(ArrowPrimitive {
+        pose: pose(0.054, 0.054, -0.059),
+        shaft_length: 0.05,
+        shaft_diameter: 0.004,
+        head_length: 0.01,
+        head_diameter: 0.008,
+        color: Color::rgba(1.0, 0.1, 0.1, 1.0),
+    });
+    forces.lines.push(LinePrimitive {
+        kind: LineType::LineList,
+        pose: pose(0.0, 0.0, 0.0),
+        thickness: 0.002,
+        scale_invariant: false,
+        points: vec![
+            Point3 {
+                x: 0.0,
+                y: 0.0,
+                z: 0.0,
+            },
+            Point3 {
+                x: 0.0,
+                y: 0.0,
+                z: 0.1,
+            },
+        ],
+        color: Color::rgba(0.0, 1.0, 0.0, 1.0),
+        colors: vec![],
+        indices: vec![],
+    });
+    forces.texts.push(TextPrimitive {
+        pose: pose(0.0, 0.0, 0.15),
+        billboard: true,
+        font_size: 12.0,
+        scale_invariant: true,
+        color: Color::rgba(1.0, 1.0, 1.0, 1.0),
+        text: "4 contacts".into(),
+    });
+    SceneUpdate {
+        deletions: vec![SceneEntityDeletion {
+            timestamp,
+            kind: SceneEntityDeletionType::All,
+            id: String::new(),
+        }],
+        entities: vec![object, table, forces],
+    }
+}
+
+/// Ten glove joints; one with only a position, the others with position, velocity and effort.
+pub fn example_joint_states(t_ns: u64) -> JointStates {
+    let mut joints: Vec<JointState> = (0..9)
+        .map(|i| JointState {
+            name: format!("j{i}"),
+            position: Some(0.1 * i as f64),
+            velocity: Some(0.0),
+            acceleration: None,
+            effort: Some(-0.05 * i as f64),
+        })
+        .collect();
+    joints.push(JointState {
+        name: "thumb_rot".into(),
+        position: Some(0.3),
+        ..JointState::default()
+    });
+    JointStates {
+        timestamp: Timestamp::from_nanos(t_ns),
+        joints,
+    }
+}
+
+/// A top-level MCAP record: opcode, byte offset of the opcode, body length.
+#[derive(Debug, Clone, Copy)]
+pub struct TopRecord {
+    pub opcode: u8,
+    pub offset: usize,
+    pub len: usize,
+}
+
+impl TopRecord {
+    /// Offset of the first body byte.
+    pub fn body(&self) -> usize {
+        self.offset + 9
+    }
+}
+
+/// Lists the top-level records of a well-formed MCAP file (stops at the footer).
+pub fn top_level_records(bytes: &[u8]) -> Vec<TopRecord> {
+    let mut out = Vec::new();
+    let mut at = 8;
+    while at + 9 <= bytes.len() {
+        let opcode = bytes[at];
+        let len = u64::from_le_bytes(bytes[at + 1..at + 9].try_into().unwrap()) as usize;
+        out.push(TopRecord {
+            opcode,
+            offset: at,
+            len,
+        });
+        if opcode == 0x02 {
+            break;
+        }
+        at += 9 + len;
+    }
+    out
+}
+
+/// MCAP opcode of a chunk record.
+pub const OP_CHUNK: u8 = 0x06;

@@ -1,0 +1,74 @@
+#!/usr/bin/env python3
+"""Reads an MCAP file with the reference Python reader (PyPI `mcap`, plus `zstandard` for
+zstd chunks) and prints what it found as JSON:
+
+    {"topics": {topic: count}, "schemas": {topic: schema name},
+     "metadata": {name: {key: value}}, "messages": total, "indexed": true}
+
+Every message is read twice: through the summary and indexes (the seeking reader, as Foxglove
+does) and front to back (the streaming reader); the counts must agree. Every message on a `json`
+channel must parse as strict JSON (no NaN/Infinity). Exits non-zero, with the reason on stderr,
+if anything fails.
+
+Usage: read_mcap.py FILE.mcap
+"""
+
+import json
+import sys
+from collections import Counter
+
+
+def _reject_constant(name):
+    raise ValueError(f"non-finite number {name} in a JSON message")
+
+
+def main(argv):
+    if len(argv) != 2:
+        print(__doc__, file=sys.stderr)
+        return 2
+    try:
+        from mcap.reader import NonSeekingReader, make_reader
+    except ImportError as e:
+        print(f"read_mcap.py: the mcap package is missing ({e}); pip install mcap zstandard",
+              file=sys.stderr)
+        return 3
+    path = argv[1]
+    try:
+        with open(path, "rb") as f:
+            reader = make_reader(f)
+            summary = reader.get_summary()
+            if summary is None:
+                raise ValueError("no summary section (file not finished?)")
+            topics = Counter()
+            schemas = {}
+            for schema, channel, message in reader.iter_messages():
+                topics[channel.topic] += 1
+                if schema is not None:
+                    schemas[channel.topic] = schema.name
+                if channel.message_encoding == "json":
+                    json.loads(message.data, parse_constant=_reject_constant)
+            metadata = {m.name: dict(m.metadata) for m in reader.iter_metadata()}
+            if summary.statistics is not None:
+                if summary.statistics.message_count != sum(topics.values()):
+                    raise ValueError("statistics message count disagrees with messages read")
+        with open(path, "rb") as f:
+            streamed = Counter()
+            for _schema, channel, _message in NonSeekingReader(f).iter_messages():
+                streamed[channel.topic] += 1
+            if streamed != topics:
+                raise ValueError(f"indexed and streamed reads disagree: {topics} vs {streamed}")
+    except Exception as e:  # report any reader failure as a non-zero exit
+        print(f"read_mcap.py: {path}: {type(e).__name__}: {e}", file=sys.stderr)
+        return 1
+    print(json.dumps({
+        "topics": dict(sorted(topics.items())),
+        "schemas": dict(sorted(schemas.items())),
+        "metadata": metadata,
+        "messages": sum(topics.values()),
+        "indexed": True,
+    }, sort_keys=True))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main(sys.argv))
