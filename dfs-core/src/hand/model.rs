@@ -550,8 +550,9 @@ impl HandModel {
         Ok(())
     }
 
-    /// The DOFs that move `link`: those of every joint on the path from the root to it
-    /// (mimic joints count for their source DOF). Needs a valid tree.
+    /// The DOFs that move `link`, as a bit set (bit d set when DOF d moves it): those of every
+    /// joint on the path from the root to it (a mimic joint counts for its source DOF). Needs
+    /// a valid tree.
     pub fn dofs_moving_link(&self, link: usize) -> u32 {
         let mut set: DofSet = 0;
         let mut current = link;
@@ -676,7 +677,8 @@ impl HandModel {
     }
 
     /// Pose of fingertip `k` in the world frame: the orientation of its link, the position of
-    /// the sphere centre (the fingertip frame T_k of the paper). Needs forward kinematics.
+    /// the sphere centre (the fingertip frame T_k of the paper). Needs forward kinematics and
+    /// `k < fingertips.len()`.
     pub fn tip_pose(&self, kin: &Kinematics, k: usize) -> Isometry {
         let rotation = kin.link_poses[self.fingertips[k].link].rotation;
         Isometry::from_parts(kin.tip_centres[k].coords.into(), rotation)
