@@ -13,6 +13,9 @@ pub const MAX_TIPS: usize = 6;
 
 /// Joint-space square matrix of fixed capacity; only the top-left `dof × dof` block is used.
 pub type DofMatrix = SMatrix<f64, MAX_DOF, MAX_DOF>;
+/// A joint-space vector of fixed capacity (angles, velocities, torques); only the first `dof`
+/// entries are used.
+pub type DofVector = nalgebra::SVector<f64, MAX_DOF>;
 /// A fingertip Jacobian of fixed capacity: rows are (linear, angular) velocity of the tip point
 /// in the world frame, columns the DOFs; only the first `dof` columns are used.
 pub type TipJacobian = SMatrix<f64, 6, MAX_DOF>;
@@ -235,6 +238,52 @@ impl Joint {
             JointKind::Fixed => Isometry::identity(),
         }
     }
+}
+
+/// Solves `A x = b` for the symmetric positive-definite top-left `n × n` block of `a` by an
+/// in-place Cholesky factorisation (entries of `x` from `n` on are zero). Allocation-free;
+/// `None` when the block is not positive definite (or not finite) or `n > MAX_DOF`. Use it
+/// for M(θ)⁻¹ τ.
+pub fn solve_dof_spd(a: &DofMatrix, b: &DofVector, n: usize) -> Option<DofVector> {
+    if n > MAX_DOF {
+        return None;
+    }
+    // Lower-triangular factor L with A = L Lᵀ, in the lower triangle of `l`.
+    let mut l = *a;
+    for j in 0..n {
+        let mut d = l[(j, j)];
+        for k in 0..j {
+            d -= l[(j, k)] * l[(j, k)];
+        }
+        if !(d > 0.0 && d.is_finite()) {
+            return None;
+        }
+        let d = d.sqrt();
+        l[(j, j)] = d;
+        for i in j + 1..n {
+            let mut v = l[(i, j)];
+            for k in 0..j {
+                v -= l[(i, k)] * l[(j, k)];
+            }
+            l[(i, j)] = v / d;
+        }
+    }
+    let mut x = DofVector::zeros();
+    for i in 0..n {
+        let mut v = b[i];
+        for k in 0..i {
+            v -= l[(i, k)] * x[k];
+        }
+        x[i] = v / l[(i, i)];
+    }
+    for i in (0..n).rev() {
+        let mut v = x[i];
+        for k in i + 1..n {
+            v -= l[(k, i)] * x[k];
+        }
+        x[i] = v / l[(i, i)];
+    }
+    x.iter().all(|v| v.is_finite()).then_some(x)
 }
 
 /// Bit set of DOFs (`MAX_DOF` ≤ 32).
@@ -695,6 +744,19 @@ impl HandModel {
         jac: &mut TipJacobian,
     ) {
         jac.fill(0.0);
+        self.accumulate_point_jacobian(kin, link, point, jac);
+    }
+
+    /// Adds the Jacobian of `point` on `link` to `jac` (which the caller zeroed) and returns
+    /// the set of DOFs whose columns it touched.
+    fn accumulate_point_jacobian(
+        &self,
+        kin: &Kinematics,
+        link: usize,
+        point: &Point,
+        jac: &mut TipJacobian,
+    ) -> DofSet {
+        let mut touched: DofSet = 0;
         let mut current = link;
         // At most one joint per link on the path to the root.
         for _ in 0..MAX_LINKS {
@@ -716,9 +778,11 @@ impl HandModel {
                 let mut col = jac.column_mut(d);
                 col.fixed_rows_mut::<3>(0).axpy(gain, &linear, 1.0);
                 col.fixed_rows_mut::<3>(3).axpy(gain, &angular, 1.0);
+                touched |= 1 << d;
             }
             current = joint.parent;
         }
+        touched
     }
 
     /// Fingertip Jacobians (world frame, at each tip centre) from the joint frames that
@@ -748,10 +812,11 @@ impl HandModel {
             }
             let pose = &kin.link_poses[l];
             let com = pose * Point::from(inertial.com);
-            self.point_jacobian(kin, l, &com, &mut jac);
+            jac.fill(0.0);
+            let touched = self.accumulate_point_jacobian(kin, l, &com, &mut jac);
             let r = pose.rotation.to_rotation_matrix();
             let inertia_world = r.matrix() * inertial.inertia * r.matrix().transpose();
-            add_link_inertia(&jac, inertial.mass, &inertia_world, n, m);
+            add_link_inertia(&jac, touched, inertial.mass, &inertia_world, m);
         }
         for (i, a) in self.armature.iter().enumerate().take(n) {
             m[(i, i)] += a;
@@ -759,25 +824,31 @@ impl HandModel {
     }
 }
 
-/// Adds `J_vᵀ m J_v + J_ωᵀ I J_ω` of one link to the top-left `n × n` block of `m`.
+/// Adds `J_vᵀ m J_v + J_ωᵀ I J_ω` of one link to `m`, over the DOFs in `touched` (the only
+/// non-zero columns of `jac`).
 fn add_link_inertia(
     jac: &TipJacobian,
+    touched: DofSet,
     mass: f64,
     inertia_world: &Mat3,
-    n: usize,
     m: &mut DofMatrix,
 ) {
-    for i in 0..n {
+    let mut dofs = [0usize; MAX_DOF];
+    let mut count = 0;
+    for (d, slot) in (0..MAX_DOF)
+        .filter(|&d| touched & (1 << d) != 0)
+        .zip(dofs.iter_mut())
+    {
+        *slot = d;
+        count += 1;
+    }
+    let dofs = &dofs[..count];
+    for (a, &i) in dofs.iter().enumerate() {
         let vi = jac.fixed_view::<3, 1>(0, i);
-        let wi = jac.fixed_view::<3, 1>(3, i);
-        if vi.iter().chain(wi.iter()).all(|&x| x == 0.0) {
-            continue;
-        }
-        let iwi = inertia_world * wi;
-        for j in i..n {
-            let vj = jac.fixed_view::<3, 1>(0, j);
-            let wj = jac.fixed_view::<3, 1>(3, j);
-            let e = mass * vi.dot(&vj) + iwi.dot(&wj);
+        let iwi = inertia_world * jac.fixed_view::<3, 1>(3, i);
+        for &j in &dofs[a..] {
+            let e = mass * vi.dot(&jac.fixed_view::<3, 1>(0, j))
+                + iwi.dot(&jac.fixed_view::<3, 1>(3, j));
             m[(i, j)] += e;
             if j != i {
                 m[(j, i)] += e;
@@ -1309,6 +1380,34 @@ pub(crate) mod tests {
             .all(|j| j.iter().all(|x| x.is_finite())));
         assert!(m.iter().all(|x| x.is_finite()));
         assert!(m.cholesky().is_some());
+    }
+
+    proptest! {
+        #[test]
+        fn the_dof_cholesky_solve_inverts_the_mass_matrix(
+            u in prop::collection::vec(0.0..1.0f64, 10),
+            b in prop::collection::vec(-1.0..1.0f64, 10),
+        ) {
+            let glove = HandModel::glove10();
+            let kin = fk(&glove, &angles_from_unit(&glove, &u));
+            let mut m = DofMatrix::zeros();
+            glove.mass_matrix(&kin, &mut m);
+            let mut rhs = DofVector::zeros();
+            rhs.as_mut_slice()[..10].copy_from_slice(&b);
+            let x = solve_dof_spd(&m, &rhs, 10).unwrap();
+            let reference = m.cholesky().unwrap().solve(&rhs);
+            prop_assert!((x - reference).amax() <= 1e-9 * reference.amax().max(1.0));
+            prop_assert!(x.as_slice()[10..].iter().all(|&v| v == 0.0));
+        }
+    }
+
+    #[test]
+    fn the_dof_cholesky_solve_rejects_an_indefinite_block() {
+        let mut a = DofMatrix::identity();
+        a[(1, 1)] = -1.0;
+        assert!(solve_dof_spd(&a, &DofVector::zeros(), 3).is_none());
+        assert!(solve_dof_spd(&a, &DofVector::zeros(), 1).is_some());
+        assert!(solve_dof_spd(&a, &DofVector::zeros(), MAX_DOF + 1).is_none());
     }
 
     #[test]
