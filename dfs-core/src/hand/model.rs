@@ -1,8 +1,8 @@
 //! Hand model types, forward kinematics, Jacobians and joint-space inertia.
 
 use crate::error::{DfsError, Result};
-use crate::math::{Isometry, Mat3, Point, Rotation, UnitVector, Vector};
-use nalgebra::SMatrix;
+use crate::math::{skew, Isometry, Mat3, Mat6, Point, Rotation, UnitVector, Vector};
+use nalgebra::{SMatrix, Vector6};
 
 /// Largest number of generalised coordinates (DOFs) a hand may have.
 pub const MAX_DOF: usize = 24;
@@ -799,62 +799,84 @@ impl HandModel {
     /// the link inertials and the armature, for the kinematics in `kin`. Allocation-free.
     ///
     /// M = Σ_links (J_vᵀ m J_v + J_ωᵀ R I Rᵀ J_ω) + diag(armature), with J_v the Jacobian of
-    /// the link's centre of mass and J_ω its angular Jacobian (world frame).
+    /// the link's centre of mass and J_ω its angular Jacobian (world frame), evaluated by the
+    /// composite rigid-body algorithm; a mimic joint enters with its multiplier.
     pub fn mass_matrix(&self, kin: &Kinematics, m: &mut DofMatrix) {
         let n = self.dof().min(MAX_DOF);
         m.fill_with_identity();
         m.view_mut((0, 0), (n, n)).fill(0.0);
-        let mut jac = TipJacobian::zeros();
-        for (l, link) in self.links.iter().enumerate() {
-            let inertial = &link.inertial;
-            if l == self.root || (inertial.mass == 0.0 && inertial.inertia == Mat3::zeros()) {
-                continue;
+        // Composite rigid-body algorithm in the world frame: the spatial inertia of every
+        // subtree at the world origin, then H_ij = S_jᵀ I_subtree(i) S_i for every joint j on
+        // the path to joint i, mapped onto the DOFs by the drive gains.
+        let mut composite = [Mat6::zeros(); MAX_LINKS];
+        for (l, link) in self.links.iter().enumerate().take(MAX_LINKS) {
+            if l != self.root {
+                composite[l] = spatial_inertia(&kin.link_poses[l], &link.inertial);
             }
-            let pose = &kin.link_poses[l];
-            let com = pose * Point::from(inertial.com);
-            jac.fill(0.0);
-            let touched = self.accumulate_point_jacobian(kin, l, &com, &mut jac);
-            let r = pose.rotation.to_rotation_matrix();
-            let inertia_world = r.matrix() * inertial.inertia * r.matrix().transpose();
-            add_link_inertia(&jac, touched, inertial.mass, &inertia_world, m);
+        }
+        for joint in self.joints.iter().take(MAX_LINKS).rev() {
+            let child = composite[joint.child];
+            composite[joint.parent] += child;
+        }
+        for (i, joint) in self.joints.iter().enumerate().take(MAX_LINKS) {
+            let Some((di, gi)) = joint.drive.dof_and_gain() else {
+                continue;
+            };
+            let force = composite[joint.child] * self.motion_subspace(kin, i);
+            let mut j = i;
+            for _ in 0..MAX_LINKS {
+                let ancestor = &self.joints[j];
+                if let Some((dj, gj)) = ancestor.drive.dof_and_gain() {
+                    let h = gi * gj * self.motion_subspace(kin, j).dot(&force);
+                    m[(di, dj)] += h;
+                    if j != i {
+                        m[(dj, di)] += h;
+                    }
+                }
+                if ancestor.parent == self.root || kin.parent_joint[ancestor.parent] == NO_JOINT {
+                    break;
+                }
+                j = kin.parent_joint[ancestor.parent];
+            }
         }
         for (i, a) in self.armature.iter().enumerate().take(n) {
             m[(i, i)] += a;
         }
     }
+
+    /// The spatial motion of joint `j` per unit joint value: (velocity of the body point at the
+    /// world origin, angular velocity), world frame.
+    fn motion_subspace(&self, kin: &Kinematics, j: usize) -> Vector6<f64> {
+        let a = kin.joint_axes[j];
+        let (linear, angular) = match self.joints[j].kind {
+            JointKind::Revolute | JointKind::Continuous => {
+                (kin.joint_frames[j].translation.vector.cross(&a), a)
+            }
+            JointKind::Prismatic => (a, Vector::zeros()),
+            JointKind::Fixed => (Vector::zeros(), Vector::zeros()),
+        };
+        Vector6::new(
+            linear.x, linear.y, linear.z, angular.x, angular.y, angular.z,
+        )
+    }
 }
 
-/// Adds `J_vᵀ m J_v + J_ωᵀ I J_ω` of one link to `m`, over the DOFs in `touched` (the only
-/// non-zero columns of `jac`).
-fn add_link_inertia(
-    jac: &TipJacobian,
-    touched: DofSet,
-    mass: f64,
-    inertia_world: &Mat3,
-    m: &mut DofMatrix,
-) {
-    let mut dofs = [0usize; MAX_DOF];
-    let mut count = 0;
-    for (d, slot) in (0..MAX_DOF)
-        .filter(|&d| touched & (1 << d) != 0)
-        .zip(dofs.iter_mut())
-    {
-        *slot = d;
-        count += 1;
-    }
-    let dofs = &dofs[..count];
-    for (a, &i) in dofs.iter().enumerate() {
-        let vi = jac.fixed_view::<3, 1>(0, i);
-        let iwi = inertia_world * jac.fixed_view::<3, 1>(3, i);
-        for &j in &dofs[a..] {
-            let e = mass * vi.dot(&jac.fixed_view::<3, 1>(0, j))
-                + iwi.dot(&jac.fixed_view::<3, 1>(3, j));
-            m[(i, j)] += e;
-            if j != i {
-                m[(j, i)] += e;
-            }
-        }
-    }
+/// Spatial inertia of a link at the world origin, for twists (velocity of the body point at the
+/// origin, angular velocity): `[[m 1, −m [c]×], [m [c]×, I − m [c]×[c]×]]` with `c` the centre
+/// of mass and `I` the inertia about it, both in the world frame.
+fn spatial_inertia(pose: &Isometry, inertial: &Inertial) -> Mat6 {
+    let c = (pose * Point::from(inertial.com)).coords;
+    let r = pose.rotation.to_rotation_matrix();
+    let inertia = r.matrix() * inertial.inertia * r.matrix().transpose();
+    let mc = skew(&c) * inertial.mass;
+    let mut s = Mat6::zeros();
+    s.fixed_view_mut::<3, 3>(0, 0)
+        .copy_from(&(Mat3::identity() * inertial.mass));
+    s.fixed_view_mut::<3, 3>(0, 3).copy_from(&-mc);
+    s.fixed_view_mut::<3, 3>(3, 0).copy_from(&mc);
+    s.fixed_view_mut::<3, 3>(3, 3)
+        .copy_from(&(inertia - mc * skew(&c)));
+    s
 }
 
 #[cfg(test)]
