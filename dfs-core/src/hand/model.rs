@@ -744,19 +744,6 @@ impl HandModel {
         jac: &mut TipJacobian,
     ) {
         jac.fill(0.0);
-        self.accumulate_point_jacobian(kin, link, point, jac);
-    }
-
-    /// Adds the Jacobian of `point` on `link` to `jac` (which the caller zeroed) and returns
-    /// the set of DOFs whose columns it touched.
-    fn accumulate_point_jacobian(
-        &self,
-        kin: &Kinematics,
-        link: usize,
-        point: &Point,
-        jac: &mut TipJacobian,
-    ) -> DofSet {
-        let mut touched: DofSet = 0;
         let mut current = link;
         // At most one joint per link on the path to the root.
         for _ in 0..MAX_LINKS {
@@ -778,11 +765,9 @@ impl HandModel {
                 let mut col = jac.column_mut(d);
                 col.fixed_rows_mut::<3>(0).axpy(gain, &linear, 1.0);
                 col.fixed_rows_mut::<3>(3).axpy(gain, &angular, 1.0);
-                touched |= 1 << d;
             }
             current = joint.parent;
         }
-        touched
     }
 
     /// Fingertip Jacobians (world frame, at each tip centre) from the joint frames that
