@@ -4,12 +4,23 @@ use serde_json::Value;
 use std::process::Command;
 
 fn icms(args: &[&str]) -> (i32, String, String) {
-    let out = Command::new(env!("CARGO_BIN_EXE_icms")).args(args).output().expect("run icms");
-    (out.status.code().unwrap_or(-1), String::from_utf8_lossy(&out.stdout).into(), String::from_utf8_lossy(&out.stderr).into())
+    let out = Command::new(env!("CARGO_BIN_EXE_icms"))
+        .args(args)
+        .output()
+        .expect("run icms");
+    (
+        out.status.code().unwrap_or(-1),
+        String::from_utf8_lossy(&out.stdout).into(),
+        String::from_utf8_lossy(&out.stderr).into(),
+    )
 }
 
 fn vec6(v: &Value) -> Vec<f64> {
-    v.as_array().unwrap().iter().map(|x| x.as_f64().unwrap()).collect()
+    v.as_array()
+        .unwrap()
+        .iter()
+        .map(|x| x.as_f64().unwrap())
+        .collect()
 }
 
 fn close(a: &[f64], b: &[f64], tol: f64) -> bool {
@@ -21,14 +32,26 @@ fn paper_sphere_reproduces_the_notes_table_and_balances_gravity() {
     let (code, out, err) = icms(&["dfs-static", "--grasp", "paper-sphere", "--json"]);
     assert_eq!(code, 0, "{err}");
     let v: Value = serde_json::from_str(&out).unwrap();
-    assert!(close(&vec6(&v["object_force"]), &[0.0, 0.0, 9.81, 0.0, 0.0, 0.0], 1e-9));
-    let table = [(1.197, 1.550), (0.954, 1.229), (1.197, 1.550), (2.660, 3.427)];
+    assert!(close(
+        &vec6(&v["object_force"]),
+        &[0.0, 0.0, 9.81, 0.0, 0.0, 0.0],
+        1e-9
+    ));
+    let table = [
+        (1.197, 1.550),
+        (0.954, 1.229),
+        (1.197, 1.550),
+        (2.660, 3.427),
+    ];
     let contacts = v["contacts"].as_array().unwrap();
     assert_eq!(contacts.len(), 4);
     for (c, (n, t)) in contacts.iter().zip(table) {
         let cn = c["normal_force"].as_f64().unwrap();
         let ct = c["tangential_force"].as_f64().unwrap();
-        assert!((cn - n).abs() / n < 0.01 && (ct - t).abs() / t < 0.01, "{cn} {ct}");
+        assert!(
+            (cn - n).abs() / n < 0.01 && (ct - t).abs() / t < 0.01,
+            "{cn} {ct}"
+        );
         assert_eq!(c["in_cone"], Value::Bool(true));
         for key in ["position", "normal", "intensity"] {
             assert!(c[key].is_array(), "{key}");
@@ -41,13 +64,33 @@ fn paper_sphere_reproduces_the_notes_table_and_balances_gravity() {
 #[test]
 fn pushing_one_and_a_half_times_harder_gives_the_papers_f_ext_and_the_static_feedback() {
     let (_, s, _) = icms(&["dfs-static", "--grasp", "paper-sphere", "--json"]);
-    let (code, out, _) = icms(&["dfs-static", "--grasp", "paper-sphere", "--scale", "1.5", "--json"]);
+    let (code, out, _) = icms(&[
+        "dfs-static",
+        "--grasp",
+        "paper-sphere",
+        "--scale",
+        "1.5",
+        "--json",
+    ]);
     assert_eq!(code, 0);
     let s: Value = serde_json::from_str(&s).unwrap();
     let v: Value = serde_json::from_str(&out).unwrap();
-    assert!(close(&vec6(&v["f_ext"]), &[0.0, 0.0, 4.905, 0.0, 0.0, 0.0], 1e-9));
-    assert!(close(&vec6(&v["object_force"]), &[0.0, 0.0, 14.715, 0.0, 0.0, 0.0], 1e-9));
-    for (a, b) in v["contacts"].as_array().unwrap().iter().zip(s["contacts"].as_array().unwrap()) {
+    assert!(close(
+        &vec6(&v["f_ext"]),
+        &[0.0, 0.0, 4.905, 0.0, 0.0, 0.0],
+        1e-9
+    ));
+    assert!(close(
+        &vec6(&v["object_force"]),
+        &[0.0, 0.0, 14.715, 0.0, 0.0, 0.0],
+        1e-9
+    ));
+    for (a, b) in v["contacts"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .zip(s["contacts"].as_array().unwrap())
+    {
         assert!(close(&vec6(&a["feedback"]), &vec6(&b["feedback"]), 1e-9));
     }
 }
@@ -69,7 +112,13 @@ fn a_grasp_file_with_low_friction_reports_an_infeasible_optimisation_or_slip() {
     assert_eq!(code, 0, "{err}");
     let v: Value = serde_json::from_str(&out).unwrap();
     assert!(v["optimised"].is_null());
-    assert!(v["optimised_reason"].as_str().unwrap().contains("infeasible") || !v["optimised_reason"].as_str().unwrap().is_empty());
+    assert!(
+        v["optimised_reason"]
+            .as_str()
+            .unwrap()
+            .contains("infeasible")
+            || !v["optimised_reason"].as_str().unwrap().is_empty()
+    );
     assert!(vec6(&v["object_acceleration"])[2] < 0.0, "the box falls");
 }
 
@@ -78,14 +127,38 @@ fn malformed_grasp_files_fail_with_a_message_naming_the_field() {
     let dir = std::env::temp_dir().join(format!("icms-bad-grasp-{}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
     let cases = [
-        (r#"{"object": {"shape": "sphere", "radius": 0.1, "mass": -1}, "mu": 1, "contacts": [{"position": [0,0,-0.1]}]}"#, "object.mass"),
-        (r#"{"object": {"shape": "sphere", "radius": 0.1, "mass": 1}, "mu": -1, "contacts": [{"position": [0,0,-0.1]}]}"#, "mu"),
-        (r#"{"object": {"shape": "sphere", "radius": 0.1, "mass": 1}, "contacts": [{"position": [0,0,-0.1]}]}"#, "mu"),
-        (r#"{"object": {"shape": "cone", "radius": 0.1, "mass": 1}, "mu": 1, "contacts": [{"position": [0,0,-0.1]}]}"#, "object.shape"),
-        (r#"{"object": {"shape": "sphere", "mass": 1}, "mu": 1, "contacts": [{"position": [0,0,-0.1]}]}"#, "object.radius"),
-        (r#"{"object": {"shape": "sphere", "radius": 0.1, "mass": 1}, "mu": 1, "contacts": []}"#, "contacts"),
-        (r#"{"object": {"shape": "sphere", "radius": 0.1, "mass": 1}, "mu": 1, "contacts": [{"position": [0,0]}]}"#, "position"),
-        (r#"{"object": {"shape": "sphere", "radius": 0.1, "mass": 1}, "mu": 1, "contact_model": "sticky", "contacts": [{"position": [0,0,-0.1]}]}"#, "sticky"),
+        (
+            r#"{"object": {"shape": "sphere", "radius": 0.1, "mass": -1}, "mu": 1, "contacts": [{"position": [0,0,-0.1]}]}"#,
+            "object.mass",
+        ),
+        (
+            r#"{"object": {"shape": "sphere", "radius": 0.1, "mass": 1}, "mu": -1, "contacts": [{"position": [0,0,-0.1]}]}"#,
+            "mu",
+        ),
+        (
+            r#"{"object": {"shape": "sphere", "radius": 0.1, "mass": 1}, "contacts": [{"position": [0,0,-0.1]}]}"#,
+            "mu",
+        ),
+        (
+            r#"{"object": {"shape": "cone", "radius": 0.1, "mass": 1}, "mu": 1, "contacts": [{"position": [0,0,-0.1]}]}"#,
+            "object.shape",
+        ),
+        (
+            r#"{"object": {"shape": "sphere", "mass": 1}, "mu": 1, "contacts": [{"position": [0,0,-0.1]}]}"#,
+            "object.radius",
+        ),
+        (
+            r#"{"object": {"shape": "sphere", "radius": 0.1, "mass": 1}, "mu": 1, "contacts": []}"#,
+            "contacts",
+        ),
+        (
+            r#"{"object": {"shape": "sphere", "radius": 0.1, "mass": 1}, "mu": 1, "contacts": [{"position": [0,0]}]}"#,
+            "position",
+        ),
+        (
+            r#"{"object": {"shape": "sphere", "radius": 0.1, "mass": 1}, "mu": 1, "contact_model": "sticky", "contacts": [{"position": [0,0,-0.1]}]}"#,
+            "sticky",
+        ),
         (r#"{"object": "#, "EOF"),
     ];
     for (i, (text, field)) in cases.iter().enumerate() {
@@ -105,7 +178,13 @@ fn malformed_grasp_files_fail_with_a_message_naming_the_field() {
 fn one_contact_and_collinear_contacts_are_reported_as_degenerate() {
     let dir = std::env::temp_dir().join(format!("icms-degenerate-{}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
-    for (name, contacts) in [("one", r#"[{"position": [0, 0, -0.1]}]"#), ("line", r#"[{"position": [0.1, 0, 0]}, {"position": [-0.1, 0, 0]}]"#)] {
+    for (name, contacts) in [
+        ("one", r#"[{"position": [0, 0, -0.1]}]"#),
+        (
+            "line",
+            r#"[{"position": [0.1, 0, 0]}, {"position": [-0.1, 0, 0]}]"#,
+        ),
+    ] {
         let file = dir.join(format!("{name}.json"));
         std::fs::write(&file, format!(r#"{{"object": {{"shape": "sphere", "radius": 0.1, "mass": 1}}, "mu": 0.8, "contacts": {contacts}}}"#)).unwrap();
         let (code, out, err) = icms(&["dfs-static", "--grasp", file.to_str().unwrap(), "--json"]);

@@ -465,13 +465,16 @@ impl Dfs {
             let c = frame.intensities_of_force_b(&(rot_inv * self.out.tips[k].tip_force_world));
             // Contact spring: the fingertip's deflection from where it stuck on the object.
             let z_world = rot * frame.normal_b();
-            let tip_point = self.out.tip_centres[k].coords + z_world * self.hand.fingertips[k].radius;
+            let tip_point =
+                self.out.tip_centres[k].coords + z_world * self.hand.fingertips[k].radius;
             let tip_b = (inv * Point::from(tip_point)).coords;
             let anchor_b = self.anchors_b[k].unwrap_or(tip_b);
             let mut err = tip_point - (self.state.pose * Point::from(anchor_b)).coords;
             err -= z_world * err.dot(&z_world);
             let v_obj = self.state.point_velocity(&tip_b);
-            let v_rel = self.prev_tip_points[k].map(|prev| (tip_point - prev) / dt - v_obj).unwrap_or_else(Vector::zeros);
+            let v_rel = self.prev_tip_points[k]
+                .map(|prev| (tip_point - prev) / dt - v_obj)
+                .unwrap_or_else(Vector::zeros);
             self.prev_tip_points[k] = Some(tip_point);
             let j = &self.kin.tip_jacobians[k];
             let mut v_joint = Vector::zeros();
@@ -482,10 +485,19 @@ impl Dfs {
             // Passive friction: a sticking fingertip drags the object along with it (tangential
             // spring-damper to the anchor), within the Coulomb cone together with the operator's
             // own tangential force.
-            let passive_w = err * self.params.surface_stiffness + (v_rel - z_world * v_rel.dot(&z_world)) * self.params.surface_damping;
+            let passive_w = err * self.params.surface_stiffness
+                + (v_rel - z_world * v_rel.dot(&z_world)) * self.params.surface_damping;
             let passive_c = frame.intensities_of_force_b(&(rot_inv * passive_w));
-            let with_passive = if c[2] > 0.0 { c + Intensity::new(passive_c[0], passive_c[1], 0.0, 0.0) } else { c };
-            let split = apply_friction(self.params.contact_model, &self.params.friction, &with_passive);
+            let with_passive = if c[2] > 0.0 {
+                c + Intensity::new(passive_c[0], passive_c[1], 0.0, 0.0)
+            } else {
+                c
+            };
+            let split = apply_friction(
+                self.params.contact_model,
+                &self.params.friction,
+                &with_passive,
+            );
             let t = &mut self.out.tips[k];
             t.intensity = c;
             t.transmitted = split.transmitted;
@@ -494,10 +506,13 @@ impl Dfs {
             let stick = t.in_contact && !t.slip;
             self.stick[k] = stick;
             self.anchors_b[k] = if stick { Some(anchor_b) } else { None };
-            self.spring_err[k] = if stick { err } else { Vector::zeros() } + z_world * t.penetration;
+            self.spring_err[k] =
+                if stick { err } else { Vector::zeros() } + z_world * t.penetration;
             if t.in_contact {
-                let tangential = split.transmitted - c.component_mul(&self.params.contact_model.mask());
-                self.passive_world[k] = rot * (frame.rot_b * Vector::new(tangential[0], tangential[1], 0.0));
+                let tangential =
+                    split.transmitted - c.component_mul(&self.params.contact_model.mask());
+                self.passive_world[k] =
+                    rot * (frame.rot_b * Vector::new(tangential[0], tangential[1], 0.0));
             }
             if t.in_contact && n < MAX_CONTACTS {
                 self.frames[n] = frame;
@@ -603,7 +618,11 @@ impl Dfs {
                     continue;
                 }
                 rhs[d1] += dt * col1.dot(&f);
-                let pc1 = if stick { col1 } else { z_world * z_world.dot(&col1) } * c;
+                let pc1 = if stick {
+                    col1
+                } else {
+                    z_world * z_world.dot(&col1)
+                } * c;
                 for d2 in 0..ndof {
                     a[(d1, d2)] += pc1.dot(&cols[d2]);
                 }
@@ -710,10 +729,28 @@ mod tests {
 
     fn all_finite(out: &TickOutput) -> bool {
         let s = &out.object;
-        out.f_ext_b.iter().chain(out.object_force_b.iter()).all(|v| v.is_finite())
-            && out.motor_q.iter().chain(out.motor_qd.iter()).chain(out.feedback_torque.iter()).all(|v| v.is_finite())
-            && s.pose.translation.vector.iter().chain(s.linear_velocity.iter()).all(|v| v.is_finite())
-            && out.tips.iter().all(|t| t.intensity.iter().chain(t.feedback.iter()).all(|v| v.is_finite()))
+        out.f_ext_b
+            .iter()
+            .chain(out.object_force_b.iter())
+            .all(|v| v.is_finite())
+            && out
+                .motor_q
+                .iter()
+                .chain(out.motor_qd.iter())
+                .chain(out.feedback_torque.iter())
+                .all(|v| v.is_finite())
+            && s.pose
+                .translation
+                .vector
+                .iter()
+                .chain(s.linear_velocity.iter())
+                .all(|v| v.is_finite())
+            && out.tips.iter().all(|t| {
+                t.intensity
+                    .iter()
+                    .chain(t.feedback.iter())
+                    .all(|v| v.is_finite())
+            })
     }
 
     #[test]
@@ -721,21 +758,62 @@ mod tests {
         let (mut dfs, q, tau, base) = glove10_holding_paper_sphere().unwrap();
         let before = *dfs.object_state();
         let cases: Vec<(Vec<f64>, Vec<f64>)> = vec![
-            ({ let mut v = q.clone(); v[3] = f64::NAN; v }, tau.clone()),
-            ({ let mut v = q.clone(); v[0] = f64::INFINITY; v }, tau.clone()),
-            ({ let mut v = q.clone(); v[5] = 10.0; v }, tau.clone()),
-            (q.clone(), { let mut v = tau.clone(); v[2] = f64::NAN; v }),
-            (q.clone(), { let mut v = tau.clone(); v[4] = 1e6; v }),
+            (
+                {
+                    let mut v = q.clone();
+                    v[3] = f64::NAN;
+                    v
+                },
+                tau.clone(),
+            ),
+            (
+                {
+                    let mut v = q.clone();
+                    v[0] = f64::INFINITY;
+                    v
+                },
+                tau.clone(),
+            ),
+            (
+                {
+                    let mut v = q.clone();
+                    v[5] = 10.0;
+                    v
+                },
+                tau.clone(),
+            ),
+            (q.clone(), {
+                let mut v = tau.clone();
+                v[2] = f64::NAN;
+                v
+            }),
+            (q.clone(), {
+                let mut v = tau.clone();
+                v[4] = 1e6;
+                v
+            }),
             (q[..5].to_vec(), tau.clone()),
             (q.clone(), tau[..3].to_vec()),
         ];
         for (qq, tt) in cases {
-            assert!(dfs.step(&GloveSample { q: &qq, tau: &tt, base }).is_err());
+            assert!(dfs
+                .step(&GloveSample {
+                    q: &qq,
+                    tau: &tt,
+                    base
+                })
+                .is_err());
             assert_eq!(*dfs.object_state(), before);
         }
         let mut bad_base = base;
         bad_base.translation.vector.x = f64::NAN;
-        assert!(dfs.step(&GloveSample { q: &q, tau: &tau, base: bad_base }).is_err());
+        assert!(dfs
+            .step(&GloveSample {
+                q: &q,
+                tau: &tau,
+                base: bad_base
+            })
+            .is_err());
         assert!(all_finite(dfs.output()));
     }
 
@@ -745,7 +823,13 @@ mod tests {
         let far = Isometry::translation(0.0, 0.0, -3.0);
         let z0 = dfs.object_state().pose.translation.z;
         for _ in 0..100 {
-            let out = dfs.step(&GloveSample { q: &q, tau: &tau, base: far }).unwrap();
+            let out = dfs
+                .step(&GloveSample {
+                    q: &q,
+                    tau: &tau,
+                    base: far,
+                })
+                .unwrap();
             assert_eq!(out.n_contacts, 0);
         }
         let s = dfs.object_state();
@@ -761,7 +845,13 @@ mod tests {
             for i in 0..200 {
                 let mut t = tau.clone();
                 t[3] += 0.01 * (i as f64 * 0.1).sin();
-                let out = dfs.step(&GloveSample { q: &q, tau: &t, base }).unwrap();
+                let out = dfs
+                    .step(&GloveSample {
+                        q: &q,
+                        tau: &t,
+                        base,
+                    })
+                    .unwrap();
                 trace.extend(out.f_ext_b.iter().map(|v| v.to_bits()));
                 trace.extend(out.motor_q.iter().map(|v| v.to_bits()));
             }

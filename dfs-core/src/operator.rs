@@ -258,11 +258,19 @@ pub fn plan_grasp(
             // Targeting that virtual tip beside the real one turns the finger's flexion plane
             // to contain the grasp axis: a planar finger pushes only within that plane.
             let mut free = with_free_base(hand, rot);
-            let real: Vec<usize> = std::iter::once(thumb).chain(fingers.iter().copied()).collect();
-            let mut tips_free: Vec<crate::hand::Fingertip> = real.iter().map(|&k| free.fingertips[k].clone()).collect();
+            let real: Vec<usize> = std::iter::once(thumb)
+                .chain(fingers.iter().copied())
+                .collect();
+            let mut tips_free: Vec<crate::hand::Fingertip> =
+                real.iter().map(|&k| free.fingertips[k].clone()).collect();
             for &f in &real {
                 let tip = &hand.fingertips[f];
-                let axis = hand.joints.iter().find(|j| j.child == tip.link).map(|j| j.axis.into_inner()).unwrap_or(Vector::y());
+                let axis = hand
+                    .joints
+                    .iter()
+                    .find(|j| j.child == tip.link)
+                    .map(|j| j.axis.into_inner())
+                    .unwrap_or(Vector::y());
                 tips_free.push(crate::hand::Fingertip {
                     name: format!("{}__axis", tip.name),
                     link: tip.link + 3,
@@ -275,10 +283,17 @@ pub fn plan_grasp(
             let n = free.dof();
             let a = Rotation::from_euler_angles(0.0, 0.0, obj_yaw + axis_angle) * Vector::x();
             let side = Vector::z().cross(&a);
-            let params = IkParams { max_iterations: 150, tolerance: 2e-4, ..IkParams::default() }
-                .with_frozen(frozen.iter().map(|d| d + 3));
+            let params = IkParams {
+                max_iterations: 150,
+                tolerance: 2e-4,
+                ..IkParams::default()
+            }
+            .with_frozen(frozen.iter().map(|d| d + 3));
             let signs = [(1.0, 1.0), (1.0, -1.0), (-1.0, 1.0), (-1.0, -1.0)];
-            for (&h, (sign, thumb_sign)) in heights.iter().flat_map(|h| signs.into_iter().map(move |s| (h, s))) {
+            for (&h, (sign, thumb_sign)) in heights
+                .iter()
+                .flat_map(|h| signs.into_iter().map(move |s| (h, s)))
+            {
                 let across = |y: Real| match object.shape {
                     Shape::Sphere { radius } => (radius * radius - h * h - y * y).max(0.0).sqrt(),
                     Shape::Cylinder { radius, .. } => (radius * radius - y * y).max(0.0).sqrt(),
@@ -288,7 +303,10 @@ pub fn plan_grasp(
                 let up = Vector::z() * h;
                 let thumb_p = centre - a * (across(0.0) + hand.fingertips[thumb].radius) + up;
                 targets.push((0, Point::from(thumb_p)));
-                targets.push((real.len(), Point::from(thumb_p + side * (0.02 * thumb_sign))));
+                targets.push((
+                    real.len(),
+                    Point::from(thumb_p + side * (0.02 * thumb_sign)),
+                ));
                 for (i, &f) in fingers.iter().enumerate() {
                     // Fingertips side by side, about 2 cm apart, as a hand's fingers lie.
                     let y = (spread * (0.5 - i as Real)).clamp(-0.7 * half, 0.7 * half);
@@ -304,7 +322,15 @@ pub fn plan_grasp(
                 q_start[1] = centre.y + back.y;
                 q_start[2] = centre.z + 0.05 + h;
                 let mut q = [0.0; MAX_DOF];
-                let r = solve_tips(&free, &Isometry::identity(), &targets, &q_start[..n], &params, &mut kin, &mut q[..n]);
+                let r = solve_tips(
+                    &free,
+                    &Isometry::identity(),
+                    &targets,
+                    &q_start[..n],
+                    &params,
+                    &mut kin,
+                    &mut q[..n],
+                );
                 best_err = best_err.min(r.max_error);
                 if r.max_error > 0.008 {
                     continue;
@@ -326,8 +352,30 @@ pub fn plan_grasp(
                 }
                 let score = align - r.max_error * 20.0;
                 if std::env::var("ICMS_DEBUG").is_ok() {
-                    let per: Vec<String> = targets.iter().filter(|(t, _)| *t < real.len()).map(|&(tip, target)| { let mut v = centre + Vector::z() * h - target.coords; v.z = 0.0; let v = v.normalize(); format!("{}:n{:.2}/z{:.2}", tip, push_alignment(&free, &kin, tip, &v), push_alignment(&free, &kin, tip, &Vector::z())) }).collect();
-                    eprintln!("cand psi={k} s={sign}/{thumb_sign} err={:.4} align={align:.3} {:?} q={:?}", r.max_error, per, q[3..13].iter().map(|v| (v*100.0).round()/100.0).collect::<Vec<_>>());
+                    let per: Vec<String> = targets
+                        .iter()
+                        .filter(|(t, _)| *t < real.len())
+                        .map(|&(tip, target)| {
+                            let mut v = centre + Vector::z() * h - target.coords;
+                            v.z = 0.0;
+                            let v = v.normalize();
+                            format!(
+                                "{}:n{:.2}/z{:.2}",
+                                tip,
+                                push_alignment(&free, &kin, tip, &v),
+                                push_alignment(&free, &kin, tip, &Vector::z())
+                            )
+                        })
+                        .collect();
+                    eprintln!(
+                        "cand psi={k} s={sign}/{thumb_sign} err={:.4} align={align:.3} {:?} q={:?}",
+                        r.max_error,
+                        per,
+                        q[3..13]
+                            .iter()
+                            .map(|v| (v * 100.0).round() / 100.0)
+                            .collect::<Vec<_>>()
+                    );
                 }
                 if best.as_ref().is_none_or(|b| score > b.0 + 1e-9) {
                     best = Some((score, r.max_error, q, rot, a, h));
@@ -402,7 +450,12 @@ pub fn plan_grasp(
 /// of the largest do not count: joint torques cannot express a push along a stretched finger.
 fn push_alignment(hand: &HandModel, kin: &Kinematics, tip: usize, dir: &Vector) -> Real {
     let (basis, nb) = push_basis(hand, kin, tip);
-    basis.iter().take(nb).map(|b| b.dot(dir).powi(2)).sum::<Real>().sqrt()
+    basis
+        .iter()
+        .take(nb)
+        .map(|b| b.dot(dir).powi(2))
+        .sum::<Real>()
+        .sqrt()
 }
 
 /// The directions (world, orthonormal) in which fingertip `tip` can push: eigenvectors of
@@ -864,7 +917,10 @@ impl Simulation {
             Phase::Grasp | Phase::Lift | Phase::Hold | Phase::Transport | Phase::Place
         );
         for g in &hand.finger_groups {
-            let touching = g.tips.iter().any(|&k| self.plan.tips[k] && out.tips[k].touching);
+            let touching = g
+                .tips
+                .iter()
+                .any(|&k| self.plan.tips[k] && out.tips[k].touching);
             for &d in &g.dofs {
                 self.latched[d] = if holding && (touching || self.latched[d].is_some()) {
                     Some(self.plan.q_grasp[d])
@@ -965,7 +1021,10 @@ impl Simulation {
         let load = wrench(&force, &moment);
         let mut x = w.transpose() * (wwt_pinv * load);
         let force_at = |x: &nalgebra::SVector<Real, COLS>, i: usize| {
-            (0..ncol).filter(|&k| owner[k] == i).map(|k| dirs[k] * x[k]).sum::<Vector>()
+            (0..ncol)
+                .filter(|&k| owner[k] == i)
+                .map(|k| dirs[k] * x[k])
+                .sum::<Vector>()
         };
         // Squeeze: raise each normal force to the safety margin over the slip limit with
         // (nearly) internal forces: the squeeze is projected away from W's strong directions by a
@@ -995,8 +1054,19 @@ impl Simulation {
         let n = hand.dof();
         for i in 0..nc {
             let f = force_at(&x, i) * self.grip;
-            if std::env::var("ICMS_DEBUG").is_ok() && self.step % 50 == 0 && (1800..2400).contains(&self.step) {
-                eprintln!("t={} tip {} want {:?} n {:?} got {:?} grip {:.2}", self.step, tips[i], f.as_slice(), normals[i].as_slice(), self.dfs.output().tips[tips[i]].tip_force_world.as_slice(), self.grip);
+            if std::env::var("ICMS_DEBUG").is_ok()
+                && self.step % 50 == 0
+                && (1800..2400).contains(&self.step)
+            {
+                eprintln!(
+                    "t={} tip {} want {:?} n {:?} got {:?} grip {:.2}",
+                    self.step,
+                    tips[i],
+                    f.as_slice(),
+                    normals[i].as_slice(),
+                    self.dfs.output().tips[tips[i]].tip_force_world.as_slice(),
+                    self.grip
+                );
             }
             let j = &kin.tip_jacobians[tips[i]];
             for (d, t) in tau.iter_mut().enumerate().take(n) {

@@ -5,6 +5,8 @@
 //! Generalised coordinates (the "DOFs", θ) are the independent joints; a mimic joint's value
 //! is `multiplier · θ[dof] + offset`. All per-tick work writes into a preallocated
 //! [`Kinematics`] of fixed capacity: no heap allocation after construction.
+//!
+//! [`ik`] places chosen fingertips at world targets (damped least squares, joint limits).
 
 mod glove10;
 pub mod ik;

@@ -1,8 +1,8 @@
 //! Hand model types, forward kinematics, Jacobians and joint-space inertia.
 
 use crate::error::{DfsError, Result};
-use crate::math::{Isometry, Mat3, Point, Rotation, UnitVector, Vector};
-use nalgebra::SMatrix;
+use crate::math::{skew, Isometry, Mat3, Mat6, Point, Rotation, UnitVector, Vector};
+use nalgebra::{SMatrix, Vector6};
 
 /// Largest number of generalised coordinates (DOFs) a hand may have.
 pub const MAX_DOF: usize = 24;
@@ -13,6 +13,9 @@ pub const MAX_TIPS: usize = 6;
 
 /// Joint-space square matrix of fixed capacity; only the top-left `dof × dof` block is used.
 pub type DofMatrix = SMatrix<f64, MAX_DOF, MAX_DOF>;
+/// A joint-space vector of fixed capacity (angles, velocities, torques); only the first `dof`
+/// entries are used.
+pub type DofVector = nalgebra::SVector<f64, MAX_DOF>;
 /// A fingertip Jacobian of fixed capacity: rows are (linear, angular) velocity of the tip point
 /// in the world frame, columns the DOFs; only the first `dof` columns are used.
 pub type TipJacobian = SMatrix<f64, 6, MAX_DOF>;
@@ -235,6 +238,52 @@ impl Joint {
             JointKind::Fixed => Isometry::identity(),
         }
     }
+}
+
+/// Solves `A x = b` for the symmetric positive-definite top-left `n × n` block of `a` by an
+/// in-place Cholesky factorisation (entries of `x` from `n` on are zero). Allocation-free;
+/// `None` when the block is not positive definite (or not finite) or `n > MAX_DOF`. Use it
+/// for M(θ)⁻¹ τ.
+pub fn solve_dof_spd(a: &DofMatrix, b: &DofVector, n: usize) -> Option<DofVector> {
+    if n > MAX_DOF {
+        return None;
+    }
+    // Lower-triangular factor L with A = L Lᵀ, in the lower triangle of `l`.
+    let mut l = *a;
+    for j in 0..n {
+        let mut d = l[(j, j)];
+        for k in 0..j {
+            d -= l[(j, k)] * l[(j, k)];
+        }
+        if !(d > 0.0 && d.is_finite()) {
+            return None;
+        }
+        let d = d.sqrt();
+        l[(j, j)] = d;
+        for i in j + 1..n {
+            let mut v = l[(i, j)];
+            for k in 0..j {
+                v -= l[(i, k)] * l[(j, k)];
+            }
+            l[(i, j)] = v / d;
+        }
+    }
+    let mut x = DofVector::zeros();
+    for i in 0..n {
+        let mut v = b[i];
+        for k in 0..i {
+            v -= l[(i, k)] * x[k];
+        }
+        x[i] = v / l[(i, i)];
+    }
+    for i in (0..n).rev() {
+        let mut v = x[i];
+        for k in i + 1..n {
+            v -= l[(k, i)] * x[k];
+        }
+        x[i] = v / l[(i, i)];
+    }
+    x.iter().all(|v| v.is_finite()).then_some(x)
 }
 
 /// Bit set of DOFs (`MAX_DOF` ≤ 32).
@@ -550,8 +599,9 @@ impl HandModel {
         Ok(())
     }
 
-    /// The DOFs that move `link`: those of every joint on the path from the root to it
-    /// (mimic joints count for their source DOF). Needs a valid tree.
+    /// The DOFs that move `link`, as a bit set (bit d set when DOF d moves it): those of every
+    /// joint on the path from the root to it (a mimic joint counts for its source DOF). Needs
+    /// a valid tree.
     pub fn dofs_moving_link(&self, link: usize) -> u32 {
         let mut set: DofSet = 0;
         let mut current = link;
@@ -676,7 +726,8 @@ impl HandModel {
     }
 
     /// Pose of fingertip `k` in the world frame: the orientation of its link, the position of
-    /// the sphere centre (the fingertip frame T_k of the paper). Needs forward kinematics.
+    /// the sphere centre (the fingertip frame T_k of the paper). Needs forward kinematics and
+    /// `k < fingertips.len()`.
     pub fn tip_pose(&self, kin: &Kinematics, k: usize) -> Isometry {
         let rotation = kin.link_poses[self.fingertips[k].link].rotation;
         Isometry::from_parts(kin.tip_centres[k].coords.into(), rotation)
@@ -722,11 +773,9 @@ impl HandModel {
     /// Fingertip Jacobians (world frame, at each tip centre) from the joint frames that
     /// [`forward_kinematics`](Self::forward_kinematics) computed. Allocation-free.
     pub fn tip_jacobians(&self, kin: &mut Kinematics) {
-        for k in 0..self.fingertips.len().min(MAX_TIPS) {
-            let link = self.fingertips[k].link;
-            let centre = kin.tip_centres[k];
-            let mut jac = std::mem::replace(&mut kin.tip_jacobians[k], TipJacobian::zeros());
-            self.point_jacobian(kin, link, &centre, &mut jac);
+        for (k, tip) in self.fingertips.iter().enumerate().take(MAX_TIPS) {
+            let mut jac = TipJacobian::zeros();
+            self.point_jacobian(kin, tip.link, &kin.tip_centres[k], &mut jac);
             kin.tip_jacobians[k] = jac;
         }
     }
@@ -735,76 +784,84 @@ impl HandModel {
     /// the link inertials and the armature, for the kinematics in `kin`. Allocation-free.
     ///
     /// M = Σ_links (J_vᵀ m J_v + J_ωᵀ R I Rᵀ J_ω) + diag(armature), with J_v the Jacobian of
-    /// the link's centre of mass and J_ω its angular Jacobian (world frame).
+    /// the link's centre of mass and J_ω its angular Jacobian (world frame), evaluated by the
+    /// composite rigid-body algorithm; a mimic joint enters with its multiplier.
     pub fn mass_matrix(&self, kin: &Kinematics, m: &mut DofMatrix) {
         let n = self.dof().min(MAX_DOF);
         m.fill_with_identity();
         m.view_mut((0, 0), (n, n)).fill(0.0);
-        // Per link, only the DOFs on its path to the root have non-zero Jacobian columns:
-        // gather those (merging a DOF that drives several joints, as mimic joints do) and add
-        // `m v_aᵀ v_b + ω_aᵀ I ω_b` for each pair.
-        const PATH: usize = 16;
-        let mut dofs = [0usize; PATH];
-        let mut lin = [Vector::zeros(); PATH];
-        let mut ang = [Vector::zeros(); PATH];
-        for (l, link) in self.links.iter().enumerate() {
-            let inertial = &link.inertial;
-            if l == self.root || (inertial.mass == 0.0 && inertial.inertia == Mat3::zeros()) {
-                continue;
+        // Composite rigid-body algorithm in the world frame: the spatial inertia of every
+        // subtree at the world origin, then H_ij = S_jᵀ I_subtree(i) S_i for every joint j on
+        // the path to joint i, mapped onto the DOFs by the drive gains.
+        let mut composite = [Mat6::zeros(); MAX_LINKS];
+        for (l, link) in self.links.iter().enumerate().take(MAX_LINKS) {
+            if l != self.root {
+                composite[l] = spatial_inertia(&kin.link_poses[l], &link.inertial);
             }
-            let pose = &kin.link_poses[l];
-            let com = pose * Point::from(inertial.com);
-            let mut cnt = 0;
-            let mut current = l;
+        }
+        for joint in self.joints.iter().take(MAX_LINKS).rev() {
+            let child = composite[joint.child];
+            composite[joint.parent] += child;
+        }
+        for (i, joint) in self.joints.iter().enumerate().take(MAX_LINKS) {
+            let Some((di, gi)) = joint.drive.dof_and_gain() else {
+                continue;
+            };
+            let force = composite[joint.child] * self.motion_subspace(kin, i);
+            let mut j = i;
             for _ in 0..MAX_LINKS {
-                let j = kin.parent_joint[current];
-                if j == NO_JOINT || current == self.root {
+                let ancestor = &self.joints[j];
+                if let Some((dj, gj)) = ancestor.drive.dof_and_gain() {
+                    let h = gi * gj * self.motion_subspace(kin, j).dot(&force);
+                    m[(di, dj)] += h;
+                    if j != i {
+                        m[(dj, di)] += h;
+                    }
+                }
+                if ancestor.parent == self.root || kin.parent_joint[ancestor.parent] == NO_JOINT {
                     break;
                 }
-                let joint = &self.joints[j];
-                if let Some((d, gain)) = joint.drive.dof_and_gain() {
-                    let a = kin.joint_axes[j];
-                    let (v, w) = match joint.kind {
-                        JointKind::Prismatic => (a, Vector::zeros()),
-                        JointKind::Fixed => (Vector::zeros(), Vector::zeros()),
-                        _ => (
-                            a.cross(&(com - Point::from(kin.joint_frames[j].translation.vector))),
-                            a,
-                        ),
-                    };
-                    match dofs[..cnt].iter().position(|&x| x == d) {
-                        Some(i) => {
-                            lin[i] += v * gain;
-                            ang[i] += w * gain;
-                        }
-                        None if cnt < PATH => {
-                            dofs[cnt] = d;
-                            lin[cnt] = v * gain;
-                            ang[cnt] = w * gain;
-                            cnt += 1;
-                        }
-                        None => {}
-                    }
-                }
-                current = joint.parent;
-            }
-            let r = pose.rotation.to_rotation_matrix();
-            let inertia_world = r.matrix() * inertial.inertia * r.matrix().transpose();
-            for a in 0..cnt {
-                let iw = inertia_world * ang[a];
-                for b in a..cnt {
-                    let e = inertial.mass * lin[a].dot(&lin[b]) + iw.dot(&ang[b]);
-                    m[(dofs[a], dofs[b])] += e;
-                    if dofs[a] != dofs[b] {
-                        m[(dofs[b], dofs[a])] += e;
-                    }
-                }
+                j = kin.parent_joint[ancestor.parent];
             }
         }
         for (i, a) in self.armature.iter().enumerate().take(n) {
             m[(i, i)] += a;
         }
     }
+
+    /// The spatial motion of joint `j` per unit joint value: (velocity of the body point at the
+    /// world origin, angular velocity), world frame.
+    fn motion_subspace(&self, kin: &Kinematics, j: usize) -> Vector6<f64> {
+        let a = kin.joint_axes[j];
+        let (linear, angular) = match self.joints[j].kind {
+            JointKind::Revolute | JointKind::Continuous => {
+                (kin.joint_frames[j].translation.vector.cross(&a), a)
+            }
+            JointKind::Prismatic => (a, Vector::zeros()),
+            JointKind::Fixed => (Vector::zeros(), Vector::zeros()),
+        };
+        Vector6::new(
+            linear.x, linear.y, linear.z, angular.x, angular.y, angular.z,
+        )
+    }
+}
+
+/// Spatial inertia of a link at the world origin, for twists (velocity of the body point at the
+/// origin, angular velocity): `[[m 1, −m [c]×], [m [c]×, I − m [c]×[c]×]]` with `c` the centre
+/// of mass and `I` the inertia about it, both in the world frame.
+fn spatial_inertia(pose: &Isometry, inertial: &Inertial) -> Mat6 {
+    let c = (pose * Point::from(inertial.com)).coords;
+    let r = pose.rotation.to_rotation_matrix();
+    let inertia = r.matrix() * inertial.inertia * r.matrix().transpose();
+    let mc = skew(&c) * inertial.mass;
+    let mut s = Mat6::zeros();
+    s.fixed_view_mut::<3, 3>(0, 0)
+        .copy_from(&(Mat3::identity() * inertial.mass));
+    s.fixed_view_mut::<3, 3>(0, 3).copy_from(&-mc);
+    s.fixed_view_mut::<3, 3>(3, 0).copy_from(&mc);
+    s.fixed_view_mut::<3, 3>(3, 3)
+        .copy_from(&(inertia - mc * skew(&c)));
+    s
 }
 
 #[cfg(test)]
@@ -1330,6 +1387,34 @@ pub(crate) mod tests {
             .all(|j| j.iter().all(|x| x.is_finite())));
         assert!(m.iter().all(|x| x.is_finite()));
         assert!(m.cholesky().is_some());
+    }
+
+    proptest! {
+        #[test]
+        fn the_dof_cholesky_solve_inverts_the_mass_matrix(
+            u in prop::collection::vec(0.0..1.0f64, 10),
+            b in prop::collection::vec(-1.0..1.0f64, 10),
+        ) {
+            let glove = HandModel::glove10();
+            let kin = fk(&glove, &angles_from_unit(&glove, &u));
+            let mut m = DofMatrix::zeros();
+            glove.mass_matrix(&kin, &mut m);
+            let mut rhs = DofVector::zeros();
+            rhs.as_mut_slice()[..10].copy_from_slice(&b);
+            let x = solve_dof_spd(&m, &rhs, 10).unwrap();
+            let reference = m.cholesky().unwrap().solve(&rhs);
+            prop_assert!((x - reference).amax() <= 1e-9 * reference.amax().max(1.0));
+            prop_assert!(x.as_slice()[10..].iter().all(|&v| v == 0.0));
+        }
+    }
+
+    #[test]
+    fn the_dof_cholesky_solve_rejects_an_indefinite_block() {
+        let mut a = DofMatrix::identity();
+        a[(1, 1)] = -1.0;
+        assert!(solve_dof_spd(&a, &DofVector::zeros(), 3).is_none());
+        assert!(solve_dof_spd(&a, &DofVector::zeros(), 1).is_some());
+        assert!(solve_dof_spd(&a, &DofVector::zeros(), MAX_DOF + 1).is_none());
     }
 
     #[test]
