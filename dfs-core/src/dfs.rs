@@ -392,7 +392,7 @@ impl Dfs {
         }
         self.hand.forward_kinematics(&s.base, s.q, &mut self.kin);
         self.hand.tip_jacobians(&mut self.kin);
-        self.hand.mass_matrix(&self.kin, &mut self.mass);
+        self.hand.mass_matrix(&mut self.kin, &mut self.mass);
         Ok(())
     }
 
