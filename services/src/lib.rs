@@ -1,1 +1,2 @@
 //! ICMS services: recording, segmentation, store.
+pub mod store;
