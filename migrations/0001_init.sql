@@ -50,7 +50,8 @@ CREATE INDEX skills_contact_model ON skills (contact_model);
 CREATE INDEX skills_quality ON skills (quality);
 CREATE INDEX skills_duration ON skills (duration_s);
 -- Equality filter + sort: the common browse queries.
-CREATE INDEX skills_shape_quality ON skills (object_shape, quality);
+-- (mass rides along so the common shape + mass window + best-quality query filters in the index)
+CREATE INDEX skills_shape_quality ON skills (object_shape, quality, object_mass);
 CREATE INDEX skills_shape_mass ON skills (object_shape, object_mass);
 CREATE INDEX skills_grasp_quality ON skills (grasp_type, quality);
 

@@ -278,33 +278,48 @@ pub(crate) fn build(q: &SkillQuery) -> Result<QueryBuilder<'_, Sqlite>, StoreErr
         None => None,
     };
 
+    // Plan: walk the index that yields the sort order (with an equality prefix where a
+    // composite index has one) and test the other filters row by row, so that a page costs
+    // about `limit / selectivity` index steps whatever the table size, instead of sorting every
+    // match of a range filter. A unary `+` keeps SQLite from driving the scan by that column.
+    let shape_leads =
+        q.object_shape.is_some() && matches!(sort.field, SortField::Quality | SortField::Mass);
+    let grasp_leads = !shape_leads && q.grasp_type.is_some() && sort.field == SortField::Quality;
+    let plus = |driving: bool| if driving { "" } else { "+" };
     let mut b = QueryBuilder::new(format!("SELECT {SKILL_COLUMNS} FROM skills WHERE 1 = 1"));
     if let Some(v) = &q.object_shape {
-        b.push(" AND object_shape = ").push_bind(v.as_str());
+        b.push(format!(" AND {}object_shape = ", plus(shape_leads)))
+            .push_bind(v.as_str());
     }
+    let by_mass = sort.field == SortField::Mass;
     if let Some(v) = q.mass_min {
-        b.push(" AND object_mass >= ").push_bind(v);
+        b.push(format!(" AND {}object_mass >= ", plus(by_mass)))
+            .push_bind(v);
     }
     if let Some(v) = q.mass_max {
-        b.push(" AND object_mass <= ").push_bind(v);
+        b.push(format!(" AND {}object_mass <= ", plus(by_mass)))
+            .push_bind(v);
     }
     if let Some(v) = q.mu_min {
-        b.push(" AND mu >= ").push_bind(v);
+        b.push(" AND +mu >= ").push_bind(v);
     }
     if let Some(v) = q.mu_max {
-        b.push(" AND mu <= ").push_bind(v);
+        b.push(" AND +mu <= ").push_bind(v);
     }
     if let Some(v) = q.contact_count {
-        b.push(" AND contact_count = ").push_bind(v);
+        b.push(" AND +contact_count = ").push_bind(v);
     }
     if let Some(v) = &q.contact_model {
-        b.push(" AND contact_model = ").push_bind(v.as_str());
+        b.push(" AND +contact_model = ").push_bind(v.as_str());
     }
     if let Some(v) = &q.grasp_type {
-        b.push(" AND grasp_type = ").push_bind(v.as_str());
+        b.push(format!(" AND {}grasp_type = ", plus(grasp_leads)))
+            .push_bind(v.as_str());
     }
     if let Some(v) = q.min_quality {
-        b.push(" AND quality >= ").push_bind(v);
+        let by_quality = sort.field == SortField::Quality;
+        b.push(format!(" AND {}quality >= ", plus(by_quality)))
+            .push_bind(v);
     }
     if let Some(name) = &q.phase {
         b.push(
