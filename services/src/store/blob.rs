@@ -80,3 +80,35 @@ pub(crate) fn remove(data_dir: &Path, rel: &str) -> Result<(), StoreError> {
         Err(e) => Err(StoreError::io(path, e)),
     }
 }
+
+/// Removes temporary files of interrupted blob writes older than an hour (younger ones may
+/// belong to an ingest still running in another process). Returns how many went; best effort.
+pub(crate) fn sweep_temp_files(data_dir: &Path) -> usize {
+    let max_age = std::time::Duration::from_secs(3600);
+    let Ok(shards) = fs::read_dir(data_dir.join("blobs/sha256")) else {
+        return 0;
+    };
+    let mut removed = 0;
+    for shard in shards.flatten() {
+        let Ok(files) = fs::read_dir(shard.path()) else {
+            continue;
+        };
+        for f in files.flatten() {
+            let name = f.file_name();
+            let name = name.to_string_lossy();
+            if !(name.starts_with('.') && name.ends_with(".tmp")) {
+                continue;
+            }
+            let old = f
+                .metadata()
+                .and_then(|m| m.modified())
+                .ok()
+                .and_then(|t| t.elapsed().ok())
+                .is_some_and(|age| age > max_age);
+            if old && fs::remove_file(f.path()).is_ok() {
+                removed += 1;
+            }
+        }
+    }
+    removed
+}

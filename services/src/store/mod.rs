@@ -39,6 +39,11 @@ pub const DB_FILE: &str = "icms.sqlite3";
 /// Largest number of sessions [`Store::list_sessions`] returns per page.
 pub const MAX_SESSION_LIMIT: u32 = 1000;
 
+/// Columns of a session row (`FROM sessions s`), its skill ids as a JSON array.
+const SESSION_COLUMNS: &str = "id, sha256, size_bytes, blob_path, meta, created_at, \
+     (SELECT json_group_array(id) FROM (SELECT id FROM skills WHERE session_id = s.id \
+     ORDER BY id)) AS skill_ids";
+
 static MIGRATOR: Migrator = sqlx::migrate!("../migrations");
 
 /// Handle to a data directory's database and blobs. Cheap to clone (shared state).
@@ -318,6 +323,16 @@ impl Store {
             .connect_with(opts)
             .await?;
         MIGRATOR.run(&pool).await?;
+        let dir = data_dir.to_path_buf();
+        let swept = tokio::task::spawn_blocking(move || blob::sweep_temp_files(&dir))
+            .await
+            .unwrap_or(0);
+        if swept > 0 {
+            tracing::info!(
+                swept,
+                "removed temporary blob files left by interrupted ingests"
+            );
+        }
 
         let rows = sqlx::query("SELECT id, feature FROM skills")
             .fetch_all(&pool)
@@ -458,15 +473,16 @@ impl Store {
         })
     }
 
-    fn row_to_session(row: &SqliteRow, skill_ids: Vec<i64>) -> Result<Session, StoreError> {
+    fn row_to_session(row: &SqliteRow) -> Result<Session, StoreError> {
         let meta: String = row.try_get("meta")?;
+        let skill_ids: String = row.try_get("skill_ids")?;
         Ok(Session {
             id: row.try_get("id")?,
             sha256: row.try_get("sha256")?,
             size_bytes: row.try_get("size_bytes")?,
             blob_path: row.try_get("blob_path")?,
             meta: serde_json::from_str(&meta)?,
-            skill_ids,
+            skill_ids: serde_json::from_str(&skill_ids)?,
             created_at: row.try_get("created_at")?,
         })
     }
@@ -489,20 +505,19 @@ impl Store {
             },
             None => 0,
         };
-        let rows = sqlx::query(
-            "SELECT id, sha256, size_bytes, blob_path, meta, created_at FROM sessions \
-             WHERE id > ? ORDER BY id LIMIT ?",
-        )
+        let rows = sqlx::query(&format!(
+            "SELECT {SESSION_COLUMNS} FROM sessions s WHERE id > ? ORDER BY id LIMIT ?"
+        ))
         .bind(after)
         .bind(i64::from(limit) + 1)
         .fetch_all(&self.inner.pool)
         .await?;
         let more = rows.len() > limit as usize;
-        let mut items = Vec::with_capacity(rows.len().min(limit as usize));
-        for row in rows.iter().take(limit as usize) {
-            let id: i64 = row.try_get("id")?;
-            items.push(Self::row_to_session(row, self.skill_ids_of(id).await?)?);
-        }
+        let items = rows
+            .iter()
+            .take(limit as usize)
+            .map(Self::row_to_session)
+            .collect::<Result<Vec<_>, _>>()?;
         let next_cursor = match (more, items.last()) {
             (true, Some(last)) => {
                 Some(query::encode_cursor("sessions", query::After::Int(last.id)))
@@ -514,14 +529,14 @@ impl Store {
 
     /// One session with its skill ids.
     pub async fn get_session(&self, id: i64) -> Result<Session, StoreError> {
-        let row = sqlx::query(
-            "SELECT id, sha256, size_bytes, blob_path, meta, created_at FROM sessions WHERE id = ?",
-        )
+        let row = sqlx::query(&format!(
+            "SELECT {SESSION_COLUMNS} FROM sessions s WHERE id = ?"
+        ))
         .bind(id)
         .fetch_optional(&self.inner.pool)
         .await?
         .ok_or(StoreError::SessionNotFound(id))?;
-        Self::row_to_session(&row, self.skill_ids_of(id).await?)
+        Self::row_to_session(&row)
     }
 
     /// Absolute path of a session's MCAP blob.
