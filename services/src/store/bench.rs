@@ -10,8 +10,10 @@ use super::{
     FEATURE_DIM,
 };
 
-/// Skills per synthetic session (one transaction each).
+/// Skills per synthetic session.
 pub const SYNTHETIC_SKILLS_PER_SESSION: usize = 1000;
+/// Synthetic sessions stored per transaction.
+pub const SYNTHETIC_SESSIONS_PER_TRANSACTION: usize = 10;
 
 /// Object shapes the generator draws from.
 pub const SYNTHETIC_SHAPES: [&str; 3] = ["sphere", "box", "cylinder"];
@@ -95,7 +97,8 @@ pub struct GenerateReport {
 }
 
 /// Inserts `n_skills` synthetic skills, [`SYNTHETIC_SKILLS_PER_SESSION`] per synthetic session
-/// (a tiny fake blob each, one transaction each), drawn from `seed`; then refreshes the planner
+/// (a tiny fake blob each), [`SYNTHETIC_SESSIONS_PER_TRANSACTION`] sessions per transaction on
+/// a connection with a large page cache, drawn from `seed`; then refreshes the planner
 /// statistics. Deterministic for a seed; a second call with the same seed stores nothing new.
 pub async fn generate_synthetic(
     store: &Store,
@@ -107,23 +110,27 @@ pub async fn generate_synthetic(
     let mut done = 0;
     let mut sessions = 0;
     while done < n_skills {
-        let n = SYNTHETIC_SKILLS_PER_SESSION.min(n_skills - done);
-        let skills: Vec<NewSkill> = (0..n).map(|_| synthetic_skill(&mut rng)).collect();
-        let blob = format!("ICMS synthetic session seed={seed} index={sessions}\n");
-        let meta = SessionMeta {
-            scenario: Some("synthetic".into()),
-            seed: Some(seed),
-            hand: "glove10".into(),
-            object_shape: skills[0].object_shape.clone(),
-            object_mass: skills[0].object_mass,
-            mu: skills[0].mu,
-            duration_ns: 0,
-            started_at: None,
-            extra: serde_json::Value::Null,
-        };
-        store.ingest(blob.as_bytes(), meta, skills).await?;
-        done += n;
-        sessions += 1;
+        let mut batch = Vec::new();
+        while done < n_skills && batch.len() < SYNTHETIC_SESSIONS_PER_TRANSACTION {
+            let n = SYNTHETIC_SKILLS_PER_SESSION.min(n_skills - done);
+            let skills: Vec<NewSkill> = (0..n).map(|_| synthetic_skill(&mut rng)).collect();
+            let blob = format!("ICMS synthetic session seed={seed} index={sessions}\n");
+            let meta = SessionMeta {
+                scenario: Some("synthetic".into()),
+                seed: Some(seed),
+                hand: "glove10".into(),
+                object_shape: skills[0].object_shape.clone(),
+                object_mass: skills[0].object_mass,
+                mu: skills[0].mu,
+                duration_ns: 0,
+                started_at: None,
+                extra: serde_json::Value::Null,
+            };
+            batch.push((blob.into_bytes(), meta, skills));
+            done += n;
+            sessions += 1;
+        }
+        store.bulk_ingest(batch).await?;
     }
     store.optimize().await?;
     Ok(GenerateReport {

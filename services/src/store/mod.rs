@@ -473,6 +473,74 @@ impl Store {
         })
     }
 
+    /// Bulk path of the synthetic generator: writes the blobs, then stores every session of
+    /// `batch` in ONE transaction on a connection with a large page cache (random-order inserts
+    /// into the filter indexes dirty one page per row and index; bigger transactions and cache
+    /// write each page fewer times). Sessions whose bytes are already stored are skipped.
+    pub(crate) async fn bulk_ingest(
+        &self,
+        batch: Vec<(Vec<u8>, SessionMeta, Vec<NewSkill>)>,
+    ) -> Result<usize, StoreError> {
+        let _guard = self.inner.blob_lock.read().await;
+        let mut prepared = Vec::with_capacity(batch.len());
+        for (bytes, meta, skills) in batch {
+            let checked = skills
+                .into_iter()
+                .enumerate()
+                .map(|(i, s)| validate_skill(i, &s).map(|f| (s, f)))
+                .collect::<Result<Vec<_>, _>>()?;
+            let sha256 = blob::sha256_hex(&bytes);
+            let dir = self.inner.dir.clone();
+            let sha = sha256.clone();
+            let size = bytes.len() as i64;
+            let rel = tokio::task::spawn_blocking(move || blob::write_atomic(&dir, &sha, &bytes))
+                .await
+                .map_err(|e| StoreError::Corrupt(format!("blob writer task failed: {e}")))??;
+            prepared.push((sha256, size, rel, meta, checked));
+        }
+        let mut conn = self.inner.pool.acquire().await?;
+        sqlx::query("PRAGMA cache_size = -1048576")
+            .execute(&mut *conn)
+            .await?;
+        let result = async {
+            let mut tx = conn.begin().await?;
+            let mut inserted = Vec::new();
+            for (sha256, size, rel, meta, checked) in &prepared {
+                let session_id: Option<i64> = sqlx::query_scalar(
+                    "INSERT INTO sessions (sha256, size_bytes, blob_path, scenario, hand, \
+                     object_shape, duration_ns, meta) VALUES (?, ?, ?, ?, ?, ?, ?, ?) \
+                     ON CONFLICT (sha256) DO NOTHING RETURNING id",
+                )
+                .bind(sha256)
+                .bind(size)
+                .bind(rel)
+                .bind(meta.scenario.as_deref())
+                .bind(&meta.hand)
+                .bind(&meta.object_shape)
+                .bind(i64::try_from(meta.duration_ns).unwrap_or(i64::MAX))
+                .bind(serde_json::to_string(meta)?)
+                .fetch_optional(&mut *tx)
+                .await?;
+                if let Some(session_id) = session_id {
+                    let ids = insert_skills(&mut tx, session_id, checked).await?;
+                    inserted.extend(ids.into_iter().zip(checked.iter().map(|c| c.1)));
+                }
+            }
+            tx.commit().await?;
+            Ok::<_, StoreError>(inserted)
+        }
+        .await;
+        sqlx::query("PRAGMA cache_size = -32768")
+            .execute(&mut *conn)
+            .await?;
+        let inserted = result?;
+        let mut index = self.inner.index.write().expect("index lock");
+        for (id, f) in &inserted {
+            index.insert(*id, *f);
+        }
+        Ok(inserted.len())
+    }
+
     fn row_to_session(row: &SqliteRow) -> Result<Session, StoreError> {
         let meta: String = row.try_get("meta")?;
         let skill_ids: String = row.try_get("skill_ids")?;
