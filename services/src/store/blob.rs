@@ -1,0 +1,114 @@
+//! Content-addressed MCAP blobs: `blobs/sha256/ab/cdef….mcap` under the data directory, written
+//! atomically (temporary file in the same directory, write, fsync, rename, fsync directory).
+
+use std::fs::{self, File};
+use std::io::Write;
+use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicU64, Ordering};
+
+use sha2::{Digest, Sha256};
+
+use super::error::StoreError;
+
+/// Hex SHA-256 of `bytes`.
+pub(crate) fn sha256_hex(bytes: &[u8]) -> String {
+    hex::encode(Sha256::digest(bytes))
+}
+
+/// Path of a blob relative to the data directory, with `/` separators.
+pub(crate) fn relative_path(sha256: &str) -> String {
+    format!("blobs/sha256/{}/{}.mcap", &sha256[..2], &sha256[2..])
+}
+
+fn sync_dir(dir: &Path) -> Result<(), StoreError> {
+    File::open(dir)
+        .and_then(|d| d.sync_all())
+        .map_err(|e| StoreError::io(dir, e))
+}
+
+/// Writes `bytes` as the blob named by `sha256` under `data_dir`, unless a complete one is
+/// already there (a leftover of an ingest killed before its row committed, or a concurrent
+/// ingest of the same file). Returns the relative path. Blocking: call on a blocking thread.
+pub(crate) fn write_atomic(
+    data_dir: &Path,
+    sha256: &str,
+    bytes: &[u8],
+) -> Result<String, StoreError> {
+    static COUNTER: AtomicU64 = AtomicU64::new(0);
+    let rel = relative_path(sha256);
+    let path = data_dir.join(&rel);
+    let dir = path.parent().expect("blob path has a parent").to_path_buf();
+    if let Ok(md) = fs::metadata(&path) {
+        // Renamed only after its fsync, so a file with the right size is complete.
+        if md.is_file() && md.len() == bytes.len() as u64 {
+            return Ok(rel);
+        }
+    }
+    if !dir.is_dir() {
+        fs::create_dir_all(&dir).map_err(|e| StoreError::io(&dir, e))?;
+        // Make the new shard directory's entry durable too.
+        if let Some(parent) = dir.parent() {
+            sync_dir(parent)?;
+        }
+    }
+    let tmp: PathBuf = dir.join(format!(
+        ".{}.{}.{}.tmp",
+        &sha256[2..],
+        std::process::id(),
+        COUNTER.fetch_add(1, Ordering::Relaxed)
+    ));
+    let result = (|| {
+        let mut f = File::create(&tmp).map_err(|e| StoreError::io(&tmp, e))?;
+        f.write_all(bytes).map_err(|e| StoreError::io(&tmp, e))?;
+        f.sync_all().map_err(|e| StoreError::io(&tmp, e))?;
+        drop(f);
+        fs::rename(&tmp, &path).map_err(|e| StoreError::io(&path, e))?;
+        sync_dir(&dir)
+    })();
+    if result.is_err() {
+        let _ = fs::remove_file(&tmp);
+    }
+    result.map(|()| rel)
+}
+
+/// Removes a blob (after its row is gone); a missing file is not an error.
+pub(crate) fn remove(data_dir: &Path, rel: &str) -> Result<(), StoreError> {
+    let path = data_dir.join(rel);
+    match fs::remove_file(&path) {
+        Ok(()) => Ok(()),
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => Ok(()),
+        Err(e) => Err(StoreError::io(path, e)),
+    }
+}
+
+/// Removes temporary files of interrupted blob writes older than an hour (younger ones may
+/// belong to an ingest still running in another process). Returns how many went; best effort.
+pub(crate) fn sweep_temp_files(data_dir: &Path) -> usize {
+    let max_age = std::time::Duration::from_secs(3600);
+    let Ok(shards) = fs::read_dir(data_dir.join("blobs/sha256")) else {
+        return 0;
+    };
+    let mut removed = 0;
+    for shard in shards.flatten() {
+        let Ok(files) = fs::read_dir(shard.path()) else {
+            continue;
+        };
+        for f in files.flatten() {
+            let name = f.file_name();
+            let name = name.to_string_lossy();
+            if !(name.starts_with('.') && name.ends_with(".tmp")) {
+                continue;
+            }
+            let old = f
+                .metadata()
+                .and_then(|m| m.modified())
+                .ok()
+                .and_then(|t| t.elapsed().ok())
+                .is_some_and(|age| age > max_age);
+            if old && fs::remove_file(f.path()).is_ok() {
+                removed += 1;
+            }
+        }
+    }
+    removed
+}

@@ -1,0 +1,74 @@
+//! The store's error type: every way an open, ingest or query can fail.
+
+use std::path::PathBuf;
+
+/// An error from the skill store ([`crate::store::Store`]).
+///
+/// Messages say what was wrong without leaking SQL; the API maps each variant to a status.
+#[derive(Debug, thiserror::Error)]
+pub enum StoreError {
+    /// The database file belongs to something else: another application id, tables without the
+    /// ICMS marker, or not a SQLite database at all.
+    #[error(
+        "{0} is not an ICMS database (another application's SQLite file or not SQLite at all); \
+         refusing to touch it — choose another data directory"
+    )]
+    NotOurs(PathBuf),
+    /// The database was migrated by a newer binary than this one.
+    #[error(
+        "the database schema is version {found}, newer than this binary supports ({supported}); \
+         upgrade icms"
+    )]
+    SchemaTooNew {
+        /// Newest migration version applied to the database.
+        found: i64,
+        /// Newest migration version this binary knows.
+        supported: i64,
+    },
+    /// A pagination cursor that this store did not produce, or one from another sort order.
+    #[error("malformed pagination cursor (pass back next_cursor unchanged, with the same sort)")]
+    BadCursor,
+    /// A query parameter out of range (limit, a min above its max, a non-finite bound, ...).
+    #[error("invalid query: {0}")]
+    InvalidQuery(String),
+    /// Ingest input that cannot be stored (wrong feature length, non-finite numbers, ...).
+    #[error("invalid input: {0}")]
+    InvalidInput(String),
+    /// No session with this id.
+    #[error("no session with id {0}")]
+    SessionNotFound(i64),
+    /// No skill with this id.
+    #[error("no skill with id {0}")]
+    SkillNotFound(i64),
+    /// A row or blob failed a consistency check.
+    #[error("store is corrupt: {0}")]
+    Corrupt(String),
+    /// A file system operation failed (full disk, permissions, ...).
+    #[error("I/O error on {path}: {source}")]
+    Io {
+        /// The file or directory involved.
+        path: PathBuf,
+        /// The underlying error.
+        #[source]
+        source: std::io::Error,
+    },
+    /// The database failed.
+    #[error("database error: {0}")]
+    Db(#[from] sqlx::Error),
+    /// Running the migrations failed.
+    #[error("database migration failed: {0}")]
+    Migrate(#[from] sqlx::migrate::MigrateError),
+    /// A JSON column could not be encoded or decoded.
+    #[error("JSON column error: {0}")]
+    Json(#[from] serde_json::Error),
+}
+
+impl StoreError {
+    /// Wraps an I/O error with the path it happened on.
+    pub(crate) fn io(path: impl Into<PathBuf>, source: std::io::Error) -> Self {
+        StoreError::Io {
+            path: path.into(),
+            source,
+        }
+    }
+}

@@ -1,0 +1,756 @@
+//! The skill data base: recorded sessions (content-addressed MCAP blobs plus metadata) and the
+//! skills found in them, in SQLite through sqlx. The only SQL of the project lives here.
+//!
+//! Layout of a data directory: `DIR/icms.sqlite3` (WAL mode) and `DIR/blobs/sha256/ab/cdef….mcap`.
+//! A blob is written and fsynced before the row that names it commits, and a session's row, its
+//! skills and their phases commit in one transaction, so a process killed at any point leaves
+//! either the whole session or none (at worst an unreferenced blob, which a later ingest of the
+//! same file reuses). One process per data directory: deletes and ingests are ordered by an
+//! in-process lock so that a delete never unlinks a blob that a concurrent ingest has just reused.
+
+pub mod bench;
+mod blob;
+mod error;
+mod knn;
+mod query;
+mod types;
+
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+use std::time::Duration;
+
+use sqlx::migrate::Migrator;
+use sqlx::sqlite::{
+    SqliteConnectOptions, SqliteJournalMode, SqlitePool, SqlitePoolOptions, SqliteRow,
+    SqliteSynchronous,
+};
+use sqlx::{Connection as _, QueryBuilder, Row as _, Sqlite, SqliteConnection};
+
+pub use error::StoreError;
+pub use query::{SkillQuery, SortField, SortKey, SortOrder, DEFAULT_LIMIT, MAX_LIMIT};
+pub use types::{IngestOutcome, NewSkill, Page, Session, SessionMeta, Skill, FEATURE_DIM};
+
+use knn::FeatureIndex;
+
+/// `PRAGMA application_id` of an ICMS database: ASCII `ICMS`.
+pub const APPLICATION_ID: i32 = 0x4943_4D53;
+/// File name of the database inside the data directory.
+pub const DB_FILE: &str = "icms.sqlite3";
+/// Largest number of sessions [`Store::list_sessions`] returns per page.
+pub const MAX_SESSION_LIMIT: u32 = 1000;
+
+/// Columns of a session row (`FROM sessions s`), its skill ids as a JSON array.
+const SESSION_COLUMNS: &str = "id, sha256, size_bytes, blob_path, meta, created_at, \
+     (SELECT json_group_array(id) FROM (SELECT id FROM skills WHERE session_id = s.id \
+     ORDER BY id)) AS skill_ids";
+
+static MIGRATOR: Migrator = sqlx::migrate!("../migrations");
+
+/// Handle to a data directory's database and blobs. Cheap to clone (shared state).
+#[derive(Clone)]
+pub struct Store {
+    inner: Arc<Inner>,
+}
+
+struct Inner {
+    dir: PathBuf,
+    pool: SqlitePool,
+    index: std::sync::RwLock<FeatureIndex>,
+    /// Ingests hold it shared from blob write to index update; deletes hold it exclusively.
+    blob_lock: tokio::sync::RwLock<()>,
+}
+
+impl std::fmt::Debug for Store {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Store")
+            .field("dir", &self.inner.dir)
+            .finish_non_exhaustive()
+    }
+}
+
+fn newest_known_version() -> i64 {
+    MIGRATOR.iter().map(|m| m.version).max().unwrap_or(0)
+}
+
+fn is_not_a_database(e: &sqlx::Error) -> bool {
+    match e {
+        // SQLITE_NOTADB = 26
+        sqlx::Error::Database(d) => {
+            d.code().as_deref() == Some("26") || d.message().contains("not a database")
+        }
+        _ => false,
+    }
+}
+
+/// Refuses a database that is not ours, or that a newer binary migrated.
+async fn check_existing(db_path: &Path) -> Result<(), StoreError> {
+    let opts = SqliteConnectOptions::new()
+        .filename(db_path)
+        .create_if_missing(false)
+        .busy_timeout(Duration::from_secs(5));
+    let not_ours = || StoreError::NotOurs(db_path.to_path_buf());
+    let mut conn = match SqliteConnection::connect_with(&opts).await {
+        Ok(c) => c,
+        Err(e) if is_not_a_database(&e) => return Err(not_ours()),
+        Err(e) => return Err(e.into()),
+    };
+    let result = async {
+        let app_id: i32 = match sqlx::query_scalar("PRAGMA application_id")
+            .fetch_one(&mut conn)
+            .await
+        {
+            Ok(v) => v,
+            Err(e) if is_not_a_database(&e) => return Err(not_ours()),
+            Err(e) => return Err(e.into()),
+        };
+        let tables: Vec<String> = sqlx::query_scalar(
+            "SELECT name FROM sqlite_master WHERE type = 'table' AND name NOT LIKE 'sqlite_%'",
+        )
+        .fetch_all(&mut conn)
+        .await?;
+        if app_id != APPLICATION_ID {
+            // A fresh file, or one that sqlx began to migrate before a crash (it creates
+            // `_sqlx_migrations` outside the first migration's transaction), is fine.
+            if app_id != 0 || tables.iter().any(|t| t != "_sqlx_migrations") {
+                return Err(not_ours());
+            }
+        }
+        if tables.iter().any(|t| t == "_sqlx_migrations") {
+            let found: Option<i64> =
+                sqlx::query_scalar("SELECT MAX(version) FROM _sqlx_migrations")
+                    .fetch_one(&mut conn)
+                    .await?;
+            let supported = newest_known_version();
+            if let Some(found) = found {
+                if found > supported {
+                    return Err(StoreError::SchemaTooNew { found, supported });
+                }
+            }
+        }
+        Ok(())
+    }
+    .await;
+    let _ = conn.close().await;
+    result
+}
+
+fn feature_from_blob(id: i64, bytes: &[u8]) -> Result<[f32; FEATURE_DIM], StoreError> {
+    if bytes.len() != FEATURE_DIM * 4 {
+        return Err(StoreError::Corrupt(format!(
+            "skill {id}: feature has {} bytes, expected {}",
+            bytes.len(),
+            FEATURE_DIM * 4
+        )));
+    }
+    let mut f = [0.0f32; FEATURE_DIM];
+    for (i, c) in bytes.chunks_exact(4).enumerate() {
+        f[i] = f32::from_le_bytes([c[0], c[1], c[2], c[3]]);
+    }
+    Ok(f)
+}
+
+fn feature_to_blob(f: &[f32; FEATURE_DIM]) -> Vec<u8> {
+    f.iter().flat_map(|x| x.to_le_bytes()).collect()
+}
+
+fn row_to_skill(row: &SqliteRow) -> Result<Skill, StoreError> {
+    let id: i64 = row.try_get("id")?;
+    let feature: Vec<u8> = row.try_get("feature")?;
+    let phases: String = row.try_get("phase_durations")?;
+    let params: String = row.try_get("params")?;
+    Ok(Skill {
+        id,
+        session_id: row.try_get("session_id")?,
+        object_shape: row.try_get("object_shape")?,
+        object_mass: row.try_get("object_mass")?,
+        mu: row.try_get("mu")?,
+        contact_count: row.try_get("contact_count")?,
+        contact_model: row.try_get("contact_model")?,
+        grasp_type: row.try_get("grasp_type")?,
+        quality: row.try_get("quality")?,
+        volume: row.try_get("volume")?,
+        duration_s: row.try_get("duration_s")?,
+        start_ns: row.try_get("start_ns")?,
+        end_ns: row.try_get("end_ns")?,
+        phase_durations: serde_json::from_str(&phases)?,
+        feature: feature_from_blob(id, &feature)?.to_vec(),
+        params: serde_json::from_str(&params)?,
+        created_at: row.try_get("created_at")?,
+    })
+}
+
+fn finite(what: &str, v: f64) -> Result<(), StoreError> {
+    if v.is_finite() {
+        Ok(())
+    } else {
+        Err(StoreError::InvalidInput(format!(
+            "{what} must be finite, got {v}"
+        )))
+    }
+}
+
+/// Checks a skill before insertion; returns its feature as a fixed array.
+fn validate_skill(i: usize, s: &NewSkill) -> Result<[f32; FEATURE_DIM], StoreError> {
+    let ctx = |field: &str| format!("skill {i}: {field}");
+    finite(&ctx("object_mass"), s.object_mass)?;
+    finite(&ctx("mu"), s.mu)?;
+    finite(&ctx("quality"), s.quality)?;
+    finite(&ctx("volume"), s.volume)?;
+    finite(&ctx("duration_s"), s.duration_s)?;
+    for (name, d) in &s.phase_durations {
+        finite(&ctx(&format!("phase {name} duration")), *d)?;
+    }
+    let feature: [f32; FEATURE_DIM] = s.feature.as_slice().try_into().map_err(|_| {
+        StoreError::InvalidInput(format!(
+            "{}: feature has {} values, expected {FEATURE_DIM}",
+            ctx("feature"),
+            s.feature.len()
+        ))
+    })?;
+    if feature.iter().any(|x| !x.is_finite()) {
+        return Err(StoreError::InvalidInput(format!(
+            "{} must be finite",
+            ctx("feature")
+        )));
+    }
+    Ok(feature)
+}
+
+/// Inserts validated skills of `session_id` and their phase rows inside `tx`; returns their ids.
+async fn insert_skills(
+    tx: &mut sqlx::Transaction<'_, Sqlite>,
+    session_id: i64,
+    skills: &[(NewSkill, [f32; FEATURE_DIM])],
+) -> Result<Vec<i64>, StoreError> {
+    let mut ids = Vec::with_capacity(skills.len());
+    // Multi-row INSERTs: 17 bound values per skill stay far below SQLite's variable limit.
+    for chunk in skills.chunks(500) {
+        let mut rows = Vec::with_capacity(chunk.len());
+        for (s, f) in chunk {
+            rows.push((
+                s,
+                feature_to_blob(f),
+                serde_json::to_string(&s.phase_durations)?,
+                serde_json::to_string(&s.params)?,
+            ));
+        }
+        let mut b: QueryBuilder<Sqlite> = QueryBuilder::new(
+            "INSERT INTO skills (session_id, object_shape, object_mass, mu, contact_count, \
+             contact_model, grasp_type, quality, volume, duration_s, start_ns, end_ns, \
+             phase_durations, feature, params) ",
+        );
+        b.push_values(&rows, |mut r, (s, f, ph, p)| {
+            r.push_bind(session_id)
+                .push_bind(s.object_shape.as_str())
+                .push_bind(s.object_mass)
+                .push_bind(s.mu)
+                .push_bind(s.contact_count)
+                .push_bind(s.contact_model.as_str())
+                .push_bind(s.grasp_type.as_str())
+                .push_bind(s.quality)
+                .push_bind(s.volume)
+                .push_bind(s.duration_s)
+                .push_bind(s.start_ns)
+                .push_bind(s.end_ns)
+                .push_bind(ph.as_str())
+                .push_bind(f.as_slice())
+                .push_bind(p.as_str());
+        });
+        b.push(" RETURNING id");
+        let mut chunk_ids: Vec<i64> = b.build_query_scalar().fetch_all(&mut **tx).await?;
+        // RETURNING order is unspecified; AUTOINCREMENT ids of one statement are consecutive.
+        chunk_ids.sort_unstable();
+        if chunk_ids.len() != chunk.len() {
+            return Err(StoreError::Corrupt(
+                "skill insert returned a wrong row count".into(),
+            ));
+        }
+        let phases: Vec<(i64, i64, &str, f64)> = chunk
+            .iter()
+            .zip(&chunk_ids)
+            .flat_map(|((s, _), id)| {
+                s.phase_durations
+                    .iter()
+                    .enumerate()
+                    .map(move |(ord, (name, d))| (*id, ord as i64, name.as_str(), *d))
+            })
+            .collect();
+        for pchunk in phases.chunks(2000) {
+            let mut b: QueryBuilder<Sqlite> =
+                QueryBuilder::new("INSERT INTO skill_phases (skill_id, ord, name, duration_s) ");
+            b.push_values(pchunk, |mut r, (id, ord, name, d)| {
+                r.push_bind(*id)
+                    .push_bind(*ord)
+                    .push_bind(*name)
+                    .push_bind(*d);
+            });
+            b.build().execute(&mut **tx).await?;
+        }
+        ids.extend(chunk_ids);
+    }
+    Ok(ids)
+}
+
+impl Store {
+    /// Opens (creating and migrating if needed) the store in `data_dir`.
+    ///
+    /// Refuses a database that is not ours ([`StoreError::NotOurs`]) or that a newer binary
+    /// migrated ([`StoreError::SchemaTooNew`]) before touching it. Settings: WAL journal,
+    /// `foreign_keys=ON`, busy timeout 5 s, `synchronous=NORMAL`. Loads the feature index.
+    pub async fn open(data_dir: &Path) -> Result<Store, StoreError> {
+        tokio::fs::create_dir_all(data_dir)
+            .await
+            .map_err(|e| StoreError::io(data_dir, e))?;
+        let db_path = data_dir.join(DB_FILE);
+        let exists = match tokio::fs::metadata(&db_path).await {
+            Ok(md) => md.len() > 0,
+            Err(e) if e.kind() == std::io::ErrorKind::NotFound => false,
+            Err(e) => return Err(StoreError::io(&db_path, e)),
+        };
+        if exists {
+            check_existing(&db_path).await?;
+        }
+        let opts = SqliteConnectOptions::new()
+            .filename(&db_path)
+            .create_if_missing(true)
+            .journal_mode(SqliteJournalMode::Wal)
+            .foreign_keys(true)
+            .busy_timeout(Duration::from_secs(5))
+            .synchronous(SqliteSynchronous::Normal)
+            .pragma("cache_size", "-32768");
+        let pool = SqlitePoolOptions::new()
+            .max_connections(8)
+            .connect_with(opts)
+            .await?;
+        MIGRATOR.run(&pool).await?;
+        let dir = data_dir.to_path_buf();
+        let swept = tokio::task::spawn_blocking(move || blob::sweep_temp_files(&dir))
+            .await
+            .unwrap_or(0);
+        if swept > 0 {
+            tracing::info!(
+                swept,
+                "removed temporary blob files left by interrupted ingests"
+            );
+        }
+
+        let rows = sqlx::query("SELECT id, feature FROM skills")
+            .fetch_all(&pool)
+            .await?;
+        let mut entries = Vec::with_capacity(rows.len());
+        for row in &rows {
+            let id: i64 = row.try_get(0)?;
+            let bytes: &[u8] = row.try_get(1)?;
+            entries.push((id, feature_from_blob(id, bytes)?));
+        }
+        drop(rows);
+        Ok(Store {
+            inner: Arc::new(Inner {
+                dir: data_dir.to_path_buf(),
+                pool,
+                index: std::sync::RwLock::new(FeatureIndex::from_entries(entries)),
+                blob_lock: tokio::sync::RwLock::new(()),
+            }),
+        })
+    }
+
+    /// The data directory.
+    pub fn data_dir(&self) -> &Path {
+        &self.inner.dir
+    }
+
+    /// Closes the connection pool (waits for in-flight queries); later calls fail.
+    pub async fn close(&self) {
+        self.inner.pool.close().await;
+    }
+
+    /// Number of skills in the feature index (equal to the skills table).
+    pub fn skill_count(&self) -> usize {
+        self.inner.index.read().expect("index lock").len()
+    }
+
+    async fn existing(&self, sha256: &str) -> Result<Option<IngestOutcome>, StoreError> {
+        let id: Option<i64> = sqlx::query_scalar("SELECT id FROM sessions WHERE sha256 = ?")
+            .bind(sha256)
+            .fetch_optional(&self.inner.pool)
+            .await?;
+        match id {
+            None => Ok(None),
+            Some(session_id) => Ok(Some(IngestOutcome {
+                session_id,
+                created: false,
+                skill_ids: self.skill_ids_of(session_id).await?,
+            })),
+        }
+    }
+
+    async fn skill_ids_of(&self, session_id: i64) -> Result<Vec<i64>, StoreError> {
+        Ok(
+            sqlx::query_scalar("SELECT id FROM skills WHERE session_id = ? ORDER BY id")
+                .bind(session_id)
+                .fetch_all(&self.inner.pool)
+                .await?,
+        )
+    }
+
+    /// Stores a session: its MCAP bytes as a content-addressed blob, its metadata and skills.
+    ///
+    /// Idempotent: bytes already stored (same SHA-256) return the existing session with
+    /// `created: false`, also when concurrent ingests of the same file race. The blob is
+    /// written atomically and fsynced before one transaction inserts the session, skills and
+    /// phases; any error (full disk, bad input) leaves no rows.
+    pub async fn ingest(
+        &self,
+        mcap: &[u8],
+        meta: SessionMeta,
+        skills: Vec<NewSkill>,
+    ) -> Result<IngestOutcome, StoreError> {
+        let checked = skills
+            .into_iter()
+            .enumerate()
+            .map(|(i, s)| validate_skill(i, &s).map(|f| (s, f)))
+            .collect::<Result<Vec<_>, _>>()?;
+        finite("object_mass", meta.object_mass)?;
+        finite("mu", meta.mu)?;
+        let duration_ns = i64::try_from(meta.duration_ns)
+            .map_err(|_| StoreError::InvalidInput("duration_ns is too large".into()))?;
+
+        let bytes = mcap.to_vec();
+        let sha256 = tokio::task::spawn_blocking(move || (blob::sha256_hex(&bytes), bytes))
+            .await
+            .map_err(|e| StoreError::Corrupt(format!("hashing task failed: {e}")));
+        let (sha256, bytes) = sha256?;
+        if let Some(found) = self.existing(&sha256).await? {
+            return Ok(found);
+        }
+
+        let _guard = self.inner.blob_lock.read().await;
+        let dir = self.inner.dir.clone();
+        let sha = sha256.clone();
+        let size = bytes.len() as i64;
+        let rel = tokio::task::spawn_blocking(move || blob::write_atomic(&dir, &sha, &bytes))
+            .await
+            .map_err(|e| StoreError::Corrupt(format!("blob writer task failed: {e}")))??;
+
+        let meta_json = serde_json::to_string(&meta)?;
+        let mut tx = self.inner.pool.begin().await?;
+        let session_id: Option<i64> = sqlx::query_scalar(
+            "INSERT INTO sessions (sha256, size_bytes, blob_path, scenario, hand, object_shape, \
+             duration_ns, meta) VALUES (?, ?, ?, ?, ?, ?, ?, ?) \
+             ON CONFLICT (sha256) DO NOTHING RETURNING id",
+        )
+        .bind(&sha256)
+        .bind(size)
+        .bind(&rel)
+        .bind(meta.scenario.as_deref())
+        .bind(&meta.hand)
+        .bind(&meta.object_shape)
+        .bind(duration_ns)
+        .bind(&meta_json)
+        .fetch_optional(&mut *tx)
+        .await?;
+        let Some(session_id) = session_id else {
+            // A concurrent ingest of the same bytes committed first.
+            tx.rollback().await?;
+            return self
+                .existing(&sha256)
+                .await?
+                .ok_or_else(|| StoreError::Corrupt("session vanished during ingest".into()));
+        };
+        let skill_ids = insert_skills(&mut tx, session_id, &checked).await?;
+        tx.commit().await?;
+
+        let mut index = self.inner.index.write().expect("index lock");
+        for (id, (_, f)) in skill_ids.iter().zip(&checked) {
+            index.insert(*id, *f);
+        }
+        drop(index);
+        tracing::debug!(session_id, skills = skill_ids.len(), "ingested session");
+        Ok(IngestOutcome {
+            session_id,
+            created: true,
+            skill_ids,
+        })
+    }
+
+    /// Bulk path of the synthetic generator: writes the blobs, then stores every session of
+    /// `batch` in ONE transaction on a connection with a large page cache (random-order inserts
+    /// into the filter indexes dirty one page per row and index; bigger transactions and cache
+    /// write each page fewer times). Sessions whose bytes are already stored are skipped.
+    pub(crate) async fn bulk_ingest(
+        &self,
+        batch: Vec<(Vec<u8>, SessionMeta, Vec<NewSkill>)>,
+    ) -> Result<usize, StoreError> {
+        let _guard = self.inner.blob_lock.read().await;
+        let mut prepared = Vec::with_capacity(batch.len());
+        for (bytes, meta, skills) in batch {
+            let checked = skills
+                .into_iter()
+                .enumerate()
+                .map(|(i, s)| validate_skill(i, &s).map(|f| (s, f)))
+                .collect::<Result<Vec<_>, _>>()?;
+            let sha256 = blob::sha256_hex(&bytes);
+            let dir = self.inner.dir.clone();
+            let sha = sha256.clone();
+            let size = bytes.len() as i64;
+            let rel = tokio::task::spawn_blocking(move || blob::write_atomic(&dir, &sha, &bytes))
+                .await
+                .map_err(|e| StoreError::Corrupt(format!("blob writer task failed: {e}")))??;
+            prepared.push((sha256, size, rel, meta, checked));
+        }
+        let mut conn = self.inner.pool.acquire().await?;
+        sqlx::query("PRAGMA cache_size = -1048576")
+            .execute(&mut *conn)
+            .await?;
+        let result = async {
+            let mut tx = conn.begin().await?;
+            let mut inserted = Vec::new();
+            for (sha256, size, rel, meta, checked) in &prepared {
+                let session_id: Option<i64> = sqlx::query_scalar(
+                    "INSERT INTO sessions (sha256, size_bytes, blob_path, scenario, hand, \
+                     object_shape, duration_ns, meta) VALUES (?, ?, ?, ?, ?, ?, ?, ?) \
+                     ON CONFLICT (sha256) DO NOTHING RETURNING id",
+                )
+                .bind(sha256)
+                .bind(size)
+                .bind(rel)
+                .bind(meta.scenario.as_deref())
+                .bind(&meta.hand)
+                .bind(&meta.object_shape)
+                .bind(i64::try_from(meta.duration_ns).unwrap_or(i64::MAX))
+                .bind(serde_json::to_string(meta)?)
+                .fetch_optional(&mut *tx)
+                .await?;
+                if let Some(session_id) = session_id {
+                    let ids = insert_skills(&mut tx, session_id, checked).await?;
+                    inserted.extend(ids.into_iter().zip(checked.iter().map(|c| c.1)));
+                }
+            }
+            tx.commit().await?;
+            Ok::<_, StoreError>(inserted)
+        }
+        .await;
+        sqlx::query("PRAGMA cache_size = -32768")
+            .execute(&mut *conn)
+            .await?;
+        let inserted = result?;
+        let mut index = self.inner.index.write().expect("index lock");
+        for (id, f) in &inserted {
+            index.insert(*id, *f);
+        }
+        Ok(inserted.len())
+    }
+
+    fn row_to_session(row: &SqliteRow) -> Result<Session, StoreError> {
+        let meta: String = row.try_get("meta")?;
+        let skill_ids: String = row.try_get("skill_ids")?;
+        Ok(Session {
+            id: row.try_get("id")?,
+            sha256: row.try_get("sha256")?,
+            size_bytes: row.try_get("size_bytes")?,
+            blob_path: row.try_get("blob_path")?,
+            meta: serde_json::from_str(&meta)?,
+            skill_ids: serde_json::from_str(&skill_ids)?,
+            created_at: row.try_get("created_at")?,
+        })
+    }
+
+    /// Sessions by ascending id, `limit` (1..=1000) per page, after `cursor`.
+    pub async fn list_sessions(
+        &self,
+        limit: u32,
+        cursor: Option<&str>,
+    ) -> Result<Page<Session>, StoreError> {
+        if limit == 0 || limit > MAX_SESSION_LIMIT {
+            return Err(StoreError::InvalidQuery(format!(
+                "limit {limit} is outside 1..={MAX_SESSION_LIMIT}"
+            )));
+        }
+        let after = match cursor {
+            Some(c) => match query::decode_cursor("sessions", false, c)? {
+                query::After::Int(id) => id,
+                query::After::Real(..) => return Err(StoreError::BadCursor),
+            },
+            None => 0,
+        };
+        let rows = sqlx::query(&format!(
+            "SELECT {SESSION_COLUMNS} FROM sessions s WHERE id > ? ORDER BY id LIMIT ?"
+        ))
+        .bind(after)
+        .bind(i64::from(limit) + 1)
+        .fetch_all(&self.inner.pool)
+        .await?;
+        let more = rows.len() > limit as usize;
+        let items = rows
+            .iter()
+            .take(limit as usize)
+            .map(Self::row_to_session)
+            .collect::<Result<Vec<_>, _>>()?;
+        let next_cursor = match (more, items.last()) {
+            (true, Some(last)) => {
+                Some(query::encode_cursor("sessions", query::After::Int(last.id)))
+            }
+            _ => None,
+        };
+        Ok(Page { items, next_cursor })
+    }
+
+    /// One session with its skill ids.
+    pub async fn get_session(&self, id: i64) -> Result<Session, StoreError> {
+        let row = sqlx::query(&format!(
+            "SELECT {SESSION_COLUMNS} FROM sessions s WHERE id = ?"
+        ))
+        .bind(id)
+        .fetch_optional(&self.inner.pool)
+        .await?
+        .ok_or(StoreError::SessionNotFound(id))?;
+        Self::row_to_session(&row)
+    }
+
+    /// Absolute path of a session's MCAP blob.
+    pub async fn session_blob_path(&self, id: i64) -> Result<PathBuf, StoreError> {
+        let rel: String = sqlx::query_scalar("SELECT blob_path FROM sessions WHERE id = ?")
+            .bind(id)
+            .fetch_optional(&self.inner.pool)
+            .await?
+            .ok_or(StoreError::SessionNotFound(id))?;
+        Ok(self.inner.dir.join(rel))
+    }
+
+    /// Deletes a session, its skills and phase rows (one transaction), then its blob.
+    pub async fn delete_session(&self, id: i64) -> Result<(), StoreError> {
+        let _guard = self.inner.blob_lock.write().await;
+        let mut tx = self.inner.pool.begin().await?;
+        let skill_ids: Vec<i64> =
+            sqlx::query_scalar("DELETE FROM skills WHERE session_id = ? RETURNING id")
+                .bind(id)
+                .fetch_all(&mut *tx)
+                .await?;
+        let rel: Option<String> =
+            sqlx::query_scalar("DELETE FROM sessions WHERE id = ? RETURNING blob_path")
+                .bind(id)
+                .fetch_optional(&mut *tx)
+                .await?;
+        let Some(rel) = rel else {
+            tx.rollback().await?;
+            return Err(StoreError::SessionNotFound(id));
+        };
+        tx.commit().await?;
+        self.inner
+            .index
+            .write()
+            .expect("index lock")
+            .remove_many(&skill_ids);
+        if let Err(e) = blob::remove(&self.inner.dir, &rel) {
+            // The rows are gone; a leftover blob is harmless garbage.
+            tracing::warn!(error = %e, "could not remove the blob of deleted session {id}");
+        }
+        Ok(())
+    }
+
+    /// One skill.
+    pub async fn get_skill(&self, id: i64) -> Result<Skill, StoreError> {
+        let row = sqlx::query(&format!(
+            "SELECT {} FROM skills WHERE id = ?",
+            query::SKILL_COLUMNS
+        ))
+        .bind(id)
+        .fetch_optional(&self.inner.pool)
+        .await?
+        .ok_or(StoreError::SkillNotFound(id))?;
+        row_to_skill(&row)
+    }
+
+    /// Deletes one skill and its phase rows (its session stays).
+    pub async fn delete_skill(&self, id: i64) -> Result<(), StoreError> {
+        let _guard = self.inner.blob_lock.write().await;
+        let done = sqlx::query("DELETE FROM skills WHERE id = ?")
+            .bind(id)
+            .execute(&self.inner.pool)
+            .await?;
+        if done.rows_affected() == 0 {
+            return Err(StoreError::SkillNotFound(id));
+        }
+        self.inner
+            .index
+            .write()
+            .expect("index lock")
+            .remove_many(&[id]);
+        Ok(())
+    }
+
+    /// Skills matching the filters of `q`, sorted by `q.sort`, one page after `q.cursor`.
+    pub async fn query_skills(&self, q: &SkillQuery) -> Result<Page<Skill>, StoreError> {
+        let mut b = query::build(q)?;
+        let rows = b.build().fetch_all(&self.inner.pool).await?;
+        let limit = q.limit as usize;
+        let more = rows.len() > limit;
+        let items = rows
+            .iter()
+            .take(limit)
+            .map(row_to_skill)
+            .collect::<Result<Vec<_>, _>>()?;
+        let next_cursor = match (more, items.last()) {
+            (true, Some(last)) => Some(query::cursor_after(q.sort, last)),
+            _ => None,
+        };
+        Ok(Page { items, next_cursor })
+    }
+
+    /// The `k` skills nearest to `feature` (Euclidean distance in feature space, nearest
+    /// first, ties by id) as (skill id, distance). CPU only: about 1 ms per 100 000 skills.
+    pub fn nearest(&self, feature: &[f32], k: usize) -> Result<Vec<(i64, f32)>, StoreError> {
+        let q: [f32; FEATURE_DIM] = feature.try_into().map_err(|_| {
+            StoreError::InvalidQuery(format!(
+                "feature has {} values, expected {FEATURE_DIM}",
+                feature.len()
+            ))
+        })?;
+        if q.iter().any(|x| !x.is_finite()) {
+            return Err(StoreError::InvalidQuery("feature must be finite".into()));
+        }
+        Ok(self
+            .inner
+            .index
+            .read()
+            .expect("index lock")
+            .nearest(&q, k, None))
+    }
+
+    /// The `k` skills nearest to skill `id`, leaving out the skill itself.
+    pub fn nearest_to_skill(&self, id: i64, k: usize) -> Result<Vec<(i64, f32)>, StoreError> {
+        let index = self.inner.index.read().expect("index lock");
+        let q = index.get(id).ok_or(StoreError::SkillNotFound(id))?;
+        Ok(index.nearest(&q, k, Some(id)))
+    }
+
+    /// Runs SQLite's `integrity_check` and `foreign_key_check`; `Corrupt` if either complains.
+    pub async fn integrity_check(&self) -> Result<(), StoreError> {
+        let msgs: Vec<String> = sqlx::query_scalar("PRAGMA integrity_check")
+            .fetch_all(&self.inner.pool)
+            .await?;
+        if msgs != ["ok"] {
+            return Err(StoreError::Corrupt(msgs.join("; ")));
+        }
+        let fk = sqlx::query("PRAGMA foreign_key_check")
+            .fetch_all(&self.inner.pool)
+            .await?;
+        if !fk.is_empty() {
+            return Err(StoreError::Corrupt(format!(
+                "{} dangling foreign keys",
+                fk.len()
+            )));
+        }
+        Ok(())
+    }
+
+    /// Updates SQLite's planner statistics (`PRAGMA optimize`); worth it after bulk inserts.
+    pub async fn optimize(&self) -> Result<(), StoreError> {
+        let mut conn = self.inner.pool.acquire().await?;
+        sqlx::query("PRAGMA analysis_limit = 1000")
+            .execute(&mut *conn)
+            .await?;
+        sqlx::query("ANALYZE").execute(&mut *conn).await?;
+        Ok(())
+    }
+}

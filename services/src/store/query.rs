@@ -1,0 +1,412 @@
+//! Skill queries: filters, sort keys and opaque keyset cursors.
+
+use std::str::FromStr;
+
+use serde::{Deserialize, Serialize};
+use sqlx::{QueryBuilder, Sqlite};
+
+use super::error::StoreError;
+
+/// Largest page size.
+pub const MAX_LIMIT: u32 = 1000;
+/// Page size when none is given.
+pub const DEFAULT_LIMIT: u32 = 50;
+
+/// Column to sort skills by; ties are broken by id in the same direction.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum SortField {
+    /// Skill id (insertion order).
+    #[default]
+    Id,
+    /// Ferrari-Canny ε quality.
+    Quality,
+    /// Object mass.
+    Mass,
+    /// Skill duration.
+    Duration,
+}
+
+/// Sort direction.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum SortOrder {
+    /// Smallest first.
+    #[default]
+    Asc,
+    /// Largest first.
+    Desc,
+}
+
+/// A sort: field and direction. Parses from `quality`, `quality:desc` or `-quality`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+pub struct SortKey {
+    /// Column to sort by.
+    pub field: SortField,
+    /// Direction.
+    pub order: SortOrder,
+}
+
+impl SortKey {
+    /// A sort by `field` in `order`.
+    pub fn new(field: SortField, order: SortOrder) -> Self {
+        SortKey { field, order }
+    }
+
+    fn column(self) -> &'static str {
+        match self.field {
+            SortField::Id => "id",
+            SortField::Quality => "quality",
+            SortField::Mass => "object_mass",
+            SortField::Duration => "duration_s",
+        }
+    }
+
+    fn tag(self) -> String {
+        let f = match self.field {
+            SortField::Id => "id",
+            SortField::Quality => "quality",
+            SortField::Mass => "mass",
+            SortField::Duration => "duration",
+        };
+        let o = match self.order {
+            SortOrder::Asc => "asc",
+            SortOrder::Desc => "desc",
+        };
+        format!("{f}:{o}")
+    }
+}
+
+impl FromStr for SortKey {
+    type Err = StoreError;
+
+    fn from_str(s: &str) -> Result<Self, StoreError> {
+        let (name, order) = if let Some(rest) = s.strip_prefix('-') {
+            (rest, SortOrder::Desc)
+        } else if let Some((name, dir)) = s.split_once(':') {
+            let order = match dir {
+                "asc" => SortOrder::Asc,
+                "desc" => SortOrder::Desc,
+                _ => {
+                    return Err(StoreError::InvalidQuery(format!(
+                        "sort direction {dir:?} is not asc or desc"
+                    )))
+                }
+            };
+            (name, order)
+        } else {
+            (s, SortOrder::Asc)
+        };
+        let field = match name {
+            "id" => SortField::Id,
+            "quality" => SortField::Quality,
+            "mass" => SortField::Mass,
+            "duration" => SortField::Duration,
+            _ => {
+                return Err(StoreError::InvalidQuery(format!(
+                    "sort field {name:?} is not one of id, quality, mass, duration"
+                )))
+            }
+        };
+        Ok(SortKey { field, order })
+    }
+}
+
+impl std::fmt::Display for SortKey {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(&self.tag())
+    }
+}
+
+/// Filters, sort and page of a skill query. Every filter is optional; ranges are inclusive.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default)]
+pub struct SkillQuery {
+    /// Object shape equals (`sphere`, `box`, `cylinder`).
+    pub object_shape: Option<String>,
+    /// Object mass at least, kg.
+    pub mass_min: Option<f64>,
+    /// Object mass at most, kg.
+    pub mass_max: Option<f64>,
+    /// Friction coefficient at least.
+    pub mu_min: Option<f64>,
+    /// Friction coefficient at most.
+    pub mu_max: Option<f64>,
+    /// Number of contacts equals.
+    pub contact_count: Option<i64>,
+    /// Contact model equals.
+    pub contact_model: Option<String>,
+    /// Grasp type equals.
+    pub grasp_type: Option<String>,
+    /// Ferrari-Canny ε at least.
+    pub min_quality: Option<f64>,
+    /// The skill has a phase of this name (with `phase_min_s`/`phase_max_s`: of that duration).
+    pub phase: Option<String>,
+    /// Duration of `phase` at least, s. Needs `phase`.
+    pub phase_min_s: Option<f64>,
+    /// Duration of `phase` at most, s. Needs `phase`.
+    pub phase_max_s: Option<f64>,
+    /// Sort order (default: id ascending).
+    pub sort: SortKey,
+    /// Page size, 1..=1000 (default 50).
+    pub limit: u32,
+    /// `next_cursor` of the previous page, or `None` for the first page.
+    pub cursor: Option<String>,
+}
+
+impl Default for SkillQuery {
+    fn default() -> Self {
+        SkillQuery {
+            object_shape: None,
+            mass_min: None,
+            mass_max: None,
+            mu_min: None,
+            mu_max: None,
+            contact_count: None,
+            contact_model: None,
+            grasp_type: None,
+            min_quality: None,
+            phase: None,
+            phase_min_s: None,
+            phase_max_s: None,
+            sort: SortKey::default(),
+            limit: DEFAULT_LIMIT,
+            cursor: None,
+        }
+    }
+}
+
+/// Position after the last row of a page: its sort value and id.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub(crate) enum After {
+    Int(i64),
+    Real(f64, i64),
+}
+
+/// Encodes a keyset position with the sort it belongs to, as hex (opaque to callers).
+pub(crate) fn encode_cursor(tag: &str, after: After) -> String {
+    let text = match after {
+        After::Int(id) => format!("v1|{tag}|{id}"),
+        After::Real(v, id) => format!("v1|{tag}|{:016x}|{id}", v.to_bits()),
+    };
+    hex::encode(text)
+}
+
+/// Decodes a cursor made by [`encode_cursor`] for the same `tag`.
+pub(crate) fn decode_cursor(tag: &str, real: bool, cursor: &str) -> Result<After, StoreError> {
+    let bytes = hex::decode(cursor).map_err(|_| StoreError::BadCursor)?;
+    let text = String::from_utf8(bytes).map_err(|_| StoreError::BadCursor)?;
+    let mut parts = text.split('|');
+    if parts.next() != Some("v1") || parts.next() != Some(tag) {
+        return Err(StoreError::BadCursor);
+    }
+    let after = if real {
+        let bits = parts
+            .next()
+            .and_then(|p| u64::from_str_radix(p, 16).ok())
+            .ok_or(StoreError::BadCursor)?;
+        let v = f64::from_bits(bits);
+        let id = parts
+            .next()
+            .and_then(|p| p.parse().ok())
+            .ok_or(StoreError::BadCursor)?;
+        if !v.is_finite() {
+            return Err(StoreError::BadCursor);
+        }
+        After::Real(v, id)
+    } else {
+        After::Int(
+            parts
+                .next()
+                .and_then(|p| p.parse().ok())
+                .ok_or(StoreError::BadCursor)?,
+        )
+    };
+    if parts.next().is_some() {
+        return Err(StoreError::BadCursor);
+    }
+    Ok(after)
+}
+
+fn check_range(name: &str, min: Option<f64>, max: Option<f64>) -> Result<(), StoreError> {
+    for (bound, v) in [("min", min), ("max", max)] {
+        if let Some(v) = v {
+            if !v.is_finite() {
+                return Err(StoreError::InvalidQuery(format!(
+                    "{name} {bound} must be finite"
+                )));
+            }
+        }
+    }
+    if let (Some(lo), Some(hi)) = (min, max) {
+        if lo > hi {
+            return Err(StoreError::InvalidQuery(format!(
+                "{name} min {lo} is above max {hi}"
+            )));
+        }
+    }
+    Ok(())
+}
+
+/// Columns of a skill row, in the order `row_to_skill` reads them.
+pub(crate) const SKILL_COLUMNS: &str = "id, session_id, object_shape, object_mass, mu, \
+     contact_count, contact_model, grasp_type, quality, volume, duration_s, start_ns, end_ns, \
+     phase_durations, feature, params, created_at";
+
+/// Validates `q` and builds its SQL (fetching `limit + 1` rows to see whether more follow).
+pub(crate) fn build(q: &SkillQuery) -> Result<QueryBuilder<'_, Sqlite>, StoreError> {
+    if q.limit == 0 || q.limit > MAX_LIMIT {
+        return Err(StoreError::InvalidQuery(format!(
+            "limit {} is outside 1..={MAX_LIMIT}",
+            q.limit
+        )));
+    }
+    check_range("mass", q.mass_min, q.mass_max)?;
+    check_range("mu", q.mu_min, q.mu_max)?;
+    check_range("quality", q.min_quality, None)?;
+    check_range("phase duration", q.phase_min_s, q.phase_max_s)?;
+    if q.phase.is_none() && (q.phase_min_s.is_some() || q.phase_max_s.is_some()) {
+        return Err(StoreError::InvalidQuery(
+            "phase_min_s and phase_max_s need phase (the phase name)".into(),
+        ));
+    }
+    let sort = q.sort;
+    let col = sort.column();
+    let real = sort.field != SortField::Id;
+    let after = match &q.cursor {
+        Some(c) => Some(decode_cursor(&sort.tag(), real, c)?),
+        None => None,
+    };
+
+    // Plan: walk the index that yields the sort order (with an equality prefix where a
+    // composite index has one) and test the other filters row by row, so that a page costs
+    // about `limit / selectivity` index steps whatever the table size, instead of sorting every
+    // match of a range filter. A unary `+` keeps SQLite from driving the scan by that column.
+    let shape_leads =
+        q.object_shape.is_some() && matches!(sort.field, SortField::Quality | SortField::Mass);
+    let grasp_leads = !shape_leads && q.grasp_type.is_some() && sort.field == SortField::Quality;
+    let plus = |driving: bool| if driving { "" } else { "+" };
+    let mut b = QueryBuilder::new(format!("SELECT {SKILL_COLUMNS} FROM skills WHERE 1 = 1"));
+    if let Some(v) = &q.object_shape {
+        b.push(format!(" AND {}object_shape = ", plus(shape_leads)))
+            .push_bind(v.as_str());
+    }
+    let by_mass = sort.field == SortField::Mass;
+    if let Some(v) = q.mass_min {
+        b.push(format!(" AND {}object_mass >= ", plus(by_mass)))
+            .push_bind(v);
+    }
+    if let Some(v) = q.mass_max {
+        b.push(format!(" AND {}object_mass <= ", plus(by_mass)))
+            .push_bind(v);
+    }
+    if let Some(v) = q.mu_min {
+        b.push(" AND +mu >= ").push_bind(v);
+    }
+    if let Some(v) = q.mu_max {
+        b.push(" AND +mu <= ").push_bind(v);
+    }
+    if let Some(v) = q.contact_count {
+        b.push(" AND +contact_count = ").push_bind(v);
+    }
+    if let Some(v) = &q.contact_model {
+        b.push(" AND +contact_model = ").push_bind(v.as_str());
+    }
+    if let Some(v) = &q.grasp_type {
+        b.push(format!(" AND {}grasp_type = ", plus(grasp_leads)))
+            .push_bind(v.as_str());
+    }
+    if let Some(v) = q.min_quality {
+        let by_quality = sort.field == SortField::Quality;
+        b.push(format!(" AND {}quality >= ", plus(by_quality)))
+            .push_bind(v);
+    }
+    if let Some(name) = &q.phase {
+        b.push(
+            " AND EXISTS (SELECT 1 FROM skill_phases p WHERE p.skill_id = skills.id AND p.name = ",
+        )
+        .push_bind(name.as_str());
+        if let Some(v) = q.phase_min_s {
+            b.push(" AND p.duration_s >= ").push_bind(v);
+        }
+        if let Some(v) = q.phase_max_s {
+            b.push(" AND p.duration_s <= ").push_bind(v);
+        }
+        b.push(")");
+    }
+    let (cmp, dir) = match sort.order {
+        SortOrder::Asc => (">", "ASC"),
+        SortOrder::Desc => ("<", "DESC"),
+    };
+    match after {
+        Some(After::Int(id)) => {
+            b.push(format!(" AND id {cmp} ")).push_bind(id);
+        }
+        Some(After::Real(v, id)) => {
+            // `col >= v` (or `<=`) lets SQLite range-scan the index; the OR breaks ties by id.
+            b.push(format!(" AND {col} {cmp}= "))
+                .push_bind(v)
+                .push(format!(" AND ({col} {cmp} "))
+                .push_bind(v)
+                .push(format!(" OR id {cmp} "))
+                .push_bind(id)
+                .push(")");
+        }
+        None => {}
+    }
+    if real {
+        b.push(format!(" ORDER BY {col} {dir}, id {dir}"));
+    } else {
+        b.push(format!(" ORDER BY id {dir}"));
+    }
+    b.push(" LIMIT ").push_bind(i64::from(q.limit) + 1);
+    Ok(b)
+}
+
+/// The cursor pointing after `skill` under `sort`.
+pub(crate) fn cursor_after(sort: SortKey, skill: &super::types::Skill) -> String {
+    let after = match sort.field {
+        SortField::Id => After::Int(skill.id),
+        SortField::Quality => After::Real(skill.quality, skill.id),
+        SortField::Mass => After::Real(skill.object_mass, skill.id),
+        SortField::Duration => After::Real(skill.duration_s, skill.id),
+    };
+    encode_cursor(&sort.tag(), after)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn cursors_round_trip_and_reject_other_sorts() {
+        let c = encode_cursor("quality:desc", After::Real(0.25, 7));
+        assert_eq!(
+            decode_cursor("quality:desc", true, &c).unwrap(),
+            After::Real(0.25, 7)
+        );
+        assert!(matches!(
+            decode_cursor("mass:desc", true, &c),
+            Err(StoreError::BadCursor)
+        ));
+        let c = encode_cursor("id:asc", After::Int(42));
+        assert_eq!(decode_cursor("id:asc", false, &c).unwrap(), After::Int(42));
+        assert!(matches!(
+            decode_cursor("id:asc", false, "zz"),
+            Err(StoreError::BadCursor)
+        ));
+    }
+
+    #[test]
+    fn sort_keys_parse_from_their_short_forms() {
+        assert_eq!(
+            "-quality".parse::<SortKey>().unwrap(),
+            SortKey::new(SortField::Quality, SortOrder::Desc)
+        );
+        assert_eq!(
+            "mass:asc".parse::<SortKey>().unwrap(),
+            SortKey::new(SortField::Mass, SortOrder::Asc)
+        );
+        assert!("colour".parse::<SortKey>().is_err());
+    }
+}

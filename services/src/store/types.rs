@@ -1,0 +1,140 @@
+//! Plain data types of the store: what goes in (sessions, skills) and what comes out.
+
+use serde::{Deserialize, Serialize};
+
+/// Length of a skill's feature vector for similarity search.
+pub const FEATURE_DIM: usize = 16;
+
+/// Metadata of a recorded session, stored beside its MCAP blob.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct SessionMeta {
+    /// Name of the simulated operator scenario, if the session was simulated.
+    pub scenario: Option<String>,
+    /// Seed of the simulation, if simulated.
+    pub seed: Option<u64>,
+    /// Name of the hand (glove) that performed the session, e.g. `glove10`.
+    pub hand: String,
+    /// Object shape: `sphere`, `box` or `cylinder`.
+    pub object_shape: String,
+    /// Object mass, kg.
+    pub object_mass: f64,
+    /// Coulomb friction coefficient between fingertips and object (dimensionless).
+    pub mu: f64,
+    /// Length of the session, ns.
+    pub duration_ns: u64,
+    /// Wall-clock start time (RFC 3339), if known.
+    pub started_at: Option<String>,
+    /// Any further parameters (free-form JSON; `null` when none).
+    pub extra: serde_json::Value,
+}
+
+/// A skill to insert: the hand-independent parameters of one grasp, in the object frame B.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct NewSkill {
+    /// Object shape: `sphere`, `box` or `cylinder`.
+    pub object_shape: String,
+    /// Object mass, kg.
+    pub object_mass: f64,
+    /// Coulomb friction coefficient (dimensionless).
+    pub mu: f64,
+    /// Number of fingertip contacts during the grasp.
+    pub contact_count: i64,
+    /// Contact model: `frictionless`, `point_with_friction` or `soft_finger`.
+    pub contact_model: String,
+    /// Grasp type label, e.g. `precision-2vf`, `power-3vf`.
+    pub grasp_type: String,
+    /// Ferrari-Canny ε grasp quality (largest disturbance wrench ball resisted; N or N·m scale).
+    pub quality: f64,
+    /// Volume of the grasp wrench space (GraspIt! volume metric).
+    pub volume: f64,
+    /// Duration of the skill, s.
+    pub duration_s: f64,
+    /// Start of the skill in its session, ns since the session's start.
+    pub start_ns: i64,
+    /// End of the skill in its session, ns since the session's start.
+    pub end_ns: i64,
+    /// Phases in order with their durations: (name, seconds).
+    pub phase_durations: Vec<(String, f64)>,
+    /// Feature vector for similarity search, exactly [`FEATURE_DIM`] finite values.
+    pub feature: Vec<f32>,
+    /// The full hand-independent parameters (JSON object).
+    pub params: serde_json::Value,
+}
+
+/// A stored skill.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Skill {
+    /// Skill id.
+    pub id: i64,
+    /// Id of the session the skill was found in.
+    pub session_id: i64,
+    /// Object shape.
+    pub object_shape: String,
+    /// Object mass, kg.
+    pub object_mass: f64,
+    /// Coulomb friction coefficient.
+    pub mu: f64,
+    /// Number of contacts.
+    pub contact_count: i64,
+    /// Contact model.
+    pub contact_model: String,
+    /// Grasp type label.
+    pub grasp_type: String,
+    /// Ferrari-Canny ε grasp quality.
+    pub quality: f64,
+    /// GWS volume metric.
+    pub volume: f64,
+    /// Duration, s.
+    pub duration_s: f64,
+    /// Start, ns since the session's start.
+    pub start_ns: i64,
+    /// End, ns since the session's start.
+    pub end_ns: i64,
+    /// Phases in order with their durations: (name, seconds).
+    pub phase_durations: Vec<(String, f64)>,
+    /// Feature vector ([`FEATURE_DIM`] values).
+    pub feature: Vec<f32>,
+    /// Full hand-independent parameters.
+    pub params: serde_json::Value,
+    /// When the row was inserted (UTC, `YYYY-MM-DDTHH:MM:SS.sssZ`).
+    pub created_at: String,
+}
+
+/// A stored session.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Session {
+    /// Session id.
+    pub id: i64,
+    /// Hex SHA-256 of the MCAP bytes.
+    pub sha256: String,
+    /// Size of the MCAP file, bytes.
+    pub size_bytes: i64,
+    /// Path of the MCAP blob relative to the data directory.
+    pub blob_path: String,
+    /// Session metadata.
+    pub meta: SessionMeta,
+    /// Ids of the session's skills, ascending.
+    pub skill_ids: Vec<i64>,
+    /// When the row was inserted (UTC, `YYYY-MM-DDTHH:MM:SS.sssZ`).
+    pub created_at: String,
+}
+
+/// Result of [`crate::store::Store::ingest`].
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+pub struct IngestOutcome {
+    /// Id of the session (new or existing).
+    pub session_id: i64,
+    /// `true` if this call stored the session, `false` if the same bytes were already stored.
+    pub created: bool,
+    /// Ids of the session's skills, ascending.
+    pub skill_ids: Vec<i64>,
+}
+
+/// One page of results.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Page<T> {
+    /// The items of this page.
+    pub items: Vec<T>,
+    /// Cursor for the next page; `None` on the last page.
+    pub next_cursor: Option<String>,
+}

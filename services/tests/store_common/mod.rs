@@ -1,0 +1,37 @@
+//! Helpers shared by the store tests: deterministic fake MCAP bytes, metadata and skills.
+#![allow(dead_code)]
+
+use services::store::bench::{synthetic_skill, SplitMix64};
+use services::store::{NewSkill, SessionMeta};
+
+/// Deterministic pseudo-MCAP bytes number `i` of `len` bytes (distinct for distinct `i`).
+pub fn fake_mcap(i: u64, len: usize) -> Vec<u8> {
+    let mut rng = SplitMix64::new(i.wrapping_mul(0x1234_5678_9ABC_DEF1) ^ 0xC0FFEE);
+    let mut out = format!("fake mcap {i}\n").into_bytes();
+    while out.len() < len {
+        out.extend_from_slice(&rng.next_u64().to_le_bytes());
+    }
+    out.truncate(len.max(16));
+    out
+}
+
+/// Metadata of a test session; `extra` records `i` and the number of skills.
+pub fn meta(i: u64, n_skills: usize) -> SessionMeta {
+    SessionMeta {
+        scenario: Some("test".into()),
+        seed: Some(i),
+        hand: "glove10".into(),
+        object_shape: "sphere".into(),
+        object_mass: 0.5,
+        mu: 0.8,
+        duration_ns: 10_000_000_000,
+        started_at: Some("2026-01-01T00:00:00Z".into()),
+        extra: serde_json::json!({ "i": i, "skills": n_skills }),
+    }
+}
+
+/// `n` synthetic skills drawn from `seed`.
+pub fn skills(seed: u64, n: usize) -> Vec<NewSkill> {
+    let mut rng = SplitMix64::new(seed);
+    (0..n).map(|_| synthetic_skill(&mut rng)).collect()
+}

@@ -1,0 +1,287 @@
+//! Store tests: skill filters, sorting and cursor pagination.
+
+mod store_common;
+
+use std::collections::HashSet;
+
+use services::store::bench::generate_synthetic;
+use services::store::{Skill, SkillQuery, SortField, SortKey, SortOrder, Store, StoreError};
+
+/// Every skill of the store, read one page at a time.
+async fn walk(store: &Store, q: &SkillQuery) -> Vec<Skill> {
+    let mut q = q.clone();
+    let mut out = Vec::new();
+    loop {
+        let page = store.query_skills(&q).await.unwrap();
+        assert!(page.items.len() <= q.limit as usize);
+        out.extend(page.items);
+        match page.next_cursor {
+            Some(c) => q.cursor = Some(c),
+            None => return out,
+        }
+    }
+}
+
+fn matches(q: &SkillQuery, s: &Skill) -> bool {
+    let ge = |v: f64, b: Option<f64>| b.is_none_or(|b| v >= b);
+    let le = |v: f64, b: Option<f64>| b.is_none_or(|b| v <= b);
+    q.object_shape.as_ref().is_none_or(|x| *x == s.object_shape)
+        && ge(s.object_mass, q.mass_min)
+        && le(s.object_mass, q.mass_max)
+        && ge(s.mu, q.mu_min)
+        && le(s.mu, q.mu_max)
+        && q.contact_count.is_none_or(|x| x == s.contact_count)
+        && q.contact_model
+            .as_ref()
+            .is_none_or(|x| *x == s.contact_model)
+        && q.grasp_type.as_ref().is_none_or(|x| *x == s.grasp_type)
+        && ge(s.quality, q.min_quality)
+        && q.phase.as_ref().is_none_or(|p| {
+            s.phase_durations
+                .iter()
+                .any(|(n, d)| n == p && ge(*d, q.phase_min_s) && le(*d, q.phase_max_s))
+        })
+}
+
+fn sort_value(sort: SortKey, s: &Skill) -> f64 {
+    match sort.field {
+        SortField::Id => s.id as f64,
+        SortField::Quality => s.quality,
+        SortField::Mass => s.object_mass,
+        SortField::Duration => s.duration_s,
+    }
+}
+
+#[tokio::test]
+async fn filters_sorts_and_cursors_walk_every_matching_skill_exactly_once() {
+    let tmp = tempfile::tempdir().unwrap();
+    let store = Store::open(tmp.path()).await.unwrap();
+    generate_synthetic(&store, 2500, 11).await.unwrap();
+    let all = walk(
+        &store,
+        &SkillQuery {
+            limit: 1000,
+            ..SkillQuery::default()
+        },
+    )
+    .await;
+    assert_eq!(all.len(), 2500);
+
+    let filters = vec![
+        SkillQuery::default(),
+        SkillQuery {
+            object_shape: Some("box".into()),
+            ..SkillQuery::default()
+        },
+        SkillQuery {
+            mass_min: Some(0.5),
+            mass_max: Some(1.0),
+            ..SkillQuery::default()
+        },
+        SkillQuery {
+            mu_min: Some(0.6),
+            mu_max: Some(0.9),
+            contact_count: Some(3),
+            ..SkillQuery::default()
+        },
+        SkillQuery {
+            contact_model: Some("soft_finger".into()),
+            grasp_type: Some("power-3vf".into()),
+            ..SkillQuery::default()
+        },
+        SkillQuery {
+            min_quality: Some(0.4),
+            object_shape: Some("sphere".into()),
+            ..SkillQuery::default()
+        },
+        SkillQuery {
+            phase: Some("lift".into()),
+            phase_min_s: Some(0.5),
+            phase_max_s: Some(0.7),
+            ..SkillQuery::default()
+        },
+        SkillQuery {
+            phase: Some("retreat".into()),
+            ..SkillQuery::default()
+        },
+    ];
+    let sorts = [
+        SortKey::new(SortField::Id, SortOrder::Asc),
+        SortKey::new(SortField::Id, SortOrder::Desc),
+        SortKey::new(SortField::Quality, SortOrder::Desc),
+        SortKey::new(SortField::Mass, SortOrder::Asc),
+        SortKey::new(SortField::Duration, SortOrder::Desc),
+    ];
+    for f in &filters {
+        let expected: HashSet<i64> = all.iter().filter(|s| matches(f, s)).map(|s| s.id).collect();
+        for sort in sorts {
+            let q = SkillQuery {
+                sort,
+                limit: 37,
+                ..f.clone()
+            };
+            let got = walk(&store, &q).await;
+            let ids: Vec<i64> = got.iter().map(|s| s.id).collect();
+            let unique: HashSet<i64> = ids.iter().copied().collect();
+            assert_eq!(unique.len(), ids.len(), "a row came twice for {q:?}");
+            assert_eq!(unique, expected, "wrong rows for {q:?}");
+            for w in got.windows(2) {
+                let (a, b) = (sort_value(sort, &w[0]), sort_value(sort, &w[1]));
+                let ordered = match sort.order {
+                    SortOrder::Asc => a < b || (a == b && w[0].id < w[1].id),
+                    SortOrder::Desc => a > b || (a == b && w[0].id > w[1].id),
+                };
+                assert!(
+                    ordered,
+                    "out of order for {sort}: {} then {}",
+                    w[0].id, w[1].id
+                );
+            }
+        }
+    }
+}
+
+#[tokio::test]
+async fn ties_in_the_sort_value_are_paged_through_by_id() {
+    let tmp = tempfile::tempdir().unwrap();
+    let store = Store::open(tmp.path()).await.unwrap();
+    let mut same = store_common::skills(5, 30);
+    for s in &mut same {
+        s.quality = 0.25;
+    }
+    store
+        .ingest(
+            &store_common::fake_mcap(5, 100),
+            store_common::meta(5, 30),
+            same,
+        )
+        .await
+        .unwrap();
+    let q = SkillQuery {
+        sort: SortKey::new(SortField::Quality, SortOrder::Desc),
+        limit: 4,
+        ..SkillQuery::default()
+    };
+    let got: Vec<i64> = walk(&store, &q).await.iter().map(|s| s.id).collect();
+    let mut expected = got.clone();
+    expected.sort_unstable_by(|a, b| b.cmp(a));
+    expected.dedup();
+    assert_eq!(got, expected);
+    assert_eq!(got.len(), 30);
+}
+
+#[tokio::test]
+async fn a_malformed_or_foreign_cursor_is_a_bad_cursor() {
+    let tmp = tempfile::tempdir().unwrap();
+    let store = Store::open(tmp.path()).await.unwrap();
+    generate_synthetic(&store, 30, 3).await.unwrap();
+    for bad in [
+        "",
+        "zz",
+        "not hex at all",
+        "00ff00",
+        &hex::encode("v1|id:asc|x"),
+    ] {
+        let q = SkillQuery {
+            cursor: Some(bad.to_string()),
+            ..SkillQuery::default()
+        };
+        assert!(
+            matches!(store.query_skills(&q).await, Err(StoreError::BadCursor)),
+            "{bad:?}"
+        );
+    }
+    let first = store
+        .query_skills(&SkillQuery {
+            limit: 5,
+            ..SkillQuery::default()
+        })
+        .await
+        .unwrap();
+    let cursor = first.next_cursor.unwrap();
+    // A cursor of one sort order is refused for another.
+    let q = SkillQuery {
+        cursor: Some(cursor.clone()),
+        sort: SortKey::new(SortField::Quality, SortOrder::Asc),
+        ..SkillQuery::default()
+    };
+    assert!(matches!(
+        store.query_skills(&q).await,
+        Err(StoreError::BadCursor)
+    ));
+    // Session cursors and skill cursors do not mix.
+    assert!(matches!(
+        store.list_sessions(10, Some(&cursor)).await,
+        Err(StoreError::BadCursor)
+    ));
+}
+
+#[tokio::test]
+async fn out_of_range_queries_are_invalid() {
+    let tmp = tempfile::tempdir().unwrap();
+    let store = Store::open(tmp.path()).await.unwrap();
+    let bad = [
+        SkillQuery {
+            limit: 0,
+            ..SkillQuery::default()
+        },
+        SkillQuery {
+            limit: 1001,
+            ..SkillQuery::default()
+        },
+        SkillQuery {
+            mass_min: Some(2.0),
+            mass_max: Some(1.0),
+            ..SkillQuery::default()
+        },
+        SkillQuery {
+            mu_min: Some(f64::NAN),
+            ..SkillQuery::default()
+        },
+        SkillQuery {
+            phase_min_s: Some(1.0),
+            ..SkillQuery::default()
+        },
+    ];
+    for q in bad {
+        assert!(
+            matches!(
+                store.query_skills(&q).await,
+                Err(StoreError::InvalidQuery(_))
+            ),
+            "{q:?}"
+        );
+    }
+    assert!(matches!(
+        store.list_sessions(0, None).await,
+        Err(StoreError::InvalidQuery(_))
+    ));
+    assert!("-colour".parse::<SortKey>().is_err());
+}
+
+#[tokio::test]
+async fn sessions_page_through_in_id_order() {
+    let tmp = tempfile::tempdir().unwrap();
+    let store = Store::open(tmp.path()).await.unwrap();
+    for i in 0..7 {
+        store
+            .ingest(
+                &store_common::fake_mcap(i, 64),
+                store_common::meta(i, 1),
+                store_common::skills(i, 1),
+            )
+            .await
+            .unwrap();
+    }
+    let mut cursor = None;
+    let mut ids = Vec::new();
+    loop {
+        let page = store.list_sessions(3, cursor.as_deref()).await.unwrap();
+        ids.extend(page.items.iter().map(|s| s.id));
+        match page.next_cursor {
+            Some(c) => cursor = Some(c),
+            None => break,
+        }
+    }
+    assert_eq!(ids, (1..=7).collect::<Vec<i64>>());
+}
