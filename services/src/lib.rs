@@ -2,10 +2,12 @@
 //!
 //! - [`mcap_io`]: MCAP session files (write, read untrusted, salvage).
 //! - [`foxglove`]: serde types for the Foxglove schemas we record.
+//! - [`session`]: grasp sessions: topics, recorder, reader, glove import.
 //! - [`error`]: the crate's error type.
 
 pub mod error;
 pub mod foxglove;
 pub mod mcap_io;
+pub mod session;
 
 pub use error::RecordingError;
