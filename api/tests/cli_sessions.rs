@@ -181,7 +181,8 @@ fn simulate_rejects_bad_scenario_files_naming_the_field() {
         "object": { "shape": "sphere", "radius": 0.04, "mass": 0.5, "mu": 0.8 },
         "tasks": [ { "phase": "approach", "duration": 0.2 } ],
     });
-    let cases: Vec<(&str, Box<dyn Fn(&mut Value)>, &str)> = vec![
+    type Edit = Box<dyn Fn(&mut Value)>;
+    let cases: Vec<(&str, Edit, &str)> = vec![
         (
             "negative mass",
             Box::new(|v| v["object"]["mass"] = (-1.0).into()),
