@@ -101,7 +101,7 @@ pub struct SimulateArgs {
     seed: Option<u64>,
     /// Simulated seconds: cuts the script short or extends its last phase (default: the
     /// script's length).
-    #[arg(long)]
+    #[arg(long, allow_negative_numbers = true)]
     duration: Option<f64>,
     /// The session file to write (MCAP).
     #[arg(long)]
@@ -237,7 +237,7 @@ pub fn run_simulate(a: SimulateArgs) -> Result<(), CliError> {
                 time_ns / 1_000_000
             ))
         }
-        _ => CliError(format!("{}: {e}", scenario.name)),
+        _ => CliError(e.to_string()),
     })?;
     let report = SimulateReport::new(&scenario, &a.out, &summary, start.elapsed().as_secs_f64());
     if a.json {

@@ -669,7 +669,8 @@ impl Messages {
 /// Runs `scenario` (glove10, 1 kHz) for its script's length or `duration` seconds and records
 /// every tick into `out`. `progress(done, total)` is called every 100 ticks and at the end.
 ///
-/// If the simulation fails midway, the file is finished with every tick before the failure
+/// A scenario that cannot be set up is [`RecordingError::InvalidInput`] (naming the field) and
+/// writes no file. If the simulation fails midway, the file is finished with every tick before the failure
 /// (it reads) and [`RecordingError::Simulation`] is returned with the failing tick's time.
 pub fn record_simulation(
     scenario: &Scenario,
@@ -677,8 +678,13 @@ pub fn record_simulation(
     out: &Path,
     mut progress: impl FnMut(u64, u64),
 ) -> Result<RecordSummary> {
-    let mut sim = Simulation::new(scenario, HandModel::glove10(), duration)
-        .map_err(|source| RecordingError::Simulation { time_ns: 0, source })?;
+    // Set-up errors (a bad field, an unreachable object, a bad duration) come before any file.
+    let mut sim = Simulation::new(scenario, HandModel::glove10(), duration).map_err(|e| {
+        RecordingError::InvalidInput {
+            location: format!("scenario {:?}", scenario.name),
+            detail: e.to_string(),
+        }
+    })?;
     let object_json = serde_json::to_string(&scenario.object).unwrap_or_default();
     let scenario_json = serde_json::to_string(scenario).unwrap_or_default();
     let info = SessionInfo {
