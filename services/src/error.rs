@@ -156,6 +156,30 @@ pub enum RecordingError {
         path: PathBuf,
     },
 
+    /// The simulation or the DFS failed at a tick; the session file holds every tick before it.
+    #[error("simulation failed at t = {:.3} s: {source}", *time_ns as f64 * 1e-9)]
+    Simulation {
+        /// Time of the failing tick, ns since the session start.
+        time_ns: u64,
+        /// The DFS error.
+        #[source]
+        source: dfs_core::DfsError,
+    },
+
+    /// An input to be imported or replayed is malformed; `location` names the line, message
+    /// or field.
+    #[error("{location}: {detail}")]
+    InvalidInput {
+        /// Where: e.g. `glove.csv line 7, column tau_index_mcp`.
+        location: String,
+        /// What is wrong.
+        detail: String,
+    },
+
+    /// The writer thread died (panicked) without reporting an error.
+    #[error("the session writer thread panicked")]
+    WriterThreadPanicked,
+
     /// An error reported by the `mcap` crate while writing.
     #[error("MCAP write error: {0}")]
     Mcap(#[from] mcap::McapError),

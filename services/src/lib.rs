@@ -2,13 +2,14 @@
 //!
 //! - [`mcap_io`]: MCAP session files (write, read untrusted, salvage).
 //! - [`foxglove`]: serde types for the Foxglove schemas we record.
+//! - [`session`]: grasp sessions: topics, recorder, reader, glove import.
 //! - [`store`]: the skill data base (SQLite via sqlx, content-addressed MCAP blobs).
 //! - [`error`]: the crate's error type.
 
 pub mod error;
 pub mod foxglove;
 pub mod mcap_io;
-
+pub mod session;
 pub mod store;
 
 pub use error::RecordingError;

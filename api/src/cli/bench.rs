@@ -20,6 +20,44 @@ pub enum BenchCommand {
         #[arg(long, default_value_t = 200_000)]
         iterations: usize,
     },
+    /// A scenario simulated alone, then simulated and recorded into an MCAP session (written
+    /// to a temporary file, deleted afterwards).
+    Session {
+        /// Print JSON: `{"seconds", "realtime_factor", "file_bytes", "bytes_per_minute", ...}`.
+        #[arg(long)]
+        json: bool,
+        /// Simulated seconds.
+        #[arg(long, default_value_t = 60.0)]
+        duration: f64,
+        /// Built-in scenario.
+        #[arg(long, default_value = "sphere-lift")]
+        scenario: String,
+    },
+}
+
+/// Result of `icms bench session`.
+#[derive(Debug, Serialize)]
+pub struct SessionBench {
+    /// Wall-clock seconds to simulate and record the session.
+    pub seconds: f64,
+    /// Simulated seconds per wall-clock second, simulating and recording.
+    pub realtime_factor: f64,
+    /// Size of the session file (bytes).
+    pub file_bytes: u64,
+    /// File size per simulated minute (bytes).
+    pub bytes_per_minute: f64,
+    /// Wall-clock seconds to simulate alone (no recording).
+    pub simulation_seconds: f64,
+    /// Simulated seconds per wall-clock second, simulating alone.
+    pub simulation_realtime_factor: f64,
+    /// Extra wall-clock seconds that recording adds to the simulation.
+    pub recording_overhead_seconds: f64,
+    /// Messages written.
+    pub messages: u64,
+    /// Ticks simulated.
+    pub ticks: u64,
+    /// Scenario.
+    pub scenario: String,
 }
 
 /// Result of `icms bench tick`.
@@ -54,7 +92,59 @@ pub fn run(c: BenchCommand) -> Result<(), CliError> {
                 Ok(())
             }
         }
+        BenchCommand::Session {
+            json,
+            duration,
+            scenario,
+        } => {
+            let r = bench_session(&scenario, duration)?;
+            if json {
+                print_json(&r)
+            } else {
+                println!(
+                    "{} s of {}: simulate + record {:.3} s ({:.0}× real time), simulate alone {:.3} s ({:.0}×); {} bytes ({:.0} bytes/min), {} messages",
+                    duration, r.scenario, r.seconds, r.realtime_factor, r.simulation_seconds,
+                    r.simulation_realtime_factor, r.file_bytes, r.bytes_per_minute, r.messages
+                );
+                Ok(())
+            }
+        }
     }
+}
+
+fn bench_session(name: &str, duration: f64) -> Result<SessionBench, CliError> {
+    let scenario = dfs_core::scenario::Scenario::builtin(name, 0)
+        .ok_or_else(|| CliError(format!("no built-in scenario {name:?}")))?;
+    let t0 = Instant::now();
+    let mut sim = dfs_core::operator::Simulation::new(
+        &scenario,
+        dfs_core::hand::HandModel::glove10(),
+        Some(duration),
+    )?;
+    while sim.step()? {
+        black_box(sim.output());
+    }
+    let simulation_seconds = t0.elapsed().as_secs_f64();
+    let ticks = sim.ticks();
+    let path = std::env::temp_dir().join(format!("icms-bench-session-{}.mcap", std::process::id()));
+    let t0 = Instant::now();
+    let result = services::session::record_simulation(&scenario, Some(duration), &path, |_, _| {});
+    let seconds = t0.elapsed().as_secs_f64();
+    let _ = std::fs::remove_file(&path);
+    let summary = result?;
+    let simulated = summary.ticks as f64 * 1e-3;
+    Ok(SessionBench {
+        seconds,
+        realtime_factor: simulated / seconds,
+        file_bytes: summary.file_bytes,
+        bytes_per_minute: summary.file_bytes as f64 * 60.0 / simulated,
+        simulation_seconds,
+        simulation_realtime_factor: simulated / simulation_seconds,
+        recording_overhead_seconds: seconds - simulation_seconds,
+        messages: summary.write.messages,
+        ticks,
+        scenario: scenario.name,
+    })
 }
 
 fn bench_tick(iterations: usize) -> Result<TickBench, CliError> {

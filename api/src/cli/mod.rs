@@ -2,6 +2,8 @@
 
 mod bench;
 mod dfs_static;
+mod sessions;
+mod simulate;
 
 use clap::{Parser, Subcommand};
 use std::process::ExitCode;
@@ -19,6 +21,16 @@ enum Command {
     /// Static force analysis of a grasp (paper §3.4): contact intensities, object force,
     /// f_ext, feedback and the optimised force distribution.
     DfsStatic(dfs_static::Args),
+    /// The built-in operator scenarios.
+    Scenarios(simulate::ScenariosArgs),
+    /// Runs a scenario through the closed 1 kHz loop (simulated operator, DFS, glove feedback)
+    /// and records it into an MCAP session file.
+    Simulate(simulate::SimulateArgs),
+    /// Recovers an MCAP file whose writer died, up to its last complete chunk.
+    Salvage(sessions::SalvageArgs),
+    /// Replays a real glove recording (MCAP or CSV) through the DFS against an object into a
+    /// session file.
+    ImportGlove(sessions::ImportArgs),
     /// Benchmarks whose figures BENCHMARKS.md quotes.
     #[command(subcommand)]
     Bench(bench::BenchCommand),
@@ -39,6 +51,10 @@ pub fn run() -> ExitCode {
     let cli = Cli::parse();
     let result = match cli.command {
         Command::DfsStatic(a) => dfs_static::run(a),
+        Command::Scenarios(a) => simulate::run_scenarios(a),
+        Command::Simulate(a) => simulate::run_simulate(a),
+        Command::Salvage(a) => sessions::run_salvage(a),
+        Command::ImportGlove(a) => sessions::run_import(a),
         Command::Bench(b) => bench::run(b),
     };
     match result {

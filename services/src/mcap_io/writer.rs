@@ -31,6 +31,9 @@ pub struct WriterOptions {
     pub flush_interval_ns: u64,
     /// MCAP header `profile` field. Default empty (no ROS profile: plain JSON).
     pub profile: String,
+    /// zstd level (1 = fastest; 0 = zstd's default, 3). Default 0. The recorder uses 1: at
+    /// 1 kHz, compression is most of the writer thread's work.
+    pub compression_level: u32,
 }
 
 impl Default for WriterOptions {
@@ -40,6 +43,7 @@ impl Default for WriterOptions {
             chunk_size: 1024 * 1024,
             flush_interval_ns: 1_000_000_000,
             profile: String::new(),
+            compression_level: 0,
         }
     }
 }
@@ -55,6 +59,7 @@ impl WriterOptions {
         };
         mcap::WriteOptions::new()
             .compression(compression)
+            .compression_level(self.compression_level)
             .compression_threads(0)
             .chunk_size(Some(self.chunk_size))
             .use_chunks(true)

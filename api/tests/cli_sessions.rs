@@ -1,0 +1,258 @@
+//! `icms scenarios`, `simulate`, `salvage` and `import-glove` end to end: the binary as a user
+//! runs it, the files it writes read back with the library.
+
+use serde_json::Value;
+use services::session::read_session;
+use std::path::Path;
+use std::process::Command;
+
+fn icms(args: &[&str]) -> (i32, String, String) {
+    let out = Command::new(env!("CARGO_BIN_EXE_icms"))
+        .args(args)
+        .output()
+        .expect("run icms");
+    (
+        out.status.code().unwrap_or(-1),
+        String::from_utf8_lossy(&out.stdout).into(),
+        String::from_utf8_lossy(&out.stderr).into(),
+    )
+}
+
+fn p(path: &Path) -> &str {
+    path.to_str().unwrap()
+}
+
+#[test]
+fn scenarios_lists_every_builtin_with_a_description() {
+    let (code, out, err) = icms(&["scenarios", "--json"]);
+    assert_eq!(code, 0, "{err}");
+    let v: Value = serde_json::from_str(&out).unwrap();
+    let names: Vec<&str> = v
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|e| e["name"].as_str().unwrap())
+        .collect();
+    assert_eq!(names, dfs_core::scenario::Scenario::BUILTINS);
+    for e in v.as_array().unwrap() {
+        assert!(!e["description"].as_str().unwrap().is_empty());
+        assert!(e["duration_s"].as_f64().unwrap() > 0.0);
+    }
+    let (code, text, _) = icms(&["scenarios"]);
+    assert_eq!(code, 0);
+    assert_eq!(text.lines().count(), names.len());
+}
+
+#[test]
+fn simulate_records_a_session_that_reads_back_and_salvage_recovers_a_truncated_copy() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("s.mcap");
+    let (code, stdout, err) = icms(&[
+        "simulate",
+        "--scenario",
+        "box-pinch-lift",
+        "--seed",
+        "3",
+        "--duration",
+        "2.5",
+        "--out",
+        p(&out),
+        "--json",
+    ]);
+    assert_eq!(code, 0, "{err}");
+    assert!(
+        err.is_empty(),
+        "no progress output when stderr is not a terminal: {err}"
+    );
+    let report: Value = serde_json::from_str(&stdout).unwrap();
+    assert_eq!(report["ticks"], 2500);
+    assert_eq!(report["seed"], 3);
+    assert_eq!(report["messages_per_topic"]["/dfs/contacts"], 2500);
+    let session = read_session(&out).unwrap();
+    assert_eq!(session.ticks(), 2500);
+    assert_eq!(session.metadata["seed"], "3");
+
+    // A writer that died mid-file: cut the file at 70 %.
+    let bytes = std::fs::read(&out).unwrap();
+    let cut = dir.path().join("cut.mcap");
+    std::fs::write(&cut, &bytes[..bytes.len() * 7 / 10]).unwrap();
+    assert!(read_session(&cut).is_err());
+    let fixed = dir.path().join("fixed.mcap");
+    let (code, stdout, err) = icms(&["salvage", p(&cut), "--out", p(&fixed), "--json"]);
+    assert_eq!(code, 0, "{err}");
+    let report: Value = serde_json::from_str(&stdout).unwrap();
+    assert_eq!(report["input_was_complete"], false);
+    assert!(report["messages"].as_u64().unwrap() > 0);
+    let salvaged = read_session(&fixed).unwrap();
+    assert!(
+        salvaged.ticks() >= 1000 && salvaged.ticks() < 2500,
+        "{}",
+        salvaged.ticks()
+    );
+    assert_eq!(
+        salvaged.joint_states[..],
+        session.joint_states[..salvaged.ticks()]
+    );
+    assert_eq!(salvaged.metadata["scenario"], "box-pinch-lift");
+
+    // The simulated session's /joint_states (foxglove.JointStates, 50 Hz) is a glove recording.
+    let imported = dir.path().join("imported.mcap");
+    let (code, stdout, err) = icms(&[
+        "import-glove",
+        "--input",
+        p(&out),
+        "--object",
+        "box-pinch-lift",
+        "--out",
+        p(&imported),
+        "--json",
+    ]);
+    assert_eq!(code, 0, "{err}");
+    let report: Value = serde_json::from_str(&stdout).unwrap();
+    assert_eq!(report["input_samples"], 125);
+    let back = read_session(&imported).unwrap();
+    assert_eq!(back.ticks(), 2481); // 0 … 2480 ms
+    assert!(back.phases.is_empty());
+}
+
+#[test]
+fn import_glove_reads_a_csv_and_rejects_bad_columns_naming_the_line() {
+    let dir = tempfile::tempdir().unwrap();
+    let hand = dfs_core::hand::HandModel::glove10();
+    let mut header = vec!["time_s".to_owned()];
+    header.extend(hand.dof_names.iter().cloned());
+    header.extend(hand.dof_names.iter().map(|n| format!("tau_{n}")));
+    let mut text = header.join(",") + "\n";
+    for i in 0..200 {
+        let q: Vec<String> = (0..hand.dof())
+            .map(|d| {
+                let mid = 0.5 * (hand.dof_lower[d] + hand.dof_upper[d]);
+                format!("{}", mid + 0.01 * (i as f64 * 0.05).sin())
+            })
+            .collect();
+        let tau = vec!["0.01".to_owned(); hand.dof()];
+        text += &format!("{},{},{}\n", i as f64 * 0.005, q.join(","), tau.join(","));
+    }
+    let csv = dir.path().join("glove.csv");
+    std::fs::write(&csv, &text).unwrap();
+    let (code, stdout, err) = icms(&[
+        "import-glove",
+        "--input",
+        p(&csv),
+        "--object",
+        r#"{"shape": "sphere", "radius": 0.04, "mass": 0.5, "mu": 0.8, "position": [0.3, 0.0, 0.04]}"#,
+    ]);
+    assert_eq!(code, 0, "{err}");
+    assert!(stdout.contains("996 ticks"), "{stdout}");
+    let default_out = dir.path().join("glove.session.mcap");
+    assert_eq!(read_session(&default_out).unwrap().ticks(), 996);
+
+    let bad = dir.path().join("bad.csv");
+    std::fs::write(&bad, text.replacen(",0.01\n", ",0.01,7\n", 1)).unwrap();
+    let (code, _, err) = icms(&[
+        "import-glove",
+        "--input",
+        p(&bad),
+        "--object",
+        "sphere-lift",
+    ]);
+    assert_ne!(code, 0);
+    assert!(
+        err.contains("bad.csv line 2") && err.contains("columns"),
+        "{err}"
+    );
+
+    let (code, _, err) = icms(&[
+        "import-glove",
+        "--input",
+        p(&csv),
+        "--object",
+        r#"{"shape": "sphere", "radius": 0.04, "mass": 0.5, "mu": -1}"#,
+    ]);
+    assert_ne!(code, 0);
+    assert!(err.contains("object.mu"), "{err}");
+}
+
+#[test]
+fn simulate_rejects_bad_scenario_files_naming_the_field() {
+    let dir = tempfile::tempdir().unwrap();
+    let base = serde_json::json!({
+        "name": "custom",
+        "object": { "shape": "sphere", "radius": 0.04, "mass": 0.5, "mu": 0.8 },
+        "tasks": [ { "phase": "approach", "duration": 0.2 } ],
+    });
+    type Edit = Box<dyn Fn(&mut Value)>;
+    let cases: Vec<(&str, Edit, &str)> = vec![
+        (
+            "negative mass",
+            Box::new(|v| v["object"]["mass"] = (-1.0).into()),
+            "object.mass",
+        ),
+        (
+            "negative mu",
+            Box::new(|v| v["object"]["mu"] = (-0.1).into()),
+            "object.mu",
+        ),
+        (
+            "unknown shape",
+            Box::new(|v| v["object"]["shape"] = "torus".into()),
+            "object.shape",
+        ),
+        (
+            "unknown phase",
+            Box::new(|v| v["tasks"][0]["phase"] = "juggle".into()),
+            "tasks[0].phase",
+        ),
+        (
+            "missing mass",
+            Box::new(|v| {
+                v["object"].as_object_mut().unwrap().remove("mass");
+            }),
+            "mass",
+        ),
+        (
+            "unknown field",
+            Box::new(|v| v["object"]["colour"] = "red".into()),
+            "colour",
+        ),
+        (
+            "zero duration",
+            Box::new(|v| v["tasks"][0]["duration"] = 0.0.into()),
+            "tasks[0].duration",
+        ),
+    ];
+    for (what, edit, field) in cases {
+        let mut v = base.clone();
+        edit(&mut v);
+        let file = dir.path().join("scenario.json");
+        std::fs::write(&file, v.to_string()).unwrap();
+        let out = dir.path().join("never.mcap");
+        let (code, _, err) = icms(&["simulate", "--scenario", p(&file), "--out", p(&out)]);
+        assert_ne!(code, 0, "{what} accepted");
+        assert!(err.contains(field), "{what}: {err}");
+        assert!(!out.exists(), "{what}: no file is written");
+    }
+    // The unedited file is fine.
+    let file = dir.path().join("ok.json");
+    std::fs::write(&file, base.to_string()).unwrap();
+    let out = dir.path().join("ok.mcap");
+    let (code, _, err) = icms(&["simulate", "--scenario", p(&file), "--out", p(&out)]);
+    assert_eq!(code, 0, "{err}");
+    assert_eq!(read_session(&out).unwrap().ticks(), 200);
+}
+
+#[test]
+fn simulate_names_the_unknown_scenario() {
+    let (code, _, err) = icms(&[
+        "simulate",
+        "--scenario",
+        "juggling",
+        "--out",
+        "/nonexistent/x.mcap",
+    ]);
+    assert_ne!(code, 0);
+    assert!(
+        err.contains("juggling") && err.contains("sphere-lift"),
+        "{err}"
+    );
+}
