@@ -1,4 +1,5 @@
 //! Criterion benchmark: one DFS tick for glove10 holding the paper's sphere on 4 contacts.
+#![allow(missing_docs)] // criterion_group! generates undocumented functions
 
 use criterion::{criterion_group, criterion_main, Criterion};
 use dfs_core::dfs::GloveSample;

@@ -58,6 +58,9 @@ pub struct DfsParams {
     pub surface_stiffness: Real,
     /// Damping (N·s/m) of the same. Default 30.
     pub surface_damping: Real,
+    /// Viscous torsional coupling between a soft fingertip pad and the object (N·m·s/rad),
+    /// limited by the torsional friction cone. Default 0.05.
+    pub torsion_damping: Real,
     /// Joint angles may exceed their limits by this much (rad or m) before a sample is refused.
     /// Default 0.05.
     pub angle_slack: Real,
@@ -82,6 +85,7 @@ impl Default for DfsParams {
             joint_damping: 0.02,
             surface_stiffness: 3000.0,
             surface_damping: 30.0,
+            torsion_damping: 0.05,
             angle_slack: 0.05,
             torque_range: 2.0,
             table_height: None,
@@ -124,6 +128,7 @@ impl DfsParams {
         nonneg("joint_damping", self.joint_damping)?;
         nonneg("surface_stiffness", self.surface_stiffness)?;
         nonneg("surface_damping", self.surface_damping)?;
+        nonneg("torsion_damping", self.torsion_damping)?;
         nonneg("angle_slack", self.angle_slack)?;
         pos("torque_range", self.torque_range)?;
         nonneg("table_mu", self.table_mu)?;
@@ -387,7 +392,7 @@ impl Dfs {
         }
         self.hand.forward_kinematics(&s.base, s.q, &mut self.kin);
         self.hand.tip_jacobians(&mut self.kin);
-        self.hand.mass_matrix(&self.kin, &mut self.mass);
+        self.hand.mass_matrix(&mut self.kin, &mut self.mass);
         Ok(())
     }
 
@@ -488,8 +493,16 @@ impl Dfs {
             let passive_w = err * self.params.surface_stiffness
                 + (v_rel - z_world * v_rel.dot(&z_world)) * self.params.surface_damping;
             let passive_c = frame.intensities_of_force_b(&(rot_inv * passive_w));
+            // Torsion (soft finger): the fingertip pad drags the object's spin about the normal
+            // along, viscously.
+            let mut w_tip = Vector::zeros();
+            for d in 0..self.hand.dof() {
+                w_tip += Vector::new(j[(3, d)], j[(4, d)], j[(5, d)]) * self.qd[d];
+            }
+            let w_obj = rot * self.state.angular_velocity_b;
+            let torsion = (w_tip - w_obj).dot(&z_world) * self.params.torsion_damping;
             let with_passive = if c[2] > 0.0 {
-                c + Intensity::new(passive_c[0], passive_c[1], 0.0, 0.0)
+                c + Intensity::new(passive_c[0], passive_c[1], 0.0, torsion)
             } else {
                 c
             };
@@ -630,8 +643,8 @@ impl Dfs {
         }
         for d in 0..ndof {
             rhs[d] += dt * fb_torque[d];
-            self.out.feedback_torque[d] = fb_torque[d];
         }
+        self.out.feedback_torque[..ndof].copy_from_slice(&fb_torque[..ndof]);
         if cholesky_solve_in_place(a, ndof, &mut rhs) {
             for d in 0..ndof {
                 let mut v = rhs[d];

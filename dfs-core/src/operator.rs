@@ -18,13 +18,12 @@
 //! The glove's motors are taken to track the DFS's position commands exactly; the measured
 //! angles are those plus sensor noise.
 
-use crate::contact::{ContactModel, Friction, Intensity};
+use crate::contact::{ContactModel, Friction};
 use crate::dfs::{Dfs, DfsParams, GloveSample, TickOutput};
 use crate::error::{DfsError, Result};
-use crate::grasp::{GraspMatrix, MAX_CONTACTS};
 use crate::hand::ik::{solve_tips, IkParams};
 use crate::hand::{HandModel, Joint, JointDrive, JointKind, Kinematics, Link, MAX_DOF, MAX_TIPS};
-use crate::math::{force_of, moment_of, wrench, Isometry, Point, Real, Rotation, Vector};
+use crate::math::{Isometry, Point, Real, Rotation, Vector};
 use crate::object::{ObjectState, RigidObject, Shape};
 use crate::scenario::{GraspStyle, Phase, ResolvedTask, Scenario};
 use rand::SeedableRng;
@@ -151,6 +150,10 @@ pub struct GraspPlan {
     pub ik_error: Real,
     /// The style used.
     pub style: GraspStyle,
+    /// Per fingertip of the grasp: the fingertip centre at the grasp, in the object frame B.
+    pub contacts_b: [Vector; MAX_TIPS],
+    /// Per fingertip of the grasp: the outward surface normal there, in B.
+    pub normals_b: [Vector; MAX_TIPS],
 }
 
 /// Index of a fingertip by name.
@@ -351,87 +354,97 @@ pub fn plan_grasp(
                     align = align.min(push_alignment(&free, &kin, tip, &Vector::z()));
                 }
                 let score = align - r.max_error * 20.0;
-                if std::env::var("ICMS_DEBUG").is_ok() {
-                    let per: Vec<String> = targets
-                        .iter()
-                        .filter(|(t, _)| *t < real.len())
-                        .map(|&(tip, target)| {
-                            let mut v = centre + Vector::z() * h - target.coords;
-                            v.z = 0.0;
-                            let v = v.normalize();
-                            format!(
-                                "{}:n{:.2}/z{:.2}",
-                                tip,
-                                push_alignment(&free, &kin, tip, &v),
-                                push_alignment(&free, &kin, tip, &Vector::z())
-                            )
-                        })
-                        .collect();
-                    eprintln!(
-                        "cand psi={k} s={sign}/{thumb_sign} err={:.4} align={align:.3} {:?} q={:?}",
-                        r.max_error,
-                        per,
-                        q[3..13]
-                            .iter()
-                            .map(|v| (v * 100.0).round() / 100.0)
-                            .collect::<Vec<_>>()
-                    );
-                }
                 if best.as_ref().is_none_or(|b| score > b.0 + 1e-9) {
                     best = Some((score, r.max_error, q, rot, a, h));
                 }
             }
         }
     }
-    let Some((_, err, q, rot, axis, h)) = best else {
+    let Some((_, err, q, rot, _axis, _h)) = best else {
         return Err(DfsError::invalid(
             "object",
             format!("no grasp of this object is reachable for the hand (fingertips {:.1} mm from the surface)", best_err * 1e3),
         ));
     };
     let n = n_hand + 3;
-    let x_axis = axis;
     let base = Isometry::from_parts(Vector::new(q[0], q[1], q[2]).into(), rot);
     let mut q_grasp = [0.0; MAX_DOF];
     q_grasp[..n - 3].copy_from_slice(&q[3..n]);
-    // Preshape: the same tips 2.5 cm further out, base fixed.
+    // Preshape and open hand: the grasp pose with each finger group opened (less flexion)
+    // until its fingertips are at least 1.5 cm (preshape) and 3 cm (open) off the object's
+    // surface; the wrist and the fingers a pinch does not use stay as they are.
     let mut tips = [false; MAX_TIPS];
-    tips[thumb] = true;
-    let mut pre_targets: Vec<(usize, Point)> = Vec::new();
-    hand.forward_kinematics(&base, &q_grasp[..hand.dof()], &mut kin);
     for &f in fingers.iter().chain(std::iter::once(&thumb)) {
         tips[f] = true;
-        let c = kin.tip_centres[f];
-        let mut out = c.coords - centre - Vector::z() * h;
-        out.z = 0.0;
-        let out = if out.norm() > 1e-9 {
-            out.normalize()
-        } else {
-            x_axis
-        };
-        pre_targets.push((f, Point::from(c.coords + out * 0.025)));
     }
-    let mut q_pre = [0.0; MAX_DOF];
+    let base_pose = Isometry::from_parts(Vector::new(q[0], q[1], q[2]).into(), rot);
+    let inv_obj = pose.inverse();
+    let mut opened = |clearance: Real| {
+        let mut out = q_grasp;
+        for g in &hand.finger_groups {
+            let dofs: Vec<usize> = g
+                .dofs
+                .iter()
+                .copied()
+                .filter(|d| !wrist.contains(d) && !frozen.contains(d))
+                .collect();
+            let mut by = 0.1;
+            loop {
+                let mut trial = out;
+                for &d in &dofs {
+                    trial[d] = (q_grasp[d] - by).clamp(hand.dof_lower[d], hand.dof_upper[d]);
+                }
+                hand.forward_kinematics(&base_pose, &trial[..n_hand], &mut kin);
+                let clear = g.tips.iter().all(|&k| {
+                    let (d, _, _) = object.shape.closest(&(inv_obj * kin.tip_centres[k]).coords);
+                    d - hand.fingertips[k].radius >= clearance
+                });
+                out = trial;
+                if clear || by > 1.5 {
+                    break;
+                }
+                by += 0.1;
+            }
+        }
+        out
+    };
+    let (fallback_pre, q_open) = (opened(0.015), opened(0.03));
+    // Preshape proper: each fingertip 1.5 cm straight out from its contact along the normal,
+    // wrist and base fixed, so that closing approaches every face head-on.
+    hand.forward_kinematics(&base_pose, &q_grasp[..n_hand], &mut kin);
+    let mut pre_targets: Vec<(usize, Point)> = Vec::new();
+    for (k, _) in tips.iter().enumerate().filter(|(_, &t)| t) {
+        let c = kin.tip_centres[k];
+        let (_, _, n_out) = object.shape.closest(&(inv_obj * c).coords);
+        pre_targets.push((k, Point::from(c.coords + (pose.rotation * n_out) * 0.015)));
+    }
     let pre_params = IkParams {
         max_iterations: 200,
         tolerance: 5e-4,
         ..IkParams::default()
     }
-    .with_frozen(frozen.iter().copied());
-    solve_tips(
+    .with_frozen(wrist.iter().chain(frozen.iter()).copied());
+    let mut q_pre = [0.0; MAX_DOF];
+    let r = solve_tips(
         hand,
-        &base,
+        &base_pose,
         &pre_targets,
-        &q_grasp[..hand.dof()],
+        &q_grasp[..n_hand],
         &pre_params,
         &mut kin,
-        &mut q_pre[..hand.dof()],
+        &mut q_pre[..n_hand],
     );
-    let mut q_open = q_pre;
-    for d in 0..hand.dof() {
-        if !frozen.contains(&d) {
-            q_open[d] = (q_pre[d] - 0.3).clamp(hand.dof_lower[d], hand.dof_upper[d]);
-        }
+    if r.max_error > 0.003 {
+        q_pre = fallback_pre;
+    }
+    let mut contacts_b = [Vector::zeros(); MAX_TIPS];
+    let mut normals_b = [Vector::zeros(); MAX_TIPS];
+    hand.forward_kinematics(&base_pose, &q_grasp[..n_hand], &mut kin);
+    for (k, _) in tips.iter().enumerate().filter(|(_, &t)| t) {
+        let c_b = (inv_obj * kin.tip_centres[k]).coords;
+        let (_, _, n_out) = object.shape.closest(&c_b);
+        contacts_b[k] = c_b;
+        normals_b[k] = n_out;
     }
     Ok(GraspPlan {
         base,
@@ -441,6 +454,8 @@ pub fn plan_grasp(
         tips,
         ik_error: err,
         style,
+        contacts_b,
+        normals_b,
     })
 }
 
@@ -505,7 +520,8 @@ pub struct OperatorParams {
     pub stiffness: Real,
     /// Wrist damping (N·m·s/rad). Default 0.05. (The fingers are damped by the glove.)
     pub wrist_damping: Real,
-    /// Grip safety margin over the slip limit (Johansson & Westling 1984: 1.2-1.6). Default 1.4.
+    /// Grip safety margin over the slip limit (Johansson & Westling 1984 report 1.2-2 in
+    /// people). Default 2.
     pub grip_safety: Real,
     /// Least normal force per contact while gripping (N). Default 0.5.
     pub min_normal: Real,
@@ -523,8 +539,11 @@ pub struct OperatorParams {
     /// Standard deviation of the glove's torque sensors (N·m). Default 2e-4.
     pub noise_torque: Real,
     /// How far past the surface the fingers aim when closing, as a fraction of the
-    /// preshape-to-grasp motion. Default 0.25.
+    /// preshape-to-grasp motion. Default 0.
     pub close_overshoot: Real,
+    /// Task-space stiffness steering a fingertip of the grasp towards its spot (N/m).
+    /// Default 150.
+    pub fingertip_stiffness: Real,
 }
 
 impl Default for OperatorParams {
@@ -532,7 +551,7 @@ impl Default for OperatorParams {
         OperatorParams {
             stiffness: 0.5,
             wrist_damping: 0.05,
-            grip_safety: 1.4,
+            grip_safety: 2.0,
             min_normal: 0.5,
             object_stiffness: 150.0,
             object_damping: 25.0,
@@ -540,7 +559,8 @@ impl Default for OperatorParams {
             tremor_arm: 5e-6,
             noise_angle: 5e-5,
             noise_torque: 2e-4,
-            close_overshoot: 0.25,
+            close_overshoot: 0.0,
+            fingertip_stiffness: 150.0,
         }
     }
 }
@@ -582,11 +602,18 @@ pub struct Simulation {
     to_q: [Real; MAX_DOF],
     from_grip: Real,
     to_grip: Real,
+    from_offset: Real,
+    to_offset: Real,
+    offset: Real,
+    /// Where the operator saw the object when it last looked before holding it: fingertip
+    /// targets are fixed to this pose until the object is held, then to the object.
+    seen_object: Isometry,
+    /// Per fingertip: where it first touched while holding, in the hand base's frame.
+    hold_in_base: [Option<Vector>; MAX_TIPS],
     base: Isometry,
     base_velocity: Vector,
     base_acceleration: Vector,
     q_intent: [Real; MAX_DOF],
-    latched: [Option<Real>; MAX_DOF],
     grip: Real,
     q_meas: [Real; MAX_DOF],
     tau_meas: [Real; MAX_DOF],
@@ -643,7 +670,8 @@ impl Simulation {
             }
         }
         let params = DfsParams {
-            contact_model: ContactModel::PointWithFriction,
+            // Fingertip pads are soft: they resist spin about the normal (Table 1, soft finger).
+            contact_model: ContactModel::SoftFinger,
             friction: Friction {
                 mu: scenario.object.mu,
                 mu_torsion: scenario.object.mu_torsion,
@@ -652,7 +680,7 @@ impl Simulation {
             ..DfsParams::default()
         };
         let plan = plan_grasp(&hand, &object, &pose, scenario.grasp)?;
-        let start_base = raise(&plan.base, 0.15);
+        let start_base = raise(&approach_pose(&plan.base, &object.shape), 0.15);
         let q0 = plan.q_open;
         let mut dfs = Dfs::new(hand, object, ObjectState::at_rest(pose), params)?;
         let n = dfs.hand().dof();
@@ -689,11 +717,15 @@ impl Simulation {
             to_q: q0,
             from_grip: 0.0,
             to_grip: 0.0,
+            from_offset: 0.03,
+            to_offset: 0.03,
+            offset: 0.03,
+            seen_object: pose,
+            hold_in_base: [None; MAX_TIPS],
             base: start_base,
             base_velocity: Vector::zeros(),
             base_acceleration: Vector::zeros(),
             q_intent: q0,
-            latched: [None; MAX_DOF],
             grip: 0.0,
             q_meas: q0,
             tau_meas: [0.0; MAX_DOF],
@@ -807,19 +839,23 @@ impl Simulation {
         self.from_base = self.to_base;
         self.from_q = self.to_q;
         self.from_grip = self.to_grip;
+        self.from_offset = self.to_offset;
+        self.seen_object = self.dfs.object_state().pose;
         let n = self.dfs.hand().dof();
         match task.phase {
             Phase::Approach => {
                 let pose = self.dfs.object_state().pose;
                 self.plan = plan_grasp(self.dfs.hand(), self.dfs.object(), &pose, self.style)?;
-                self.to_base = raise(&self.plan.base, 0.06);
+                self.to_base = approach_pose(&self.plan.base, &self.dfs.object().shape);
                 self.to_q = self.plan.q_open;
                 self.to_grip = 0.0;
+                self.to_offset = 0.03;
                 self.object_in_base = None;
             }
             Phase::Preshape => {
                 self.to_base = self.plan.base;
                 self.to_q = self.plan.q_pre;
+                self.to_offset = 0.015;
             }
             Phase::Grasp => {
                 let mut q = self.plan.q_grasp;
@@ -831,6 +867,8 @@ impl Simulation {
                 }
                 self.to_q = q;
                 self.to_grip = 1.0;
+                // Aim a little inside the surface, as a person presses on what they hold.
+                self.to_offset = -0.002;
             }
             Phase::Lift => {
                 self.to_base = raise(&self.from_base, task.height);
@@ -852,11 +890,13 @@ impl Simulation {
             Phase::Release => {
                 self.to_q = self.plan.q_pre;
                 self.to_grip = 0.0;
+                self.to_offset = 0.015;
             }
             Phase::Retreat => {
                 self.to_base = raise(&self.from_base, 0.10);
                 self.to_q = self.plan.q_open;
                 self.to_grip = 0.0;
+                self.to_offset = 0.03;
             }
         }
         Ok(())
@@ -898,6 +938,7 @@ impl Simulation {
             self.q_intent[d] = self.from_q[d] + (self.to_q[d] - self.from_q[d]) * mq + tr;
         }
         self.grip = self.from_grip + (self.to_grip - self.from_grip) * mg;
+        self.offset = self.from_offset + (self.to_offset - self.from_offset) * mq;
     }
 
     /// The operator's joint torques: impedance around the intention plus grip torques `Jᵀ f`
@@ -906,42 +947,74 @@ impl Simulation {
         let hand = self.dfs.hand();
         let n = hand.dof();
         let out = self.dfs.output();
+        let kin = self.dfs.kinematics();
         let q = &out.motor_q;
         let qd = &out.motor_qd;
-        // A person stops a finger where it meets the object and from then on mostly controls
-        // its force: while the object is held, a finger group that touches is held softly (a
-        // fifth of the stiffness) around its planned contact pose, and the grip torques do the
-        // work.
-        let holding = matches!(
-            self.phase(),
-            Phase::Grasp | Phase::Lift | Phase::Hold | Phase::Transport | Phase::Place
-        );
+        let obj_pose = if self.object_in_base.is_some() {
+            self.dfs.object_state().pose
+        } else {
+            self.seen_object
+        };
+        // The fingers of the grasp are steered in task space: each fingertip towards a point
+        // on the object (in the object's frame, so it follows the object), `offset` out along
+        // the surface normal, like a person reaching for a spot they see; closing makes the
+        // offset zero, approaching every face head-on. The other joints (wrist, unused
+        // fingers) hold the intended joint angles.
+        let mut in_grasp = [false; MAX_DOF];
+        let mut tau = [0.0; MAX_DOF];
         for g in &hand.finger_groups {
-            let touching = g
-                .tips
-                .iter()
-                .any(|&k| self.plan.tips[k] && out.tips[k].touching);
+            if !g.tips.iter().any(|&k| self.plan.tips[k]) {
+                continue;
+            }
             for &d in &g.dofs {
-                self.latched[d] = if holding && (touching || self.latched[d].is_some()) {
-                    Some(self.plan.q_grasp[d])
-                } else {
-                    None
+                in_grasp[d] = true;
+            }
+            for &k in g.tips.iter().filter(|&&k| self.plan.tips[k]) {
+                let touching = out.tips[k].touching;
+                let holding = matches!(
+                    self.phase(),
+                    Phase::Grasp | Phase::Lift | Phase::Hold | Phase::Transport | Phase::Place
+                );
+                // Touching while holding, a person keeps the finger where it met the object
+                // relative to the hand; the squeeze presses it on.
+                if holding && touching && self.hold_in_base[k].is_none() {
+                    self.hold_in_base[k] = Some((self.base.inverse() * kin.tip_centres[k]).coords);
+                }
+                if !holding {
+                    self.hold_in_base[k] = None;
+                }
+                let target = match self.hold_in_base[k] {
+                    Some(h) => self.base * Point::from(h),
+                    None => {
+                        obj_pose
+                            * Point::from(
+                                self.plan.contacts_b[k] + self.plan.normals_b[k] * self.offset,
+                            )
+                    }
                 };
+                let mut err = target - kin.tip_centres[k];
+                let e = err.norm();
+                if e > 0.03 {
+                    err *= 0.03 / e;
+                }
+                let f = err * self.params.fingertip_stiffness;
+                let j = &kin.tip_jacobians[k];
+                for &d in &g.dofs {
+                    tau[d] += j[(0, d)] * f.x + j[(1, d)] * f.y + j[(2, d)] * f.z;
+                }
             }
         }
-        let mut tau = [0.0; MAX_DOF];
         for d in 0..n {
-            let mut kp = self.params.stiffness * hand.torque_limit[d];
-            if let Some(l) = self.latched[d] {
-                self.q_intent[d] = l;
-                kp *= 0.2;
+            if in_grasp[d] {
+                continue;
             }
+            let kp = self.params.stiffness * hand.torque_limit[d];
             let kd = if hand.dof_names[d].starts_with("wrist") {
                 self.params.wrist_damping
             } else {
                 0.0
             };
-            tau[d] = kp * (self.q_intent[d] - q[d]) - kd * qd[d];
+            tau[d] += kp * (self.q_intent[d] - q[d]) - kd * qd[d];
         }
         if self.grip > 0.0 {
             self.add_grip_torques(&mut tau);
@@ -952,123 +1025,75 @@ impl Simulation {
         }
     }
 
+    /// Grip torques: the operator squeezes, pressing each fingertip of the grasp along the
+    /// contact normal with the force friction needs to carry the load it expects (weight plus
+    /// the hand's acceleration) with its safety margin, for the friction it expects. Friction
+    /// then carries the object as the arm moves (the DFS's stick friction), as in a person's
+    /// grip; a squeeze too weak for the real μ lets the object slip.
     fn add_grip_torques(&self, tau: &mut [Real; MAX_DOF]) {
         let out = self.dfs.output();
         let obj = self.dfs.object();
         let st = self.dfs.object_state();
         let g = self.dfs.params().gravity;
-        let mut frames =
-            [crate::contact::ContactFrame::from_normal(Vector::zeros(), Vector::z()); MAX_CONTACTS];
-        let mut tips = [0usize; MAX_CONTACTS];
-        let mut nc = 0;
-        for k in 0..out.n_tips {
-            if let (true, Some(f)) = (self.plan.tips[k], out.tips[k].frame) {
-                if nc < MAX_CONTACTS {
-                    frames[nc] = f;
-                    tips[nc] = k;
-                    nc += 1;
-                }
-            }
-        }
-        if nc == 0 {
-            return;
-        }
-        // The wrench the hand must apply (world): carry the weight, follow the hand's
-        // acceleration, and correct the object's pose relative to the hand.
-        let p = &self.params;
-        let mut force = (self.base_acceleration - g) * obj.mass;
-        let mut moment = Vector::zeros();
-        if let Some(rel) = self.object_in_base {
-            let target = self.base * rel;
-            let e = target.translation.vector - st.pose.translation.vector;
-            let ed = self.base_velocity - st.linear_velocity;
-            force += (e * p.object_stiffness + ed * p.object_damping) * obj.mass;
-            let e_rot = (target.rotation * st.pose.rotation.inverse()).scaled_axis();
-            let w_world = st.pose.rotation * st.angular_velocity_b;
-            let inertia = obj.inertia.trace() / 3.0;
-            moment = (e_rot * p.object_stiffness - w_world * p.object_damping) * inertia;
-        } else {
-            // Grasping on the table: take over the weight as the grip ramps up.
-            force *= self.grip;
-        }
-        // Distribute the load over what each fingertip can actually push: the well-conditioned
-        // range of its Jacobian over its finger's DOFs (a planar finger pushes only in its
-        // flexion plane, a stretched one not along its length). Forces outside that range
-        // would be lost in the DFS's (Jᵀ)⁺ anyway.
         let kin = self.dfs.kinematics();
         let hand = self.dfs.hand();
-        const COLS: usize = 3 * MAX_CONTACTS;
-        let mut w = nalgebra::SMatrix::<Real, 6, COLS>::zeros();
-        let mut dirs = [Vector::zeros(); COLS];
-        let mut owner = [usize::MAX; COLS];
-        let mut ncol = 0;
-        let mut normals = [Vector::zeros(); MAX_CONTACTS];
-        let centre = st.pose.translation.vector;
-        for i in 0..nc {
-            let frame = frames[i];
-            normals[i] = st.pose.rotation * frame.normal_b();
-            let p = st.pose * Point::from(frame.p_b);
-            let (basis, nb) = push_basis(hand, kin, tips[i]);
-            for u in basis.iter().take(nb) {
-                let m = (p.coords - centre).cross(u);
-                w.set_column(ncol, &wrench(u, &m));
-                dirs[ncol] = *u;
-                owner[ncol] = i;
-                ncol += 1;
+        let p = &self.params;
+        let planned = self
+            .plan
+            .tips
+            .iter()
+            .take(out.n_tips)
+            .filter(|&&t| t)
+            .count();
+        let touching: Vec<usize> = (0..out.n_tips)
+            .filter(|&k| self.plan.tips[k] && out.tips[k].frame.is_some())
+            .collect();
+        // Squeeze only once every finger of the grasp is on the object.
+        if touching.is_empty() || touching.len() < planned {
+            return;
+        }
+        let load = ((self.base_acceleration - g) * obj.mass).norm();
+        let normal = (p.grip_safety * load / (self.operator_mu * touching.len() as Real))
+            .max(p.min_normal)
+            * self.grip;
+        // Per fingertip: the force for a unit normal push, along what it can push.
+        let mut unit = [Vector::zeros(); MAX_TIPS];
+        let mut ok = [false; MAX_TIPS];
+        for &k in &touching {
+            let frame = out.tips[k].frame.expect("touching tips have a frame");
+            let n_in = st.pose.rotation * frame.normal_b();
+            let (basis, nb) = push_basis(hand, kin, k);
+            let mut dir = Vector::zeros();
+            for b in basis.iter().take(nb) {
+                dir += b * b.dot(&n_in);
+            }
+            let along = dir.dot(&n_in);
+            if along >= 0.2 {
+                unit[k] = dir / along;
+                ok[k] = true;
             }
         }
-        let (wwt_pinv, _) = crate::math::sym_pinv6(&(w * w.transpose()), 1e-9);
-        let load = wrench(&force, &moment);
-        let mut x = w.transpose() * (wwt_pinv * load);
-        let force_at = |x: &nalgebra::SVector<Real, COLS>, i: usize| {
-            (0..ncol)
-                .filter(|&k| owner[k] == i)
-                .map(|k| dirs[k] * x[k])
-                .sum::<Vector>()
-        };
-        // Squeeze: raise each normal force to the safety margin over the slip limit with
-        // (nearly) internal forces: the squeeze is projected away from W's strong directions by a
-        // regularised projection, `e − Wᵀ (W Wᵀ + εI)⁻¹ W e`. Two fingers whose push planes do
-        // not share the squeeze line exactly have no exact null space; the small net wrench left
-        // is corrected through the object term of the load on the next tick.
-        let wwt = w * w.transpose();
-        let eps = 1e-2 * wwt.trace().max(1e-12);
-        let reg = nalgebra::Cholesky::new(wwt + crate::math::Mat6::identity() * eps)
-            .map(|c| c.inverse())
-            .unwrap_or_else(crate::math::Mat6::zeros);
-        let mut e = nalgebra::SVector::<Real, COLS>::zeros();
-        for i in 0..nc {
-            let f = force_at(&x, i);
-            let n = normals[i];
-            let nf = f.dot(&n);
-            let tf = (f - n * nf).norm();
-            let want = (tf * p.grip_safety / self.operator_mu).max(p.min_normal);
-            if want > nf {
-                // Push along the part of the normal this fingertip can produce.
-                for k in (0..ncol).filter(|&k| owner[k] == i) {
-                    e[k] = dirs[k].dot(&n) * (want - nf);
-                }
+        // Normal forces near the wanted squeeze with little net force: minimise
+        // ‖N − N₀‖² + w ‖Σ N_k unit_k‖² (w = 4), i.e. N = (I + w AᵀA)⁻¹ N₀. An exactly
+        // force-free squeeze rarely exists for two or three fingertips that push only in their
+        // own planes; the stick friction absorbs the small remainder.
+        let ks: Vec<usize> = touching.iter().copied().filter(|&k| ok[k]).collect();
+        let m = ks.len().min(MAX_TIPS);
+        let mut sys = nalgebra::SMatrix::<Real, MAX_TIPS, MAX_TIPS>::identity();
+        let mut mags = [normal; MAX_TIPS];
+        for a in 0..m {
+            for b in 0..m {
+                sys[(a, b)] += 4.0 * unit[ks[a]].dot(&unit[ks[b]]);
             }
         }
-        x += e - w.transpose() * (reg * (w * e));
+        if !crate::math::cholesky_solve_in_place(&mut sys, m, &mut mags) {
+            mags = [normal; MAX_TIPS];
+        }
         let n = hand.dof();
-        for i in 0..nc {
-            let f = force_at(&x, i) * self.grip;
-            if std::env::var("ICMS_DEBUG").is_ok()
-                && self.step % 50 == 0
-                && (1800..2400).contains(&self.step)
-            {
-                eprintln!(
-                    "t={} tip {} want {:?} n {:?} got {:?} grip {:.2}",
-                    self.step,
-                    tips[i],
-                    f.as_slice(),
-                    normals[i].as_slice(),
-                    self.dfs.output().tips[tips[i]].tip_force_world.as_slice(),
-                    self.grip
-                );
-            }
-            let j = &kin.tip_jacobians[tips[i]];
+        for (idx, &k) in ks.iter().enumerate().take(m) {
+            let magnitude = mags[idx].max(p.min_normal * self.grip);
+            let f = unit[k] * magnitude;
+            let j = &kin.tip_jacobians[k];
             for (d, t) in tau.iter_mut().enumerate().take(n) {
                 *t += j[(0, d)] * f.x + j[(1, d)] * f.y + j[(2, d)] * f.z;
             }
@@ -1099,6 +1124,16 @@ impl GraspStyle {
     }
 }
 
+/// Where the hand waits before closing in: beside the grasp pose along the palm's y axis (the
+/// fingertips close in the palm's x-z plane, so sliding along y brings them around the
+/// object without touching it), by the object's size plus 5 cm, and 1 cm higher.
+fn approach_pose(grasp_base: &Isometry, shape: &Shape) -> Isometry {
+    let side = grasp_base.rotation * Vector::y() * (shape.bounding_radius() + 0.05);
+    let mut x = *grasp_base;
+    x.translation.vector += side + Vector::z() * 0.01;
+    x
+}
+
 /// The pose raised by `dz` (m) along world z.
 fn raise(x: &Isometry, dz: Real) -> Isometry {
     let mut y = *x;
@@ -1120,5 +1155,100 @@ pub fn support_depth(shape: &Shape, rotation: &Rotation) -> Real {
             let az = m[(2, 2)].abs();
             radius * (1.0 - az * az).max(0.0).sqrt() + half_height * az
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn run(name: &str, seed: u64) -> (Simulation, Vec<(Phase, Real, bool, usize)>) {
+        let s = Scenario::builtin(name, seed).unwrap();
+        let mut sim = Simulation::new(&s, HandModel::glove10(), None).unwrap();
+        let mut trace = Vec::new();
+        while sim.step().unwrap() {
+            let o = sim.output();
+            let slip = o.tips.iter().take(o.n_tips).any(|t| t.in_contact && t.slip);
+            trace.push((
+                sim.phase(),
+                sim.dfs().object_state().pose.translation.z,
+                slip,
+                o.n_contacts,
+            ));
+        }
+        (sim, trace)
+    }
+
+    #[test]
+    fn a_pinch_lift_carries_the_box_off_the_table_and_sets_it_down() {
+        let (_, trace) = run("box-pinch-lift", 1);
+        let start = trace[0].1;
+        let lifted = trace
+            .iter()
+            .filter(|t| t.0 == Phase::Hold)
+            .map(|t| t.1)
+            .fold(0.0, Real::max);
+        assert!(
+            lifted > start + 0.05,
+            "box rose only to {lifted} from {start}"
+        );
+        let end = trace.last().unwrap().1;
+        assert!(
+            (end - start).abs() < 0.01,
+            "the box is back on the table: {end}"
+        );
+        assert_eq!(trace.last().unwrap().3, 0, "released");
+    }
+
+    #[test]
+    fn the_same_scenario_and_seed_give_identical_sessions() {
+        let a = run("box-pinch-lift", 7).1;
+        let b = run("box-pinch-lift", 7).1;
+        assert!(a
+            .iter()
+            .zip(&b)
+            .all(|(x, y)| x.1.to_bits() == y.1.to_bits() && x.2 == y.2 && x.3 == y.3));
+        let c = run("box-pinch-lift", 8).1;
+        assert!(
+            a.iter()
+                .zip(&c)
+                .any(|(x, y)| x.1.to_bits() != y.1.to_bits()),
+            "seeds change the noise"
+        );
+    }
+
+    #[test]
+    fn box_slip_shows_slip_and_the_box_leaves_the_grasp() {
+        let (sim, trace) = run("box-slip", 3);
+        assert!(trace.iter().any(|t| t.2), "slip flags");
+        let last_hold = trace.iter().filter(|t| t.0 == Phase::Hold).last().unwrap();
+        assert_eq!(
+            last_hold.3, 0,
+            "no contact left while the hand holds up high"
+        );
+        let table = sim.table_height();
+        assert!(
+            last_hold.1 < table + 0.05,
+            "the box stayed down: {}",
+            last_hold.1
+        );
+    }
+
+    #[test]
+    fn every_builtin_scenario_plans_a_grasp_and_runs_its_first_second() {
+        for name in Scenario::BUILTINS {
+            let s = Scenario::builtin(name, 0).unwrap();
+            let mut sim = Simulation::new(&s, HandModel::glove10(), Some(1.0)).unwrap();
+            while sim.step().unwrap() {}
+            assert_eq!(sim.ticks(), 1000, "{name}");
+            assert!(sim.phases().iter().all(|p| p.end_ns <= 1_000_000_000));
+        }
+    }
+
+    #[test]
+    fn a_duration_out_of_range_is_refused() {
+        let s = Scenario::builtin("box-pinch-lift", 0).unwrap();
+        let e = Simulation::new(&s, HandModel::glove10(), Some(-1.0)).unwrap_err();
+        assert!(e.to_string().contains("duration"));
     }
 }

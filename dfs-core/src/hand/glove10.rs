@@ -27,7 +27,6 @@
 
 use super::{FingerGroup, Fingertip, HandModel, Inertial, Joint, JointDrive, JointKind, Link};
 use crate::math::{Isometry, Mat3, Rotation, UnitVector, Vector};
-use std::f64::consts::FRAC_PI_4;
 
 /// Adult hand length (m), wrist crease to the tip of the middle finger.
 pub const HAND_LENGTH: f64 = 0.19;
@@ -534,7 +533,10 @@ mod tests {
             }
         }
         assert!(best < contact, "closest approach {best} m");
-        assert!(tips(&hand, &[0.0; 10])[0].z < 0.0, "the thumb rests on the palmar side");
+        assert!(
+            tips(&hand, &[0.0; 10])[0].z < 0.0,
+            "the thumb rests on the palmar side"
+        );
     }
 
     #[test]

@@ -178,6 +178,9 @@ pub struct Kinematics {
     pub tip_centres: [Point; MAX_TIPS],
     /// Jacobian of every fingertip centre: (linear, angular) rows, DOF columns, world frame.
     pub tip_jacobians: [TipJacobian; MAX_TIPS],
+    /// Scratch for [`HandModel::mass_matrix`]: composite spatial inertia of every subtree
+    /// (only the hand's links are written).
+    pub composite: [Mat6; MAX_LINKS],
 }
 
 impl Default for Kinematics {
@@ -189,6 +192,7 @@ impl Default for Kinematics {
             parent_joint: [NO_JOINT; MAX_LINKS],
             tip_centres: [Point::origin(); MAX_TIPS],
             tip_jacobians: [TipJacobian::zeros(); MAX_TIPS],
+            composite: [Mat6::zeros(); MAX_LINKS],
         }
     }
 }
@@ -773,10 +777,34 @@ impl HandModel {
     /// Fingertip Jacobians (world frame, at each tip centre) from the joint frames that
     /// [`forward_kinematics`](Self::forward_kinematics) computed. Allocation-free.
     pub fn tip_jacobians(&self, kin: &mut Kinematics) {
+        let n = self.dof().min(MAX_DOF);
         for (k, tip) in self.fingertips.iter().enumerate().take(MAX_TIPS) {
-            let mut jac = TipJacobian::zeros();
-            self.point_jacobian(kin, tip.link, &kin.tip_centres[k], &mut jac);
-            kin.tip_jacobians[k] = jac;
+            let point = kin.tip_centres[k];
+            let jac = &mut kin.tip_jacobians[k];
+            jac.columns_mut(0, n).fill(0.0);
+            let mut current = tip.link;
+            for _ in 0..MAX_LINKS {
+                let j = kin.parent_joint[current];
+                if j == NO_JOINT || current == self.root {
+                    break;
+                }
+                let joint = &self.joints[j];
+                if let Some((d, gain)) = joint.drive.dof_and_gain() {
+                    let a = kin.joint_axes[j];
+                    let (linear, angular) = match joint.kind {
+                        JointKind::Prismatic => (a, Vector::zeros()),
+                        JointKind::Fixed => (Vector::zeros(), Vector::zeros()),
+                        _ => (
+                            a.cross(&(point - Point::from(kin.joint_frames[j].translation.vector))),
+                            a,
+                        ),
+                    };
+                    let mut col = jac.column_mut(d);
+                    col.fixed_rows_mut::<3>(0).axpy(gain, &linear, 1.0);
+                    col.fixed_rows_mut::<3>(3).axpy(gain, &angular, 1.0);
+                }
+                current = joint.parent;
+            }
         }
     }
 
@@ -786,18 +814,28 @@ impl HandModel {
     /// M = Σ_links (J_vᵀ m J_v + J_ωᵀ R I Rᵀ J_ω) + diag(armature), with J_v the Jacobian of
     /// the link's centre of mass and J_ω its angular Jacobian (world frame), evaluated by the
     /// composite rigid-body algorithm; a mimic joint enters with its multiplier.
-    pub fn mass_matrix(&self, kin: &Kinematics, m: &mut DofMatrix) {
+    pub fn mass_matrix(&self, kin: &mut Kinematics, m: &mut DofMatrix) {
         let n = self.dof().min(MAX_DOF);
         m.fill_with_identity();
         m.view_mut((0, 0), (n, n)).fill(0.0);
         // Composite rigid-body algorithm in the world frame: the spatial inertia of every
         // subtree at the world origin, then H_ij = S_jᵀ I_subtree(i) S_i for every joint j on
-        // the path to joint i, mapped onto the DOFs by the drive gains.
-        let mut composite = [Mat6::zeros(); MAX_LINKS];
+        // the path to joint i, mapped onto the DOFs by the drive gains. The subtree inertias live
+        // in the kinematics' scratch (disjoint field borrows), so nothing large is zeroed.
+        let Kinematics {
+            composite,
+            joint_axes,
+            joint_frames,
+            link_poses,
+            parent_joint,
+            ..
+        } = kin;
         for (l, link) in self.links.iter().enumerate().take(MAX_LINKS) {
-            if l != self.root {
-                composite[l] = spatial_inertia(&kin.link_poses[l], &link.inertial);
-            }
+            composite[l] = if l != self.root {
+                spatial_inertia(&link_poses[l], &link.inertial)
+            } else {
+                Mat6::zeros()
+            };
         }
         for joint in self.joints.iter().take(MAX_LINKS).rev() {
             let child = composite[joint.child];
@@ -807,21 +845,25 @@ impl HandModel {
             let Some((di, gi)) = joint.drive.dof_and_gain() else {
                 continue;
             };
-            let force = composite[joint.child] * self.motion_subspace(kin, i);
+            let force = composite[joint.child] * self.motion_subspace(joint_axes, joint_frames, i);
             let mut j = i;
             for _ in 0..MAX_LINKS {
                 let ancestor = &self.joints[j];
                 if let Some((dj, gj)) = ancestor.drive.dof_and_gain() {
-                    let h = gi * gj * self.motion_subspace(kin, j).dot(&force);
+                    let h = gi
+                        * gj
+                        * self
+                            .motion_subspace(joint_axes, joint_frames, j)
+                            .dot(&force);
                     m[(di, dj)] += h;
                     if j != i {
                         m[(dj, di)] += h;
                     }
                 }
-                if ancestor.parent == self.root || kin.parent_joint[ancestor.parent] == NO_JOINT {
+                if ancestor.parent == self.root || parent_joint[ancestor.parent] == NO_JOINT {
                     break;
                 }
-                j = kin.parent_joint[ancestor.parent];
+                j = parent_joint[ancestor.parent];
             }
         }
         for (i, a) in self.armature.iter().enumerate().take(n) {
@@ -831,11 +873,16 @@ impl HandModel {
 
     /// The spatial motion of joint `j` per unit joint value: (velocity of the body point at the
     /// world origin, angular velocity), world frame.
-    fn motion_subspace(&self, kin: &Kinematics, j: usize) -> Vector6<f64> {
-        let a = kin.joint_axes[j];
+    fn motion_subspace(
+        &self,
+        axes: &[Vector; MAX_LINKS],
+        frames: &[Isometry; MAX_LINKS],
+        j: usize,
+    ) -> Vector6<f64> {
+        let a = axes[j];
         let (linear, angular) = match self.joints[j].kind {
             JointKind::Revolute | JointKind::Continuous => {
-                (kin.joint_frames[j].translation.vector.cross(&a), a)
+                (frames[j].translation.vector.cross(&a), a)
             }
             JointKind::Prismatic => (a, Vector::zeros()),
             JointKind::Fixed => (Vector::zeros(), Vector::zeros()),
@@ -1277,9 +1324,9 @@ pub(crate) mod tests {
 
     fn assert_mass_matrix_is_consistent(hand: &HandModel, q: &[f64], qdot: &[f64]) {
         let n = hand.dof();
-        let kin = fk(hand, q);
+        let mut kin = fk(hand, q);
         let mut m = DofMatrix::zeros();
-        hand.mass_matrix(&kin, &mut m);
+        hand.mass_matrix(&mut kin, &mut m);
         assert!((m - m.transpose()).amax() < 1e-15);
         assert!(m.cholesky().is_some(), "M is not positive definite");
         let mut rest = m;
@@ -1366,9 +1413,9 @@ pub(crate) mod tests {
         };
         hand.validate().unwrap();
         for angle in [-1.0, 0.0, 0.7] {
-            let kin = fk(&hand, &[angle]);
+            let mut kin = fk(&hand, &[angle]);
             let mut m = DofMatrix::zeros();
-            hand.mass_matrix(&kin, &mut m);
+            hand.mass_matrix(&mut kin, &mut m);
             let expected = izz + mass * com * com + 1e-4;
             assert!((m[(0, 0)] - expected).abs() < 1e-15);
         }
@@ -1380,7 +1427,7 @@ pub(crate) mod tests {
         let mut kin = fk(&glove, &[0.0; 10]);
         glove.tip_jacobians(&mut kin);
         let mut m = DofMatrix::zeros();
-        glove.mass_matrix(&kin, &mut m);
+        glove.mass_matrix(&mut kin, &mut m);
         assert!(kin
             .tip_jacobians
             .iter()
@@ -1396,9 +1443,9 @@ pub(crate) mod tests {
             b in prop::collection::vec(-1.0..1.0f64, 10),
         ) {
             let glove = HandModel::glove10();
-            let kin = fk(&glove, &angles_from_unit(&glove, &u));
+            let mut kin = fk(&glove, &angles_from_unit(&glove, &u));
             let mut m = DofMatrix::zeros();
-            glove.mass_matrix(&kin, &mut m);
+            glove.mass_matrix(&mut kin, &mut m);
             let mut rhs = DofVector::zeros();
             rhs.as_mut_slice()[..10].copy_from_slice(&b);
             let x = solve_dof_spd(&m, &rhs, 10).unwrap();
