@@ -3,11 +3,13 @@
 //! - [`mcap_io`]: MCAP session files (write, read untrusted, salvage).
 //! - [`foxglove`]: serde types for the Foxglove schemas we record.
 //! - [`session`]: grasp sessions: topics, recorder, reader, glove import.
+//! - [`segmentation`]: sessions into skills (one per grasp) and their parameters.
 //! - [`error`]: the crate's error type.
 
 pub mod error;
 pub mod foxglove;
 pub mod mcap_io;
+pub mod segmentation;
 pub mod session;
 
 pub use error::RecordingError;

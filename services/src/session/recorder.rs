@@ -621,7 +621,7 @@ impl Messages {
             let t = &tip.transmitted;
             let f_world = object_pose.rotation * (frame.rot_b * Vector::new(t[0], t[1], t[2]));
             let magnitude = f_world.norm();
-            if !(magnitude > 1e-9) {
+            if magnitude.is_nan() || magnitude <= 1e-9 {
                 continue;
             }
             let point_world = object_pose * Point::from(frame.p_b);
