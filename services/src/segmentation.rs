@@ -451,7 +451,8 @@ fn speed_profile(g: &Grid, params: &SegmentParams, window_s: f64) -> Vec<f64> {
             }
             let span = (b - a) as f64 * dt;
             let lin = (g.base_p[b] - g.base_p[a]).norm();
-            let ang = g.base_r[a].angle_to(&g.base_r[b]);
+            let d = g.base_r[a].coords.dot(&g.base_r[b].coords).abs().min(1.0);
+            let ang = 2.0 * d.acos();
             (lin + params.rotation_radius * ang) / span
         })
         .collect()
@@ -766,7 +767,6 @@ fn skill_parameters(
     let mu = object.as_ref().map(|o| o.mu);
     let start_ns = phases.first().map_or(0, |p| p.start_ns);
     let end_ns = phases.last().map_or(0, |p| p.end_ns);
-    let phase_at = |t: u64| phases.iter().find(|p| p.start_ns <= t && t < p.end_ns);
     let grasp_start = phases
         .iter()
         .find(|p| p.name == "grasp")
@@ -792,7 +792,8 @@ fn skill_parameters(
         steady_n: usize,
         pos: Vector,
         nrm: Vector,
-        per_phase: BTreeMap<String, ([f64; 4], usize)>,
+        /// Per phase index of `phases`: sums of the intensities and samples.
+        per_phase: Vec<([f64; 4], usize)>,
         profile_t: Vec<(u64, f64)>,
         slip: Option<u64>,
     }
@@ -803,6 +804,7 @@ fn skill_parameters(
     let mut margin_ratio = f64::INFINITY;
     let mut slips = Vec::new();
     let mut last_t = grasp_start;
+    let mut pi = 0usize;
     for (t, c) in &session.contacts {
         if *t < grasp_start || *t >= grasp_end {
             continue;
@@ -812,10 +814,19 @@ fn skill_parameters(
         if steady {
             steady_samples += 1;
         }
-        let phase = phase_at(*t).map_or("", |p| p.name.as_str());
+        // Phases are in time order: advance the current one.
+        while pi + 1 < phases.len() && *t >= phases[pi].end_ns {
+            pi += 1;
+        }
+        let phase = phases.get(pi).map_or("", |p| p.name.as_str());
         let mut sum_n = 0.0;
-        for f in &c.fingers {
-            let a = match accs.iter().position(|a| a.name == f.name) {
+        for (fi, f) in c.fingers.iter().enumerate() {
+            // Fingers come in the same order every tick; look the name up only if not.
+            let found = match accs.get(fi) {
+                Some(a) if a.name == f.name => Some(fi),
+                _ => accs.iter().position(|a| a.name == f.name),
+            };
+            let a = match found {
                 Some(i) => &mut accs[i],
                 None => {
                     accs.push(Acc {
@@ -823,7 +834,7 @@ fn skill_parameters(
                         steady_n: 0,
                         pos: Vector::zeros(),
                         nrm: Vector::zeros(),
-                        per_phase: BTreeMap::new(),
+                        per_phase: vec![([0.0; 4], 0); phases.len()],
                         profile_t: Vec::new(),
                         slip: None,
                     });
@@ -848,7 +859,9 @@ fn skill_parameters(
                 continue;
             }
             sum_n += normal;
-            let e = a.per_phase.entry(phase.to_owned()).or_insert(([0.0; 4], 0));
+            let Some(e) = a.per_phase.get_mut(pi) else {
+                continue;
+            };
             for (k, v) in [i.x, i.y, i.z, i.torsion].into_iter().enumerate() {
                 e.0[k] += v;
             }
@@ -905,12 +918,20 @@ fn skill_parameters(
                 finger: a.name.clone(),
                 position_b: arr(&pos),
                 normal_b: arr(&nrm),
-                mean_intensity: a
-                    .per_phase
-                    .iter()
-                    .filter(|(k, _)| !k.is_empty())
-                    .map(|(k, (s, c))| (k.clone(), s.map(|v| v / *c as f64)))
-                    .collect(),
+                mean_intensity: {
+                    let mut m: BTreeMap<String, ([f64; 4], usize)> = BTreeMap::new();
+                    for (p, (s, c)) in phases.iter().zip(&a.per_phase) {
+                        let e = m.entry(p.name.clone()).or_insert(([0.0; 4], 0));
+                        for k in 0..4 {
+                            e.0[k] += s[k];
+                        }
+                        e.1 += c;
+                    }
+                    m.into_iter()
+                        .filter(|(_, (_, c))| *c > 0)
+                        .map(|(k, (s, c))| (k, s.map(|v| v / c as f64)))
+                        .collect()
+                },
                 grip_profile,
             }
         })
