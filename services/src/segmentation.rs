@@ -359,12 +359,14 @@ impl Grid {
 }
 
 fn build_grid(session: &Session, params: &SegmentParams) -> Option<Grid> {
-    let obj: Vec<(u64, Isometry)> = session
+    let mut obj: Vec<(u64, Isometry)> = session
         .object
         .iter()
         .map(|(t, o)| (*t, iso(&o.pose) * iso(&o.pose_in_hand).inverse()))
         .filter(|(_, b)| b.translation.vector.iter().all(|v| v.is_finite()))
         .collect();
+    // Files are in log-time order; be safe against reordered samples anyway.
+    obj.sort_by_key(|(t, _)| *t);
     if obj.len() < 2 {
         return None;
     }
@@ -391,17 +393,22 @@ fn build_grid(session: &Session, params: &SegmentParams) -> Option<Grid> {
         base_r.push(a.rotation.nlerp(&b.rotation, s));
     }
     let mut touching = vec![false; n];
-    let c = &session.contacts;
+    let mut c: Vec<(u64, bool)> = session
+        .contacts
+        .iter()
+        .map(|(t, m)| (*t, m.fingers.iter().filter(|f| f.in_contact).count() >= 2))
+        .collect();
+    c.sort_by_key(|(t, _)| *t);
     let mut j = 0;
     for (i, tv) in touching.iter_mut().enumerate() {
         let t = t0 + i as u64 * dt_ns;
         while j + 1 < c.len() && c[j + 1].0 <= t {
             j += 1;
         }
-        if let Some((tc, m)) = c.get(j) {
+        if let Some((tc, on)) = c.get(j) {
             // Zero-order hold, but not across a long hole in the data.
             if *tc <= t + dt_ns && t - (*tc).min(t) < 50_000_000 {
-                *tv = m.fingers.iter().filter(|f| f.in_contact).count() >= 2;
+                *tv = *on;
             }
         }
     }
