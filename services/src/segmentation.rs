@@ -165,8 +165,10 @@ pub struct KeyPose {
     pub rotation: [f64; 3],
 }
 
-/// Grasp quality (GraspIt!): Ferrari-Canny ε and the volume of the grasp wrench space, point
-/// contacts with friction, 8-edge linearised cones, on the mean contacts with the object's μ.
+/// Grasp quality (GraspIt!): Ferrari-Canny ε and the volume of the grasp wrench space with
+/// 8-edge linearised friction cones, on the mean contacts with the object's μ and μ_t and the
+/// recording's contact model (soft finger: with point contacts with friction a two-finger pinch
+/// is never force closure), torques divided by the object's half diagonal.
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct QualityParamsOut {
     /// Ferrari-Canny ε (0 when not force closure).
@@ -215,7 +217,9 @@ pub struct SkillParameters {
     pub contacts: Vec<ContactParams>,
     /// Mean sum of the normal forces while the object is held (N).
     pub internal_force_n: f64,
-    /// Smallest `μ c_n − |c_t|` over the grasp (N); negative when a contact left its cone.
+    /// Smallest `μ c_n − |c_t|` over the held part of the grasp (`lift` to `place`, or the
+    /// whole grasp if the object was never lifted), on contacts pushing with more than 0.05 N
+    /// (N); negative when a contact left its cone.
     pub friction_margin_n: f64,
     /// The same as a ratio `(μ c_n − |c_t|) / (μ c_n)` (1 = pure normal force, ≤ 0 = slip).
     pub friction_margin_ratio: f64,
@@ -224,7 +228,8 @@ pub struct SkillParameters {
     pub motion: Vec<KeyPose>,
     /// Duration of each phase (s; summed when a phase repeats).
     pub phase_durations: BTreeMap<String, f64>,
-    /// Slip events.
+    /// Slip events: runs of ≥ 2 ms in which a touching contact's requested intensities were
+    /// outside its friction cone, merged per finger when less than 20 ms apart.
     pub slip_events: Vec<SlipEvent>,
     /// Grasp quality on the mean contacts (absent without contacts or μ).
     pub quality: Option<QualityParamsOut>,
@@ -854,7 +859,7 @@ fn skill_parameters(
             if f.slip && f.touching {
                 a.slip.get_or_insert(*t);
             } else if let Some(s) = a.slip.take() {
-                if t - s >= 5_000_000 {
+                if t - s >= 2_000_000 {
                     slips.push(SlipEvent {
                         time_s: (s - grasp_start) as f64 * 1e-9,
                         finger: f.name.clone(),
@@ -878,7 +883,9 @@ fn skill_parameters(
                 a.pos += v3(&f.point_b);
                 a.nrm += v3(&f.normal_b);
             }
-            if let (Some(mu), true) = (mu, f.in_contact && i.z > 0.0) {
+            // The friction margin over the held part (closing and opening are excluded: there
+            // the normal force is near zero by intent).
+            if let (Some(mu), true) = (mu, steady && f.in_contact && i.z > 0.05) {
                 let ct = i.x.hypot(i.y);
                 let m = mu * i.z - ct;
                 margin_n = margin_n.min(m);
@@ -901,6 +908,18 @@ fn skill_parameters(
             });
         }
     }
+    // One event per finger for slips closer than 20 ms.
+    slips.sort_by(|a, b| a.finger.cmp(&b.finger).then(a.time_s.total_cmp(&b.time_s)));
+    let mut merged: Vec<SlipEvent> = Vec::new();
+    for e in slips {
+        match merged.last_mut() {
+            Some(m) if m.finger == e.finger && e.time_s - (m.time_s + m.duration_s) < 0.02 => {
+                m.duration_s = (e.time_s + e.duration_s - m.time_s).max(m.duration_s);
+            }
+            _ => merged.push(e),
+        }
+    }
+    let mut slips = merged;
     slips.sort_by(|a, b| a.time_s.total_cmp(&b.time_s));
     // Contacts: fingers touching for at least 30 % of the steady part.
     let min_n = (steady_samples as f64 * 0.3).max(1.0) as usize;
@@ -958,7 +977,7 @@ fn skill_parameters(
                 mu: o.mu,
                 mu_torsion: o.mu_torsion,
             };
-            grasp_quality(&frames, ContactModel::PointWithFriction, &fr, &qp)
+            grasp_quality(&frames, ContactModel::SoftFinger, &fr, &qp)
                 .ok()
                 .map(|q| QualityParamsOut {
                     epsilon: q.epsilon,
