@@ -4,11 +4,13 @@
 //! - [`foxglove`]: serde types for the Foxglove schemas we record.
 //! - [`session`]: grasp sessions: topics, recorder, reader, glove import.
 //! - [`store`]: the skill data base (SQLite via sqlx, content-addressed MCAP blobs).
+//! - [`segmentation`]: sessions into skills (one per grasp) and their parameters.
 //! - [`error`]: the crate's error type.
 
 pub mod error;
 pub mod foxglove;
 pub mod mcap_io;
+pub mod segmentation;
 pub mod session;
 pub mod store;
 

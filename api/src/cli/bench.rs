@@ -33,6 +33,20 @@ pub enum BenchCommand {
         #[arg(long, default_value = "sphere-lift")]
         scenario: String,
     },
+    /// Segmentation of every built-in scenario × seeds scored against the ground truth, and
+    /// the time to segment a long sphere-lift session.
+    Segmentation {
+        /// Print JSON: `{"overall": {"median_boundary_error_ms", "phases_found_fraction", ...},
+        /// "per_scenario": {...}, "segment_60s_ms", ...}`.
+        #[arg(long)]
+        json: bool,
+        /// Seeds per scenario (0..N).
+        #[arg(long, default_value_t = 20)]
+        seeds: u64,
+        /// Simulated seconds of the session whose segmentation is timed.
+        #[arg(long, default_value_t = 60.0)]
+        duration: f64,
+    },
 }
 
 /// Result of `icms bench session`.
@@ -80,6 +94,11 @@ pub struct TickBench {
 /// Runs a benchmark.
 pub fn run(c: BenchCommand) -> Result<(), CliError> {
     match c {
+        BenchCommand::Segmentation {
+            json,
+            seeds,
+            duration,
+        } => super::segment::bench_segmentation(seeds, duration, json),
         BenchCommand::Tick { json, iterations } => {
             let r = bench_tick(iterations.max(1000))?;
             if json {

@@ -2,6 +2,7 @@
 
 mod bench;
 mod dfs_static;
+mod segment;
 mod sessions;
 mod simulate;
 
@@ -31,6 +32,9 @@ enum Command {
     /// Replays a real glove recording (MCAP or CSV) through the DFS against an object into a
     /// session file.
     ImportGlove(sessions::ImportArgs),
+    /// Segments a session file into skills (one per grasp) with their hand-independent
+    /// parameters.
+    Segment(segment::SegmentArgs),
     /// Benchmarks whose figures BENCHMARKS.md quotes.
     #[command(subcommand)]
     Bench(bench::BenchCommand),
@@ -55,6 +59,7 @@ pub fn run() -> ExitCode {
         Command::Simulate(a) => simulate::run_simulate(a),
         Command::Salvage(a) => sessions::run_salvage(a),
         Command::ImportGlove(a) => sessions::run_import(a),
+        Command::Segment(a) => segment::run_segment(a),
         Command::Bench(b) => bench::run(b),
     };
     match result {

@@ -1,0 +1,1156 @@
+//! Segmentation of a session into skills (one per grasp) and their hand-independent
+//! parameters, and scoring against ground truth.
+//!
+//! # Method
+//!
+//! The primary cue is the motion of the hand's base link, `base = object pose ∘ pose_in_hand⁻¹`,
+//! resampled by timestamp onto a 1 ms grid (dropped samples are interpolated). Its speed
+//! (linear plus [`SegmentParams::rotation_radius`] × angular, central differences over
+//! ±[`SegmentParams::speed_window_s`]) is thresholded with hysteresis into *moves*; moves that
+//! are too short or too small are dropped. A hand move is close to a minimum-jerk profile, so
+//! each move's start and end are refined from its progress curve: the times at which it has
+//! covered 10 %, 50 % and 90 % of its displacement give its centre and duration (for a
+//! minimum-jerk profile the 10-90 % time is 50.7 % of the whole), which is much less biased
+//! than a speed threshold.
+//!
+//! Contact *episodes* (at least two fingers transmitting force, with minimum duration and gap
+//! merging) are the grasps; a single finger bumping into the object is not one. Around each episode the moves and the rests between them are labelled by a small
+//! grammar: moves before the first touch are `approach` (and the last of two or more is
+//! `preshape`); the rest from the last of them to the first move in contact is `grasp`; moves in
+//! contact are `lift` (mostly up), `place` (mostly down) or `transport` (otherwise, or a turn);
+//! rests between them are `hold`, the rest after a `place` is `release`; the first move after
+//! the episode is `retreat`. The object's motion is not needed for the boundaries.
+
+use std::collections::BTreeMap;
+
+use dfs_core::contact::{ContactFrame, ContactModel, Friction};
+use dfs_core::grasp::quality::{grasp_quality, QualityParams};
+use dfs_core::math::{Isometry, Rotation, Vector};
+use dfs_core::scenario::ScenarioObject;
+use serde::Serialize;
+
+use crate::foxglove::Pose;
+use crate::session::{GroundTruthPhase, Session};
+
+/// Tuning of [`segment`]. The defaults suit human-speed grasping at any sample rate ≥ 100 Hz.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct SegmentParams {
+    /// Grid step of the resampled signals (s). Default 0.001.
+    pub grid_s: f64,
+    /// Half width of the central difference for the speed (s). Default 0.015.
+    pub speed_window_s: f64,
+    /// Length that turns angular speed into a linear speed (m). Default 0.1.
+    pub rotation_radius: f64,
+    /// A move starts above this speed (m/s). Default 0.008.
+    pub move_enter_speed: f64,
+    /// A move ends below this speed (m/s). Default 0.003.
+    pub move_exit_speed: f64,
+    /// Shortest move (s). Default 0.08.
+    pub min_move_s: f64,
+    /// Smallest move displacement (m, rotations counted × `rotation_radius`). Default 0.0015.
+    pub min_move_m: f64,
+    /// Shortest contact episode (s). Default 0.1.
+    pub min_contact_s: f64,
+    /// Contact gaps shorter than this are bridged (s). Default 0.3.
+    pub contact_gap_s: f64,
+    /// A move with |vertical| / |displacement| above this is a lift or a place. Default 0.6.
+    pub vertical_fraction: f64,
+    /// Points of the resampled grip-force profile. Default 50.
+    pub profile_points: usize,
+    /// Key poses of the object's motion every this many seconds (plus phase boundaries).
+    /// Default 0.25.
+    pub keyframe_s: f64,
+}
+
+impl Default for SegmentParams {
+    fn default() -> Self {
+        SegmentParams {
+            grid_s: 0.001,
+            speed_window_s: 0.015,
+            rotation_radius: 0.1,
+            move_enter_speed: 0.008,
+            move_exit_speed: 0.003,
+            min_move_s: 0.08,
+            min_move_m: 0.0015,
+            min_contact_s: 0.1,
+            contact_gap_s: 0.3,
+            vertical_fraction: 0.6,
+            profile_points: 50,
+            keyframe_s: 0.25,
+        }
+    }
+}
+
+/// A phase found by [`segment`].
+#[derive(Debug, Clone, PartialEq, Eq, Serialize)]
+pub struct PhaseSpan {
+    /// Phase name (`approach`, `preshape`, `grasp`, `lift`, `hold`, `transport`, `place`,
+    /// `release`, `retreat`).
+    pub name: String,
+    /// Start, ns since the session start.
+    pub start_ns: u64,
+    /// End (exclusive), ns since the session start.
+    pub end_ns: u64,
+}
+
+/// The result of [`segment`]: one skill per grasp, in time order.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct Segmentation {
+    /// The skills.
+    pub skills: Vec<Skill>,
+}
+
+/// One grasp of a session: its phases and its hand-independent parameters.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct Skill {
+    /// Phases, in time order, contiguous.
+    pub phases: Vec<PhaseSpan>,
+    /// The skill's parameters (flattened into the skill's JSON).
+    #[serde(flatten)]
+    pub parameters: SkillParameters,
+}
+
+/// The object as the session's metadata describes it.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct ObjectParams {
+    /// `sphere`, `box` or `cylinder`.
+    pub shape: String,
+    /// Size (m): `[radius]` (sphere), half extents (box), `[radius, half_height]` (cylinder).
+    pub size: Vec<f64>,
+    /// Mass (kg).
+    pub mass: f64,
+    /// Principal moments of inertia about B's axes (kg·m²), solid body of uniform density.
+    pub inertia: [f64; 3],
+    /// Coulomb friction coefficient.
+    pub mu: f64,
+    /// Torsional friction coefficient (m).
+    pub mu_torsion: f64,
+}
+
+/// One contact of a skill, in the object frame B.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct ContactParams {
+    /// Fingertip of the recording hand (provenance only; the skill does not depend on it).
+    pub finger: String,
+    /// Mean contact point in B over the held part of the grasp (m).
+    pub position_b: [f64; 3],
+    /// Mean unit normal in B, pointing into the object.
+    pub normal_b: [f64; 3],
+    /// Mean intensities `[x, y, normal, torsion]` (N, N·m) per phase name, while touching.
+    pub mean_intensity: BTreeMap<String, [f64; 4]>,
+    /// Normal force (N) resampled to [`SegmentParams::profile_points`] points over the span from
+    /// the start of `grasp` to the end of `release` (or of the last phase in contact).
+    pub grip_profile: Vec<f64>,
+}
+
+/// A slip of one contact.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct SlipEvent {
+    /// Start, s since the start of `grasp`.
+    pub time_s: f64,
+    /// Fingertip.
+    pub finger: String,
+    /// Duration (s).
+    pub duration_s: f64,
+}
+
+/// A key pose of the object relative to its pose at the start of the grasp (frame B₀).
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct KeyPose {
+    /// Time since the start of `grasp` (s).
+    pub time_s: f64,
+    /// Position of B in B₀ (m).
+    pub position: [f64; 3],
+    /// Rotation of B relative to B₀ as a rotation vector (rad).
+    pub rotation: [f64; 3],
+}
+
+/// Grasp quality (GraspIt!): Ferrari-Canny ε and the volume of the grasp wrench space with
+/// 8-edge linearised friction cones, on the mean contacts with the object's μ and μ_t and the
+/// recording's contact model (soft finger: with point contacts with friction a two-finger pinch
+/// is never force closure), torques divided by the object's half diagonal.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct QualityParamsOut {
+    /// Ferrari-Canny ε (0 when not force closure).
+    pub epsilon: f64,
+    /// Volume of the grasp wrench space.
+    pub volume: f64,
+    /// The grasp is force closure.
+    pub force_closure: bool,
+}
+
+/// Grasp type label.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct GraspType {
+    /// `precision` (≤ 3 contacts) or `power`.
+    pub label: String,
+    /// Number of virtual fingers: groups of contacts with similar normals (within 60°);
+    /// 2 for a pinch. 0 without contacts.
+    pub opposing_virtual_fingers: usize,
+}
+
+/// Where a skill comes from.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct SkillSource {
+    /// Scenario (or imported file) name.
+    pub scenario: String,
+    /// Seed, if simulated.
+    pub seed: Option<u64>,
+    /// The session's `hand` and `source` metadata.
+    pub metadata: BTreeMap<String, String>,
+    /// Start of the skill's first phase (ns since the session start).
+    pub start_ns: u64,
+    /// End of the skill's last phase (ns).
+    pub end_ns: u64,
+}
+
+/// The parameters of a skill, in the object frame B and independent of the hand.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct SkillParameters {
+    /// The object (absent when the metadata does not describe it).
+    pub object: Option<ObjectParams>,
+    /// Contact model of the recording (`soft_finger`: point contact with friction and torsion).
+    pub contact_model: String,
+    /// Number of contacts.
+    pub contact_count: usize,
+    /// The contacts.
+    pub contacts: Vec<ContactParams>,
+    /// Mean sum of the normal forces while the object is held (N).
+    pub internal_force_n: f64,
+    /// Smallest `μ c_n − |c_t|` over the held part of the grasp (`lift` to `place`, or the
+    /// whole grasp if the object was never lifted), on contacts pushing with more than 0.05 N
+    /// (N); negative when a contact left its cone.
+    pub friction_margin_n: f64,
+    /// The same as a ratio `(μ c_n − |c_t|) / (μ c_n)` (1 = pure normal force, ≤ 0 = slip).
+    pub friction_margin_ratio: f64,
+    /// The object's motion relative to its pose at the start of `grasp`: key poses at every
+    /// phase boundary and every [`SegmentParams::keyframe_s`] in between.
+    pub motion: Vec<KeyPose>,
+    /// Duration of each phase (s; summed when a phase repeats).
+    pub phase_durations: BTreeMap<String, f64>,
+    /// Slip events: runs of ≥ 2 ms in which a touching contact's requested intensities were
+    /// outside its friction cone, merged per finger when less than 20 ms apart.
+    pub slip_events: Vec<SlipEvent>,
+    /// Grasp quality on the mean contacts (absent without contacts or μ).
+    pub quality: Option<QualityParamsOut>,
+    /// Grasp type.
+    pub grasp_type: GraspType,
+    /// Source session and span.
+    pub source: SkillSource,
+    /// Feature vector for similarity search, see [`FEATURE_DIMENSIONS`].
+    pub feature: [f32; 16],
+}
+
+/// Meaning of each dimension of [`SkillParameters::feature`].
+pub const FEATURE_DIMENSIONS: [&str; 16] = [
+    "ln(mass / 1 kg)",
+    "mu",
+    "contact count",
+    "Ferrari-Canny epsilon",
+    "grasp wrench space volume^(1/6)",
+    "internal force / weight",
+    "hold duration (s)",
+    "lift height of the object (m)",
+    "horizontal transport distance of the object (m)",
+    "largest rotation of the object (rad)",
+    "mean |normal_b.x| of the contacts",
+    "mean |normal_b.y| of the contacts",
+    "mean |normal_b.z| of the contacts",
+    "shape is sphere (0/1)",
+    "shape is box (0/1)",
+    "shape is cylinder (0/1)",
+];
+
+/// Score of a segmentation against ground truth.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct Score {
+    /// Absolute boundary errors (ms) of the found truth phases: start and end of each, except
+    /// boundaries at the session's start (0) and at the truth's last end.
+    pub boundary_errors_ms: Vec<f64>,
+    /// Median of `boundary_errors_ms` (0 when empty).
+    pub median_boundary_error_ms: f64,
+    /// Fraction of truth phases found: a phase of the same name overlaps it by more than 50 %
+    /// of its duration (1 when there is no truth).
+    pub phases_found_fraction: f64,
+}
+
+/// Scores found phases against ground truth (see [`Score`]).
+pub fn score(found: &[PhaseSpan], truth: &[GroundTruthPhase]) -> Score {
+    let last_end = truth.iter().map(|p| p.end_ns).max().unwrap_or(0);
+    let mut errors = Vec::new();
+    let mut n_found = 0;
+    for t in truth {
+        let len = t.end_ns.saturating_sub(t.start_ns).max(1);
+        let best = found
+            .iter()
+            .filter(|f| f.name == t.name)
+            .map(|f| {
+                let ov = f
+                    .end_ns
+                    .min(t.end_ns)
+                    .saturating_sub(f.start_ns.max(t.start_ns));
+                (ov, f)
+            })
+            .max_by_key(|(ov, _)| *ov);
+        if let Some((ov, f)) = best {
+            if ov * 2 > len {
+                n_found += 1;
+                if t.start_ns > 0 {
+                    errors.push((f.start_ns as f64 - t.start_ns as f64).abs() * 1e-6);
+                }
+                if t.end_ns < last_end {
+                    errors.push((f.end_ns as f64 - t.end_ns as f64).abs() * 1e-6);
+                }
+            }
+        }
+    }
+    let median = median(&mut errors.clone());
+    Score {
+        boundary_errors_ms: errors,
+        median_boundary_error_ms: median,
+        phases_found_fraction: if truth.is_empty() {
+            1.0
+        } else {
+            n_found as f64 / truth.len() as f64
+        },
+    }
+}
+
+/// Median of values (0 when empty); reorders `v`.
+pub fn median(v: &mut [f64]) -> f64 {
+    if v.is_empty() {
+        return 0.0;
+    }
+    v.sort_by(|a, b| a.total_cmp(b));
+    let n = v.len();
+    if n % 2 == 1 {
+        v[n / 2]
+    } else {
+        0.5 * (v[n / 2 - 1] + v[n / 2])
+    }
+}
+
+fn iso(p: &Pose) -> Isometry {
+    let q = nalgebra::Quaternion::new(
+        p.orientation.w,
+        p.orientation.x,
+        p.orientation.y,
+        p.orientation.z,
+    );
+    let r = if q.norm() > 1e-9 {
+        Rotation::from_quaternion(q)
+    } else {
+        Rotation::identity()
+    };
+    Isometry::from_parts(
+        Vector::new(p.position.x, p.position.y, p.position.z).into(),
+        r,
+    )
+}
+
+/// Signals resampled onto the uniform grid.
+struct Grid {
+    t0: u64,
+    dt_ns: u64,
+    base_p: Vec<Vector>,
+    base_r: Vec<Rotation>,
+    touching: Vec<bool>,
+}
+
+impl Grid {
+    fn len(&self) -> usize {
+        self.base_p.len()
+    }
+}
+
+fn build_grid(session: &Session, params: &SegmentParams) -> Option<Grid> {
+    let mut obj: Vec<(u64, Isometry)> = session
+        .object
+        .iter()
+        .map(|(t, o)| (*t, iso(&o.pose) * iso(&o.pose_in_hand).inverse()))
+        .filter(|(_, b)| b.translation.vector.iter().all(|v| v.is_finite()))
+        .collect();
+    // Files are in log-time order; be safe against reordered samples anyway.
+    obj.sort_by_key(|(t, _)| *t);
+    if obj.len() < 2 {
+        return None;
+    }
+    let t0 = obj[0].0;
+    let t1 = obj[obj.len() - 1].0;
+    let dt_ns = ((params.grid_s * 1e9) as u64).max(1);
+    let n = ((t1 - t0) / dt_ns + 1) as usize;
+    let mut base_p = Vec::with_capacity(n);
+    let mut base_r = Vec::with_capacity(n);
+    let mut k = 0;
+    for i in 0..n {
+        let t = t0 + i as u64 * dt_ns;
+        while k + 2 < obj.len() && obj[k + 1].0 <= t {
+            k += 1;
+        }
+        let (ta, a) = &obj[k];
+        let (tb, b) = &obj[(k + 1).min(obj.len() - 1)];
+        let s = if tb > ta {
+            ((t as f64 - *ta as f64) / (*tb as f64 - *ta as f64)).clamp(0.0, 1.0)
+        } else {
+            0.0
+        };
+        base_p.push(a.translation.vector.lerp(&b.translation.vector, s));
+        base_r.push(a.rotation.nlerp(&b.rotation, s));
+    }
+    let mut touching = vec![false; n];
+    let mut c: Vec<(u64, bool)> = session
+        .contacts
+        .iter()
+        .map(|(t, m)| (*t, m.fingers.iter().filter(|f| f.in_contact).count() >= 2))
+        .collect();
+    c.sort_by_key(|(t, _)| *t);
+    let mut j = 0;
+    for (i, tv) in touching.iter_mut().enumerate() {
+        let t = t0 + i as u64 * dt_ns;
+        while j + 1 < c.len() && c[j + 1].0 <= t {
+            j += 1;
+        }
+        if let Some((tc, on)) = c.get(j) {
+            // Zero-order hold, but not across a long hole in the data.
+            if *tc <= t + dt_ns && t - (*tc).min(t) < 50_000_000 {
+                *tv = *on;
+            }
+        }
+    }
+    Some(Grid {
+        t0,
+        dt_ns,
+        base_p,
+        base_r,
+        touching,
+    })
+}
+
+/// A move of the hand's base: grid indices of its refined start and end, and its displacement.
+#[derive(Debug, Clone, Copy)]
+struct Move {
+    start: f64,
+    end: f64,
+    dp: Vector,
+    angle: f64,
+}
+
+/// τ at which a minimum-jerk profile has covered `s` of its displacement.
+fn min_jerk_tau(s: f64) -> f64 {
+    let (mut lo, mut hi) = (0.0f64, 0.5f64);
+    for _ in 0..60 {
+        let t = 0.5 * (lo + hi);
+        let v = t * t * t * (10.0 - 15.0 * t + 6.0 * t * t);
+        if v < s {
+            lo = t;
+        } else {
+            hi = t;
+        }
+    }
+    0.5 * (lo + hi)
+}
+
+fn speed_profile(g: &Grid, params: &SegmentParams, window_s: f64) -> Vec<f64> {
+    let n = g.len();
+    let w = ((window_s / params.grid_s).round() as usize).max(1);
+    let dt = g.dt_ns as f64 * 1e-9;
+    (0..n)
+        .map(|i| {
+            let a = i.saturating_sub(w);
+            let b = (i + w).min(n - 1);
+            if b <= a {
+                return 0.0;
+            }
+            let span = (b - a) as f64 * dt;
+            let lin = (g.base_p[b] - g.base_p[a]).norm();
+            let d = g.base_r[a].coords.dot(&g.base_r[b].coords).abs().min(1.0);
+            let ang = 2.0 * d.acos();
+            (lin + params.rotation_radius * ang) / span
+        })
+        .collect()
+}
+
+/// Runs of `speed` above `enter` (extended back and forward to where it is below `exit`)
+/// inside `[from, to)`.
+fn hysteresis(speed: &[f64], enter: f64, exit: f64, from: usize, to: usize) -> Vec<(usize, usize)> {
+    let mut raw = Vec::new();
+    let mut start: Option<usize> = None;
+    for i in from..to {
+        let v = speed[i];
+        match start {
+            None if v > enter => {
+                let mut s = i;
+                while s > from && speed[s - 1] > exit {
+                    s -= 1;
+                }
+                start = Some(s);
+            }
+            Some(s) if v < exit => {
+                raw.push((s, i));
+                start = None;
+            }
+            _ => {}
+        }
+    }
+    if let Some(s) = start {
+        raw.push((s, to.saturating_sub(1)));
+    }
+    raw
+}
+
+fn find_moves(g: &Grid, params: &SegmentParams) -> Vec<Move> {
+    let n = g.len();
+    let dt = g.dt_ns as f64 * 1e-9;
+    let speed = speed_profile(g, params, params.speed_window_s);
+    let mut raw = hysteresis(
+        &speed,
+        params.move_enter_speed,
+        params.move_exit_speed,
+        0,
+        n,
+    );
+    // Second pass for slow, small moves in the rests between the fast ones: a wider window
+    // (less noise) and a quarter of the thresholds.
+    let slow = speed_profile(g, params, 3.0 * params.speed_window_s);
+    let margin = (3.0 * params.speed_window_s / params.grid_s) as usize;
+    let mut gaps = Vec::new();
+    let mut prev = 0usize;
+    for &(a, b) in &raw {
+        gaps.push((prev, a.saturating_sub(margin)));
+        prev = (b + margin).min(n);
+    }
+    gaps.push((prev, n));
+    for (a, b) in gaps {
+        if b > a {
+            raw.extend(hysteresis(
+                &slow,
+                0.25 * params.move_enter_speed,
+                0.25 * params.move_exit_speed,
+                a,
+                b,
+            ));
+        }
+    }
+    raw.sort_unstable();
+    let tau10 = min_jerk_tau(0.1);
+    let mut moves = Vec::new();
+    for (a, b) in raw {
+        if (b - a) as f64 * dt < params.min_move_s {
+            continue;
+        }
+        let dp = g.base_p[b] - g.base_p[a];
+        let rot = g.base_r[a].inverse() * g.base_r[b];
+        let rv = rot.scaled_axis();
+        let d2 = dp.norm_squared() + (params.rotation_radius * rv.norm()).powi(2);
+        if d2.sqrt() < params.min_move_m {
+            continue;
+        }
+        // Progress along the move's displacement (translation and rotation together).
+        let progress = |i: usize| -> f64 {
+            let p = g.base_p[i] - g.base_p[a];
+            let r = (g.base_r[a].inverse() * g.base_r[i]).scaled_axis();
+            (p.dot(&dp) + params.rotation_radius.powi(2) * r.dot(&rv)) / d2
+        };
+        let crossing = |level: f64| -> f64 {
+            let mut prev = progress(a);
+            for i in a + 1..=b {
+                let cur = progress(i);
+                if cur >= level {
+                    let f = if cur > prev {
+                        (level - prev) / (cur - prev)
+                    } else {
+                        1.0
+                    };
+                    return (i - 1) as f64 + f.clamp(0.0, 1.0);
+                }
+                prev = cur;
+            }
+            b as f64
+        };
+        let (t10, t50, t90) = (crossing(0.1), crossing(0.5), crossing(0.9));
+        let dur = (t90 - t10) / (1.0 - 2.0 * tau10);
+        let (mut s, mut e) = (t50 - 0.5 * dur, t50 + 0.5 * dur);
+        // The fit should not move a boundary far outside what the threshold saw.
+        let slack = 0.3 * (b - a) as f64;
+        s = s.clamp(a as f64 - slack, a as f64 + slack).max(0.0);
+        e = e
+            .clamp(b as f64 - slack, b as f64 + slack)
+            .min((n - 1) as f64);
+        moves.push(Move {
+            start: s,
+            end: e,
+            dp,
+            angle: rv.norm(),
+        });
+    }
+    // Neighbouring moves must not overlap after refinement.
+    for i in 1..moves.len() {
+        if moves[i].start < moves[i - 1].end {
+            let m = 0.5 * (moves[i].start + moves[i - 1].end);
+            moves[i].start = m;
+            moves[i - 1].end = m;
+        }
+    }
+    moves
+}
+
+fn find_episodes(g: &Grid, params: &SegmentParams) -> Vec<(usize, usize)> {
+    let mut eps: Vec<(usize, usize)> = Vec::new();
+    let mut start = None;
+    for i in 0..=g.len() {
+        let on = i < g.len() && g.touching[i];
+        match (start, on) {
+            (None, true) => start = Some(i),
+            (Some(s), false) => {
+                eps.push((s, i));
+                start = None;
+            }
+            _ => {}
+        }
+    }
+    let gap = (params.contact_gap_s / params.grid_s) as usize;
+    let mut merged: Vec<(usize, usize)> = Vec::new();
+    for e in eps {
+        match merged.last_mut() {
+            Some(last) if e.0 - last.1 <= gap => last.1 = e.1,
+            _ => merged.push(e),
+        }
+    }
+    let min = (params.min_contact_s / params.grid_s) as usize;
+    merged.retain(|(a, b)| b - a >= min);
+    merged
+}
+
+/// Segments a session into skills, one per grasp. Pure: no I/O.
+pub fn segment(session: &Session, params: &SegmentParams) -> Segmentation {
+    let Some(g) = build_grid(session, params) else {
+        return Segmentation { skills: Vec::new() };
+    };
+    let moves = find_moves(&g, params);
+    let episodes = find_episodes(&g, params);
+    let n = g.len();
+    let last = (n - 1) as f64;
+    let tol = 0.05 / params.grid_s;
+    let mut skills_spans: Vec<Vec<(String, f64, f64)>> = Vec::new();
+    let mut prev_end = 0.0f64;
+    let mut mi = 0usize; // first move not yet used
+    for (k, &(c0, c1)) in episodes.iter().enumerate() {
+        let (c0, c1) = (c0 as f64, c1 as f64);
+        let mut spans: Vec<(String, f64, f64)> = Vec::new();
+        // Moves before the first touch.
+        let pre: Vec<Move> = moves[mi..]
+            .iter()
+            .take_while(|m| m.end <= c0 + tol)
+            .copied()
+            .collect();
+        mi += pre.len();
+        let grasp_start = pre.last().map_or(c0, |m| m.end.min(c0));
+        if pre.len() >= 2 {
+            let p = pre[pre.len() - 1];
+            spans.push(("approach".into(), prev_end, p.start));
+            spans.push(("preshape".into(), p.start, p.end.min(grasp_start)));
+        } else {
+            spans.push(("approach".into(), prev_end, grasp_start));
+        }
+        // Moves after the grasp: in contact, or after a lost contact until the retreat (the
+        // first upward move after the contact ended or after a place).
+        let next_c0 = episodes.get(k + 1).map(|e| e.0 as f64);
+        let mut cursor = grasp_start;
+        let mut name_rest = "grasp";
+        let mut last_label = "";
+        let mut retreat = None;
+        while let Some(m) = moves.get(mi).copied() {
+            if next_c0.is_some_and(|c| m.end > c + tol) {
+                break;
+            }
+            let h = m.dp.norm();
+            let label = if h < params.rotation_radius * m.angle * 0.5 {
+                "transport"
+            } else if m.dp.z > params.vertical_fraction * h {
+                "lift"
+            } else if m.dp.z < -params.vertical_fraction * h {
+                "place"
+            } else {
+                "transport"
+            };
+            mi += 1;
+            if label == "lift" && (m.start > c1 + tol || last_label == "place") {
+                retreat = Some(m);
+                break;
+            }
+            if m.start - cursor > 0.15 / params.grid_s || name_rest == "grasp" {
+                spans.push((name_rest.into(), cursor, m.start));
+            } else if let Some(prev) = spans.last_mut() {
+                prev.2 = m.start;
+            }
+            spans.push((label.into(), m.start, m.end));
+            cursor = m.end;
+            last_label = label;
+            name_rest = "hold";
+        }
+        if last_label == "place" {
+            name_rest = "release";
+        }
+        match retreat {
+            Some(r) => {
+                spans.push((name_rest.into(), cursor, r.start));
+                let end = if next_c0.is_some() { r.end } else { last };
+                spans.push(("retreat".into(), r.start, end));
+                prev_end = end;
+            }
+            None => {
+                let end = next_c0.map_or(last, |c| c1.max(cursor).min(c));
+                spans.push((name_rest.into(), cursor, end.max(cursor)));
+                prev_end = end;
+            }
+        }
+        skills_spans.push(spans);
+    }
+    let grid_ns = |x: f64| g.t0 + (x.max(0.0) * g.dt_ns as f64).round() as u64;
+    let skills = skills_spans
+        .into_iter()
+        .map(|spans| {
+            let phases: Vec<PhaseSpan> = spans
+                .into_iter()
+                .filter(|(_, a, b)| b > a)
+                .map(|(name, a, b)| PhaseSpan {
+                    name,
+                    start_ns: if a <= 0.0 { 0 } else { grid_ns(a) },
+                    end_ns: grid_ns(b),
+                })
+                .collect();
+            let parameters = skill_parameters(session, &phases, params);
+            Skill { phases, parameters }
+        })
+        .collect();
+    Segmentation { skills }
+}
+
+fn object_params(session: &Session) -> Option<ObjectParams> {
+    let o: ScenarioObject = serde_json::from_str(session.metadata.get("object")?).ok()?;
+    let m = o.mass;
+    let (size, inertia) = match o.shape.as_str() {
+        "sphere" => {
+            let r = o.radius?;
+            let i = 0.4 * m * r * r;
+            (vec![r], [i, i, i])
+        }
+        "box" => {
+            let h = o.half_extents?;
+            let [a, b, c] = h.map(|v| 4.0 * v * v);
+            (
+                h.to_vec(),
+                [m * (b + c) / 12.0, m * (a + c) / 12.0, m * (a + b) / 12.0],
+            )
+        }
+        "cylinder" => {
+            let (r, h) = (o.radius?, o.half_height?);
+            let ix = m * (3.0 * r * r + 4.0 * h * h) / 12.0;
+            (vec![r, h], [ix, ix, 0.5 * m * r * r])
+        }
+        _ => return None,
+    };
+    Some(ObjectParams {
+        shape: o.shape,
+        size,
+        mass: m,
+        inertia,
+        mu: o.mu,
+        mu_torsion: o.mu_torsion,
+    })
+}
+
+fn v3(v: &crate::foxglove::Vector3) -> Vector {
+    Vector::new(v.x, v.y, v.z)
+}
+
+fn arr(v: &Vector) -> [f64; 3] {
+    [v.x, v.y, v.z]
+}
+
+const HELD: [&str; 4] = ["lift", "hold", "transport", "place"];
+
+fn skill_parameters(
+    session: &Session,
+    phases: &[PhaseSpan],
+    params: &SegmentParams,
+) -> SkillParameters {
+    let object = object_params(session);
+    let mu = object.as_ref().map(|o| o.mu);
+    let start_ns = phases.first().map_or(0, |p| p.start_ns);
+    let end_ns = phases.last().map_or(0, |p| p.end_ns);
+    let grasp_start = phases
+        .iter()
+        .find(|p| p.name == "grasp")
+        .map_or(start_ns, |p| p.start_ns);
+    let grasp_end = phases
+        .iter()
+        .rev()
+        .find(|p| p.name == "release" || HELD.contains(&p.name.as_str()) || p.name == "grasp")
+        .map_or(end_ns, |p| p.end_ns);
+    let held_span = {
+        let h: Vec<&PhaseSpan> = phases
+            .iter()
+            .filter(|p| HELD.contains(&p.name.as_str()))
+            .collect();
+        match (h.first(), h.last()) {
+            (Some(a), Some(b)) => (a.start_ns, b.end_ns),
+            _ => (grasp_start, grasp_end),
+        }
+    };
+    // Per finger accumulators.
+    struct Acc {
+        name: String,
+        steady_n: usize,
+        pos: Vector,
+        nrm: Vector,
+        /// Per phase index of `phases`: sums of the intensities and samples.
+        per_phase: Vec<([f64; 4], usize)>,
+        profile_t: Vec<(u64, f64)>,
+        slip: Option<u64>,
+    }
+    let mut accs: Vec<Acc> = Vec::new();
+    let mut steady_samples = 0usize;
+    let mut internal = (0.0, 0usize);
+    let mut margin_n = f64::INFINITY;
+    let mut margin_ratio = f64::INFINITY;
+    let mut slips = Vec::new();
+    let mut last_t = grasp_start;
+    let mut pi = 0usize;
+    for (t, c) in &session.contacts {
+        if *t < grasp_start || *t >= grasp_end {
+            continue;
+        }
+        last_t = *t;
+        let steady = *t >= held_span.0 && *t < held_span.1;
+        if steady {
+            steady_samples += 1;
+        }
+        // Phases are in time order: advance the current one.
+        while pi + 1 < phases.len() && *t >= phases[pi].end_ns {
+            pi += 1;
+        }
+        let phase = phases.get(pi).map_or("", |p| p.name.as_str());
+        let mut sum_n = 0.0;
+        for (fi, f) in c.fingers.iter().enumerate() {
+            // Fingers come in the same order every tick; look the name up only if not.
+            let found = match accs.get(fi) {
+                Some(a) if a.name == f.name => Some(fi),
+                _ => accs.iter().position(|a| a.name == f.name),
+            };
+            let a = match found {
+                Some(i) => &mut accs[i],
+                None => {
+                    accs.push(Acc {
+                        name: f.name.clone(),
+                        steady_n: 0,
+                        pos: Vector::zeros(),
+                        nrm: Vector::zeros(),
+                        per_phase: vec![([0.0; 4], 0); phases.len()],
+                        profile_t: Vec::new(),
+                        slip: None,
+                    });
+                    accs.last_mut().expect("pushed")
+                }
+            };
+            let i = &f.intensity;
+            let normal = if f.in_contact { i.z.max(0.0) } else { 0.0 };
+            a.profile_t.push((*t, normal));
+            if f.slip && f.touching {
+                a.slip.get_or_insert(*t);
+            } else if let Some(s) = a.slip.take() {
+                if t - s >= 2_000_000 {
+                    slips.push(SlipEvent {
+                        time_s: (s - grasp_start) as f64 * 1e-9,
+                        finger: f.name.clone(),
+                        duration_s: (t - s) as f64 * 1e-9,
+                    });
+                }
+            }
+            if !f.touching {
+                continue;
+            }
+            sum_n += normal;
+            let Some(e) = a.per_phase.get_mut(pi) else {
+                continue;
+            };
+            for (k, v) in [i.x, i.y, i.z, i.torsion].into_iter().enumerate() {
+                e.0[k] += v;
+            }
+            e.1 += 1;
+            if steady {
+                a.steady_n += 1;
+                a.pos += v3(&f.point_b);
+                a.nrm += v3(&f.normal_b);
+            }
+            // The friction margin over the held part (closing and opening are excluded: there
+            // the normal force is near zero by intent).
+            if let (Some(mu), true) = (mu, steady && f.in_contact && i.z > 0.05) {
+                let ct = i.x.hypot(i.y);
+                let m = mu * i.z - ct;
+                margin_n = margin_n.min(m);
+                if mu * i.z > 1e-6 {
+                    margin_ratio = margin_ratio.min(m / (mu * i.z));
+                }
+            }
+        }
+        if steady && HELD.contains(&phase) {
+            internal.0 += sum_n;
+            internal.1 += 1;
+        }
+    }
+    for a in &mut accs {
+        if let Some(s) = a.slip.take() {
+            slips.push(SlipEvent {
+                time_s: (s - grasp_start) as f64 * 1e-9,
+                finger: a.name.clone(),
+                duration_s: (last_t - s) as f64 * 1e-9,
+            });
+        }
+    }
+    // One event per finger for slips closer than 20 ms.
+    slips.sort_by(|a, b| a.finger.cmp(&b.finger).then(a.time_s.total_cmp(&b.time_s)));
+    let mut merged: Vec<SlipEvent> = Vec::new();
+    for e in slips {
+        match merged.last_mut() {
+            Some(m) if m.finger == e.finger && e.time_s - (m.time_s + m.duration_s) < 0.02 => {
+                m.duration_s = (e.time_s + e.duration_s - m.time_s).max(m.duration_s);
+            }
+            _ => merged.push(e),
+        }
+    }
+    let mut slips = merged;
+    slips.sort_by(|a, b| a.time_s.total_cmp(&b.time_s));
+    // Contacts: fingers touching for at least 30 % of the steady part.
+    let min_n = (steady_samples as f64 * 0.3).max(1.0) as usize;
+    let span = (grasp_end.saturating_sub(grasp_start)).max(1) as f64;
+    let npts = params.profile_points.max(2);
+    let contacts: Vec<ContactParams> = accs
+        .iter()
+        .filter(|a| a.steady_n >= min_n && a.nrm.norm() > 0.0)
+        .map(|a| {
+            let pos = a.pos / a.steady_n as f64;
+            let nrm = a.nrm.normalize();
+            let mut grip_profile = Vec::with_capacity(npts);
+            let mut j = 0;
+            for k in 0..npts {
+                let t = grasp_start as f64 + span * k as f64 / (npts - 1) as f64;
+                while j + 1 < a.profile_t.len() && (a.profile_t[j + 1].0 as f64) <= t {
+                    j += 1;
+                }
+                grip_profile.push(a.profile_t.get(j).map_or(0.0, |p| p.1));
+            }
+            ContactParams {
+                finger: a.name.clone(),
+                position_b: arr(&pos),
+                normal_b: arr(&nrm),
+                mean_intensity: {
+                    let mut m: BTreeMap<String, ([f64; 4], usize)> = BTreeMap::new();
+                    for (p, (s, c)) in phases.iter().zip(&a.per_phase) {
+                        let e = m.entry(p.name.clone()).or_insert(([0.0; 4], 0));
+                        for k in 0..4 {
+                            e.0[k] += s[k];
+                        }
+                        e.1 += c;
+                    }
+                    m.into_iter()
+                        .filter(|(_, (_, c))| *c > 0)
+                        .map(|(k, (s, c))| (k, s.map(|v| v / c as f64)))
+                        .collect()
+                },
+                grip_profile,
+            }
+        })
+        .collect();
+    // Quality on the mean contacts.
+    let quality = match (&object, contacts.len()) {
+        (Some(o), n) if n > 0 => {
+            let frames: Vec<ContactFrame> = contacts
+                .iter()
+                .map(|c| ContactFrame::from_normal(c.position_b.into(), c.normal_b.into()))
+                .collect();
+            let qp = QualityParams {
+                torque_scale: Some(o.size.iter().map(|v| v * v).sum::<f64>().sqrt()),
+                ..QualityParams::default()
+            };
+            let fr = Friction {
+                mu: o.mu,
+                mu_torsion: o.mu_torsion,
+            };
+            grasp_quality(&frames, ContactModel::SoftFinger, &fr, &qp)
+                .ok()
+                .map(|q| QualityParamsOut {
+                    epsilon: q.epsilon,
+                    volume: q.volume,
+                    force_closure: q.force_closure,
+                })
+        }
+        _ => None,
+    };
+    // Virtual fingers: greedy groups of normals within 60° of the group's first.
+    let mut groups: Vec<Vector> = Vec::new();
+    for c in &contacts {
+        let nv = Vector::from(c.normal_b);
+        if !groups.iter().any(|g| g.dot(&nv) > 0.5) {
+            groups.push(nv);
+        }
+    }
+    let grasp_type = GraspType {
+        label: if contacts.len() <= 3 {
+            "precision"
+        } else {
+            "power"
+        }
+        .into(),
+        opposing_virtual_fingers: groups.len(),
+    };
+    // Object motion relative to B at grasp start.
+    let mut times: Vec<u64> = phases
+        .iter()
+        .flat_map(|p| [p.start_ns, p.end_ns])
+        .filter(|t| *t >= grasp_start && *t <= grasp_end)
+        .collect();
+    let step = (params.keyframe_s * 1e9).max(1e6) as u64;
+    let mut t = grasp_start;
+    while t < grasp_end {
+        times.push(t);
+        t += step;
+    }
+    times.sort_unstable();
+    times.dedup();
+    let obj_at = |t: u64| -> Option<Isometry> {
+        let i = session.object.partition_point(|(ts, _)| *ts < t);
+        let i = i.min(session.object.len().checked_sub(1)?);
+        Some(iso(&session.object[i].1.pose))
+    };
+    let mut motion = Vec::new();
+    let (mut lift_h, mut horiz, mut max_rot) = (0.0f64, 0.0f64, 0.0f64);
+    if let Some(b0) = obj_at(grasp_start) {
+        for &t in &times {
+            if let Some(b) = obj_at(t) {
+                let rel = b0.inverse() * b;
+                let d = b.translation.vector - b0.translation.vector;
+                lift_h = lift_h.max(d.z);
+                horiz = horiz.max(d.x.hypot(d.y));
+                max_rot = max_rot.max(rel.rotation.angle());
+                motion.push(KeyPose {
+                    time_s: (t - grasp_start) as f64 * 1e-9,
+                    position: arr(&rel.translation.vector),
+                    rotation: arr(&rel.rotation.scaled_axis()),
+                });
+            }
+        }
+    }
+    let mut phase_durations = BTreeMap::new();
+    for p in phases {
+        *phase_durations.entry(p.name.clone()).or_insert(0.0) +=
+            (p.end_ns - p.start_ns) as f64 * 1e-9;
+    }
+    let internal_force_n = if internal.1 > 0 {
+        internal.0 / internal.1 as f64
+    } else {
+        0.0
+    };
+    let fin = |v: f64| if v.is_finite() { v } else { 0.0 };
+    let (friction_margin_n, friction_margin_ratio) = (fin(margin_n), fin(margin_ratio));
+    let mean_abs_n = {
+        let mut s = Vector::zeros();
+        for c in &contacts {
+            s += Vector::from(c.normal_b).abs();
+        }
+        if contacts.is_empty() {
+            s
+        } else {
+            s / contacts.len() as f64
+        }
+    };
+    let shape = object.as_ref().map_or("", |o| o.shape.as_str());
+    let weight = object.as_ref().map_or(1.0, |o| o.mass * 9.81);
+    let q = quality.as_ref();
+    let raw = [
+        object.as_ref().map_or(0.0, |o| o.mass.ln()),
+        mu.unwrap_or(0.0),
+        contacts.len() as f64,
+        q.map_or(0.0, |q| q.epsilon),
+        q.map_or(0.0, |q| q.volume.max(0.0).powf(1.0 / 6.0)),
+        internal_force_n / weight,
+        phase_durations.get("hold").copied().unwrap_or(0.0),
+        lift_h,
+        horiz,
+        max_rot,
+        mean_abs_n.x,
+        mean_abs_n.y,
+        mean_abs_n.z,
+        (shape == "sphere") as u8 as f64,
+        (shape == "box") as u8 as f64,
+        (shape == "cylinder") as u8 as f64,
+    ];
+    let feature = raw.map(|v| fin(v) as f32);
+    let source = SkillSource {
+        scenario: session.scenario().unwrap_or("").to_owned(),
+        seed: session.metadata.get("seed").and_then(|s| s.parse().ok()),
+        metadata: session
+            .metadata
+            .iter()
+            .filter(|(k, _)| matches!(k.as_str(), "hand" | "source" | "started_at"))
+            .map(|(k, v)| (k.clone(), v.clone()))
+            .collect(),
+        start_ns,
+        end_ns,
+    };
+    SkillParameters {
+        object,
+        contact_model: "soft_finger".into(),
+        contact_count: contacts.len(),
+        contacts,
+        internal_force_n,
+        friction_margin_n,
+        friction_margin_ratio,
+        motion,
+        phase_durations,
+        slip_events: slips,
+        quality,
+        grasp_type,
+        source,
+        feature,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn ten_to_ninety_percent_of_a_minimum_jerk_move_is_about_half_its_duration() {
+        let t = min_jerk_tau(0.1);
+        assert!((1.0 - 2.0 * t - 0.507).abs() < 0.01, "{t}");
+    }
+
+    #[test]
+    fn a_phase_found_exactly_scores_zero_error_and_full_recall() {
+        let truth = vec![
+            GroundTruthPhase {
+                name: "approach".into(),
+                start_ns: 0,
+                end_ns: 100,
+            },
+            GroundTruthPhase {
+                name: "grasp".into(),
+                start_ns: 100,
+                end_ns: 300,
+            },
+        ];
+        let found: Vec<PhaseSpan> = truth
+            .iter()
+            .map(|p| PhaseSpan {
+                name: p.name.clone(),
+                start_ns: p.start_ns,
+                end_ns: p.end_ns,
+            })
+            .collect();
+        let s = score(&found, &truth);
+        assert_eq!(s.phases_found_fraction, 1.0);
+        assert_eq!(s.median_boundary_error_ms, 0.0);
+        assert_eq!(s.boundary_errors_ms.len(), 2);
+    }
+}

@@ -1,0 +1,202 @@
+//! Segmentation of simulated sessions into skills, scored against their ground truth, and the
+//! skills' parameters.
+
+use std::sync::{Mutex, OnceLock};
+
+use dfs_core::scenario::Scenario;
+use services::segmentation::{score, segment, PhaseSpan, SegmentParams, Segmentation};
+use services::session::{read_session, record_simulation, Session};
+
+/// A built-in scenario simulated, recorded and read back; cached per (name, seed, duration).
+fn session(name: &str, seed: u64, duration: Option<f64>) -> Session {
+    type Cache = Mutex<Vec<((String, u64, Option<u64>), Session)>>;
+    static CACHE: OnceLock<Cache> = OnceLock::new();
+    let key = (name.to_owned(), seed, duration.map(f64::to_bits));
+    let cache = CACHE.get_or_init(|| Mutex::new(Vec::new()));
+    if let Some((_, s)) = cache.lock().unwrap().iter().find(|(k, _)| *k == key) {
+        return s.clone();
+    }
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("s.mcap");
+    let scenario = Scenario::builtin(name, seed).unwrap();
+    record_simulation(&scenario, duration, &path, |_, _| {}).unwrap();
+    let s = read_session(&path).unwrap();
+    cache.lock().unwrap().push((key, s.clone()));
+    s
+}
+
+fn found(seg: &Segmentation) -> Vec<PhaseSpan> {
+    seg.skills.iter().flat_map(|s| s.phases.clone()).collect()
+}
+
+fn describe(seg: &Segmentation, s: &Session) -> String {
+    let f: Vec<String> = found(seg)
+        .iter()
+        .map(|p| {
+            format!(
+                "{} {}-{}",
+                p.name,
+                p.start_ns / 1_000_000,
+                p.end_ns / 1_000_000
+            )
+        })
+        .collect();
+    let t: Vec<String> = s
+        .phases
+        .iter()
+        .map(|p| {
+            format!(
+                "{} {}-{}",
+                p.name,
+                p.start_ns / 1_000_000,
+                p.end_ns / 1_000_000
+            )
+        })
+        .collect();
+    format!("found: {}\ntruth: {}", f.join(", "), t.join(", "))
+}
+
+/// Deterministic pseudo-random numbers in [0, 1).
+struct Lcg(u64);
+impl Lcg {
+    fn next(&mut self) -> f64 {
+        self.0 = self
+            .0
+            .wrapping_mul(6364136223846793005)
+            .wrapping_add(1442695040888963407);
+        (self.0 >> 11) as f64 / (1u64 << 53) as f64
+    }
+}
+
+#[test]
+fn box_pinch_lift_finds_every_phase_in_order_near_the_ground_truth() {
+    let s = session("box-pinch-lift", 1, None);
+    let seg = segment(&s, &SegmentParams::default());
+    assert_eq!(seg.skills.len(), 1, "{}", describe(&seg, &s));
+    let names: Vec<&str> = seg.skills[0]
+        .phases
+        .iter()
+        .map(|p| p.name.as_str())
+        .collect();
+    let truth: Vec<&str> = s.phases.iter().map(|p| p.name.as_str()).collect();
+    assert_eq!(names, truth, "{}", describe(&seg, &s));
+    let sc = score(&found(&seg), &s.phases);
+    assert_eq!(sc.phases_found_fraction, 1.0);
+    assert!(
+        sc.median_boundary_error_ms <= 30.0,
+        "{:?}\n{}",
+        sc,
+        describe(&seg, &s)
+    );
+    assert!(
+        sc.boundary_errors_ms.iter().all(|e| *e < 100.0),
+        "{:?}\n{}",
+        sc,
+        describe(&seg, &s)
+    );
+}
+
+#[test]
+fn two_grasps_yield_two_skills() {
+    let s = session("two-grasps", 2, None);
+    let seg = segment(&s, &SegmentParams::default());
+    assert_eq!(seg.skills.len(), 2, "{}", describe(&seg, &s));
+    let sc = score(&found(&seg), &s.phases);
+    assert!(
+        sc.phases_found_fraction >= 0.9,
+        "{sc:?}\n{}",
+        describe(&seg, &s)
+    );
+    assert!(seg.skills[0].parameters.source.end_ns <= seg.skills[1].parameters.source.start_ns);
+}
+
+#[test]
+fn a_session_without_contact_yields_no_skill() {
+    let s = session("sphere-lift", 0, Some(1.0));
+    let seg = segment(&s, &SegmentParams::default());
+    assert!(seg.skills.is_empty(), "{}", describe(&seg, &s));
+    let empty = Session {
+        object: Vec::new(),
+        ..s
+    };
+    assert!(segment(&empty, &SegmentParams::default()).skills.is_empty());
+}
+
+#[test]
+fn dropped_samples_and_jitter_do_not_break_the_segmentation() {
+    let mut s = session("box-pinch-lift", 3, None);
+    let mut rng = Lcg(7);
+    let mut keep = |_: &u64| rng.next() >= 0.05;
+    s.joint_states.retain(|(t, _)| keep(t));
+    s.feedback.retain(|(t, _)| keep(t));
+    s.contacts.retain(|(t, _)| keep(t));
+    s.object.retain(|(t, _)| keep(t));
+    let mut rng = Lcg(11);
+    for (t, o) in &mut s.object {
+        // ±0.1 ms timestamp jitter would reorder nothing; ±0.1 mm position noise on the pose.
+        *t = t.saturating_add((rng.next() * 100_000.0) as u64);
+        o.pose.position.x += (rng.next() - 0.5) * 2e-4;
+        o.pose.position.y += (rng.next() - 0.5) * 2e-4;
+        o.pose.position.z += (rng.next() - 0.5) * 2e-4;
+    }
+    let seg = segment(&s, &SegmentParams::default());
+    assert_eq!(seg.skills.len(), 1, "{}", describe(&seg, &s));
+    let sc = score(&found(&seg), &s.phases);
+    assert_eq!(sc.phases_found_fraction, 1.0, "{}", describe(&seg, &s));
+    assert!(
+        sc.median_boundary_error_ms <= 40.0,
+        "{sc:?}\n{}",
+        describe(&seg, &s)
+    );
+}
+
+#[test]
+fn skill_parameters_are_finite_in_the_object_frame_with_a_16_dim_feature() {
+    let s = session("box-pinch-lift", 1, None);
+    let seg = segment(&s, &SegmentParams::default());
+    let p = &seg.skills[0].parameters;
+    let half = [0.025, 0.025, 0.04];
+    assert!(p.contact_count >= 2, "{p:#?}");
+    for c in &p.contacts {
+        // On the box's surface: one coordinate at ± its half extent, the others inside.
+        let on_face = (0..3).any(|k| (c.position_b[k].abs() - half[k]).abs() < 0.004);
+        let inside = (0..3).all(|k| c.position_b[k].abs() < half[k] + 0.004);
+        assert!(on_face && inside, "{c:?}");
+        let n: f64 = c.normal_b.iter().map(|v| v * v).sum();
+        assert!((n - 1.0).abs() < 1e-9);
+        assert_eq!(c.grip_profile.len(), 50);
+        assert!(c.grip_profile.iter().all(|v| v.is_finite() && *v >= 0.0));
+    }
+    assert_eq!(p.grasp_type.label, "precision");
+    assert_eq!(p.grasp_type.opposing_virtual_fingers, 2, "{:?}", p.contacts);
+    assert!(p.internal_force_n > 0.0 && p.internal_force_n.is_finite());
+    assert!(p.friction_margin_n.is_finite() && p.friction_margin_ratio <= 1.0);
+    assert!(p.quality.as_ref().unwrap().epsilon.is_finite());
+    assert!(!p.motion.is_empty());
+    assert!(p
+        .motion
+        .iter()
+        .all(|k| k.position.iter().chain(&k.rotation).all(|v| v.is_finite())));
+    assert_eq!(p.feature.len(), 16);
+    assert!(p.feature.iter().all(|v| v.is_finite()), "{:?}", p.feature);
+    let json = serde_json::to_value(&seg).unwrap();
+    assert!(json["skills"][0]["phases"][0]["name"].is_string());
+    assert!(json["skills"][0]["feature"].as_array().unwrap().len() == 16);
+}
+
+#[test]
+fn every_builtin_scenario_is_segmented_close_to_its_ground_truth() {
+    // A summary for the log; the thresholds here are loose, `icms bench segmentation` reports.
+    for name in Scenario::BUILTINS {
+        let s = session(name, 0, None);
+        let seg = segment(&s, &SegmentParams::default());
+        let sc = score(&found(&seg), &s.phases);
+        println!(
+            "{name}: median {:.1} ms, found {:.2}\n{}",
+            sc.median_boundary_error_ms,
+            sc.phases_found_fraction,
+            describe(&seg, &s)
+        );
+        assert!(sc.phases_found_fraction >= 0.5, "{name}: {sc:?}");
+    }
+}
