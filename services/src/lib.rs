@@ -5,10 +5,12 @@
 //! - [`session`]: grasp sessions: topics, recorder, reader, glove import.
 //! - [`store`]: the skill data base (SQLite via sqlx, content-addressed MCAP blobs).
 //! - [`segmentation`]: sessions into skills (one per grasp) and their parameters.
+//! - [`ingest`]: a session file read, segmented and stored in one step.
 //! - [`error`]: the crate's error type.
 
 pub mod error;
 pub mod foxglove;
+pub mod ingest;
 pub mod mcap_io;
 pub mod segmentation;
 pub mod session;

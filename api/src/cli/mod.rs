@@ -5,6 +5,7 @@ mod dfs_static;
 mod segment;
 mod sessions;
 mod simulate;
+mod skills;
 
 use clap::{Parser, Subcommand};
 use std::process::ExitCode;
@@ -35,6 +36,10 @@ enum Command {
     /// Segments a session file into skills (one per grasp) with their hand-independent
     /// parameters.
     Segment(segment::SegmentArgs),
+    /// Stores session files and their skills in the skill data base (idempotent).
+    Ingest(skills::IngestArgs),
+    /// Queries the skill data base: filters, sorting, cursor pagination, similar skills.
+    Skills(skills::SkillsArgs),
     /// Benchmarks whose figures BENCHMARKS.md quotes.
     #[command(subcommand)]
     Bench(bench::BenchCommand),
@@ -60,6 +65,8 @@ pub fn run() -> ExitCode {
         Command::Salvage(a) => sessions::run_salvage(a),
         Command::ImportGlove(a) => sessions::run_import(a),
         Command::Segment(a) => segment::run_segment(a),
+        Command::Ingest(a) => skills::run_ingest(a),
+        Command::Skills(a) => skills::run_skills(a),
         Command::Bench(b) => bench::run(b),
     };
     match result {
@@ -85,8 +92,14 @@ pub fn parse_json<T: serde::de::DeserializeOwned>(text: &str) -> Result<T, Strin
     })
 }
 
-/// Prints a value as pretty JSON on stdout.
+/// Prints a value as pretty JSON on stdout. A closed pipe (`icms ... | head`) ends quietly.
 pub fn print_json<T: serde::Serialize>(v: &T) -> Result<(), CliError> {
-    println!("{}", serde_json::to_string_pretty(v)?);
-    Ok(())
+    use std::io::Write;
+    let text = serde_json::to_string_pretty(v)?;
+    match writeln!(std::io::stdout().lock(), "{text}") {
+        Err(e) if e.kind() != std::io::ErrorKind::BrokenPipe => {
+            Err(CliError(format!("stdout: {e}")))
+        }
+        _ => Ok(()),
+    }
 }

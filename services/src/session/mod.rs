@@ -39,7 +39,7 @@ mod recorder;
 mod time;
 
 pub use messages::*;
-pub use read::{read_session, read_session_with_limits, Session};
+pub use read::{read_session, read_session_bytes, read_session_with_limits, Session};
 pub use recorder::{record_simulation, RecordSummary, SessionInfo, SessionRecorder, TickData};
 pub use time::rfc3339_utc;
 

@@ -56,6 +56,13 @@ pub fn read_session_with_limits(path: impl AsRef<Path>, limits: &ReadLimits) -> 
     from_recorded(&recorded, &path.display().to_string())
 }
 
+/// Reads a session from bytes already in memory (for example an HTTP upload), with the same
+/// checks as [`read_session_with_limits`]; `name` appears in error messages.
+pub fn read_session_bytes(bytes: &[u8], name: &str, limits: &ReadLimits) -> Result<Session> {
+    let recorded = crate::mcap_io::read_session_bytes(bytes, limits)?;
+    from_recorded(&recorded, name)
+}
+
 fn from_recorded(recorded: &RecordedSession, name: &str) -> Result<Session> {
     let expected: [(&str, &JsonSchema); 3] = [
         (TOPIC_TF, &FRAME_TRANSFORMS_SCHEMA),

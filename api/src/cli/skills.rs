@@ -1,0 +1,187 @@
+//! `icms ingest` and `icms skills`: the skill data base from the command line.
+
+use super::{print_json, CliError};
+use services::ingest::ingest_bytes;
+use services::store::{SkillQuery, SortKey, Store};
+use std::path::PathBuf;
+
+/// Arguments of `icms ingest`.
+#[derive(Debug, clap::Args)]
+pub struct IngestArgs {
+    /// Session files (MCAP) to store with their skills.
+    #[arg(required = true)]
+    files: Vec<PathBuf>,
+    /// Data directory (SQLite database and MCAP blobs).
+    #[arg(long, default_value = "icms-data")]
+    data: PathBuf,
+    /// Print JSON.
+    #[arg(long)]
+    json: bool,
+}
+
+/// Arguments of `icms skills`: every filter of the store.
+#[derive(Debug, clap::Args)]
+pub struct SkillsArgs {
+    /// Object shape (sphere, box, cylinder).
+    #[arg(long)]
+    shape: Option<String>,
+    /// Least object mass (kg).
+    #[arg(long)]
+    mass_min: Option<f64>,
+    /// Largest object mass (kg).
+    #[arg(long)]
+    mass_max: Option<f64>,
+    /// Least friction coefficient.
+    #[arg(long)]
+    mu_min: Option<f64>,
+    /// Largest friction coefficient.
+    #[arg(long)]
+    mu_max: Option<f64>,
+    /// Number of contacts.
+    #[arg(long)]
+    contacts: Option<i64>,
+    /// Contact model (frictionless, point_with_friction, soft_finger).
+    #[arg(long)]
+    contact_model: Option<String>,
+    /// Grasp type label (precision, power).
+    #[arg(long)]
+    grasp_type: Option<String>,
+    /// Least grasp quality ε.
+    #[arg(long)]
+    min_quality: Option<f64>,
+    /// Phase whose duration to filter on (with --phase-min-s / --phase-max-s).
+    #[arg(long)]
+    phase: Option<String>,
+    /// Least duration of --phase (s).
+    #[arg(long)]
+    phase_min_s: Option<f64>,
+    /// Largest duration of --phase (s).
+    #[arg(long)]
+    phase_max_s: Option<f64>,
+    /// Sort: id, quality, mass or duration, optionally `:desc` (or a leading `-`).
+    #[arg(long, default_value = "id")]
+    sort: String,
+    /// Page size (1-1000).
+    #[arg(long, default_value_t = 50)]
+    limit: u32,
+    /// Cursor from a previous page's `next_cursor`.
+    #[arg(long)]
+    cursor: Option<String>,
+    /// The k nearest skills to this skill id instead of a filtered list.
+    #[arg(long)]
+    similar_to: Option<i64>,
+    /// Data directory.
+    #[arg(long, default_value = "icms-data")]
+    data: PathBuf,
+    /// Print JSON.
+    #[arg(long)]
+    json: bool,
+}
+
+fn runtime() -> Result<tokio::runtime::Runtime, CliError> {
+    tokio::runtime::Builder::new_multi_thread()
+        .enable_all()
+        .build()
+        .map_err(|e| CliError(format!("tokio: {e}")))
+}
+
+/// Reads, segments and stores each file; the same file twice is stored once.
+pub fn run_ingest(a: IngestArgs) -> Result<(), CliError> {
+    runtime()?.block_on(async {
+        let store = Store::open(&a.data)
+            .await
+            .map_err(|e| CliError(format!("{}: {e}", a.data.display())))?;
+        let mut results = Vec::new();
+        for f in &a.files {
+            let bytes = std::fs::read(f).map_err(|e| CliError(format!("{}: {e}", f.display())))?;
+            let out = ingest_bytes(&store, bytes, f.display().to_string())
+                .await
+                .map_err(|e| CliError(format!("{}: {e}", f.display())))?;
+            if !a.json {
+                println!(
+                    "{}: session {} ({}), {} skill(s)",
+                    f.display(),
+                    out.session_id,
+                    if out.created {
+                        "stored"
+                    } else {
+                        "already stored"
+                    },
+                    out.skill_ids.len()
+                );
+            }
+            results.push(serde_json::json!({
+                "file": f.display().to_string(),
+                "session_id": out.session_id,
+                "created": out.created,
+                "skill_ids": out.skill_ids,
+            }));
+        }
+        store.close().await;
+        if a.json {
+            print_json(&serde_json::json!({ "sessions": results }))?;
+        }
+        Ok(())
+    })
+}
+
+/// Lists skills matching the filters (one page), or the nearest skills to one.
+pub fn run_skills(a: SkillsArgs) -> Result<(), CliError> {
+    runtime()?.block_on(async {
+        let store = Store::open(&a.data)
+            .await
+            .map_err(|e| CliError(format!("{}: {e}", a.data.display())))?;
+        if let Some(id) = a.similar_to {
+            let near = store.nearest_to_skill(id, a.limit as usize)?;
+            let items: Vec<_> = near
+                .iter()
+                .map(|(id, d)| serde_json::json!({ "skill_id": id, "distance": d }))
+                .collect();
+            store.close().await;
+            return print_json(&serde_json::json!({ "similar_to": id, "items": items }));
+        }
+        let sort: SortKey = a
+            .sort
+            .parse()
+            .map_err(|e| CliError(format!("--sort: {e}")))?;
+        let q = SkillQuery {
+            object_shape: a.shape,
+            mass_min: a.mass_min,
+            mass_max: a.mass_max,
+            mu_min: a.mu_min,
+            mu_max: a.mu_max,
+            contact_count: a.contacts,
+            contact_model: a.contact_model,
+            grasp_type: a.grasp_type,
+            min_quality: a.min_quality,
+            phase: a.phase,
+            phase_min_s: a.phase_min_s,
+            phase_max_s: a.phase_max_s,
+            sort,
+            limit: a.limit,
+            cursor: a.cursor,
+        };
+        let page = store.query_skills(&q).await?;
+        store.close().await;
+        if a.json {
+            return print_json(&page);
+        }
+        for s in &page.items {
+            println!(
+                "skill {:>6}  session {:>5}  {:<8} {:>6.3} kg  μ {:.2}  {} contacts  {:<9} ε {:.4}",
+                s.id,
+                s.session_id,
+                s.object_shape,
+                s.object_mass,
+                s.mu,
+                s.contact_count,
+                s.grasp_type,
+                s.quality
+            );
+        }
+        if let Some(c) = &page.next_cursor {
+            println!("next page: --cursor {c}");
+        }
+        Ok(())
+    })
+}

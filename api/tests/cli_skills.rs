@@ -1,0 +1,98 @@
+//! `icms ingest` and `icms skills` end to end: sessions into the skill data base and back.
+
+use serde_json::Value;
+use std::path::Path;
+use std::process::Command;
+
+fn icms(dir: &Path, args: &[&str]) -> (i32, String, String) {
+    let out = Command::new(env!("CARGO_BIN_EXE_icms"))
+        .current_dir(dir)
+        .args(args)
+        .output()
+        .expect("run icms");
+    (
+        out.status.code().unwrap_or(-1),
+        String::from_utf8_lossy(&out.stdout).into(),
+        String::from_utf8_lossy(&out.stderr).into(),
+    )
+}
+
+#[test]
+fn sessions_are_ingested_once_with_their_skills_and_can_be_queried() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let (c, _, e) = icms(
+        d,
+        &[
+            "simulate",
+            "--scenario",
+            "two-grasps",
+            "--seed",
+            "4",
+            "--out",
+            "a.mcap",
+        ],
+    );
+    assert_eq!(c, 0, "{e}");
+    let (c, out, e) = icms(d, &["ingest", "a.mcap", "a.mcap", "--json"]);
+    assert_eq!(c, 0, "{e}");
+    let v: Value = serde_json::from_str(&out).unwrap();
+    let s = v["sessions"].as_array().unwrap();
+    assert_eq!(
+        s[0]["session_id"], s[1]["session_id"],
+        "the same file is one session"
+    );
+    assert_eq!(s[0]["created"], Value::Bool(true));
+    assert_eq!(s[1]["created"], Value::Bool(false));
+    assert_eq!(
+        s[0]["skill_ids"].as_array().unwrap().len(),
+        2,
+        "two grasps, two skills"
+    );
+    assert!(d.join("icms-data").join("icms.sqlite3").exists());
+
+    let (c, out, e) = icms(
+        d,
+        &[
+            "skills",
+            "--shape",
+            "box",
+            "--contacts",
+            "2",
+            "--sort",
+            "quality:desc",
+            "--json",
+        ],
+    );
+    assert_eq!(c, 0, "{e}");
+    let page: Value = serde_json::from_str(&out).unwrap();
+    let items = page["items"].as_array().unwrap();
+    assert_eq!(items.len(), 2);
+    assert!(items[0]["quality"].as_f64().unwrap() >= items[1]["quality"].as_f64().unwrap());
+    let (_, out, _) = icms(d, &["skills", "--shape", "sphere", "--json"]);
+    let none: Value = serde_json::from_str(&out).unwrap();
+    assert!(none["items"].as_array().unwrap().is_empty());
+
+    let id = items[0]["id"].as_i64().unwrap().to_string();
+    let (c, out, e) = icms(d, &["skills", "--similar-to", &id, "--limit", "1"]);
+    assert_eq!(c, 0, "{e}");
+    let near: Value = serde_json::from_str(&out).unwrap();
+    assert_eq!(near["items"].as_array().unwrap().len(), 1);
+}
+
+#[test]
+fn a_corrupt_file_is_refused_with_its_reason_and_stores_nothing() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    std::fs::write(d.join("bad.mcap"), b"not an mcap file at all").unwrap();
+    let (c, _, e) = icms(d, &["ingest", "bad.mcap"]);
+    assert_ne!(c, 0);
+    assert!(e.contains("bad.mcap") && e.contains("MCAP"), "{e}");
+    let (c, out, _) = icms(d, &["skills", "--json"]);
+    assert_eq!(c, 0);
+    let v: Value = serde_json::from_str(&out).unwrap();
+    assert!(v["items"].as_array().unwrap().is_empty());
+    let (c, _, e) = icms(d, &["skills", "--cursor", "zz"]);
+    assert_ne!(c, 0);
+    assert!(e.contains("cursor"), "{e}");
+}
