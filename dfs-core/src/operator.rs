@@ -1221,11 +1221,7 @@ mod tests {
     fn box_slip_shows_slip_and_the_box_leaves_the_grasp() {
         let (sim, trace) = run("box-slip", 3);
         assert!(trace.iter().any(|t| t.2), "slip flags");
-        let last_hold = trace
-            .iter()
-            .filter(|t| t.0 == Phase::Hold)
-            .next_back()
-            .unwrap();
+        let last_hold = trace.iter().rfind(|t| t.0 == Phase::Hold).unwrap();
         assert_eq!(
             last_hold.3, 0,
             "no contact left while the hand holds up high"

@@ -36,10 +36,13 @@ enum Command {
     /// Segments a session file into skills (one per grasp) with their hand-independent
     /// parameters.
     Segment(segment::SegmentArgs),
+    /// The main job end to end: simulates every built-in scenario, stores the sessions and
+    /// their skills in the skill data base (./icms-data) and lists the skills.
+    Demo(skills::DemoArgs),
     /// Stores session files and their skills in the skill data base (idempotent).
     Ingest(skills::IngestArgs),
     /// Queries the skill data base: filters, sorting, cursor pagination, similar skills.
-    Skills(skills::SkillsArgs),
+    Skills(Box<skills::SkillsArgs>),
     /// Benchmarks whose figures BENCHMARKS.md quotes.
     #[command(subcommand)]
     Bench(bench::BenchCommand),
@@ -65,8 +68,9 @@ pub fn run() -> ExitCode {
         Command::Salvage(a) => sessions::run_salvage(a),
         Command::ImportGlove(a) => sessions::run_import(a),
         Command::Segment(a) => segment::run_segment(a),
+        Command::Demo(a) => skills::run_demo(a),
         Command::Ingest(a) => skills::run_ingest(a),
-        Command::Skills(a) => skills::run_skills(a),
+        Command::Skills(a) => skills::run_skills(*a),
         Command::Bench(b) => bench::run(b),
     };
     match result {
