@@ -748,21 +748,43 @@ impl HandModel {
         jac: &mut TipJacobian,
     ) {
         jac.fill(0.0);
+        self.add_chain_jacobian(
+            &kin.parent_joint,
+            &kin.joint_axes,
+            &kin.joint_frames,
+            link,
+            point,
+            jac,
+        );
+    }
+
+    /// Adds the Jacobian columns of the joints on the path from `link` to the root for a world
+    /// point on `link` (the caller zeroes `jac`). Takes the kinematics' fields separately so a
+    /// caller can write into `Kinematics::tip_jacobians` while reading the rest.
+    fn add_chain_jacobian(
+        &self,
+        parent_joint: &[usize; MAX_LINKS],
+        joint_axes: &[Vector; MAX_LINKS],
+        joint_frames: &[Isometry; MAX_LINKS],
+        link: usize,
+        point: &Point,
+        jac: &mut TipJacobian,
+    ) {
         let mut current = link;
         // At most one joint per link on the path to the root.
         for _ in 0..MAX_LINKS {
-            let j = kin.parent_joint[current];
+            let j = parent_joint[current];
             if j == NO_JOINT || current == self.root {
                 break;
             }
             let joint = &self.joints[j];
             if let Some((d, gain)) = joint.drive.dof_and_gain() {
-                let a = kin.joint_axes[j];
+                let a = joint_axes[j];
                 let (linear, angular) = match joint.kind {
                     JointKind::Prismatic => (a, Vector::zeros()),
                     JointKind::Fixed => (Vector::zeros(), Vector::zeros()),
                     _ => (
-                        a.cross(&(point - Point::from(kin.joint_frames[j].translation.vector))),
+                        a.cross(&(point - Point::from(joint_frames[j].translation.vector))),
                         a,
                     ),
                 };
@@ -778,33 +800,25 @@ impl HandModel {
     /// [`forward_kinematics`](Self::forward_kinematics) computed. Allocation-free.
     pub fn tip_jacobians(&self, kin: &mut Kinematics) {
         let n = self.dof().min(MAX_DOF);
+        let Kinematics {
+            parent_joint,
+            joint_axes,
+            joint_frames,
+            tip_centres,
+            tip_jacobians,
+            ..
+        } = kin;
         for (k, tip) in self.fingertips.iter().enumerate().take(MAX_TIPS) {
-            let point = kin.tip_centres[k];
-            let jac = &mut kin.tip_jacobians[k];
+            let jac = &mut tip_jacobians[k];
             jac.columns_mut(0, n).fill(0.0);
-            let mut current = tip.link;
-            for _ in 0..MAX_LINKS {
-                let j = kin.parent_joint[current];
-                if j == NO_JOINT || current == self.root {
-                    break;
-                }
-                let joint = &self.joints[j];
-                if let Some((d, gain)) = joint.drive.dof_and_gain() {
-                    let a = kin.joint_axes[j];
-                    let (linear, angular) = match joint.kind {
-                        JointKind::Prismatic => (a, Vector::zeros()),
-                        JointKind::Fixed => (Vector::zeros(), Vector::zeros()),
-                        _ => (
-                            a.cross(&(point - Point::from(kin.joint_frames[j].translation.vector))),
-                            a,
-                        ),
-                    };
-                    let mut col = jac.column_mut(d);
-                    col.fixed_rows_mut::<3>(0).axpy(gain, &linear, 1.0);
-                    col.fixed_rows_mut::<3>(3).axpy(gain, &angular, 1.0);
-                }
-                current = joint.parent;
-            }
+            self.add_chain_jacobian(
+                parent_joint,
+                joint_axes,
+                joint_frames,
+                tip.link,
+                &tip_centres[k],
+                jac,
+            );
         }
     }
 
