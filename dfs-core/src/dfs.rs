@@ -12,12 +12,16 @@
 //!    feedback `c̃_h − c̃_o` per finger, finger dynamics `M θ̈ = τ − Σ Jᵀ f_fb` (eq. 19-21, in
 //!    joint space so wrist torques take part) integrated to the glove motor commands.
 //!
-//! **Departure from the paper, documented.** The paper integrates θ̈ open-loop. A real glove
-//! finger cannot enter the object because the operator's finger meets the motor's position
-//! command; in simulation the commanded fingertip is kept on the object's surface by a stiff
-//! spring-damper acting *on the finger only* (never on the object), integrated implicitly:
-//! along the normal for every touching finger, and also tangentially to an anchor point for a
-//! sticking contact. It adds no force to the object, so a held object does not creep.
+//! **Departures from the paper, documented.** The paper integrates θ̈ open-loop and moves the
+//! object only by the operator's intensities. In a closed loop that lets fingers sink into the
+//! object and cannot hold anything against a moving hand, so:
+//! - along the normal, a touching fingertip is kept on the surface by a stiff spring-damper that
+//!   acts on the finger only (integrated implicitly);
+//! - tangentially, a *sticking* fingertip is tied to an anchor point on the object by a
+//!   spring-damper acting on finger and object alike (stick friction), plus viscous torsion for
+//!   the soft pad; added to the operator's intensities, the total is kept inside the Coulomb
+//!   cone, and beyond it the contact slips and the anchor moves with the fingertip. At rest the
+//!   springs hold a fixed deflection instead of creeping; near the cone's edge slow slip remains.
 //!
 //! **Table.** An optional horizontal support plane carries the object before it is grasped
 //! and after it is placed: it cancels downward force and velocity of a resting object and
