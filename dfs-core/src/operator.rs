@@ -3,15 +3,17 @@
 //! An operator wears the glove and performs a [`Scenario`]: scripted phases (`approach`,
 //! `preshape`, `grasp`, `lift`, `hold`, `transport`, `place`, `release`, `retreat`). Like a
 //! person it
-//! - plans a grasp for the object where it lies (fingertip inverse kinematics with the hand's
-//!   base free, [`plan_grasp`]);
-//! - reaches with minimum-jerk profiles (Flash & Hogan 1985) of the arm (the hand base) and the
-//!   fingers;
-//! - holds its fingers with a joint-space impedance around its intention and adds grip torques
-//!   `τ = Σ Jᵀ f` for the contact forces it wants;
-//! - ramps force when loading and unloading, and grips with a safety margin over the slip
-//!   limit for the friction it expects (Johansson & Westling 1984): grip force follows load;
-//! - corrects the object's pose relative to its hand as it sees and feels it;
+//! - plans a grasp for the object where it lies ([`plan_grasp`]: fingertip inverse kinematics
+//!   with the hand's base free, preferring grasps whose fingertips can push along their contact
+//!   normals and the vertical);
+//! - reaches with minimum-jerk profiles (Flash & Hogan 1985) of the arm (the hand base) and
+//!   slides the open hand in beside the object;
+//! - steers each fingertip of the grasp towards its spot on the object, closing along the
+//!   normal; once touching it keeps the finger where it met the object relative to the hand;
+//! - squeezes with the normal force friction needs for the load it expects (weight plus the
+//!   arm's acceleration), with a safety margin for the friction it expects (Johansson &
+//!   Westling 1984), ramping it up after every finger touches and down on release; friction then
+//!   carries the object as the arm moves;
 //! - has a physiological tremor (8-12 Hz) and the glove's sensors add noise, all from a seeded
 //!   ChaCha8 stream: the same scenario and seed give bit-identical sessions.
 //!
@@ -140,7 +142,7 @@ pub struct GraspPlan {
     pub base: Isometry,
     /// Joint angles with the chosen fingertips on the surface.
     pub q_grasp: [Real; MAX_DOF],
-    /// Joint angles with those fingertips 2.5 cm off the surface (the preshape).
+    /// Joint angles with those fingertips 1.5 cm out along their contact normals (the preshape).
     pub q_pre: [Real; MAX_DOF],
     /// Open hand for approach and retreat.
     pub q_open: [Real; MAX_DOF],
@@ -525,11 +527,6 @@ pub struct OperatorParams {
     pub grip_safety: Real,
     /// Least normal force per contact while gripping (N). Default 0.5.
     pub min_normal: Real,
-    /// How firmly the operator corrects the object's position relative to the hand (1/s²).
-    /// Default 150.
-    pub object_stiffness: Real,
-    /// Damping of that correction (1/s). Default 25.
-    pub object_damping: Real,
     /// Physiological tremor amplitude at the finger joints (rad). Default 1e-4.
     pub tremor_joint: Real,
     /// Tremor amplitude of the arm (hand base) (m). Default 5e-6.
@@ -553,8 +550,6 @@ impl Default for OperatorParams {
             wrist_damping: 0.05,
             grip_safety: 2.0,
             min_normal: 0.5,
-            object_stiffness: 150.0,
-            object_damping: 25.0,
             tremor_joint: 1e-4,
             tremor_arm: 5e-6,
             noise_angle: 5e-5,
@@ -595,7 +590,8 @@ pub struct Simulation {
     table_height: Real,
     operator_mu: Real,
     plan: GraspPlan,
-    object_in_base: Option<Isometry>,
+    /// The grasp phase has ended and the object is held (until release ends).
+    object_held: bool,
     from_base: Isometry,
     to_base: Isometry,
     from_q: [Real; MAX_DOF],
@@ -611,7 +607,6 @@ pub struct Simulation {
     /// Per fingertip: where it first touched while holding, in the hand base's frame.
     hold_in_base: [Option<Vector>; MAX_TIPS],
     base: Isometry,
-    base_velocity: Vector,
     base_acceleration: Vector,
     q_intent: [Real; MAX_DOF],
     grip: Real,
@@ -710,7 +705,7 @@ impl Simulation {
             table_height,
             operator_mu,
             plan,
-            object_in_base: None,
+            object_held: false,
             from_base: start_base,
             to_base: start_base,
             from_q: q0,
@@ -723,7 +718,6 @@ impl Simulation {
             seen_object: pose,
             hold_in_base: [None; MAX_TIPS],
             base: start_base,
-            base_velocity: Vector::zeros(),
             base_acceleration: Vector::zeros(),
             q_intent: q0,
             grip: 0.0,
@@ -826,10 +820,10 @@ impl Simulation {
 
     fn end_phase(&mut self) {
         if self.span_now().phase == Phase::Grasp {
-            self.object_in_base = Some(self.base.inverse() * self.dfs.object_state().pose);
+            self.object_held = true;
         }
         if self.span_now().phase == Phase::Release {
-            self.object_in_base = None;
+            self.object_held = false;
         }
     }
 
@@ -850,7 +844,7 @@ impl Simulation {
                 self.to_q = self.plan.q_open;
                 self.to_grip = 0.0;
                 self.to_offset = 0.03;
-                self.object_in_base = None;
+                self.object_held = false;
             }
             Phase::Preshape => {
                 self.to_base = self.plan.base;
@@ -927,8 +921,6 @@ impl Simulation {
                 * (std::f64::consts::TAU * self.tremor_freq[i] * time + self.tremor_phase[i]).sin();
         }
         let new_base = Isometry::from_parts((p + tremor).into(), r);
-        let dt = TICK_NS as Real * 1e-9;
-        self.base_velocity = (new_base.translation.vector - self.base.translation.vector) / dt;
         self.base_acceleration = dp * (m2 / (dur * dur));
         self.base = new_base;
         let n = self.dfs.hand().dof();
@@ -950,7 +942,7 @@ impl Simulation {
         let kin = self.dfs.kinematics();
         let q = &out.motor_q;
         let qd = &out.motor_qd;
-        let obj_pose = if self.object_in_base.is_some() {
+        let obj_pose = if self.object_held {
             self.dfs.object_state().pose
         } else {
             self.seen_object
