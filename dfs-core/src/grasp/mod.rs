@@ -87,7 +87,8 @@ mod tests {
     use crate::math::Vector;
     use proptest::prelude::*;
 
-    /// The paper's §3.4 sphere contacts.
+    /// The paper's §3.4 sphere contacts, normals from each point through the centre; shared by
+    /// the grasp tests.
     pub(crate) fn paper_contacts() -> Vec<ContactFrame> {
         [
             [0.054, 0.054, -0.059],
@@ -98,8 +99,6 @@ mod tests {
         .iter()
         .map(|p| {
             let p = Vector::from(*p);
-            let on_surface = p.normalize() * 0.1;
-            let _ = on_surface;
             ContactFrame::from_normal(p, -p.normalize())
         })
         .collect()

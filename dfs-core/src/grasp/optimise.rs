@@ -364,21 +364,7 @@ mod tests {
     use crate::math::{Vector, STANDARD_GRAVITY};
     use proptest::prelude::*;
 
-    /// The paper's §3.4 sphere contacts, normals from each point through the centre.
-    fn paper_contacts() -> Vec<ContactFrame> {
-        [
-            [0.054, 0.054, -0.059],
-            [0.0, 0.076, -0.059],
-            [-0.054, 0.054, -0.059],
-            [0.0, -0.076, -0.059],
-        ]
-        .iter()
-        .map(|p| {
-            let p = Vector::from(*p);
-            ContactFrame::from_normal(p, -p.normalize())
-        })
-        .collect()
-    }
+    use crate::grasp::tests::paper_contacts;
 
     fn gravity_load() -> Wrench {
         Wrench::new(0.0, 0.0, STANDARD_GRAVITY, 0.0, 0.0, 0.0)

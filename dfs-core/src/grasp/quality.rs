@@ -646,20 +646,7 @@ mod tests {
     use crate::math::{Rotation, Vector};
     use proptest::prelude::*;
 
-    fn paper_contacts() -> Vec<ContactFrame> {
-        [
-            [0.054, 0.054, -0.059],
-            [0.0, 0.076, -0.059],
-            [-0.054, 0.054, -0.059],
-            [0.0, -0.076, -0.059],
-        ]
-        .iter()
-        .map(|p| {
-            let p = Vector::from(*p);
-            ContactFrame::from_normal(p, -p.normalize())
-        })
-        .collect()
-    }
+    use crate::grasp::tests::paper_contacts;
 
     fn on_sphere(dirs: &[[f64; 3]], r: f64) -> Vec<ContactFrame> {
         dirs.iter()
