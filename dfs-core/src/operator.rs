@@ -592,6 +592,8 @@ pub struct Simulation {
     plan: GraspPlan,
     /// The grasp phase has ended and the object is held (until release ends).
     object_held: bool,
+    /// Per fingertip: the shear it feels (N), low-passed over 50 ms.
+    felt_shear: [Real; MAX_TIPS],
     from_base: Isometry,
     to_base: Isometry,
     from_q: [Real; MAX_DOF],
@@ -706,6 +708,7 @@ impl Simulation {
             operator_mu,
             plan,
             object_held: false,
+            felt_shear: [0.0; MAX_TIPS],
             from_base: start_base,
             to_base: start_base,
             from_q: q0,
@@ -1008,6 +1011,12 @@ impl Simulation {
             };
             tau[d] += kp * (self.q_intent[d] - q[d]) - kd * qd[d];
         }
+        let alpha = (TICK_NS as Real * 1e-9 / 0.05).min(1.0);
+        for k in 0..out.n_tips.min(MAX_TIPS) {
+            let c = out.tips[k].transmitted;
+            let shear = (c[0] * c[0] + c[1] * c[1]).sqrt();
+            self.felt_shear[k] += (shear - self.felt_shear[k]) * alpha;
+        }
         if self.grip > 0.0 {
             self.add_grip_torques(&mut tau);
         }
@@ -1072,14 +1081,22 @@ impl Simulation {
         let ks: Vec<usize> = touching.iter().copied().filter(|&k| ok[k]).collect();
         let m = ks.len().min(MAX_TIPS);
         let mut sys = nalgebra::SMatrix::<Real, MAX_TIPS, MAX_TIPS>::identity();
-        let mut mags = [normal; MAX_TIPS];
+        // Each fingertip's squeeze also follows the shear it feels (per-digit grip control,
+        // Edin, Westling & Johansson 1992): at least the safety margin over its own shear, felt
+        // with a 50 ms lag.
+        let mut wanted = [normal; MAX_TIPS];
+        for (idx, &k) in ks.iter().enumerate().take(m) {
+            wanted[idx] =
+                normal.max(p.grip_safety * self.felt_shear[k] / self.operator_mu * self.grip);
+        }
+        let mut mags = wanted;
         for a in 0..m {
             for b in 0..m {
                 sys[(a, b)] += 4.0 * unit[ks[a]].dot(&unit[ks[b]]);
             }
         }
         if !crate::math::cholesky_solve_in_place(&mut sys, m, &mut mags) {
-            mags = [normal; MAX_TIPS];
+            mags = wanted;
         }
         let n = hand.dof();
         for (idx, &k) in ks.iter().enumerate().take(m) {
