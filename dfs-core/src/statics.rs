@@ -411,12 +411,8 @@ pub fn analyse(spec: &GraspSpec, scale: Real) -> Result<StaticAnalysis> {
     } else if g.rank < 6 {
         warnings.push(format!("the grasp matrix has rank {} < 6 (for example collinear contacts): some wrenches cannot be resisted", g.rank));
     }
-    let mut residual_load = load;
-    {
-        let mut back = [Intensity::zeros(); MAX_CONTACTS];
-        g.distribute(&load, &mut back);
-        residual_load -= g.wrench(&back[..n]);
-    }
+    // c_static = W⁺ L already: what it reproduces is the part of the load W can carry.
+    let residual_load = load - g.wrench(&c_static[..n]);
     if residual_load.norm() > 1e-9 * (1.0 + load.norm()) {
         warnings.push(format!(
             "the contacts cannot balance the load exactly (residual {:.4} N or N·m)",
