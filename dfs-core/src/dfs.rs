@@ -37,7 +37,7 @@ use crate::hand::{DofMatrix, HandModel, Kinematics, MAX_DOF, MAX_TIPS};
 use crate::math::{
     cholesky_solve_in_place, force_of, moment_of, wrench, Isometry, Point, Real, Vector, Wrench,
 };
-use crate::object::{external_wrench_b, integrate, ObjectState, RigidObject, Shape};
+use crate::object::{external_wrench_b, integrate, ObjectState, RigidObject};
 
 /// Parameters of the DFS. Units SI.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -671,19 +671,7 @@ impl Dfs {
 
     /// Distance (m) from the object's centre to its lowest point, for its current orientation.
     fn support_depth(&self) -> Real {
-        let r = self.state.pose.rotation.to_rotation_matrix();
-        let m = r.matrix();
-        match self.object.shape {
-            Shape::Sphere { radius } => radius,
-            Shape::Box { half_extents } => (0..3).map(|i| m[(2, i)].abs() * half_extents[i]).sum(),
-            Shape::Cylinder {
-                radius,
-                half_height,
-            } => {
-                let az = m[(2, 2)].abs();
-                radius * (1.0 - az * az).max(0.0).sqrt() + half_height * az
-            }
-        }
+        self.object.shape.support_depth(&self.state.pose.rotation)
     }
 
     fn resting_on_table(&self) -> bool {

@@ -110,6 +110,24 @@ impl Shape {
         }
     }
 
+    /// Distance (m) from the centre to the lowest point when the object is rotated by
+    /// `rotation` in the world (the depth it rests at on a horizontal table).
+    pub fn support_depth(&self, rotation: &Rotation) -> Real {
+        let r = rotation.to_rotation_matrix();
+        let m = r.matrix();
+        match *self {
+            Shape::Sphere { radius } => radius,
+            Shape::Box { half_extents } => (0..3).map(|i| m[(2, i)].abs() * half_extents[i]).sum(),
+            Shape::Cylinder {
+                radius,
+                half_height,
+            } => {
+                let az = m[(2, 2)].abs();
+                radius * (1.0 - az * az).max(0.0).sqrt() + half_height * az
+            }
+        }
+    }
+
     /// Bounding radius about the centre (m).
     pub fn bounding_radius(&self) -> Real {
         match *self {

@@ -630,7 +630,7 @@ impl Simulation {
         duration_s: Option<Real>,
     ) -> Result<Simulation> {
         let (object, tasks) = scenario.resolve()?;
-        let depth = support_depth(&object.shape, &Rotation::identity());
+        let depth = object.shape.support_depth(&Rotation::identity());
         let yaw = Rotation::from_euler_angles(0.0, 0.0, scenario.object.yaw);
         let position = scenario
             .object
@@ -880,7 +880,7 @@ impl Simulation {
             }
             Phase::Place => {
                 let obj = self.dfs.object_state().pose;
-                let depth = support_depth(&self.dfs.object().shape, &obj.rotation);
+                let depth = self.dfs.object().shape.support_depth(&obj.rotation);
                 let dz = self.table_height + depth - obj.translation.z - 0.002;
                 self.to_base = raise(&self.from_base, dz);
             }
@@ -1148,23 +1148,6 @@ fn raise(x: &Isometry, dz: Real) -> Isometry {
     let mut y = *x;
     y.translation.vector.z += dz;
     y
-}
-
-/// Distance from an object's centre to its lowest point for a rotation (m).
-pub fn support_depth(shape: &Shape, rotation: &Rotation) -> Real {
-    let r = rotation.to_rotation_matrix();
-    let m = r.matrix();
-    match *shape {
-        Shape::Sphere { radius } => radius,
-        Shape::Box { half_extents } => (0..3).map(|i| m[(2, i)].abs() * half_extents[i]).sum(),
-        Shape::Cylinder {
-            radius,
-            half_height,
-        } => {
-            let az = m[(2, 2)].abs();
-            radius * (1.0 - az * az).max(0.0).sqrt() + half_height * az
-        }
-    }
 }
 
 #[cfg(test)]

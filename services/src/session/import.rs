@@ -38,7 +38,7 @@ use dfs_core::dfs::{Dfs, DfsParams, GloveSample};
 use dfs_core::hand::HandModel;
 use dfs_core::math::{Isometry, Rotation, Vector};
 use dfs_core::object::ObjectState;
-use dfs_core::operator::{support_depth, TICK_NS};
+use dfs_core::operator::TICK_NS;
 use dfs_core::scenario::ScenarioObject;
 
 use super::recorder::{RecordSummary, SessionInfo, SessionRecorder, TickData};
@@ -375,7 +375,7 @@ pub fn replay_glove(
             ));
         }
     }
-    let depth = support_depth(&rigid.shape, &Rotation::identity());
+    let depth = rigid.shape.support_depth(&Rotation::identity());
     let position = object
         .position
         .map(Vector::from)
