@@ -1046,9 +1046,16 @@ impl Simulation {
             .take(out.n_tips)
             .filter(|&&t| t)
             .count();
-        let touching: Vec<usize> = (0..out.n_tips)
-            .filter(|&k| self.plan.tips[k] && out.tips[k].frame.is_some())
-            .collect();
+        // Fixed-capacity lists: this runs every tick of a session.
+        let mut touching = [0usize; MAX_TIPS];
+        let mut nt = 0;
+        for k in 0..out.n_tips.min(MAX_TIPS) {
+            if self.plan.tips[k] && out.tips[k].frame.is_some() {
+                touching[nt] = k;
+                nt += 1;
+            }
+        }
+        let touching = &touching[..nt];
         // Squeeze only once every finger of the grasp is on the object.
         if touching.is_empty() || touching.len() < planned {
             return;
@@ -1060,8 +1067,10 @@ impl Simulation {
         // Per fingertip: the force for a unit normal push, along what it can push.
         let mut unit = [Vector::zeros(); MAX_TIPS];
         let mut ok = [false; MAX_TIPS];
-        for &k in &touching {
-            let frame = out.tips[k].frame.expect("touching tips have a frame");
+        for &k in touching {
+            let Some(frame) = out.tips[k].frame else {
+                continue;
+            };
             let n_in = st.pose.rotation * frame.normal_b();
             let (basis, nb) = push_basis(hand, kin, k);
             let mut dir = Vector::zeros();
@@ -1078,8 +1087,12 @@ impl Simulation {
         // ‖N − N₀‖² + w ‖Σ N_k unit_k‖² (w = 4), i.e. N = (I + w AᵀA)⁻¹ N₀. An exactly
         // force-free squeeze rarely exists for two or three fingertips that push only in their
         // own planes; the stick friction absorbs the small remainder.
-        let ks: Vec<usize> = touching.iter().copied().filter(|&k| ok[k]).collect();
-        let m = ks.len().min(MAX_TIPS);
+        let mut ks = [0usize; MAX_TIPS];
+        let mut m = 0;
+        for &k in touching.iter().filter(|&&k| ok[k]) {
+            ks[m] = k;
+            m += 1;
+        }
         let mut sys = nalgebra::SMatrix::<Real, MAX_TIPS, MAX_TIPS>::identity();
         // Each fingertip's squeeze also follows the shear it feels (per-digit grip control,
         // Edin, Westling & Johansson 1992): at least the safety margin over its own shear, felt
