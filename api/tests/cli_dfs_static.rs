@@ -1,19 +1,9 @@
 //! `icms dfs-static` end to end: the binary as a user runs it.
 
-use serde_json::Value;
-use std::process::Command;
+mod common;
+use common::icms;
 
-fn icms(args: &[&str]) -> (i32, String, String) {
-    let out = Command::new(env!("CARGO_BIN_EXE_icms"))
-        .args(args)
-        .output()
-        .expect("run icms");
-    (
-        out.status.code().unwrap_or(-1),
-        String::from_utf8_lossy(&out.stdout).into(),
-        String::from_utf8_lossy(&out.stderr).into(),
-    )
-}
+use serde_json::Value;
 
 fn vec6(v: &Value) -> Vec<f64> {
     v.as_array()

@@ -1,19 +1,9 @@
 //! `icms segment` end to end: a simulated session file into skills, and bad input refused.
 
-use serde_json::Value;
-use std::process::Command;
+mod common;
+use common::icms;
 
-fn icms(args: &[&str]) -> (i32, String, String) {
-    let out = Command::new(env!("CARGO_BIN_EXE_icms"))
-        .args(args)
-        .output()
-        .expect("run icms");
-    (
-        out.status.code().unwrap_or(-1),
-        String::from_utf8_lossy(&out.stdout).into(),
-        String::from_utf8_lossy(&out.stderr).into(),
-    )
-}
+use serde_json::Value;
 
 #[test]
 fn segment_prints_one_skill_with_its_phases_for_a_pinch_lift_and_none_without_contact() {

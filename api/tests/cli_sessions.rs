@@ -1,22 +1,12 @@
 //! `icms scenarios`, `simulate`, `salvage` and `import-glove` end to end: the binary as a user
 //! runs it, the files it writes read back with the library.
 
+mod common;
+use common::icms;
+
 use serde_json::Value;
 use services::session::read_session;
 use std::path::Path;
-use std::process::Command;
-
-fn icms(args: &[&str]) -> (i32, String, String) {
-    let out = Command::new(env!("CARGO_BIN_EXE_icms"))
-        .args(args)
-        .output()
-        .expect("run icms");
-    (
-        out.status.code().unwrap_or(-1),
-        String::from_utf8_lossy(&out.stdout).into(),
-        String::from_utf8_lossy(&out.stderr).into(),
-    )
-}
 
 fn p(path: &Path) -> &str {
     path.to_str().unwrap()

@@ -1,21 +1,9 @@
 //! `icms ingest` and `icms skills` end to end: sessions into the skill data base and back.
 
-use serde_json::Value;
-use std::path::Path;
-use std::process::Command;
+mod common;
+use common::icms_in as icms;
 
-fn icms(dir: &Path, args: &[&str]) -> (i32, String, String) {
-    let out = Command::new(env!("CARGO_BIN_EXE_icms"))
-        .current_dir(dir)
-        .args(args)
-        .output()
-        .expect("run icms");
-    (
-        out.status.code().unwrap_or(-1),
-        String::from_utf8_lossy(&out.stdout).into(),
-        String::from_utf8_lossy(&out.stderr).into(),
-    )
-}
+use serde_json::Value;
 
 #[test]
 fn sessions_are_ingested_once_with_their_skills_and_can_be_queried() {

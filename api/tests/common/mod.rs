@@ -1,0 +1,27 @@
+//! Running the `icms` binary from the end-to-end tests.
+
+#![allow(dead_code)] // each test file uses some of these
+
+use std::path::Path;
+use std::process::Command;
+
+/// Runs `icms` with `args`; returns (exit code, stdout, stderr).
+pub fn icms(args: &[&str]) -> (i32, String, String) {
+    run(Command::new(env!("CARGO_BIN_EXE_icms")).args(args))
+}
+
+/// Runs `icms` with `args` in the working directory `dir`.
+pub fn icms_in(dir: &Path, args: &[&str]) -> (i32, String, String) {
+    run(Command::new(env!("CARGO_BIN_EXE_icms"))
+        .current_dir(dir)
+        .args(args))
+}
+
+fn run(cmd: &mut Command) -> (i32, String, String) {
+    let out = cmd.output().expect("run icms");
+    (
+        out.status.code().unwrap_or(-1),
+        String::from_utf8_lossy(&out.stdout).into_owned(),
+        String::from_utf8_lossy(&out.stderr).into_owned(),
+    )
+}
