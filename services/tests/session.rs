@@ -69,7 +69,16 @@ fn a_simulated_session_reads_back_with_the_samples_written() {
     assert_eq!(session.phases[0].name, "approach");
     assert_eq!(session.phases[0].start_ns, 0);
 
-    // The same samples as the simulation produced, value for value.
+    // The same samples as the simulation produced, value for value, to the recorded
+    // resolution (1 nm / 1 nrad for geometry, 1 µN / 1 µN·m for forces): within half a step.
+    let geometry = 0.5 / GEOMETRY_STEPS_PER_UNIT + 1e-15;
+    let force = 0.5 / FORCE_STEPS_PER_UNIT + 1e-12;
+    let close = |read: &[f64], sim: &[f64], tol: f64, what: &str| {
+        assert_eq!(read.len(), sim.len(), "{what}");
+        for (r, s) in read.iter().zip(sim) {
+            assert!((r - s).abs() <= tol, "{what}: read {r}, simulated {s}");
+        }
+    };
     let scenario = Scenario::builtin("sphere-lift", 7).unwrap();
     let mut sim = Simulation::new(&scenario, HandModel::glove10(), Some(SECONDS)).unwrap();
     let mut i = 0;
@@ -77,30 +86,54 @@ fn a_simulated_session_reads_back_with_the_samples_written() {
         let (q, tau, base) = sim.sample();
         let (t, js) = &session.joint_states[i];
         assert_eq!(*t, sim.time_ns());
-        assert_eq!(js.positions, q);
-        assert_eq!(js.efforts, tau);
+        close(&js.positions, q, geometry, "positions");
+        close(&js.efforts, tau, force, "efforts");
         let out = sim.output();
         let (_, fb) = &session.feedback[i];
-        assert_eq!(fb.feedback_torques, out.feedback_torque[..q.len()]);
+        close(
+            &fb.feedback_torques,
+            &out.feedback_torque[..q.len()],
+            force,
+            "feedback torques",
+        );
         let (_, obj) = &session.object[i];
         let p = out.object.pose.translation.vector;
-        assert_eq!(
-            [
+        close(
+            &[
                 obj.pose.position.x,
                 obj.pose.position.y,
-                obj.pose.position.z
+                obj.pose.position.z,
             ],
-            [p.x, p.y, p.z]
+            &[p.x, p.y, p.z],
+            geometry,
+            "object position",
         );
         let in_hand = base.inverse() * out.object.pose;
-        assert_eq!(obj.pose_in_hand.position.z, in_hand.translation.z);
+        close(
+            &[obj.pose_in_hand.position.z],
+            &[in_hand.translation.z],
+            geometry,
+            "object in hand",
+        );
         let (_, c) = &session.contacts[i];
         assert_eq!(c.n_contacts as usize, out.n_contacts);
         for (k, f) in c.fingers.iter().enumerate() {
             assert_eq!(f.in_contact, out.tips[k].in_contact);
             assert_eq!(f.slip, out.tips[k].slip);
             assert_eq!(f.in_cone, !f.slip);
-            assert_eq!(f.transmitted.z, out.tips[k].transmitted[2]);
+            close(
+                &[f.transmitted.z],
+                &[out.tips[k].transmitted[2]],
+                force,
+                "transmitted normal force",
+            );
+            if !out.tips[k].touching {
+                assert_eq!(
+                    f.point_b,
+                    Default::default(),
+                    "no contact point when not touching"
+                );
+            }
         }
         i += 1;
     }
@@ -537,4 +570,56 @@ fn a_tick_with_a_nan_is_refused_and_the_rest_of_the_session_still_reads() {
     for (t, n) in counts {
         assert_eq!(session.message_counts[&t], n);
     }
+}
+
+#[test]
+fn a_topic_left_undecoded_is_still_checked_for_valid_json() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("bad-feedback.mcap");
+    let mut w = SessionWriter::create(&path).unwrap();
+    for (topic, schema) in RAW_TOPICS.iter().zip(ICMS_SCHEMAS.iter()) {
+        w.register_channel(topic, schema).unwrap();
+    }
+    w.write(TOPIC_CONTACTS, 0, &Contacts::default()).unwrap();
+    w.write(TOPIC_OBJECT_STATE, 0, &ObjectState::default())
+        .unwrap();
+    w.write(TOPIC_GLOVE_JOINT_STATES, 0, &GloveJointStates::default())
+        .unwrap();
+    w.write_raw_json(TOPIC_GLOVE_FEEDBACK, 3, b"{\"names\": [")
+        .unwrap();
+    w.finish().unwrap();
+    let bytes = std::fs::read(&path).unwrap();
+    for topics in [DecodeTopics::ALL, DecodeTopics::SEGMENTATION] {
+        let e = read_session_bytes_with(&bytes, "bad", &Default::default(), topics).unwrap_err();
+        assert!(
+            matches!(&e, RecordingError::InvalidJson { topic, log_time_ns: 3, .. }
+                if topic == TOPIC_GLOVE_FEEDBACK),
+            "{topics:?}: {e}"
+        );
+    }
+    // Decoding only what segmentation needs leaves the other raw topics empty.
+    let good = dir.path().join("good.mcap");
+    let mut w = SessionWriter::create(&good).unwrap();
+    for (topic, schema) in RAW_TOPICS.iter().zip(ICMS_SCHEMAS.iter()) {
+        w.register_channel(topic, schema).unwrap();
+    }
+    w.write(TOPIC_CONTACTS, 0, &Contacts::default()).unwrap();
+    w.write(TOPIC_OBJECT_STATE, 0, &ObjectState::default())
+        .unwrap();
+    w.write(TOPIC_GLOVE_JOINT_STATES, 0, &GloveJointStates::default())
+        .unwrap();
+    w.write(TOPIC_GLOVE_FEEDBACK, 0, &GloveFeedback::default())
+        .unwrap();
+    w.finish().unwrap();
+    let bytes = std::fs::read(&good).unwrap();
+    let s = read_session_bytes_with(
+        &bytes,
+        "good",
+        &Default::default(),
+        DecodeTopics::SEGMENTATION,
+    )
+    .unwrap();
+    assert_eq!((s.contacts.len(), s.object.len()), (1, 1));
+    assert_eq!((s.joint_states.len(), s.feedback.len()), (0, 0));
+    assert_eq!(s.message_counts[TOPIC_GLOVE_FEEDBACK], 1);
 }

@@ -59,7 +59,9 @@ pub struct GloveJointStates {
 pub struct FingerFeedback {
     /// Fingertip name.
     pub name: String,
-    /// Force of the object on the fingertip, world frame (N).
+    /// Force of the object on the fingertip, world frame (N); left out of the message when
+    /// zero (no contact).
+    #[serde(default, skip_serializing_if = "is_zero_vector")]
     pub feedback_force_world: Vector3,
     /// The operator's fingertip force from τ, world frame (N).
     pub tip_force_world: Vector3,
@@ -96,7 +98,23 @@ pub struct Intensity4 {
     pub torsion: f64,
 }
 
-/// One fingertip of [`Contacts`].
+fn is_zero_vector(v: &Vector3) -> bool {
+    *v == Vector3::default()
+}
+
+fn is_zero(x: &f64) -> bool {
+    *x == 0.0
+}
+
+impl Intensity4 {
+    fn is_zero(&self) -> bool {
+        *self == Intensity4::default()
+    }
+}
+
+/// One fingertip of [`Contacts`]. A fingertip away from the object (most of them, most of
+/// the time) has zero point, normal, penetration and intensities; those zero fields are left
+/// out of the message (a third of the session's size otherwise) and read back as zero.
 #[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct FingerContact {
@@ -107,16 +125,22 @@ pub struct FingerContact {
     /// Touching and pushing: the contact transmits force.
     pub in_contact: bool,
     /// Contact point in the object frame B (m); zero when not touching.
+    #[serde(default, skip_serializing_if = "is_zero_vector")]
     pub point_b: Vector3,
     /// Unit contact normal in B, pointing into the object; zero when not touching.
+    #[serde(default, skip_serializing_if = "is_zero_vector")]
     pub normal_b: Vector3,
     /// Penetration (m), negative for a gap; 0 when not touching.
+    #[serde(default, skip_serializing_if = "is_zero")]
     pub penetration: f64,
     /// The operator's intensities `c_h`.
+    #[serde(default, skip_serializing_if = "Intensity4::is_zero")]
     pub intensity: Intensity4,
     /// What acts on the object (friction-limited).
+    #[serde(default, skip_serializing_if = "Intensity4::is_zero")]
     pub transmitted: Intensity4,
     /// Fed back to the operator.
+    #[serde(default, skip_serializing_if = "Intensity4::is_zero")]
     pub feedback: Intensity4,
     /// The requested intensities are inside the friction cone (`!slip`).
     pub in_cone: bool,

@@ -39,8 +39,14 @@ mod recorder;
 mod time;
 
 pub use messages::*;
-pub use read::{read_session, read_session_bytes, read_session_with_limits, Session};
-pub use recorder::{record_simulation, RecordSummary, SessionInfo, SessionRecorder, TickData};
+pub use read::{
+    read_session, read_session_bytes, read_session_bytes_with, read_session_with_limits,
+    DecodeTopics, Session,
+};
+pub use recorder::{
+    record_simulation, RecordSummary, SessionInfo, SessionRecorder, TickData, FORCE_STEPS_PER_UNIT,
+    GEOMETRY_STEPS_PER_UNIT,
+};
 pub use time::rfc3339_utc;
 
 /// Raw tick topic: glove joint states.

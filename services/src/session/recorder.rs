@@ -140,17 +140,49 @@ impl std::fmt::Debug for SessionRecorder {
     }
 }
 
+/// Steps per unit of the geometry and motion a session records (m, rad, m/s, rad/s, unit
+/// vectors and quaternions): 1 nm, 1 nrad. Values are rounded to this before they are written,
+/// so the file holds short decimals (about half the text of a shortest-round-trip double,
+/// which makes sessions smaller and faster to read) and reading back gives exactly what was
+/// recorded. Far finer than any glove's sensors and than the 1 µm/s drift a hold is judged by.
+pub const GEOMETRY_STEPS_PER_UNIT: f64 = 1e9;
+/// Steps per unit of the forces and torques a session records (N, N·m): 1 µN, 1 µN·m.
+pub const FORCE_STEPS_PER_UNIT: f64 = 1e6;
+
+/// `x` rounded to `1 / steps`; `-0` becomes `0`; a non-finite `x` is returned unchanged (the
+/// recorder refuses it later, naming the field).
+fn round_to(x: f64, steps: f64) -> f64 {
+    let r = (x * steps).round() / steps;
+    if r.is_finite() {
+        r + 0.0
+    } else {
+        x
+    }
+}
+
+fn g(x: f64) -> f64 {
+    round_to(x, GEOMETRY_STEPS_PER_UNIT)
+}
+
+fn f(x: f64) -> f64 {
+    round_to(x, FORCE_STEPS_PER_UNIT)
+}
+
 fn v3(v: &Vector) -> Vector3 {
-    Vector3::new(v.x, v.y, v.z)
+    Vector3::new(g(v.x), g(v.y), g(v.z))
+}
+
+fn force3(v: &Vector) -> Vector3 {
+    Vector3::new(f(v.x), f(v.y), f(v.z))
 }
 
 fn quat(r: &Rotation) -> Quaternion {
     let q = r.quaternion();
     Quaternion {
-        x: q.i,
-        y: q.j,
-        z: q.k,
-        w: q.w,
+        x: g(q.i),
+        y: g(q.j),
+        z: g(q.k),
+        w: g(q.w),
     }
 }
 
@@ -163,15 +195,15 @@ fn pose(iso: &Isometry) -> Pose {
 
 fn intensity(c: &dfs_core::contact::Intensity) -> Intensity4 {
     Intensity4 {
-        x: c[0],
-        y: c[1],
-        z: c[2],
-        torsion: c[3],
+        x: f(c[0]),
+        y: f(c[1]),
+        z: f(c[2]),
+        torsion: f(c[3]),
     }
 }
 
 fn wrench6(w: &dfs_core::math::Wrench) -> [f64; 6] {
-    [w[0], w[1], w[2], w[3], w[4], w[5]]
+    [f(w[0]), f(w[1]), f(w[2]), f(w[3]), f(w[4]), f(w[5])]
 }
 
 impl SessionRecorder {
@@ -523,25 +555,25 @@ impl Messages {
         };
         for i in 0..n {
             let q = tick.q.get(i).copied().unwrap_or(0.0);
-            self.joints.positions[i] = q;
+            self.joints.positions[i] = g(q);
             self.joints.velocities[i] = if dt > 0.0 {
-                (q - self.prev_q[i]) / dt
+                g((q - self.prev_q[i]) / dt)
             } else {
                 0.0
             };
-            self.joints.efforts[i] = tick.tau.get(i).copied().unwrap_or(0.0);
+            self.joints.efforts[i] = f(tick.tau.get(i).copied().unwrap_or(0.0));
             self.prev_q[i] = q;
-            self.feedback.motor_positions[i] = out.motor_q[i];
-            self.feedback.motor_velocities[i] = out.motor_qd[i];
-            self.feedback.feedback_torques[i] = out.feedback_torque[i];
+            self.feedback.motor_positions[i] = g(out.motor_q[i]);
+            self.feedback.motor_velocities[i] = g(out.motor_qd[i]);
+            self.feedback.feedback_torques[i] = f(out.feedback_torque[i]);
         }
         self.prev_time_ns = Some(tick.time_ns);
         self.contacts.n_contacts = out.n_contacts as u32;
         for k in 0..hand.n_tips {
             let tip = &out.tips[k];
-            let f = &mut self.feedback.fingers[k];
-            f.feedback_force_world = v3(&tip.feedback_force_world);
-            f.tip_force_world = v3(&tip.tip_force_world);
+            let fb = &mut self.feedback.fingers[k];
+            fb.feedback_force_world = force3(&tip.feedback_force_world);
+            fb.tip_force_world = force3(&tip.tip_force_world);
             let c = &mut self.contacts.fingers[k];
             c.touching = tip.touching;
             c.in_contact = tip.in_contact;
@@ -549,7 +581,7 @@ impl Messages {
                 (Some(frame), true) => {
                     c.point_b = v3(&frame.p_b);
                     c.normal_b = v3(&frame.normal_b());
-                    c.penetration = tip.penetration;
+                    c.penetration = g(tip.penetration);
                 }
                 _ => {
                     c.point_b = Vector3::default();
@@ -645,9 +677,9 @@ impl Messages {
                     position: v3(&point_world.coords),
                     orientation: quat(&rotation),
                 },
-                shaft_length: length - head,
+                shaft_length: g(length - head),
                 shaft_diameter: 0.003,
-                head_length: head,
+                head_length: g(head),
                 head_diameter: 0.007,
                 color: if tip.slip {
                     Color::rgba(1.0, 0.6, 0.0, 1.0)
