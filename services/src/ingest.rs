@@ -5,7 +5,7 @@
 use crate::error::RecordingError;
 use crate::mcap_io::ReadLimits;
 use crate::segmentation::{segment, SegmentParams, Skill};
-use crate::session::read_session_bytes;
+use crate::session::{read_session_bytes_with, DecodeTopics};
 use crate::store::{IngestOutcome, NewSkill, SessionMeta, Store, StoreError};
 
 /// Why an ingest failed. Nothing is stored in either case.
@@ -22,14 +22,19 @@ pub enum IngestError {
 /// Reads, validates and segments a session held in memory: the session's metadata for the
 /// store and one [`NewSkill`] per grasp (with the full parameters as JSON).
 pub fn analyse(bytes: &[u8], name: &str) -> Result<(SessionMeta, Vec<NewSkill>), RecordingError> {
-    let session = read_session_bytes(bytes, name, &ReadLimits::default())?;
+    let session = read_session_bytes_with(
+        bytes,
+        name,
+        &ReadLimits::default(),
+        DecodeTopics::SEGMENTATION,
+    )?;
     let seg = segment(&session, &SegmentParams::default());
     let m = &session.metadata;
     let object: serde_json::Value = m
         .get("object")
         .and_then(|s| serde_json::from_str(s).ok())
         .unwrap_or(serde_json::Value::Null);
-    let duration_ns = match (session.joint_states.first(), session.joint_states.last()) {
+    let duration_ns = match (session.object.first(), session.object.last()) {
         (Some(a), Some(b)) => b.0.saturating_sub(a.0),
         _ => 0,
     };

@@ -47,6 +47,41 @@ pub enum BenchCommand {
         #[arg(long, default_value_t = 60.0)]
         duration: f64,
     },
+    /// Ingest (read and validate, segment, store) of simulated sessions held in memory; the
+    /// simulation that makes them is not timed.
+    Ingest {
+        /// Print JSON: `{"sessions_per_second", "analyse_ms", "store_ms", ...}`.
+        #[arg(long)]
+        json: bool,
+        /// Number of sessions (sphere-lift, seeds 0..N).
+        #[arg(long, default_value_t = 20)]
+        sessions: u64,
+        /// Simulated seconds per session.
+        #[arg(long, default_value_t = 10.0)]
+        duration: f64,
+        /// Built-in scenario.
+        #[arg(long, default_value = "sphere-lift")]
+        scenario: String,
+    },
+}
+
+/// Result of `icms bench ingest`.
+#[derive(Debug, Serialize)]
+pub struct IngestBench {
+    /// Sessions ingested per wall-clock second (analyse + store, one after the other).
+    pub sessions_per_second: f64,
+    /// Median time to read, validate and segment one session (ms).
+    pub analyse_ms: f64,
+    /// Median time to store one session with its skills (hash, blob, transaction) (ms).
+    pub store_ms: f64,
+    /// Median size of one session file (bytes).
+    pub file_bytes: u64,
+    /// Sessions ingested.
+    pub sessions: u64,
+    /// Simulated seconds per session.
+    pub duration: f64,
+    /// Scenario.
+    pub scenario: String,
 }
 
 /// Result of `icms bench session`.
@@ -99,6 +134,24 @@ pub fn run(c: BenchCommand) -> Result<(), CliError> {
             seeds,
             duration,
         } => super::segment::bench_segmentation(seeds, duration, json),
+        BenchCommand::Ingest {
+            json,
+            sessions,
+            duration,
+            scenario,
+        } => {
+            let r = bench_ingest(&scenario, sessions.max(1), duration)?;
+            if json {
+                print_json(&r)
+            } else {
+                println!(
+                    "ingest of {} {} s {} sessions ({} bytes each): {:.1} sessions/s; per session: read + segment {:.1} ms, store {:.1} ms (medians)",
+                    r.sessions, r.duration, r.scenario, r.file_bytes, r.sessions_per_second,
+                    r.analyse_ms, r.store_ms
+                );
+                Ok(())
+            }
+        }
         BenchCommand::Tick { json, iterations } => {
             let r = bench_tick(iterations.max(1000))?;
             if json {
@@ -163,6 +216,53 @@ fn bench_session(name: &str, duration: f64) -> Result<SessionBench, CliError> {
         messages: summary.write.messages,
         ticks,
         scenario: scenario.name,
+    })
+}
+
+fn bench_ingest(name: &str, sessions: u64, duration: f64) -> Result<IngestBench, CliError> {
+    let dir = tempfile::tempdir().map_err(|e| CliError(format!("temporary directory: {e}")))?;
+    let mut files = Vec::new();
+    for seed in 0..sessions {
+        let scenario = dfs_core::scenario::Scenario::builtin(name, seed)
+            .ok_or_else(|| CliError(format!("no built-in scenario {name:?}")))?;
+        let path = dir.path().join(format!("{seed}.mcap"));
+        services::session::record_simulation(&scenario, Some(duration), &path, |_, _| {})?;
+        let bytes =
+            std::fs::read(&path).map_err(|e| CliError(format!("{}: {e}", path.display())))?;
+        std::fs::remove_file(&path).map_err(|e| CliError(format!("{}: {e}", path.display())))?;
+        files.push(bytes);
+    }
+    let rt = tokio::runtime::Builder::new_multi_thread()
+        .enable_all()
+        .build()
+        .map_err(|e| CliError(format!("starting the async runtime: {e}")))?;
+    let data = dir.path().join("data");
+    let (mut analyse, mut store_t, total) = rt.block_on(async {
+        let store = services::store::Store::open(&data).await?;
+        let (mut a, mut s) = (Vec::new(), Vec::new());
+        let t_all = Instant::now();
+        for (i, bytes) in files.iter().enumerate() {
+            let t0 = Instant::now();
+            let (meta, skills) = services::ingest::analyse(bytes, &format!("session {i}"))?;
+            a.push(t0.elapsed().as_secs_f64() * 1e3);
+            let t0 = Instant::now();
+            store.ingest(bytes, meta, skills).await?;
+            s.push(t0.elapsed().as_secs_f64() * 1e3);
+        }
+        let total = t_all.elapsed().as_secs_f64();
+        store.close().await;
+        Ok::<_, CliError>((a, s, total))
+    })?;
+    let mut sizes: Vec<u64> = files.iter().map(|f| f.len() as u64).collect();
+    sizes.sort_unstable();
+    Ok(IngestBench {
+        sessions_per_second: sessions as f64 / total,
+        analyse_ms: services::segmentation::median(&mut analyse),
+        store_ms: services::segmentation::median(&mut store_t),
+        file_bytes: sizes[sizes.len() / 2],
+        sessions,
+        duration,
+        scenario: name.to_string(),
     })
 }
 

@@ -18,8 +18,8 @@ pub mod schemas;
 mod writer;
 
 pub use reader::{
-    read_session_bytes, read_session_file, MetadataRecord, ReadLimits, RecordedMessage,
-    RecordedSession, SchemaInfo, TopicRecording,
+    read_session_bytes, read_session_bytes_decoding, read_session_file, read_session_file_decoding,
+    MetadataRecord, ReadLimits, RecordedMessage, RecordedSession, SchemaInfo, TopicRecording,
 };
 pub use salvage::{salvage, SalvageReport};
 pub use schemas::JsonSchema;

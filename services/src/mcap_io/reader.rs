@@ -86,6 +86,21 @@ impl TopicRecording {
         self.schema.as_ref().map(|s| s.name.as_str())
     }
 
+    /// Checks that every message is valid JSON (without building anything).
+    pub fn check_json(&self) -> Result<()> {
+        self.check_json_encoding()?;
+        for m in &self.messages {
+            serde_json::from_slice::<serde::de::IgnoredAny>(&m.data).map_err(|source| {
+                RecordingError::InvalidJson {
+                    topic: self.topic.clone(),
+                    log_time_ns: m.log_time_ns,
+                    source,
+                }
+            })?;
+        }
+        Ok(())
+    }
+
     /// The messages parsed as JSON values, with their log times.
     pub fn json_values(&self) -> Result<Vec<(u64, serde_json::Value)>> {
         self.decode()
@@ -200,7 +215,18 @@ impl RecordedSession {
 
 /// Reads a whole MCAP session from memory. See [`read_session_file`].
 pub fn read_session_bytes(bytes: &[u8], limits: &ReadLimits) -> Result<RecordedSession> {
-    read_session_from(bytes, Some(bytes.len() as u64), limits)
+    read_session_from(bytes, Some(bytes.len() as u64), limits, &[])
+}
+
+/// [`read_session_bytes`] for a caller that decodes the messages of `decoded_topics` itself
+/// (which validates their JSON): those are not parsed a second time here. Every other `json`
+/// topic is still checked to hold valid JSON.
+pub fn read_session_bytes_decoding(
+    bytes: &[u8],
+    limits: &ReadLimits,
+    decoded_topics: &[&str],
+) -> Result<RecordedSession> {
+    read_session_from(bytes, Some(bytes.len() as u64), limits, decoded_topics)
 }
 
 /// Reads a whole MCAP session from a file, safely for untrusted input: checks the magic,
@@ -209,6 +235,16 @@ pub fn read_session_bytes(bytes: &[u8], limits: &ReadLimits) -> Result<RecordedS
 /// [`RecordingError::Truncated`]: [`crate::mcap_io::salvage`] it). Messages on `json` topics
 /// are checked to be valid JSON.
 pub fn read_session_file(path: impl AsRef<Path>, limits: &ReadLimits) -> Result<RecordedSession> {
+    read_session_file_decoding(path, limits, &[])
+}
+
+/// [`read_session_file`] for a caller that decodes the messages of `decoded_topics` itself;
+/// see [`read_session_bytes_decoding`].
+pub fn read_session_file_decoding(
+    path: impl AsRef<Path>,
+    limits: &ReadLimits,
+    decoded_topics: &[&str],
+) -> Result<RecordedSession> {
     let path = path.as_ref();
     let file = File::open(path)
         .map_err(|e| RecordingError::io(format!("opening {}", path.display()), e))?;
@@ -216,13 +252,19 @@ pub fn read_session_file(path: impl AsRef<Path>, limits: &ReadLimits) -> Result<
         .metadata()
         .map_err(|e| RecordingError::io(format!("reading {}", path.display()), e))?
         .len();
-    read_session_from(BufReader::with_capacity(1 << 16, file), Some(len), limits)
+    read_session_from(
+        BufReader::with_capacity(1 << 16, file),
+        Some(len),
+        limits,
+        decoded_topics,
+    )
 }
 
 fn read_session_from<R: Read>(
     src: R,
     total_len: Option<u64>,
     limits: &ReadLimits,
+    decoded_topics: &[&str],
 ) -> Result<RecordedSession> {
     let mut builder = SessionBuilder {
         session: RecordedSession::default(),
@@ -230,6 +272,7 @@ fn read_session_from<R: Read>(
         channels: HashMap::new(),
         total_bytes: 0,
         limits: *limits,
+        decoded_topics,
     };
     let outcome = scan(src, total_len, limits, |batch| builder.apply(batch))?;
     if let Some(err) = outcome.error {
@@ -244,15 +287,17 @@ fn read_session_from<R: Read>(
     Ok(builder.session)
 }
 
-struct SessionBuilder {
+struct SessionBuilder<'a> {
     session: RecordedSession,
     schemas: HashMap<u16, SchemaInfo>,
     channels: HashMap<u16, String>,
     total_bytes: u64,
     limits: ReadLimits,
+    /// Topics whose JSON the caller validates by decoding them.
+    decoded_topics: &'a [&'a str],
 }
 
-impl SessionBuilder {
+impl SessionBuilder<'_> {
     fn apply(&mut self, batch: Batch) -> Result<()> {
         let offset = batch.offset;
         let corrupt = |detail: String| RecordingError::Corrupt { offset, detail };
@@ -343,7 +388,9 @@ impl SessionBuilder {
                         .topics
                         .get_mut(topic)
                         .expect("every channel has a topic entry");
-                    if t.message_encoding == MESSAGE_ENCODING {
+                    if t.message_encoding == MESSAGE_ENCODING
+                        && !self.decoded_topics.contains(&topic.as_str())
+                    {
                         if let Err(source) = serde_json::from_slice::<serde::de::IgnoredAny>(&data)
                         {
                             return Err(RecordingError::InvalidJson {
