@@ -610,8 +610,8 @@ impl Dfs {
         }
         let mut fb_torque = [0.0; MAX_DOF];
         for k in 0..self.hand.fingertips.len() {
-            let t = self.out.tips[k];
-            let j = self.kin.tip_jacobians[k];
+            let t = &self.out.tips[k];
+            let j = &self.kin.tip_jacobians[k];
             // The feedback, less the passive friction part: the contact spring below carries
             // that on the finger side, implicitly.
             let f = t.feedback_force_world + self.passive_world[k];

@@ -97,46 +97,50 @@ pub fn sym_pinv6(a: &Mat6, rel_tol: Real) -> (Mat6, usize) {
 }
 
 /// Solves `A x = b` in place for the symmetric positive definite top-left `n × n` block of a
-/// fixed-capacity square matrix by Cholesky factorisation (`a` is overwritten by the factor,
-/// `b` by `x`). Returns `false`, leaving `b` unspecified, when the block is not positive
-/// definite. Allocation-free; the hot-path solver for joint-space systems.
+/// fixed-capacity square matrix by Cholesky factorisation `A = Uᵀ U` (only the upper triangle
+/// of the block is read; it is overwritten by `U`, `b` by `x`). Returns `false`, leaving `b`
+/// unspecified, when the block is not positive definite. Allocation-free; the hot-path solver
+/// for joint-space systems. Works column by column on the column-major storage, so every inner
+/// loop runs over contiguous memory.
 pub fn cholesky_solve_in_place<const N: usize>(
     a: &mut nalgebra::SMatrix<Real, N, N>,
     n: usize,
     b: &mut [Real],
 ) -> bool {
     debug_assert!(n <= N && b.len() >= n);
+    let n = n.min(N).min(b.len());
+    let u = a.as_mut_slice();
+    let dot = |x: &[Real], y: &[Real]| x.iter().zip(y).map(|(p, q)| p * q).sum::<Real>();
     for j in 0..n {
-        let mut d = a[(j, j)];
-        for k in 0..j {
-            d -= a[(j, k)] * a[(j, k)];
-        }
+        // Column j of U above the diagonal is final once the columns before it are; then
+        // U[j][i] for i > j uses columns j and i.
+        let (head, tail) = u.split_at_mut((j + 1) * N);
+        let col_j = &mut head[j * N..j * N + j + 1];
+        let d = col_j[j] - dot(&col_j[..j], &col_j[..j]);
         if d <= 0.0 || !d.is_finite() {
             return false;
         }
         let d = d.sqrt();
-        a[(j, j)] = d;
+        col_j[j] = d;
+        let col_j = &col_j[..j];
         for i in (j + 1)..n {
-            let mut s = a[(i, j)];
-            for k in 0..j {
-                s -= a[(i, k)] * a[(j, k)];
-            }
-            a[(i, j)] = s / d;
+            let col_i = &mut tail[(i - j - 1) * N..(i - j - 1) * N + j + 1];
+            col_i[j] = (col_i[j] - dot(col_j, &col_i[..j])) / d;
         }
     }
+    // Uᵀ y = b.
     for i in 0..n {
-        let mut s = b[i];
-        for k in 0..i {
-            s -= a[(i, k)] * b[k];
-        }
-        b[i] = s / a[(i, i)];
+        let col_i = &u[i * N..i * N + i + 1];
+        b[i] = (b[i] - dot(&col_i[..i], &b[..i])) / col_i[i];
     }
+    // U x = y, column by column.
     for i in (0..n).rev() {
-        let mut s = b[i];
-        for k in (i + 1)..n {
-            s -= a[(k, i)] * b[k];
+        let col_i = &u[i * N..i * N + i + 1];
+        let x = b[i] / col_i[i];
+        b[i] = x;
+        for (bk, uk) in b[..i].iter_mut().zip(&col_i[..i]) {
+            *bk -= uk * x;
         }
-        b[i] = s / a[(i, i)];
     }
     true
 }
@@ -159,6 +163,28 @@ mod tests {
         assert_eq!(b[2], 99.0);
         let mut bad = nalgebra::SMatrix::<f64, 2, 2>::new(1.0, 2.0, 2.0, 1.0);
         assert!(!cholesky_solve_in_place(&mut bad, 2, &mut [1.0, 1.0]));
+    }
+
+    proptest::proptest! {
+        #[test]
+        fn cholesky_agrees_with_nalgebra_on_random_spd_blocks(
+            entries in proptest::collection::vec(-1.0..1.0f64, 36),
+            rhs in proptest::collection::vec(-1.0..1.0f64, 6),
+            n in 1usize..=6,
+        ) {
+            let g = nalgebra::SMatrix::<f64, 6, 6>::from_iterator(entries);
+            let spd = g * g.transpose() + nalgebra::SMatrix::<f64, 6, 6>::identity() * 0.1;
+            let mut a = nalgebra::SMatrix::<f64, 8, 8>::identity();
+            a.fixed_view_mut::<6, 6>(0, 0).copy_from(&spd);
+            let mut b = [0.0; 8];
+            b[..6].copy_from_slice(&rhs);
+            proptest::prop_assert!(cholesky_solve_in_place(&mut a, n, &mut b));
+            let block = spd.view((0, 0), (n, n)).clone_owned();
+            let x = block.cholesky().unwrap().solve(&nalgebra::DVector::from_column_slice(&rhs[..n]));
+            for i in 0..n {
+                proptest::prop_assert!((b[i] - x[i]).abs() <= 1e-9 * x.amax().max(1.0));
+            }
+        }
     }
 
     #[test]

@@ -2,7 +2,7 @@
 
 use crate::error::{DfsError, Result};
 use crate::math::{skew, Isometry, Mat3, Mat6, Point, Rotation, UnitVector, Vector};
-use nalgebra::{SMatrix, Vector6};
+use nalgebra::SMatrix;
 
 /// Largest number of generalised coordinates (DOFs) a hand may have.
 pub const MAX_DOF: usize = 24;
@@ -180,7 +180,75 @@ pub struct Kinematics {
     pub tip_jacobians: [TipJacobian; MAX_TIPS],
     /// Scratch for [`HandModel::mass_matrix`]: composite spatial inertia of every subtree
     /// (only the hand's links are written).
-    pub composite: [Mat6; MAX_LINKS],
+    pub composite: [SpatialInertia; MAX_LINKS],
+}
+
+/// A rigid body's spatial inertia about the world origin, in the compact form the composite
+/// rigid-body algorithm needs: mass `m`, first moment `h = m c` (c the centre of mass) and the
+/// rotational inertia about the origin `I_o = I_c − m [c]×[c]×`, all in the world frame. As a
+/// 6x6 matrix acting on twists (velocity of the body point at the origin, angular velocity) it
+/// is `[[m 1, −[h]×], [[h]×, I_o]]`; ten numbers instead of 36, and adding two subtrees is ten
+/// additions.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct SpatialInertia {
+    /// Mass (kg).
+    pub mass: f64,
+    /// First moment of mass about the origin, `m c` (kg·m).
+    pub h: Vector,
+    /// Rotational inertia about the origin (kg·m²), symmetric.
+    pub i_o: Mat3,
+}
+
+impl SpatialInertia {
+    /// No mass.
+    pub const ZERO: SpatialInertia = SpatialInertia {
+        mass: 0.0,
+        h: Vector::new(0.0, 0.0, 0.0),
+        i_o: Mat3::new(0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0),
+    };
+
+    /// A link's inertia about the world origin for the link at `pose`.
+    pub fn of_link(pose: &Isometry, inertial: &Inertial) -> SpatialInertia {
+        let m = inertial.mass;
+        let c = (pose * Point::from(inertial.com)).coords;
+        let r = pose.rotation.to_rotation_matrix();
+        let i_c = r.matrix() * inertial.inertia * r.matrix().transpose();
+        // −m [c]×[c]× = m (|c|² 1 − c cᵀ).
+        let i_o = i_c + (Mat3::identity() * c.norm_squared() - c * c.transpose()) * m;
+        SpatialInertia {
+            mass: m,
+            h: c * m,
+            i_o,
+        }
+    }
+
+    /// The spatial force `I (v, ω)` = (m v − h × ω, h × v + I_o ω) for the twist `(v, ω)`.
+    pub fn apply(&self, v: &Vector, w: &Vector) -> (Vector, Vector) {
+        (
+            v * self.mass - self.h.cross(w),
+            self.h.cross(v) + self.i_o * w,
+        )
+    }
+
+    /// The 6x6 matrix form.
+    pub fn to_matrix(&self) -> Mat6 {
+        let hx = skew(&self.h);
+        let mut s = Mat6::zeros();
+        s.fixed_view_mut::<3, 3>(0, 0)
+            .copy_from(&(Mat3::identity() * self.mass));
+        s.fixed_view_mut::<3, 3>(0, 3).copy_from(&-hx);
+        s.fixed_view_mut::<3, 3>(3, 0).copy_from(&hx);
+        s.fixed_view_mut::<3, 3>(3, 3).copy_from(&self.i_o);
+        s
+    }
+}
+
+impl std::ops::AddAssign for SpatialInertia {
+    fn add_assign(&mut self, o: SpatialInertia) {
+        self.mass += o.mass;
+        self.h += o.h;
+        self.i_o += o.i_o;
+    }
 }
 
 impl Default for Kinematics {
@@ -192,7 +260,7 @@ impl Default for Kinematics {
             parent_joint: [NO_JOINT; MAX_LINKS],
             tip_centres: [Point::origin(); MAX_TIPS],
             tip_jacobians: [TipJacobian::zeros(); MAX_TIPS],
-            composite: [Mat6::zeros(); MAX_LINKS],
+            composite: [SpatialInertia::ZERO; MAX_LINKS],
         }
     }
 }
@@ -822,20 +890,26 @@ impl HandModel {
         }
     }
 
-    /// Joint-space inertia M(θ) (top-left `dof × dof` block of `m`, the rest identity) from
-    /// the link inertials and the armature, for the kinematics in `kin`. Allocation-free.
+    /// Joint-space inertia M(θ) into the top-left `dof × dof` block of `m` (the rest of `m` is
+    /// not touched) from the link inertials and the armature, for the kinematics in `kin`.
+    /// Allocation-free.
     ///
     /// M = Σ_links (J_vᵀ m J_v + J_ωᵀ R I Rᵀ J_ω) + diag(armature), with J_v the Jacobian of
     /// the link's centre of mass and J_ω its angular Jacobian (world frame), evaluated by the
     /// composite rigid-body algorithm; a mimic joint enters with its multiplier.
     pub fn mass_matrix(&self, kin: &mut Kinematics, m: &mut DofMatrix) {
         let n = self.dof().min(MAX_DOF);
-        m.fill_with_identity();
-        m.view_mut((0, 0), (n, n)).fill(0.0);
+        // Only the block is written: filling all 24x24 entries every tick cost as much as the
+        // algorithm itself.
+        for c in 0..n {
+            for r in 0..n {
+                m[(r, c)] = 0.0;
+            }
+        }
         // Composite rigid-body algorithm in the world frame: the spatial inertia of every
-        // subtree at the world origin, then H_ij = S_jᵀ I_subtree(i) S_i for every joint j on
-        // the path to joint i, mapped onto the DOFs by the drive gains. The subtree inertias live
-        // in the kinematics' scratch (disjoint field borrows), so nothing large is zeroed.
+        // subtree about the world origin, then H_ij = S_jᵀ I_subtree(i) S_i for every joint j
+        // on the path to joint i, mapped onto the DOFs by the drive gains. The subtree
+        // inertias live in the kinematics' scratch (disjoint field borrows).
         let Kinematics {
             composite,
             joint_axes,
@@ -845,30 +919,42 @@ impl HandModel {
             ..
         } = kin;
         for (l, link) in self.links.iter().enumerate().take(MAX_LINKS) {
-            composite[l] = if l != self.root {
-                spatial_inertia(&link_poses[l], &link.inertial)
+            composite[l] = if l != self.root && link.inertial.mass > 0.0 {
+                SpatialInertia::of_link(&link_poses[l], &link.inertial)
             } else {
-                Mat6::zeros()
+                SpatialInertia::ZERO
             };
         }
-        for joint in self.joints.iter().take(MAX_LINKS).rev() {
+        let joints = &self.joints[..self.joints.len().min(MAX_LINKS)];
+        for joint in joints.iter().rev() {
             let child = composite[joint.child];
             composite[joint.parent] += child;
         }
-        for (i, joint) in self.joints.iter().enumerate().take(MAX_LINKS) {
+        // Every joint's motion subspace once: (velocity of the body point at the origin,
+        // angular velocity) per unit joint value.
+        let mut motion = [(Vector::zeros(), Vector::zeros()); MAX_LINKS];
+        for (j, joint) in joints.iter().enumerate() {
+            let a = joint_axes[j];
+            motion[j] = match joint.kind {
+                JointKind::Revolute | JointKind::Continuous => {
+                    (joint_frames[j].translation.vector.cross(&a), a)
+                }
+                JointKind::Prismatic => (a, Vector::zeros()),
+                JointKind::Fixed => (Vector::zeros(), Vector::zeros()),
+            };
+        }
+        for (i, joint) in joints.iter().enumerate() {
             let Some((di, gi)) = joint.drive.dof_and_gain() else {
                 continue;
             };
-            let force = composite[joint.child] * self.motion_subspace(joint_axes, joint_frames, i);
+            let (v, w) = &motion[i];
+            let (f, t) = composite[joint.child].apply(v, w);
             let mut j = i;
             for _ in 0..MAX_LINKS {
-                let ancestor = &self.joints[j];
+                let ancestor = &joints[j];
                 if let Some((dj, gj)) = ancestor.drive.dof_and_gain() {
-                    let h = gi
-                        * gj
-                        * self
-                            .motion_subspace(joint_axes, joint_frames, j)
-                            .dot(&force);
+                    let (vj, wj) = &motion[j];
+                    let h = gi * gj * (vj.dot(&f) + wj.dot(&t));
                     m[(di, dj)] += h;
                     if j != i {
                         m[(dj, di)] += h;
@@ -884,45 +970,6 @@ impl HandModel {
             m[(i, i)] += a;
         }
     }
-
-    /// The spatial motion of joint `j` per unit joint value: (velocity of the body point at the
-    /// world origin, angular velocity), world frame.
-    fn motion_subspace(
-        &self,
-        axes: &[Vector; MAX_LINKS],
-        frames: &[Isometry; MAX_LINKS],
-        j: usize,
-    ) -> Vector6<f64> {
-        let a = axes[j];
-        let (linear, angular) = match self.joints[j].kind {
-            JointKind::Revolute | JointKind::Continuous => {
-                (frames[j].translation.vector.cross(&a), a)
-            }
-            JointKind::Prismatic => (a, Vector::zeros()),
-            JointKind::Fixed => (Vector::zeros(), Vector::zeros()),
-        };
-        Vector6::new(
-            linear.x, linear.y, linear.z, angular.x, angular.y, angular.z,
-        )
-    }
-}
-
-/// Spatial inertia of a link at the world origin, for twists (velocity of the body point at the
-/// origin, angular velocity): `[[m 1, −m [c]×], [m [c]×, I − m [c]×[c]×]]` with `c` the centre
-/// of mass and `I` the inertia about it, both in the world frame.
-fn spatial_inertia(pose: &Isometry, inertial: &Inertial) -> Mat6 {
-    let c = (pose * Point::from(inertial.com)).coords;
-    let r = pose.rotation.to_rotation_matrix();
-    let inertia = r.matrix() * inertial.inertia * r.matrix().transpose();
-    let mc = skew(&c) * inertial.mass;
-    let mut s = Mat6::zeros();
-    s.fixed_view_mut::<3, 3>(0, 0)
-        .copy_from(&(Mat3::identity() * inertial.mass));
-    s.fixed_view_mut::<3, 3>(0, 3).copy_from(&-mc);
-    s.fixed_view_mut::<3, 3>(3, 0).copy_from(&mc);
-    s.fixed_view_mut::<3, 3>(3, 3)
-        .copy_from(&(inertia - mc * skew(&c)));
-    s
 }
 
 #[cfg(test)]
@@ -1339,7 +1386,7 @@ pub(crate) mod tests {
     fn assert_mass_matrix_is_consistent(hand: &HandModel, q: &[f64], qdot: &[f64]) {
         let n = hand.dof();
         let mut kin = fk(hand, q);
-        let mut m = DofMatrix::zeros();
+        let mut m = DofMatrix::identity();
         hand.mass_matrix(&mut kin, &mut m);
         assert!((m - m.transpose()).amax() < 1e-15);
         assert!(m.cholesky().is_some(), "M is not positive definite");
@@ -1428,7 +1475,7 @@ pub(crate) mod tests {
         hand.validate().unwrap();
         for angle in [-1.0, 0.0, 0.7] {
             let mut kin = fk(&hand, &[angle]);
-            let mut m = DofMatrix::zeros();
+            let mut m = DofMatrix::identity();
             hand.mass_matrix(&mut kin, &mut m);
             let expected = izz + mass * com * com + 1e-4;
             assert!((m[(0, 0)] - expected).abs() < 1e-15);
@@ -1440,7 +1487,7 @@ pub(crate) mod tests {
         let glove = HandModel::glove10();
         let mut kin = fk(&glove, &[0.0; 10]);
         glove.tip_jacobians(&mut kin);
-        let mut m = DofMatrix::zeros();
+        let mut m = DofMatrix::identity();
         glove.mass_matrix(&mut kin, &mut m);
         assert!(kin
             .tip_jacobians
@@ -1458,7 +1505,7 @@ pub(crate) mod tests {
         ) {
             let glove = HandModel::glove10();
             let mut kin = fk(&glove, &angles_from_unit(&glove, &u));
-            let mut m = DofMatrix::zeros();
+            let mut m = DofMatrix::identity();
             glove.mass_matrix(&mut kin, &mut m);
             let mut rhs = DofVector::zeros();
             rhs.as_mut_slice()[..10].copy_from_slice(&b);
