@@ -17,6 +17,7 @@ pub mod hand;
 pub mod math;
 pub mod object;
 pub mod operator;
+pub mod replay;
 pub mod scenario;
 pub mod statics;
 

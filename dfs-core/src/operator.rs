@@ -465,7 +465,7 @@ pub fn plan_grasp(
 /// projection onto the well-conditioned range of the tip's linear Jacobian over its finger
 /// group's DOFs (1 = fully, 0 = not at all). Directions whose singular value is below a quarter
 /// of the largest do not count: joint torques cannot express a push along a stretched finger.
-fn push_alignment(hand: &HandModel, kin: &Kinematics, tip: usize, dir: &Vector) -> Real {
+pub(crate) fn push_alignment(hand: &HandModel, kin: &Kinematics, tip: usize, dir: &Vector) -> Real {
     let (basis, nb) = push_basis(hand, kin, tip);
     basis
         .iter()

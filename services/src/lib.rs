@@ -12,6 +12,7 @@ pub mod error;
 pub mod foxglove;
 pub mod ingest;
 pub mod mcap_io;
+pub mod replay;
 pub mod segmentation;
 pub mod session;
 pub mod store;

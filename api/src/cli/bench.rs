@@ -33,6 +33,17 @@ pub enum BenchCommand {
         #[arg(long, default_value = "sphere-lift")]
         scenario: String,
     },
+    /// Replay of the sphere-lift skill (recorded with glove10, segmented) on Allegro: the
+    /// time to retarget and simulate it, per 5 s of skill (5 000 DFS ticks), and one
+    /// retargeting step (warm-started IK plus the force distribution with torque limits).
+    Replay {
+        /// Print JSON: `{"retarget_ms", "simulate_ms", "per_5s_ms", "retarget_step_us", ...}`.
+        #[arg(long)]
+        json: bool,
+        /// Hand.
+        #[arg(long, default_value = "allegro")]
+        hand: String,
+    },
     /// Segmentation of every built-in scenario × seeds scored against the ground truth, and
     /// the time to segment a long sphere-lift session.
     Segmentation {
@@ -129,6 +140,7 @@ pub struct TickBench {
 /// Runs a benchmark.
 pub fn run(c: BenchCommand) -> Result<(), CliError> {
     match c {
+        BenchCommand::Replay { json, hand } => super::replay::bench_replay(&hand, json),
         BenchCommand::Segmentation {
             json,
             seeds,

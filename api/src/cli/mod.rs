@@ -2,6 +2,7 @@
 
 mod bench;
 mod dfs_static;
+mod replay;
 mod segment;
 mod sessions;
 mod simulate;
@@ -43,6 +44,11 @@ enum Command {
     Ingest(skills::IngestArgs),
     /// Queries the skill data base: filters, sorting, cursor pagination, similar skills.
     Skills(Box<skills::SkillsArgs>),
+    /// The built-in robot hands (glove10, allegro, barrett, inspire, gripper), or one hand.
+    Hands(replay::HandsArgs),
+    /// Retargets a skill onto a robot hand and simulates it in the DFS: the report says
+    /// whether the object was held.
+    Replay(replay::ReplayArgs),
     /// Benchmarks whose figures BENCHMARKS.md quotes.
     #[command(subcommand)]
     Bench(bench::BenchCommand),
@@ -71,6 +77,8 @@ pub fn run() -> ExitCode {
         Command::Demo(a) => skills::run_demo(a),
         Command::Ingest(a) => skills::run_ingest(a),
         Command::Skills(a) => skills::run_skills(*a),
+        Command::Hands(a) => replay::run_hands(a),
+        Command::Replay(a) => replay::run_replay(a),
         Command::Bench(b) => bench::run(b),
     };
     match result {

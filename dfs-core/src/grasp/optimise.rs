@@ -23,6 +23,10 @@
 //! horizontal pair) is reported as infeasible without calling the solver, and the solver never
 //! sees redundant equality rows.
 //!
+//! [`optimise_with_torque_limits`] adds the hand's joint torque limits: with `T` the map from
+//! the contact intensities to the joint torques `τ = Σ_i J_iᵀ f_i` (f_i the force contact i
+//! applies to the object), `|T c| ≤ τ_max` row by row (two linear inequalities per joint).
+//!
 //! Every solution is checked after the solve: residual `‖W c − load‖ ≤ 10⁻⁶ (1 + ‖load‖)` and
 //! every cone constraint within `10⁻⁶ (1 + max |c|)`. The result is deterministic: same input,
 //! same output (Clarabel runs single-threaded).
@@ -183,7 +187,45 @@ pub fn optimise(
     load_b: &Wrench,
     params: &OptimiseParams,
 ) -> Result<Distribution, Infeasible> {
+    optimise_with_torque_limits(contacts, model, friction, load_b, params, None)
+}
+
+/// Joint torque limits for [`optimise_with_torque_limits`]: `|Σ_k map[(d, 4 i + k)] c_i[k]| ≤
+/// limits[d]` for every joint `d`, with `c_i` the intensities of contact `i` in the layout of
+/// [`Intensity`] (components the contact model does not use are ignored).
+#[derive(Debug, Clone, PartialEq)]
+pub struct TorqueLimits {
+    /// Joint torques per unit intensity: one row per joint, four columns per contact (N·m/N).
+    pub map: DMatrix<Real>,
+    /// Torque limit per joint (N·m), > 0.
+    pub limits: Vec<Real>,
+}
+
+/// [`optimise`] with the hand's joint torque limits as further constraints (`None`: none).
+/// A load the cones could carry but the torques cannot is [`InfeasibleKind::NoDistribution`]
+/// too; solve once without limits to tell the two apart.
+pub fn optimise_with_torque_limits(
+    contacts: &[ContactFrame],
+    model: ContactModel,
+    friction: &Friction,
+    load_b: &Wrench,
+    params: &OptimiseParams,
+    torque: Option<&TorqueLimits>,
+) -> Result<Distribution, Infeasible> {
     validate(contacts, friction, load_b, params)?;
+    if let Some(t) = torque {
+        let ok = t.map.ncols() == 4 * contacts.len()
+            && t.map.nrows() == t.limits.len()
+            && t.map.iter().all(|v| v.is_finite())
+            && t.limits.iter().all(|l| l.is_finite() && *l > 0.0);
+        if !ok {
+            return Err(Infeasible::new(
+                InfeasibleKind::InvalidInput,
+                "torque limits: the map needs 4 columns per contact and one finite limit > 0 \
+                 per row",
+            ));
+        }
+    }
     let comps = components(model);
     let k = comps.len();
     let n_contacts = contacts.len();
@@ -248,7 +290,8 @@ pub fn optimise(
     let q = vec![0.0; n];
 
     // Constraints A x + s = b, s in the cones, block by block.
-    let n_nonneg = n_contacts * if has_torsion { 3 } else { 1 };
+    let n_torque = torque.map_or(0, |t| 2 * t.limits.len());
+    let n_nonneg = n_contacts * if has_torsion { 3 } else { 1 } + n_torque;
     let n_soc = if has_tangent { 3 * n_contacts } else { 0 };
     let m = m_eq + n_nonneg + n_soc;
     let mut a = DMatrix::<Real>::zeros(m, n);
@@ -272,6 +315,20 @@ pub fn optimise(
             a[(row, z)] = -mu_t;
             a[(row, t)] = -1.0;
             row += 1;
+        }
+    }
+    if let Some(t) = torque {
+        // τ_max − T c ≥ 0 and τ_max + T c ≥ 0, on the model's components.
+        for d in 0..t.limits.len() {
+            for sign in [1.0, -1.0] {
+                for i in 0..n_contacts {
+                    for (j, &comp) in comps.iter().enumerate() {
+                        a[(row, k * i + j)] = sign * t.map[(d, 4 * i + comp)];
+                    }
+                }
+                b[row] = t.limits[d];
+                row += 1;
+            }
         }
     }
     let mut cones = vec![

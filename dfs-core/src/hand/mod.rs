@@ -7,9 +7,15 @@
 //! [`Kinematics`] of fixed capacity: no heap allocation after construction.
 //!
 //! [`ik`] places chosen fingertips at world targets (damped least squares, joint limits).
+//! [`urdf`] builds hands from a URDF plus a [`HandSpec`]; [`builtin`] holds the built-in hands
+//! (`glove10`, `allegro`, `barrett`, `inspire`, `gripper`).
 
+pub mod builtin;
 mod glove10;
 pub mod ik;
 mod model;
+pub mod urdf;
 
+pub use builtin::{builtin_hand, builtin_spec, thumb_of, BUILTIN_HANDS};
 pub use model::*;
+pub use urdf::{FingertipSpec, HandSpec, DEFAULT_ARMATURE};

@@ -690,10 +690,37 @@ impl HandModel {
         set
     }
 
+    /// The path from `link` up to the root (the link first), at most [`MAX_LINKS`] long.
+    fn ancestors(&self, link: usize) -> Vec<usize> {
+        let mut path = vec![link];
+        let mut current = link;
+        for _ in 0..MAX_LINKS {
+            let Some(joint) = self.joints.iter().find(|j| j.child == current) else {
+                break;
+            };
+            current = joint.parent;
+            path.push(current);
+        }
+        path
+    }
+
+    /// The deepest link that is an ancestor (or equal) of every link in `links`; `None` for
+    /// no links. Needs a valid tree.
+    pub fn common_ancestor(&self, links: impl IntoIterator<Item = usize>) -> Option<usize> {
+        let mut links = links.into_iter();
+        let mut path = self.ancestors(links.next()?);
+        for l in links {
+            let other = self.ancestors(l);
+            path.retain(|a| other.contains(a));
+        }
+        path.first().copied()
+    }
+
     /// Computes the finger groups from the tree (tips sharing non-common DOFs).
     ///
     /// The DOFs of tip k are those of the joints on the path from the root to its link.
-    /// With two or more tips, the DOFs shared by every tip (the wrist) are dropped; tips whose
+    /// With two or more tips, the DOFs that move every tip rigidly together (the wrist: those
+    /// above the tips' lowest common ancestor link) are dropped; tips whose
     /// remaining DOF sets intersect are united (transitively). A tip without DOFs forms its
     /// own group with no DOFs. Groups are ordered by their first tip; tips and DOFs ascend.
     pub fn compute_finger_groups(&mut self) {
@@ -703,7 +730,14 @@ impl HandModel {
             sets[k] = self.dofs_moving_link(tip.link);
         }
         if nt >= 2 {
-            let common = sets[..nt].iter().fold(DofSet::MAX, |acc, s| acc & s);
+            // The DOFs that move every tip rigidly together (a wrist): those moving the lowest
+            // common ancestor of the tips' links. A DOF below it that reaches every tip through
+            // different joints (the mimic-coupled jaws of a parallel gripper) stays: it moves
+            // the tips relative to each other, so it pushes on the object.
+            let common = self
+                .common_ancestor(self.fingertips.iter().take(nt).map(|t| t.link))
+                .map(|lca| self.dofs_moving_link(lca))
+                .unwrap_or(0);
             sets[..nt].iter_mut().for_each(|s| *s &= !common);
         }
         // Union-find over at most MAX_TIPS tips: label each tip with the smallest tip index
@@ -1339,7 +1373,7 @@ pub(crate) mod tests {
         (plus.rotation * minus.rotation.inverse()).scaled_axis() / (2.0 * h)
     }
 
-    fn assert_jacobians_match_finite_differences(hand: &HandModel, q: &[f64]) {
+    pub(crate) fn assert_jacobians_match_finite_differences(hand: &HandModel, q: &[f64]) {
         let mut kin = fk(hand, q);
         hand.tip_jacobians(&mut kin);
         let h = 1e-6;
@@ -1383,7 +1417,7 @@ pub(crate) mod tests {
         energy
     }
 
-    fn assert_mass_matrix_is_consistent(hand: &HandModel, q: &[f64], qdot: &[f64]) {
+    pub(crate) fn assert_mass_matrix_is_consistent(hand: &HandModel, q: &[f64], qdot: &[f64]) {
         let n = hand.dof();
         let mut kin = fk(hand, q);
         let mut m = DofMatrix::identity();

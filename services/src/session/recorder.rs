@@ -46,6 +46,8 @@ const ALL_TOPICS: [&str; 7] = [
 struct Batch {
     data: Vec<u8>,
     items: Vec<(u8, u64, usize, usize)>,
+    /// Metadata records to write after the batch's messages.
+    metadata: Vec<(String, BTreeMap<String, String>)>,
 }
 
 /// Descriptive parameters of a session, written to the `session` metadata record.
@@ -284,6 +286,7 @@ impl SessionRecorder {
             batch: Batch {
                 data: Vec::with_capacity(64 * 1024),
                 items: Vec::with_capacity(BATCH_TICKS as usize * ALL_TOPICS.len()),
+                metadata: Vec::new(),
             },
             batch_ticks: 0,
             path,
@@ -341,13 +344,21 @@ impl SessionRecorder {
         Ok(())
     }
 
+    /// Adds a metadata record (written after the ticks recorded so far), for records only
+    /// known at the end such as a replay's report.
+    pub fn add_metadata(&mut self, name: &str, metadata: BTreeMap<String, String>) -> Result<()> {
+        self.batch.metadata.push((name.to_owned(), metadata));
+        self.send_batch()
+    }
+
     fn send_batch(&mut self) -> Result<()> {
-        if self.batch.items.is_empty() {
+        if self.batch.items.is_empty() && self.batch.metadata.is_empty() {
             return Ok(());
         }
         let next = self.recycled.try_recv().unwrap_or_else(|_| Batch {
             data: Vec::with_capacity(self.batch.data.capacity()),
             items: Vec::with_capacity(self.batch.items.capacity()),
+            metadata: Vec::new(),
         });
         let full = std::mem::replace(&mut self.batch, next);
         self.batch_ticks = 0;
@@ -457,6 +468,9 @@ fn writer_thread(
     for mut batch in rx {
         for &(topic, t, start, end) in &batch.items {
             writer.write_raw_json(ALL_TOPICS[topic as usize], t, &batch.data[start..end])?;
+        }
+        for (name, metadata) in batch.metadata.drain(..) {
+            writer.add_metadata(&name, metadata)?;
         }
         batch.data.clear();
         batch.items.clear();

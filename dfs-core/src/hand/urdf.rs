@@ -1,0 +1,874 @@
+//! Robot hands from URDF plus a hand spec: [`HandSpec`] and [`HandModel::from_urdf`].
+//!
+//! A URDF gives the kinematic tree and the inertials; the hand spec adds what a URDF does not
+//! say: which links carry the fingertips (a contact sphere at an offset, with a radius), the
+//! joint torque limits (URDF `effort` values are often placeholders: 10 N·m on the Allegro, 0 on
+//! the Barrett), which fingertip is the thumb, and optionally the base link and the armature.
+//!
+//! # What is read, and the defaults
+//!
+//! * Joints `revolute` (limited), `continuous` (unlimited), `prismatic` (limited) and `fixed`;
+//!   `mimic` joints become [`JointDrive::Mimic`] of their source joint (chains of mimics are
+//!   composed). `floating`, `planar` and `spherical` joints are refused: a hand is a tree of
+//!   one-DOF joints. A revolute or prismatic joint whose lower and upper limits are equal is
+//!   refused (URDF requires `<limit>` for them; a missing one reads as 0, 0).
+//! * A DOF's limits are its joint's limits intersected with those of every joint that mimics
+//!   it, mapped back through the multiplier and offset, so no mimic joint leaves its range.
+//! * Inertials: mass, centre of mass and inertia (rotated by the inertial origin's rpy into the
+//!   link frame). A link without `<inertial>` is massless (URDF semantics, as in Pinocchio and
+//!   MuJoCo's compiler with `inertiafromgeom="false"`); the armature that every DOF gets
+//!   ([`HandSpec::armature`], default [`DEFAULT_ARMATURE`]) keeps the joint-space inertia
+//!   positive definite. Negative masses and inertias that are not positive semi-definite are
+//!   refused, naming the link.
+//! * Geometry (visual and collision meshes) is not needed and ignored.
+//! * The tree: exactly one root (or the spec's `base_link`, whose subtree becomes the hand),
+//!   no link with two parents, no loops; every error names the link or joint.
+
+use std::collections::BTreeMap;
+
+use super::{Fingertip, HandModel, Inertial, Joint, JointDrive, JointKind, Link, MAX_DOF};
+use super::{MAX_LINKS, MAX_TIPS};
+use crate::error::{DfsError, Result};
+use crate::math::{Isometry, Mat3, Rotation, UnitVector, Vector};
+
+/// Armature (reflected rotor inertia, kg·m² or kg) added to every DOF when the spec gives none.
+/// Small beside a geared robot finger's reflected inertia (around 10⁻³ kg·m² for the Allegro's
+/// 1:369 gears), large enough to keep massless links and 1 kHz explicit control well posed.
+pub const DEFAULT_ARMATURE: f64 = 1e-4;
+
+/// One fingertip of a hand spec.
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct FingertipSpec {
+    /// Name of the fingertip (for example `thumb`); default the link's name.
+    #[serde(default)]
+    pub name: Option<String>,
+    /// URDF link the contact sphere is fixed to.
+    pub link: String,
+    /// Centre of the contact sphere in the link frame (m).
+    pub offset: [f64; 3],
+    /// Radius of the contact sphere (m), > 0.
+    pub radius: f64,
+}
+
+/// A hand spec: what the URDF does not say. JSON:
+///
+/// ```json
+/// { "name": "allegro", "urdf": "allegro_hand_right.urdf",
+///   "fingertips": [ { "name": "thumb", "link": "link_15.0_tip", "offset": [0, 0, -0.01],
+///                     "radius": 0.012 }, ... ],
+///   "thumb": "thumb", "torque_limit": 0.7, "joint_torque_limits": { "joint_12.0": 0.7 },
+///   "base_link": "base_link", "armature": 0.0001 }
+/// ```
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct HandSpec {
+    /// Name of the hand model.
+    pub name: String,
+    /// The URDF file (a path relative to the spec file; for built-in hands the embedded file's
+    /// name). dfs-core never opens it: callers read it and pass the text.
+    pub urdf: String,
+    /// The fingertips, 1..=[`MAX_TIPS`].
+    pub fingertips: Vec<FingertipSpec>,
+    /// Torque (prismatic: force) limit of every DOF without its own entry (N·m or N), > 0.
+    pub torque_limit: f64,
+    /// Per-joint torque limits (N·m or N) by the name of the joint that is the DOF.
+    #[serde(default)]
+    pub joint_torque_limits: BTreeMap<String, f64>,
+    /// The hand's base link; default the URDF's root. Links outside its subtree are dropped.
+    #[serde(default)]
+    pub base_link: Option<String>,
+    /// Name of the fingertip that opposes the others (the thumb); default the fingertip named
+    /// `thumb`, else the first fingertip.
+    #[serde(default)]
+    pub thumb: Option<String>,
+    /// Armature added to every DOF (kg·m² or kg), ≥ 0; default [`DEFAULT_ARMATURE`].
+    #[serde(default)]
+    pub armature: Option<f64>,
+}
+
+impl HandSpec {
+    /// Index of the thumb among the fingertips (see [`HandSpec::thumb`]).
+    pub fn thumb_index(&self) -> usize {
+        let name_of = |t: &FingertipSpec| t.name.clone().unwrap_or_else(|| t.link.clone());
+        let wanted = self.thumb.clone().unwrap_or_else(|| "thumb".to_owned());
+        self.fingertips
+            .iter()
+            .position(|t| name_of(t) == wanted)
+            .unwrap_or(0)
+    }
+
+    /// Checks the spec's own fields (not those that need the URDF); the error names the field.
+    pub fn validate(&self) -> Result<()> {
+        if self.name.trim().is_empty() {
+            return Err(DfsError::invalid("name", "must not be empty"));
+        }
+        if self.fingertips.is_empty() || self.fingertips.len() > MAX_TIPS {
+            let reason = format!(
+                "{} fingertips, expected 1..={MAX_TIPS}",
+                self.fingertips.len()
+            );
+            return Err(DfsError::invalid("fingertips", reason));
+        }
+        for (i, t) in self.fingertips.iter().enumerate() {
+            if !t.offset.iter().all(|v| v.is_finite()) {
+                return Err(DfsError::invalid(
+                    format!("fingertips[{i}].offset"),
+                    "must be finite",
+                ));
+            }
+            if !(t.radius.is_finite() && t.radius > 0.0) {
+                let reason = format!("radius {} must be a finite number > 0", t.radius);
+                return Err(DfsError::invalid(format!("fingertips[{i}].radius"), reason));
+            }
+        }
+        if !(self.torque_limit.is_finite() && self.torque_limit > 0.0) {
+            let reason = format!("{} must be a finite number > 0", self.torque_limit);
+            return Err(DfsError::invalid("torque_limit", reason));
+        }
+        for (joint, &t) in &self.joint_torque_limits {
+            if !(t.is_finite() && t > 0.0) {
+                let reason = format!("{t} must be a finite number > 0");
+                return Err(DfsError::invalid(
+                    format!("joint_torque_limits.{joint}"),
+                    reason,
+                ));
+            }
+        }
+        if let Some(a) = self.armature {
+            if !(a.is_finite() && a >= 0.0) {
+                let reason = format!("{a} must be a finite number ≥ 0");
+                return Err(DfsError::invalid("armature", reason));
+            }
+        }
+        if let Some(thumb) = &self.thumb {
+            let found = self
+                .fingertips
+                .iter()
+                .any(|t| t.name.as_ref().unwrap_or(&t.link) == thumb);
+            if !found {
+                return Err(DfsError::invalid(
+                    "thumb",
+                    format!("no fingertip named {thumb:?}"),
+                ));
+            }
+        }
+        Ok(())
+    }
+}
+
+/// An isometry from a URDF origin (xyz, fixed-axis roll-pitch-yaw).
+fn pose(p: &urdf_rs::Pose) -> Isometry {
+    let [x, y, z] = p.xyz.0;
+    let [r, pi, ya] = p.rpy.0;
+    Isometry::from_parts(
+        Vector::new(x, y, z).into(),
+        Rotation::from_euler_angles(r, pi, ya),
+    )
+}
+
+/// The link's mass properties in the link frame; the field name of an error names the link.
+fn inertial(link: &urdf_rs::Link) -> Result<Inertial> {
+    let field = || format!("urdf link {:?} inertial", link.name);
+    let m = link.inertial.mass.value;
+    if !(m.is_finite() && m >= 0.0) {
+        return Err(DfsError::invalid(
+            field(),
+            format!("mass {m} must be finite and ≥ 0"),
+        ));
+    }
+    let i = &link.inertial.inertia;
+    let local = Mat3::new(
+        i.ixx, i.ixy, i.ixz, i.ixy, i.iyy, i.iyz, i.ixz, i.iyz, i.izz,
+    );
+    if !local.iter().all(|v| v.is_finite()) {
+        return Err(DfsError::invalid(field(), "inertia is not finite"));
+    }
+    let eig = local.symmetric_eigenvalues();
+    let scale = eig.iter().fold(0.0_f64, |a, b| a.max(b.abs()));
+    if eig.iter().any(|&e| e < -1e-9 * scale.max(1e-12)) {
+        return Err(DfsError::invalid(
+            field(),
+            format!(
+                "inertia is not positive semi-definite (eigenvalues {:.3e}, {:.3e}, {:.3e})",
+                eig[0], eig[1], eig[2]
+            ),
+        ));
+    }
+    let origin = pose(&link.inertial.origin);
+    let r = origin.rotation.to_rotation_matrix();
+    Ok(Inertial {
+        mass: m,
+        com: origin.translation.vector,
+        inertia: r.matrix() * local * r.matrix().transpose(),
+    })
+}
+
+/// The source DOF joint of a (possibly chained) mimic: (source joint name, multiplier, offset).
+fn resolve_mimic(
+    by_name: &BTreeMap<&str, &urdf_rs::Joint>,
+    joint: &urdf_rs::Joint,
+) -> Result<(String, f64, f64)> {
+    let (mut mult, mut off) = (1.0, 0.0);
+    let mut current = joint;
+    for _ in 0..=by_name.len() {
+        let Some(m) = &current.mimic else {
+            return Ok((current.name.clone(), mult, off));
+        };
+        let Some(source) = by_name.get(m.joint.as_str()) else {
+            return Err(DfsError::invalid(
+                format!("urdf joint {:?} mimic", joint.name),
+                format!("mimics joint {:?}, which does not exist", m.joint),
+            ));
+        };
+        // value = a (b θ + c) + d
+        let (a, d) = (m.multiplier.unwrap_or(1.0), m.offset.unwrap_or(0.0));
+        if !(a.is_finite() && d.is_finite()) {
+            return Err(DfsError::invalid(
+                format!("urdf joint {:?} mimic", joint.name),
+                "multiplier and offset must be finite",
+            ));
+        }
+        off = a * off + d;
+        mult *= a;
+        if matches!(source.joint_type, urdf_rs::JointType::Fixed) {
+            return Err(DfsError::invalid(
+                format!("urdf joint {:?} mimic", joint.name),
+                format!("mimics the fixed joint {:?}", source.name),
+            ));
+        }
+        current = source;
+    }
+    Err(DfsError::invalid(
+        format!("urdf joint {:?} mimic", joint.name),
+        "mimic joints form a cycle",
+    ))
+}
+
+impl HandModel {
+    /// Builds a hand from URDF text and a hand spec. Pure: the caller reads the files.
+    ///
+    /// Errors ([`DfsError::Invalid`]) name the problem: a URDF that does not parse, a
+    /// kinematic loop, several roots, an unknown link or joint, an unsupported joint type,
+    /// a negative mass or radius, more than [`MAX_DOF`] DOFs or [`MAX_LINKS`] links.
+    pub fn from_urdf(urdf: &str, spec: &HandSpec) -> Result<HandModel> {
+        spec.validate()?;
+        let robot = urdf_rs::read_from_string(urdf)
+            .map_err(|e| DfsError::invalid("urdf", format!("does not parse: {e}")))?;
+        let links = &robot.links;
+        let mut link_index: BTreeMap<&str, usize> = BTreeMap::new();
+        for (i, l) in links.iter().enumerate() {
+            if link_index.insert(l.name.as_str(), i).is_some() {
+                return Err(DfsError::invalid(
+                    format!("urdf link {:?}", l.name),
+                    "duplicate link name",
+                ));
+            }
+        }
+        let mut by_name: BTreeMap<&str, &urdf_rs::Joint> = BTreeMap::new();
+        // Per link: the joint whose child it is.
+        let mut parent_of: Vec<Option<usize>> = vec![None; links.len()];
+        for (j, joint) in robot.joints.iter().enumerate() {
+            if by_name.insert(joint.name.as_str(), joint).is_some() {
+                return Err(DfsError::invalid(
+                    format!("urdf joint {:?}", joint.name),
+                    "duplicate joint name",
+                ));
+            }
+            let field = || format!("urdf joint {:?}", joint.name);
+            match joint.joint_type {
+                urdf_rs::JointType::Revolute
+                | urdf_rs::JointType::Continuous
+                | urdf_rs::JointType::Prismatic
+                | urdf_rs::JointType::Fixed => {}
+                ref other => {
+                    return Err(DfsError::invalid(
+                        field(),
+                        format!(
+                            "type {other:?} is not supported (a hand is a tree of revolute, \
+                             continuous, prismatic and fixed joints)"
+                        ),
+                    ))
+                }
+            }
+            let lookup = |name: &str, role: &str| {
+                link_index.get(name).copied().ok_or_else(|| {
+                    DfsError::invalid(field(), format!("{role} link {name:?} does not exist"))
+                })
+            };
+            lookup(&joint.parent.link, "parent")?;
+            let child = lookup(&joint.child.link, "child")?;
+            if let Some(other) = parent_of[child] {
+                return Err(DfsError::invalid(
+                    format!("urdf link {:?}", joint.child.link),
+                    format!(
+                        "is the child of two joints ({:?} and {:?}): a kinematic loop",
+                        robot.joints[other].name, joint.name
+                    ),
+                ));
+            }
+            parent_of[child] = Some(j);
+        }
+        let roots: Vec<&str> = (0..links.len())
+            .filter(|&l| parent_of[l].is_none())
+            .map(|l| links[l].name.as_str())
+            .collect();
+        if roots.is_empty() {
+            return Err(DfsError::invalid(
+                "urdf",
+                "every link has a parent joint: the joints form a kinematic loop",
+            ));
+        }
+        if roots.len() > 1 {
+            return Err(DfsError::invalid(
+                "urdf",
+                format!(
+                    "several root links ({}): a hand is one tree",
+                    roots.join(", ")
+                ),
+            ));
+        }
+        // Links reached from the root; a link with a parent that is not reached is on a loop.
+        let mut children: Vec<Vec<usize>> = vec![Vec::new(); links.len()];
+        for (j, joint) in robot.joints.iter().enumerate() {
+            children[link_index[joint.parent.link.as_str()]].push(j);
+        }
+        let root = link_index[roots[0]];
+        let base = match &spec.base_link {
+            Some(name) => *link_index.get(name.as_str()).ok_or_else(|| {
+                DfsError::invalid("base_link", format!("no link named {name:?} in the URDF"))
+            })?,
+            None => root,
+        };
+        let mut reached = vec![false; links.len()];
+        let mut stack = vec![root];
+        while let Some(l) = stack.pop() {
+            reached[l] = true;
+            stack.extend(
+                children[l]
+                    .iter()
+                    .map(|&j| link_index[robot.joints[j].child.link.as_str()]),
+            );
+        }
+        if let Some(l) = (0..links.len()).find(|&l| !reached[l]) {
+            return Err(DfsError::invalid(
+                format!("urdf link {:?}", links[l].name),
+                "is not connected to the root: its joints form a kinematic loop",
+            ));
+        }
+        // Breadth-first order of the base's subtree: links and joints.
+        let mut order_links = vec![base];
+        let mut order_joints: Vec<usize> = Vec::new();
+        let mut head = 0;
+        while head < order_links.len() {
+            let l = order_links[head];
+            head += 1;
+            for &j in &children[l] {
+                order_joints.push(j);
+                order_links.push(link_index[robot.joints[j].child.link.as_str()]);
+            }
+        }
+        if order_links.len() > MAX_LINKS {
+            let reason = format!("{} links > {MAX_LINKS}", order_links.len());
+            return Err(DfsError::invalid("urdf", reason));
+        }
+        let new_index: BTreeMap<usize, usize> = order_links
+            .iter()
+            .enumerate()
+            .map(|(new, &old)| (old, new))
+            .collect();
+        let mut hand_links = Vec::with_capacity(order_links.len());
+        for &l in &order_links {
+            hand_links.push(Link {
+                name: links[l].name.clone(),
+                inertial: inertial(&links[l])?,
+            });
+        }
+        // DOFs: the moving joints that mimic nothing, in tree order.
+        let mut dof_of: BTreeMap<String, usize> = BTreeMap::new();
+        let mut dof_names = Vec::new();
+        let mut dof_lower = Vec::new();
+        let mut dof_upper = Vec::new();
+        let limits = |joint: &urdf_rs::Joint| -> Result<(f64, f64)> {
+            match joint.joint_type {
+                urdf_rs::JointType::Continuous => Ok((f64::NEG_INFINITY, f64::INFINITY)),
+                urdf_rs::JointType::Fixed => Ok((0.0, 0.0)),
+                _ => {
+                    let (lo, hi) = (joint.limit.lower, joint.limit.upper);
+                    if !(lo.is_finite() && hi.is_finite()) || lo >= hi {
+                        return Err(DfsError::invalid(
+                            format!("urdf joint {:?} limit", joint.name),
+                            format!(
+                                "lower {lo} must be below upper {hi} (a revolute or prismatic \
+                                 joint needs <limit lower upper>)"
+                            ),
+                        ));
+                    }
+                    Ok((lo, hi))
+                }
+            }
+        };
+        for &j in &order_joints {
+            let joint = &robot.joints[j];
+            if joint.mimic.is_none() && !matches!(joint.joint_type, urdf_rs::JointType::Fixed) {
+                let (lo, hi) = limits(joint)?;
+                dof_of.insert(joint.name.clone(), dof_names.len());
+                dof_names.push(joint.name.clone());
+                dof_lower.push(lo);
+                dof_upper.push(hi);
+            }
+        }
+        if dof_names.len() > MAX_DOF {
+            let reason = format!("{} DOFs > {MAX_DOF}", dof_names.len());
+            return Err(DfsError::invalid("urdf", reason));
+        }
+        let mut hand_joints = Vec::with_capacity(order_joints.len());
+        for &j in &order_joints {
+            let joint = &robot.joints[j];
+            let field = || format!("urdf joint {:?}", joint.name);
+            let kind = match joint.joint_type {
+                urdf_rs::JointType::Revolute => JointKind::Revolute,
+                urdf_rs::JointType::Continuous => JointKind::Continuous,
+                urdf_rs::JointType::Prismatic => JointKind::Prismatic,
+                _ => JointKind::Fixed,
+            };
+            let (lower, upper) = limits(joint)?;
+            let drive = if kind == JointKind::Fixed {
+                JointDrive::Fixed
+            } else if joint.mimic.is_some() {
+                let (source, multiplier, offset) = resolve_mimic(&by_name, joint)?;
+                let Some(&dof) = dof_of.get(&source) else {
+                    return Err(DfsError::invalid(
+                        field(),
+                        format!("mimics joint {source:?}, which is not in the hand's subtree"),
+                    ));
+                };
+                if multiplier == 0.0 {
+                    return Err(DfsError::invalid(field(), "mimic multiplier is 0"));
+                }
+                // Keep the mimic joint inside its own limits: narrow the source DOF's range.
+                if lower.is_finite() || upper.is_finite() {
+                    let a = (lower - offset) / multiplier;
+                    let b = (upper - offset) / multiplier;
+                    dof_lower[dof] = dof_lower[dof].max(a.min(b));
+                    dof_upper[dof] = dof_upper[dof].min(a.max(b));
+                    if dof_lower[dof] > dof_upper[dof] {
+                        return Err(DfsError::invalid(
+                            field(),
+                            format!("its limits and those of {source:?} leave no common range"),
+                        ));
+                    }
+                }
+                JointDrive::Mimic {
+                    dof,
+                    multiplier,
+                    offset,
+                }
+            } else {
+                JointDrive::Dof(dof_of[&joint.name])
+            };
+            let axis = Vector::from(joint.axis.xyz.0);
+            if kind != JointKind::Fixed
+                && !(axis.iter().all(|v| v.is_finite()) && axis.norm() > 1e-9)
+            {
+                return Err(DfsError::invalid(field(), "axis must be a non-zero vector"));
+            }
+            let axis = if axis.norm() > 1e-9 {
+                UnitVector::new_normalize(axis)
+            } else {
+                Vector::x_axis()
+            };
+            let origin = pose(&joint.origin);
+            if !origin.translation.vector.iter().all(|v| v.is_finite()) {
+                return Err(DfsError::invalid(field(), "origin is not finite"));
+            }
+            hand_joints.push(Joint {
+                name: joint.name.clone(),
+                kind,
+                parent: new_index[&link_index[joint.parent.link.as_str()]],
+                child: new_index[&link_index[joint.child.link.as_str()]],
+                origin,
+                axis,
+                lower: if kind == JointKind::Fixed { 0.0 } else { lower },
+                upper: if kind == JointKind::Fixed { 0.0 } else { upper },
+                drive,
+            });
+        }
+        for name in spec.joint_torque_limits.keys() {
+            if !dof_of.contains_key(name) {
+                return Err(DfsError::invalid(
+                    format!("joint_torque_limits.{name}"),
+                    "no such independent (non-mimic, moving) joint in the hand",
+                ));
+            }
+        }
+        let torque_limit = dof_names
+            .iter()
+            .map(|n| {
+                spec.joint_torque_limits
+                    .get(n)
+                    .copied()
+                    .unwrap_or(spec.torque_limit)
+            })
+            .collect();
+        let armature = vec![spec.armature.unwrap_or(DEFAULT_ARMATURE); dof_names.len()];
+        let mut fingertips = Vec::with_capacity(spec.fingertips.len());
+        for (i, t) in spec.fingertips.iter().enumerate() {
+            let link = link_index
+                .get(t.link.as_str())
+                .and_then(|old| new_index.get(old))
+                .copied()
+                .ok_or_else(|| {
+                    DfsError::invalid(
+                        format!("fingertips[{i}].link"),
+                        format!("no link named {:?} in the hand", t.link),
+                    )
+                })?;
+            fingertips.push(Fingertip {
+                name: t.name.clone().unwrap_or_else(|| t.link.clone()),
+                link,
+                offset: Vector::from(t.offset),
+                radius: t.radius,
+            });
+        }
+        let mut hand = HandModel {
+            name: spec.name.clone(),
+            links: hand_links,
+            joints: hand_joints,
+            root: 0,
+            dof_names,
+            dof_lower,
+            dof_upper,
+            torque_limit,
+            armature,
+            fingertips,
+            finger_groups: Vec::new(),
+        };
+        hand.compute_finger_groups();
+        hand.validate()?;
+        Ok(hand)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::hand::builtin::{builtin_hand, builtin_spec, GRIPPER_URDF};
+    use crate::hand::model::tests::{
+        angles_from_unit, assert_jacobians_match_finite_differences,
+        assert_mass_matrix_is_consistent,
+    };
+    use crate::hand::{FingerGroup, Kinematics, BUILTIN_HANDS};
+
+    fn error_of(result: Result<HandModel>) -> (String, String) {
+        match result {
+            Err(DfsError::Invalid { field, reason }) => (field, reason),
+            Err(other) => panic!("expected an invalid-model error, got {other:?}"),
+            Ok(h) => panic!("expected an error, got a hand with {} DOFs", h.dof()),
+        }
+    }
+
+    fn gripper_spec() -> HandSpec {
+        builtin_spec("gripper").unwrap().0
+    }
+
+    #[test]
+    fn every_builtin_hand_loads_with_its_fingers_and_dofs() {
+        let expected = [
+            ("glove10", 5, 10),
+            ("allegro", 4, 16),
+            ("barrett", 3, 8),
+            ("inspire", 5, 6),
+            ("gripper", 2, 2),
+        ];
+        assert_eq!(BUILTIN_HANDS.len(), expected.len());
+        for (name, tips, dofs) in expected {
+            let hand = builtin_hand(name).unwrap();
+            assert_eq!(hand.name, name);
+            assert_eq!(hand.fingertips.len(), tips, "{name} fingertips");
+            assert_eq!(hand.dof(), dofs, "{name} DOFs");
+            hand.validate().unwrap();
+        }
+    }
+
+    #[test]
+    fn inspire_mimic_joints_follow_their_source_within_their_own_limits() {
+        let hand = builtin_hand("inspire").unwrap();
+        let mimics: Vec<&Joint> = hand
+            .joints
+            .iter()
+            .filter(|j| matches!(j.drive, JointDrive::Mimic { .. }))
+            .collect();
+        // Four finger intermediates and two thumb joints.
+        assert_eq!(mimics.len(), 6);
+        let j = hand
+            .joints
+            .iter()
+            .find(|j| j.name == "index_intermediate_joint")
+            .unwrap();
+        let JointDrive::Mimic {
+            dof,
+            multiplier,
+            offset,
+        } = j.drive
+        else {
+            panic!("not a mimic");
+        };
+        assert_eq!(hand.dof_names[dof], "index_proximal_joint");
+        assert_eq!((multiplier, offset), (1.06399, -0.04545));
+        // The thumb's pitch DOF is narrowed so its intermediate joint (×1.334, ≤ 0.8) stays in.
+        let pitch = hand
+            .dof_names
+            .iter()
+            .position(|n| n == "thumb_proximal_pitch_joint")
+            .unwrap();
+        assert!((hand.dof_upper[pitch] - 0.8 / 1.334).abs() < 1e-12);
+        for m in mimics {
+            let (d, gain) = m.drive.dof_and_gain().unwrap();
+            for q in [hand.dof_lower[d], hand.dof_upper[d]] {
+                let mut theta = vec![0.0; hand.dof()];
+                theta[d] = q;
+                let v = m.drive.value(&theta);
+                assert!(
+                    v >= m.lower - 1e-9 && v <= m.upper + 1e-9,
+                    "{} = {v}",
+                    m.name
+                );
+                assert!(gain != 0.0);
+            }
+        }
+    }
+
+    #[test]
+    fn the_gripper_jaws_share_one_dof_and_form_one_finger_group() {
+        let hand = builtin_hand("gripper").unwrap();
+        let jaw = hand
+            .dof_names
+            .iter()
+            .position(|n| n == "right_finger_joint")
+            .unwrap();
+        assert_eq!(
+            hand.finger_groups,
+            vec![FingerGroup {
+                tips: vec![0, 1],
+                dofs: vec![jaw]
+            }]
+        );
+        // Opening the jaw DOF moves the two pads apart symmetrically.
+        let mut kin = Kinematics::default();
+        let mut q = vec![0.0; 2];
+        q[jaw] = 0.03;
+        hand.forward_kinematics(&Isometry::identity(), &q, &mut kin);
+        let gap = (kin.tip_centres[0] - kin.tip_centres[1]).norm();
+        assert!((gap - (0.06 + 0.02)).abs() < 1e-12, "{gap}");
+    }
+
+    #[test]
+    fn allegro_jacobians_and_inertia_match_finite_differences() {
+        let hand = builtin_hand("allegro").unwrap();
+        let mut u = 0.137;
+        for _ in 0..5 {
+            let samples: Vec<f64> = (0..hand.dof())
+                .map(|_| {
+                    u = (u * 7.31 + 0.123) % 1.0;
+                    u
+                })
+                .collect();
+            let q = angles_from_unit(&hand, &samples);
+            assert_jacobians_match_finite_differences(&hand, &q);
+            let qdot: Vec<f64> = samples.iter().map(|s| 2.0 * s - 1.0).collect();
+            assert_mass_matrix_is_consistent(&hand, &q, &qdot);
+        }
+        let inspire = builtin_hand("inspire").unwrap();
+        let q = angles_from_unit(&inspire, &[0.3, 0.5, 0.7, 0.2, 0.9, 0.4]);
+        assert_jacobians_match_finite_differences(&inspire, &q);
+    }
+
+    /// The gripper URDF with `from` replaced by `to` (which must occur).
+    fn edited(from: &str, to: &str) -> String {
+        assert!(GRIPPER_URDF.contains(from), "{from}");
+        GRIPPER_URDF.replacen(from, to, 1)
+    }
+
+    #[test]
+    fn bad_urdfs_and_specs_are_refused_naming_the_problem() {
+        let spec = gripper_spec();
+        let cases: Vec<(String, HandSpec, &str, &str)> = vec![
+            (
+                "<robot name=\"x\"><link name=".into(),
+                spec.clone(),
+                "urdf",
+                "does not parse",
+            ),
+            (
+                // A loop: the palm becomes the child of a finger as well.
+                edited(
+                    "</robot>",
+                    "<joint name=\"loop\" type=\"fixed\"><parent link=\"left_finger\"/>\
+                     <child link=\"palm\"/></joint></robot>",
+                ),
+                spec.clone(),
+                "urdf link \"palm\"",
+                "kinematic loop",
+            ),
+            (
+                edited("</robot>", "<link name=\"stray\"/></robot>"),
+                spec.clone(),
+                "urdf",
+                "several root links (base_link, stray)",
+            ),
+            (
+                GRIPPER_URDF.into(),
+                HandSpec {
+                    fingertips: vec![FingertipSpec {
+                        name: None,
+                        link: "nail".into(),
+                        offset: [0.0; 3],
+                        radius: 0.01,
+                    }],
+                    thumb: None,
+                    ..spec.clone()
+                },
+                "fingertips[0].link",
+                "no link named \"nail\"",
+            ),
+            (
+                edited("<mass value=\"0.05\"/>", "<mass value=\"-0.05\"/>"),
+                spec.clone(),
+                "urdf link \"right_finger\" inertial",
+                "mass -0.05",
+            ),
+            (
+                edited("ixx=\"3.5e-5\"", "ixx=\"-3.5e-5\""),
+                spec.clone(),
+                "urdf link \"right_finger\" inertial",
+                "not positive semi-definite",
+            ),
+            (
+                GRIPPER_URDF.into(),
+                {
+                    let mut s = spec.clone();
+                    s.fingertips[1].radius = -0.01;
+                    s
+                },
+                "fingertips[1].radius",
+                "radius -0.01",
+            ),
+            (
+                edited("type=\"revolute\"", "type=\"floating\""),
+                spec.clone(),
+                "urdf joint \"wrist_roll\"",
+                "Floating is not supported",
+            ),
+            (
+                edited("joint=\"right_finger_joint\"", "joint=\"thumb_joint\""),
+                spec.clone(),
+                "urdf joint \"left_finger_joint\" mimic",
+                "\"thumb_joint\", which does not exist",
+            ),
+            (
+                edited("<child link=\"palm\"/>", "<child link=\"hand\"/>"),
+                spec.clone(),
+                "urdf joint \"wrist_roll\"",
+                "child link \"hand\" does not exist",
+            ),
+            (
+                edited(
+                    "<limit lower=\"-3.14\" upper=\"3.14\" effort=\"5\" velocity=\"3\"/>",
+                    "",
+                ),
+                spec.clone(),
+                "urdf joint \"wrist_roll\" limit",
+                "needs <limit",
+            ),
+            (
+                GRIPPER_URDF.into(),
+                HandSpec {
+                    torque_limit: 0.0,
+                    ..spec.clone()
+                },
+                "torque_limit",
+                "> 0",
+            ),
+            (
+                GRIPPER_URDF.into(),
+                {
+                    let mut s = spec.clone();
+                    s.joint_torque_limits
+                        .insert("left_finger_joint".into(), 5.0);
+                    s
+                },
+                "joint_torque_limits.left_finger_joint",
+                "no such independent",
+            ),
+            (
+                GRIPPER_URDF.into(),
+                HandSpec {
+                    base_link: Some("forearm".into()),
+                    ..spec.clone()
+                },
+                "base_link",
+                "no link named \"forearm\"",
+            ),
+        ];
+        for (urdf, spec, field, reason) in cases {
+            let (f, r) = error_of(HandModel::from_urdf(&urdf, &spec));
+            assert_eq!(f, field, "{r}");
+            assert!(r.contains(reason), "{field}: {r:?} lacks {reason:?}");
+        }
+    }
+
+    #[test]
+    fn too_many_dofs_are_refused() {
+        // 25 revolute joints in a chain.
+        let mut urdf = String::from("<robot name=\"snake\"><link name=\"l0\"/>");
+        for i in 1..=25 {
+            urdf.push_str(&format!(
+                "<link name=\"l{i}\"/><joint name=\"j{i}\" type=\"revolute\">\
+                 <parent link=\"l{}\"/><child link=\"l{i}\"/><axis xyz=\"0 0 1\"/>\
+                 <limit lower=\"-1\" upper=\"1\" effort=\"1\" velocity=\"1\"/></joint>",
+                i - 1
+            ));
+        }
+        urdf.push_str("</robot>");
+        let spec = HandSpec {
+            fingertips: vec![FingertipSpec {
+                name: None,
+                link: "l25".into(),
+                offset: [0.0; 3],
+                radius: 0.01,
+            }],
+            thumb: None,
+            joint_torque_limits: BTreeMap::new(),
+            ..gripper_spec()
+        };
+        let (field, reason) = error_of(HandModel::from_urdf(&urdf, &spec));
+        assert_eq!(field, "urdf");
+        assert!(reason.contains("25 DOFs > 24"), "{reason}");
+    }
+
+    #[test]
+    fn a_base_link_drops_the_links_above_it_and_continuous_joints_are_unlimited() {
+        let urdf = edited("type=\"revolute\"", "type=\"continuous\"");
+        let spec = HandSpec {
+            base_link: Some("palm".into()),
+            joint_torque_limits: BTreeMap::new(),
+            ..gripper_spec()
+        };
+        let hand = HandModel::from_urdf(&urdf, &spec).unwrap();
+        assert_eq!(hand.links[hand.root].name, "palm");
+        assert_eq!(hand.dof(), 1);
+        let full = HandModel::from_urdf(
+            &urdf,
+            &HandSpec {
+                joint_torque_limits: BTreeMap::new(),
+                ..gripper_spec()
+            },
+        )
+        .unwrap();
+        assert_eq!(full.dof_lower[0], f64::NEG_INFINITY);
+        assert_eq!(full.dof_upper[0], f64::INFINITY);
+        // A massless link reads as massless; the armature keeps M positive definite.
+        assert!(full.armature.iter().all(|&a| a == DEFAULT_ARMATURE));
+    }
+}

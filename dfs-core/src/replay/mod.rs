@@ -1,0 +1,530 @@
+//! Skill transfer (paper §4, IP-flow 2): a skill recorded with the glove, retargeted onto a
+//! robot hand of another structure ([`plan`]) and executed by that hand in the DFS at 1 kHz,
+//! driven by joint torques from its controller ([`run`]), with a report of whether the object
+//! was actually held ([`ReplayReport`]).
+//!
+//! # What a skill gives
+//!
+//! [`SkillSpec`]: the object (shape, mass, μ), the contact model, the contacts in the object
+//! frame B with their normals and held normal forces, the object's motion as key poses relative
+//! to its pose when the grasp began (B₀), the phases and their durations, and, when the
+//! recording lost the object before `release`, when that happened. services converts its
+//! `SkillParameters` into one.
+//!
+//! # Steps
+//!
+//! 1. **Contacts.** The skill's contacts are split into two virtual fingers: the thumb's side
+//!    (contacts whose normals lie within 60° of the thumb contact's) and the opposing side. The
+//!    hand's thumb ([`crate::hand::thumb_of`] or the spec's `thumb`) takes the thumb side; its
+//!    other fingertips the opposing side: one-to-one when the counts match, else a new contact
+//!    set: the opposing side's centre spread across the grasp axis at the hand's own finger
+//!    spacing (or merged into one point), projected onto the surface.
+//! 2. **Base pose.** The hand's own grasp axis (thumb tip to the centroid of the others, at
+//!    mid-range joint angles) is aligned with the skill's, and 12 rolls about it are tried
+//!    (approaching from below the table excluded); for each, fingertip inverse kinematics with
+//!    the base position free (joint limits and mimic couplings honoured) places the fingertips
+//!    on their contacts. Candidates are scored by the IK residual, by how well each fingertip
+//!    can push along its contact normal, by grasp quality (Ferrari-Canny ε of the contacts the
+//!    fingertips actually reach) and by approaching from above.
+//! 3. **Forces.** At the reference's samples (every [`ReplayParams::force_sample_s`]), the
+//!    least internal force that carries the object's load `m (a − g)` with exact friction cones,
+//!    a friction margin and the hand's torque limits `|Σ Jᵀ f| ≤ τ_max` (a second-order cone
+//!    programme, [`crate::grasp::optimise::optimise_with_torque_limits`]); infeasible without
+//!    the torque limits is `no_force_closure`, feasible only without them `torque_limit`.
+//! 4. **Simulation.** [`run`]: the arm (the hand's base, moved kinematically like the
+//!    operator's) approaches with the fingers preshaped 2 cm off their contacts, the fingers
+//!    close under task-space steering, the grip ramps up to the planned forces `τ = Jᵀ f`, the
+//!    base follows the reference object motion (so the object follows only if the grasp holds
+//!    it), the grip ramps down, the fingers open and the hand retreats. Every torque is clamped
+//!    to the hand's limit.
+
+mod plan;
+mod run;
+
+pub use plan::{plan, Plan, RetargetStep};
+pub use run::{run, run_with, Replay, ReplayTick};
+
+use crate::contact::{ContactModel, Friction};
+use crate::math::{Isometry, Real, Rotation, Vector};
+use crate::object::Shape;
+use crate::scenario::Phase;
+
+/// One contact of a skill, in the object frame B.
+#[derive(Debug, Clone, PartialEq)]
+pub struct SkillContact {
+    /// The recording hand's fingertip (provenance; `thumb` marks the thumb's side).
+    pub finger: String,
+    /// Contact point in B (m).
+    pub position_b: Vector,
+    /// Unit normal in B, pointing into the object.
+    pub normal_b: Vector,
+}
+
+/// A key pose of the object relative to its pose when the grasp began (B₀).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct SkillKeyPose {
+    /// Time since the start of `grasp` (s).
+    pub time_s: Real,
+    /// Position of B in B₀ (m).
+    pub position: Vector,
+    /// Rotation of B relative to B₀ as a rotation vector (rad).
+    pub rotation: Vector,
+}
+
+/// What a replay needs of a skill. SI units.
+#[derive(Debug, Clone, PartialEq)]
+pub struct SkillSpec {
+    /// Object shape (B at its centre of mass).
+    pub shape: Shape,
+    /// Object mass (kg), > 0.
+    pub mass: Real,
+    /// Friction between fingertips and object.
+    pub friction: Friction,
+    /// Contact model of the recording.
+    pub contact_model: ContactModel,
+    /// The contacts (at least two for a grasp).
+    pub contacts: Vec<SkillContact>,
+    /// The object's motion, in time order (may be empty: the object stays).
+    pub motion: Vec<SkillKeyPose>,
+    /// The phases in order with their durations (s).
+    pub phases: Vec<(Phase, Real)>,
+    /// When the recording lost the object before `release` (s since the start of `grasp`):
+    /// the reference then holds the last held pose until `place` sets it down.
+    pub held_until_s: Option<Real>,
+}
+
+/// Why a replay failed.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum FailureReason {
+    /// No base pose and joint angles put the fingertips on the contacts.
+    Unreachable,
+    /// The load needs more joint torque than the hand has.
+    TorqueLimit,
+    /// The object slipped out of the grasp (or away from its reference motion).
+    Slip,
+    /// The contacts cannot carry the load inside their friction cones at all.
+    NoForceClosure,
+}
+
+impl FailureReason {
+    /// Name as in reports and the data base.
+    pub fn name(self) -> &'static str {
+        match self {
+            FailureReason::Unreachable => "unreachable",
+            FailureReason::TorqueLimit => "torque_limit",
+            FailureReason::Slip => "slip",
+            FailureReason::NoForceClosure => "no_force_closure",
+        }
+    }
+}
+
+/// A contact of the retargeted grasp.
+#[derive(Debug, Clone, PartialEq, serde::Serialize)]
+pub struct PlannedContact {
+    /// The hand's fingertip.
+    pub finger: String,
+    /// Contact point in B (m).
+    pub position_b: [Real; 3],
+    /// Unit normal in B, into the object.
+    pub normal_b: [Real; 3],
+}
+
+/// Grasp quality of the retargeted contacts (GraspIt!'s metrics, 8-edge cones).
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize)]
+pub struct ReplayQuality {
+    /// Ferrari-Canny ε (0 when not force closure).
+    pub epsilon: Real,
+    /// Volume of the grasp wrench space.
+    pub volume: Real,
+    /// Force closure.
+    pub force_closure: bool,
+}
+
+/// The outcome of a replay. Failures are reports, never errors.
+#[derive(Debug, Clone, PartialEq, serde::Serialize)]
+pub struct ReplayReport {
+    /// The hand.
+    pub hand: String,
+    /// The object followed its reference motion while held and was never dropped.
+    pub success: bool,
+    /// Why not, when `success` is false.
+    pub failure_reason: Option<FailureReason>,
+    /// A sentence on what happened.
+    pub detail: String,
+    /// Largest distance of the object from its reference while held (m).
+    pub position_error_max_m: Real,
+    /// Root mean square of the same (m).
+    pub position_error_rms_m: Real,
+    /// Largest rotation of the object away from its reference while held (rad).
+    pub orientation_error_max_rad: Real,
+    /// Root mean square of the same (rad).
+    pub orientation_error_rms_rad: Real,
+    /// Largest distance a held contact point moved over the object's surface (m).
+    pub max_slip_m: Real,
+    /// Ticks in which a held contact slipped (outside its friction cone).
+    pub slip_ticks: u64,
+    /// Smallest `1 − |c_t| / (μ c_n)` of a transmitting contact while held (1 = pure normal
+    /// force, 0 = on the cone).
+    pub min_friction_margin: Real,
+    /// Largest |τ| / τ_max over the replay.
+    pub peak_torque_ratio: Real,
+    /// The DOF where that happened.
+    pub peak_torque_joint: String,
+    /// Quality of the retargeted contacts.
+    pub quality: ReplayQuality,
+    /// The retargeted contacts.
+    pub contacts: Vec<PlannedContact>,
+    /// Largest fingertip distance from its contact after inverse kinematics (m).
+    pub ik_error_m: Real,
+    /// Highest rise of the object above its start (m).
+    pub lift_height_m: Real,
+    /// Simulated ticks (1 kHz).
+    pub ticks: u64,
+    /// Simulated time (s).
+    pub duration_s: Real,
+}
+
+/// Parameters of planning and replay. SI units.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ReplayParams {
+    /// Friction margin of the force distribution, [0, 1): contacts plan for μ (1 − margin). The
+    /// margin is also the grip safety: a parallel gripper cannot push tangentially, so friction
+    /// (the DFS's stick springs) carries the load on the planned normal force. Default 0.5.
+    pub friction_margin: Real,
+    /// Least planned normal force per contact (N). Default 0.5.
+    pub min_normal: Real,
+    /// Largest fingertip IK error for a reachable grasp (m). Default 0.006.
+    pub reach_tolerance: Real,
+    /// Reference samples of the force distribution every this many seconds. Default 0.25.
+    pub force_sample_s: Real,
+    /// Success: largest position error while held (m). Default 0.02.
+    pub max_position_error: Real,
+    /// Success: largest orientation error while held (rad). Default 0.35.
+    pub max_orientation_error: Real,
+    /// Task-space stiffness steering a fingertip to its contact (N/m). Default 100.
+    pub fingertip_stiffness: Real,
+    /// Task-space damping of the same (N·s/m). Default 3.
+    pub fingertip_damping: Real,
+    /// Preshape clearance of the fingertips along the contact normals (m). Default 0.02.
+    pub preshape_clearance: Real,
+    /// How far inside the surface the closing fingertips aim (m). Default 0.004.
+    pub close_depth: Real,
+}
+
+impl Default for ReplayParams {
+    fn default() -> Self {
+        ReplayParams {
+            friction_margin: 0.5,
+            min_normal: 0.5,
+            reach_tolerance: 0.006,
+            force_sample_s: 0.25,
+            max_position_error: 0.02,
+            max_orientation_error: 0.35,
+            fingertip_stiffness: 100.0,
+            fingertip_damping: 3.0,
+            preshape_clearance: 0.02,
+            close_depth: 0.004,
+        }
+    }
+}
+
+/// The replay's timeline, from the skill's phases: when the grasp starts and ends, when the
+/// held part ends (start of `release`), and the total.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Timeline {
+    /// Start of `grasp` (s since the replay's start).
+    pub grasp_start: Real,
+    /// End of `grasp` (start of the held motion).
+    pub grasp_end: Real,
+    /// Start of `place` (or of `release` when there is no place).
+    pub place_start: Real,
+    /// Start of `release`.
+    pub release_start: Real,
+    /// End of `release`.
+    pub release_end: Real,
+    /// End of the replay.
+    pub end: Real,
+}
+
+impl SkillSpec {
+    /// The replay's timeline. Phases before `grasp` last at least 0.5 s together; a missing
+    /// `grasp` lasts 0.8 s, a missing `release` 0.6 s, and a 0.6 s retreat ends the replay.
+    pub fn timeline(&self) -> Timeline {
+        let dur = |p: Phase| -> Real {
+            self.phases
+                .iter()
+                .filter(|(q, _)| *q == p)
+                .map(|(_, d)| d.max(0.0))
+                .sum()
+        };
+        let before = (dur(Phase::Approach) + dur(Phase::Preshape)).max(0.5);
+        let grasp = if dur(Phase::Grasp) > 0.0 {
+            dur(Phase::Grasp)
+        } else {
+            0.8
+        };
+        let grasp_end = before + grasp;
+        let moving = dur(Phase::Lift) + dur(Phase::Hold) + dur(Phase::Transport);
+        let place_start = grasp_end + moving;
+        let release_start = place_start + dur(Phase::Place);
+        let release = if dur(Phase::Release) > 0.0 {
+            dur(Phase::Release)
+        } else {
+            0.6
+        };
+        let release_end = release_start + release;
+        Timeline {
+            grasp_start: before,
+            grasp_end,
+            place_start,
+            release_start,
+            release_end,
+            end: release_end + dur(Phase::Retreat).max(0.6),
+        }
+    }
+
+    /// Start pose of the object: at rest on a table at z = 0, B aligned with the world.
+    pub fn start_pose(&self) -> Isometry {
+        let depth = self.shape.support_depth(&Rotation::identity());
+        Isometry::translation(0.0, 0.0, depth)
+    }
+
+    /// The skill's motion at `s` (s since the start of `grasp`) relative to B₀: cubic Hermite
+    /// interpolation of the key poses' positions and rotation vectors with Catmull-Rom tangents
+    /// (continuous velocity, so an arm following it needs no infinite acceleration at a key
+    /// pose); held constant outside the key poses and after [`SkillSpec::held_until_s`].
+    pub fn key_pose(&self, s: Real) -> Isometry {
+        // Key poses after the recording lost the object are not the skill's motion.
+        let held = match self.held_until_s {
+            Some(h) => self.motion.partition_point(|k| k.time_s <= h + 1e-9).max(1),
+            None => self.motion.len(),
+        };
+        let m = &self.motion[..held.min(self.motion.len())];
+        let pose =
+            |p: Vector, r: Vector| Isometry::from_parts(p.into(), Rotation::from_scaled_axis(r));
+        let (Some(first), Some(last)) = (m.first(), m.last()) else {
+            return Isometry::identity();
+        };
+        if s <= first.time_s || m.len() == 1 {
+            return pose(first.position, first.rotation);
+        }
+        if s >= last.time_s {
+            return pose(last.position, last.rotation);
+        }
+        let i = m.partition_point(|k| k.time_s <= s).clamp(1, m.len() - 1) - 1;
+        let (k0, k1) = (&m[i], &m[i + 1]);
+        let h = (k1.time_s - k0.time_s).max(1e-9);
+        let tangent = |j: usize, f: &dyn Fn(&SkillKeyPose) -> Vector| -> Vector {
+            let a = &m[j.saturating_sub(1)];
+            let b = &m[(j + 1).min(m.len() - 1)];
+            let dt = b.time_s - a.time_s;
+            if dt > 1e-9 {
+                (f(b) - f(a)) / dt
+            } else {
+                Vector::zeros()
+            }
+        };
+        let u = ((s - k0.time_s) / h).clamp(0.0, 1.0);
+        let (u2, u3) = (u * u, u * u * u);
+        let (h00, h10, h01, h11) = (
+            2.0 * u3 - 3.0 * u2 + 1.0,
+            u3 - 2.0 * u2 + u,
+            -2.0 * u3 + 3.0 * u2,
+            u3 - u2,
+        );
+        let interp = |f: &dyn Fn(&SkillKeyPose) -> Vector| -> Vector {
+            f(k0) * h00 + tangent(i, f) * (h10 * h) + f(k1) * h01 + tangent(i + 1, f) * (h11 * h)
+        };
+        pose(interp(&|k| k.position), interp(&|k| k.rotation))
+    }
+
+    /// The object's reference pose in the world at `t` (s since the replay's start), relative
+    /// to [`start_pose`](Self::start_pose): still until the grasp begins, then the skill's key
+    /// poses ([`key_pose`](Self::key_pose)), holding the last held pose when the recording
+    /// lost the object, set down during `place` in that case.
+    pub fn reference(&self, t: Real) -> Isometry {
+        let tl = self.timeline();
+        let start = self.start_pose();
+        let s = t - tl.grasp_start;
+        let key = |s: Real| -> Isometry { self.key_pose(s) };
+        let relative = match self.held_until_s {
+            Some(h) if s > h => {
+                let held = key(h);
+                let place_s = tl.place_start - tl.grasp_start;
+                let release_s = tl.release_start - tl.grasp_start;
+                if s <= place_s.max(h) {
+                    held
+                } else {
+                    // Set it down where it was held: the rise above the table goes to zero.
+                    let a = ((s - place_s.max(h)) / (release_s - place_s.max(h)).max(1e-3))
+                        .clamp(0.0, 1.0);
+                    let a = 10.0 * a.powi(3) - 15.0 * a.powi(4) + 6.0 * a.powi(5);
+                    let rest = self.shape.support_depth(&held.rotation)
+                        - self.shape.support_depth(&Rotation::identity());
+                    let mut down = held;
+                    down.translation.vector.z += (rest - held.translation.vector.z) * a;
+                    down
+                }
+            }
+            _ => key(s.max(0.0)),
+        };
+        // Relative poses are of B in B₀; B₀ = start.
+        start * relative
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::hand::{builtin_hand, thumb_of};
+
+    /// A two-finger pinch of a 0.2 kg box along x, lifted 8 cm over 1 s, held 0.5 s, put back.
+    fn box_pinch(mass: Real) -> SkillSpec {
+        let key = |t: Real, z: Real| SkillKeyPose {
+            time_s: t,
+            position: Vector::new(0.0, 0.0, z),
+            rotation: Vector::zeros(),
+        };
+        SkillSpec {
+            shape: Shape::Box {
+                half_extents: [0.025, 0.025, 0.04],
+            },
+            mass,
+            friction: Friction {
+                mu: 0.8,
+                mu_torsion: 0.003,
+            },
+            contact_model: ContactModel::SoftFinger,
+            contacts: vec![
+                SkillContact {
+                    finger: "thumb".into(),
+                    position_b: Vector::new(-0.025, 0.0, 0.0),
+                    normal_b: Vector::x(),
+                },
+                SkillContact {
+                    finger: "index".into(),
+                    position_b: Vector::new(0.025, 0.0, 0.0),
+                    normal_b: -Vector::x(),
+                },
+            ],
+            motion: vec![
+                key(0.0, 0.0),
+                key(0.8, 0.0),
+                key(1.3, 0.04),
+                key(1.8, 0.08),
+                key(2.3, 0.08),
+                key(2.8, 0.04),
+                key(3.3, 0.0),
+            ],
+            phases: vec![
+                (Phase::Approach, 0.5),
+                (Phase::Grasp, 0.8),
+                (Phase::Lift, 1.0),
+                (Phase::Hold, 0.5),
+                (Phase::Place, 1.0),
+                (Phase::Release, 0.5),
+                (Phase::Retreat, 0.3),
+            ],
+            held_until_s: None,
+        }
+    }
+
+    #[test]
+    fn the_timeline_follows_the_skills_phases() {
+        let tl = box_pinch(0.2).timeline();
+        assert!((tl.grasp_start - 0.5).abs() < 1e-12);
+        assert!((tl.grasp_end - 1.3).abs() < 1e-12);
+        assert!((tl.place_start - 2.8).abs() < 1e-12);
+        assert!((tl.release_start - 3.8).abs() < 1e-12);
+        // The retreat lasts at least 0.6 s.
+        assert!((tl.end - 4.9).abs() < 1e-12);
+    }
+
+    #[test]
+    fn the_reference_passes_through_the_key_poses_with_continuous_velocity() {
+        let skill = box_pinch(0.2);
+        let z0 = skill.start_pose().translation.z;
+        for k in &skill.motion {
+            let p = skill.reference(0.5 + k.time_s).translation.vector;
+            assert!((p.z - z0 - k.position.z).abs() < 1e-12, "{}", k.time_s);
+        }
+        // Velocity on either side of a key pose agrees (no kink for the arm to follow).
+        let v = |t: Real| {
+            (skill.reference(t + 1e-4).translation.z - skill.reference(t - 1e-4).translation.z)
+                / 2e-4
+        };
+        let t = 0.5 + 1.3;
+        assert!((v(t - 2e-3) - v(t + 2e-3)).abs() < 0.01);
+    }
+
+    #[test]
+    fn a_reference_that_lost_the_object_holds_then_sets_it_down() {
+        let mut skill = box_pinch(0.2);
+        // Pretend the recording dropped it at 1.8 s after the grasp began.
+        skill.held_until_s = Some(1.8);
+        let z0 = skill.start_pose().translation.z;
+        let tl = skill.timeline();
+        let held = skill.reference(tl.grasp_start + 1.8).translation.z - z0;
+        let later = skill.reference(tl.place_start - 0.01).translation.z - z0;
+        assert!((held - 0.08).abs() < 1e-9 && (later - 0.08).abs() < 1e-9);
+        let down = skill.reference(tl.release_start).translation.z - z0;
+        assert!(down.abs() < 1e-9, "{down}");
+    }
+
+    #[test]
+    fn a_box_pinch_replays_on_the_gripper_and_lifts_the_box() {
+        let hand = builtin_hand("gripper").unwrap();
+        let r = run(
+            &hand,
+            thumb_of(&hand),
+            &box_pinch(0.2),
+            &ReplayParams::default(),
+        )
+        .unwrap();
+        assert!(r.success, "{:?}: {}", r.failure_reason, r.detail);
+        assert!(r.lift_height_m > 0.06, "{}", r.lift_height_m);
+        assert!(r.position_error_max_m < 0.02);
+        assert!(r.peak_torque_ratio > 0.0 && r.peak_torque_ratio <= 1.0 + 1e-9);
+        assert_eq!(r.ticks, 4900);
+    }
+
+    #[test]
+    fn a_box_too_heavy_for_the_torque_limits_fails_with_torque_limit() {
+        let hand = builtin_hand("gripper").unwrap();
+        let r = run(
+            &hand,
+            thumb_of(&hand),
+            &box_pinch(8.0),
+            &ReplayParams::default(),
+        )
+        .unwrap();
+        assert!(!r.success);
+        assert_eq!(
+            r.failure_reason,
+            Some(FailureReason::TorqueLimit),
+            "{}",
+            r.detail
+        );
+    }
+
+    #[test]
+    fn a_box_wider_than_the_gripper_opens_fails_with_unreachable() {
+        let hand = builtin_hand("gripper").unwrap();
+        let mut skill = box_pinch(0.2);
+        skill.shape = Shape::Box {
+            half_extents: [0.09, 0.05, 0.04],
+        };
+        skill.contacts[0].position_b.x = -0.09;
+        skill.contacts[1].position_b.x = 0.09;
+        let r = run(&hand, thumb_of(&hand), &skill, &ReplayParams::default()).unwrap();
+        assert!(!r.success);
+        assert_eq!(
+            r.failure_reason,
+            Some(FailureReason::Unreachable),
+            "{}",
+            r.detail
+        );
+        assert_eq!(r.ticks, 0);
+    }
+}

@@ -1,0 +1,673 @@
+//! Retargeting a skill onto a hand: contact assignment (and a new contact set when the finger
+//! counts differ), the base pose, fingertip inverse kinematics and the force distribution with
+//! exact friction cones and the hand's torque limits. See the module documentation of
+//! [`crate::replay`].
+
+use super::{FailureReason, PlannedContact, ReplayParams, ReplayQuality, SkillSpec};
+use crate::contact::{ContactFrame, Intensity};
+use crate::error::{DfsError, Result};
+use crate::grasp::optimise::{
+    optimise, optimise_with_torque_limits, InfeasibleKind, OptimiseParams, TorqueLimits,
+};
+use crate::grasp::quality::{grasp_quality, QualityParams};
+use crate::hand::ik::{solve_tips, IkParams};
+use crate::hand::{HandModel, Kinematics, MAX_DOF, MAX_TIPS};
+use crate::math::{Isometry, Point, Real, Rotation, Vector, Wrench};
+use crate::operator::{push_alignment, with_free_base};
+use nalgebra::{DMatrix, Matrix3};
+
+/// Rolls of the hand about the grasp axis tried when choosing the base pose.
+const ROLLS: usize = 12;
+
+/// A retargeted grasp: where the hand goes, its joint angles, its contacts and the planned
+/// contact forces along the reference motion.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Plan {
+    /// The hand.
+    pub hand: HandModel,
+    /// Index of the thumb (the fingertip opposing the others).
+    pub thumb: usize,
+    /// Pose of the hand's base at the grasp (world).
+    pub base_grasp: Isometry,
+    /// The same relative to the object's start pose (B₀): the base follows the object.
+    pub base_in_b0: Isometry,
+    /// Direction (world) in which the hand approaches the object.
+    pub approach_dir: Vector,
+    /// Joint angles with the fingertips on their contacts.
+    pub q_grasp: [Real; MAX_DOF],
+    /// Joint angles with the fingertips [`ReplayParams::preshape_clearance`] off them.
+    pub q_pre: [Real; MAX_DOF],
+    /// Per fingertip of the hand: its contact (point where the sphere touches, inward normal)
+    /// in B.
+    pub contacts: Vec<ContactFrame>,
+    /// Largest fingertip distance from its target after inverse kinematics (m).
+    pub ik_error: Real,
+    /// Grasp quality of `contacts`.
+    pub quality: ReplayQuality,
+    /// Times (s since the replay's start) of the force samples.
+    pub force_times: Vec<Real>,
+    /// Planned intensities per force sample and fingertip (contact frames of `contacts`).
+    pub forces: Vec<[Intensity; MAX_TIPS]>,
+    /// Map from intensities to joint torques at the grasp (rows DOFs, 4 columns per tip).
+    pub torque_map: DMatrix<Real>,
+    /// A reason the grasp cannot work, found while planning, with a sentence.
+    pub failure: Option<(FailureReason, String)>,
+}
+
+/// One candidate base pose.
+struct Candidate {
+    score: Real,
+    error: Real,
+    rotation: Rotation,
+    approach: Vector,
+    q_free: [Real; MAX_DOF],
+}
+
+/// Contacts of the skill on the thumb's side and on the opposing side.
+fn sides(skill: &SkillSpec) -> (Vec<usize>, Vec<usize>) {
+    let n = skill.contacts.len();
+    let thumb = skill
+        .contacts
+        .iter()
+        .position(|c| c.finger == "thumb")
+        .unwrap_or(0);
+    let nt = skill.contacts[thumb].normal_b;
+    let (mut a, mut b) = (Vec::new(), Vec::new());
+    for i in 0..n {
+        if skill.contacts[i].normal_b.dot(&nt) > 0.5 {
+            a.push(i);
+        } else {
+            b.push(i);
+        }
+    }
+    (a, b)
+}
+
+/// Mid-range joint angles (infinite limits read as ±1).
+fn mid_angles(hand: &HandModel) -> [Real; MAX_DOF] {
+    let mut q = [0.0; MAX_DOF];
+    for d in 0..hand.dof() {
+        let lo = hand.dof_lower[d].max(-1.0);
+        let hi = hand.dof_upper[d].min(1.0).max(lo);
+        q[d] = 0.5 * (lo + hi);
+    }
+    q
+}
+
+/// The point on the surface nearest `p_b` and the inward normal there, both in B.
+fn on_surface(skill: &SkillSpec, p_b: &Vector) -> (Vector, Vector) {
+    let (_, point, outward) = skill.shape.closest(p_b);
+    (point, -outward)
+}
+
+/// Rotation taking the orthonormal pair (a, d) of one frame onto (a', d') of another.
+fn align(a_from: &Vector, d_from: &Vector, a_to: &Vector, d_to: &Vector) -> Rotation {
+    let from = Matrix3::from_columns(&[*a_from, *d_from, a_from.cross(d_from)]);
+    let to = Matrix3::from_columns(&[*a_to, *d_to, a_to.cross(d_to)]);
+    Rotation::from_matrix(&(to * from.transpose()))
+}
+
+/// Unit vector of `v` with its component along unit `a` removed; `fallback` if that is ~0.
+fn perpendicular(v: &Vector, a: &Vector, fallback: &Vector) -> Vector {
+    let p = v - a * a.dot(v);
+    if p.norm() > 1e-9 {
+        p.normalize()
+    } else {
+        let f = fallback - a * a.dot(fallback);
+        f.normalize()
+    }
+}
+
+/// Validates a skill for replay; the error names the field.
+fn validate(skill: &SkillSpec, thumb: usize, hand: &HandModel) -> Result<()> {
+    skill.shape.validate()?;
+    if !(skill.mass.is_finite() && skill.mass > 0.0) {
+        return Err(DfsError::invalid("skill.object.mass", "must be > 0"));
+    }
+    if !(skill.friction.mu.is_finite() && skill.friction.mu >= 0.0) {
+        return Err(DfsError::invalid(
+            "skill.object.mu",
+            "must be finite and ≥ 0",
+        ));
+    }
+    if skill.contacts.is_empty() {
+        return Err(DfsError::invalid(
+            "skill.contacts",
+            "the skill has no contacts",
+        ));
+    }
+    for (i, c) in skill.contacts.iter().enumerate() {
+        let ok = c
+            .position_b
+            .iter()
+            .chain(c.normal_b.iter())
+            .all(|v| v.is_finite())
+            && c.normal_b.norm() > 0.5;
+        if !ok {
+            return Err(DfsError::invalid(
+                format!("skill.contacts[{i}]"),
+                "position and unit normal must be finite",
+            ));
+        }
+    }
+    if thumb >= hand.fingertips.len() {
+        return Err(DfsError::invalid("thumb", "no such fingertip"));
+    }
+    hand.validate()
+}
+
+/// Retargets `skill` onto `hand` (whose fingertip `thumb` opposes the others). Planning
+/// failures (unreachable contacts, loads the cones or the torques cannot carry) are in
+/// [`Plan::failure`]; errors are for invalid input only.
+pub fn plan(
+    hand: &HandModel,
+    thumb: usize,
+    skill: &SkillSpec,
+    params: &ReplayParams,
+) -> Result<Plan> {
+    validate(skill, thumb, hand)?;
+    let mut candidates = plan_candidates(hand, thumb, skill, params);
+    candidates.sort_by(|a, b| b.score.total_cmp(&a.score));
+    let start = skill.start_pose();
+    let n_hand = hand.dof();
+    let nt = hand.fingertips.len();
+    let mut kin = Kinematics::default();
+    let (best, reachable) = match candidates.first() {
+        Some(c) => (c, c.error <= params.reach_tolerance),
+        None => {
+            return Err(DfsError::invalid("hand", "no candidate base pose"));
+        }
+    };
+    let base_grasp = Isometry::from_parts(
+        Vector::new(best.q_free[0], best.q_free[1], best.q_free[2]).into(),
+        best.rotation,
+    );
+    let mut q_grasp = [0.0; MAX_DOF];
+    q_grasp[..n_hand].copy_from_slice(&best.q_free[3..n_hand + 3]);
+    // The contacts the fingertips reach.
+    hand.forward_kinematics(&base_grasp, &q_grasp[..n_hand], &mut kin);
+    let inv = start.inverse();
+    let contacts: Vec<ContactFrame> = (0..nt)
+        .map(|k| {
+            let c_b = (inv * kin.tip_centres[k]).coords;
+            let (p, n_in) = on_surface(skill, &c_b);
+            ContactFrame::from_normal(p, n_in)
+        })
+        .collect();
+    // Preshape: each fingertip out along its normal, base fixed, the common DOFs held.
+    let mut grouped = [false; MAX_DOF];
+    for g in &hand.finger_groups {
+        for &d in &g.dofs {
+            grouped[d] = true;
+        }
+    }
+    let pre_targets: Vec<(usize, Point)> = (0..nt)
+        .map(|k| {
+            let c = &contacts[k];
+            let out = -c.normal_b();
+            let p = c.p_b + out * (hand.fingertips[k].radius + params.preshape_clearance);
+            (k, start * Point::from(p))
+        })
+        .collect();
+    let pre_params = IkParams {
+        max_iterations: 150,
+        tolerance: 5e-4,
+        ..IkParams::default()
+    }
+    .with_frozen((0..n_hand).filter(|&d| !grouped[d]));
+    let mut q_pre = [0.0; MAX_DOF];
+    solve_tips(
+        hand,
+        &base_grasp,
+        &pre_targets,
+        &q_grasp[..n_hand],
+        &pre_params,
+        &mut kin,
+        &mut q_pre[..n_hand],
+    );
+    let quality = grasp_quality(
+        &contacts,
+        skill.contact_model,
+        &skill.friction,
+        &QualityParams::default(),
+    )
+    .map(|q| ReplayQuality {
+        epsilon: q.epsilon,
+        volume: q.volume,
+        force_closure: q.force_closure,
+    })
+    .unwrap_or(ReplayQuality {
+        epsilon: 0.0,
+        volume: 0.0,
+        force_closure: false,
+    });
+    // Torque map at the grasp (B = world at the start: the start pose is not rotated).
+    hand.forward_kinematics(&base_grasp, &q_grasp[..n_hand], &mut kin);
+    hand.tip_jacobians(&mut kin);
+    let mut torque_map = DMatrix::<Real>::zeros(n_hand, 4 * nt);
+    for (k, c) in contacts.iter().enumerate() {
+        let j = &kin.tip_jacobians[k];
+        let r = c.rot_b.to_rotation_matrix();
+        for d in 0..n_hand {
+            let lin = Vector::new(j[(0, d)], j[(1, d)], j[(2, d)]);
+            let ang = Vector::new(j[(3, d)], j[(4, d)], j[(5, d)]);
+            for comp in 0..3 {
+                torque_map[(d, 4 * k + comp)] = lin.dot(&r.matrix().column(comp).into_owned());
+            }
+            torque_map[(d, 4 * k + 3)] = ang.dot(&c.normal_b());
+        }
+    }
+    let mut plan = Plan {
+        hand: hand.clone(),
+        thumb,
+        base_grasp,
+        base_in_b0: inv * base_grasp,
+        approach_dir: best.approach,
+        q_grasp,
+        q_pre,
+        contacts,
+        ik_error: best.error,
+        quality,
+        force_times: Vec::new(),
+        forces: Vec::new(),
+        torque_map,
+        failure: None,
+    };
+    if !reachable {
+        plan.failure = Some((
+            FailureReason::Unreachable,
+            format!(
+                "no base pose puts every fingertip on its contact: the best misses by {:.1} mm \
+                 (tolerance {:.1} mm)",
+                best.error * 1e3,
+                params.reach_tolerance * 1e3
+            ),
+        ));
+        return Ok(plan);
+    }
+    plan_forces(&mut plan, skill, params);
+    Ok(plan)
+}
+
+/// The wrench (in B) the hand must apply at `t` for the reference motion: `m (a − g)`, with
+/// `a` from central differences of the reference over ±25 ms. Moments are not planned.
+pub(crate) fn load_at(skill: &SkillSpec, t: Real, gravity: &Vector) -> Wrench {
+    let h = 0.025;
+    let p = |t: Real| skill.reference(t).translation.vector;
+    let a = (p(t + h) - p(t) * 2.0 + p(t - h)) / (h * h);
+    let r = skill.reference(t).rotation;
+    let f = r.inverse() * ((a - gravity) * skill.mass);
+    Wrench::new(f.x, f.y, f.z, 0.0, 0.0, 0.0)
+}
+
+/// Fills the force schedule, and the failure when the cones or the torques cannot carry it.
+fn plan_forces(plan: &mut Plan, skill: &SkillSpec, params: &ReplayParams) {
+    let tl = skill.timeline();
+    let g = Vector::new(0.0, 0.0, -crate::math::STANDARD_GRAVITY);
+    let opt = OptimiseParams {
+        margin: params.friction_margin,
+        min_normal: params.min_normal,
+    };
+    let limits = TorqueLimits {
+        map: plan.torque_map.clone(),
+        limits: plan.hand.torque_limit.clone(),
+    };
+    let nt = plan.contacts.len();
+    // Static load first, without torque limits: can the contacts carry it at all?
+    let static_load = load_at(skill, tl.grasp_start, &g);
+    if let Err(e) = optimise(
+        &plan.contacts,
+        skill.contact_model,
+        &skill.friction,
+        &static_load,
+        &opt,
+    ) {
+        let reason = match e.kind {
+            InfeasibleKind::NoDistribution | InfeasibleKind::Solver => {
+                FailureReason::NoForceClosure
+            }
+            InfeasibleKind::InvalidInput => FailureReason::NoForceClosure,
+        };
+        plan.failure = Some((
+            reason,
+            format!(
+                "the retargeted contacts cannot carry the object's weight inside their friction \
+                 cones with a {:.0} % margin: {}",
+                params.friction_margin * 100.0,
+                e.reason
+            ),
+        ));
+    }
+    let mut t = tl.grasp_start;
+    let step = params.force_sample_s.max(0.01);
+    while t <= tl.release_start + 1e-9 {
+        let load = load_at(skill, t, &g);
+        let with_limits = optimise_with_torque_limits(
+            &plan.contacts,
+            skill.contact_model,
+            &skill.friction,
+            &load,
+            &opt,
+            Some(&limits),
+        );
+        let dist = match with_limits {
+            Ok(d) => Some(d),
+            Err(e) => {
+                if plan.failure.is_none() {
+                    plan.failure = Some((
+                        FailureReason::TorqueLimit,
+                        format!(
+                            "carrying the load at t = {t:.2} s needs more joint torque than the \
+                             hand's limits allow ({})",
+                            e.reason
+                        ),
+                    ));
+                }
+                optimise(
+                    &plan.contacts,
+                    skill.contact_model,
+                    &skill.friction,
+                    &load,
+                    &opt,
+                )
+                .ok()
+            }
+        };
+        let mut row = [Intensity::zeros(); MAX_TIPS];
+        match dist {
+            Some(d) => row[..nt].copy_from_slice(&d.intensities),
+            None => {
+                // Nothing carries it: squeeze with the least normal force and let it slip.
+                for c in row.iter_mut().take(nt) {
+                    c[2] = params.min_normal;
+                }
+            }
+        }
+        plan.force_times.push(t);
+        plan.forces.push(row);
+        t += step;
+    }
+}
+
+/// Scored candidate base poses (rolls about the grasp axis), each with the joint angles from
+/// fingertip inverse kinematics on the hand with a free base position.
+fn plan_candidates(
+    hand: &HandModel,
+    thumb: usize,
+    skill: &SkillSpec,
+    params: &ReplayParams,
+) -> Vec<Candidate> {
+    let nt = hand.fingertips.len();
+    let n_hand = hand.dof();
+    let start = skill.start_pose();
+    let (thumb_side, other_side) = sides(skill);
+    let centroid = |idx: &[usize]| -> Vector {
+        idx.iter()
+            .map(|&i| skill.contacts[i].position_b)
+            .sum::<Vector>()
+            / idx.len().max(1) as Real
+    };
+    let thumb_c = centroid(&thumb_side);
+    let other_c = if other_side.is_empty() {
+        -thumb_c
+    } else {
+        centroid(&other_side)
+    };
+    let a_s = (other_c - thumb_c)
+        .try_normalize(1e-9)
+        .unwrap_or_else(Vector::x);
+    // The hand's own grasp axis and approach direction at mid-range angles.
+    let q_mid = mid_angles(hand);
+    let mut kin = Kinematics::default();
+    hand.forward_kinematics(&Isometry::identity(), &q_mid[..n_hand], &mut kin);
+    let others: Vec<usize> = (0..nt).filter(|&k| k != thumb).collect();
+    let p_t = kin.tip_centres[thumb].coords;
+    let p_o = if others.is_empty() {
+        p_t + Vector::x()
+    } else {
+        others
+            .iter()
+            .map(|&k| kin.tip_centres[k].coords)
+            .sum::<Vector>()
+            / others.len() as Real
+    };
+    let a_h = (p_o - p_t).try_normalize(1e-9).unwrap_or_else(Vector::x);
+    let m_h = 0.5 * (p_t + p_o);
+    let d_h = perpendicular(&m_h, &a_h, &Vector::z());
+    let lat_h = a_h.cross(&d_h);
+    // The other fingertips ordered across the grasp axis, with their offsets from the middle.
+    let mut lateral: Vec<(usize, Real)> = others
+        .iter()
+        .map(|&k| (k, (kin.tip_centres[k].coords - p_o).dot(&lat_h)))
+        .collect();
+    lateral.sort_by(|a, b| a.1.total_cmp(&b.1));
+    let half_width = skill.shape.bounding_radius();
+    let mut out = Vec::with_capacity(ROLLS);
+    let ik = IkParams {
+        max_iterations: 120,
+        tolerance: 3e-4,
+        ..IkParams::default()
+    };
+    let up_perp = perpendicular(&-Vector::z(), &a_s, &Vector::x());
+    let side = a_s.cross(&up_perp);
+    for r in 0..ROLLS {
+        let psi = r as Real * std::f64::consts::TAU / ROLLS as Real;
+        let d_w = up_perp * psi.cos() + side * psi.sin();
+        if d_w.z > 0.35 {
+            continue; // the palm would come from below the table
+        }
+        let rot = align(&a_h, &d_h, &a_s, &d_w);
+        let lat_w = a_s.cross(&d_w);
+        // Targets: tip centres in the world.
+        let mut targets: Vec<(usize, Point)> = Vec::with_capacity(nt);
+        let target_of = |k: usize, p_b: Vector| {
+            let (p, n_in) = on_surface(skill, &p_b);
+            start * Point::from(p - n_in * hand.fingertips[k].radius)
+        };
+        targets.push((thumb, target_of(thumb, thumb_c)));
+        if lateral.len() == other_side.len() && !other_side.is_empty() {
+            let mut skill_lat: Vec<(usize, Real)> = other_side
+                .iter()
+                .map(|&i| (i, skill.contacts[i].position_b.dot(&lat_w)))
+                .collect();
+            skill_lat.sort_by(|a, b| a.1.total_cmp(&b.1));
+            for ((k, _), (i, _)) in lateral.iter().zip(&skill_lat) {
+                targets.push((*k, target_of(*k, skill.contacts[*i].position_b)));
+            }
+        } else {
+            let mean = lateral.iter().map(|l| l.1).sum::<Real>() / lateral.len().max(1) as Real;
+            for &(k, u) in &lateral {
+                let off = (u - mean).clamp(-0.8 * half_width, 0.8 * half_width);
+                targets.push((k, target_of(k, other_c + lat_w * off)));
+            }
+        }
+        let free = with_free_base(hand, rot);
+        let n = free.dof();
+        let mut q_start = [0.0; MAX_DOF];
+        q_start[3..n].copy_from_slice(&q_mid[..n_hand]);
+        let centre = start.translation.vector;
+        let base0 = centre - rot * m_h;
+        q_start[..3].copy_from_slice(base0.as_slice());
+        let mut q = [0.0; MAX_DOF];
+        let res = solve_tips(
+            &free,
+            &Isometry::identity(),
+            &targets,
+            &q_start[..n],
+            &ik,
+            &mut kin,
+            &mut q[..n],
+        );
+        // Fingertips below the table top, or a base below it, are not a grasp.
+        let below =
+            (0..nt).any(|k| kin.tip_centres[k].z < hand.fingertips[k].radius - 0.002) || q[2] < 0.0;
+        let mut error = res.max_error;
+        if below {
+            error = error.max(1.0);
+        }
+        free.tip_jacobians(&mut kin);
+        let mut align_min: Real = 1.0;
+        let mut frames = Vec::with_capacity(nt);
+        for k in 0..nt {
+            let c_b = (start.inverse() * kin.tip_centres[k]).coords;
+            let (p, n_in) = on_surface(skill, &c_b);
+            frames.push(ContactFrame::from_normal(p, n_in));
+            let n_world = start.rotation * n_in;
+            align_min = align_min.min(push_alignment(&free, &kin, k, &n_world));
+        }
+        let eps = grasp_quality(
+            &frames,
+            skill.contact_model,
+            &skill.friction,
+            &QualityParams::default(),
+        )
+        .map(|q| q.epsilon)
+        .unwrap_or(0.0);
+        let reach_penalty = if error <= params.reach_tolerance {
+            0.0
+        } else {
+            10.0
+        };
+        let score = -reach_penalty - 20.0 * error + align_min + 2.0 * eps - 0.3 * d_w.z;
+        out.push(Candidate {
+            score,
+            error,
+            rotation: rot,
+            approach: d_w,
+            q_free: q,
+        });
+    }
+    out
+}
+
+/// One retargeting step along the reference motion: fingertip inverse kinematics for the
+/// hand's base at the reference pose (warm-started from the previous step's angles) and the
+/// force distribution for the load there with cones and torque limits.
+#[derive(Debug)]
+pub struct RetargetStep<'a> {
+    plan: &'a Plan,
+    skill: &'a SkillSpec,
+    params: ReplayParams,
+    kin: Kinematics,
+    limits: TorqueLimits,
+    targets_b: Vec<(usize, Point)>,
+    targets: Vec<(usize, Point)>,
+    /// The joint angles of the last step.
+    pub q: [Real; MAX_DOF],
+}
+
+impl<'a> RetargetStep<'a> {
+    /// Starts at the plan's grasp angles.
+    pub fn new(plan: &'a Plan, skill: &'a SkillSpec, params: &ReplayParams) -> Self {
+        let targets_b = plan
+            .contacts
+            .iter()
+            .enumerate()
+            .map(|(k, c)| {
+                let r = plan.hand.fingertips[k].radius;
+                (k, Point::from(c.p_b - c.normal_b() * r))
+            })
+            .collect::<Vec<_>>();
+        RetargetStep {
+            plan,
+            skill,
+            params: *params,
+            kin: Kinematics::default(),
+            limits: TorqueLimits {
+                map: plan.torque_map.clone(),
+                limits: plan.hand.torque_limit.clone(),
+            },
+            targets: targets_b.clone(),
+            targets_b,
+            q: plan.q_grasp,
+        }
+    }
+
+    /// Retargets the reference at `t` (s since the replay's start): returns the IK error (m)
+    /// and the intensities per fingertip (`None` when the cones and torques cannot carry the
+    /// load there).
+    pub fn step(&mut self, t: Real) -> (Real, Option<Vec<Intensity>>) {
+        let obj = self.skill.reference(t);
+        let base = obj * self.plan.base_in_b0;
+        for (dst, src) in self.targets.iter_mut().zip(&self.targets_b) {
+            *dst = (src.0, obj * src.1);
+        }
+        let n = self.plan.hand.dof();
+        let ik = IkParams {
+            max_iterations: 20,
+            tolerance: 1e-4,
+            ..IkParams::default()
+        };
+        let q0 = self.q;
+        let r = solve_tips(
+            &self.plan.hand,
+            &base,
+            &self.targets,
+            &q0[..n],
+            &ik,
+            &mut self.kin,
+            &mut self.q[..n],
+        );
+        let g = Vector::new(0.0, 0.0, -crate::math::STANDARD_GRAVITY);
+        let load = load_at(self.skill, t, &g);
+        let opt = OptimiseParams {
+            margin: self.params.friction_margin,
+            min_normal: self.params.min_normal,
+        };
+        let d = optimise_with_torque_limits(
+            &self.plan.contacts,
+            self.skill.contact_model,
+            &self.skill.friction,
+            &load,
+            &opt,
+            Some(&self.limits),
+        )
+        .ok()
+        .map(|d| d.intensities);
+        (r.max_error, d)
+    }
+}
+
+impl Plan {
+    /// The retargeted contacts for a report.
+    pub fn planned_contacts(&self) -> Vec<PlannedContact> {
+        self.contacts
+            .iter()
+            .enumerate()
+            .map(|(k, c)| {
+                let n = c.normal_b();
+                PlannedContact {
+                    finger: self.hand.fingertips[k].name.clone(),
+                    position_b: [c.p_b.x, c.p_b.y, c.p_b.z],
+                    normal_b: [n.x, n.y, n.z],
+                }
+            })
+            .collect()
+    }
+
+    /// Planned intensities of every fingertip at `t`, linearly interpolated between the force
+    /// samples (held at the ends). Allocation-free.
+    pub fn forces_at(&self, t: Real) -> [Intensity; MAX_TIPS] {
+        let n = self.force_times.len();
+        if n == 0 {
+            return [Intensity::zeros(); MAX_TIPS];
+        }
+        if t <= self.force_times[0] {
+            return self.forces[0];
+        }
+        if t >= self.force_times[n - 1] {
+            return self.forces[n - 1];
+        }
+        let i = self
+            .force_times
+            .partition_point(|&x| x <= t)
+            .clamp(1, n - 1);
+        let (t0, t1) = (self.force_times[i - 1], self.force_times[i]);
+        let a = ((t - t0) / (t1 - t0).max(1e-12)).clamp(0.0, 1.0);
+        let mut out = [Intensity::zeros(); MAX_TIPS];
+        for k in 0..MAX_TIPS {
+            out[k] = self.forces[i - 1][k] * (1.0 - a) + self.forces[i][k] * a;
+        }
+        out
+    }
+}

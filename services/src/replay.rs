@@ -1,0 +1,350 @@
+//! Replaying skills on robot hands: a skill's JSON (one element of `icms segment --json`'s
+//! `skills`, or a stored skill's parameters) into dfs-core's [`SkillSpec`], hand specs read
+//! from files, and the replay recorded as an MCAP file that Foxglove shows like a session
+//! (same topics), with a `replay` metadata record holding the skill, the hand and the report.
+
+use std::collections::BTreeMap;
+use std::path::Path;
+
+use dfs_core::contact::{ContactModel, Friction};
+use dfs_core::hand::{builtin_hand, builtin_spec, thumb_of, HandModel, HandSpec};
+use dfs_core::math::Vector;
+use dfs_core::object::Shape;
+use dfs_core::replay::{
+    run_with, ReplayParams, ReplayReport, SkillContact, SkillKeyPose, SkillSpec,
+};
+use dfs_core::scenario::Phase;
+use serde::Deserialize;
+
+use crate::error::{RecordingError, Result};
+use crate::session::{SessionInfo, SessionRecorder, TickData};
+
+/// Name of the replay's metadata record.
+pub const REPLAY_METADATA: &str = "replay";
+
+/// A hand ready to replay on: the model, its thumb, and where it came from.
+#[derive(Debug, Clone)]
+pub struct LoadedHand {
+    /// The model.
+    pub model: HandModel,
+    /// Index of the fingertip opposing the others.
+    pub thumb: usize,
+    /// The spec (absent for `glove10`).
+    pub spec: Option<HandSpec>,
+    /// The URDF text (absent for `glove10`).
+    pub urdf: Option<String>,
+}
+
+fn invalid(location: impl Into<String>, detail: impl Into<String>) -> RecordingError {
+    RecordingError::InvalidInput {
+        location: location.into(),
+        detail: detail.into(),
+    }
+}
+
+/// A built-in hand by name.
+pub fn load_builtin_hand(name: &str) -> Result<LoadedHand> {
+    let model = builtin_hand(name).map_err(|e| invalid(format!("hand {name:?}"), e.to_string()))?;
+    let (spec, urdf) = match builtin_spec(name) {
+        Some((s, u)) => (Some(s), Some(u.to_owned())),
+        None => (None, None),
+    };
+    let thumb = spec
+        .as_ref()
+        .map_or_else(|| thumb_of(&model), HandSpec::thumb_index);
+    Ok(LoadedHand {
+        model,
+        thumb,
+        spec,
+        urdf,
+    })
+}
+
+/// A hand from a spec's JSON text and its URDF text; errors name the problem.
+pub fn load_hand_from_texts(spec_json: &str, urdf: &str, location: &str) -> Result<LoadedHand> {
+    let de = &mut serde_json::Deserializer::from_str(spec_json);
+    let spec: HandSpec = serde_path_to_error::deserialize(de)
+        .map_err(|e| invalid(location, format!("hand spec: {e}")))?;
+    let model = HandModel::from_urdf(urdf, &spec).map_err(|e| invalid(location, e.to_string()))?;
+    Ok(LoadedHand {
+        thumb: spec.thumb_index(),
+        model,
+        spec: Some(spec),
+        urdf: Some(urdf.to_owned()),
+    })
+}
+
+/// A hand from a spec file (its `urdf` relative to the spec's directory).
+pub fn load_hand_file(path: &Path) -> Result<LoadedHand> {
+    let location = path.display().to_string();
+    let text = std::fs::read_to_string(path)
+        .map_err(|e| RecordingError::io(format!("reading {location}"), e))?;
+    let value: serde_json::Value = serde_json::from_str(&text)
+        .map_err(|e| invalid(&location, format!("hand spec is not JSON: {e}")))?;
+    let urdf_name = value
+        .get("urdf")
+        .and_then(|u| u.as_str())
+        .ok_or_else(|| invalid(&location, "hand spec: missing field `urdf`"))?;
+    let urdf_path = path.parent().unwrap_or(Path::new(".")).join(urdf_name);
+    let urdf = std::fs::read_to_string(&urdf_path)
+        .map_err(|e| RecordingError::io(format!("reading {}", urdf_path.display()), e))?;
+    load_hand_from_texts(&text, &urdf, &location)
+}
+
+/// A built-in hand name, or a spec file.
+pub fn load_hand(name_or_path: &str) -> Result<LoadedHand> {
+    if dfs_core::hand::BUILTIN_HANDS.contains(&name_or_path) {
+        load_builtin_hand(name_or_path)
+    } else if Path::new(name_or_path).is_file() {
+        load_hand_file(Path::new(name_or_path))
+    } else {
+        Err(invalid(
+            "hand",
+            format!(
+                "{name_or_path:?} is neither a built-in hand ({}) nor a spec file",
+                dfs_core::hand::BUILTIN_HANDS.join(", ")
+            ),
+        ))
+    }
+}
+
+#[derive(Deserialize)]
+struct PhaseJson {
+    name: String,
+    start_ns: u64,
+    end_ns: u64,
+}
+
+#[derive(Deserialize)]
+struct ObjectJson {
+    shape: String,
+    size: Vec<f64>,
+    mass: f64,
+    mu: f64,
+    #[serde(default)]
+    mu_torsion: f64,
+}
+
+#[derive(Deserialize)]
+struct ContactJson {
+    #[serde(default)]
+    finger: String,
+    position_b: [f64; 3],
+    normal_b: [f64; 3],
+    #[serde(default)]
+    grip_profile: Vec<f64>,
+}
+
+#[derive(Deserialize)]
+struct KeyPoseJson {
+    time_s: f64,
+    position: [f64; 3],
+    rotation: [f64; 3],
+}
+
+#[derive(Deserialize)]
+struct SkillJson {
+    phases: Vec<PhaseJson>,
+    object: Option<ObjectJson>,
+    contact_model: String,
+    contacts: Vec<ContactJson>,
+    #[serde(default)]
+    motion: Vec<KeyPoseJson>,
+}
+
+/// A skill's JSON (as `icms segment --json` prints each of its `skills`, or a stored skill's
+/// parameters) as a [`SkillSpec`]. Errors name the field.
+///
+/// When the contacts' grip profiles show that the recording lost the object before `release`
+/// (fewer than two contacts pushing with more than 0.05 N after the grip was established),
+/// [`SkillSpec::held_until_s`] says when.
+pub fn skill_spec_from_json(value: &serde_json::Value, location: &str) -> Result<SkillSpec> {
+    let skill: SkillJson = serde_path_to_error::deserialize(value)
+        .map_err(|e| invalid(location, format!("skill: {e}")))?;
+    let object = skill.object.ok_or_else(|| {
+        invalid(
+            location,
+            "skill.object: the skill does not describe its object",
+        )
+    })?;
+    let size = |i: usize| object.size.get(i).copied().unwrap_or(f64::NAN);
+    let shape = match object.shape.as_str() {
+        "sphere" => Shape::Sphere { radius: size(0) },
+        "box" => Shape::Box {
+            half_extents: [size(0), size(1), size(2)],
+        },
+        "cylinder" => Shape::Cylinder {
+            radius: size(0),
+            half_height: size(1),
+        },
+        other => {
+            return Err(invalid(
+                location,
+                format!("skill.object.shape: unknown shape {other:?}"),
+            ))
+        }
+    };
+    shape
+        .validate()
+        .map_err(|e| invalid(location, format!("skill.object: {e}")))?;
+    let contact_model = match skill.contact_model.as_str() {
+        "frictionless" => ContactModel::Frictionless,
+        "point_with_friction" => ContactModel::PointWithFriction,
+        "soft_finger" => ContactModel::SoftFinger,
+        other => {
+            return Err(invalid(
+                location,
+                format!("skill.contact_model: unknown model {other:?}"),
+            ))
+        }
+    };
+    let mut phases = Vec::with_capacity(skill.phases.len());
+    for (i, p) in skill.phases.iter().enumerate() {
+        let phase = Phase::from_name(&p.name).ok_or_else(|| {
+            invalid(
+                location,
+                format!("skill.phases[{i}].name: unknown phase {:?}", p.name),
+            )
+        })?;
+        phases.push((phase, p.end_ns.saturating_sub(p.start_ns) as f64 * 1e-9));
+    }
+    // When the recording lost the object: the grip profiles span grasp start → release end.
+    let find = |name: &str| skill.phases.iter().find(|p| p.name == name);
+    let held_until_s = match (find("grasp"), skill.phases.last()) {
+        (Some(g), Some(last)) if !skill.contacts.is_empty() => {
+            let end = find("release").map_or(last.end_ns, |r| r.end_ns);
+            let span = end.saturating_sub(g.start_ns) as f64 * 1e-9;
+            let release_s = find("release").map_or(f64::INFINITY, |r| {
+                r.start_ns.saturating_sub(g.start_ns) as f64 * 1e-9
+            });
+            let npts = skill
+                .contacts
+                .iter()
+                .map(|c| c.grip_profile.len())
+                .min()
+                .unwrap_or(0);
+            let pushing = |k: usize| {
+                skill
+                    .contacts
+                    .iter()
+                    .filter(|c| c.grip_profile[k] > 0.05)
+                    .count()
+                    >= 2
+            };
+            let mut established = false;
+            let mut lost = None;
+            for k in 0..npts {
+                let t = span * k as f64 / (npts.max(2) - 1) as f64;
+                if pushing(k) {
+                    established = true;
+                } else if established && t < release_s {
+                    lost = Some(span * (k.saturating_sub(1)) as f64 / (npts.max(2) - 1) as f64);
+                    break;
+                }
+            }
+            lost
+        }
+        _ => None,
+    };
+    Ok(SkillSpec {
+        shape,
+        mass: object.mass,
+        friction: Friction {
+            mu: object.mu,
+            mu_torsion: object.mu_torsion,
+        },
+        contact_model,
+        contacts: skill
+            .contacts
+            .iter()
+            .map(|c| SkillContact {
+                finger: c.finger.clone(),
+                position_b: Vector::from(c.position_b),
+                normal_b: Vector::from(c.normal_b),
+            })
+            .collect(),
+        motion: skill
+            .motion
+            .iter()
+            .map(|k| SkillKeyPose {
+                time_s: k.time_s,
+                position: Vector::from(k.position),
+                rotation: Vector::from(k.rotation),
+            })
+            .collect(),
+        phases,
+        held_until_s,
+    })
+}
+
+/// Where a replay's skill comes from, for the `replay` metadata record.
+#[derive(Debug, Clone, Default, PartialEq, Eq)]
+pub struct ReplaySource {
+    /// The skill's id in the data base, if stored.
+    pub skill_id: Option<i64>,
+    /// Name of the skill's file or source session.
+    pub skill_name: String,
+}
+
+/// Replays `skill` on `hand`; with `out`, records the replay as an MCAP file (written even
+/// when the replay fails: the report says how). Errors are for invalid input and I/O only.
+pub fn replay_skill(
+    hand: &LoadedHand,
+    skill: &SkillSpec,
+    params: &ReplayParams,
+    source: &ReplaySource,
+    out: Option<&Path>,
+) -> Result<ReplayReport> {
+    let location = format!("hand {:?}", hand.model.name);
+    let Some(out) = out else {
+        return dfs_core::replay::run(&hand.model, hand.thumb, skill, params)
+            .map_err(|e| invalid(location, e.to_string()));
+    };
+    let object = dfs_core::object::RigidObject::new(skill.shape, skill.mass)
+        .map_err(|e| invalid("skill.object", e.to_string()))?;
+    let info = SessionInfo {
+        scenario: source.skill_name.clone(),
+        seed: None,
+        object_json: String::new(),
+        source: "replay".to_owned(),
+        extra: BTreeMap::from([("replay_hand".to_owned(), hand.model.name.clone())]),
+        phases: Vec::new(),
+    };
+    let mut recorder = SessionRecorder::create(out, &hand.model, &object, &info)?;
+    let mut failed: Option<RecordingError> = None;
+    let report = run_with(&hand.model, hand.thumb, skill, params, |tick| {
+        if failed.is_some() {
+            return;
+        }
+        let data = TickData {
+            time_ns: tick.time_ns,
+            q: tick.q,
+            tau: tick.tau,
+            base: tick.base,
+            output: tick.output,
+            kinematics: tick.kinematics,
+        };
+        if let Err(e) = recorder.record(&data) {
+            failed = Some(e);
+        }
+    })
+    .map_err(|e| invalid(location, e.to_string()))?;
+    if let Some(e) = failed {
+        let _ = recorder.finish();
+        return Err(e);
+    }
+    let mut meta = BTreeMap::new();
+    meta.insert("hand".to_owned(), hand.model.name.clone());
+    meta.insert(
+        "skill_id".to_owned(),
+        source.skill_id.map(|i| i.to_string()).unwrap_or_default(),
+    );
+    meta.insert("skill".to_owned(), source.skill_name.clone());
+    meta.insert(
+        "report".to_owned(),
+        serde_json::to_string(&report).unwrap_or_default(),
+    );
+    recorder.add_metadata(REPLAY_METADATA, meta)?;
+    recorder.finish()?;
+    Ok(report)
+}
