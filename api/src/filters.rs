@@ -7,8 +7,9 @@ use serde::Deserialize;
 use services::store::{SkillQuery, SortKey, StoreError, DEFAULT_LIMIT};
 
 /// Filters, sort and page of a skill query. Every filter is optional; ranges are inclusive.
-#[derive(Debug, Clone, Default, PartialEq, Deserialize, clap::Args)]
+#[derive(Debug, Clone, Default, PartialEq, Deserialize, clap::Args, utoipa::IntoParams)]
 #[serde(default, deny_unknown_fields)]
+#[into_params(parameter_in = Query)]
 pub struct SkillFilters {
     /// Object shape: sphere, box or cylinder.
     #[arg(long)]
@@ -27,6 +28,7 @@ pub struct SkillFilters {
     pub mu_max: Option<f64>,
     /// Number of fingertip contacts.
     #[arg(long)]
+    #[param(minimum = 0)]
     pub contacts: Option<i64>,
     /// Contact model: frictionless, point_with_friction or soft_finger.
     #[arg(long)]
@@ -52,6 +54,7 @@ pub struct SkillFilters {
     pub sort: Option<String>,
     /// Page size, 1 to 1000. Default 50.
     #[arg(long)]
+    #[param(minimum = 1, maximum = 1000)]
     pub limit: Option<u32>,
     /// `next_cursor` of the previous page, passed back unchanged with the same filters and sort.
     #[arg(long)]

@@ -3,6 +3,7 @@
 mod bench;
 mod dfs_static;
 mod segment;
+mod serve;
 mod sessions;
 mod simulate;
 mod skills;
@@ -41,6 +42,9 @@ enum Command {
     Demo(skills::DemoArgs),
     /// Stores session files and their skills in the skill data base (idempotent).
     Ingest(skills::IngestArgs),
+    /// The HTTP API: record sessions, simulate, query and browse skills. Creates and migrates
+    /// the data directory; seeds an empty data base with simulated sessions (--no-demo skips).
+    Serve(Box<crate::config::ServeArgs>),
     /// Queries the skill data base: filters, sorting, cursor pagination, similar skills.
     Skills(Box<skills::SkillsArgs>),
     /// Benchmarks whose figures BENCHMARKS.md quotes.
@@ -71,6 +75,7 @@ pub fn run() -> ExitCode {
         Command::Demo(a) => skills::run_demo(a),
         Command::Ingest(a) => skills::run_ingest(a),
         Command::Skills(a) => skills::run_skills(*a),
+        Command::Serve(a) => serve::run_serve(*a),
         Command::Bench(b) => bench::run(b),
     };
     match result {
