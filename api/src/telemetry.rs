@@ -1,5 +1,6 @@
 //! Logging: `tracing` events to stderr, filtered by `RUST_LOG` (default `info`; per-request
-//! spans and events come at `debug` from `tower_http`, e.g. `RUST_LOG=info,tower_http=debug`).
+//! spans and events come at `debug` from `tower_http`, e.g. `RUST_LOG=info,tower_http=debug`);
+//! colours only on a terminal.
 
 use tracing_subscriber::EnvFilter;
 
@@ -9,5 +10,6 @@ pub fn init() {
     let _ = tracing_subscriber::fmt()
         .with_env_filter(filter)
         .with_writer(std::io::stderr)
+        .with_ansi(std::io::IsTerminal::is_terminal(&std::io::stderr()))
         .try_init();
 }

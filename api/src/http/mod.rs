@@ -34,6 +34,7 @@ use tower_http::cors::{AllowOrigin, CorsLayer};
 use tower_http::trace::TraceLayer;
 use utoipa::openapi::security::{Http, HttpAuthScheme, SecurityScheme};
 use utoipa::openapi::{InfoBuilder, OpenApi};
+use utoipa::{PartialSchema, ToSchema};
 use utoipa_axum::router::OpenApiRouter;
 
 pub use error::{Problem, ProblemBody};
@@ -82,6 +83,14 @@ fn finish_openapi(mut api: OpenApi, writes_need_token: bool) -> OpenApi {
         ))
         .build();
     let components = api.components.get_or_insert_with(Default::default);
+    // The scenario object is referenced from a hand-written schema (a name or an object), so
+    // the derive does not collect it: add it and the schemas it refers to.
+    let mut scenario = vec![(
+        <simulations::ScenarioDoc as ToSchema>::name().into_owned(),
+        <simulations::ScenarioDoc as PartialSchema>::schema(),
+    )];
+    <simulations::ScenarioDoc as ToSchema>::schemas(&mut scenario);
+    components.schemas.extend(scenario);
     if writes_need_token {
         components.add_security_scheme(
             "bearer",

@@ -20,6 +20,23 @@ use super::state::AppState;
 /// Media type of a session upload or download.
 pub const MCAP: &str = "application/x-mcap";
 
+/// An MCAP file in a request or response body (documentation only: the bytes travel as they
+/// are).
+#[derive(Debug, Clone, Copy)]
+pub struct McapFile;
+
+impl utoipa::PartialSchema for McapFile {
+    fn schema() -> utoipa::openapi::RefOr<utoipa::openapi::schema::Schema> {
+        utoipa::openapi::schema::ObjectBuilder::new()
+            .schema_type(utoipa::openapi::schema::Type::String)
+            .content_media_type(MCAP)
+            .description(Some("An MCAP session file"))
+            .into()
+    }
+}
+
+impl ToSchema for McapFile {}
+
 /// Metadata of a recorded session.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize, ToSchema)]
 pub struct SessionMetaBody {
@@ -172,7 +189,7 @@ fn is_mcap(headers: &HeaderMap) -> bool {
 /// Uploads a session file: it is read (chunk CRCs checked), segmented into skills and stored
 /// with them in one transaction. The same bytes again return the stored session.
 #[utoipa::path(post, path = "/sessions", tag = "sessions",
-    request_body(content = Vec<u8>, content_type = "application/x-mcap",
+    request_body(content = McapFile, content_type = "application/x-mcap",
         description = "An MCAP session file as `icms simulate` or `icms import-glove` writes it"),
     security((), ("bearer" = [])),
     responses(
@@ -265,7 +282,7 @@ async fn get_session(
 #[utoipa::path(get, path = "/sessions/{id}/mcap", tag = "sessions",
     params(("id" = i64, Path, description = "Session id")),
     responses(
-        (status = 200, description = "The MCAP file", content_type = "application/x-mcap", body = Vec<u8>),
+        (status = 200, description = "The MCAP file", content_type = "application/x-mcap", body = McapFile),
         (status = 400, description = "The id is not an integer", body = ProblemBody, content_type = "application/problem+json"),
         (status = 404, description = "No session with this id", body = ProblemBody, content_type = "application/problem+json"),
     ))]
