@@ -292,7 +292,7 @@ fn bench_tick(iterations: usize) -> Result<TickBench, CliError> {
     }
     let contacts = dfs.output().n_contacts;
     let mut times = vec![0u32; iterations];
-    let region = stats_alloc::Region::new(crate::GLOBAL);
+    let region = stats_alloc::Region::new(&stats_alloc::INSTRUMENTED_SYSTEM);
     let total = Instant::now();
     for t in times.iter_mut() {
         let t0 = Instant::now();

@@ -4,6 +4,7 @@ mod bench;
 mod dfs_static;
 mod replay;
 mod segment;
+mod serve;
 mod sessions;
 mod simulate;
 mod skills;
@@ -42,6 +43,9 @@ enum Command {
     Demo(skills::DemoArgs),
     /// Stores session files and their skills in the skill data base (idempotent).
     Ingest(skills::IngestArgs),
+    /// The HTTP API: record sessions, simulate, query and browse skills. Creates and migrates
+    /// the data directory; seeds an empty data base with simulated sessions (--no-demo skips).
+    Serve(Box<crate::config::ServeArgs>),
     /// Queries the skill data base: filters, sorting, cursor pagination, similar skills.
     Skills(Box<skills::SkillsArgs>),
     /// The built-in robot hands (glove10, allegro, barrett, inspire, gripper), or one hand.
@@ -79,6 +83,7 @@ pub fn run() -> ExitCode {
         Command::Skills(a) => skills::run_skills(*a),
         Command::Hands(a) => replay::run_hands(a),
         Command::Replay(a) => replay::run_replay(a),
+        Command::Serve(a) => serve::run_serve(*a),
         Command::Bench(b) => bench::run(b),
     };
     match result {

@@ -1,8 +1,9 @@
 //! `icms ingest` and `icms skills`: the skill data base from the command line.
 
 use super::{print_json, CliError};
+use crate::filters::SkillFilters;
 use services::ingest::ingest_bytes;
-use services::store::{SkillQuery, SortKey, Store};
+use services::store::{Store, DEFAULT_LIMIT};
 use std::path::PathBuf;
 
 /// Arguments of `icms ingest`.
@@ -19,55 +20,14 @@ pub struct IngestArgs {
     json: bool,
 }
 
-/// Arguments of `icms skills`: every filter of the store.
+/// Arguments of `icms skills`: every filter of the store, or similar skills.
 #[derive(Debug, clap::Args)]
 pub struct SkillsArgs {
-    /// Object shape (sphere, box, cylinder).
-    #[arg(long)]
-    shape: Option<String>,
-    /// Least object mass (kg).
-    #[arg(long)]
-    mass_min: Option<f64>,
-    /// Largest object mass (kg).
-    #[arg(long)]
-    mass_max: Option<f64>,
-    /// Least friction coefficient.
-    #[arg(long)]
-    mu_min: Option<f64>,
-    /// Largest friction coefficient.
-    #[arg(long)]
-    mu_max: Option<f64>,
-    /// Number of contacts.
-    #[arg(long)]
-    contacts: Option<i64>,
-    /// Contact model (frictionless, point_with_friction, soft_finger).
-    #[arg(long)]
-    contact_model: Option<String>,
-    /// Grasp type label (precision, power).
-    #[arg(long)]
-    grasp_type: Option<String>,
-    /// Least grasp quality ε.
-    #[arg(long)]
-    min_quality: Option<f64>,
-    /// Phase whose duration to filter on (with --phase-min-s / --phase-max-s).
-    #[arg(long)]
-    phase: Option<String>,
-    /// Least duration of --phase (s).
-    #[arg(long)]
-    phase_min_s: Option<f64>,
-    /// Largest duration of --phase (s).
-    #[arg(long)]
-    phase_max_s: Option<f64>,
-    /// Sort: id, quality, mass or duration, optionally `:desc` (or a leading `-`).
-    #[arg(long, default_value = "id")]
-    sort: String,
-    /// Page size (1-1000).
-    #[arg(long, default_value_t = 50)]
-    limit: u32,
-    /// Cursor from a previous page's `next_cursor`.
-    #[arg(long)]
-    cursor: Option<String>,
-    /// The k nearest skills to this skill id instead of a filtered list.
+    /// Filters, sort and page (the same parameters as `GET /api/v1/skills`).
+    #[command(flatten)]
+    filters: SkillFilters,
+    /// The k nearest skills to this skill id instead of a filtered list (k = --limit, default
+    /// 50).
     #[arg(long)]
     similar_to: Option<i64>,
     /// Data directory.
@@ -132,7 +92,8 @@ pub fn run_skills(a: SkillsArgs) -> Result<(), CliError> {
             .await
             .map_err(|e| CliError(format!("{}: {e}", a.data.display())))?;
         if let Some(id) = a.similar_to {
-            let near = store.nearest_to_skill(id, a.limit as usize)?;
+            let k = a.filters.limit.unwrap_or(DEFAULT_LIMIT) as usize;
+            let near = store.nearest_to_skill(id, k)?;
             let items: Vec<_> = near
                 .iter()
                 .map(|(id, d)| serde_json::json!({ "skill_id": id, "distance": d }))
@@ -140,27 +101,10 @@ pub fn run_skills(a: SkillsArgs) -> Result<(), CliError> {
             store.close().await;
             return print_json(&serde_json::json!({ "similar_to": id, "items": items }));
         }
-        let sort: SortKey = a
-            .sort
-            .parse()
+        let q = a
+            .filters
+            .to_query()
             .map_err(|e| CliError(format!("--sort: {e}")))?;
-        let q = SkillQuery {
-            object_shape: a.shape,
-            mass_min: a.mass_min,
-            mass_max: a.mass_max,
-            mu_min: a.mu_min,
-            mu_max: a.mu_max,
-            contact_count: a.contacts,
-            contact_model: a.contact_model,
-            grasp_type: a.grasp_type,
-            min_quality: a.min_quality,
-            phase: a.phase,
-            phase_min_s: a.phase_min_s,
-            phase_max_s: a.phase_max_s,
-            sort,
-            limit: a.limit,
-            cursor: a.cursor,
-        };
         let page = store.query_skills(&q).await?;
         store.close().await;
         if a.json {
@@ -224,21 +168,10 @@ pub fn run_demo(a: DemoArgs) -> Result<(), CliError> {
     })?;
     println!();
     run_skills(SkillsArgs {
-        shape: None,
-        mass_min: None,
-        mass_max: None,
-        mu_min: None,
-        mu_max: None,
-        contacts: None,
-        contact_model: None,
-        grasp_type: None,
-        min_quality: None,
-        phase: None,
-        phase_min_s: None,
-        phase_max_s: None,
-        sort: "id".into(),
-        limit: 100,
-        cursor: None,
+        filters: SkillFilters {
+            limit: Some(100),
+            ..SkillFilters::default()
+        },
         similar_to: None,
         data: a.data,
         json: false,

@@ -1,0 +1,25 @@
+//! `icms serve`: the HTTP API on the embedded SQLite data base.
+
+use super::CliError;
+use crate::config::ServeArgs;
+use crate::startup::{shutdown_signal, Application};
+
+/// Serves until SIGINT or SIGTERM, then finishes in-flight requests and closes the database.
+pub fn run_serve(a: ServeArgs) -> Result<(), CliError> {
+    crate::telemetry::init();
+    let config = a.into_config()?;
+    let rt = tokio::runtime::Builder::new_multi_thread()
+        .enable_all()
+        .build()
+        .map_err(|e| CliError(format!("tokio: {e}")))?;
+    rt.block_on(async {
+        let app = Application::build(config).await?;
+        eprintln!(
+            "icms: serving on http://{}/api/v1 (OpenAPI document: http://{}/api/v1/openapi.json); Ctrl-C stops",
+            app.local_addr(),
+            app.local_addr()
+        );
+        app.run_until(shutdown_signal()).await?;
+        Ok(())
+    })
+}

@@ -1,0 +1,177 @@
+//! Settings of `icms serve`: the command-line arguments ([`ServeArgs`], also read from
+//! `ICMS_TOKEN`) and the checked configuration they become ([`ServeConfig`]).
+
+use std::net::SocketAddr;
+use std::path::PathBuf;
+use std::time::Duration;
+
+use axum::http::HeaderValue;
+
+use crate::http::{LayerConfig, StateConfig};
+
+/// Default largest request body: 256 MiB.
+pub const DEFAULT_MAX_BODY: usize = 256 * 1024 * 1024;
+
+/// Arguments of `icms serve`.
+#[derive(Debug, Clone, clap::Args)]
+pub struct ServeArgs {
+    /// Address to listen on. Anything but a loopback address needs a token.
+    #[arg(long, default_value = "127.0.0.1:8080")]
+    pub addr: SocketAddr,
+    /// Data directory: SQLite database and MCAP blobs, created and migrated on first start.
+    #[arg(long, default_value = "icms-data")]
+    pub data: PathBuf,
+    /// Bearer token that write requests (uploads, simulations, deletes) must send; reads stay
+    /// open. Without one, writes are open too (allowed on a loopback address only).
+    #[arg(long, env = "ICMS_TOKEN", hide_env_values = true)]
+    pub token: Option<String>,
+    /// Do not seed an empty data base with simulated sessions of the built-in scenarios.
+    #[arg(long)]
+    pub no_demo: bool,
+    /// Largest request body, bytes (an upload over it is refused with 413).
+    #[arg(long, default_value_t = DEFAULT_MAX_BODY)]
+    pub max_body: usize,
+    /// Origin allowed to call the API from a browser (repeatable). Default: none, no CORS.
+    #[arg(long = "cors-origin")]
+    pub cors_origins: Vec<String>,
+    /// Time limit of one request in seconds, body included (over it: 503).
+    #[arg(long, default_value_t = 120.0)]
+    pub request_timeout: f64,
+    /// Simulations that may run at once; further requests wait for a turn.
+    #[arg(long, default_value_t = 2)]
+    pub max_simulations: usize,
+    /// Skills whose JSON the server keeps in memory for `GET /api/v1/skills/{id}`.
+    #[arg(long, default_value_t = 100_000)]
+    pub cache_skills: usize,
+}
+
+impl Default for ServeArgs {
+    fn default() -> Self {
+        ServeArgs {
+            addr: SocketAddr::from(([127, 0, 0, 1], 8080)),
+            data: PathBuf::from("icms-data"),
+            token: None,
+            no_demo: false,
+            max_body: DEFAULT_MAX_BODY,
+            cors_origins: Vec::new(),
+            request_timeout: 120.0,
+            max_simulations: 2,
+            cache_skills: 100_000,
+        }
+    }
+}
+
+/// A checked server configuration.
+#[derive(Debug, Clone)]
+pub struct ServeConfig {
+    /// Address to listen on (port 0: any free port).
+    pub addr: SocketAddr,
+    /// Data directory.
+    pub data: PathBuf,
+    /// Seed an empty data base with simulated sessions.
+    pub demo: bool,
+    /// Handler state settings (token, body limit, simulations, cache).
+    pub state: StateConfig,
+    /// Layer settings (time limit, CORS).
+    pub layers: LayerConfig,
+}
+
+/// Why a configuration is refused.
+#[derive(Debug, thiserror::Error)]
+pub enum ConfigError {
+    /// Listening beyond this machine without a token would let anyone write.
+    #[error(
+        "refusing to serve on {0} without a token: anyone who can reach it could upload and \
+         delete. Set ICMS_TOKEN or --token, or listen on a loopback address (127.0.0.1)"
+    )]
+    OpenNonLoopback(SocketAddr),
+    /// An empty token.
+    #[error("the token is empty")]
+    EmptyToken,
+    /// A CORS origin that is not a valid header value.
+    #[error("--cors-origin {0:?} is not a valid origin")]
+    BadOrigin(String),
+    /// A setting out of range.
+    #[error("{0}")]
+    OutOfRange(String),
+}
+
+impl ServeArgs {
+    /// The checked configuration.
+    pub fn into_config(self) -> Result<ServeConfig, ConfigError> {
+        let token = match self.token {
+            Some(t) if t.trim().is_empty() => return Err(ConfigError::EmptyToken),
+            Some(t) => Some(t.trim().to_string()),
+            None => None,
+        };
+        if token.is_none() && !self.addr.ip().is_loopback() {
+            return Err(ConfigError::OpenNonLoopback(self.addr));
+        }
+        if !(self.request_timeout.is_finite() && self.request_timeout > 0.0) {
+            return Err(ConfigError::OutOfRange(format!(
+                "--request-timeout must be a positive number of seconds, got {}",
+                self.request_timeout
+            )));
+        }
+        if self.max_body == 0 {
+            return Err(ConfigError::OutOfRange(
+                "--max-body must be at least 1".into(),
+            ));
+        }
+        let cors_origins = self
+            .cors_origins
+            .iter()
+            .map(|o| HeaderValue::from_str(o).map_err(|_| ConfigError::BadOrigin(o.clone())))
+            .collect::<Result<Vec<_>, _>>()?;
+        Ok(ServeConfig {
+            addr: self.addr,
+            data: self.data,
+            demo: !self.no_demo,
+            state: StateConfig {
+                token,
+                max_body: self.max_body,
+                max_simulations: self.max_simulations.max(1),
+                cache_capacity: self.cache_skills,
+            },
+            layers: LayerConfig {
+                request_timeout: Duration::from_secs_f64(self.request_timeout),
+                cors_origins,
+            },
+        })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn serving_beyond_loopback_needs_a_token() {
+        let open = ServeArgs {
+            addr: "0.0.0.0:8080".parse().unwrap(),
+            ..ServeArgs::default()
+        };
+        assert!(matches!(
+            open.clone().into_config(),
+            Err(ConfigError::OpenNonLoopback(_))
+        ));
+        let with_token = ServeArgs {
+            token: Some("s3cret".into()),
+            ..open
+        };
+        assert!(with_token.into_config().is_ok());
+        assert!(
+            ServeArgs::default().into_config().is_ok(),
+            "loopback is fine"
+        );
+    }
+
+    #[test]
+    fn an_empty_token_is_refused() {
+        let a = ServeArgs {
+            token: Some("  ".into()),
+            ..ServeArgs::default()
+        };
+        assert!(matches!(a.into_config(), Err(ConfigError::EmptyToken)));
+    }
+}

@@ -1,0 +1,154 @@
+//! The skill filters, sort and page of a skill query, as one set of named parameters shared by
+//! the command line (`icms skills --shape box ...`) and the HTTP API
+//! (`GET /api/v1/skills?shape=box&...`), and their translation into the store's
+//! [`SkillQuery`]. Names and meanings are the same in both places.
+
+use serde::Deserialize;
+use services::store::{SkillQuery, SortKey, StoreError, DEFAULT_LIMIT};
+
+/// Filters, sort and page of a skill query. Every filter is optional; ranges are inclusive.
+#[derive(Debug, Clone, Default, PartialEq, Deserialize, clap::Args, utoipa::IntoParams)]
+#[serde(default, deny_unknown_fields)]
+#[into_params(parameter_in = Query)]
+pub struct SkillFilters {
+    /// Object shape: sphere, box or cylinder.
+    #[arg(long)]
+    pub shape: Option<String>,
+    /// Least object mass, kg.
+    #[arg(long)]
+    pub mass_min: Option<f64>,
+    /// Largest object mass, kg.
+    #[arg(long)]
+    pub mass_max: Option<f64>,
+    /// Least Coulomb friction coefficient.
+    #[arg(long)]
+    pub mu_min: Option<f64>,
+    /// Largest Coulomb friction coefficient.
+    #[arg(long)]
+    pub mu_max: Option<f64>,
+    /// Number of fingertip contacts.
+    #[arg(long)]
+    #[param(minimum = 0)]
+    pub contacts: Option<i64>,
+    /// Contact model: frictionless, point_with_friction or soft_finger.
+    #[arg(long)]
+    pub contact_model: Option<String>,
+    /// Grasp type label, e.g. precision-2vf.
+    #[arg(long)]
+    pub grasp_type: Option<String>,
+    /// Least Ferrari-Canny grasp quality ε.
+    #[arg(long)]
+    pub min_quality: Option<f64>,
+    /// The skill has a phase of this name (with phase_min_s / phase_max_s: of that duration).
+    #[arg(long)]
+    pub phase: Option<String>,
+    /// Least duration of `phase`, s (needs `phase`).
+    #[arg(long)]
+    pub phase_min_s: Option<f64>,
+    /// Largest duration of `phase`, s (needs `phase`).
+    #[arg(long)]
+    pub phase_max_s: Option<f64>,
+    /// Sort: id, quality, mass or duration, optionally with `:asc` / `:desc` (or a leading `-`
+    /// for descending). Default: id ascending.
+    #[arg(long, allow_hyphen_values = true)]
+    pub sort: Option<String>,
+    /// Page size, 1 to 1000. Default 50.
+    #[arg(long)]
+    #[param(minimum = 1, maximum = 1000)]
+    pub limit: Option<u32>,
+    /// `next_cursor` of the previous page, passed back unchanged with the same filters and sort.
+    #[arg(long)]
+    pub cursor: Option<String>,
+}
+
+impl SkillFilters {
+    /// The store query these parameters ask for. A malformed sort is
+    /// [`StoreError::InvalidQuery`]; the store itself checks ranges, limit and cursor.
+    pub fn to_query(&self) -> Result<SkillQuery, StoreError> {
+        let sort: SortKey = match &self.sort {
+            Some(s) => s.parse()?,
+            None => SortKey::default(),
+        };
+        Ok(SkillQuery {
+            object_shape: self.shape.clone(),
+            mass_min: self.mass_min,
+            mass_max: self.mass_max,
+            mu_min: self.mu_min,
+            mu_max: self.mu_max,
+            contact_count: self.contacts,
+            contact_model: self.contact_model.clone(),
+            grasp_type: self.grasp_type.clone(),
+            min_quality: self.min_quality,
+            phase: self.phase.clone(),
+            phase_min_s: self.phase_min_s,
+            phase_max_s: self.phase_max_s,
+            sort,
+            limit: self.limit.unwrap_or(DEFAULT_LIMIT),
+            cursor: self.cursor.clone(),
+        })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use services::store::{SortField, SortOrder};
+
+    #[test]
+    fn command_line_flags_and_query_string_give_the_same_query() {
+        use clap::Parser;
+        #[derive(Parser)]
+        struct Cli {
+            #[command(flatten)]
+            f: SkillFilters,
+        }
+        let cli = Cli::try_parse_from([
+            "x",
+            "--shape",
+            "box",
+            "--mass-min",
+            "0.1",
+            "--contacts",
+            "2",
+            "--phase",
+            "hold",
+            "--phase-max-s",
+            "2.5",
+            "--sort",
+            "-quality",
+            "--limit",
+            "7",
+        ])
+        .unwrap()
+        .f;
+        let http: SkillFilters = serde_json::from_value(serde_json::json!({
+            "shape": "box", "mass_min": 0.1, "contacts": 2, "phase": "hold",
+            "phase_max_s": 2.5, "sort": "-quality", "limit": 7
+        }))
+        .unwrap();
+        assert_eq!(cli, http);
+        let q = cli.to_query().unwrap();
+        assert_eq!(q.object_shape.as_deref(), Some("box"));
+        assert_eq!(q.contact_count, Some(2));
+        assert_eq!(q.sort, SortKey::new(SortField::Quality, SortOrder::Desc));
+        assert_eq!(q.limit, 7);
+    }
+
+    #[test]
+    fn defaults_are_id_order_and_fifty_per_page() {
+        let q = SkillFilters::default().to_query().unwrap();
+        assert_eq!(q, SkillQuery::default());
+    }
+
+    #[test]
+    fn an_unknown_parameter_or_sort_is_refused() {
+        assert!(
+            serde_json::from_value::<SkillFilters>(serde_json::json!({"colour": "red"})).is_err()
+        );
+        let f = SkillFilters {
+            sort: Some("colour".into()),
+            ..SkillFilters::default()
+        };
+        assert!(matches!(f.to_query(), Err(StoreError::InvalidQuery(_))));
+    }
+}

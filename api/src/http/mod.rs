@@ -1,0 +1,171 @@
+//! The HTTP API: one router per resource over one [`AppState`], merged by [`app`] with the
+//! layers every route gets (time limit, body limit, problem+json for every error, optional
+//! CORS, request tracing), and the OpenAPI 3.1 document generated from the same handlers, so
+//! the document lists exactly the routes the router serves.
+//!
+//! | route | |
+//! |---|---|
+//! | `POST /api/v1/sessions` | upload an MCAP session (201, or 200 if already stored) |
+//! | `GET /api/v1/sessions`, `GET /api/v1/sessions/{id}` | list (paginated), get |
+//! | `GET /api/v1/sessions/{id}/mcap`, `DELETE /api/v1/sessions/{id}` | download, delete |
+//! | `POST /api/v1/simulations` | simulate a scenario server-side and store it |
+//! | `GET /api/v1/skills` | every store filter, sort, `limit`, `cursor` |
+//! | `GET /api/v1/skills/{id}`, `GET /api/v1/skills/{id}/similar`, `DELETE /api/v1/skills/{id}` | |
+//! | `GET /healthz`, `GET /api/v1/openapi.json` | liveness, this API's document |
+
+pub mod cache;
+pub mod error;
+pub mod extract;
+pub mod meta;
+pub mod sessions;
+pub mod simulations;
+pub mod skills;
+pub mod state;
+
+use std::time::Duration;
+
+use axum::extract::{DefaultBodyLimit, Request, State};
+use axum::http::{header, HeaderValue, Method};
+use axum::middleware::{self, Next};
+use axum::response::{IntoResponse, Response};
+use axum::Router;
+use bytes::Bytes;
+use tower_http::cors::{AllowOrigin, CorsLayer};
+use tower_http::trace::TraceLayer;
+use utoipa::openapi::security::{Http, HttpAuthScheme, SecurityScheme};
+use utoipa::openapi::{InfoBuilder, OpenApi};
+use utoipa::{PartialSchema, ToSchema};
+use utoipa_axum::router::OpenApiRouter;
+
+pub use error::{Problem, ProblemBody};
+pub use state::{AppState, StateConfig};
+
+/// Prefix of every resource route.
+pub const API_PREFIX: &str = "/api/v1";
+
+/// Settings of the layers around the routes.
+#[derive(Debug, Clone)]
+pub struct LayerConfig {
+    /// Time limit of one request, body included.
+    pub request_timeout: Duration,
+    /// Origins allowed to call the API from a browser; empty: no CORS headers at all.
+    pub cors_origins: Vec<HeaderValue>,
+}
+
+/// Every route with its OpenAPI description, before state and layers.
+pub fn routes() -> OpenApiRouter<AppState> {
+    let api = OpenApiRouter::new()
+        .merge(sessions::router())
+        .merge(skills::router())
+        .merge(simulations::router())
+        .merge(meta::api_router());
+    OpenApiRouter::new()
+        .nest(API_PREFIX, api)
+        .merge(meta::root_router())
+}
+
+/// The OpenAPI document of [`routes`], with the info, tags and the bearer scheme; when
+/// `writes_need_token` is false the write operations carry no security requirement, as the
+/// server then accepts them without one.
+pub fn openapi(writes_need_token: bool) -> OpenApi {
+    let (_, api) = routes().split_for_parts();
+    finish_openapi(api, writes_need_token)
+}
+
+fn finish_openapi(mut api: OpenApi, writes_need_token: bool) -> OpenApi {
+    api.info = InfoBuilder::new()
+        .title("ICMS skill service")
+        .version(env!("CARGO_PKG_VERSION"))
+        .description(Some(
+            "Record grasp sessions (MCAP), simulate scenarios server-side, and query and browse \
+             the skill data base. Errors are application/problem+json (RFC 9457). A request \
+             over the server's time limit is answered 503.",
+        ))
+        .build();
+    let components = api.components.get_or_insert_with(Default::default);
+    // The scenario object is referenced from a hand-written schema (a name or an object), so
+    // the derive does not collect it: add it and the schemas it refers to.
+    let mut scenario = vec![(
+        <simulations::ScenarioDoc as ToSchema>::name().into_owned(),
+        <simulations::ScenarioDoc as PartialSchema>::schema(),
+    )];
+    <simulations::ScenarioDoc as ToSchema>::schemas(&mut scenario);
+    components.schemas.extend(scenario);
+    if writes_need_token {
+        components.add_security_scheme(
+            "bearer",
+            SecurityScheme::Http(Http::new(HttpAuthScheme::Bearer)),
+        );
+    }
+    for item in api.paths.paths.values_mut() {
+        for op in [
+            &mut item.post,
+            &mut item.delete,
+            &mut item.put,
+            &mut item.patch,
+        ]
+        .into_iter()
+        .flatten()
+        {
+            if writes_need_token {
+                // Drop the empty (anonymous) alternative: a token is required.
+                if let Some(sec) = op.security.as_mut() {
+                    sec.retain(|s| {
+                        serde_json::to_value(s).is_ok_and(|v| v != serde_json::json!({}))
+                    });
+                }
+            } else {
+                op.security = None;
+                op.responses.responses.remove("401");
+            }
+        }
+    }
+    api
+}
+
+/// The application: every route over `state`, with its layers. Also stores the OpenAPI
+/// document in `state` for `GET /api/v1/openapi.json`.
+pub fn app(state: AppState, layers: &LayerConfig) -> Router {
+    let (router, api) = routes().split_for_parts();
+    let api = finish_openapi(api, state.token().is_some());
+    state.set_openapi_json(Bytes::from(
+        api.to_json().expect("the OpenAPI document serialises"),
+    ));
+    let max_body = state.max_body();
+    let mut router = router
+        .fallback(not_found)
+        .with_state(state)
+        .layer(DefaultBodyLimit::max(max_body))
+        .layer(middleware::from_fn_with_state(
+            layers.request_timeout,
+            time_limit,
+        ));
+    if !layers.cors_origins.is_empty() {
+        router = router.layer(
+            CorsLayer::new()
+                .allow_origin(AllowOrigin::list(layers.cors_origins.clone()))
+                .allow_methods([Method::GET, Method::POST, Method::DELETE])
+                .allow_headers([header::AUTHORIZATION, header::CONTENT_TYPE]),
+        );
+    }
+    router
+        .layer(middleware::map_response(error::problem_for_bare_errors))
+        .layer(TraceLayer::new_for_http())
+}
+
+async fn not_found() -> Problem {
+    Problem::not_found("no such route; the API is described at /api/v1/openapi.json")
+}
+
+/// Middleware: a request that takes longer than the limit (reading its body included) is
+/// answered 503 problem+json.
+async fn time_limit(State(limit): State<Duration>, req: Request, next: Next) -> Response {
+    match tokio::time::timeout(limit, next.run(req)).await {
+        Ok(r) => r,
+        Err(_) => Problem::unavailable(format!(
+            "the request took longer than the server's limit of {} s",
+            limit.as_secs_f64()
+        ))
+        .into_response(),
+    }
+}

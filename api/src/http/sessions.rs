@@ -1,0 +1,340 @@
+//! `/api/v1/sessions`: upload an MCAP session (read, validated, segmented and stored with its
+//! skills in one atomic, idempotent step), list, get, download and delete sessions.
+
+use axum::body::Body;
+use axum::extract::State;
+use axum::http::{header, HeaderMap, HeaderValue, StatusCode};
+use axum::response::{IntoResponse, Response};
+use serde::{Deserialize, Serialize};
+use services::ingest::ingest_bytes;
+use services::store::{IngestOutcome, Session, SessionMeta, DEFAULT_LIMIT};
+use utoipa::{IntoParams, ToSchema};
+use utoipa_axum::router::OpenApiRouter;
+use utoipa_axum::routes;
+
+use super::error::{Problem, ProblemBody};
+use super::extract::{Id, Query, WriteAccess};
+use super::skills::SkillBody;
+use super::state::AppState;
+
+/// Media type of a session upload or download.
+pub const MCAP: &str = "application/x-mcap";
+
+/// An MCAP file in a request or response body (documentation only: the bytes travel as they
+/// are).
+#[derive(Debug, Clone, Copy)]
+pub struct McapFile;
+
+impl utoipa::PartialSchema for McapFile {
+    fn schema() -> utoipa::openapi::RefOr<utoipa::openapi::schema::Schema> {
+        utoipa::openapi::schema::ObjectBuilder::new()
+            .schema_type(utoipa::openapi::schema::Type::String)
+            .content_media_type(MCAP)
+            .description(Some("An MCAP session file"))
+            .into()
+    }
+}
+
+impl ToSchema for McapFile {}
+
+/// Metadata of a recorded session.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, ToSchema)]
+pub struct SessionMetaBody {
+    /// Name of the simulated operator scenario, if the session was simulated.
+    pub scenario: Option<String>,
+    /// Seed of the simulation, if simulated.
+    pub seed: Option<u64>,
+    /// Hand (glove) that performed the session, e.g. glove10.
+    pub hand: String,
+    /// Object shape: sphere, box or cylinder.
+    pub object_shape: String,
+    /// Object mass, kg.
+    pub object_mass: f64,
+    /// Coulomb friction coefficient.
+    pub mu: f64,
+    /// Length of the session, ns.
+    pub duration_ns: u64,
+    /// Wall-clock start time (RFC 3339), if known.
+    pub started_at: Option<String>,
+    /// Every metadata field of the session file (free-form).
+    #[schema(value_type = Object)]
+    pub extra: serde_json::Value,
+}
+
+impl From<SessionMeta> for SessionMetaBody {
+    fn from(m: SessionMeta) -> Self {
+        SessionMetaBody {
+            scenario: m.scenario,
+            seed: m.seed,
+            hand: m.hand,
+            object_shape: m.object_shape,
+            object_mass: m.object_mass,
+            mu: m.mu,
+            duration_ns: m.duration_ns,
+            started_at: m.started_at,
+            extra: m.extra,
+        }
+    }
+}
+
+/// A stored session.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, ToSchema)]
+pub struct SessionBody {
+    /// Session id.
+    pub id: i64,
+    /// Hex SHA-256 of the MCAP file (the same bytes are one session).
+    pub sha256: String,
+    /// Size of the MCAP file, bytes.
+    pub size_bytes: i64,
+    /// Session metadata.
+    pub meta: SessionMetaBody,
+    /// Ids of the session's skills, ascending.
+    pub skill_ids: Vec<i64>,
+    /// When the session was stored (UTC, RFC 3339).
+    pub created_at: String,
+    /// Where to download the MCAP file.
+    pub mcap_url: String,
+}
+
+impl From<Session> for SessionBody {
+    fn from(s: Session) -> Self {
+        SessionBody {
+            mcap_url: format!("/api/v1/sessions/{}/mcap", s.id),
+            id: s.id,
+            sha256: s.sha256,
+            size_bytes: s.size_bytes,
+            meta: s.meta.into(),
+            skill_ids: s.skill_ids,
+            created_at: s.created_at,
+        }
+    }
+}
+
+/// One page of sessions.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, ToSchema)]
+pub struct SessionPage {
+    /// Sessions by ascending id.
+    pub items: Vec<SessionBody>,
+    /// Pass as `cursor` for the next page; `null` on the last.
+    pub next_cursor: Option<String>,
+}
+
+/// Page parameters of `GET /sessions`.
+#[derive(Debug, Clone, Default, Deserialize, IntoParams)]
+#[serde(default, deny_unknown_fields)]
+#[into_params(parameter_in = Query)]
+pub struct PageParams {
+    /// Page size, 1 to 1000. Default 50.
+    #[param(minimum = 1, maximum = 1000)]
+    pub limit: Option<u32>,
+    /// `next_cursor` of the previous page.
+    pub cursor: Option<String>,
+}
+
+/// A session stored (or found already stored) with its skills.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, ToSchema)]
+pub struct StoredSession {
+    /// Id of the session.
+    pub session_id: i64,
+    /// `true` if this request stored it, `false` if the same bytes were already stored.
+    pub created: bool,
+    /// The session's skills, by ascending id.
+    pub skills: Vec<SkillBody>,
+}
+
+impl StoredSession {
+    /// The reply for an ingest: 201 with `Location` if created, else 200.
+    pub async fn reply(st: &AppState, out: IngestOutcome) -> Result<Response, Problem> {
+        let mut skills = Vec::with_capacity(out.skill_ids.len());
+        for id in &out.skill_ids {
+            skills.push(SkillBody::from(st.store().get_skill(*id).await?));
+        }
+        let body = StoredSession {
+            session_id: out.session_id,
+            created: out.created,
+            skills,
+        };
+        let status = if out.created {
+            StatusCode::CREATED
+        } else {
+            StatusCode::OK
+        };
+        let mut r = (status, axum::Json(body)).into_response();
+        if out.created {
+            if let Ok(v) = HeaderValue::from_str(&format!("/api/v1/sessions/{}", out.session_id)) {
+                r.headers_mut().insert(header::LOCATION, v);
+            }
+        }
+        Ok(r)
+    }
+}
+
+/// The routes of this resource.
+pub fn router() -> OpenApiRouter<AppState> {
+    OpenApiRouter::new()
+        .routes(routes!(upload_session, list_sessions))
+        .routes(routes!(get_session, delete_session))
+        .routes(routes!(download_session))
+}
+
+/// Whether `headers` declare an MCAP body (parameters after `;` are ignored).
+fn is_mcap(headers: &HeaderMap) -> bool {
+    headers
+        .get(header::CONTENT_TYPE)
+        .and_then(|v| v.to_str().ok())
+        .and_then(|v| v.split(';').next())
+        .is_some_and(|m| m.trim().eq_ignore_ascii_case(MCAP))
+}
+
+/// Uploads a session file: it is read (chunk CRCs checked), segmented into skills and stored
+/// with them in one transaction. The same bytes again return the stored session.
+#[utoipa::path(post, path = "/sessions", tag = "sessions",
+    request_body(content = McapFile, content_type = "application/x-mcap",
+        description = "An MCAP session file as `icms simulate` or `icms import-glove` writes it"),
+    security((), ("bearer" = [])),
+    responses(
+        (status = 201, description = "Stored; `Location` names the new session", body = StoredSession,
+            headers(("Location" = String, description = "URL of the session"))),
+        (status = 200, description = "The same bytes were already stored: that session", body = StoredSession),
+        (status = 401, description = "A token is configured and was not sent, or a wrong one", body = ProblemBody, content_type = "application/problem+json"),
+        (status = 413, description = "The body is over the server's limit", body = ProblemBody, content_type = "application/problem+json"),
+        (status = 415, description = "Content-Type is not application/x-mcap", body = ProblemBody, content_type = "application/problem+json"),
+        (status = 422, description = "Not a valid session file, with the reason; nothing was stored", body = ProblemBody, content_type = "application/problem+json"),
+        (status = 503, description = "Over the server's time limit", body = ProblemBody, content_type = "application/problem+json"),
+    ))]
+async fn upload_session(
+    _: WriteAccess,
+    State(st): State<AppState>,
+    headers: HeaderMap,
+    body: Body,
+) -> Result<Response, Problem> {
+    if !is_mcap(&headers) {
+        return Err(Problem::unsupported_media_type(format!(
+            "upload a session as Content-Type: {MCAP}"
+        )));
+    }
+    let limit = st.max_body();
+    let declared = headers
+        .get(header::CONTENT_LENGTH)
+        .and_then(|v| v.to_str().ok())
+        .and_then(|v| v.parse::<u64>().ok());
+    if declared.is_some_and(|n| n > limit as u64) {
+        return Err(Problem::too_large(limit));
+    }
+    let bytes = axum::body::to_bytes(body, limit).await.map_err(|e| {
+        let over = std::error::Error::source(&e)
+            .is_some_and(|s| s.is::<http_body_util::LengthLimitError>());
+        if over {
+            Problem::too_large(limit)
+        } else {
+            Problem::bad_request(format!("could not read the request body: {e}"))
+        }
+    })?;
+    let size = bytes.len();
+    let out = ingest_bytes(st.store(), Vec::from(bytes), "upload".into()).await?;
+    tracing::info!(
+        session_id = out.session_id,
+        created = out.created,
+        skills = out.skill_ids.len(),
+        size,
+        "session uploaded"
+    );
+    StoredSession::reply(&st, out).await
+}
+
+/// Sessions by ascending id, one page at a time.
+#[utoipa::path(get, path = "/sessions", tag = "sessions",
+    params(PageParams),
+    responses(
+        (status = 200, description = "One page of sessions", body = SessionPage),
+        (status = 400, description = "An invalid limit or cursor, or an unknown parameter", body = ProblemBody, content_type = "application/problem+json"),
+    ))]
+async fn list_sessions(
+    State(st): State<AppState>,
+    Query(p): Query<PageParams>,
+) -> Result<axum::Json<SessionPage>, Problem> {
+    let page = st
+        .store()
+        .list_sessions(p.limit.unwrap_or(DEFAULT_LIMIT), p.cursor.as_deref())
+        .await?;
+    Ok(axum::Json(SessionPage {
+        items: page.items.into_iter().map(SessionBody::from).collect(),
+        next_cursor: page.next_cursor,
+    }))
+}
+
+/// One session with its skill ids.
+#[utoipa::path(get, path = "/sessions/{id}", tag = "sessions",
+    params(("id" = i64, Path, description = "Session id")),
+    responses(
+        (status = 200, description = "The session", body = SessionBody),
+        (status = 400, description = "The id is not an integer", body = ProblemBody, content_type = "application/problem+json"),
+        (status = 404, description = "No session with this id", body = ProblemBody, content_type = "application/problem+json"),
+    ))]
+async fn get_session(
+    State(st): State<AppState>,
+    Id(id): Id,
+) -> Result<axum::Json<SessionBody>, Problem> {
+    Ok(axum::Json(st.store().get_session(id).await?.into()))
+}
+
+/// The session's MCAP file, as uploaded or recorded.
+#[utoipa::path(get, path = "/sessions/{id}/mcap", tag = "sessions",
+    params(("id" = i64, Path, description = "Session id")),
+    responses(
+        (status = 200, description = "The MCAP file", content_type = "application/x-mcap", body = McapFile),
+        (status = 400, description = "The id is not an integer", body = ProblemBody, content_type = "application/problem+json"),
+        (status = 404, description = "No session with this id", body = ProblemBody, content_type = "application/problem+json"),
+    ))]
+async fn download_session(State(st): State<AppState>, Id(id): Id) -> Result<Response, Problem> {
+    let path = st.store().session_blob_path(id).await?;
+    let file = match tokio::fs::File::open(&path).await {
+        Ok(f) => f,
+        // Deleted between the lookup and the open.
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => {
+            return Err(Problem::not_found(format!("no session with id {id}")))
+        }
+        Err(e) => return Err(Problem::internal(&e)),
+    };
+    let len = file
+        .metadata()
+        .await
+        .map_err(|e| Problem::internal(&e))?
+        .len();
+    let body = Body::from_stream(tokio_util::io::ReaderStream::with_capacity(
+        file,
+        256 * 1024,
+    ));
+    let mut r = Response::new(body);
+    let h = r.headers_mut();
+    h.insert(header::CONTENT_TYPE, HeaderValue::from_static(MCAP));
+    h.insert(header::CONTENT_LENGTH, HeaderValue::from(len));
+    if let Ok(v) = HeaderValue::from_str(&format!("attachment; filename=\"session-{id}.mcap\"")) {
+        h.insert(header::CONTENT_DISPOSITION, v);
+    }
+    Ok(r)
+}
+
+/// Deletes a session with its skills and its MCAP file.
+#[utoipa::path(delete, path = "/sessions/{id}", tag = "sessions",
+    params(("id" = i64, Path, description = "Session id")),
+    security((), ("bearer" = [])),
+    responses(
+        (status = 204, description = "Deleted, with its skills and MCAP file"),
+        (status = 400, description = "The id is not an integer", body = ProblemBody, content_type = "application/problem+json"),
+        (status = 401, description = "A token is configured and was not sent, or a wrong one", body = ProblemBody, content_type = "application/problem+json"),
+        (status = 404, description = "No session with this id", body = ProblemBody, content_type = "application/problem+json"),
+    ))]
+async fn delete_session(
+    _: WriteAccess,
+    State(st): State<AppState>,
+    Id(id): Id,
+) -> Result<StatusCode, Problem> {
+    // Skills are created with their session and never added later, so these are all of them.
+    let skill_ids = st.store().get_session(id).await?.skill_ids;
+    let result = st.store().delete_session(id).await;
+    st.cache().remove(&skill_ids);
+    result?;
+    tracing::info!(session_id = id, skills = skill_ids.len(), "deleted session");
+    Ok(StatusCode::NO_CONTENT)
+}

@@ -1,0 +1,225 @@
+//! `/api/v1/skills`: filtered and paginated lists, one skill (served from the hot-skill cache),
+//! similar skills, delete.
+
+use axum::body::Body;
+use axum::extract::State;
+use axum::http::{header, HeaderValue, StatusCode};
+use axum::response::{IntoResponse, Response};
+use bytes::Bytes;
+use serde::{Deserialize, Serialize};
+use services::store::{Skill, FEATURE_DIM};
+use utoipa::{IntoParams, ToSchema};
+use utoipa_axum::router::OpenApiRouter;
+use utoipa_axum::routes;
+
+use super::error::{Problem, ProblemBody};
+use super::extract::{Id, Query, WriteAccess};
+use super::state::AppState;
+use crate::filters::SkillFilters;
+
+/// A stored skill: the hand-independent parameters of one grasp, in the object frame B.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, ToSchema)]
+pub struct SkillBody {
+    /// Skill id.
+    pub id: i64,
+    /// Id of the session the skill was found in.
+    pub session_id: i64,
+    /// Object shape: sphere, box or cylinder.
+    pub object_shape: String,
+    /// Object mass, kg.
+    pub object_mass: f64,
+    /// Coulomb friction coefficient.
+    pub mu: f64,
+    /// Number of fingertip contacts.
+    pub contact_count: i64,
+    /// Contact model: frictionless, point_with_friction or soft_finger.
+    pub contact_model: String,
+    /// Grasp type label, e.g. precision-2vf.
+    pub grasp_type: String,
+    /// Ferrari-Canny ε grasp quality.
+    pub quality: f64,
+    /// Volume of the grasp wrench space.
+    pub volume: f64,
+    /// Duration of the skill, s.
+    pub duration_s: f64,
+    /// Start of the skill, ns since the session's start.
+    pub start_ns: i64,
+    /// End of the skill, ns since the session's start.
+    pub end_ns: i64,
+    /// Phases in order with their durations: `[name, seconds]` pairs.
+    pub phase_durations: Vec<(String, f64)>,
+    /// Feature vector for similarity search (16 values).
+    #[schema(min_items = 16, max_items = 16)]
+    pub feature: Vec<f32>,
+    /// The full hand-independent parameters, as `icms segment --json` prints them.
+    #[schema(value_type = Object)]
+    pub params: serde_json::Value,
+    /// When the skill was stored (UTC, RFC 3339).
+    pub created_at: String,
+}
+
+impl From<Skill> for SkillBody {
+    fn from(s: Skill) -> Self {
+        debug_assert_eq!(s.feature.len(), FEATURE_DIM);
+        SkillBody {
+            id: s.id,
+            session_id: s.session_id,
+            object_shape: s.object_shape,
+            object_mass: s.object_mass,
+            mu: s.mu,
+            contact_count: s.contact_count,
+            contact_model: s.contact_model,
+            grasp_type: s.grasp_type,
+            quality: s.quality,
+            volume: s.volume,
+            duration_s: s.duration_s,
+            start_ns: s.start_ns,
+            end_ns: s.end_ns,
+            phase_durations: s.phase_durations,
+            feature: s.feature,
+            params: s.params,
+            created_at: s.created_at,
+        }
+    }
+}
+
+/// One page of skills.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, ToSchema)]
+pub struct SkillPage {
+    /// The skills of this page, in the requested order.
+    pub items: Vec<SkillBody>,
+    /// Pass as `cursor` (with the same filters and sort) for the next page; `null` on the last.
+    pub next_cursor: Option<String>,
+}
+
+/// Parameters of `GET /skills/{id}/similar`.
+#[derive(Debug, Clone, Default, Deserialize, IntoParams)]
+#[serde(default, deny_unknown_fields)]
+#[into_params(parameter_in = Query)]
+pub struct SimilarParams {
+    /// How many similar skills, 1 to 1000. Default 10.
+    #[param(minimum = 1, maximum = 1000)]
+    pub k: Option<u32>,
+}
+
+/// A skill near another in feature space.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, ToSchema)]
+pub struct Neighbour {
+    /// Id of the similar skill.
+    pub skill_id: i64,
+    /// Euclidean distance between the two feature vectors.
+    pub distance: f32,
+}
+
+/// The skills most similar to one.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, ToSchema)]
+pub struct SimilarSkills {
+    /// The skill asked about.
+    pub similar_to: i64,
+    /// Nearest first (ties by id); the skill itself is left out.
+    pub items: Vec<Neighbour>,
+}
+
+/// The routes of this resource.
+pub fn router() -> OpenApiRouter<AppState> {
+    OpenApiRouter::new()
+        .routes(routes!(list_skills))
+        .routes(routes!(get_skill, delete_skill))
+        .routes(routes!(similar_skills))
+}
+
+/// Skills matching every given filter, one page at a time.
+#[utoipa::path(get, path = "/skills", tag = "skills",
+    params(SkillFilters),
+    responses(
+        (status = 200, description = "One page of matching skills", body = SkillPage),
+        (status = 400, description = "An invalid filter, sort, limit or cursor, or an unknown parameter", body = ProblemBody, content_type = "application/problem+json"),
+    ))]
+async fn list_skills(
+    State(st): State<AppState>,
+    Query(filters): Query<SkillFilters>,
+) -> Result<axum::Json<SkillPage>, Problem> {
+    let q = filters.to_query()?;
+    let page = st.store().query_skills(&q).await?;
+    Ok(axum::Json(SkillPage {
+        items: page.items.into_iter().map(SkillBody::from).collect(),
+        next_cursor: page.next_cursor,
+    }))
+}
+
+fn json_response(json: Bytes) -> Response {
+    let mut r = Response::new(Body::from(json));
+    r.headers_mut().insert(
+        header::CONTENT_TYPE,
+        HeaderValue::from_static("application/json"),
+    );
+    r
+}
+
+/// One skill.
+#[utoipa::path(get, path = "/skills/{id}", tag = "skills",
+    params(("id" = i64, Path, description = "Skill id")),
+    responses(
+        (status = 200, description = "The skill", body = SkillBody),
+        (status = 400, description = "The id is not an integer", body = ProblemBody, content_type = "application/problem+json"),
+        (status = 404, description = "No skill with this id", body = ProblemBody, content_type = "application/problem+json"),
+    ))]
+async fn get_skill(State(st): State<AppState>, Id(id): Id) -> Result<Response, Problem> {
+    let epoch = match st.cache().get(id) {
+        Ok(json) => return Ok(json_response(json)),
+        Err(epoch) => epoch,
+    };
+    let skill = SkillBody::from(st.store().get_skill(id).await?);
+    let json = Bytes::from(serde_json::to_vec(&skill).map_err(|e| Problem::internal(&e))?);
+    st.cache().insert(id, json.clone(), epoch);
+    Ok(json_response(json))
+}
+
+/// Deletes one skill (its session stays).
+#[utoipa::path(delete, path = "/skills/{id}", tag = "skills",
+    params(("id" = i64, Path, description = "Skill id")),
+    security((), ("bearer" = [])),
+    responses(
+        (status = 204, description = "Deleted"),
+        (status = 400, description = "The id is not an integer", body = ProblemBody, content_type = "application/problem+json"),
+        (status = 401, description = "A token is configured and was not sent, or a wrong one", body = ProblemBody, content_type = "application/problem+json"),
+        (status = 404, description = "No skill with this id", body = ProblemBody, content_type = "application/problem+json"),
+    ))]
+async fn delete_skill(
+    _: WriteAccess,
+    State(st): State<AppState>,
+    Id(id): Id,
+) -> Result<StatusCode, Problem> {
+    let result = st.store().delete_skill(id).await;
+    st.cache().remove(&[id]);
+    result?;
+    tracing::info!(skill_id = id, "deleted skill");
+    Ok(StatusCode::NO_CONTENT)
+}
+
+/// The `k` skills nearest to one in feature space.
+#[utoipa::path(get, path = "/skills/{id}/similar", tag = "skills",
+    params(("id" = i64, Path, description = "Skill id"), SimilarParams),
+    responses(
+        (status = 200, description = "The nearest skills, nearest first", body = SimilarSkills),
+        (status = 400, description = "The id is not an integer, or k is out of range", body = ProblemBody, content_type = "application/problem+json"),
+        (status = 404, description = "No skill with this id", body = ProblemBody, content_type = "application/problem+json"),
+    ))]
+async fn similar_skills(
+    State(st): State<AppState>,
+    Id(id): Id,
+    Query(p): Query<SimilarParams>,
+) -> Result<impl IntoResponse, Problem> {
+    let k = p.k.unwrap_or(10);
+    if !(1..=1000).contains(&k) {
+        return Err(Problem::bad_request(format!("k {k} is outside 1..=1000")));
+    }
+    let near = st.store().nearest_to_skill(id, k as usize)?;
+    Ok(axum::Json(SimilarSkills {
+        similar_to: id,
+        items: near
+            .into_iter()
+            .map(|(skill_id, distance)| Neighbour { skill_id, distance })
+            .collect(),
+    }))
+}

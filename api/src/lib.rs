@@ -1,0 +1,12 @@
+//! ICMS's user-facing layer: the HTTP API ([`http`]), the `icms` command line ([`cli`]) and
+//! the skill-filter parameters both share ([`filters`]).
+//!
+//! The `icms` binary is `api::cli::run()` with an allocation-counting global allocator
+//! (`stats_alloc`), which `icms bench tick` reads.
+
+pub mod cli;
+pub mod config;
+pub mod filters;
+pub mod http;
+pub mod startup;
+pub mod telemetry;

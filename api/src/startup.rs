@@ -1,0 +1,209 @@
+//! Starting and stopping the server: open (create, migrate) the store, bind, serve until a
+//! shutdown signal, seed an empty data base in the background, and on shutdown let in-flight
+//! requests finish and close the database cleanly.
+
+use std::future::Future;
+use std::net::SocketAddr;
+
+use axum::Router;
+use dfs_core::scenario::Scenario;
+use services::store::{Store, StoreError};
+use tokio::net::TcpListener;
+use tokio_util::sync::CancellationToken;
+
+use crate::config::ServeConfig;
+use crate::http::{self, AppState};
+
+/// Why the server could not start or stopped with an error.
+#[derive(Debug, thiserror::Error)]
+pub enum StartupError {
+    /// The store could not be opened (not ours, too new, unreadable ...).
+    #[error("{path}: {source}")]
+    Store {
+        /// The data directory.
+        path: String,
+        /// Why.
+        #[source]
+        source: StoreError,
+    },
+    /// The address could not be bound, or serving failed.
+    #[error("{context}: {source}")]
+    Io {
+        /// What was being done.
+        context: String,
+        /// Why.
+        #[source]
+        source: std::io::Error,
+    },
+}
+
+/// A bound, ready server. [`Application::run_until`] serves it.
+pub struct Application {
+    listener: TcpListener,
+    addr: SocketAddr,
+    router: Router,
+    state: AppState,
+    demo: bool,
+}
+
+impl std::fmt::Debug for Application {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Application")
+            .field("addr", &self.addr)
+            .field("state", &self.state)
+            .finish_non_exhaustive()
+    }
+}
+
+impl Application {
+    /// Opens the store in `config.data` (creating and migrating it), builds the router and
+    /// binds `config.addr` (port 0: a free port, see [`Application::local_addr`]).
+    pub async fn build(config: ServeConfig) -> Result<Application, StartupError> {
+        let store = Store::open(&config.data)
+            .await
+            .map_err(|source| StartupError::Store {
+                path: config.data.display().to_string(),
+                source,
+            })?;
+        let state = AppState::new(store, &config.state);
+        clear_scratch(state.scratch_dir()).await;
+        let router = http::app(state.clone(), &config.layers);
+        let listener = TcpListener::bind(config.addr)
+            .await
+            .map_err(|source| StartupError::Io {
+                context: format!("binding {}", config.addr),
+                source,
+            })?;
+        let addr = listener.local_addr().map_err(|source| StartupError::Io {
+            context: "reading the bound address".into(),
+            source,
+        })?;
+        Ok(Application {
+            listener,
+            addr,
+            router,
+            state,
+            demo: config.demo,
+        })
+    }
+
+    /// The address the server listens on.
+    pub fn local_addr(&self) -> SocketAddr {
+        self.addr
+    }
+
+    /// The handlers' state (its store is the server's).
+    pub fn state(&self) -> &AppState {
+        &self.state
+    }
+
+    /// Serves until `shutdown` completes, then stops accepting, lets in-flight requests and
+    /// the seeding finish the session they are on, and closes the database.
+    pub async fn run_until(
+        self,
+        shutdown: impl Future<Output = ()> + Send + 'static,
+    ) -> Result<(), StartupError> {
+        let stopping = CancellationToken::new();
+        let seeding = if self.demo {
+            let state = self.state.clone();
+            let stop = stopping.clone();
+            Some(tokio::spawn(
+                async move { seed_if_empty(&state, &stop).await },
+            ))
+        } else {
+            None
+        };
+        tracing::info!(addr = %self.addr, data = %self.state.store().data_dir().display(),
+            writes_need_token = self.state.token().is_some(), "serving the ICMS API");
+        let stop = stopping.clone();
+        let served = axum::serve(self.listener, self.router)
+            .with_graceful_shutdown(async move {
+                shutdown.await;
+                tracing::info!("shutting down: finishing in-flight requests");
+                stop.cancel();
+            })
+            .await;
+        stopping.cancel();
+        if let Some(task) = seeding {
+            let _ = task.await;
+        }
+        self.state.store().close().await;
+        tracing::info!("database closed; stopped");
+        served.map_err(|source| StartupError::Io {
+            context: "serving".into(),
+            source,
+        })
+    }
+}
+
+/// Resolves on SIGINT (Ctrl-C) or SIGTERM.
+pub async fn shutdown_signal() {
+    let ctrl_c = async {
+        if tokio::signal::ctrl_c().await.is_err() {
+            std::future::pending::<()>().await;
+        }
+    };
+    #[cfg(unix)]
+    let term = async {
+        match tokio::signal::unix::signal(tokio::signal::unix::SignalKind::terminate()) {
+            Ok(mut s) => {
+                s.recv().await;
+            }
+            Err(_) => std::future::pending::<()>().await,
+        }
+    };
+    #[cfg(not(unix))]
+    let term = std::future::pending::<()>();
+    tokio::select! {
+        _ = ctrl_c => {},
+        _ = term => {},
+    }
+}
+
+/// Removes simulation files a killed server left in the scratch directory (one server per
+/// data directory, so none is in use now).
+async fn clear_scratch(dir: &std::path::Path) {
+    let Ok(mut entries) = tokio::fs::read_dir(dir).await else {
+        return;
+    };
+    while let Ok(Some(e)) = entries.next_entry().await {
+        let _ = tokio::fs::remove_file(e.path()).await;
+    }
+}
+
+/// Seeds an empty data base with one simulated session of every built-in scenario (seed 0),
+/// so that a newcomer sees skills at once. Stops between sessions when `stop` is cancelled.
+async fn seed_if_empty(state: &AppState, stop: &CancellationToken) {
+    match state.store().list_sessions(1, None).await {
+        Ok(page) if page.items.is_empty() => {}
+        Ok(_) => return,
+        Err(e) => {
+            tracing::warn!(error = %e, "could not check whether the data base is empty");
+            return;
+        }
+    }
+    tracing::info!(
+        scenarios = Scenario::BUILTINS.len(),
+        "empty data base: seeding it with simulated sessions of the built-in scenarios \
+         (--no-demo skips this)"
+    );
+    for name in Scenario::BUILTINS {
+        if stop.is_cancelled() {
+            tracing::info!("seeding stopped by shutdown");
+            return;
+        }
+        let Some(scenario) = Scenario::builtin(name, 0) else {
+            continue;
+        };
+        match http::simulations::simulate_and_store(state, scenario, None).await {
+            Ok(out) => tracing::info!(
+                scenario = name,
+                session_id = out.session_id,
+                skills = out.skill_ids.len(),
+                "seeded"
+            ),
+            Err(p) => tracing::warn!(scenario = name, problem = %p, "seeding failed"),
+        }
+    }
+    tracing::info!("seeding done");
+}

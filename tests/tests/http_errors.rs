@@ -1,0 +1,283 @@
+//! Every error status of the API, each as an RFC 9457 problem: 400, 401, 404, 405, 413, 415,
+//! 422, 503; bad input never gives a 500, and a failed upload stores nothing.
+
+use reqwest::Method;
+use serde_json::json;
+use tests::{session_bytes, TestApp};
+
+const TOKEN: &str = "test-token-1234";
+
+#[tokio::test]
+async fn invalid_filters_cursors_ids_and_parameters_are_400() {
+    let app = TestApp::spawn().await;
+    let c = &app.client;
+    let d = c.get("/api/v1/skills?mass_min=heavy").await.problem(400);
+    assert!(
+        d.contains("mass_min"),
+        "the detail names the parameter: {d}"
+    );
+    let d = c.get("/api/v1/skills?colour=red").await.problem(400);
+    assert!(d.contains("colour"), "{d}");
+    let d = c
+        .get("/api/v1/skills?mass_min=2&mass_max=1")
+        .await
+        .problem(400);
+    assert!(d.contains("mass"), "{d}");
+    c.get("/api/v1/skills?limit=0").await.problem(400);
+    c.get("/api/v1/skills?limit=5000").await.problem(400);
+    c.get("/api/v1/skills?sort=colour").await.problem(400);
+    c.get("/api/v1/skills?phase_min_s=1").await.problem(400);
+    let d = c
+        .get("/api/v1/skills?cursor=not-a-cursor")
+        .await
+        .problem(400);
+    assert!(d.contains("cursor"), "{d}");
+    // A cursor of one sort order is refused with another.
+    let by_id: String = b"v1|id:asc|5".iter().map(|b| format!("{b:02x}")).collect();
+    assert_eq!(
+        c.get(&format!("/api/v1/skills?cursor={by_id}"))
+            .await
+            .status,
+        200
+    );
+    c.get(&format!("/api/v1/skills?sort=quality&cursor={by_id}"))
+        .await
+        .problem(400);
+    c.get("/api/v1/sessions?cursor=zz").await.problem(400);
+    c.get("/api/v1/sessions?limit=-1").await.problem(400);
+    c.get("/api/v1/skills/abc").await.problem(400);
+    c.get("/api/v1/sessions/1.5").await.problem(400);
+    c.get("/api/v1/skills/1/similar?k=0").await.problem(400);
+    app.stop().await;
+}
+
+#[tokio::test]
+async fn unknown_ids_and_routes_are_404_and_wrong_methods_405() {
+    let app = TestApp::spawn().await;
+    let c = &app.client;
+    let d = c.get("/api/v1/skills/999").await.problem(404);
+    assert!(d.contains("999"), "{d}");
+    c.get("/api/v1/skills/999/similar").await.problem(404);
+    c.get("/api/v1/sessions/999").await.problem(404);
+    c.get("/api/v1/sessions/999/mcap").await.problem(404);
+    c.delete("/api/v1/sessions/999", None).await.problem(404);
+    c.delete("/api/v1/skills/999", None).await.problem(404);
+    c.get("/api/v1/nothing-here").await.problem(404);
+    c.get("/api/v2/skills").await.problem(404);
+    let r = c.send(Method::PUT, "/api/v1/skills/1", None, None).await;
+    r.problem(405);
+    assert!(r.headers.contains_key("allow"));
+    c.send(Method::PATCH, "/api/v1/sessions", None, None)
+        .await
+        .problem(405);
+    app.stop().await;
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn uploads_of_the_wrong_type_or_over_the_limit_are_refused_and_store_nothing() {
+    let app = TestApp::spawn_with(|a| a.max_body = 64 * 1024).await;
+    let c = &app.client;
+    let mcap = session_bytes("box-pinch-lift", 1, Some(2.0));
+    assert!(mcap.len() > 64 * 1024, "the test session is over the limit");
+
+    let d = c.upload(&mcap, None).await.problem(413);
+    assert!(d.contains("65536"), "{d}");
+    let r = c
+        .send(
+            Method::POST,
+            "/api/v1/sessions",
+            Some(("application/octet-stream", b"abc".to_vec())),
+            None,
+        )
+        .await;
+    assert!(r.problem(415).contains("application/x-mcap"));
+    c.send(Method::POST, "/api/v1/sessions", None, None)
+        .await
+        .problem(415);
+    let r = c
+        .send(
+            Method::POST,
+            "/api/v1/simulations",
+            Some(("text/plain", b"{\"scenario\": \"box-slip\"}".to_vec())),
+            None,
+        )
+        .await;
+    r.problem(415);
+    let big = json!({"scenario": "x".repeat(70 * 1024)});
+    c.post_json("/api/v1/simulations", &big, None)
+        .await
+        .problem(413);
+
+    let sessions = c.get("/api/v1/sessions").await.json();
+    assert_eq!(sessions["items"], json!([]));
+    app.stop().await;
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn an_invalid_session_is_422_with_its_reason_and_stores_nothing() {
+    let app = TestApp::spawn().await;
+    let c = &app.client;
+    let d = c
+        .upload(b"definitely not an mcap file", None)
+        .await
+        .problem(422);
+    assert!(d.contains("MCAP"), "the reason: {d}");
+
+    let mcap = session_bytes("box-slip", 2, Some(1.0));
+    let cut = &mcap[..mcap.len() * 2 / 3];
+    let d = c.upload(cut, None).await.problem(422);
+    assert!(d.contains("not a valid session"), "{d}");
+    let mut flipped = mcap.clone();
+    let mid = flipped.len() / 2;
+    flipped[mid] ^= 0xff;
+    c.upload(&flipped, None).await.problem(422);
+    c.upload(b"", None).await.problem(422);
+
+    assert_eq!(c.get("/api/v1/sessions").await.json()["items"], json!([]));
+    assert_eq!(c.get("/api/v1/skills").await.json()["items"], json!([]));
+    let blobs = app.data.join("blobs");
+    assert!(
+        !blobs.exists() || std::fs::read_dir(&blobs).unwrap().next().is_none(),
+        "no blob was written"
+    );
+    app.stop().await;
+}
+
+#[tokio::test]
+async fn bad_simulation_requests_are_400_or_422_naming_the_field() {
+    let app = TestApp::spawn().await;
+    let c = &app.client;
+    let r = c
+        .send(
+            Method::POST,
+            "/api/v1/simulations",
+            Some(("application/json", b"{\"scenario\": ".to_vec())),
+            None,
+        )
+        .await;
+    r.problem(400);
+    let d = c
+        .post_json(
+            "/api/v1/simulations",
+            &json!({"scenario": "moonwalk"}),
+            None,
+        )
+        .await
+        .problem(422);
+    assert!(
+        d.contains("two-grasps"),
+        "lists the built-in scenarios: {d}"
+    );
+    let d = c
+        .post_json(
+            "/api/v1/simulations",
+            &json!({"scenario": "box-slip", "seed": -1}),
+            None,
+        )
+        .await
+        .problem(422);
+    assert!(d.contains("seed"), "{d}");
+    let d = c
+        .post_json(
+            "/api/v1/simulations",
+            &json!({"scenario": "box-slip", "duration": 1e6}),
+            None,
+        )
+        .await
+        .problem(422);
+    assert!(d.contains("duration"), "{d}");
+    let d = c
+        .post_json(
+            "/api/v1/simulations",
+            &json!({"scenario": {"name": "x", "object": {"shape": "box", "mass": -1, "mu": 0.5,
+                "half_extents": [0.02, 0.02, 0.04]}, "tasks": [{"phase": "grasp", "duration": 1}]}}),
+            None,
+        )
+        .await
+        .problem(422);
+    assert!(d.contains("mass"), "{d}");
+    let d = c
+        .post_json(
+            "/api/v1/simulations",
+            &json!({"scenario": "box-slip", "speed": 2}),
+            None,
+        )
+        .await
+        .problem(422);
+    assert!(d.contains("speed"), "{d}");
+    assert_eq!(c.get("/api/v1/sessions").await.json()["items"], json!([]));
+    app.stop().await;
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn writes_need_the_token_when_one_is_configured_and_reads_stay_open() {
+    let app = TestApp::spawn_with(|a| a.token = Some(TOKEN.into())).await;
+    let c = &app.client;
+    let mcap = session_bytes("box-slip", 4, Some(2.0));
+
+    let r = c.upload(&mcap, None).await;
+    assert!(r.problem(401).contains("Bearer"));
+    assert!(r.headers.contains_key("www-authenticate"));
+    c.upload(&mcap, Some("wrong-token")).await.problem(401);
+    c.post_json(
+        "/api/v1/simulations",
+        &json!({"scenario": "box-slip"}),
+        None,
+    )
+    .await
+    .problem(401);
+    // 401 comes before anything is read: even a bad body is refused for the token first.
+    c.send(
+        Method::POST,
+        "/api/v1/sessions",
+        Some(("text/plain", vec![])),
+        None,
+    )
+    .await
+    .problem(401);
+    assert_eq!(c.get("/api/v1/sessions").await.json()["items"], json!([]));
+
+    let r = c.upload(&mcap, Some(TOKEN)).await;
+    assert_eq!(r.status, 201, "{}", String::from_utf8_lossy(&r.body));
+    let id = r.json()["session_id"].as_i64().unwrap();
+    // Reads need no token.
+    assert_eq!(c.get(&format!("/api/v1/sessions/{id}")).await.status, 200);
+    assert_eq!(c.get("/api/v1/skills").await.status, 200);
+    assert_eq!(
+        c.get(&format!("/api/v1/sessions/{id}/mcap")).await.status,
+        200
+    );
+    // Deletes do.
+    c.delete(&format!("/api/v1/sessions/{id}"), None)
+        .await
+        .problem(401);
+    c.delete(&format!("/api/v1/sessions/{id}"), Some("nope"))
+        .await
+        .problem(401);
+    c.delete("/api/v1/skills/1", None).await.problem(401);
+    assert_eq!(c.get(&format!("/api/v1/sessions/{id}")).await.status, 200);
+    assert_eq!(
+        c.delete(&format!("/api/v1/sessions/{id}"), Some(TOKEN))
+            .await
+            .status,
+        204
+    );
+    app.stop().await;
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_request_over_the_time_limit_is_a_503_problem() {
+    let app = TestApp::spawn_with(|a| a.request_timeout = 0.02).await;
+    // Ten simulated seconds take far longer than 20 ms to simulate and record.
+    let d = app
+        .client
+        .post_json(
+            "/api/v1/simulations",
+            &json!({"scenario": "two-grasps", "duration": 10.0}),
+            None,
+        )
+        .await
+        .problem(503);
+    assert!(d.contains("limit"), "{d}");
+    app.stop().await;
+}

@@ -1,0 +1,176 @@
+//! The OpenAPI document: valid OpenAPI 3.1 (checked by Python's openapi-spec-validator, which
+//! `.ci/run` installs), and its (method, path) pairs are exactly the routes the server answers.
+
+use std::collections::BTreeSet;
+use std::io::Write;
+use std::process::{Command, Stdio};
+
+use reqwest::Method;
+use serde_json::Value;
+use tests::TestApp;
+
+/// Every endpoint the issue asks for.
+const ENDPOINTS: &[(&str, &str)] = &[
+    ("get", "/api/v1/openapi.json"),
+    ("get", "/api/v1/sessions"),
+    ("post", "/api/v1/sessions"),
+    ("get", "/api/v1/sessions/{id}"),
+    ("delete", "/api/v1/sessions/{id}"),
+    ("get", "/api/v1/sessions/{id}/mcap"),
+    ("post", "/api/v1/simulations"),
+    ("get", "/api/v1/skills"),
+    ("get", "/api/v1/skills/{id}"),
+    ("delete", "/api/v1/skills/{id}"),
+    ("get", "/api/v1/skills/{id}/similar"),
+    ("get", "/healthz"),
+];
+
+const METHODS: &[&str] = &["get", "post", "put", "patch", "delete"];
+
+fn documented(doc: &Value) -> BTreeSet<(String, String)> {
+    let mut out = BTreeSet::new();
+    for (path, item) in doc["paths"].as_object().expect("paths") {
+        for m in METHODS {
+            if item.get(*m).is_some() {
+                out.insert((m.to_string(), path.clone()));
+            }
+        }
+    }
+    out
+}
+
+/// Validates with openapi-spec-validator; panics with its message if invalid.
+fn validate_with_python(doc: &Value) {
+    let script = "import json, sys\n\
+                  from openapi_spec_validator import validate\n\
+                  validate(json.load(sys.stdin))\n\
+                  print('valid')\n";
+    let mut child = Command::new("python3")
+        .args(["-c", script])
+        .stdin(Stdio::piped())
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .expect("python3 (with `pip install openapi-spec-validator`, as .ci/run does)");
+    child
+        .stdin
+        .take()
+        .unwrap()
+        .write_all(doc.to_string().as_bytes())
+        .unwrap();
+    let out = child.wait_with_output().unwrap();
+    assert!(
+        out.status.success() && out.stdout.starts_with(b"valid"),
+        "the OpenAPI document is invalid (or openapi-spec-validator is missing: \
+         pip install openapi-spec-validator):\n{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+}
+
+#[tokio::test]
+async fn the_openapi_document_is_valid_and_lists_every_endpoint() {
+    let app = TestApp::spawn().await;
+    let r = app.client.get("/api/v1/openapi.json").await;
+    assert_eq!(r.status, 200);
+    assert_eq!(r.content_type(), "application/json");
+    let doc = r.json();
+    assert!(
+        doc["openapi"].as_str().unwrap().starts_with("3.1"),
+        "{}",
+        doc["openapi"]
+    );
+    validate_with_python(&doc);
+
+    let expected: BTreeSet<(String, String)> = ENDPOINTS
+        .iter()
+        .map(|(m, p)| (m.to_string(), p.to_string()))
+        .collect();
+    assert_eq!(documented(&doc), expected);
+
+    // Every filter of the store is a documented query parameter of GET /skills.
+    let params: BTreeSet<&str> = doc["paths"]["/api/v1/skills"]["get"]["parameters"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|p| p["name"].as_str().unwrap())
+        .collect();
+    for name in [
+        "shape",
+        "mass_min",
+        "mass_max",
+        "mu_min",
+        "mu_max",
+        "contacts",
+        "contact_model",
+        "grasp_type",
+        "min_quality",
+        "phase",
+        "phase_min_s",
+        "phase_max_s",
+        "sort",
+        "limit",
+        "cursor",
+    ] {
+        assert!(params.contains(name), "GET /skills documents {name}");
+    }
+    // Without a token configured, writes carry no security requirement.
+    let upload = &doc["paths"]["/api/v1/sessions"]["post"];
+    assert!(upload.get("security").is_none(), "{upload}");
+    assert_eq!(
+        upload["requestBody"]["content"]
+            .as_object()
+            .unwrap()
+            .keys()
+            .collect::<Vec<_>>(),
+        ["application/x-mcap"]
+    );
+    app.stop().await;
+}
+
+#[tokio::test]
+async fn the_router_answers_exactly_the_documented_methods_and_paths() {
+    let app = TestApp::spawn().await;
+    let doc = app.client.get("/api/v1/openapi.json").await.json();
+    let documented = documented(&doc);
+    let paths: BTreeSet<&String> = documented.iter().map(|(_, p)| p).collect();
+    for path in paths {
+        let url = path.replace("{id}", "999");
+        for m in METHODS {
+            let method = Method::from_bytes(m.to_uppercase().as_bytes()).unwrap();
+            let r = app.client.send(method, &url, None, None).await;
+            let is_route = r.status != 405
+                && !(r.status == 404
+                    && r.json()["detail"]
+                        .as_str()
+                        .unwrap()
+                        .contains("no such route"));
+            assert_eq!(
+                is_route,
+                documented.contains(&(m.to_string(), path.clone())),
+                "{m} {url} answered {}: {}",
+                r.status,
+                String::from_utf8_lossy(&r.body)
+            );
+            assert_ne!(r.status, 500, "{m} {url}");
+        }
+    }
+    app.stop().await;
+}
+
+#[tokio::test]
+async fn with_a_token_configured_the_document_requires_it_on_writes_only() {
+    let app = TestApp::spawn_with(|a| a.token = Some("tok".into())).await;
+    let doc = app.client.get("/api/v1/openapi.json").await.json();
+    validate_with_python(&doc);
+    assert_eq!(
+        doc["components"]["securitySchemes"]["bearer"]["scheme"],
+        "bearer"
+    );
+    for (m, p) in documented(&doc) {
+        let op = &doc["paths"][&p][&m];
+        let secured = op["security"] == serde_json::json!([{"bearer": []}]);
+        assert_eq!(secured, m != "get", "{m} {p}: {}", op["security"]);
+        assert_eq!(op["responses"].get("401").is_some(), m != "get", "{m} {p}");
+    }
+    app.stop().await;
+}
