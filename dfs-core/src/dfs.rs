@@ -18,10 +18,12 @@
 //! - along the normal, a touching fingertip is kept on the surface by a stiff spring-damper that
 //!   acts on the finger only (integrated implicitly);
 //! - tangentially, a *sticking* fingertip is tied to an anchor point on the object by a
-//!   spring-damper acting on finger and object alike (stick friction), plus viscous torsion for
-//!   the soft pad; added to the operator's intensities, the total is kept inside the Coulomb
-//!   cone, and beyond it the contact slips and the anchor moves with the fingertip. At rest the
-//!   springs hold a fixed deflection instead of creeping; near the cone's edge slow slip remains.
+//!   spring-damper acting on finger and object alike (stick friction), plus a torsional
+//!   spring-damper for the soft pad (the pad's twist about the normal since it stuck); added to
+//!   the operator's intensities, the total is kept inside the Coulomb cone, and beyond it the
+//!   contact slips and the anchor moves with the fingertip (a pad that only turns on the surface
+//!   keeps its tangential anchor and the twist the torsional cone allows). At rest the springs
+//!   hold a fixed deflection instead of creeping; near the cone's edge slow slip remains.
 //!
 //! **Table.** An optional horizontal support plane carries the object before it is grasped
 //! and after it is placed: it cancels downward force and velocity of a resting object and
@@ -65,6 +67,10 @@ pub struct DfsParams {
     /// Viscous torsional coupling between a soft fingertip pad and the object (N·m·s/rad),
     /// limited by the torsional friction cone. Default 0.05.
     pub torsion_damping: Real,
+    /// Torsional stiffness of a sticking soft fingertip pad (N·m/rad): the pad resists being
+    /// twisted about the normal from where it stuck, within the torsional friction cone.
+    /// Default 0.04 (a pad with about 5 mm contact radius and the surface stiffness: k a²/2).
+    pub torsion_stiffness: Real,
     /// Joint angles may exceed their limits by this much (rad or m) before a sample is refused.
     /// Default 0.05.
     pub angle_slack: Real,
@@ -90,6 +96,7 @@ impl Default for DfsParams {
             surface_stiffness: 3000.0,
             surface_damping: 30.0,
             torsion_damping: 0.05,
+            torsion_stiffness: 0.04,
             angle_slack: 0.05,
             torque_range: 2.0,
             table_height: None,
@@ -133,6 +140,7 @@ impl DfsParams {
         nonneg("surface_stiffness", self.surface_stiffness)?;
         nonneg("surface_damping", self.surface_damping)?;
         nonneg("torsion_damping", self.torsion_damping)?;
+        nonneg("torsion_stiffness", self.torsion_stiffness)?;
         nonneg("angle_slack", self.angle_slack)?;
         pos("torque_range", self.torque_range)?;
         nonneg("table_mu", self.table_mu)?;
@@ -253,6 +261,8 @@ pub struct Dfs {
     spring_err: [Vector; MAX_TIPS],
     spring_vel: [Vector; MAX_TIPS],
     stick: [bool; MAX_TIPS],
+    /// Per tip: how far the pad has twisted about the normal since it stuck (rad).
+    twist: [Real; MAX_TIPS],
     passive_world: [Vector; MAX_TIPS],
     frames: [ContactFrame; MAX_CONTACTS],
     transmitted: [Intensity; MAX_CONTACTS],
@@ -299,6 +309,7 @@ impl Dfs {
             spring_err: [Vector::zeros(); MAX_TIPS],
             spring_vel: [Vector::zeros(); MAX_TIPS],
             stick: [false; MAX_TIPS],
+            twist: [0.0; MAX_TIPS],
             passive_world: [Vector::zeros(); MAX_TIPS],
             frames: [ContactFrame::from_normal(Vector::zeros(), Vector::z()); MAX_CONTACTS],
             transmitted: [Intensity::zeros(); MAX_CONTACTS],
@@ -469,6 +480,7 @@ impl Dfs {
             let Some(frame) = self.out.tips[k].frame else {
                 self.anchors_b[k] = None;
                 self.prev_tip_points[k] = None;
+                self.twist[k] = 0.0;
                 continue;
             };
             let c = frame.intensities_of_force_b(&(rot_inv * self.out.tips[k].tip_force_world));
@@ -498,13 +510,16 @@ impl Dfs {
                 + (v_rel - z_world * v_rel.dot(&z_world)) * self.params.surface_damping;
             let passive_c = frame.intensities_of_force_b(&(rot_inv * passive_w));
             // Torsion (soft finger): the fingertip pad drags the object's spin about the normal
-            // along, viscously.
+            // along, a torsional spring-damper from where it stuck.
             let mut w_tip = Vector::zeros();
             for d in 0..self.hand.dof() {
                 w_tip += Vector::new(j[(3, d)], j[(4, d)], j[(5, d)]) * self.qd[d];
             }
             let w_obj = rot * self.state.angular_velocity_b;
-            let torsion = (w_tip - w_obj).dot(&z_world) * self.params.torsion_damping;
+            let spin = (w_tip - w_obj).dot(&z_world);
+            let twist = self.twist[k] + spin * dt;
+            let torsion =
+                twist * self.params.torsion_stiffness + spin * self.params.torsion_damping;
             let with_passive = if c[2] > 0.0 {
                 c + Intensity::new(passive_c[0], passive_c[1], 0.0, torsion)
             } else {
@@ -520,8 +535,23 @@ impl Dfs {
             t.transmitted = split.transmitted;
             t.slip = split.slip;
             t.in_contact = !split.separating;
-            let stick = t.in_contact && !t.slip;
+            // The pad sticks unless it slides: a pad that only spins on the surface (torsional
+            // slip of the soft finger) keeps its tangential anchor.
+            let slides = with_passive[0].hypot(with_passive[1])
+                > self.params.friction.mu.max(0.0) * with_passive[2];
+            let stick = t.in_contact && !slides;
             self.stick[k] = stick;
+            // Beyond the torsional cone the pad turns on the surface and keeps only the twist
+            // the cone allows.
+            let soft = self.params.contact_model == ContactModel::SoftFinger;
+            self.twist[k] = if !soft || !t.in_contact || c[2] <= 0.0 {
+                0.0
+            } else if self.params.torsion_stiffness > 0.0 && split.transmitted[3] != torsion {
+                (split.transmitted[3] - spin * self.params.torsion_damping)
+                    / self.params.torsion_stiffness
+            } else {
+                twist
+            };
             self.anchors_b[k] = if stick { Some(anchor_b) } else { None };
             self.spring_err[k] =
                 if stick { err } else { Vector::zeros() } + z_world * t.penetration;

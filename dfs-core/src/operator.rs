@@ -239,9 +239,12 @@ pub fn plan_grasp(
         ][..],
         Shape::Sphere { radius } | Shape::Cylinder { radius, .. } => &[(0.0, radius)][..],
     };
+    // Above the centre of mass: an object hangs from the line through two opposing contacts
+    // like a pendulum, stable only below it (a soft pad resists spin about its normal only
+    // viscously, so an object pinched below its centre slowly rolls out).
     let heights: &[Real] = match object.shape {
-        Shape::Sphere { radius } => &[0.0, 0.2 * radius][..],
-        Shape::Box { half_extents } => &[0.0, 0.3 * half_extents[2]][..],
+        Shape::Sphere { radius } => &[0.35 * radius, 0.25 * radius][..],
+        Shape::Box { half_extents } => &[0.4 * half_extents[2], 0.25 * half_extents[2]][..],
         Shape::Cylinder { half_height, .. } => &[0.3 * half_height, 0.0][..],
     };
     let mut kin = Kinematics::default();
@@ -503,6 +506,29 @@ fn push_basis(hand: &HandModel, kin: &Kinematics, tip: usize) -> ([Vector; 3], u
     (out, nb)
 }
 
+/// The link fingertip `tip`'s finger is mounted on (glove10: the palm): walking up from the
+/// fingertip's link, the parent of the first joint not driven by the finger group's DOFs.
+fn mount_link(hand: &HandModel, tip: usize) -> usize {
+    let dofs: &[usize] = hand
+        .finger_groups
+        .iter()
+        .find(|g| g.tips.contains(&tip))
+        .map(|g| g.dofs.as_slice())
+        .unwrap_or(&[]);
+    let mut link = hand.fingertips[tip].link;
+    while let Some(j) = hand.joints.iter().find(|j| j.child == link) {
+        let in_group = match j.drive {
+            JointDrive::Dof(d) | JointDrive::Mimic { dof: d, .. } => dofs.contains(&d),
+            JointDrive::Fixed => true,
+        };
+        if !in_group {
+            return j.parent;
+        }
+        link = j.parent;
+    }
+    link
+}
+
 /// Minimum-jerk profile s(τ) = 10τ³ − 15τ⁴ + 6τ⁵ on [0, 1] (Flash & Hogan 1985), and its
 /// second derivative.
 fn min_jerk(t: Real) -> (Real, Real) {
@@ -538,9 +564,20 @@ pub struct OperatorParams {
     /// How far past the surface the fingers aim when closing, as a fraction of the
     /// preshape-to-grasp motion. Default 0.
     pub close_overshoot: Real,
-    /// Task-space stiffness steering a fingertip of the grasp towards its spot (N/m).
-    /// Default 150.
+    /// Task-space stiffness steering a fingertip of the grasp towards its spot while it
+    /// reaches, closes and opens (N/m). Default 150.
     pub fingertip_stiffness: Real,
+    /// Task-space stiffness keeping a fingertip of the grasp where it met the object, relative
+    /// to the hand, while holding (N/m). Default 1000: a pinching fingertip is about 1 N/mm
+    /// stiff (finger-pad and joint impedance of a person's precision grip).
+    pub hold_stiffness: Real,
+    /// Damping of a finger's posture in the null space of its fingertip's task (N·m·s/rad).
+    /// Default 0.005.
+    pub posture_damping: Real,
+    /// Task-space damping of the same, on the fingertip's velocity relative to the hand
+    /// (N·s/m). Default 5: well damped, and stable at 1 kHz although the operator's torques are
+    /// computed from the previous tick's state.
+    pub hold_damping: Real,
 }
 
 impl Default for OperatorParams {
@@ -556,6 +593,9 @@ impl Default for OperatorParams {
             noise_torque: 2e-4,
             close_overshoot: 0.0,
             fingertip_stiffness: 150.0,
+            hold_stiffness: 1000.0,
+            hold_damping: 5.0,
+            posture_damping: 0.005,
         }
     }
 }
@@ -592,8 +632,6 @@ pub struct Simulation {
     plan: GraspPlan,
     /// The grasp phase has ended and the object is held (until release ends).
     object_held: bool,
-    /// Per fingertip: the shear it feels (N), low-passed over 50 ms.
-    felt_shear: [Real; MAX_TIPS],
     from_base: Isometry,
     to_base: Isometry,
     from_q: [Real; MAX_DOF],
@@ -606,12 +644,17 @@ pub struct Simulation {
     /// Where the operator saw the object when it last looked before holding it: fingertip
     /// targets are fixed to this pose until the object is held, then to the object.
     seen_object: Isometry,
-    /// Per fingertip: where it first touched while holding, in the hand base's frame.
-    hold_in_base: [Option<Vector>; MAX_TIPS],
+    /// Per fingertip: where it first touched while holding (the pad on the surface) and the
+    /// inward contact normal there, both in the frame of the link its finger is mounted on.
+    hold_in_mount: [Option<(Vector, Vector)>; MAX_TIPS],
+    /// Per fingertip: the link its finger is mounted on ([`mount_link`]).
+    mount: [usize; MAX_TIPS],
     base: Isometry,
     base_acceleration: Vector,
     q_intent: [Real; MAX_DOF],
     grip: Real,
+    /// Share of the object's expected load the fingertips lift actively (0-1).
+    carry: Real,
     q_meas: [Real; MAX_DOF],
     tau_meas: [Real; MAX_DOF],
     tau: [Real; MAX_DOF],
@@ -679,6 +722,10 @@ impl Simulation {
         let plan = plan_grasp(&hand, &object, &pose, scenario.grasp)?;
         let start_base = raise(&approach_pose(&plan.base, &object.shape), 0.15);
         let q0 = plan.q_open;
+        let mut mount = [0; MAX_TIPS];
+        for (k, m) in mount.iter_mut().enumerate().take(hand.fingertips.len()) {
+            *m = mount_link(&hand, k);
+        }
         let mut dfs = Dfs::new(hand, object, ObjectState::at_rest(pose), params)?;
         let n = dfs.hand().dof();
         let mut rng = ChaCha8Rng::seed_from_u64(scenario.seed);
@@ -708,7 +755,6 @@ impl Simulation {
             operator_mu,
             plan,
             object_held: false,
-            felt_shear: [0.0; MAX_TIPS],
             from_base: start_base,
             to_base: start_base,
             from_q: q0,
@@ -719,11 +765,13 @@ impl Simulation {
             to_offset: 0.03,
             offset: 0.03,
             seen_object: pose,
-            hold_in_base: [None; MAX_TIPS],
+            hold_in_mount: [None; MAX_TIPS],
+            mount,
             base: start_base,
             base_acceleration: Vector::zeros(),
             q_intent: q0,
             grip: 0.0,
+            carry: 0.0,
             q_meas: q0,
             tau_meas: [0.0; MAX_DOF],
             tau: [0.0; MAX_DOF],
@@ -933,12 +981,37 @@ impl Simulation {
             self.q_intent[d] = self.from_q[d] + (self.to_q[d] - self.from_q[d]) * mq + tr;
         }
         self.grip = self.from_grip + (self.to_grip - self.from_grip) * mg;
+        // The load force: the fingertips take over the object's weight from the table early in
+        // the lift (the loading phase, before the object moves: Johansson & Westling 1984) and
+        // hand it back late in the place.
+        self.carry = match span.phase {
+            Phase::Lift => min_jerk(s / 0.3).0,
+            Phase::Hold | Phase::Transport => 1.0,
+            Phase::Place => 1.0 - min_jerk((s - 0.6) / 0.4).0,
+            _ => 0.0,
+        };
         self.offset = self.from_offset + (self.to_offset - self.from_offset) * mq;
     }
 
-    /// The operator's joint torques: impedance around the intention plus grip torques `Jᵀ f`
-    /// for the contact forces it wants.
+    /// The operator's joint torques `Jᵀ f` for the fingertips of the grasp, and an impedance
+    /// around the intended angles for the other joints (wrist, unused fingers).
+    ///
+    /// Reaching and closing, a fingertip of the grasp is steered towards its spot on the object
+    /// (in the object's frame, so it follows the object), `offset` out along the surface normal,
+    /// with the soft [`OperatorParams::fingertip_stiffness`], like a person reaching for a spot
+    /// they see; closing makes the offset zero, approaching every face head-on.
+    ///
+    /// Once it touches while holding, the operator keeps the fingertip where it met the object,
+    /// relative to the palm (the link the finger is mounted on): a stiff, damped impedance ([`OperatorParams::hold_stiffness`],
+    /// [`OperatorParams::hold_damping`]) about that spot pushed into the object by the pad's
+    /// expected compression `N / k_s` (the DFS's surface stiffness), plus the squeeze `N` along
+    /// the normal ([`Simulation::grip_forces`]). The set-points, fixed in the hand, fix the
+    /// object's place in the hand: between opposing fingertips both springs hold it, and a
+    /// squeeze that changes equally on both sides does not move it. Set-points relative to the
+    /// palm rather than the forearm keep the fingers' impedance out of a loop through the
+    /// wrist (fingertip forces turn the palm, which would move a forearm-fixed set-point).
     fn compute_torques(&mut self) {
+        let (mags, units, lift) = self.grip_forces();
         let hand = self.dfs.hand();
         let n = hand.dof();
         let out = self.dfs.output();
@@ -950,11 +1023,18 @@ impl Simulation {
         } else {
             self.seen_object
         };
-        // The fingers of the grasp are steered in task space: each fingertip towards a point
-        // on the object (in the object's frame, so it follows the object), `offset` out along
-        // the surface normal, like a person reaching for a spot they see; closing makes the
-        // offset zero, approaching every face head-on. The other joints (wrist, unused
-        // fingers) hold the intended joint angles.
+        let obj_rot = self.dfs.object_state().pose.rotation;
+        let k_s = self.dfs.params().surface_stiffness;
+        let holding = matches!(
+            self.phase(),
+            Phase::Grasp | Phase::Lift | Phase::Hold | Phase::Transport | Phase::Place
+        );
+        // The operator fixes the fingertips' places only once every fingertip of the grasp is
+        // on the object; until then each closes softly on its spot, so the first to touch does
+        // not shove the object away from the others.
+        let all_touch = (0..out.n_tips.min(MAX_TIPS))
+            .filter(|&k| self.plan.tips[k])
+            .all(|k| out.tips[k].touching);
         let mut in_grasp = [false; MAX_DOF];
         let mut tau = [0.0; MAX_DOF];
         for g in &hand.finger_groups {
@@ -964,38 +1044,76 @@ impl Simulation {
             for &d in &g.dofs {
                 in_grasp[d] = true;
             }
+        }
+        for g in &hand.finger_groups {
             for &k in g.tips.iter().filter(|&&k| self.plan.tips[k]) {
-                let touching = out.tips[k].touching;
-                let holding = matches!(
-                    self.phase(),
-                    Phase::Grasp | Phase::Lift | Phase::Hold | Phase::Transport | Phase::Place
-                );
-                // Touching while holding, a person keeps the finger where it met the object
-                // relative to the hand; the squeeze presses it on.
-                if holding && touching && self.hold_in_base[k].is_none() {
-                    self.hold_in_base[k] = Some((self.base.inverse() * kin.tip_centres[k]).coords);
-                }
+                let tip = &out.tips[k];
+                let x = kin.tip_centres[k];
+                let mount = kin.link_poses[self.mount[k]];
                 if !holding {
-                    self.hold_in_base[k] = None;
+                    self.hold_in_mount[k] = None;
+                } else if let (true, None, Some(frame)) =
+                    (all_touch, self.hold_in_mount[k], tip.frame)
+                {
+                    // Where the fingertip met the object, with the pad just on the surface, and
+                    // the inward normal there, both relative to the palm.
+                    let n_in = obj_rot * frame.normal_b();
+                    let spot = x - n_in * tip.penetration;
+                    let inv = mount.inverse();
+                    self.hold_in_mount[k] = Some(((inv * spot).coords, inv.rotation * n_in));
                 }
-                let target = match self.hold_in_base[k] {
-                    Some(h) => self.base * Point::from(h),
+                let j = &kin.tip_jacobians[k];
+                let mut f = match self.hold_in_mount[k] {
+                    Some((spot, n_in)) => {
+                        let target =
+                            mount * Point::from(spot) + (mount.rotation * n_in) * (mags[k] / k_s);
+                        let mut v = Vector::zeros();
+                        for &d in &g.dofs {
+                            v += Vector::new(j[(0, d)], j[(1, d)], j[(2, d)]) * qd[d];
+                        }
+                        (target - x) * self.params.hold_stiffness - v * self.params.hold_damping
+                    }
                     None => {
-                        obj_pose
+                        let target = obj_pose
                             * Point::from(
                                 self.plan.contacts_b[k] + self.plan.normals_b[k] * self.offset,
-                            )
+                            );
+                        let mut err = target - x;
+                        let e = err.norm();
+                        if e > 0.03 {
+                            err *= 0.03 / e;
+                        }
+                        err * self.params.fingertip_stiffness
                     }
                 };
-                let mut err = target - kin.tip_centres[k];
-                let e = err.norm();
-                if e > 0.03 {
-                    err *= 0.03 / e;
-                }
-                let f = err * self.params.fingertip_stiffness;
-                let j = &kin.tip_jacobians[k];
+                f += units[k] * mags[k];
+                f += lift[k];
                 for &d in &g.dofs {
                     tau[d] += j[(0, d)] * f.x + j[(1, d)] * f.y + j[(2, d)] * f.z;
+                }
+            }
+            // A finger with more joints than its fingertip needs (the index: three joints in
+            // its flexion plane) keeps its intended posture in the null space of the fingertip
+            // task, so it neither drifts towards a stretched, singular posture nor moves the
+            // fingertip: τ₀ − Jᵀ (J Jᵀ + λ²I)⁻¹ J τ₀ for the posture impedance τ₀.
+            let mut planned = g.tips.iter().filter(|&&k| self.plan.tips[k]);
+            if let (Some(&k), None) = (planned.next(), planned.next()) {
+                let j = &kin.tip_jacobians[k];
+                let mut t0 = [0.0; MAX_DOF];
+                let mut jt0 = Vector::zeros();
+                let mut jjt = nalgebra::Matrix3::<Real>::identity() * 1e-6;
+                for &d in &g.dofs {
+                    let kp = self.params.stiffness * hand.torque_limit[d];
+                    t0[d] = kp * (self.q_intent[d] - q[d]) - self.params.posture_damping * qd[d];
+                    let c = Vector::new(j[(0, d)], j[(1, d)], j[(2, d)]);
+                    jt0 += c * t0[d];
+                    jjt += c * c.transpose();
+                }
+                if let Some(y) = jjt.cholesky().map(|ch| ch.solve(&jt0)) {
+                    for &d in &g.dofs {
+                        let c = Vector::new(j[(0, d)], j[(1, d)], j[(2, d)]);
+                        tau[d] += t0[d] - c.dot(&y);
+                    }
                 }
             }
         }
@@ -1011,27 +1129,33 @@ impl Simulation {
             };
             tau[d] += kp * (self.q_intent[d] - q[d]) - kd * qd[d];
         }
-        let alpha = (TICK_NS as Real * 1e-9 / 0.05).min(1.0);
-        for k in 0..out.n_tips.min(MAX_TIPS) {
-            let c = out.tips[k].transmitted;
-            let shear = (c[0] * c[0] + c[1] * c[1]).sqrt();
-            self.felt_shear[k] += (shear - self.felt_shear[k]) * alpha;
-        }
-        if self.grip > 0.0 {
-            self.add_grip_torques(&mut tau);
-        }
         for d in 0..n {
             let lim = 1.9 * hand.torque_limit[d];
             self.tau[d] = tau[d].clamp(-lim, lim);
         }
     }
 
-    /// Grip torques: the operator squeezes, pressing each fingertip of the grasp along the
-    /// contact normal with the force friction needs to carry the load it expects (weight plus
-    /// the hand's acceleration) with its safety margin, for the friction it expects. Friction
-    /// then carries the object as the arm moves (the DFS's stick friction), as in a person's
-    /// grip; a squeeze too weak for the real μ lets the object slip.
-    fn add_grip_torques(&self, tau: &mut [Real; MAX_DOF]) {
+    /// The squeeze: per fingertip of the grasp, the normal force `N_k` the operator presses
+    /// with and the unit push `u_k` (world) that delivers it, `f_k = N_k u_k`. Zero until every
+    /// fingertip of the grasp touches.
+    ///
+    /// The squeeze is what friction needs to carry the load the operator expects (weight plus
+    /// the arm's planned acceleration, anticipated as people do: Johansson & Westling 1984)
+    /// with its safety margin, for the friction it expects, and follows the grip ramp. It is not
+    /// re-sized from what the fingertips feel (no slip reflex): a squeeze too weak for the real
+    /// μ lets the object slip. `u_k` is the contact's inward normal projected onto the
+    /// directions the fingertip can push (glove10's fingers and thumb push only in their
+    /// flexion planes; eq. 14 transmits only forces in the range of Jᵀ), scaled to a unit
+    /// normal component. The magnitudes are balanced so the squeezes nearly cancel: minimise
+    /// ‖N − N₀‖² + w ‖Σ N_k u_k‖² (w = 4), i.e. N = (I + w AᵀA)⁻¹ N₀; for opposing fingertips
+    /// the squeeze is equal and opposite.
+    fn grip_forces(&self) -> ([Real; MAX_TIPS], [Vector; MAX_TIPS], [Vector; MAX_TIPS]) {
+        let mut mags = [0.0; MAX_TIPS];
+        let mut unit = [Vector::zeros(); MAX_TIPS];
+        let mut lift = [Vector::zeros(); MAX_TIPS];
+        if self.grip <= 0.0 {
+            return (mags, unit, lift);
+        }
         let out = self.dfs.output();
         let obj = self.dfs.object();
         let st = self.dfs.object_state();
@@ -1058,35 +1182,37 @@ impl Simulation {
         let touching = &touching[..nt];
         // Squeeze only once every finger of the grasp is on the object.
         if touching.is_empty() || touching.len() < planned {
-            return;
+            return (mags, unit, lift);
         }
-        let load = ((self.base_acceleration - g) * obj.mass).norm();
+        let load_force = (self.base_acceleration - g) * obj.mass;
+        let load = load_force.norm();
         let normal = (p.grip_safety * load / (self.operator_mu * touching.len() as Real))
             .max(p.min_normal)
             * self.grip;
-        // Per fingertip: the force for a unit normal push, along what it can push.
-        let mut unit = [Vector::zeros(); MAX_TIPS];
         let mut ok = [false; MAX_TIPS];
+        let mut range = [nalgebra::Matrix3::<Real>::zeros(); MAX_TIPS];
+        let mut arm = [Vector::zeros(); MAX_TIPS];
         for &k in touching {
             let Some(frame) = out.tips[k].frame else {
                 continue;
             };
             let n_in = st.pose.rotation * frame.normal_b();
+            arm[k] = st.pose.rotation * frame.p_b;
             let (basis, nb) = push_basis(hand, kin, k);
             let mut dir = Vector::zeros();
             for b in basis.iter().take(nb) {
                 dir += b * b.dot(&n_in);
+                range[k] += b * b.transpose();
             }
             let along = dir.dot(&n_in);
             if along >= 0.2 {
                 unit[k] = dir / along;
                 ok[k] = true;
+                // The load force is tangential: the squeeze alone sets the normal force.
+                let d = dir.normalize();
+                range[k] -= d * d.transpose();
             }
         }
-        // Normal forces near the wanted squeeze with little net force: minimise
-        // ‖N − N₀‖² + w ‖Σ N_k unit_k‖² (w = 4), i.e. N = (I + w AᵀA)⁻¹ N₀. An exactly
-        // force-free squeeze rarely exists for two or three fingertips that push only in their
-        // own planes; the stick friction absorbs the small remainder.
         let mut ks = [0usize; MAX_TIPS];
         let mut m = 0;
         for &k in touching.iter().filter(|&&k| ok[k]) {
@@ -1094,30 +1220,90 @@ impl Simulation {
             m += 1;
         }
         let mut sys = nalgebra::SMatrix::<Real, MAX_TIPS, MAX_TIPS>::identity();
-        // Each fingertip's squeeze also follows the shear it feels (per-digit grip control,
-        // Edin, Westling & Johansson 1992): at least the safety margin over its own shear, felt
-        // with a 50 ms lag.
-        let mut wanted = [normal; MAX_TIPS];
-        for (idx, &k) in ks.iter().enumerate().take(m) {
-            wanted[idx] =
-                normal.max(p.grip_safety * self.felt_shear[k] / self.operator_mu * self.grip);
-        }
-        let mut mags = wanted;
+        let wanted = [normal; MAX_TIPS];
+        let mut solved = wanted;
         for a in 0..m {
             for b in 0..m {
                 sys[(a, b)] += 4.0 * unit[ks[a]].dot(&unit[ks[b]]);
             }
         }
-        if !crate::math::cholesky_solve_in_place(&mut sys, m, &mut mags) {
-            mags = wanted;
+        if !crate::math::cholesky_solve_in_place(&mut sys, m, &mut solved) {
+            solved = wanted;
         }
-        let n = hand.dof();
         for (idx, &k) in ks.iter().enumerate().take(m) {
-            let magnitude = mags[idx].max(p.min_normal * self.grip);
-            let f = unit[k] * magnitude;
-            let j = &kin.tip_jacobians[k];
-            for (d, t) in tau.iter_mut().enumerate().take(n) {
-                *t += j[(0, d)] * f.x + j[(1, d)] * f.y + j[(2, d)] * f.z;
+            mags[k] = solved[idx].max(p.min_normal * self.grip);
+        }
+        for k in 0..MAX_TIPS {
+            if !ok[k] {
+                unit[k] = Vector::zeros();
+            }
+        }
+        if self.carry > 0.0 && m > 0 {
+            self.distribute_load(&ks[..m], &range, &arm, &mags, &unit, load_force, &mut lift);
+        }
+        (mags, unit, lift)
+    }
+
+    /// The load force (Johansson & Westling's "load force", beside the grip force): how the
+    /// fingertips `ks` share lifting the object. Each fingertip pushes `l_k` within the
+    /// directions it can push, across its push along the normal (`range[k]`, a projection: the
+    /// squeeze alone sets the normal force); together with the squeeze
+    /// `N_k u_k` they apply the wrench the expected motion needs, `Σ (l_k + N_k u_k) =
+    /// carry · m (a − g)` and no moment about the centre of mass (`arm[k]`: contact point from
+    /// the centre, world), so the stick springs are left with nothing to carry and the object
+    /// does not turn in the hand when the fingertips do not sit exactly opposite. Nearest to an
+    /// equal share: `l = l₀ + Aᵀ (A Aᵀ + εI)⁻¹ (b − A l₀)`, moments scaled by 1/(3 cm); the
+    /// small ε leaves out what the fingertips cannot do (a moment about the line through two
+    /// contacts).
+    #[allow(clippy::too_many_arguments)]
+    fn distribute_load(
+        &self,
+        ks: &[usize],
+        range: &[nalgebra::Matrix3<Real>; MAX_TIPS],
+        arm: &[Vector; MAX_TIPS],
+        mags: &[Real; MAX_TIPS],
+        unit: &[Vector; MAX_TIPS],
+        load_force: Vector,
+        lift: &mut [Vector; MAX_TIPS],
+    ) {
+        const SCALE: Real = 1.0 / 0.03;
+        let want = load_force * self.carry;
+        let mut squeeze_force = Vector::zeros();
+        let mut squeeze_moment = Vector::zeros();
+        for &k in ks {
+            let f = unit[k] * mags[k];
+            squeeze_force += f;
+            squeeze_moment += arm[k].cross(&f);
+        }
+        // Per fingertip, the 6x3 block A_k = [P_k; [r_k]x P_k / L].
+        let mut blocks = [nalgebra::SMatrix::<Real, 6, 3>::zeros(); MAX_TIPS];
+        let mut aat = nalgebra::Matrix6::<Real>::zeros();
+        let mut resid = nalgebra::Vector6::<Real>::zeros();
+        let share = want / ks.len() as Real;
+        let mut b = nalgebra::Vector6::<Real>::zeros();
+        b.fixed_rows_mut::<3>(0).copy_from(&(want - squeeze_force));
+        b.fixed_rows_mut::<3>(3)
+            .copy_from(&(-squeeze_moment * SCALE));
+        resid += b;
+        for &k in ks {
+            let p = range[k];
+            let mut a = nalgebra::SMatrix::<Real, 6, 3>::zeros();
+            a.fixed_view_mut::<3, 3>(0, 0).copy_from(&p);
+            a.fixed_view_mut::<3, 3>(3, 0)
+                .copy_from(&(arm[k].cross_matrix() * p * SCALE));
+            lift[k] = p * share;
+            resid -= a * share;
+            aat += a * a.transpose();
+            blocks[k] = a;
+        }
+        let eps = 1e-3 * aat.trace().max(1e-12);
+        for i in 0..6 {
+            aat[(i, i)] += eps;
+        }
+        if let Some(chol) = aat.cholesky() {
+            let y = chol.solve(&resid);
+            for &k in ks {
+                lift[k] += blocks[k].transpose() * y;
             }
         }
     }
@@ -1237,6 +1423,59 @@ mod tests {
             "the box stayed down: {}",
             last_hold.1
         );
+    }
+
+    /// Drift of the held object relative to the hand during `hold` (m/s): the least-squares
+    /// slope (linear trend) of its position relative to the hand base, per axis, as a vector's
+    /// length. The standard creep measure: zero-mean tremor does not count as drift. Also
+    /// returns the least number of contacts seen during `hold` and the object's lowest height
+    /// above its start then.
+    fn hold_drift(name: &str, seed: u64) -> (Real, usize, Real) {
+        let s = Scenario::builtin(name, seed).unwrap();
+        let mut sim = Simulation::new(&s, HandModel::glove10(), None).unwrap();
+        let start = sim.dfs().object_state().pose.translation.z;
+        let mut samples: Vec<(Real, Vector)> = Vec::new();
+        let (mut contacts, mut lowest) = (usize::MAX, Real::INFINITY);
+        while sim.step().unwrap() {
+            if sim.phase() != Phase::Hold {
+                continue;
+            }
+            let st = sim.dfs().object_state();
+            let (_, _, base) = sim.sample();
+            let rel = (base.inverse() * st.pose).translation.vector;
+            samples.push((sim.time_ns() as Real * 1e-9, rel));
+            contacts = contacts.min(sim.output().n_contacts);
+            lowest = lowest.min(st.pose.translation.z - start);
+        }
+        let n = samples.len() as Real;
+        let tm = samples.iter().map(|s| s.0).sum::<Real>() / n;
+        let pm = samples.iter().map(|s| s.1).sum::<Vector>() / n;
+        let stt: Real = samples.iter().map(|s| (s.0 - tm).powi(2)).sum();
+        let slope = samples
+            .iter()
+            .map(|s| (s.1 - pm) * (s.0 - tm))
+            .sum::<Vector>()
+            / stt;
+        (slope.norm(), contacts, lowest)
+    }
+
+    #[test]
+    fn in_sphere_lift_both_fingertips_hold_the_sphere_up_through_hold_for_every_seed() {
+        for seed in 0..5 {
+            let (_, contacts, lowest) = hold_drift("sphere-lift", seed);
+            assert!(contacts >= 2, "seed {seed}: only {contacts} contacts");
+            assert!(lowest > 0.08, "seed {seed}: the sphere sank to {lowest} m");
+        }
+    }
+
+    #[test]
+    #[ignore = "issue 3, not met yet: the sphere still creeps by 20-50 um/s (README)"]
+    fn in_sphere_lift_the_held_sphere_drifts_below_1_um_per_s_relative_to_the_hand() {
+        for seed in 0..5 {
+            let (drift, contacts, _) = hold_drift("sphere-lift", seed);
+            assert!(contacts >= 2, "seed {seed}: dropped");
+            assert!(drift < 1e-6, "seed {seed}: drift {} um/s", drift * 1e6);
+        }
     }
 
     #[test]
