@@ -39,8 +39,8 @@ fn replay(hand: &LoadedHand, skill: &SkillSpec) -> ReplayReport {
 #[test]
 fn a_sphere_lift_recorded_with_glove10_replays_on_allegro_and_barrett() {
     let skill = recorded_skill("sphere-lift");
-    // The recording dropped the sphere during hold; the reference keeps the held part.
-    assert!(skill.held_until_s.is_some());
+    // The glove10 operator holds the sphere through the whole skill now.
+    assert!(skill.held_until_s.is_none());
     for name in ["allegro", "barrett"] {
         let r = replay(&load_builtin_hand(name).unwrap(), &skill);
         assert!(r.success, "{name}: {:?} {}", r.failure_reason, r.detail);
