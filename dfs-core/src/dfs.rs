@@ -736,9 +736,19 @@ impl Dfs {
             want
         };
         let force_w = tangential + Vector::new(0.0, 0.0, normal);
-        // Resting objects do not spin or tip: cancel the moment and angular velocity.
-        let h = self.object.inertia * self.state.angular_velocity_b / dt;
-        let moment_b = -(moment_of(f_b) + h);
+        let (support_w, stands) = self.object.shape.table_support(&rot);
+        let moment_b = if stands {
+            // Standing on a face (or a sphere on its point): it does not spin or tip; cancel
+            // the moment and the angular velocity.
+            let h = self.object.inertia * self.state.angular_velocity_b / dt;
+            -(moment_of(f_b) + h)
+        } else {
+            // On an edge or a corner: the table pushes at the support, which tips the object
+            // over towards a face; the edge's rolling friction damps the rocking (time constant
+            // 50 ms), so it settles instead of bouncing from edge to edge.
+            let damping = self.object.inertia * self.state.angular_velocity_b / 0.05;
+            rot.inverse() * support_w.cross(&force_w) - damping
+        };
         wrench(&(rot.inverse() * force_w), &moment_b)
     }
 

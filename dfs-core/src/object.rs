@@ -128,6 +128,52 @@ impl Shape {
         }
     }
 
+    /// Where the shape rests on a horizontal table, for its orientation `rotation`: the centre
+    /// of its lowest point, edge or face relative to the shape's centre (world frame, m), and
+    /// whether that support is a face (or, for a sphere or a cylinder on its side, a point or
+    /// line straight below the centre), on which the shape stands still. On an edge or a corner
+    /// it tips over: the table's force at the support makes a moment about the centre. Heights
+    /// within 0.5 mm count as level.
+    pub fn table_support(&self, rotation: &Rotation) -> (Vector, bool) {
+        const LEVEL: Real = 5e-4;
+        let r = rotation.to_rotation_matrix();
+        let m = r.matrix();
+        match *self {
+            Shape::Sphere { radius } => (Vector::new(0.0, 0.0, -radius), true),
+            Shape::Box { half_extents } => {
+                let mut s_b = Vector::zeros();
+                let mut level = 0;
+                for i in 0..3 {
+                    let up = m[(2, i)];
+                    if 2.0 * half_extents[i] * up.abs() < LEVEL {
+                        level += 1;
+                    } else {
+                        s_b[i] = -up.signum() * half_extents[i];
+                    }
+                }
+                (r * s_b, level >= 2)
+            }
+            Shape::Cylinder {
+                radius,
+                half_height,
+            } => {
+                let up = Vector::new(m[(2, 0)], m[(2, 1)], m[(2, 2)]);
+                let radial = Vector::new(up.x, up.y, 0.0);
+                let radial_norm = radial.norm();
+                let standing = 2.0 * radius * radial_norm < LEVEL;
+                let lying = 2.0 * half_height * up.z.abs() < LEVEL;
+                let mut s_b = Vector::zeros();
+                if !lying {
+                    s_b.z = -up.z.signum() * half_height;
+                }
+                if !standing {
+                    s_b -= radial * (radius / radial_norm);
+                }
+                (r * s_b, standing || lying)
+            }
+        }
+    }
+
     /// Bounding radius about the centre (m).
     pub fn bounding_radius(&self) -> Real {
         match *self {
@@ -324,6 +370,38 @@ pub fn integrate(obj: &RigidObject, state: &mut ObjectState, f_ext_b: &Wrench, d
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_box_stands_on_a_face_and_tips_from_an_edge() {
+        let b = Shape::Box {
+            half_extents: [0.025, 0.025, 0.04],
+        };
+        let (s, stands) = b.table_support(&Rotation::identity());
+        assert!(stands);
+        assert!((s - Vector::new(0.0, 0.0, -0.04)).norm() < 1e-12);
+        // Tilted 0.2 rad about x: it rests on an edge off to the side of its centre.
+        let (s, stands) = b.table_support(&Rotation::from_euler_angles(0.2, 0.0, 0.0));
+        assert!(!stands);
+        assert!(s.y.abs() > 0.01, "the edge is beside the centre: {s:?}");
+        assert!((s.z + b.support_depth(&Rotation::from_euler_angles(0.2, 0.0, 0.0))).abs() < 1e-12);
+        let sphere = Shape::Sphere { radius: 0.04 };
+        assert!(
+            sphere
+                .table_support(&Rotation::from_euler_angles(0.3, 0.2, 0.1))
+                .1
+        );
+        let cyl = Shape::Cylinder {
+            radius: 0.03,
+            half_height: 0.06,
+        };
+        assert!(cyl.table_support(&Rotation::identity()).1, "standing");
+        let on_side = Rotation::from_euler_angles(std::f64::consts::FRAC_PI_2, 0.0, 0.0);
+        assert!(cyl.table_support(&on_side).1, "lying on its side");
+        let tilted = Rotation::from_euler_angles(0.3, 0.0, 0.0);
+        let (s, stands) = cyl.table_support(&tilted);
+        assert!(!stands, "on its rim");
+        assert!((s.z + cyl.support_depth(&tilted)).abs() < 1e-12);
+    }
 
     #[test]
     fn an_object_with_no_hand_falls_at_g() {

@@ -30,7 +30,7 @@ const DESCRIPTIONS: &[(&str, &str)] = &[
     ),
     (
         "box-slip",
-        "pinch of the box with μ 0.12 while the operator grips for μ 0.8: it slips and drops",
+        "pinch of the box with μ 0.3 while the operator grips for μ 0.8: lifted by the grip peak at lift-off, it slips and drops as the grip relaxes",
     ),
     (
         "two-grasps",
