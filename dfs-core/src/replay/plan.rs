@@ -118,6 +118,44 @@ fn perpendicular(v: &Vector, a: &Vector, fallback: &Vector) -> Vector {
     }
 }
 
+/// Where the ray from the centre along unit `dir` leaves the surface (B), with the outward
+/// normal there: bisection on the signed distance (the shapes are convex).
+fn surface_along(shape: &crate::object::Shape, dir: &Vector) -> (Vector, Vector) {
+    let (mut lo, mut hi) = (0.0, shape.bounding_radius() * 1.01 + 1e-6);
+    for _ in 0..48 {
+        let mid = 0.5 * (lo + hi);
+        if shape.closest(&(dir * mid)).0 < 0.0 {
+            lo = mid;
+        } else {
+            hi = mid;
+        }
+    }
+    let p = dir * hi;
+    (p, shape.closest(&p).2)
+}
+
+/// Two antipodal contact points through the centre of mass for a pinch along `axis` (from the
+/// thumb's side to the other): the axis is made horizontal (the contacts at the height of the
+/// centre of mass, so gravity makes no moment about the line between them) and, where the
+/// surface normal there is close to it, aligned with that normal (a box's face, a cylinder's
+/// side), so the normals are opposite and on the line. Returns (thumb point, other point,
+/// axis).
+fn antipodal_pair(shape: &crate::object::Shape, axis: &Vector) -> (Vector, Vector, Vector) {
+    let horizontal = Vector::new(axis.x, axis.y, 0.0);
+    let mut a = if horizontal.norm() > 0.3 {
+        horizontal.normalize()
+    } else {
+        *axis
+    };
+    let (_, n) = surface_along(shape, &a);
+    if n.dot(&a) > 0.7 && (n.z.abs() < 1e-9 || horizontal.norm() <= 0.3) {
+        a = n;
+    }
+    let (p_o, _) = surface_along(shape, &a);
+    let (p_t, _) = surface_along(shape, &-a);
+    (p_t, p_o, a)
+}
+
 /// Validates a skill for replay; the error names the field.
 fn validate(skill: &SkillSpec, thumb: usize, hand: &HandModel) -> Result<()> {
     skill.shape.validate()?;
@@ -416,6 +454,15 @@ fn plan_candidates(
     let a_s = (other_c - thumb_c)
         .try_normalize(1e-9)
         .unwrap_or_else(Vector::x);
+    // A two-fingertip hand pinches antipodally through the centre of mass, at its height: the
+    // squeeze then makes no moment and gravity none about the contacts (the recording's own
+    // contacts may be a few millimetres off that line).
+    let (thumb_c, other_c, a_s) = if nt == 2 {
+        let (p_t, p_o, a) = antipodal_pair(&skill.shape, &a_s);
+        (p_t, p_o, a)
+    } else {
+        (thumb_c, other_c, a_s)
+    };
     // The hand's own grasp axis and approach direction at mid-range angles.
     let q_mid = mid_angles(hand);
     let mut kin = Kinematics::default();
@@ -465,7 +512,7 @@ fn plan_candidates(
             start * Point::from(p - n_in * hand.fingertips[k].radius)
         };
         targets.push((thumb, target_of(thumb, thumb_c)));
-        if lateral.len() == other_side.len() && !other_side.is_empty() {
+        if lateral.len() == other_side.len() && !other_side.is_empty() && nt != 2 {
             let mut skill_lat: Vec<(usize, Real)> = other_side
                 .iter()
                 .map(|&i| (i, skill.contacts[i].position_b.dot(&lat_w)))

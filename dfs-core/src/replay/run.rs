@@ -56,6 +56,13 @@ pub struct Replay {
     step: u64,
     n_steps: u64,
     stats: Stats,
+    /// Two fingertips driven by one DOF (a parallel gripper's jaws), with the planned offset of
+    /// the object's centre from their midpoint along the line between them (m).
+    pinch: Option<(usize, usize, Real)>,
+    /// For such a pinch: the jaw line's direction and midpoint in the base frame at the grasp.
+    jaw_line: Option<(Vector, Point)>,
+    /// The arm's correction (world) that keeps such a pinch centred on the object.
+    centring: Vector,
 }
 
 /// Running statistics for the report.
@@ -136,6 +143,27 @@ impl Replay {
             }
         }
         let n_steps = (timeline.end / DT).round() as u64;
+        let pinch = match hand.finger_groups.as_slice() {
+            [g] if g.tips.len() == 2 && hand.fingertips.len() == 2 => {
+                let (a, b) = (g.tips[0], g.tips[1]);
+                let centre = |k: usize| {
+                    let c = &plan.contacts[k];
+                    c.p_b - c.normal_b() * hand.fingertips[k].radius
+                };
+                let u = (centre(b) - centre(a)).try_normalize(1e-9);
+                u.map(|u| (a, b, -(0.5 * (centre(a) + centre(b))).dot(&u)))
+            }
+            _ => None,
+        };
+        let jaw_line = pinch.map(|(a, b, _)| {
+            let to_base = plan.base_in_b0.inverse();
+            let centre = |k: usize| {
+                let c = &plan.contacts[k];
+                to_base * Point::from(c.p_b - c.normal_b() * hand.fingertips[k].radius)
+            };
+            let (pa, pb) = (centre(a), centre(b));
+            ((pb - pa).normalize(), Point::from(0.5 * (pa.coords + pb.coords)))
+        });
         let mut q = [0.0; MAX_DOF];
         q[..n].copy_from_slice(&plan.q_pre[..n]);
         Ok(Replay {
@@ -155,6 +183,9 @@ impl Replay {
             step: 0,
             n_steps,
             stats: Stats::default(),
+            pinch,
+            jaw_line,
+            centring: Vector::zeros(),
         })
     }
 
@@ -178,7 +209,7 @@ impl Replay {
     fn schedule(&self, t: Real) -> (Isometry, Real, Real, bool) {
         let tl = &self.timeline;
         let p = &self.params;
-        let follow = |t: Real| self.skill.reference(t) * self.plan.base_in_b0;
+        let follow = |t: Real| self.level_jaws(self.skill.reference(t) * self.plan.base_in_b0);
         if t < tl.grasp_start {
             let s = min_jerk(t / tl.grasp_start.max(1e-3));
             let a = self.pre_base;
@@ -295,14 +326,59 @@ impl Replay {
         }
     }
 
+    /// A pinch's jaws squeeze with equal force, so they can carry no load along the line between
+    /// them: in the DFS nothing pushes back when the object moves along it (a real jaw's
+    /// contact stiffness would). Following the skill's rotation as it is would tilt that line
+    /// and let gravity pull the object along it; the hand turns by the least rotation about the
+    /// jaws' midpoint that keeps the line horizontal (the object's orientation error shows it).
+    fn level_jaws(&self, base: Isometry) -> Isometry {
+        let Some((u_base, mid_base)) = self.jaw_line else {
+            return base;
+        };
+        let u = base.rotation * u_base;
+        let Some(level) = Vector::new(u.x, u.y, 0.0).try_normalize(1e-6) else {
+            return base;
+        };
+        let Some(turn) = crate::math::Rotation::rotation_between(&u, &level) else {
+            return base;
+        };
+        let mid = base * mid_base;
+        let about_mid = Isometry::from_parts((mid.coords - turn * mid.coords).into(), turn);
+        about_mid * base
+    }
+
+    /// Two jaws on one DOF squeeze symmetrically about the hand, and the DFS's surface springs
+    /// act on the fingers only: nothing in the simulation keeps the object centred between the
+    /// jaws, and a millimetre of drift along the jaw line opens one contact. A real gripper's
+    /// jaws clamp the object; here the arm moves the hand along the jaw line towards the
+    /// object's measured offset from the jaws' midpoint (time constant 20 ms), as a compliant
+    /// wrist would. Only while both jaws touch.
+    fn centre_pinch(&mut self, preshaped: bool) {
+        let Some((a, b, s0)) = self.pinch else {
+            return;
+        };
+        let out = self.dfs.output();
+        if preshaped || !(out.tips[a].touching && out.tips[b].touching) {
+            return;
+        }
+        let (pa, pb) = (out.tip_centres[a].coords, out.tip_centres[b].coords);
+        let Some(u) = (pb - pa).try_normalize(1e-9) else {
+            return;
+        };
+        let s = (self.dfs.object_state().pose.translation.vector - 0.5 * (pa + pb)).dot(&u) - s0;
+        self.centring += u * (s * DT / 0.02);
+    }
+
     /// Runs one tick; `Ok(false)` when the replay is over.
     pub fn step(&mut self) -> Result<bool> {
         if self.step >= self.n_steps {
             return Ok(false);
         }
         let t = self.step as Real * DT;
-        let (base, offset, grip, preshaped) = self.schedule(t);
+        let (mut base, offset, grip, preshaped) = self.schedule(t);
         self.control(t, offset, grip, preshaped);
+        self.centre_pinch(preshaped);
+        base.translation.vector += self.centring;
         let n = self.dfs.hand().dof();
         self.base = base;
         self.q[..n].copy_from_slice(&self.dfs.output().motor_q[..n]);
