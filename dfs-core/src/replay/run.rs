@@ -56,13 +56,9 @@ pub struct Replay {
     step: u64,
     n_steps: u64,
     stats: Stats,
-    /// Two fingertips driven by one DOF (a parallel gripper's jaws), with the planned offset of
-    /// the object's centre from their midpoint along the line between them (m).
-    pinch: Option<(usize, usize, Real)>,
-    /// For such a pinch: the jaw line's direction and midpoint in the base frame at the grasp.
+    /// For two fingertips driven by one DOF (a parallel gripper's jaws): the line between them
+    /// at the grasp, as its direction and midpoint in the base frame.
     jaw_line: Option<(Vector, Point)>,
-    /// The arm's correction (world) that keeps such a pinch centred on the object.
-    centring: Vector,
 }
 
 /// Running statistics for the report.
@@ -138,31 +134,28 @@ impl Replay {
         }
         let mut grasp_dof = [false; MAX_DOF];
         for g in &hand.finger_groups {
-            for &d in &g.dofs {
-                grasp_dof[d] = true;
+            if g.tips.iter().any(|&k| plan.active[k]) {
+                for &d in &g.dofs {
+                    grasp_dof[d] = true;
+                }
             }
         }
         let n_steps = (timeline.end / DT).round() as u64;
         let pinch = match hand.finger_groups.as_slice() {
-            [g] if g.tips.len() == 2 && hand.fingertips.len() == 2 => {
-                let (a, b) = (g.tips[0], g.tips[1]);
-                let centre = |k: usize| {
-                    let c = &plan.contacts[k];
-                    c.p_b - c.normal_b() * hand.fingertips[k].radius
-                };
-                let u = (centre(b) - centre(a)).try_normalize(1e-9);
-                u.map(|u| (a, b, -(0.5 * (centre(a) + centre(b))).dot(&u)))
-            }
+            [g] if g.tips.len() == 2 && hand.fingertips.len() == 2 => Some((g.tips[0], g.tips[1])),
             _ => None,
         };
-        let jaw_line = pinch.map(|(a, b, _)| {
+        let jaw_line = pinch.map(|(a, b)| {
             let to_base = plan.base_in_b0.inverse();
             let centre = |k: usize| {
                 let c = &plan.contacts[k];
                 to_base * Point::from(c.p_b - c.normal_b() * hand.fingertips[k].radius)
             };
             let (pa, pb) = (centre(a), centre(b));
-            ((pb - pa).normalize(), Point::from(0.5 * (pa.coords + pb.coords)))
+            (
+                (pb - pa).normalize(),
+                Point::from(0.5 * (pa.coords + pb.coords)),
+            )
         });
         let mut q = [0.0; MAX_DOF];
         q[..n].copy_from_slice(&plan.q_pre[..n]);
@@ -183,9 +176,7 @@ impl Replay {
             step: 0,
             n_steps,
             stats: Stats::default(),
-            pinch,
             jaw_line,
-            centring: Vector::zeros(),
         })
     }
 
@@ -272,7 +263,7 @@ impl Replay {
         if !preshaped {
             let forces = self.plan.forces_at(t);
             for g in &hand.finger_groups {
-                for &k in &g.tips {
+                for &k in g.tips.iter().filter(|&&k| self.plan.active[k]) {
                     let tip = &hand.fingertips[k];
                     let c = &self.plan.contacts[k];
                     let j = &kin.tip_jacobians[k];
@@ -347,38 +338,14 @@ impl Replay {
         about_mid * base
     }
 
-    /// Two jaws on one DOF squeeze symmetrically about the hand, and the DFS's surface springs
-    /// act on the fingers only: nothing in the simulation keeps the object centred between the
-    /// jaws, and a millimetre of drift along the jaw line opens one contact. A real gripper's
-    /// jaws clamp the object; here the arm moves the hand along the jaw line towards the
-    /// object's measured offset from the jaws' midpoint (time constant 20 ms), as a compliant
-    /// wrist would. Only while both jaws touch.
-    fn centre_pinch(&mut self, preshaped: bool) {
-        let Some((a, b, s0)) = self.pinch else {
-            return;
-        };
-        let out = self.dfs.output();
-        if preshaped || !(out.tips[a].touching && out.tips[b].touching) {
-            return;
-        }
-        let (pa, pb) = (out.tip_centres[a].coords, out.tip_centres[b].coords);
-        let Some(u) = (pb - pa).try_normalize(1e-9) else {
-            return;
-        };
-        let s = (self.dfs.object_state().pose.translation.vector - 0.5 * (pa + pb)).dot(&u) - s0;
-        self.centring += u * (s * DT / 0.02);
-    }
-
     /// Runs one tick; `Ok(false)` when the replay is over.
     pub fn step(&mut self) -> Result<bool> {
         if self.step >= self.n_steps {
             return Ok(false);
         }
         let t = self.step as Real * DT;
-        let (mut base, offset, grip, preshaped) = self.schedule(t);
+        let (base, offset, grip, preshaped) = self.schedule(t);
         self.control(t, offset, grip, preshaped);
-        self.centre_pinch(preshaped);
-        base.translation.vector += self.centring;
         let n = self.dfs.hand().dof();
         self.base = base;
         self.q[..n].copy_from_slice(&self.dfs.output().motor_q[..n]);
