@@ -37,16 +37,20 @@ fn replay(hand: &LoadedHand, skill: &SkillSpec) -> ReplayReport {
 }
 
 #[test]
-fn a_sphere_lift_recorded_with_glove10_replays_on_allegro_and_barrett() {
+fn a_sphere_lift_recorded_with_glove10_replays_on_allegro_barrett_and_the_gripper() {
     let skill = recorded_skill("sphere-lift");
     // The glove10 operator holds the sphere through the whole skill now.
     assert!(skill.held_until_s.is_none());
-    for name in ["allegro", "barrett"] {
+    for name in ["allegro", "barrett", "gripper"] {
         let r = replay(&load_builtin_hand(name).unwrap(), &skill);
         assert!(r.success, "{name}: {:?} {}", r.failure_reason, r.detail);
         assert!(r.lift_height_m > 0.07, "{name} lifted {}", r.lift_height_m);
-        assert!(r.position_error_max_m < 0.02);
-        assert!(r.quality.force_closure);
+        assert!(
+            r.position_error_max_m < 0.02,
+            "{name}: {}",
+            r.position_error_max_m
+        );
+        assert!(r.quality.force_closure, "{name}");
     }
 }
 

@@ -18,14 +18,25 @@
 //!    hand's thumb ([`crate::hand::thumb_of`] or the spec's `thumb`) takes the thumb side; its
 //!    other fingertips the opposing side: one-to-one when the counts match, else a new contact
 //!    set: the opposing side's centre spread across the grasp axis at the hand's own finger
-//!    spacing (or merged into one point), projected onto the surface.
+//!    spacing (or merged into one point), projected onto the surface. A hand with two
+//!    fingertips (a parallel gripper) pinches antipodally through the centre of mass, at its
+//!    height, along the skill's grasp axis made horizontal (a box's or cylinder's face normal
+//!    when that is close).
 //! 2. **Base pose.** The hand's own grasp axis (thumb tip to the centroid of the others, at
 //!    mid-range joint angles) is aligned with the skill's, and 12 rolls about it are tried
 //!    (approaching from below the table excluded); for each, fingertip inverse kinematics with
 //!    the base position free (joint limits and mimic couplings honoured) places the fingertips
 //!    on their contacts. Candidates are scored by the IK residual, by how well each fingertip
 //!    can push along its contact normal, by grasp quality (Ferrari-Canny ε of the contacts the
-//!    fingertips actually reach) and by approaching from above.
+//!    fingertips actually reach) and by approaching from above. When no pose puts every
+//!    fingertip on its contact (an underactuated hand cannot put every tip on an arbitrary
+//!    point), the thumb and the two, then one, opposing fingers nearest it are placed (those
+//!    opposing fingers only need to rest on the surface near their targets) and every other
+//!    finger curls, its DOFs swept from open to closed, until its tip first touches the
+//!    object; a finger whose curl misses stays open and out of the grasp
+//!    ([`Plan::active`]). Such a grasp counts only when its contacts are a force closure and
+//!    every finger can push along its contact normal inside the planned friction cone;
+//!    otherwise the replay fails with `unreachable`.
 //! 3. **Forces.** At the reference's samples (every [`ReplayParams::force_sample_s`]), the
 //!    least internal force that carries the object's load `m (a − g)` with exact friction cones,
 //!    a friction margin and the hand's torque limits `|Σ Jᵀ f| ≤ τ_max` (a second-order cone
@@ -36,7 +47,10 @@
 //!    close under task-space steering, the grip ramps up to the planned forces `τ = Jᵀ f`, the
 //!    base follows the reference object motion (so the object follows only if the grasp holds
 //!    it), the grip ramps down, the fingers open and the hand retreats. Every torque is clamped
-//!    to the hand's limit.
+//!    to the hand's limit. Two jaws on one DOF squeeze with equal force and the DFS's surface
+//!    springs act on the fingers only, so a pinch carries no load along its jaw line: the hand
+//!    turns by the least rotation that keeps that line horizontal while it follows the skill
+//!    (otherwise gravity pulls the object along a tilted line and one jaw opens).
 
 mod plan;
 mod run;

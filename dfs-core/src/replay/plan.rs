@@ -38,8 +38,11 @@ pub struct Plan {
     /// Joint angles with the fingertips [`ReplayParams::preshape_clearance`] off them.
     pub q_pre: [Real; MAX_DOF],
     /// Per fingertip of the hand: its contact (point where the sphere touches, inward normal)
-    /// in B.
+    /// in B; meaningful for the fingertips in [`Plan::active`] only.
     pub contacts: Vec<ContactFrame>,
+    /// Per fingertip: it takes part in the grasp. A finger of an underactuated hand whose curl
+    /// misses the object stays open and out of the grasp.
+    pub active: Vec<bool>,
     /// Largest fingertip distance from its target after inverse kinematics (m).
     pub ik_error: Real,
     /// Grasp quality of `contacts`.
@@ -48,7 +51,8 @@ pub struct Plan {
     pub force_times: Vec<Real>,
     /// Planned intensities per force sample and fingertip (contact frames of `contacts`).
     pub forces: Vec<[Intensity; MAX_TIPS]>,
-    /// Map from intensities to joint torques at the grasp (rows DOFs, 4 columns per tip).
+    /// Map from intensities to joint torques at the grasp (rows DOFs, 4 columns per active
+    /// tip, in the order of the fingertips).
     pub torque_map: DMatrix<Real>,
     /// A reason the grasp cannot work, found while planning, with a sentence.
     pub failure: Option<(FailureReason, String)>,
@@ -57,10 +61,27 @@ pub struct Plan {
 /// One candidate base pose.
 struct Candidate {
     score: Real,
+    /// Largest distance of a placed (key) fingertip from its target (m).
     error: Real,
+    /// The placed fingertips reach and, for a curled grasp, the contacts that result are a
+    /// force closure the fingers can push into.
+    ok: bool,
+    /// Smallest alignment of a contact's normal with the directions its finger can push in.
+    align: Real,
     rotation: Rotation,
     approach: Vector,
     q_free: [Real; MAX_DOF],
+    active: [bool; MAX_TIPS],
+}
+
+/// Which fingertips the base pose and inverse kinematics place on targets.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Keys {
+    /// Every fingertip on its own contact.
+    All,
+    /// The thumb and this many opposing fingertips (those nearest the thumb); every other
+    /// finger curls until it meets the surface, or stays out of the grasp.
+    Nearest(usize),
 }
 
 /// Contacts of the skill on the thumb's side and on the opposing side.
@@ -118,6 +139,44 @@ fn perpendicular(v: &Vector, a: &Vector, fallback: &Vector) -> Vector {
     }
 }
 
+/// Where the ray from the centre along unit `dir` leaves the surface (B), with the outward
+/// normal there: bisection on the signed distance (the shapes are convex).
+fn surface_along(shape: &crate::object::Shape, dir: &Vector) -> (Vector, Vector) {
+    let (mut lo, mut hi) = (0.0, shape.bounding_radius() * 1.01 + 1e-6);
+    for _ in 0..48 {
+        let mid = 0.5 * (lo + hi);
+        if shape.closest(&(dir * mid)).0 < 0.0 {
+            lo = mid;
+        } else {
+            hi = mid;
+        }
+    }
+    let p = dir * hi;
+    (p, shape.closest(&p).2)
+}
+
+/// Two antipodal contact points through the centre of mass for a pinch along `axis` (from the
+/// thumb's side to the other): the axis is made horizontal (the contacts at the height of the
+/// centre of mass, so gravity makes no moment about the line between them) and, where the
+/// surface normal there is close to it, aligned with that normal (a box's face, a cylinder's
+/// side), so the normals are opposite and on the line. Returns (thumb point, other point,
+/// axis).
+fn antipodal_pair(shape: &crate::object::Shape, axis: &Vector) -> (Vector, Vector, Vector) {
+    let horizontal = Vector::new(axis.x, axis.y, 0.0);
+    let mut a = if horizontal.norm() > 0.3 {
+        horizontal.normalize()
+    } else {
+        *axis
+    };
+    let (_, n) = surface_along(shape, &a);
+    if n.dot(&a) > 0.7 && (n.z.abs() < 1e-9 || horizontal.norm() <= 0.3) {
+        a = n;
+    }
+    let (p_o, _) = surface_along(shape, &a);
+    let (p_t, _) = surface_along(shape, &-a);
+    (p_t, p_o, a)
+}
+
 /// Validates a skill for replay; the error names the field.
 fn validate(skill: &SkillSpec, thumb: usize, hand: &HandModel) -> Result<()> {
     skill.shape.validate()?;
@@ -166,18 +225,42 @@ pub fn plan(
     params: &ReplayParams,
 ) -> Result<Plan> {
     validate(skill, thumb, hand)?;
-    let mut candidates = plan_candidates(hand, thumb, skill, params);
-    candidates.sort_by(|a, b| b.score.total_cmp(&a.score));
+    let nt = hand.fingertips.len();
+    let best_of = |keys: Keys| {
+        plan_candidates(hand, thumb, skill, params, keys)
+            .into_iter()
+            .max_by(|a, b| a.score.total_cmp(&b.score))
+    };
+    // Every fingertip on its contact; failing that (an underactuated hand cannot put every
+    // tip on an arbitrary point), the thumb and two, then one, opposing fingers placed and the
+    // other fingers curled onto the surface.
+    let mut best = best_of(Keys::All);
+    // Why the curled grasps were refused, when every one was.
+    let mut curled_refused = None;
+    if !best.as_ref().is_some_and(|c| c.ok) && nt >= 3 {
+        for n in [2, 1] {
+            match best_of(Keys::Nearest(n)) {
+                Some(c) if c.ok => {
+                    best = Some(c);
+                    curled_refused = None;
+                    break;
+                }
+                Some(c) if c.error <= params.reach_tolerance && curled_refused.is_none() => {
+                    curled_refused = Some((n, c.align));
+                }
+                _ => {}
+            }
+        }
+    }
+    let Some(best) = best else {
+        return Err(DfsError::invalid("hand", "no candidate base pose"));
+    };
+    let best = &best;
+    let reachable = best.ok;
     let start = skill.start_pose();
     let n_hand = hand.dof();
-    let nt = hand.fingertips.len();
     let mut kin = Kinematics::default();
-    let (best, reachable) = match candidates.first() {
-        Some(c) => (c, c.error <= params.reach_tolerance),
-        None => {
-            return Err(DfsError::invalid("hand", "no candidate base pose"));
-        }
-    };
+    let active: Vec<bool> = best.active[..nt].to_vec();
     let base_grasp = Isometry::from_parts(
         Vector::new(best.q_free[0], best.q_free[1], best.q_free[2]).into(),
         best.rotation,
@@ -202,6 +285,7 @@ pub fn plan(
         }
     }
     let pre_targets: Vec<(usize, Point)> = (0..nt)
+        .filter(|&k| active[k])
         .map(|k| {
             let c = &contacts[k];
             let out = -c.normal_b();
@@ -225,8 +309,12 @@ pub fn plan(
         &mut kin,
         &mut q_pre[..n_hand],
     );
+    let active_contacts: Vec<ContactFrame> = (0..nt)
+        .filter(|&k| active[k])
+        .map(|k| contacts[k])
+        .collect();
     let quality = grasp_quality(
-        &contacts,
+        &active_contacts,
         skill.contact_model,
         &skill.friction,
         &QualityParams::default(),
@@ -244,17 +332,18 @@ pub fn plan(
     // Torque map at the grasp (B = world at the start: the start pose is not rotated).
     hand.forward_kinematics(&base_grasp, &q_grasp[..n_hand], &mut kin);
     hand.tip_jacobians(&mut kin);
-    let mut torque_map = DMatrix::<Real>::zeros(n_hand, 4 * nt);
-    for (k, c) in contacts.iter().enumerate() {
+    let mut torque_map = DMatrix::<Real>::zeros(n_hand, 4 * active_contacts.len());
+    for (i, k) in (0..nt).filter(|&k| active[k]).enumerate() {
+        let c = &contacts[k];
         let j = &kin.tip_jacobians[k];
         let r = c.rot_b.to_rotation_matrix();
         for d in 0..n_hand {
             let lin = Vector::new(j[(0, d)], j[(1, d)], j[(2, d)]);
             let ang = Vector::new(j[(3, d)], j[(4, d)], j[(5, d)]);
             for comp in 0..3 {
-                torque_map[(d, 4 * k + comp)] = lin.dot(&r.matrix().column(comp).into_owned());
+                torque_map[(d, 4 * i + comp)] = lin.dot(&r.matrix().column(comp).into_owned());
             }
-            torque_map[(d, 4 * k + 3)] = ang.dot(&c.normal_b());
+            torque_map[(d, 4 * i + 3)] = ang.dot(&c.normal_b());
         }
     }
     let mut plan = Plan {
@@ -266,6 +355,7 @@ pub fn plan(
         q_grasp,
         q_pre,
         contacts,
+        active,
         ik_error: best.error,
         quality,
         force_times: Vec::new(),
@@ -274,15 +364,27 @@ pub fn plan(
         failure: None,
     };
     if !reachable {
-        plan.failure = Some((
-            FailureReason::Unreachable,
+        let mu = skill.friction.mu * (1.0 - params.friction_margin);
+        let why = if let Some((n, align)) = curled_refused {
             format!(
-                "no base pose puts every fingertip on its contact: the best misses by {:.1} mm \
+                "no base pose puts every fingertip on its contact (the best misses by {:.1} mm); \
+                 the thumb and {n} opposing finger(s) reach the object with the others curled \
+                 onto it, but a finger there cannot push along its contact normal within the \
+                 friction cone (alignment {align:.2}, needs {:.2})",
+                best.error * 1e3,
+                1.0 / (1.0 + mu * mu).sqrt()
+            )
+        } else if best.error > params.reach_tolerance {
+            format!(
+                "no base pose puts the fingertips on their contacts: the best misses by {:.1} mm \
                  (tolerance {:.1} mm)",
                 best.error * 1e3,
                 params.reach_tolerance * 1e3
-            ),
-        ));
+            )
+        } else {
+            "the fingers that reach the object do not make a force closure".to_owned()
+        };
+        plan.failure = Some((FailureReason::Unreachable, why));
         return Ok(plan);
     }
     plan_forces(&mut plan, skill, params);
@@ -312,11 +414,14 @@ fn plan_forces(plan: &mut Plan, skill: &SkillSpec, params: &ReplayParams) {
         map: plan.torque_map.clone(),
         limits: plan.hand.torque_limit.clone(),
     };
-    let nt = plan.contacts.len();
+    let tips: Vec<usize> = (0..plan.contacts.len())
+        .filter(|&k| plan.active[k])
+        .collect();
+    let contacts: Vec<ContactFrame> = tips.iter().map(|&k| plan.contacts[k]).collect();
     // Static load first, without torque limits: can the contacts carry it at all?
     let static_load = load_at(skill, tl.grasp_start, &g);
     if let Err(e) = optimise(
-        &plan.contacts,
+        &contacts,
         skill.contact_model,
         &skill.friction,
         &static_load,
@@ -343,7 +448,7 @@ fn plan_forces(plan: &mut Plan, skill: &SkillSpec, params: &ReplayParams) {
     while t <= tl.release_start + 1e-9 {
         let load = load_at(skill, t, &g);
         let with_limits = optimise_with_torque_limits(
-            &plan.contacts,
+            &contacts,
             skill.contact_model,
             &skill.friction,
             &load,
@@ -363,23 +468,20 @@ fn plan_forces(plan: &mut Plan, skill: &SkillSpec, params: &ReplayParams) {
                         ),
                     ));
                 }
-                optimise(
-                    &plan.contacts,
-                    skill.contact_model,
-                    &skill.friction,
-                    &load,
-                    &opt,
-                )
-                .ok()
+                optimise(&contacts, skill.contact_model, &skill.friction, &load, &opt).ok()
             }
         };
         let mut row = [Intensity::zeros(); MAX_TIPS];
         match dist {
-            Some(d) => row[..nt].copy_from_slice(&d.intensities),
+            Some(d) => {
+                for (&k, c) in tips.iter().zip(&d.intensities) {
+                    row[k] = *c;
+                }
+            }
             None => {
                 // Nothing carries it: squeeze with the least normal force and let it slip.
-                for c in row.iter_mut().take(nt) {
-                    c[2] = params.min_normal;
+                for &k in &tips {
+                    row[k][2] = params.min_normal;
                 }
             }
         }
@@ -390,12 +492,14 @@ fn plan_forces(plan: &mut Plan, skill: &SkillSpec, params: &ReplayParams) {
 }
 
 /// Scored candidate base poses (rolls about the grasp axis), each with the joint angles from
-/// fingertip inverse kinematics on the hand with a free base position.
+/// fingertip inverse kinematics on the hand with a free base position for the fingertips
+/// `keys` places, and the other fingers curled onto the surface ([`curl_onto`]).
 fn plan_candidates(
     hand: &HandModel,
     thumb: usize,
     skill: &SkillSpec,
     params: &ReplayParams,
+    keys: Keys,
 ) -> Vec<Candidate> {
     let nt = hand.fingertips.len();
     let n_hand = hand.dof();
@@ -416,12 +520,34 @@ fn plan_candidates(
     let a_s = (other_c - thumb_c)
         .try_normalize(1e-9)
         .unwrap_or_else(Vector::x);
+    // A two-fingertip hand pinches antipodally through the centre of mass, at its height: the
+    // squeeze then makes no moment and gravity none about the contacts (the recording's own
+    // contacts may be a few millimetres off that line).
+    let (thumb_c, other_c, a_s) = if nt == 2 {
+        let (p_t, p_o, a) = antipodal_pair(&skill.shape, &a_s);
+        (p_t, p_o, a)
+    } else {
+        (thumb_c, other_c, a_s)
+    };
     // The hand's own grasp axis and approach direction at mid-range angles.
     let q_mid = mid_angles(hand);
     let mut kin = Kinematics::default();
     hand.forward_kinematics(&Isometry::identity(), &q_mid[..n_hand], &mut kin);
-    let others: Vec<usize> = (0..nt).filter(|&k| k != thumb).collect();
     let p_t = kin.tip_centres[thumb].coords;
+    // The opposing fingertips placed on targets: all, or those nearest the thumb.
+    let mut others: Vec<usize> = (0..nt).filter(|&k| k != thumb).collect();
+    if let Keys::Nearest(n) = keys {
+        others.sort_by(|&a, &b| {
+            let d = |k: usize| (kin.tip_centres[k].coords - p_t).norm();
+            d(a).total_cmp(&d(b))
+        });
+        others.truncate(n);
+    }
+    let mut key = [false; MAX_TIPS];
+    key[thumb] = true;
+    for &k in &others {
+        key[k] = true;
+    }
     let p_o = if others.is_empty() {
         p_t + Vector::x()
     } else {
@@ -435,7 +561,7 @@ fn plan_candidates(
     let m_h = 0.5 * (p_t + p_o);
     let d_h = perpendicular(&m_h, &a_h, &Vector::z());
     let lat_h = a_h.cross(&d_h);
-    // The other fingertips ordered across the grasp axis, with their offsets from the middle.
+    // The placed fingertips ordered across the grasp axis, with their offsets from the middle.
     let mut lateral: Vec<(usize, Real)> = others
         .iter()
         .map(|&k| (k, (kin.tip_centres[k].coords - p_o).dot(&lat_h)))
@@ -450,6 +576,7 @@ fn plan_candidates(
     };
     let up_perp = perpendicular(&-Vector::z(), &a_s, &Vector::x());
     let side = a_s.cross(&up_perp);
+    let inv_start = start.inverse();
     for r in 0..ROLLS {
         let psi = r as Real * std::f64::consts::TAU / ROLLS as Real;
         let d_w = up_perp * psi.cos() + side * psi.sin();
@@ -465,7 +592,7 @@ fn plan_candidates(
             start * Point::from(p - n_in * hand.fingertips[k].radius)
         };
         targets.push((thumb, target_of(thumb, thumb_c)));
-        if lateral.len() == other_side.len() && !other_side.is_empty() {
+        if lateral.len() == other_side.len() && !other_side.is_empty() && nt != 2 {
             let mut skill_lat: Vec<(usize, Real)> = other_side
                 .iter()
                 .map(|&i| (i, skill.contacts[i].position_b.dot(&lat_w)))
@@ -489,7 +616,7 @@ fn plan_candidates(
         let base0 = centre - rot * m_h;
         q_start[..3].copy_from_slice(base0.as_slice());
         let mut q = [0.0; MAX_DOF];
-        let res = solve_tips(
+        let mut res = solve_tips(
             &free,
             &Isometry::identity(),
             &targets,
@@ -498,6 +625,43 @@ fn plan_candidates(
             &mut kin,
             &mut q[..n],
         );
+        if keys != Keys::All {
+            // The opposing fingers of an underactuated hand need only touch the surface near
+            // their targets: each target moves to the surface point nearest the tip (tip
+            // spheres resting on it), and the thumb stays on its contact.
+            for _ in 0..4 {
+                if res.max_error <= ik.tolerance {
+                    break;
+                }
+                for (k, target) in targets.iter_mut().skip(1) {
+                    let c_b = (inv_start * kin.tip_centres[*k]).coords;
+                    let (p, n_in) = on_surface(skill, &c_b);
+                    *target = start * Point::from(p - n_in * hand.fingertips[*k].radius);
+                }
+                let q0 = q;
+                res = solve_tips(
+                    &free,
+                    &Isometry::identity(),
+                    &targets,
+                    &q0[..n],
+                    &ik,
+                    &mut kin,
+                    &mut q[..n],
+                );
+            }
+        }
+        // The fingers not placed curl until they meet the surface, or stay open out of it.
+        let mut active = key;
+        for g in &hand.finger_groups {
+            if g.tips.iter().any(|&k| key[k]) || g.dofs.is_empty() {
+                continue;
+            }
+            let dofs: Vec<usize> = g.dofs.iter().map(|&d| d + 3).collect();
+            for &k in &g.tips {
+                active[k] = curl_onto(&free, skill, &inv_start, k, &dofs, &mut kin, &mut q[..n]);
+            }
+        }
+        free.forward_kinematics(&Isometry::identity(), &q[..n], &mut kin);
         // Fingertips below the table top, or a base below it, are not a grasp.
         let below =
             (0..nt).any(|k| kin.tip_centres[k].z < hand.fingertips[k].radius - 0.002) || q[2] < 0.0;
@@ -508,36 +672,100 @@ fn plan_candidates(
         free.tip_jacobians(&mut kin);
         let mut align_min: Real = 1.0;
         let mut frames = Vec::with_capacity(nt);
-        for k in 0..nt {
-            let c_b = (start.inverse() * kin.tip_centres[k]).coords;
+        for k in (0..nt).filter(|&k| active[k]) {
+            let c_b = (inv_start * kin.tip_centres[k]).coords;
             let (p, n_in) = on_surface(skill, &c_b);
             frames.push(ContactFrame::from_normal(p, n_in));
             let n_world = start.rotation * n_in;
             align_min = align_min.min(push_alignment(&free, &kin, k, &n_world));
         }
-        let eps = grasp_quality(
+        let quality = grasp_quality(
             &frames,
             skill.contact_model,
             &skill.friction,
             &QualityParams::default(),
         )
-        .map(|q| q.epsilon)
-        .unwrap_or(0.0);
-        let reach_penalty = if error <= params.reach_tolerance {
-            0.0
-        } else {
-            10.0
-        };
+        .ok();
+        let eps = quality.map_or(0.0, |q| q.epsilon);
+        let closure = quality.is_some_and(|q| q.force_closure && q.epsilon > 1e-3);
+        // Every tip placed: reaching is enough (the force check follows); a curled grasp must
+        // also hold.
+        // A finger that cannot push along its contact normal within the planned friction cone
+        // only slides over the surface.
+        let mu = skill.friction.mu * (1.0 - params.friction_margin);
+        let pushes = align_min >= 1.0 / (1.0 + mu * mu).sqrt();
+        let ok = error <= params.reach_tolerance && (keys == Keys::All || (closure && pushes));
+        let reach_penalty = if ok { 0.0 } else { 10.0 };
         let score = -reach_penalty - 20.0 * error + align_min + 2.0 * eps - 0.3 * d_w.z;
         out.push(Candidate {
             score,
             error,
+            ok,
+            align: align_min,
             rotation: rot,
             approach: d_w,
             q_free: q,
+            active,
         });
     }
     out
+}
+
+/// Curls the finger of fingertip `tip` (its DOFs `dofs`, all moved together from the end of
+/// their range away from the object towards the other) until the tip touches the object's
+/// surface; `q` then holds that first touch. A finger whose curl misses the object, or that
+/// touches it even when open, is left open and `false` returned. `inv_start` maps the world
+/// into B at the object's start pose.
+fn curl_onto(
+    hand: &HandModel,
+    skill: &SkillSpec,
+    inv_start: &Isometry,
+    tip: usize,
+    dofs: &[usize],
+    kin: &mut Kinematics,
+    q: &mut [Real],
+) -> bool {
+    const STEPS: usize = 32;
+    let radius = hand.fingertips[tip].radius;
+    let mut gap = |q: &mut [Real], s: Real| -> Real {
+        for &d in dofs {
+            let (lo, hi) = (hand.dof_lower[d], hand.dof_upper[d]);
+            q[d] = lo + (hi - lo) * s;
+        }
+        hand.forward_kinematics(&Isometry::identity(), q, kin);
+        skill
+            .shape
+            .closest(&(inv_start * kin.tip_centres[tip]).coords)
+            .0
+            - radius
+    };
+    let (g0, g1) = (gap(q, 0.0), gap(q, 1.0));
+    let (open, closed) = if g0 >= g1 { (0.0, 1.0) } else { (1.0, 0.0) };
+    if g0.max(g1) <= 0.0 {
+        // In the object even when open.
+        gap(q, open);
+        return false;
+    }
+    let mut prev = open;
+    for i in 1..=STEPS {
+        let s = open + (closed - open) * i as Real / STEPS as Real;
+        if gap(q, s) <= 0.0 {
+            let (mut out, mut inside) = (prev, s);
+            for _ in 0..20 {
+                let mid = 0.5 * (out + inside);
+                if gap(q, mid) > 0.0 {
+                    out = mid;
+                } else {
+                    inside = mid;
+                }
+            }
+            gap(q, out);
+            return true;
+        }
+        prev = s;
+    }
+    gap(q, open);
+    false
 }
 
 /// One retargeting step along the reference motion: fingertip inverse kinematics for the
@@ -563,6 +791,7 @@ impl<'a> RetargetStep<'a> {
             .contacts
             .iter()
             .enumerate()
+            .filter(|(k, _)| plan.active[*k])
             .map(|(k, c)| {
                 let r = plan.hand.fingertips[k].radius;
                 (k, Point::from(c.p_b - c.normal_b() * r))
@@ -614,8 +843,12 @@ impl<'a> RetargetStep<'a> {
             margin: self.params.friction_margin,
             min_normal: self.params.min_normal,
         };
+        let contacts: Vec<ContactFrame> = (0..self.plan.contacts.len())
+            .filter(|&k| self.plan.active[k])
+            .map(|k| self.plan.contacts[k])
+            .collect();
         let d = optimise_with_torque_limits(
-            &self.plan.contacts,
+            &contacts,
             self.skill.contact_model,
             &self.skill.friction,
             &load,
@@ -634,6 +867,7 @@ impl Plan {
         self.contacts
             .iter()
             .enumerate()
+            .filter(|(k, _)| self.active[*k])
             .map(|(k, c)| {
                 let n = c.normal_b();
                 PlannedContact {
@@ -669,5 +903,100 @@ impl Plan {
             out[k] = self.forces[i - 1][k] * (1.0 - a) + self.forces[i][k] * a;
         }
         out
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::object::Shape;
+
+    #[test]
+    fn a_pinch_of_a_sphere_is_antipodal_through_its_centre_at_its_height() {
+        let shape = Shape::Sphere { radius: 0.04 };
+        // The recording's axis dips 6° and is off the x axis.
+        let axis = Vector::new(1.0, 0.2, -0.1).normalize();
+        let (t, o, a) = antipodal_pair(&shape, &axis);
+        assert!(a.z.abs() < 1e-12 && (a.norm() - 1.0).abs() < 1e-12);
+        assert!((t + o).norm() < 1e-9, "{t} {o}");
+        assert!((o.norm() - 0.04).abs() < 1e-9 && o.z.abs() < 1e-12);
+        assert!(o.normalize().dot(&a) > 1.0 - 1e-9);
+    }
+
+    #[test]
+    fn a_pinch_of_a_box_takes_the_centres_of_two_opposite_faces() {
+        let shape = Shape::Box {
+            half_extents: [0.025, 0.03, 0.04],
+        };
+        let axis = Vector::new(1.0, 0.15, 0.05).normalize();
+        let (t, o, a) = antipodal_pair(&shape, &axis);
+        assert!((a - Vector::x()).norm() < 1e-9, "{a}");
+        assert!((o - Vector::new(0.025, 0.0, 0.0)).norm() < 1e-9, "{o}");
+        assert!((t + o).norm() < 1e-9, "{t}");
+    }
+
+    #[test]
+    fn a_curling_finger_stops_where_its_tip_first_touches_the_surface() {
+        let hand = crate::hand::builtin_hand("inspire").unwrap();
+        let skill = SkillSpec {
+            shape: Shape::Sphere { radius: 0.04 },
+            mass: 0.3,
+            friction: crate::contact::Friction::default(),
+            contact_model: crate::contact::ContactModel::SoftFinger,
+            contacts: Vec::new(),
+            motion: Vec::new(),
+            phases: Vec::new(),
+            held_until_s: None,
+        };
+        let index = hand
+            .fingertips
+            .iter()
+            .position(|t| t.name == "index")
+            .unwrap();
+        let group = hand
+            .finger_groups
+            .iter()
+            .find(|g| g.tips.contains(&index))
+            .unwrap();
+        let mut kin = Kinematics::default();
+        let mut q = [0.0; MAX_DOF];
+        let n = hand.dof();
+        // Put the sphere in front of the open index fingertip, 2 cm further out along the palm
+        // normal than the tip, where the curling finger sweeps through it.
+        let half = |q: &mut [Real; MAX_DOF]| {
+            for &d in &group.dofs {
+                q[d] = 0.5 * (hand.dof_lower[d] + hand.dof_upper[d]);
+            }
+        };
+        half(&mut q);
+        hand.forward_kinematics(&Isometry::identity(), &q[..n], &mut kin);
+        let tip_half = kin.tip_centres[index].coords;
+        let centre = tip_half + tip_half.normalize() * 0.045;
+        let inv = Isometry::translation(-centre.x, -centre.y, -centre.z);
+        let touches = curl_onto(
+            &hand,
+            &skill,
+            &inv,
+            index,
+            &group.dofs,
+            &mut kin,
+            &mut q[..n],
+        );
+        assert!(touches);
+        hand.forward_kinematics(&Isometry::identity(), &q[..n], &mut kin);
+        let gap =
+            (kin.tip_centres[index].coords - centre).norm() - 0.04 - hand.fingertips[index].radius;
+        assert!((0.0..1e-4).contains(&gap), "{gap}");
+        // Far away, the curl misses and the finger is left open, out of the grasp.
+        let far = Isometry::translation(-1.0, 0.0, 0.0);
+        assert!(!curl_onto(
+            &hand,
+            &skill,
+            &far,
+            index,
+            &group.dofs,
+            &mut kin,
+            &mut q[..n]
+        ));
     }
 }

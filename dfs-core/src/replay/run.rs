@@ -56,6 +56,9 @@ pub struct Replay {
     step: u64,
     n_steps: u64,
     stats: Stats,
+    /// For two fingertips driven by one DOF (a parallel gripper's jaws): the line between them
+    /// at the grasp, as its direction and midpoint in the base frame.
+    jaw_line: Option<(Vector, Point)>,
 }
 
 /// Running statistics for the report.
@@ -131,11 +134,29 @@ impl Replay {
         }
         let mut grasp_dof = [false; MAX_DOF];
         for g in &hand.finger_groups {
-            for &d in &g.dofs {
-                grasp_dof[d] = true;
+            if g.tips.iter().any(|&k| plan.active[k]) {
+                for &d in &g.dofs {
+                    grasp_dof[d] = true;
+                }
             }
         }
         let n_steps = (timeline.end / DT).round() as u64;
+        let pinch = match hand.finger_groups.as_slice() {
+            [g] if g.tips.len() == 2 && hand.fingertips.len() == 2 => Some((g.tips[0], g.tips[1])),
+            _ => None,
+        };
+        let jaw_line = pinch.map(|(a, b)| {
+            let to_base = plan.base_in_b0.inverse();
+            let centre = |k: usize| {
+                let c = &plan.contacts[k];
+                to_base * Point::from(c.p_b - c.normal_b() * hand.fingertips[k].radius)
+            };
+            let (pa, pb) = (centre(a), centre(b));
+            (
+                (pb - pa).normalize(),
+                Point::from(0.5 * (pa.coords + pb.coords)),
+            )
+        });
         let mut q = [0.0; MAX_DOF];
         q[..n].copy_from_slice(&plan.q_pre[..n]);
         Ok(Replay {
@@ -155,6 +176,7 @@ impl Replay {
             step: 0,
             n_steps,
             stats: Stats::default(),
+            jaw_line,
         })
     }
 
@@ -178,7 +200,7 @@ impl Replay {
     fn schedule(&self, t: Real) -> (Isometry, Real, Real, bool) {
         let tl = &self.timeline;
         let p = &self.params;
-        let follow = |t: Real| self.skill.reference(t) * self.plan.base_in_b0;
+        let follow = |t: Real| self.level_jaws(self.skill.reference(t) * self.plan.base_in_b0);
         if t < tl.grasp_start {
             let s = min_jerk(t / tl.grasp_start.max(1e-3));
             let a = self.pre_base;
@@ -241,7 +263,7 @@ impl Replay {
         if !preshaped {
             let forces = self.plan.forces_at(t);
             for g in &hand.finger_groups {
-                for &k in &g.tips {
+                for &k in g.tips.iter().filter(|&&k| self.plan.active[k]) {
                     let tip = &hand.fingertips[k];
                     let c = &self.plan.contacts[k];
                     let j = &kin.tip_jacobians[k];
@@ -293,6 +315,27 @@ impl Replay {
         if held && saturated {
             self.stats.saturated_ticks += 1;
         }
+    }
+
+    /// A pinch's jaws squeeze with equal force, so they can carry no load along the line between
+    /// them: in the DFS nothing pushes back when the object moves along it (a real jaw's
+    /// contact stiffness would). Following the skill's rotation as it is would tilt that line
+    /// and let gravity pull the object along it; the hand turns by the least rotation about the
+    /// jaws' midpoint that keeps the line horizontal (the object's orientation error shows it).
+    fn level_jaws(&self, base: Isometry) -> Isometry {
+        let Some((u_base, mid_base)) = self.jaw_line else {
+            return base;
+        };
+        let u = base.rotation * u_base;
+        let Some(level) = Vector::new(u.x, u.y, 0.0).try_normalize(1e-6) else {
+            return base;
+        };
+        let Some(turn) = crate::math::Rotation::rotation_between(&u, &level) else {
+            return base;
+        };
+        let mid = base * mid_base;
+        let about_mid = Isometry::from_parts((mid.coords - turn * mid.coords).into(), turn);
+        about_mid * base
     }
 
     /// Runs one tick; `Ok(false)` when the replay is over.
