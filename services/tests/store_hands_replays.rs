@@ -50,7 +50,10 @@ async fn the_migration_lists_built_in_hands_and_stores_an_uploaded_one_beside_th
     let store = Store::open(tmp.path()).await.unwrap();
     let hands = store.list_hands().await.unwrap();
     let names: Vec<&str> = hands.iter().map(|h| h.name.as_str()).collect();
-    assert_eq!(names, ["glove10", "allegro", "barrett", "inspire", "gripper"]);
+    assert_eq!(
+        names,
+        ["glove10", "allegro", "barrett", "inspire", "gripper"]
+    );
     assert!(hands.iter().all(|h| h.builtin && h.created_at.is_none()));
     let gripper = &hands[4];
     assert_eq!(gripper.fingers, ["thumb", "finger"]);

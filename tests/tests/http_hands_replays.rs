@@ -26,7 +26,11 @@ fn gripper_urdf() -> String {
 }
 
 fn blob_path(data: &Path, sha256: &str) -> std::path::PathBuf {
-    data.join(format!("blobs/sha256/{}/{}.mcap", &sha256[..2], &sha256[2..]))
+    data.join(format!(
+        "blobs/sha256/{}/{}.mcap",
+        &sha256[..2],
+        &sha256[2..]
+    ))
 }
 
 async fn hand_names(c: &Client) -> Vec<String> {
@@ -47,7 +51,10 @@ async fn built_in_hands_are_listed_and_an_uploaded_hand_joins_them_once() {
     let list = c.get("/api/v1/hands").await.json();
     let items = list["items"].as_array().unwrap();
     let names: Vec<&str> = items.iter().map(|h| h["name"].as_str().unwrap()).collect();
-    assert_eq!(names, ["glove10", "allegro", "barrett", "inspire", "gripper"]);
+    assert_eq!(
+        names,
+        ["glove10", "allegro", "barrett", "inspire", "gripper"]
+    );
     let allegro = &items[1];
     assert_eq!(allegro["builtin"], true);
     assert_eq!(allegro["dof"], 16);
@@ -95,7 +102,10 @@ async fn built_in_hands_are_listed_and_an_uploaded_hand_joins_them_once() {
         .problem(409);
     assert!(d.contains("my-gripper"), "{d}");
     let clash = json!({"spec": gripper_spec("allegro"), "urdf": gripper_urdf()});
-    let d = c.post_json("/api/v1/hands", &clash, None).await.problem(409);
+    let d = c
+        .post_json("/api/v1/hands", &clash, None)
+        .await
+        .problem(409);
     assert!(d.contains("built-in"), "{d}");
     assert_eq!(hand_names(c).await.len(), 6);
     c.get("/api/v1/hands/nobody").await.problem(404);
@@ -195,9 +205,13 @@ async fn hand_uploads_and_replays_need_the_token_when_one_is_configured() {
     c.post_json("/api/v1/hands", &upload, Some("wrong"))
         .await
         .problem(401);
-    c.post_json("/api/v1/skills/1/replays", &json!({"hand": "gripper"}), None)
-        .await
-        .problem(401);
+    c.post_json(
+        "/api/v1/skills/1/replays",
+        &json!({"hand": "gripper"}),
+        None,
+    )
+    .await
+    .problem(401);
     assert_eq!(hand_names(c).await.len(), 5);
     let r = c.post_json("/api/v1/hands", &upload, Some(TOKEN)).await;
     assert_eq!(r.status, 201, "{}", String::from_utf8_lossy(&r.body));
@@ -258,7 +272,10 @@ async fn a_stored_skill_replays_on_hands_and_its_replays_are_fetched_and_deleted
 
     // An uploaded copy of the gripper replays like it.
     let upload = json!({"spec": gripper_spec("my-gripper"), "urdf": gripper_urdf()});
-    assert_eq!(c.post_json("/api/v1/hands", &upload, None).await.status, 201);
+    assert_eq!(
+        c.post_json("/api/v1/hands", &upload, None).await.status,
+        201
+    );
     let r = c
         .post_json(&replays, &json!({"hand": "my-gripper"}), None)
         .await;
@@ -270,14 +287,21 @@ async fn a_stored_skill_replays_on_hands_and_its_replays_are_fetched_and_deleted
     // A gripper whose jaws open 2 cm cannot take the 5 cm box: a failed replay, still 201.
     let tiny_urdf = gripper_urdf().replace("upper=\"0.055\"", "upper=\"0.010\"");
     let upload = json!({"spec": gripper_spec("tiny-gripper"), "urdf": tiny_urdf});
-    assert_eq!(c.post_json("/api/v1/hands", &upload, None).await.status, 201);
+    assert_eq!(
+        c.post_json("/api/v1/hands", &upload, None).await.status,
+        201
+    );
     let r = c
         .post_json(&replays, &json!({"hand": "tiny-gripper"}), None)
         .await;
     assert_eq!(r.status, 201, "{}", String::from_utf8_lossy(&r.body));
     let failed = r.json();
     assert_eq!(failed["success"], false);
-    assert_eq!(failed["failure_reason"], "unreachable", "{}", failed["report"]);
+    assert_eq!(
+        failed["failure_reason"], "unreachable",
+        "{}",
+        failed["report"]
+    );
     assert_eq!(failed["report"]["failure_reason"], "unreachable");
     assert_eq!(
         c.get(failed["mcap_url"].as_str().unwrap()).await.status,
@@ -293,9 +317,13 @@ async fn a_stored_skill_replays_on_hands_and_its_replays_are_fetched_and_deleted
     c.post_json(&replays, &json!({"hnad": "gripper"}), None)
         .await
         .problem(422);
-    c.post_json("/api/v1/skills/99999/replays", &json!({"hand": "gripper"}), None)
-        .await
-        .problem(404);
+    c.post_json(
+        "/api/v1/skills/99999/replays",
+        &json!({"hand": "gripper"}),
+        None,
+    )
+    .await
+    .problem(404);
 
     let list = c.get(&replays).await.json();
     let ids: Vec<i64> = list["items"]
@@ -355,7 +383,10 @@ async fn deleting_a_session_deletes_the_replays_of_its_skills() {
     // A too-small gripper fails at planning: a fast replay.
     let tiny_urdf = gripper_urdf().replace("upper=\"0.055\"", "upper=\"0.010\"");
     let upload = json!({"spec": gripper_spec("tiny"), "urdf": tiny_urdf});
-    assert_eq!(c.post_json("/api/v1/hands", &upload, None).await.status, 201);
+    assert_eq!(
+        c.post_json("/api/v1/hands", &upload, None).await.status,
+        201
+    );
     let r = c
         .post_json(
             &format!("/api/v1/skills/{skill_id}/replays"),

@@ -7,9 +7,7 @@ use super::{print_json, CliError};
 use dfs_core::hand::BUILTIN_HANDS;
 use dfs_core::replay::ReplayParams;
 use serde::Serialize;
-use services::replay::{
-    load_hand, replay_skill, skill_spec_from_json, LoadedHand, ReplaySource,
-};
+use services::replay::{load_hand, replay_skill, skill_spec_from_json, LoadedHand, ReplaySource};
 use services::store::{HandSummary, Store, StoreError, DB_FILE};
 use std::path::{Path, PathBuf};
 
@@ -244,7 +242,8 @@ pub fn run_replay(a: ReplayArgs) -> Result<(), CliError> {
         };
         let report = replay_skill(&hand, &skill, &ReplayParams::default(), &source, Some(&out))?;
         let bytes = std::fs::read(&out).map_err(|e| CliError(format!("{}: {e}", out.display())))?;
-        let replay = rt.block_on(store.insert_replay(skill_id, &hand.model.name, &report, bytes))?;
+        let replay =
+            rt.block_on(store.insert_replay(skill_id, &hand.model.name, &report, bytes))?;
         Ok::<_, CliError>((report, replay.id))
     })();
     rt.block_on(store.close());

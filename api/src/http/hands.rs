@@ -303,6 +303,10 @@ mod tests {
         v["fingertips"][1]["radius"] = "big".into();
         let p = spec_of(&HandUpload { spec: v, ..up }).unwrap_err();
         assert_eq!(p.status, StatusCode::UNPROCESSABLE_ENTITY);
-        assert!(p.detail.contains("spec.fingertips[1].radius"), "{}", p.detail);
+        assert!(
+            p.detail.contains("spec.fingertips[1].radius"),
+            "{}",
+            p.detail
+        );
     }
 }

@@ -231,9 +231,8 @@ async fn create_replay(
         skill_id: Some(skill_id),
         skill_name: format!("skill {skill_id}"),
     };
-    let spec = skill_spec_from_json(&skill.params, &source.skill_name).map_err(|e| {
-        Problem::unprocessable(format!("skill {skill_id} cannot be replayed: {e}"))
-    })?;
+    let spec = skill_spec_from_json(&skill.params, &source.skill_name)
+        .map_err(|e| Problem::unprocessable(format!("skill {skill_id} cannot be replayed: {e}")))?;
     let permit = st
         .simulations()
         .clone()

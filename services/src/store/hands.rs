@@ -65,9 +65,8 @@ impl Hand {
                 self.summary.name
             )));
         };
-        build(spec.clone(), urdf.clone()).map_err(|e| {
-            StoreError::Corrupt(format!("stored hand {:?}: {e}", self.summary.name))
-        })
+        build(spec.clone(), urdf.clone())
+            .map_err(|e| StoreError::Corrupt(format!("stored hand {:?}: {e}", self.summary.name)))
     }
 }
 

@@ -29,8 +29,8 @@ use sqlx::sqlite::{
 use sqlx::{Connection as _, QueryBuilder, Row as _, Sqlite, SqliteConnection};
 
 pub use error::StoreError;
-pub use query::{SkillQuery, SortField, SortKey, SortOrder, DEFAULT_LIMIT, MAX_LIMIT};
 pub use hands::MAX_HAND_NAME;
+pub use query::{SkillQuery, SortField, SortKey, SortOrder, DEFAULT_LIMIT, MAX_LIMIT};
 pub use types::{
     Hand, HandSummary, IngestOutcome, NewSkill, Page, Replay, Session, SessionMeta, Skill,
     FEATURE_DIM,
@@ -628,12 +628,9 @@ impl Store {
     pub async fn delete_session(&self, id: i64) -> Result<(), StoreError> {
         let _guard = self.inner.blob_lock.write().await;
         let mut tx = self.inner.pool.begin().await?;
-        let mut blobs = hands::delete_replays_of(
-            &mut tx,
-            "SELECT id FROM skills WHERE session_id = ?",
-            id,
-        )
-        .await?;
+        let mut blobs =
+            hands::delete_replays_of(&mut tx, "SELECT id FROM skills WHERE session_id = ?", id)
+                .await?;
         let skill_ids: Vec<i64> =
             sqlx::query_scalar("DELETE FROM skills WHERE session_id = ? RETURNING id")
                 .bind(id)
