@@ -22,6 +22,14 @@ const ENDPOINTS: &[(&str, &str)] = &[
     ("get", "/api/v1/skills/{id}"),
     ("delete", "/api/v1/skills/{id}"),
     ("get", "/api/v1/skills/{id}/similar"),
+    ("get", "/api/v1/skills/{id}/replays"),
+    ("post", "/api/v1/skills/{id}/replays"),
+    ("get", "/api/v1/hands"),
+    ("post", "/api/v1/hands"),
+    ("get", "/api/v1/hands/{id}"),
+    ("get", "/api/v1/hands/{id}/urdf"),
+    ("get", "/api/v1/replays/{id}"),
+    ("get", "/api/v1/replays/{id}/mcap"),
     ("get", "/healthz"),
 ];
 

@@ -1,78 +1,74 @@
-//! `icms hands`: the built-in robot hands (or one hand spec file); `icms replay`: a skill
-//! retargeted onto a hand and simulated in the DFS, with its report and optionally an MCAP.
+//! `icms hands`: the built-in robot hands (or one hand spec file), with `--data` the hands
+//! uploaded to a data base too; `icms replay`: a skill retargeted onto a hand and simulated in
+//! the DFS, with its report and optionally an MCAP. A replay of a stored skill (`--skill ID`) is
+//! stored in the data base beside it, with its MCAP, like `POST /api/v1/skills/{id}/replays`.
 
 use super::{print_json, CliError};
 use dfs_core::hand::BUILTIN_HANDS;
 use dfs_core::replay::ReplayParams;
 use serde::Serialize;
-use services::replay::{load_hand, replay_skill, skill_spec_from_json, ReplaySource};
-use std::path::PathBuf;
+use services::replay::{load_hand, replay_skill, skill_spec_from_json, LoadedHand, ReplaySource};
+use services::store::{HandSummary, Store, StoreError, DB_FILE};
+use std::path::{Path, PathBuf};
 
 /// Arguments of `icms hands`.
 #[derive(Debug, clap::Args)]
 pub struct HandsArgs {
-    /// Show one hand: a built-in name or a hand spec file (JSON; its `urdf` beside it).
+    /// Show one hand: a built-in name, a hand spec file (JSON; its `urdf` beside it), or with
+    /// --data the name of an uploaded hand.
     hand: Option<String>,
+    /// Data directory of a skill data base: list its uploaded hands too.
+    #[arg(long)]
+    data: Option<PathBuf>,
     /// Print JSON.
     #[arg(long)]
     json: bool,
 }
 
-/// One hand as `icms hands` lists it.
-#[derive(Debug, Serialize)]
-pub struct HandSummary {
-    /// Name.
-    pub name: String,
-    /// Fingertip names (the thumb first).
-    pub fingers: Vec<String>,
-    /// Number of DOFs.
-    pub dof: usize,
-    /// DOF names.
-    pub dof_names: Vec<String>,
-    /// Smallest and largest torque limit (N·m, or N for prismatic DOFs).
-    pub torque_limit: [f64; 2],
-    /// Built in.
-    pub builtin: bool,
+fn runtime() -> Result<tokio::runtime::Runtime, CliError> {
+    tokio::runtime::Builder::new_current_thread()
+        .enable_all()
+        .build()
+        .map_err(|e| CliError(format!("starting the runtime: {e}")))
 }
 
-fn summary(name_or_path: &str) -> Result<HandSummary, CliError> {
-    let hand = load_hand(name_or_path)?;
-    let m = &hand.model;
-    let mut fingers: Vec<String> = vec![m.fingertips[hand.thumb].name.clone()];
-    fingers.extend(
-        m.fingertips
-            .iter()
-            .enumerate()
-            .filter(|(k, _)| *k != hand.thumb)
-            .map(|(_, t)| t.name.clone()),
-    );
-    let lo = m.torque_limit.iter().copied().fold(f64::INFINITY, f64::min);
-    let hi = m.torque_limit.iter().copied().fold(0.0, f64::max);
-    Ok(HandSummary {
-        name: m.name.clone(),
-        fingers,
-        dof: m.dof(),
-        dof_names: m.dof_names.clone(),
-        torque_limit: [lo, hi],
-        builtin: BUILTIN_HANDS.contains(&name_or_path),
+/// Runs `f` on the store in `data`, then closes it.
+fn with_store<T>(
+    data: &Path,
+    f: impl AsyncFnOnce(&Store) -> Result<T, StoreError>,
+) -> Result<T, CliError> {
+    runtime()?.block_on(async {
+        let store = Store::open(data).await?;
+        let out = f(&store).await;
+        store.close().await;
+        Ok(out?)
     })
 }
 
-/// Lists the built-in hands, or shows one.
+/// Whether `data` holds a data base (so looking a hand up there cannot create one).
+fn has_store(data: &Path) -> bool {
+    data.join(DB_FILE).is_file()
+}
+
+/// Lists the built-in hands (and with --data the uploaded ones), or shows one.
 pub fn run_hands(a: HandsArgs) -> Result<(), CliError> {
-    let hands = match &a.hand {
-        Some(h) => vec![summary(h)?],
-        None => BUILTIN_HANDS
+    let hands: Vec<HandSummary> = match (&a.hand, &a.data) {
+        (Some(h), data) => {
+            let (hand, builtin) = resolve_hand(h, data.as_deref())?;
+            vec![HandSummary::of(&hand, builtin, None)]
+        }
+        (None, Some(data)) => with_store(data, async |s| s.list_hands().await)?,
+        (None, None) => BUILTIN_HANDS
             .iter()
-            .map(|h| summary(h))
-            .collect::<Result<Vec<_>, _>>()?,
+            .map(|h| Ok(HandSummary::of(&load_hand(h)?, true, None)))
+            .collect::<Result<Vec<_>, CliError>>()?,
     };
     if a.json {
         return print_json(&hands);
     }
     for h in &hands {
         println!(
-            "{:<8} {} fingers ({}), {} DOFs, torque limit {}",
+            "{:<8} {} fingers ({}), {} DOFs, torque limit {}{}",
             h.name,
             h.fingers.len(),
             h.fingers.join(", "),
@@ -81,29 +77,58 @@ pub fn run_hands(a: HandsArgs) -> Result<(), CliError> {
                 format!("{}", h.torque_limit[0])
             } else {
                 format!("{}-{}", h.torque_limit[0], h.torque_limit[1])
-            }
+            },
+            if h.builtin { "" } else { " (uploaded)" }
         );
     }
     Ok(())
+}
+
+/// A hand: built-in name, spec file, or (with a data base in `data`) an uploaded hand's name.
+/// Also says whether it is built in.
+fn resolve_hand(name_or_path: &str, data: Option<&Path>) -> Result<(LoadedHand, bool), CliError> {
+    if BUILTIN_HANDS.contains(&name_or_path) || Path::new(name_or_path).is_file() {
+        return Ok((
+            load_hand(name_or_path)?,
+            BUILTIN_HANDS.contains(&name_or_path),
+        ));
+    }
+    match data {
+        Some(d) if has_store(d) => {
+            let name = name_or_path.to_owned();
+            let hand = with_store(d, async move |s| s.get_hand(&name).await?.load())
+                .map_err(|CliError(e)| {
+                    CliError(format!(
+                        "--hand {name_or_path:?} is neither a built-in hand ({}), a spec file,                          nor a hand in {}: {e}",
+                        BUILTIN_HANDS.join(", "),
+                        d.display()
+                    ))
+                })?;
+            Ok((hand, false))
+        }
+        _ => Ok((load_hand(name_or_path)?, false)),
+    }
 }
 
 /// Arguments of `icms replay`.
 #[derive(Debug, clap::Args)]
 pub struct ReplayArgs {
     /// The skill: a JSON file holding one element of the `skills` list that `icms segment
-    /// --json` prints, or the id of a skill in the data base (see --data).
+    /// --json` prints, or the id of a skill in the data base (see --data); a replay of a stored
+    /// skill is stored there too, with its MCAP.
     #[arg(long)]
     skill: String,
-    /// The hand: a built-in name (see `icms hands`) or a hand spec file (JSON).
+    /// The hand: a built-in name (see `icms hands`), a hand spec file (JSON), or the name of a
+    /// hand uploaded to the data base.
     #[arg(long)]
     hand: String,
-    /// Data directory of the skill data base, for a skill id.
+    /// Data directory of the skill data base, for a skill id or an uploaded hand.
     #[arg(long, default_value = "icms-data")]
     data: PathBuf,
     /// Record the replay into this MCAP file (viewable in Foxglove like a session).
     #[arg(long)]
     out: Option<PathBuf>,
-    /// Print the report as JSON.
+    /// Print the report as JSON (with `replay_id` when the replay was stored).
     #[arg(long)]
     json: bool,
 }
@@ -128,16 +153,13 @@ fn read_skill(a: &ReplayArgs) -> Result<(serde_json::Value, ReplaySource), CliEr
             a.skill
         ))
     })?;
-    let rt = tokio::runtime::Builder::new_current_thread()
-        .enable_all()
-        .build()
-        .map_err(|e| CliError(format!("starting the runtime: {e}")))?;
-    let skill = rt.block_on(async {
-        let store = services::store::Store::open(&a.data).await?;
-        let skill = store.get_skill(id).await;
-        store.close().await;
-        skill
-    })?;
+    if !has_store(&a.data) {
+        return Err(CliError(format!(
+            "--skill {id}: there is no skill data base in {} (see --data)",
+            a.data.display()
+        )));
+    }
+    let skill = with_store(&a.data, async |s| s.get_skill(id).await)?;
     Ok((
         skill.params,
         ReplaySource {
@@ -147,20 +169,100 @@ fn read_skill(a: &ReplayArgs) -> Result<(serde_json::Value, ReplaySource), CliEr
     ))
 }
 
+/// Makes sure the data base knows the hand a stored replay names: a hand from a spec file is
+/// stored (under its spec's name) unless an identical one is; a different hand of that name is
+/// refused before the replay runs.
+async fn ensure_hand_stored(store: &Store, hand: &LoadedHand) -> Result<(), CliError> {
+    let name = &hand.model.name;
+    let (Some(spec), Some(urdf)) = (&hand.spec, &hand.urdf) else {
+        return Err(CliError(format!("hand {name:?} has no spec to store")));
+    };
+    match store.get_hand(name).await {
+        Ok(stored) => {
+            let same = stored.urdf.as_deref() == Some(urdf.as_str())
+                && stored.spec.as_ref().is_some_and(|s| {
+                    let mut s = s.clone();
+                    s.urdf.clone_from(&spec.urdf);
+                    &s == spec
+                });
+            if same {
+                Ok(())
+            } else {
+                Err(CliError(format!(
+                    "a different hand named {name:?} is already stored in the data base; \
+                     rename the hand in its spec to store this replay"
+                )))
+            }
+        }
+        Err(StoreError::HandNotFound(_)) => {
+            store.put_hand(spec.clone(), urdf.clone()).await?;
+            Ok(())
+        }
+        Err(e) => Err(e.into()),
+    }
+}
+
 /// Replays a skill on a hand and prints the report. A failed replay is a report (exit 0).
+/// A stored skill's replay is stored too.
 pub fn run_replay(a: ReplayArgs) -> Result<(), CliError> {
     let (value, source) = read_skill(&a)?;
     let skill = skill_spec_from_json(&value, &source.skill_name)?;
-    let hand = load_hand(&a.hand)?;
-    let report = replay_skill(
-        &hand,
-        &skill,
-        &ReplayParams::default(),
-        &source,
-        a.out.as_deref(),
-    )?;
+    let (hand, builtin) = resolve_hand(&a.hand, Some(&a.data))?;
+    let Some(skill_id) = source.skill_id else {
+        let report = replay_skill(
+            &hand,
+            &skill,
+            &ReplayParams::default(),
+            &source,
+            a.out.as_deref(),
+        )?;
+        return print_report(&a, &source, &report, None);
+    };
+    let rt = runtime()?;
+    let store = rt.block_on(Store::open(&a.data))?;
+    let result = (|| {
+        if !builtin {
+            rt.block_on(ensure_hand_stored(&store, &hand))?;
+        }
+        // Record into --out, or a temporary file in the data directory, and store the bytes.
+        let tmp;
+        let out = match &a.out {
+            Some(p) => p.clone(),
+            None => {
+                let dir = a.data.join("tmp");
+                std::fs::create_dir_all(&dir)
+                    .map_err(|e| CliError(format!("{}: {e}", dir.display())))?;
+                tmp = tempfile::Builder::new()
+                    .prefix("replay-")
+                    .suffix(".mcap")
+                    .tempfile_in(&dir)
+                    .map_err(|e| CliError(format!("{}: {e}", dir.display())))?;
+                tmp.path().to_path_buf()
+            }
+        };
+        let report = replay_skill(&hand, &skill, &ReplayParams::default(), &source, Some(&out))?;
+        let bytes = std::fs::read(&out).map_err(|e| CliError(format!("{}: {e}", out.display())))?;
+        let replay =
+            rt.block_on(store.insert_replay(skill_id, &hand.model.name, &report, bytes))?;
+        Ok::<_, CliError>((report, replay.id))
+    })();
+    rt.block_on(store.close());
+    let (report, replay_id) = result?;
+    print_report(&a, &source, &report, Some(replay_id))
+}
+
+fn print_report(
+    a: &ReplayArgs,
+    source: &ReplaySource,
+    report: &dfs_core::replay::ReplayReport,
+    replay_id: Option<i64>,
+) -> Result<(), CliError> {
     if a.json {
-        return print_json(&report);
+        let mut v = serde_json::to_value(report)?;
+        if let (Some(id), Some(obj)) = (replay_id, v.as_object_mut()) {
+            obj.insert("replay_id".into(), id.into());
+        }
+        return print_json(&v);
     }
     println!(
         "{} on {}: {}{} — {}",
@@ -184,6 +286,9 @@ pub fn run_replay(a: ReplayArgs) -> Result<(), CliError> {
     );
     if let Some(out) = &a.out {
         println!("  recorded to {}", out.display());
+    }
+    if let Some(id) = replay_id {
+        println!("  stored as replay {id} in {}", a.data.display());
     }
     Ok(())
 }

@@ -59,6 +59,10 @@ impl Problem {
     pub fn not_found(detail: impl Into<String>) -> Self {
         Self::new(StatusCode::NOT_FOUND, detail)
     }
+    /// 409: a name already taken (an uploaded hand named like a built-in or a stored hand).
+    pub fn conflict(detail: impl Into<String>) -> Self {
+        Self::new(StatusCode::CONFLICT, detail)
+    }
     /// 413: the request body is over the server's limit.
     pub fn too_large(limit: usize) -> Self {
         Self::new(
@@ -132,10 +136,14 @@ impl From<StoreError> for Problem {
             StoreError::BadCursor | StoreError::InvalidQuery(_) => {
                 Problem::bad_request(e.to_string())
             }
-            StoreError::InvalidInput(_) => Problem::unprocessable(e.to_string()),
-            StoreError::SessionNotFound(_) | StoreError::SkillNotFound(_) => {
-                Problem::not_found(e.to_string())
+            StoreError::InvalidInput(_) | StoreError::InvalidHand(_) => {
+                Problem::unprocessable(e.to_string())
             }
+            StoreError::SessionNotFound(_)
+            | StoreError::SkillNotFound(_)
+            | StoreError::HandNotFound(_)
+            | StoreError::ReplayNotFound(_) => Problem::not_found(e.to_string()),
+            StoreError::Conflict(_) => Problem::conflict(e.to_string()),
             StoreError::Db(sqlx::Error::PoolClosed) => {
                 Problem::unavailable("the server is shutting down")
             }

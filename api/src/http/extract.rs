@@ -52,6 +52,22 @@ impl<S: Send + Sync> FromRequestParts<S> for Id {
     }
 }
 
+/// A name from the path (`/hands/{id}`, where a hand's id is its name).
+#[derive(Debug, Clone)]
+pub struct Name(pub String);
+
+impl<S: Send + Sync> FromRequestParts<S> for Name {
+    type Rejection = Problem;
+
+    async fn from_request_parts(parts: &mut Parts, state: &S) -> Result<Self, Problem> {
+        let axum::extract::Path(raw) =
+            axum::extract::Path::<String>::from_request_parts(parts, state)
+                .await
+                .map_err(|e| Problem::bad_request(e.body_text()))?;
+        Ok(Name(raw))
+    }
+}
+
 /// A JSON body deserialised into `T`: 415 without `Content-Type: application/json`, 413 over
 /// the body limit, 400 for malformed JSON, 422 for JSON of the wrong shape (naming the field).
 #[derive(Debug, Clone)]

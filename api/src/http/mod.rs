@@ -11,12 +11,18 @@
 //! | `POST /api/v1/simulations` | simulate a scenario server-side and store it |
 //! | `GET /api/v1/skills` | every store filter, sort, `limit`, `cursor` |
 //! | `GET /api/v1/skills/{id}`, `GET /api/v1/skills/{id}/similar`, `DELETE /api/v1/skills/{id}` | |
+//! | `GET /api/v1/hands`, `POST /api/v1/hands` | built-in and uploaded hands; upload URDF + spec |
+//! | `GET /api/v1/hands/{id}`, `GET /api/v1/hands/{id}/urdf` | one hand (id = name), its URDF |
+//! | `POST /api/v1/skills/{id}/replays`, `GET /api/v1/skills/{id}/replays` | replay on a hand, list |
+//! | `GET /api/v1/replays/{id}`, `GET /api/v1/replays/{id}/mcap` | one replay's report, its MCAP |
 //! | `GET /healthz`, `GET /api/v1/openapi.json` | liveness, this API's document |
 
 pub mod cache;
 pub mod error;
 pub mod extract;
+pub mod hands;
 pub mod meta;
+pub mod replays;
 pub mod sessions;
 pub mod simulations;
 pub mod skills;
@@ -58,6 +64,8 @@ pub fn routes() -> OpenApiRouter<AppState> {
         .merge(sessions::router())
         .merge(skills::router())
         .merge(simulations::router())
+        .merge(hands::router())
+        .merge(replays::router())
         .merge(meta::api_router());
     OpenApiRouter::new()
         .nest(API_PREFIX, api)
@@ -77,8 +85,9 @@ fn finish_openapi(mut api: OpenApi, writes_need_token: bool) -> OpenApi {
         .title("ICMS skill service")
         .version(env!("CARGO_PKG_VERSION"))
         .description(Some(
-            "Record grasp sessions (MCAP), simulate scenarios server-side, and query and browse \
-             the skill data base. Errors are application/problem+json (RFC 9457). A request \
+            "Record grasp sessions (MCAP), simulate scenarios server-side, query and browse the \
+             skill data base, upload robot hands (URDF + hand spec) and replay skills on them. \
+             Errors are application/problem+json (RFC 9457). A request \
              over the server's time limit is answered 503.",
         ))
         .build();

@@ -288,12 +288,25 @@ async fn get_session(
     ))]
 async fn download_session(State(st): State<AppState>, Id(id): Id) -> Result<Response, Problem> {
     let path = st.store().session_blob_path(id).await?;
-    let file = match tokio::fs::File::open(&path).await {
-        Ok(f) => f,
+    send_mcap(
+        &path,
+        &format!("session-{id}.mcap"),
         // Deleted between the lookup and the open.
-        Err(e) if e.kind() == std::io::ErrorKind::NotFound => {
-            return Err(Problem::not_found(format!("no session with id {id}")))
-        }
+        || Problem::not_found(format!("no session with id {id}")),
+    )
+    .await
+}
+
+/// Streams the MCAP file at `path` as an attachment named `filename`; `missing` is the problem
+/// when the file is gone (its row was deleted since the lookup).
+pub(super) async fn send_mcap(
+    path: &std::path::Path,
+    filename: &str,
+    missing: impl FnOnce() -> Problem,
+) -> Result<Response, Problem> {
+    let file = match tokio::fs::File::open(path).await {
+        Ok(f) => f,
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Err(missing()),
         Err(e) => return Err(Problem::internal(&e)),
     };
     let len = file
@@ -309,18 +322,18 @@ async fn download_session(State(st): State<AppState>, Id(id): Id) -> Result<Resp
     let h = r.headers_mut();
     h.insert(header::CONTENT_TYPE, HeaderValue::from_static(MCAP));
     h.insert(header::CONTENT_LENGTH, HeaderValue::from(len));
-    if let Ok(v) = HeaderValue::from_str(&format!("attachment; filename=\"session-{id}.mcap\"")) {
+    if let Ok(v) = HeaderValue::from_str(&format!("attachment; filename=\"{filename}\"")) {
         h.insert(header::CONTENT_DISPOSITION, v);
     }
     Ok(r)
 }
 
-/// Deletes a session with its skills and its MCAP file.
+/// Deletes a session with its skills, their replays and the MCAP files.
 #[utoipa::path(delete, path = "/sessions/{id}", tag = "sessions",
     params(("id" = i64, Path, description = "Session id")),
     security((), ("bearer" = [])),
     responses(
-        (status = 204, description = "Deleted, with its skills and MCAP file"),
+        (status = 204, description = "Deleted, with its skills, their replays and the MCAP files"),
         (status = 400, description = "The id is not an integer", body = ProblemBody, content_type = "application/problem+json"),
         (status = 401, description = "A token is configured and was not sent, or a wrong one", body = ProblemBody, content_type = "application/problem+json"),
         (status = 404, description = "No session with this id", body = ProblemBody, content_type = "application/problem+json"),

@@ -175,12 +175,12 @@ async fn get_skill(State(st): State<AppState>, Id(id): Id) -> Result<Response, P
     Ok(json_response(json))
 }
 
-/// Deletes one skill (its session stays).
+/// Deletes one skill with its replays (its session stays).
 #[utoipa::path(delete, path = "/skills/{id}", tag = "skills",
     params(("id" = i64, Path, description = "Skill id")),
     security((), ("bearer" = [])),
     responses(
-        (status = 204, description = "Deleted"),
+        (status = 204, description = "Deleted, with its replays and their MCAP files"),
         (status = 400, description = "The id is not an integer", body = ProblemBody, content_type = "application/problem+json"),
         (status = 401, description = "A token is configured and was not sent, or a wrong one", body = ProblemBody, content_type = "application/problem+json"),
         (status = 404, description = "No skill with this id", body = ProblemBody, content_type = "application/problem+json"),

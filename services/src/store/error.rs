@@ -40,6 +40,18 @@ pub enum StoreError {
     /// No skill with this id.
     #[error("no skill with id {0}")]
     SkillNotFound(i64),
+    /// No robot hand (built-in or uploaded) with this name.
+    #[error("no hand named {0:?}")]
+    HandNotFound(String),
+    /// No replay with this id.
+    #[error("no replay with id {0}")]
+    ReplayNotFound(i64),
+    /// A hand that cannot be built: its URDF or spec is invalid (the message names the problem).
+    #[error("the hand is invalid: {0}")]
+    InvalidHand(String),
+    /// A name already taken (a hand named like a built-in or a stored hand).
+    #[error("{0}")]
+    Conflict(String),
     /// A row or blob failed a consistency check.
     #[error("store is corrupt: {0}")]
     Corrupt(String),

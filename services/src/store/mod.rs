@@ -5,12 +5,14 @@
 //! A blob is written and fsynced before the row that names it commits, and a session's row, its
 //! skills and their phases commit in one transaction, so a process killed at any point leaves
 //! either the whole session or none (at worst an unreferenced blob, which a later ingest of the
-//! same file reuses). One process per data directory: deletes and ingests are ordered by an
+//! same file reuses). Replays of skills on robot hands are stored the same way (see `hands`),
+//! and go with their skill. One process per data directory: deletes and ingests are ordered by an
 //! in-process lock so that a delete never unlinks a blob that a concurrent ingest has just reused.
 
 pub mod bench;
 mod blob;
 mod error;
+mod hands;
 mod knn;
 mod query;
 mod types;
@@ -27,8 +29,12 @@ use sqlx::sqlite::{
 use sqlx::{Connection as _, QueryBuilder, Row as _, Sqlite, SqliteConnection};
 
 pub use error::StoreError;
+pub use hands::MAX_HAND_NAME;
 pub use query::{SkillQuery, SortField, SortKey, SortOrder, DEFAULT_LIMIT, MAX_LIMIT};
-pub use types::{IngestOutcome, NewSkill, Page, Session, SessionMeta, Skill, FEATURE_DIM};
+pub use types::{
+    Hand, HandSummary, IngestOutcome, NewSkill, Page, Replay, Session, SessionMeta, Skill,
+    FEATURE_DIM,
+};
 
 use knn::FeatureIndex;
 
@@ -617,21 +623,25 @@ impl Store {
         Ok(self.inner.dir.join(rel))
     }
 
-    /// Deletes a session, its skills and phase rows (one transaction), then its blob.
+    /// Deletes a session, its skills, their phase rows and replays (one transaction), then its
+    /// blob and its replays' blobs.
     pub async fn delete_session(&self, id: i64) -> Result<(), StoreError> {
         let _guard = self.inner.blob_lock.write().await;
         let mut tx = self.inner.pool.begin().await?;
+        let mut blobs =
+            hands::delete_replays_of(&mut tx, "SELECT id FROM skills WHERE session_id = ?", id)
+                .await?;
         let skill_ids: Vec<i64> =
             sqlx::query_scalar("DELETE FROM skills WHERE session_id = ? RETURNING id")
                 .bind(id)
                 .fetch_all(&mut *tx)
                 .await?;
-        let rel: Option<String> =
-            sqlx::query_scalar("DELETE FROM sessions WHERE id = ? RETURNING blob_path")
+        let row: Option<(String, String)> =
+            sqlx::query_as("DELETE FROM sessions WHERE id = ? RETURNING sha256, blob_path")
                 .bind(id)
                 .fetch_optional(&mut *tx)
                 .await?;
-        let Some(rel) = rel else {
+        let Some(session_blob) = row else {
             tx.rollback().await?;
             return Err(StoreError::SessionNotFound(id));
         };
@@ -641,10 +651,9 @@ impl Store {
             .write()
             .expect("index lock")
             .remove_many(&skill_ids);
-        if let Err(e) = blob::remove(&self.inner.dir, &rel) {
-            // The rows are gone; a leftover blob is harmless garbage.
-            tracing::warn!(error = %e, "could not remove the blob of deleted session {id}");
-        }
+        blobs.push(session_blob);
+        // The rows are gone; a leftover blob is harmless garbage.
+        self.remove_unreferenced_blobs(&blobs).await;
         Ok(())
     }
 
@@ -661,21 +670,27 @@ impl Store {
         row_to_skill(&row)
     }
 
-    /// Deletes one skill and its phase rows (its session stays).
+    /// Deletes one skill, its phase rows and its replays (one transaction; its session stays),
+    /// then the replays' blobs.
     pub async fn delete_skill(&self, id: i64) -> Result<(), StoreError> {
         let _guard = self.inner.blob_lock.write().await;
+        let mut tx = self.inner.pool.begin().await?;
+        let blobs = hands::delete_replays_of(&mut tx, "?", id).await?;
         let done = sqlx::query("DELETE FROM skills WHERE id = ?")
             .bind(id)
-            .execute(&self.inner.pool)
+            .execute(&mut *tx)
             .await?;
         if done.rows_affected() == 0 {
+            tx.rollback().await?;
             return Err(StoreError::SkillNotFound(id));
         }
+        tx.commit().await?;
         self.inner
             .index
             .write()
             .expect("index lock")
             .remove_many(&[id]);
+        self.remove_unreferenced_blobs(&blobs).await;
         Ok(())
     }
 

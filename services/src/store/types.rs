@@ -138,3 +138,58 @@ pub struct Page<T> {
     /// Cursor for the next page; `None` on the last page.
     pub next_cursor: Option<String>,
 }
+
+/// A robot hand as listed: built-in (from code) or uploaded (a row of `hands`).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct HandSummary {
+    /// Name, unique among built-in and uploaded hands; also the hand's id in URLs.
+    pub name: String,
+    /// `true` for the hands built into the binary.
+    pub builtin: bool,
+    /// Fingertip names, the thumb first.
+    pub fingers: Vec<String>,
+    /// Number of DOFs (independent joints).
+    pub dof: usize,
+    /// DOF names in θ order.
+    pub dof_names: Vec<String>,
+    /// Smallest and largest joint torque limit (N·m, N for prismatic DOFs).
+    pub torque_limit: [f64; 2],
+    /// When an uploaded hand was stored (UTC, `YYYY-MM-DDTHH:MM:SS.sssZ`); `None` if built in.
+    pub created_at: Option<String>,
+}
+
+/// A robot hand with what it is made of.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Hand {
+    /// What lists show.
+    pub summary: HandSummary,
+    /// The hand spec (`None` for `glove10`, which is built in code without a URDF).
+    pub spec: Option<dfs_core::hand::HandSpec>,
+    /// The URDF text (`None` for `glove10`).
+    pub urdf: Option<String>,
+}
+
+/// A stored replay of a skill on a hand.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Replay {
+    /// Replay id.
+    pub id: i64,
+    /// The replayed skill.
+    pub skill_id: i64,
+    /// Name of the hand.
+    pub hand: String,
+    /// Whether the object was held (the report's `success`).
+    pub success: bool,
+    /// Why not: `unreachable`, `torque_limit`, `slip` or `no_force_closure`.
+    pub failure_reason: Option<String>,
+    /// The replay report as JSON (dfs-core's `ReplayReport`).
+    pub report: serde_json::Value,
+    /// Hex SHA-256 of the replay's MCAP file.
+    pub sha256: String,
+    /// Size of the MCAP file, bytes.
+    pub size_bytes: i64,
+    /// Path of the MCAP blob relative to the data directory.
+    pub blob_path: String,
+    /// When the row was inserted (UTC, `YYYY-MM-DDTHH:MM:SS.sssZ`).
+    pub created_at: String,
+}

@@ -1,0 +1,118 @@
+//! `icms replay` and `icms hands` with a data base: a stored skill's replay is stored beside it,
+//! a hand from a spec file is stored with it and listed; bad hands are refused naming the
+//! problem.
+
+mod common;
+use common::icms_in as icms;
+
+use serde_json::Value;
+use services::store::Store;
+
+/// Writes the gripper's spec (named `name`, jaw stroke `stroke` m) and URDF into `dir`; returns
+/// the spec file's name.
+fn write_gripper(dir: &std::path::Path, name: &str, stroke: &str, tip_link: &str) -> String {
+    let (mut spec, urdf) = dfs_core::hand::builtin_spec("gripper").unwrap();
+    spec.name = name.into();
+    spec.urdf = format!("{name}.urdf");
+    spec.fingertips[1].link = tip_link.into();
+    let urdf = urdf.replace("upper=\"0.055\"", &format!("upper=\"{stroke}\""));
+    std::fs::write(dir.join(&spec.urdf), urdf).unwrap();
+    let file = format!("{name}.json");
+    std::fs::write(dir.join(&file), serde_json::to_string(&spec).unwrap()).unwrap();
+    file
+}
+
+fn json(out: &str) -> Value {
+    serde_json::from_str(out).unwrap_or_else(|e| panic!("not JSON ({e}): {out}"))
+}
+
+#[test]
+fn a_stored_skill_replays_into_the_data_base_with_its_hand() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let (c, _, e) = icms(
+        d,
+        &[
+            "simulate",
+            "--scenario",
+            "box-pinch-lift",
+            "--out",
+            "a.mcap",
+        ],
+    );
+    assert_eq!(c, 0, "{e}");
+    let (c, out, e) = icms(d, &["ingest", "a.mcap", "--json"]);
+    assert_eq!(c, 0, "{e}");
+    let skill = json(&out)["sessions"][0]["skill_ids"][0].as_i64().unwrap();
+    let skill = skill.to_string();
+
+    let (c, out, e) = icms(
+        d,
+        &["replay", "--skill", &skill, "--hand", "gripper", "--json"],
+    );
+    assert_eq!(c, 0, "{e}");
+    let report = json(&out);
+    assert_eq!(report["success"], true, "{report}");
+    let held_id = report["replay_id"].as_i64().expect("a stored replay's id");
+
+    // A hand from a spec file too small for the box: a failed replay, stored with its hand.
+    let tiny = write_gripper(d, "tiny", "0.010", "left_finger");
+    let (c, out, e) = icms(d, &["replay", "--skill", &skill, "--hand", &tiny, "--json"]);
+    assert_eq!(c, 0, "a failed replay is a report: {e}");
+    let report = json(&out);
+    assert_eq!(report["success"], false);
+    assert_eq!(report["failure_reason"], "unreachable");
+    let failed_id = report["replay_id"].as_i64().unwrap();
+    // Stored now: usable by name, and listed.
+    let (c, out, e) = icms(d, &["hands", "--data", "icms-data", "--json"]);
+    assert_eq!(c, 0, "{e}");
+    let hands = json(&out);
+    let last = hands.as_array().unwrap().last().unwrap().clone();
+    assert_eq!(last["name"], "tiny");
+    assert_eq!(last["builtin"], false);
+    let (c, out, e) = icms(
+        d,
+        &["replay", "--skill", &skill, "--hand", "tiny", "--json"],
+    );
+    assert_eq!(c, 0, "{e}");
+    assert_eq!(json(&out)["failure_reason"], "unreachable");
+
+    let rt = tokio::runtime::Builder::new_current_thread()
+        .enable_all()
+        .build()
+        .unwrap();
+    rt.block_on(async {
+        let store = Store::open(&d.join("icms-data")).await.unwrap();
+        let skill: i64 = skill.parse().unwrap();
+        let replays = store.list_replays(skill).await.unwrap();
+        assert_eq!(replays.len(), 3);
+        assert_eq!(replays[0].id, held_id);
+        assert_eq!(replays[0].hand, "gripper");
+        assert!(replays[0].success);
+        assert_eq!(replays[1].id, failed_id);
+        assert_eq!(replays[1].hand, "tiny");
+        let bytes = std::fs::read(store.replay_blob_path(held_id).await.unwrap()).unwrap();
+        assert!(bytes.starts_with(b"\x89MCAP0\r\n"));
+        store.close().await;
+    });
+}
+
+#[test]
+fn a_skill_file_replays_without_touching_a_data_base_and_bad_hands_are_named() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let nail = write_gripper(d, "nail", "0.055", "nail");
+    let (c, _, e) = icms(d, &["hands", &nail]);
+    assert_ne!(c, 0);
+    assert!(
+        e.contains("fingertips[1].link") && e.contains("nail"),
+        "{e}"
+    );
+    let (c, _, e) = icms(d, &["replay", "--skill", "7", "--hand", "gripper"]);
+    assert_ne!(c, 0);
+    assert!(e.contains("no skill data base"), "{e}");
+    let (c, _, e) = icms(d, &["hands", "nobody", "--data", "icms-data"]);
+    assert_ne!(c, 0);
+    assert!(e.contains("nobody"), "{e}");
+    assert!(!d.join("icms-data").exists(), "nothing created a data base");
+}

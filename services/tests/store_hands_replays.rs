@@ -1,0 +1,182 @@
+//! Store tests of migration 0002: uploaded hands beside the built-in ones, replays with their
+//! blobs, and deletes of skills and sessions taking their replays and unshared blobs along.
+
+mod store_common;
+
+use dfs_core::hand::builtin::GRIPPER_URDF;
+use dfs_core::hand::{builtin_spec, HandSpec};
+use dfs_core::replay::{ReplayParams, ReplayReport};
+use services::replay::{load_builtin_hand, replay_skill, skill_spec_from_json, ReplaySource};
+use services::store::{Store, StoreError};
+use store_common::{fake_mcap, meta, skills};
+
+fn gripper_spec(name: &str) -> HandSpec {
+    let mut spec = builtin_spec("gripper").unwrap().0;
+    spec.name = name.into();
+    spec
+}
+
+/// A report of a replay that fails at once: a 0.4 m sphere does not fit in the gripper.
+fn unreachable_report() -> ReplayReport {
+    let skill = serde_json::json!({
+        "phases": [
+            {"name": "approach", "start_ns": 0, "end_ns": 500_000_000u64},
+            {"name": "grasp", "start_ns": 500_000_000u64, "end_ns": 1_000_000_000u64},
+            {"name": "lift", "start_ns": 1_000_000_000u64, "end_ns": 1_500_000_000u64},
+            {"name": "release", "start_ns": 1_500_000_000u64, "end_ns": 2_000_000_000u64}
+        ],
+        "object": {"shape": "sphere", "size": [0.2], "mass": 0.3, "mu": 0.8},
+        "contact_model": "soft_finger",
+        "contacts": [
+            {"finger": "thumb", "position_b": [0.2, 0.0, 0.0], "normal_b": [-1.0, 0.0, 0.0]},
+            {"finger": "index", "position_b": [-0.2, 0.0, 0.0], "normal_b": [1.0, 0.0, 0.0]}
+        ]
+    });
+    let spec = skill_spec_from_json(&skill, "big sphere").unwrap();
+    let hand = load_builtin_hand("gripper").unwrap();
+    replay_skill(
+        &hand,
+        &spec,
+        &ReplayParams::default(),
+        &ReplaySource::default(),
+        None,
+    )
+    .unwrap()
+}
+
+#[tokio::test]
+async fn the_migration_lists_built_in_hands_and_stores_an_uploaded_one_beside_them() {
+    let tmp = tempfile::tempdir().unwrap();
+    let store = Store::open(tmp.path()).await.unwrap();
+    let hands = store.list_hands().await.unwrap();
+    let names: Vec<&str> = hands.iter().map(|h| h.name.as_str()).collect();
+    assert_eq!(
+        names,
+        ["glove10", "allegro", "barrett", "inspire", "gripper"]
+    );
+    assert!(hands.iter().all(|h| h.builtin && h.created_at.is_none()));
+    let gripper = &hands[4];
+    assert_eq!(gripper.fingers, ["thumb", "finger"]);
+    assert_eq!(gripper.dof, 2);
+
+    let stored = store
+        .put_hand(gripper_spec("my-gripper"), GRIPPER_URDF.into())
+        .await
+        .unwrap();
+    assert!(!stored.summary.builtin);
+    assert_eq!(stored.summary.dof, 2);
+    assert_eq!(stored.summary.torque_limit, [2.0, 40.0]);
+    let hands = store.list_hands().await.unwrap();
+    assert_eq!(hands.len(), 6);
+    assert_eq!(hands[5].name, "my-gripper");
+    assert_eq!(hands[5].fingers, gripper.fingers);
+
+    let got = store.get_hand("my-gripper").await.unwrap();
+    assert_eq!(got.urdf.as_deref(), Some(GRIPPER_URDF));
+    assert_eq!(got.spec.as_ref().unwrap().name, "my-gripper");
+    assert_eq!(got.load().unwrap().model.dof(), 2);
+    let builtin = store.get_hand("allegro").await.unwrap();
+    assert!(builtin.summary.builtin);
+    assert!(builtin.urdf.unwrap().contains("<robot"));
+    assert!(store.get_hand("glove10").await.unwrap().spec.is_none());
+    assert!(matches!(
+        store.get_hand("nobody").await,
+        Err(StoreError::HandNotFound(_))
+    ));
+
+    // Survives a restart.
+    store.close().await;
+    let store = Store::open(tmp.path()).await.unwrap();
+    assert_eq!(store.list_hands().await.unwrap().len(), 6);
+    store.integrity_check().await.unwrap();
+}
+
+#[tokio::test]
+async fn hands_with_a_taken_name_or_a_bad_urdf_are_refused_and_nothing_is_stored() {
+    let tmp = tempfile::tempdir().unwrap();
+    let store = Store::open(tmp.path()).await.unwrap();
+    store
+        .put_hand(gripper_spec("mine"), GRIPPER_URDF.into())
+        .await
+        .unwrap();
+    for name in ["mine", "allegro"] {
+        let e = store
+            .put_hand(gripper_spec(name), GRIPPER_URDF.into())
+            .await
+            .unwrap_err();
+        assert!(matches!(e, StoreError::Conflict(_)), "{name}: {e}");
+        assert!(e.to_string().contains(name), "{e}");
+    }
+    let bad = [
+        ("a", "<robot name='x'><link name='a'>".to_owned(), "parse"),
+        (
+            "b",
+            GRIPPER_URDF.replace("<mass value=\"0.6\"/>", "<mass value=\"-0.6\"/>"),
+            "mass",
+        ),
+        ("../etc", GRIPPER_URDF.to_owned(), "name"),
+    ];
+    for (name, urdf, word) in bad {
+        let e = store.put_hand(gripper_spec(name), urdf).await.unwrap_err();
+        assert!(matches!(e, StoreError::InvalidHand(_)), "{name}: {e}");
+        assert!(e.to_string().contains(word), "{name}: {e}");
+    }
+    assert_eq!(store.list_hands().await.unwrap().len(), 6);
+}
+
+#[tokio::test]
+async fn replays_are_stored_with_their_blob_and_go_with_their_skill_or_session() {
+    let tmp = tempfile::tempdir().unwrap();
+    let store = Store::open(tmp.path()).await.unwrap();
+    let out = store
+        .ingest(&fake_mcap(1, 1000), meta(1, 2), skills(1, 2))
+        .await
+        .unwrap();
+    let (s1, s2) = (out.skill_ids[0], out.skill_ids[1]);
+    let report = unreachable_report();
+    assert!(!report.success);
+
+    let bytes = fake_mcap(100, 5000);
+    let a = store
+        .insert_replay(s1, "gripper", &report, bytes.clone())
+        .await
+        .unwrap();
+    assert!(!a.success);
+    assert_eq!(a.failure_reason.as_deref(), Some("unreachable"));
+    assert_eq!(a.report["hand"], "gripper");
+    assert_eq!(a.size_bytes, 5000);
+    assert_eq!(store.get_replay(a.id).await.unwrap(), a);
+    let path = store.replay_blob_path(a.id).await.unwrap();
+    assert_eq!(std::fs::read(&path).unwrap(), bytes);
+    // The same bytes for another skill share the blob.
+    let b = store
+        .insert_replay(s2, "gripper", &report, bytes.clone())
+        .await
+        .unwrap();
+    assert_eq!(store.replay_blob_path(b.id).await.unwrap(), path);
+    assert_eq!(store.list_replays(s1).await.unwrap(), vec![a.clone()]);
+    assert!(matches!(
+        store.list_replays(999).await,
+        Err(StoreError::SkillNotFound(999))
+    ));
+    assert!(matches!(
+        store.insert_replay(999, "gripper", &report, bytes).await,
+        Err(StoreError::SkillNotFound(999))
+    ));
+
+    // Deleting skill 1 takes replay a; the blob stays while replay b names it.
+    store.delete_skill(s1).await.unwrap();
+    assert!(matches!(
+        store.get_replay(a.id).await,
+        Err(StoreError::ReplayNotFound(_))
+    ));
+    assert!(path.exists());
+    // Deleting the session takes skill 2, replay b and now the blob.
+    store.delete_session(out.session_id).await.unwrap();
+    assert!(matches!(
+        store.get_replay(b.id).await,
+        Err(StoreError::ReplayNotFound(_))
+    ));
+    assert!(!path.exists());
+    store.integrity_check().await.unwrap();
+}
