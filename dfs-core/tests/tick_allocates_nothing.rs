@@ -26,16 +26,25 @@ fn a_dfs_tick_with_four_contacts_allocates_nothing() {
     };
     // Warm up outside the measured region.
     dfs.step(&sample).unwrap();
-    let region = Region::new(GLOBAL);
-    let mut contacts = 0;
-    for _ in 0..1000 {
-        dfs.set_object_state(start);
-        contacts += dfs.step(&sample).unwrap().n_contacts;
+    // The counters are process-wide, and the test harness's own threads may allocate now and
+    // then (a busy machine makes that likelier): a tick that allocates does so in every one of
+    // the 1000 ticks of every attempt, so one clean attempt out of five proves the tick clean.
+    let mut attempts = Vec::new();
+    for _ in 0..5 {
+        let region = Region::new(GLOBAL);
+        let mut contacts = 0;
+        for _ in 0..1000 {
+            dfs.set_object_state(start);
+            contacts += dfs.step(&sample).unwrap().n_contacts;
+        }
+        let stats = region.change();
+        assert_eq!(contacts, 4000, "every tick must have the four contacts");
+        if stats.allocations == 0 && stats.reallocations == 0 {
+            return;
+        }
+        attempts.push(stats);
     }
-    let stats = region.change();
-    assert_eq!(contacts, 4000, "every tick must have the four contacts");
-    assert_eq!(stats.allocations, 0, "{stats:?}");
-    assert_eq!(stats.reallocations, 0, "{stats:?}");
+    panic!("ticks allocated in every attempt: {attempts:?}");
 }
 
 fn a_free_falling_object_tick_and_a_refused_sample_allocate_nothing() {
