@@ -358,7 +358,12 @@ impl SkillSpec {
     /// poses ([`key_pose`](Self::key_pose)), holding the last held pose when the recording
     /// lost the object, set down during `place` in that case.
     pub fn reference(&self, t: Real) -> Isometry {
-        let tl = self.timeline();
+        self.reference_in(&self.timeline(), t)
+    }
+
+    /// [`reference`](Self::reference) with the timeline already at hand (a replay computes it
+    /// once rather than every tick).
+    pub fn reference_in(&self, tl: &Timeline, t: Real) -> Isometry {
         let start = self.start_pose();
         let s = t - tl.grasp_start;
         let key = |s: Real| -> Isometry { self.key_pose(s) };
@@ -441,6 +446,45 @@ mod tests {
                 (Phase::Retreat, 0.3),
             ],
             held_until_s: None,
+        }
+    }
+
+    #[test]
+    fn a_retargeting_step_balances_the_load_inside_the_cones_and_torque_limits() {
+        let hand = builtin_hand("gripper").unwrap();
+        let skill = box_pinch(0.2);
+        let params = ReplayParams::default();
+        let plan = plan(&hand, thumb_of(&hand), &skill, &params).unwrap();
+        assert!(plan.failure.is_none(), "{:?}", plan.failure);
+        let tl = skill.timeline();
+        let contacts: Vec<_> = (0..plan.contacts.len())
+            .filter(|&k| plan.active[k])
+            .map(|k| plan.contacts[k])
+            .collect();
+        let g = Vector::new(0.0, 0.0, -crate::math::STANDARD_GRAVITY);
+        let mu = skill.friction.mu * (1.0 - params.friction_margin);
+        let mut step = RetargetStep::new(&plan, &skill, &params);
+        for i in 0..50 {
+            let t = tl.grasp_end + (tl.release_start - tl.grasp_end) * i as Real / 50.0;
+            let load = plan::load_at(&skill, t, &g);
+            let (ik_error, forces) = step.step(t);
+            assert!(ik_error < params.reach_tolerance, "{t}: {ik_error}");
+            let forces = forces.expect("the box's load is carried all along");
+            let mut wrench = crate::math::Wrench::zeros();
+            for (c, f) in contacts.iter().zip(forces) {
+                wrench += c.wrench_b(f);
+                assert!(f[2] >= params.min_normal - 1e-9);
+                assert!(f[0].hypot(f[1]) <= mu * f[2] + 1e-6, "{f:?}");
+            }
+            assert!((wrench - load).norm() < 1e-6 * (1.0 + load.norm()), "{t}");
+            let tau = &plan.torque_map
+                * nalgebra::DVector::from_iterator(
+                    4 * forces.len(),
+                    forces.iter().flat_map(|f| f.iter().copied()),
+                );
+            for (d, t) in tau.iter().enumerate() {
+                assert!(t.abs() <= hand.torque_limit[d] + 1e-6);
+            }
         }
     }
 
