@@ -30,6 +30,12 @@
 //! Every solution is checked after the solve: residual `‖W c − load‖ ≤ 10⁻⁶ (1 + ‖load‖)` and
 //! every cone constraint within `10⁻⁶ (1 + max |c|)`. The result is deterministic: same input,
 //! same output (Clarabel runs single-threaded).
+//!
+//! [`ForceSolver`] solves the same problem for one set of contacts and many loads (retargeting
+//! along a motion): set up once, each load is answered by Newton's method on the dual of the
+//! equality rows, warm-started from the previous load, whose iterates are exactly inside the
+//! cones (see [`ForceSolver::solve_into`]); Clarabel, with the load fed in through its data
+//! updates, answers when a torque limit binds or Newton does not converge.
 
 use crate::contact::{ContactFrame, ContactModel, Friction, Intensity};
 use crate::math::{Real, Wrench};

@@ -27,8 +27,10 @@
 //!    (approaching from below the table excluded); for each, fingertip inverse kinematics with
 //!    the base position free (joint limits and mimic couplings honoured) places the fingertips
 //!    on their contacts. Candidates are scored by the IK residual, by how well each fingertip
-//!    can push along its contact normal, by grasp quality (Ferrari-Canny ε of the contacts the
-//!    fingertips actually reach) and by approaching from above. When no pose puts every
+//!    can push along its contact normal and by approaching from above (and, for the curled
+//!    grasps below, by grasp quality: Ferrari-Canny ε of the contacts the fingertips reach;
+//!    with every tip on its own contact the candidates' contacts agree, and ε is computed once
+//!    for the chosen pose). When no pose puts every
 //!    fingertip on its contact (an underactuated hand cannot put every tip on an arbitrary
 //!    point), the thumb and the two, then one, opposing fingers nearest it are placed (those
 //!    opposing fingers only need to rest on the surface near their targets) and every other
@@ -40,8 +42,10 @@
 //! 3. **Forces.** At the reference's samples (every [`ReplayParams::force_sample_s`]), the
 //!    least internal force that carries the object's load `m (a − g)` with exact friction cones,
 //!    a friction margin and the hand's torque limits `|Σ Jᵀ f| ≤ τ_max` (a second-order cone
-//!    programme, [`crate::grasp::optimise::optimise_with_torque_limits`]); infeasible without
-//!    the torque limits is `no_force_closure`, feasible only without them `torque_limit`.
+//!    programme, [`crate::grasp::optimise::ForceSolver`]: set up once for the contacts, each
+//!    load solved by Newton's method on its dual, warm-started, with Clarabel when a torque
+//!    limit binds); infeasible without the torque limits is `no_force_closure`, feasible only
+//!    without them `torque_limit`.
 //! 4. **Simulation.** [`run`]: the arm (the hand's base, moved kinematically like the
 //!    operator's) approaches with the fingers preshaped 2 cm off their contacts, the fingers
 //!    close under task-space steering, the grip ramps up to the planned forces `τ = Jᵀ f`, the

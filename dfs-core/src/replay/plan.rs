@@ -584,10 +584,11 @@ fn plan_candidates(
     for r in 0..ROLLS {
         let psi = r as Real * std::f64::consts::TAU / ROLLS as Real;
         let d_w = up_perp * psi.cos() + side * psi.sin();
-        if d_w.z > 0.35 {
+        let rot = align(&a_h, &d_h, &a_s, &d_w);
+        let approach = d_w;
+        if approach.z > 0.35 {
             continue; // the palm would come from below the table
         }
-        let rot = align(&a_h, &d_h, &a_s, &d_w);
         let lat_w = a_s.cross(&d_w);
         // Targets: tip centres in the world.
         let mut targets: Vec<(usize, Point)> = Vec::with_capacity(nt);
@@ -686,7 +687,9 @@ fn plan_candidates(
         // Every tip on its own contact: the candidates' contacts are the same up to the IK
         // error, so their quality is computed once, for the chosen one (a Ferrari-Canny hull
         // is most of the planning time); curled grasps differ and need it here.
-        let quality = if keys == Keys::All {
+        let mu = skill.friction.mu * (1.0 - params.friction_margin);
+        let pushes = align_min >= 1.0 / (1.0 + mu * mu).sqrt();
+        let quality = if keys == Keys::All || error > params.reach_tolerance || !pushes {
             None
         } else {
             grasp_quality(
@@ -702,19 +705,17 @@ fn plan_candidates(
         // Every tip placed: reaching is enough (the force check follows); a curled grasp must
         // also hold.
         // A finger that cannot push along its contact normal within the planned friction cone
-        // only slides over the surface.
-        let mu = skill.friction.mu * (1.0 - params.friction_margin);
-        let pushes = align_min >= 1.0 / (1.0 + mu * mu).sqrt();
+        // only slides over the surface (`pushes`).
         let ok = error <= params.reach_tolerance && (keys == Keys::All || (closure && pushes));
         let reach_penalty = if ok { 0.0 } else { 10.0 };
-        let score = -reach_penalty - 20.0 * error + align_min + 2.0 * eps - 0.3 * d_w.z;
+        let score = -reach_penalty - 20.0 * error + align_min + 2.0 * eps - 0.3 * approach.z;
         out.push(Candidate {
             score,
             error,
             ok,
             align: align_min,
             rotation: rot,
-            approach: d_w,
+            approach,
             q_free: q,
             active,
         });
