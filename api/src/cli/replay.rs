@@ -311,6 +311,9 @@ pub struct ReplayBench {
     /// One retargeting step along the held motion: IK warm-started from the previous step and
     /// the force distribution with cones and torque limits (µs, median).
     pub retarget_step_us: f64,
+    /// Of those steps, how many found a force distribution (the others: the load cannot be
+    /// carried there).
+    pub retarget_steps_held: usize,
 }
 
 fn median(mut v: Vec<f64>) -> f64 {
@@ -357,11 +360,13 @@ pub fn bench_replay(hand: &str, json: bool) -> Result<(), CliError> {
     let tl = skill.timeline();
     let mut step = dfs_core::replay::RetargetStep::new(&plan, &skill, &params);
     let mut steps = Vec::new();
+    let mut held = 0;
     for i in 0..200 {
         let t = tl.grasp_end + (tl.release_start - tl.grasp_end) * i as f64 / 200.0;
         let t0 = Instant::now();
-        std::hint::black_box(step.step(t));
+        let (_, forces) = std::hint::black_box(step.step(t));
         steps.push(t0.elapsed().as_secs_f64() * 1e6);
+        held += usize::from(forces.is_some());
     }
     let (retarget_ms, replay_ms) = (median(plan_t), median(run_t));
     let ticks = report.ticks.max(1);
@@ -373,19 +378,21 @@ pub fn bench_replay(hand: &str, json: bool) -> Result<(), CliError> {
         ticks,
         per_5s_ms: retarget_ms + (replay_ms - retarget_ms) * 5000.0 / ticks as f64,
         retarget_step_us: median(steps),
+        retarget_steps_held: held,
     };
     if json {
         return print_json(&result);
     }
     println!(
         "replay sphere-lift on {}: retarget {:.1} ms, replay {:.1} ms for {} ticks \
-         (retarget + 5 000 ticks: {:.1} ms), one retargeting step {:.0} µs",
+         (retarget + 5 000 ticks: {:.1} ms), one retargeting step {:.0} µs ({} of 200 held)",
         result.hand,
         result.retarget_ms,
         result.replay_ms,
         result.ticks,
         result.per_5s_ms,
-        result.retarget_step_us
+        result.retarget_step_us,
+        result.retarget_steps_held
     );
     Ok(())
 }

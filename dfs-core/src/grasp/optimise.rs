@@ -30,12 +30,18 @@
 //! Every solution is checked after the solve: residual `‖W c − load‖ ≤ 10⁻⁶ (1 + ‖load‖)` and
 //! every cone constraint within `10⁻⁶ (1 + max |c|)`. The result is deterministic: same input,
 //! same output (Clarabel runs single-threaded).
+//!
+//! [`ForceSolver`] solves the same problem for one set of contacts and many loads (retargeting
+//! along a motion): set up once, each load is answered by Newton's method on the dual of the
+//! equality rows, warm-started from the previous load, whose iterates are exactly inside the
+//! cones (see [`ForceSolver::solve_into`]); Clarabel, with the load fed in through its data
+//! updates, answers when a torque limit binds or Newton does not converge.
 
 use crate::contact::{ContactFrame, ContactModel, Friction, Intensity};
 use crate::math::{Real, Wrench};
 use clarabel::algebra::CscMatrix;
 use clarabel::solver::{DefaultSettings, DefaultSolver, IPSolver, SolverStatus, SupportedConeT};
-use nalgebra::{DMatrix, DVector};
+use nalgebra::DMatrix;
 
 /// Relative tolerance of the post-solve checks (residual and cones).
 pub const CHECK_TOLERANCE: Real = 1e-6;
@@ -213,204 +219,590 @@ pub fn optimise_with_torque_limits(
     torque: Option<&TorqueLimits>,
 ) -> Result<Distribution, Infeasible> {
     validate(contacts, friction, load_b, params)?;
-    if let Some(t) = torque {
-        let ok = t.map.ncols() == 4 * contacts.len()
-            && t.map.nrows() == t.limits.len()
-            && t.map.iter().all(|v| v.is_finite())
-            && t.limits.iter().all(|l| l.is_finite() && *l > 0.0);
-        if !ok {
-            return Err(Infeasible::new(
-                InfeasibleKind::InvalidInput,
-                "torque limits: the map needs 4 columns per contact and one finite limit > 0 \
-                 per row",
-            ));
-        }
-    }
-    let comps = components(model);
-    let k = comps.len();
-    let n_contacts = contacts.len();
-    let n = k * n_contacts;
-    let mu = friction.mu * (1.0 - params.margin);
-    let mu_t = friction.mu_torsion * (1.0 - params.margin);
-    let has_tangent = model != ContactModel::Frictionless;
-    let has_torsion = model == ContactModel::SoftFinger;
-
-    // W restricted to the model's components.
-    let mut w = DMatrix::<Real>::zeros(6, n);
-    for (i, c) in contacts.iter().enumerate() {
-        for (j, &comp) in comps.iter().enumerate() {
-            let mut e = Intensity::zeros();
-            e[comp] = 1.0;
-            w.set_column(k * i + j, &c.wrench_b(&e));
-        }
-    }
-    let load = DVector::from_column_slice(load_b.as_slice());
-    let load_norm = load.norm();
-
-    // Range of W: thin SVD of the 6 x n matrix.
-    let svd = w.clone().svd(true, false);
-    let u = svd
-        .u
-        .as_ref()
-        .ok_or_else(|| Infeasible::new(InfeasibleKind::Solver, "SVD of W failed"))?;
-    let smax = svd.singular_values.iter().fold(0.0_f64, |m, &s| m.max(s));
-    let range: Vec<usize> = (0..svd.singular_values.len())
-        .filter(|&r| svd.singular_values[r] > 1e-9 * smax.max(1e-300))
-        .collect();
-    let ur = DMatrix::from_fn(6, range.len(), |i, j| u[(i, range[j])]);
-    let load_in_range = &ur * (ur.transpose() * &load);
-    let outside = (&load - &load_in_range).norm();
-    if outside > CHECK_TOLERANCE * (1.0 + load_norm) {
-        return Err(Infeasible::new(
-            InfeasibleKind::NoDistribution,
-            format!(
-                "no distribution inside the friction cones balances the load (the contacts \
-                 cannot produce it at all: W has rank {}, the part of the load outside its \
-                 range is {outside:.3e})",
-                range.len()
-            ),
-        ));
-    }
-    let a_eq = ur.transpose() * &w;
-    let b_eq = ur.transpose() * &load;
-    let m_eq = range.len();
-
-    // Torsion weight.
-    let ell = contacts.iter().fold(0.0_f64, |m, c| m.max(c.p_b.norm()));
-    let ell = if ell > 0.0 { ell } else { 1.0 };
-
-    // Objective ½ xᵀ P x with P = 2 diag(weights): upper triangle of a diagonal matrix.
-    let mut pdiag = Vec::with_capacity(n);
-    for _ in 0..n_contacts {
-        for &comp in comps {
-            pdiag.push(if comp == 3 { 2.0 / (ell * ell) } else { 2.0 });
-        }
-    }
-    let p = CscMatrix::new(n, n, (0..=n).collect(), (0..n).collect(), pdiag);
-    let q = vec![0.0; n];
-
-    // Constraints A x + s = b, s in the cones, block by block.
-    let n_torque = torque.map_or(0, |t| 2 * t.limits.len());
-    let n_nonneg = n_contacts * if has_torsion { 3 } else { 1 } + n_torque;
-    let n_soc = if has_tangent { 3 * n_contacts } else { 0 };
-    let m = m_eq + n_nonneg + n_soc;
-    let mut a = DMatrix::<Real>::zeros(m, n);
-    let mut b = vec![0.0; m];
-    a.rows_mut(0, m_eq).copy_from(&a_eq);
-    b[..m_eq].copy_from_slice(b_eq.as_slice());
-    let iz = comps.iter().position(|&c| c == 2).unwrap_or(0);
-    let mut row = m_eq;
-    for i in 0..n_contacts {
-        let z = k * i + iz;
-        // c_z ≥ min_normal  ⇔  s = c_z − min_normal ≥ 0.
-        a[(row, z)] = -1.0;
-        b[row] = -params.min_normal;
-        row += 1;
-        if has_torsion {
-            let t = k * i + 3;
-            // μ_t' c_z − c_τ ≥ 0 and μ_t' c_z + c_τ ≥ 0.
-            a[(row, z)] = -mu_t;
-            a[(row, t)] = 1.0;
-            row += 1;
-            a[(row, z)] = -mu_t;
-            a[(row, t)] = -1.0;
-            row += 1;
-        }
-    }
-    if let Some(t) = torque {
-        // τ_max − T c ≥ 0 and τ_max + T c ≥ 0, on the model's components.
-        for d in 0..t.limits.len() {
-            for sign in [1.0, -1.0] {
-                for i in 0..n_contacts {
-                    for (j, &comp) in comps.iter().enumerate() {
-                        a[(row, k * i + j)] = sign * t.map[(d, 4 * i + comp)];
-                    }
-                }
-                b[row] = t.limits[d];
-                row += 1;
-            }
-        }
-    }
-    let mut cones = vec![
-        SupportedConeT::ZeroConeT(m_eq),
-        SupportedConeT::NonnegativeConeT(n_nonneg),
-    ];
-    if has_tangent {
-        for i in 0..n_contacts {
-            // s = (μ' c_z, c_x, c_y) in the second-order cone.
-            a[(row, k * i + 2)] = -mu;
-            a[(row + 1, k * i)] = -1.0;
-            a[(row + 2, k * i + 1)] = -1.0;
-            row += 3;
-            cones.push(SupportedConeT::SecondOrderConeT(3));
-        }
-    }
-    if m_eq == 0 {
-        cones.remove(0);
-    }
-
-    let settings = DefaultSettings::<Real> {
-        verbose: false,
-        max_threads: 1,
-        ..DefaultSettings::default()
-    };
-    let mut solver = DefaultSolver::new(&p, &q, &csc(&a), &b, &cones, settings).map_err(|e| {
-        Infeasible::new(InfeasibleKind::Solver, format!("solver setup failed: {e}"))
-    })?;
-    solver.solve();
-    let status = solver.solution.status;
-    match status {
-        SolverStatus::Solved | SolverStatus::AlmostSolved => {}
-        SolverStatus::PrimalInfeasible | SolverStatus::AlmostPrimalInfeasible => {
-            return Err(Infeasible::new(
-                InfeasibleKind::NoDistribution,
-                format!(
-                    "no distribution inside the friction cones balances the load (μ = {}, \
-                     margin = {}, minimum normal force = {} N; solver status {status:?})",
-                    friction.mu, params.margin, params.min_normal
-                ),
-            ));
-        }
-        other => {
-            return Err(Infeasible::new(
-                InfeasibleKind::Solver,
-                format!("solver stopped with status {other:?}"),
-            ));
-        }
-    }
-
-    let x = &solver.solution.x;
-    let mut intensities = vec![Intensity::zeros(); n_contacts];
-    for (i, c) in intensities.iter_mut().enumerate() {
-        for (j, &comp) in comps.iter().enumerate() {
-            c[comp] = x[k * i + j];
-        }
-    }
-    let xv = DVector::from_column_slice(x);
-    let residual = (&w * &xv - &load).norm();
-    if residual > CHECK_TOLERANCE * (1.0 + load_norm) {
-        return Err(Infeasible::new(
-            InfeasibleKind::Solver,
-            format!("solver returned a distribution that does not balance the load (residual {residual:.3e}, status {status:?})"),
-        ));
-    }
-    let scale = CHECK_TOLERANCE * (1.0 + x.iter().fold(0.0_f64, |m, v| m.max(v.abs())));
-    for (i, c) in intensities.iter().enumerate() {
-        let tan = (c[0] * c[0] + c[1] * c[1]).sqrt();
-        let ok = c[2] >= params.min_normal - scale
-            && tan <= mu * c[2] + scale
-            && c[3].abs() <= mu_t * c[2] + scale;
-        if !ok {
-            return Err(Infeasible::new(
-                InfeasibleKind::Solver,
-                format!("solver returned a distribution outside the cone of contact {i} (status {status:?})"),
-            ));
-        }
-    }
+    let mut solver = ForceSolver::new(contacts, model, friction, params, torque)?;
+    let mut intensities = vec![Intensity::zeros(); contacts.len()];
+    let residual = solver.solve_into(load_b, &mut intensities)?;
     Ok(Distribution {
         intensities,
         residual,
     })
+}
+
+/// The force distribution of [`optimise_with_torque_limits`] for one set of contacts and
+/// many loads: the problem is set up once (the grasp matrix's range, the cones, the torque
+/// rows and Clarabel's KKT structure) and each [`solve`](Self::solve_into) only replaces the
+/// load, through Clarabel's data updates. Same problem, same checks, same answers as
+/// [`optimise_with_torque_limits`]; for retargeting along a reference motion, where the
+/// contacts stay and the load changes every step.
+pub struct ForceSolver {
+    comps: &'static [usize],
+    mu: Real,
+    mu_t: Real,
+    min_normal: Real,
+    friction: Friction,
+    margin: Real,
+    /// W restricted to the model's components (6 × n).
+    w: DMatrix<Real>,
+    /// Orthonormal basis of W's range (6 × m_eq).
+    ur: DMatrix<Real>,
+    /// The constraint right-hand side; its first `m_eq` entries are the load's.
+    b: Vec<Real>,
+    solver: DefaultSolver<Real>,
+    /// The equality rows `U_rᵀ W` with the torsion columns scaled by ℓ (variables in which
+    /// the objective is the plain squared norm).
+    a_s: DMatrix<Real>,
+    /// Torsion scale ℓ (see the module documentation).
+    ell: Real,
+    /// Torque rows on the model's components and their limits, for checking a fast solution.
+    torque: Option<(DMatrix<Real>, Vec<Real>)>,
+    /// Dual variables of the equality rows from the last fast solve (its warm start).
+    lambda: [Real; 6],
+    /// Scratch: `A_sᵀ λ`, its projection, and a perturbed projection.
+    y: Vec<Real>,
+    x: Vec<Real>,
+    x_probe: Vec<Real>,
+    /// Solves answered by the dual Newton method, and by Clarabel.
+    fast_solves: u64,
+    clarabel_solves: u64,
+}
+
+impl std::fmt::Debug for ForceSolver {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("ForceSolver")
+            .field("contacts", &(self.w.ncols() / self.comps.len().max(1)))
+            .field("variables", &self.w.ncols())
+            .field("constraints", &self.b.len())
+            .finish()
+    }
+}
+
+impl ForceSolver {
+    /// Sets the problem up for `contacts` (see [`optimise_with_torque_limits`]).
+    pub fn new(
+        contacts: &[ContactFrame],
+        model: ContactModel,
+        friction: &Friction,
+        params: &OptimiseParams,
+        torque: Option<&TorqueLimits>,
+    ) -> Result<Self, Infeasible> {
+        validate(contacts, friction, &Wrench::zeros(), params)?;
+        if let Some(t) = torque {
+            let ok = t.map.ncols() == 4 * contacts.len()
+                && t.map.nrows() == t.limits.len()
+                && t.map.iter().all(|v| v.is_finite())
+                && t.limits.iter().all(|l| l.is_finite() && *l > 0.0);
+            if !ok {
+                return Err(Infeasible::new(
+                    InfeasibleKind::InvalidInput,
+                    "torque limits: the map needs 4 columns per contact and one finite limit > 0 \
+                     per row",
+                ));
+            }
+        }
+        let comps = components(model);
+        let k = comps.len();
+        let n_contacts = contacts.len();
+        let n = k * n_contacts;
+        let mu = friction.mu * (1.0 - params.margin);
+        let mu_t = friction.mu_torsion * (1.0 - params.margin);
+        let has_tangent = model != ContactModel::Frictionless;
+        let has_torsion = model == ContactModel::SoftFinger;
+
+        // W restricted to the model's components.
+        let mut w = DMatrix::<Real>::zeros(6, n);
+        for (i, c) in contacts.iter().enumerate() {
+            for (j, &comp) in comps.iter().enumerate() {
+                let mut e = Intensity::zeros();
+                e[comp] = 1.0;
+                w.set_column(k * i + j, &c.wrench_b(&e));
+            }
+        }
+        // Range of W: thin SVD of the 6 x n matrix.
+        let svd = w.clone().svd(true, false);
+        let u = svd
+            .u
+            .as_ref()
+            .ok_or_else(|| Infeasible::new(InfeasibleKind::Solver, "SVD of W failed"))?;
+        let smax = svd.singular_values.iter().fold(0.0_f64, |m, &s| m.max(s));
+        let range: Vec<usize> = (0..svd.singular_values.len())
+            .filter(|&r| svd.singular_values[r] > 1e-9 * smax.max(1e-300))
+            .collect();
+        let ur = DMatrix::from_fn(6, range.len(), |i, j| u[(i, range[j])]);
+        let a_eq = ur.transpose() * &w;
+        let m_eq = range.len();
+
+        // Torsion weight.
+        let ell = contacts.iter().fold(0.0_f64, |m, c| m.max(c.p_b.norm()));
+        let ell = if ell > 0.0 { ell } else { 1.0 };
+
+        // Objective ½ xᵀ P x with P = 2 diag(weights): upper triangle of a diagonal matrix.
+        let mut pdiag = Vec::with_capacity(n);
+        for _ in 0..n_contacts {
+            for &comp in comps {
+                pdiag.push(if comp == 3 { 2.0 / (ell * ell) } else { 2.0 });
+            }
+        }
+        let p = CscMatrix::new(n, n, (0..=n).collect(), (0..n).collect(), pdiag);
+        let q = vec![0.0; n];
+
+        // Constraints A x + s = b, s in the cones, block by block.
+        let n_torque = torque.map_or(0, |t| 2 * t.limits.len());
+        let n_nonneg = n_contacts * if has_torsion { 3 } else { 1 } + n_torque;
+        let n_soc = if has_tangent { 3 * n_contacts } else { 0 };
+        let m = m_eq + n_nonneg + n_soc;
+        let mut a = DMatrix::<Real>::zeros(m, n);
+        let b = vec![0.0; m];
+        let mut b = b;
+        a.rows_mut(0, m_eq).copy_from(&a_eq);
+        let iz = comps.iter().position(|&c| c == 2).unwrap_or(0);
+        let mut row = m_eq;
+        for i in 0..n_contacts {
+            let z = k * i + iz;
+            // c_z ≥ min_normal  ⇔  s = c_z − min_normal ≥ 0.
+            a[(row, z)] = -1.0;
+            b[row] = -params.min_normal;
+            row += 1;
+            if has_torsion {
+                let t = k * i + 3;
+                // μ_t' c_z − c_τ ≥ 0 and μ_t' c_z + c_τ ≥ 0.
+                a[(row, z)] = -mu_t;
+                a[(row, t)] = 1.0;
+                row += 1;
+                a[(row, z)] = -mu_t;
+                a[(row, t)] = -1.0;
+                row += 1;
+            }
+        }
+        if let Some(t) = torque {
+            // τ_max − T c ≥ 0 and τ_max + T c ≥ 0, on the model's components.
+            for d in 0..t.limits.len() {
+                for sign in [1.0, -1.0] {
+                    for i in 0..n_contacts {
+                        for (j, &comp) in comps.iter().enumerate() {
+                            a[(row, k * i + j)] = sign * t.map[(d, 4 * i + comp)];
+                        }
+                    }
+                    b[row] = t.limits[d];
+                    row += 1;
+                }
+            }
+        }
+        let mut cones = vec![
+            SupportedConeT::ZeroConeT(m_eq),
+            SupportedConeT::NonnegativeConeT(n_nonneg),
+        ];
+        if has_tangent {
+            for i in 0..n_contacts {
+                // s = (μ' c_z, c_x, c_y) in the second-order cone.
+                a[(row, k * i + 2)] = -mu;
+                a[(row + 1, k * i)] = -1.0;
+                a[(row + 2, k * i + 1)] = -1.0;
+                row += 3;
+                cones.push(SupportedConeT::SecondOrderConeT(3));
+            }
+        }
+        if m_eq == 0 {
+            cones.remove(0);
+        }
+        // No presolve: the load goes in through data updates, which it would forbid.
+        let settings = DefaultSettings::<Real> {
+            verbose: false,
+            max_threads: 1,
+            presolve_enable: false,
+            ..DefaultSettings::default()
+        };
+        let solver = DefaultSolver::new(&p, &q, &csc(&a), &b, &cones, settings).map_err(|e| {
+            Infeasible::new(InfeasibleKind::Solver, format!("solver setup failed: {e}"))
+        })?;
+        let mut a_s = a_eq.clone();
+        if has_torsion {
+            for i in 0..n_contacts {
+                a_s.column_mut(k * i + 3).scale_mut(ell);
+            }
+        }
+        let torque = torque.map(|t| {
+            let rows = DMatrix::from_fn(t.limits.len(), n, |d, v| {
+                t.map[(d, 4 * (v / k) + comps[v % k])]
+            });
+            (rows, t.limits.clone())
+        });
+        Ok(ForceSolver {
+            comps,
+            mu,
+            mu_t,
+            min_normal: params.min_normal,
+            friction: *friction,
+            margin: params.margin,
+            w,
+            ur,
+            b,
+            solver,
+            a_s,
+            ell,
+            torque,
+            lambda: [0.0; 6],
+            y: vec![0.0; n],
+            x: vec![0.0; n],
+            x_probe: vec![0.0; n],
+            fast_solves: 0,
+            clarabel_solves: 0,
+        })
+    }
+
+    /// The least-internal-force distribution for `load_b` (the wrench the hand must apply, in
+    /// B), written to `out` (one entry per contact); returns the residual `‖W c − load‖`.
+    /// Errors as [`optimise_with_torque_limits`]'s.
+    pub fn solve_into(
+        &mut self,
+        load_b: &Wrench,
+        out: &mut [Intensity],
+    ) -> Result<Real, Infeasible> {
+        let k = self.comps.len();
+        let n_contacts = self.w.ncols() / k.max(1);
+        if out.len() != n_contacts || !load_b.iter().all(|v| v.is_finite()) {
+            return Err(Infeasible::new(
+                InfeasibleKind::InvalidInput,
+                "the load must be finite and the output hold one intensity per contact",
+            ));
+        }
+        let load_norm = load_b.norm();
+        let m_eq = self.ur.ncols();
+        // The load must lie in the range of W: U_r U_rᵀ load = load.
+        let mut outside = *load_b;
+        for j in 0..m_eq {
+            let col = self.ur.column(j);
+            let c: Real = (0..6).map(|i| col[i] * load_b[i]).sum();
+            self.b[j] = c;
+            for i in 0..6 {
+                outside[i] -= col[i] * c;
+            }
+        }
+        let outside = outside.norm();
+        if outside > CHECK_TOLERANCE * (1.0 + load_norm) {
+            return Err(Infeasible::new(
+                InfeasibleKind::NoDistribution,
+                format!(
+                    "no distribution inside the friction cones balances the load (the contacts \
+                     cannot produce it at all: W has rank {m_eq}, the part of the load outside \
+                     its range is {outside:.3e})"
+                ),
+            ));
+        }
+        if self.solve_fast(load_b, out) {
+            self.fast_solves += 1;
+            return Ok(self.residual(out, load_b));
+        }
+        self.solve_clarabel(load_b, out)
+    }
+
+    /// Clarabel's answer for the load already in `b` (see [`solve_into`](Self::solve_into)).
+    fn solve_clarabel(
+        &mut self,
+        load_b: &Wrench,
+        out: &mut [Intensity],
+    ) -> Result<Real, Infeasible> {
+        let k = self.comps.len();
+        let load_norm = load_b.norm();
+        self.clarabel_solves += 1;
+        self.solver
+            .update_b(&self.b)
+            .map_err(|e| Infeasible::new(InfeasibleKind::Solver, format!("data update: {e}")))?;
+        self.solver.solve();
+        let status = self.solver.solution.status;
+        match status {
+            SolverStatus::Solved | SolverStatus::AlmostSolved => {}
+            SolverStatus::PrimalInfeasible | SolverStatus::AlmostPrimalInfeasible => {
+                return Err(Infeasible::new(
+                    InfeasibleKind::NoDistribution,
+                    format!(
+                        "no distribution inside the friction cones balances the load (μ = {}, \
+                         margin = {}, minimum normal force = {} N; solver status {status:?})",
+                        self.friction.mu, self.margin, self.min_normal
+                    ),
+                ));
+            }
+            other => {
+                return Err(Infeasible::new(
+                    InfeasibleKind::Solver,
+                    format!("solver stopped with status {other:?}"),
+                ));
+            }
+        }
+        let x = &self.solver.solution.x;
+        for (i, c) in out.iter_mut().enumerate() {
+            *c = Intensity::zeros();
+            for (j, &comp) in self.comps.iter().enumerate() {
+                c[comp] = x[k * i + j];
+            }
+        }
+        let mut res = -*load_b;
+        for (j, xj) in x.iter().enumerate() {
+            for i in 0..6 {
+                res[i] += self.w[(i, j)] * xj;
+            }
+        }
+        let residual = res.norm();
+        if residual > CHECK_TOLERANCE * (1.0 + load_norm) {
+            return Err(Infeasible::new(
+                InfeasibleKind::Solver,
+                format!("solver returned a distribution that does not balance the load (residual {residual:.3e}, status {status:?})"),
+            ));
+        }
+        let scale = CHECK_TOLERANCE * (1.0 + x.iter().fold(0.0_f64, |m, v| m.max(v.abs())));
+        for (i, c) in out.iter().enumerate() {
+            let tan = (c[0] * c[0] + c[1] * c[1]).sqrt();
+            let ok = c[2] >= self.min_normal - scale
+                && tan <= self.mu * c[2] + scale
+                && c[3].abs() <= self.mu_t * c[2] + scale;
+            if !ok {
+                return Err(Infeasible::new(
+                    InfeasibleKind::Solver,
+                    format!("solver returned a distribution outside the cone of contact {i} (status {status:?})"),
+                ));
+            }
+        }
+        Ok(residual)
+    }
+
+    /// How many solves the dual Newton method answered, and how many Clarabel did.
+    pub fn solve_counts(&self) -> (u64, u64) {
+        (self.fast_solves, self.clarabel_solves)
+    }
+
+    /// `‖W c − load‖` for intensities `c`.
+    fn residual(&self, c: &[Intensity], load_b: &Wrench) -> Real {
+        let k = self.comps.len();
+        let mut res = -*load_b;
+        for (i, ci) in c.iter().enumerate() {
+            for (j, &comp) in self.comps.iter().enumerate() {
+                for r in 0..6 {
+                    res[r] += self.w[(r, k * i + j)] * ci[comp];
+                }
+            }
+        }
+        res.norm()
+    }
+
+    /// The exact distribution by Newton's method on the dual of the equality rows, warm-started
+    /// from the last solve; `false` (and `out` untouched) when it does not apply or converge,
+    /// for Clarabel to answer.
+    ///
+    /// With the torsion scaled by ℓ the problem is `min ½‖x‖²` over `x` in the product `K` of
+    /// the per-contact sets `{c_z ≥ c_min, ‖c_t‖ ≤ μ' c_z, |c_τ| ≤ μ_t' c_z}` with `A x = b`
+    /// (`b = U_rᵀ load`, `A` of full row rank ≤ 6). Its dual, `max_λ λᵀb − (yᵀΠ(y) −
+    /// ½‖Π(y)‖²)` with `y = Aᵀλ` and `Π` the projection onto `K` (closed form per contact), is
+    /// concave and smooth in at most six variables, with gradient `b − A Π(Aᵀλ)`; at its
+    /// maximum `x = Π(Aᵀλ)` is the unique optimum. Every iterate's `x` lies in the cones
+    /// exactly; the method stops when the equality residual is within the solver checks'
+    /// tolerance. A solution that breaks a torque limit is not the constrained optimum:
+    /// Clarabel then solves the full problem.
+    fn solve_fast(&mut self, load_b: &Wrench, out: &mut [Intensity]) -> bool {
+        let m = self.ur.ncols();
+        let n = self.w.ncols();
+        let k = self.comps.len();
+        let tol = 0.1 * CHECK_TOLERANCE * (1.0 + load_b.norm());
+        let b = nalgebra::Vector6::from_fn(|i, _| if i < m { self.b[i] } else { 0.0 });
+        let mut lambda = nalgebra::Vector6::from_column_slice(&self.lambda);
+        if !lambda.iter().all(|v| v.is_finite()) {
+            lambda = nalgebra::Vector6::zeros();
+        }
+        let mut value = self.dual_at(&lambda, &b);
+        let mut converged = false;
+        for _ in 0..40 {
+            // Gradient (the equality residual) at the current iterate; x holds Π(Aᵀλ).
+            let mut g = b;
+            for i in 0..m {
+                for v in 0..n {
+                    g[i] -= self.a_s[(i, v)] * self.x[v];
+                }
+            }
+            if g.norm() <= tol {
+                converged = true;
+                break;
+            }
+            // H = A J Aᵀ with J the projection's derivative (piecewise constant), column by
+            // column from the change of Π along Aᵀ e_j.
+            let mut h = nalgebra::Matrix6::<Real>::identity();
+            let step = 1e-7 * (1.0 + lambda.norm());
+            for j in 0..m {
+                for v in 0..n {
+                    self.y[v] = (0..m).map(|i| self.a_s[(i, v)] * lambda[i]).sum::<Real>()
+                        + self.a_s[(j, v)] * step;
+                }
+                project_all(
+                    &self.y,
+                    &mut self.x_probe,
+                    self.comps,
+                    self.mu,
+                    self.mu_t / self.ell,
+                    self.min_normal,
+                );
+                for i in 0..m {
+                    h[(i, j)] = (0..n)
+                        .map(|v| self.a_s[(i, v)] * (self.x_probe[v] - self.x[v]))
+                        .sum::<Real>()
+                        / step;
+                }
+            }
+            let sym = (h + h.transpose()) * 0.5;
+            let mut reg = 1e-12 * (1.0 + sym.trace().abs());
+            let direction = loop {
+                let mut a = sym;
+                for i in 0..6 {
+                    a[(i, i)] += if i < m { reg } else { 1.0 };
+                }
+                if let Some(ch) = a.cholesky() {
+                    break Some(ch.solve(&g));
+                }
+                reg *= 100.0;
+                if reg > 1e6 {
+                    break None;
+                }
+            };
+            let Some(direction) = direction else {
+                break;
+            };
+            // Backtracking on the dual (it must rise).
+            let mut t = 1.0;
+            let slope = g.dot(&direction);
+            let mut accepted = false;
+            for _ in 0..30 {
+                let trial = lambda + direction * t;
+                let v = self.dual_at(&trial, &b);
+                if v >= value + 1e-4 * t * slope || (v - value).abs() <= 1e-15 * (1.0 + value.abs())
+                {
+                    lambda = trial;
+                    value = v;
+                    accepted = true;
+                    break;
+                }
+                t *= 0.5;
+            }
+            if !accepted {
+                // Restore x for lambda and give up.
+                self.dual_at(&lambda, &b);
+                break;
+            }
+        }
+        if !converged {
+            return false;
+        }
+        // The torque limits, on the unscaled intensities.
+        if let Some((rows, limits)) = &self.torque {
+            let scale =
+                CHECK_TOLERANCE * (1.0 + self.x.iter().fold(0.0_f64, |a, v| a.max(v.abs())));
+            for d in 0..limits.len() {
+                let tau: Real = (0..n)
+                    .map(|v| {
+                        let unscaled = if self.comps[v % k] == 3 {
+                            self.x[v] * self.ell
+                        } else {
+                            self.x[v]
+                        };
+                        rows[(d, v)] * unscaled
+                    })
+                    .sum();
+                if tau.abs() > limits[d] + scale {
+                    return false;
+                }
+            }
+        }
+        self.lambda.copy_from_slice(lambda.as_slice());
+        for (i, c) in out.iter_mut().enumerate() {
+            *c = Intensity::zeros();
+            for (j, &comp) in self.comps.iter().enumerate() {
+                let v = self.x[k * i + j];
+                c[comp] = if comp == 3 { v * self.ell } else { v };
+            }
+        }
+        true
+    }
+
+    /// The dual objective at `lambda`; leaves `Π(Aᵀλ)` in `x`.
+    fn dual_at(&mut self, lambda: &nalgebra::Vector6<Real>, b: &nalgebra::Vector6<Real>) -> Real {
+        let m = self.ur.ncols();
+        let n = self.w.ncols();
+        for v in 0..n {
+            self.y[v] = (0..m).map(|i| self.a_s[(i, v)] * lambda[i]).sum();
+        }
+        project_all(
+            &self.y,
+            &mut self.x,
+            self.comps,
+            self.mu,
+            self.mu_t / self.ell,
+            self.min_normal,
+        );
+        let (mut yx, mut xx) = (0.0, 0.0);
+        for v in 0..n {
+            yx += self.y[v] * self.x[v];
+            xx += self.x[v] * self.x[v];
+        }
+        lambda.dot(b) - (yx - 0.5 * xx)
+    }
+}
+
+/// Projects every contact's block of `y` onto its set `{c_z ≥ c_min, ‖c_t‖ ≤ μ c_z, |c_τ| ≤
+/// μ_τ c_z}` (the components present in `comps`), into `x`. Per contact the nearest point
+/// keeps the tangential direction and the torsion's sign: for a normal force `z` the tangential
+/// part is clipped to `μ z` and the torsion to `μ_τ z`, which leaves a convex piecewise
+/// quadratic in `z` whose minimiser on `[c_min, ∞)` is found interval by interval.
+fn project_all(y: &[Real], x: &mut [Real], comps: &[usize], mu: Real, mu_tau: Real, c_min: Real) {
+    let k = comps.len();
+    let pos = |c: usize| comps.iter().position(|&x| x == c);
+    let (iz, it, itau) = (pos(2).unwrap_or(0), pos(0), pos(3));
+    for (yc, xc) in y.chunks_exact(k).zip(x.chunks_exact_mut(k)) {
+        let z0 = yc[iz];
+        let a = it.map_or(0.0, |i| (yc[i] * yc[i] + yc[i + 1] * yc[i + 1]).sqrt());
+        let tau = itau.map_or(0.0, |i| yc[i].abs());
+        // φ'(z)/2 = z − z0 − μ max(0, a − μz) − μ_τ max(0, τ − μ_τ z), increasing in z.
+        let bp1 = if mu > 0.0 { a / mu } else { Real::INFINITY };
+        let bp2 = if mu_tau > 0.0 {
+            tau / mu_tau
+        } else {
+            Real::INFINITY
+        };
+        let root_with = |s1: bool, s2: bool| {
+            let (mut num, mut den) = (z0, 1.0);
+            if s1 {
+                num += mu * a;
+                den += mu * mu;
+            }
+            if s2 {
+                num += mu_tau * tau;
+                den += mu_tau * mu_tau;
+            }
+            num / den
+        };
+        // Try the intervals between the breakpoints in order; the root lies in exactly one.
+        let mut z = root_with(false, false);
+        let (lo, hi) = (bp1.min(bp2), bp1.max(bp2));
+        for (s1_at, s2_at, left, right) in [
+            (true, true, Real::NEG_INFINITY, lo),
+            (bp1 > lo, bp2 > lo, lo, hi),
+            (false, false, hi, Real::INFINITY),
+        ] {
+            let r = root_with(s1_at, s2_at);
+            if r >= left && r <= right {
+                z = r;
+                break;
+            }
+        }
+        let z = z.max(c_min).max(0.0);
+        xc.copy_from_slice(yc);
+        xc[iz] = z;
+        if let Some(i) = it {
+            let limit = mu * z;
+            if a > limit {
+                let f = if a > 0.0 { limit / a } else { 0.0 };
+                xc[i] *= f;
+                xc[i + 1] *= f;
+            }
+        }
+        if let Some(i) = itau {
+            xc[i] = yc[i].clamp(-mu_tau * z, mu_tau * z);
+        }
+    }
 }
 
 #[cfg(test)]
@@ -438,6 +830,96 @@ mod tests {
         let (n, t) = normal_and_tangential(c);
         let tol = 1e-6 * (1.0 + c.norm());
         n >= min_normal - tol && t <= mu * n + tol && c[3].abs() <= mu_t * n + tol
+    }
+
+    /// Loads along a lift: gravity plus accelerations up to 6 m/s² and moments up to 0.05 N·m,
+    /// deterministic (xorshift).
+    fn lift_loads(count: usize) -> Vec<Wrench> {
+        let mut state = 0x9e37_79b9_7f4a_7c15_u64;
+        let mut next = || {
+            state ^= state << 13;
+            state ^= state >> 7;
+            state ^= state << 17;
+            (state >> 11) as Real / (1u64 << 53) as Real * 2.0 - 1.0
+        };
+        (0..count)
+            .map(|_| {
+                let m = 0.3;
+                Wrench::new(
+                    m * 6.0 * next(),
+                    m * 6.0 * next(),
+                    m * (STANDARD_GRAVITY + 6.0 * next()),
+                    0.05 * next(),
+                    0.05 * next(),
+                    0.05 * next(),
+                )
+            })
+            .collect()
+    }
+
+    #[test]
+    fn the_dual_newton_distribution_matches_clarabels_for_every_load_along_a_lift() {
+        let contacts = paper_contacts();
+        let params = OptimiseParams {
+            margin: 0.5,
+            min_normal: 0.5,
+        };
+        for model in [ContactModel::PointWithFriction, ContactModel::SoftFinger] {
+            let mut solver = ForceSolver::new(&contacts, model, &fr(0.8), &params, None).unwrap();
+            let mut fast = vec![Intensity::zeros(); 4];
+            let mut reference = vec![Intensity::zeros(); 4];
+            let mut solved = 0;
+            for load in lift_loads(60) {
+                let before = solver.solve_counts();
+                let r = solver.solve_into(&load, &mut fast);
+                let Ok(residual) = r else {
+                    // Infeasible for the fast method and Clarabel alike.
+                    assert!(solver.solve_clarabel(&load, &mut reference).is_err());
+                    continue;
+                };
+                assert!(residual <= CHECK_TOLERANCE * (1.0 + load.norm()));
+                assert_eq!(solver.solve_counts().0, before.0 + 1, "{model:?} {load:?}");
+                solver.solve_clarabel(&load, &mut reference).unwrap();
+                let scale = 1.0 + reference.iter().fold(0.0_f64, |a, c| a.max(c.amax()));
+                for (f, c) in fast.iter().zip(&reference) {
+                    assert!((f - c).amax() < 1e-5 * scale, "{model:?}: {f:?} vs {c:?}");
+                    assert!(inside(f, 0.4, 0.0025, 0.5), "{f:?}");
+                }
+                let d = Distribution {
+                    intensities: fast.clone(),
+                    residual,
+                };
+                assert_balances(&contacts, model, &d, &load);
+                solved += 1;
+            }
+            assert!(solved >= 30, "{model:?}: {solved} of 60 loads held");
+        }
+    }
+
+    #[test]
+    fn a_distribution_that_breaks_a_torque_limit_is_left_to_clarabel() {
+        let contacts = paper_contacts();
+        let params = OptimiseParams {
+            margin: 0.5,
+            min_normal: 0.5,
+        };
+        let model = ContactModel::SoftFinger;
+        let load = gravity_load();
+        let free = optimise(&contacts, model, &fr(0.8), &load, &params).unwrap();
+        // One "joint" that sums the first contact's normal force, limited below what the free
+        // optimum uses but above what the grasp can make do with.
+        let mut map = DMatrix::zeros(1, 16);
+        map[(0, 2)] = 1.0;
+        let limits = TorqueLimits {
+            map,
+            limits: vec![0.9 * free.intensities[0][2]],
+        };
+        let mut solver =
+            ForceSolver::new(&contacts, model, &fr(0.8), &params, Some(&limits)).unwrap();
+        let mut out = vec![Intensity::zeros(); 4];
+        solver.solve_into(&load, &mut out).unwrap();
+        assert_eq!(solver.solve_counts(), (0, 1));
+        assert!(out[0][2] <= limits.limits[0] + 1e-6, "{}", out[0][2]);
     }
 
     fn assert_balances(

@@ -27,8 +27,10 @@
 //!    (approaching from below the table excluded); for each, fingertip inverse kinematics with
 //!    the base position free (joint limits and mimic couplings honoured) places the fingertips
 //!    on their contacts. Candidates are scored by the IK residual, by how well each fingertip
-//!    can push along its contact normal, by grasp quality (Ferrari-Canny ε of the contacts the
-//!    fingertips actually reach) and by approaching from above. When no pose puts every
+//!    can push along its contact normal and by approaching from above (and, for the curled
+//!    grasps below, by grasp quality: Ferrari-Canny ε of the contacts the fingertips reach;
+//!    with every tip on its own contact the candidates' contacts agree, and ε is computed once
+//!    for the chosen pose). When no pose puts every
 //!    fingertip on its contact (an underactuated hand cannot put every tip on an arbitrary
 //!    point), the thumb and the two, then one, opposing fingers nearest it are placed (those
 //!    opposing fingers only need to rest on the surface near their targets) and every other
@@ -40,8 +42,10 @@
 //! 3. **Forces.** At the reference's samples (every [`ReplayParams::force_sample_s`]), the
 //!    least internal force that carries the object's load `m (a − g)` with exact friction cones,
 //!    a friction margin and the hand's torque limits `|Σ Jᵀ f| ≤ τ_max` (a second-order cone
-//!    programme, [`crate::grasp::optimise::optimise_with_torque_limits`]); infeasible without
-//!    the torque limits is `no_force_closure`, feasible only without them `torque_limit`.
+//!    programme, [`crate::grasp::optimise::ForceSolver`]: set up once for the contacts, each
+//!    load solved by Newton's method on its dual, warm-started, with Clarabel when a torque
+//!    limit binds); infeasible without the torque limits is `no_force_closure`, feasible only
+//!    without them `torque_limit`.
 //! 4. **Simulation.** [`run`]: the arm (the hand's base, moved kinematically like the
 //!    operator's) approaches with the fingers preshaped 2 cm off their contacts, the fingers
 //!    close under task-space steering, the grip ramps up to the planned forces `τ = Jᵀ f`, the
@@ -358,7 +362,12 @@ impl SkillSpec {
     /// poses ([`key_pose`](Self::key_pose)), holding the last held pose when the recording
     /// lost the object, set down during `place` in that case.
     pub fn reference(&self, t: Real) -> Isometry {
-        let tl = self.timeline();
+        self.reference_in(&self.timeline(), t)
+    }
+
+    /// [`reference`](Self::reference) with the timeline already at hand (a replay computes it
+    /// once rather than every tick).
+    pub fn reference_in(&self, tl: &Timeline, t: Real) -> Isometry {
         let start = self.start_pose();
         let s = t - tl.grasp_start;
         let key = |s: Real| -> Isometry { self.key_pose(s) };
@@ -441,6 +450,45 @@ mod tests {
                 (Phase::Retreat, 0.3),
             ],
             held_until_s: None,
+        }
+    }
+
+    #[test]
+    fn a_retargeting_step_balances_the_load_inside_the_cones_and_torque_limits() {
+        let hand = builtin_hand("gripper").unwrap();
+        let skill = box_pinch(0.2);
+        let params = ReplayParams::default();
+        let plan = plan(&hand, thumb_of(&hand), &skill, &params).unwrap();
+        assert!(plan.failure.is_none(), "{:?}", plan.failure);
+        let tl = skill.timeline();
+        let contacts: Vec<_> = (0..plan.contacts.len())
+            .filter(|&k| plan.active[k])
+            .map(|k| plan.contacts[k])
+            .collect();
+        let g = Vector::new(0.0, 0.0, -crate::math::STANDARD_GRAVITY);
+        let mu = skill.friction.mu * (1.0 - params.friction_margin);
+        let mut step = RetargetStep::new(&plan, &skill, &params);
+        for i in 0..50 {
+            let t = tl.grasp_end + (tl.release_start - tl.grasp_end) * i as Real / 50.0;
+            let load = plan::load_at(&skill, t, &g);
+            let (ik_error, forces) = step.step(t);
+            assert!(ik_error < params.reach_tolerance, "{t}: {ik_error}");
+            let forces = forces.expect("the box's load is carried all along");
+            let mut wrench = crate::math::Wrench::zeros();
+            for (c, f) in contacts.iter().zip(forces) {
+                wrench += c.wrench_b(f);
+                assert!(f[2] >= params.min_normal - 1e-9);
+                assert!(f[0].hypot(f[1]) <= mu * f[2] + 1e-6, "{f:?}");
+            }
+            assert!((wrench - load).norm() < 1e-6 * (1.0 + load.norm()), "{t}");
+            let tau = &plan.torque_map
+                * nalgebra::DVector::from_iterator(
+                    4 * forces.len(),
+                    forces.iter().flat_map(|f| f.iter().copied()),
+                );
+            for (d, t) in tau.iter().enumerate() {
+                assert!(t.abs() <= hand.torque_limit[d] + 1e-6);
+            }
         }
     }
 

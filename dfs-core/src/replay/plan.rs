@@ -6,9 +6,7 @@
 use super::{FailureReason, PlannedContact, ReplayParams, ReplayQuality, SkillSpec};
 use crate::contact::{ContactFrame, Intensity};
 use crate::error::{DfsError, Result};
-use crate::grasp::optimise::{
-    optimise, optimise_with_torque_limits, InfeasibleKind, OptimiseParams, TorqueLimits,
-};
+use crate::grasp::optimise::{ForceSolver, InfeasibleKind, OptimiseParams, TorqueLimits};
 use crate::grasp::quality::{grasp_quality, QualityParams};
 use crate::hand::ik::{solve_tips, IkParams};
 use crate::hand::{HandModel, Kinematics, MAX_DOF, MAX_TIPS};
@@ -418,20 +416,37 @@ fn plan_forces(plan: &mut Plan, skill: &SkillSpec, params: &ReplayParams) {
         .filter(|&k| plan.active[k])
         .collect();
     let contacts: Vec<ContactFrame> = tips.iter().map(|&k| plan.contacts[k]).collect();
+    // One solver each with and without the torque limits: the contacts stay, the load changes.
+    let new_solver = |limits: Option<&TorqueLimits>| {
+        ForceSolver::new(
+            &contacts,
+            skill.contact_model,
+            &skill.friction,
+            &opt,
+            limits,
+        )
+    };
+    let (mut cones_only, mut with_limits) = match (new_solver(None), new_solver(Some(&limits))) {
+        (Ok(a), Ok(b)) => (a, b),
+        (Err(e), _) | (_, Err(e)) => {
+            plan.failure = Some((
+                FailureReason::NoForceClosure,
+                format!(
+                    "the retargeted contacts cannot be planned for: {}",
+                    e.reason
+                ),
+            ));
+            return;
+        }
+    };
+    let mut dist = vec![Intensity::zeros(); contacts.len()];
     // Static load first, without torque limits: can the contacts carry it at all?
     let static_load = load_at(skill, tl.grasp_start, &g);
-    if let Err(e) = optimise(
-        &contacts,
-        skill.contact_model,
-        &skill.friction,
-        &static_load,
-        &opt,
-    ) {
+    if let Err(e) = cones_only.solve_into(&static_load, &mut dist) {
         let reason = match e.kind {
-            InfeasibleKind::NoDistribution | InfeasibleKind::Solver => {
-                FailureReason::NoForceClosure
-            }
-            InfeasibleKind::InvalidInput => FailureReason::NoForceClosure,
+            InfeasibleKind::NoDistribution
+            | InfeasibleKind::Solver
+            | InfeasibleKind::InvalidInput => FailureReason::NoForceClosure,
         };
         plan.failure = Some((
             reason,
@@ -447,16 +462,8 @@ fn plan_forces(plan: &mut Plan, skill: &SkillSpec, params: &ReplayParams) {
     let step = params.force_sample_s.max(0.01);
     while t <= tl.release_start + 1e-9 {
         let load = load_at(skill, t, &g);
-        let with_limits = optimise_with_torque_limits(
-            &contacts,
-            skill.contact_model,
-            &skill.friction,
-            &load,
-            &opt,
-            Some(&limits),
-        );
-        let dist = match with_limits {
-            Ok(d) => Some(d),
+        let solved = match with_limits.solve_into(&load, &mut dist) {
+            Ok(_) => true,
             Err(e) => {
                 if plan.failure.is_none() {
                     plan.failure = Some((
@@ -468,21 +475,18 @@ fn plan_forces(plan: &mut Plan, skill: &SkillSpec, params: &ReplayParams) {
                         ),
                     ));
                 }
-                optimise(&contacts, skill.contact_model, &skill.friction, &load, &opt).ok()
+                cones_only.solve_into(&load, &mut dist).is_ok()
             }
         };
         let mut row = [Intensity::zeros(); MAX_TIPS];
-        match dist {
-            Some(d) => {
-                for (&k, c) in tips.iter().zip(&d.intensities) {
-                    row[k] = *c;
-                }
+        if solved {
+            for (&k, c) in tips.iter().zip(&dist) {
+                row[k] = *c;
             }
-            None => {
-                // Nothing carries it: squeeze with the least normal force and let it slip.
-                for &k in &tips {
-                    row[k][2] = params.min_normal;
-                }
+        } else {
+            // Nothing carries it: squeeze with the least normal force and let it slip.
+            for &k in &tips {
+                row[k][2] = params.min_normal;
             }
         }
         plan.force_times.push(t);
@@ -580,10 +584,11 @@ fn plan_candidates(
     for r in 0..ROLLS {
         let psi = r as Real * std::f64::consts::TAU / ROLLS as Real;
         let d_w = up_perp * psi.cos() + side * psi.sin();
-        if d_w.z > 0.35 {
+        let rot = align(&a_h, &d_h, &a_s, &d_w);
+        let approach = d_w;
+        if approach.z > 0.35 {
             continue; // the palm would come from below the table
         }
-        let rot = align(&a_h, &d_h, &a_s, &d_w);
         let lat_w = a_s.cross(&d_w);
         // Targets: tip centres in the world.
         let mut targets: Vec<(usize, Point)> = Vec::with_capacity(nt);
@@ -679,31 +684,38 @@ fn plan_candidates(
             let n_world = start.rotation * n_in;
             align_min = align_min.min(push_alignment(&free, &kin, k, &n_world));
         }
-        let quality = grasp_quality(
-            &frames,
-            skill.contact_model,
-            &skill.friction,
-            &QualityParams::default(),
-        )
-        .ok();
+        // Every tip on its own contact: the candidates' contacts are the same up to the IK
+        // error, so their quality is computed once, for the chosen one (a Ferrari-Canny hull
+        // is most of the planning time); curled grasps differ and need it here.
+        let mu = skill.friction.mu * (1.0 - params.friction_margin);
+        let pushes = align_min >= 1.0 / (1.0 + mu * mu).sqrt();
+        let quality = if keys == Keys::All || error > params.reach_tolerance || !pushes {
+            None
+        } else {
+            grasp_quality(
+                &frames,
+                skill.contact_model,
+                &skill.friction,
+                &QualityParams::default(),
+            )
+            .ok()
+        };
         let eps = quality.map_or(0.0, |q| q.epsilon);
         let closure = quality.is_some_and(|q| q.force_closure && q.epsilon > 1e-3);
         // Every tip placed: reaching is enough (the force check follows); a curled grasp must
         // also hold.
         // A finger that cannot push along its contact normal within the planned friction cone
-        // only slides over the surface.
-        let mu = skill.friction.mu * (1.0 - params.friction_margin);
-        let pushes = align_min >= 1.0 / (1.0 + mu * mu).sqrt();
+        // only slides over the surface (`pushes`).
         let ok = error <= params.reach_tolerance && (keys == Keys::All || (closure && pushes));
         let reach_penalty = if ok { 0.0 } else { 10.0 };
-        let score = -reach_penalty - 20.0 * error + align_min + 2.0 * eps - 0.3 * d_w.z;
+        let score = -reach_penalty - 20.0 * error + align_min + 2.0 * eps - 0.3 * approach.z;
         out.push(Candidate {
             score,
             error,
             ok,
             align: align_min,
             rotation: rot,
-            approach: d_w,
+            approach,
             q_free: q,
             active,
         });
@@ -770,16 +782,18 @@ fn curl_onto(
 
 /// One retargeting step along the reference motion: fingertip inverse kinematics for the
 /// hand's base at the reference pose (warm-started from the previous step's angles) and the
-/// force distribution for the load there with cones and torque limits.
+/// force distribution for the load there with cones and torque limits (one solver set up for
+/// the plan's contacts, fed the new load each step). Allocation-free after [`new`](Self::new)
+/// apart from the solver's own work.
 #[derive(Debug)]
 pub struct RetargetStep<'a> {
     plan: &'a Plan,
     skill: &'a SkillSpec,
-    params: ReplayParams,
     kin: Kinematics,
-    limits: TorqueLimits,
+    solver: Option<ForceSolver>,
     targets_b: Vec<(usize, Point)>,
     targets: Vec<(usize, Point)>,
+    forces: Vec<Intensity>,
     /// The joint angles of the last step.
     pub q: [Real; MAX_DOF],
 }
@@ -797,25 +811,40 @@ impl<'a> RetargetStep<'a> {
                 (k, Point::from(c.p_b - c.normal_b() * r))
             })
             .collect::<Vec<_>>();
+        let contacts: Vec<ContactFrame> =
+            targets_b.iter().map(|&(k, _)| plan.contacts[k]).collect();
+        let limits = TorqueLimits {
+            map: plan.torque_map.clone(),
+            limits: plan.hand.torque_limit.clone(),
+        };
+        let opt = OptimiseParams {
+            margin: params.friction_margin,
+            min_normal: params.min_normal,
+        };
+        let solver = ForceSolver::new(
+            &contacts,
+            skill.contact_model,
+            &skill.friction,
+            &opt,
+            Some(&limits),
+        )
+        .ok();
         RetargetStep {
             plan,
             skill,
-            params: *params,
             kin: Kinematics::default(),
-            limits: TorqueLimits {
-                map: plan.torque_map.clone(),
-                limits: plan.hand.torque_limit.clone(),
-            },
+            solver,
             targets: targets_b.clone(),
+            forces: vec![Intensity::zeros(); targets_b.len()],
             targets_b,
             q: plan.q_grasp,
         }
     }
 
     /// Retargets the reference at `t` (s since the replay's start): returns the IK error (m)
-    /// and the intensities per fingertip (`None` when the cones and torques cannot carry the
-    /// load there).
-    pub fn step(&mut self, t: Real) -> (Real, Option<Vec<Intensity>>) {
+    /// and the intensities of the grasp's contacts (the fingertips in [`Plan::active`], in
+    /// order; `None` when the cones and torques cannot carry the load there).
+    pub fn step(&mut self, t: Real) -> (Real, Option<&[Intensity]>) {
         let obj = self.skill.reference(t);
         let base = obj * self.plan.base_in_b0;
         for (dst, src) in self.targets.iter_mut().zip(&self.targets_b) {
@@ -839,25 +868,11 @@ impl<'a> RetargetStep<'a> {
         );
         let g = Vector::new(0.0, 0.0, -crate::math::STANDARD_GRAVITY);
         let load = load_at(self.skill, t, &g);
-        let opt = OptimiseParams {
-            margin: self.params.friction_margin,
-            min_normal: self.params.min_normal,
-        };
-        let contacts: Vec<ContactFrame> = (0..self.plan.contacts.len())
-            .filter(|&k| self.plan.active[k])
-            .map(|k| self.plan.contacts[k])
-            .collect();
-        let d = optimise_with_torque_limits(
-            &contacts,
-            self.skill.contact_model,
-            &self.skill.friction,
-            &load,
-            &opt,
-            Some(&self.limits),
-        )
-        .ok()
-        .map(|d| d.intensities);
-        (r.max_error, d)
+        let solved = self
+            .solver
+            .as_mut()
+            .is_some_and(|s| s.solve_into(&load, &mut self.forces).is_ok());
+        (r.max_error, solved.then_some(&self.forces[..]))
     }
 }
 

@@ -56,6 +56,10 @@ pub struct Replay {
     step: u64,
     n_steps: u64,
     stats: Stats,
+    /// The object's reference pose at the current tick.
+    reference: Isometry,
+    /// Where the base is when the grasp releases.
+    release_base: Isometry,
     /// For two fingertips driven by one DOF (a parallel gripper's jaws): the line between them
     /// at the grasp, as its direction and midpoint in the base frame.
     jaw_line: Option<(Vector, Point)>,
@@ -159,7 +163,7 @@ impl Replay {
         });
         let mut q = [0.0; MAX_DOF];
         q[..n].copy_from_slice(&plan.q_pre[..n]);
-        Ok(Replay {
+        let mut replay = Replay {
             start_z: start.translation.z,
             plan,
             skill: skill.clone(),
@@ -177,7 +181,12 @@ impl Replay {
             n_steps,
             stats: Stats::default(),
             jaw_line,
-        })
+            reference: start,
+            release_base: Isometry::identity(),
+        };
+        let release = replay.timeline.release_start;
+        replay.release_base = replay.follow(release);
+        Ok(replay)
     }
 
     /// The plan.
@@ -195,12 +204,17 @@ impl Replay {
         self.n_steps
     }
 
+    /// Where the base follows the object's reference at `t` (the jaws of a pinch kept level).
+    fn follow(&self, t: Real) -> Isometry {
+        let reference = self.skill.reference_in(&self.timeline, t);
+        self.level_jaws(reference * self.plan.base_in_b0)
+    }
+
     /// Where the base is at `t`, and the planned fingertip offset off the surface (m), grip
     /// (0..1) and whether the fingers are preshaped (joint control) at `t`.
     fn schedule(&self, t: Real) -> (Isometry, Real, Real, bool) {
         let tl = &self.timeline;
         let p = &self.params;
-        let follow = |t: Real| self.level_jaws(self.skill.reference(t) * self.plan.base_in_b0);
         if t < tl.grasp_start {
             let s = min_jerk(t / tl.grasp_start.max(1e-3));
             let a = self.pre_base;
@@ -221,9 +235,11 @@ impl Replay {
             return (self.plan.base_grasp, offset, grip, false);
         }
         if t < tl.release_start {
-            return (follow(t), -p.close_depth, 1.0, false);
+            // The tick's reference is the skill's at `t`.
+            let base = self.level_jaws(self.reference * self.plan.base_in_b0);
+            return (base, -p.close_depth, 1.0, false);
         }
-        let at_release = follow(tl.release_start);
+        let at_release = self.release_base;
         if t < tl.release_end {
             let s = (t - tl.release_start) / (tl.release_end - tl.release_start).max(1e-3);
             let grip = 1.0 - min_jerk(s / 0.4);
@@ -245,7 +261,7 @@ impl Replay {
         let kin = self.dfs.kinematics();
         let q = &out.motor_q;
         let qd = &out.motor_qd;
-        let reference = self.skill.reference(t);
+        let reference = self.reference;
         let obj = self.dfs.object_state().pose;
         let mut tau = [0.0; MAX_DOF];
         // Posture: joint-space impedance to the preshape or grasp angles; weak on the fingers
@@ -344,6 +360,7 @@ impl Replay {
             return Ok(false);
         }
         let t = self.step as Real * DT;
+        self.reference = self.skill.reference_in(&self.timeline, t);
         let (base, offset, grip, preshaped) = self.schedule(t);
         self.control(t, offset, grip, preshaped);
         let n = self.dfs.hand().dof();
@@ -373,7 +390,7 @@ impl Replay {
         if !(t >= tl.grasp_end && t < tl.release_start) {
             return;
         }
-        let reference = self.skill.reference(t);
+        let reference = self.reference;
         let e_pos = (state.pose.translation.vector - reference.translation.vector).norm();
         let e_rot = (reference.rotation.inverse() * state.pose.rotation).angle();
         s.pos_max = s.pos_max.max(e_pos);
@@ -554,10 +571,8 @@ pub fn run_with(
     }
     let mut replay = Replay::from_plan(plan, skill, params)?;
     while replay.step()? {
-        let t = (replay.step - 1) as Real * DT;
-        let reference = replay.skill.reference(t);
         let tick = ReplayTick {
-            reference: &reference,
+            reference: &replay.reference,
             ..replay.tick()
         };
         on_tick(&tick);
