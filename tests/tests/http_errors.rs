@@ -265,6 +265,63 @@ async fn writes_need_the_token_when_one_is_configured_and_reads_stay_open() {
     app.stop().await;
 }
 
+/// A write refused before its body is read (401 here) still reads the body: the client, which
+/// sends the whole body before it looks for an answer, gets the 401 rather than a reset
+/// connection, and can send its next request on the same connection.
+#[tokio::test]
+async fn a_refused_upload_is_answered_after_its_body_and_the_connection_stays_open() {
+    use tokio::io::{AsyncBufReadExt, AsyncReadExt, AsyncWriteExt, BufReader};
+
+    let app = TestApp::spawn_with(|a| a.token = Some(TOKEN.into())).await;
+    let body = vec![0x5a_u8; 8 << 20];
+    let stream = tokio::net::TcpStream::connect(app.addr).await.unwrap();
+    let (read, mut write) = stream.into_split();
+    let mut read = BufReader::new(read);
+    let head = format!(
+        "POST /api/v1/sessions HTTP/1.1\r\nHost: {}\r\nContent-Type: application/x-mcap\r\n\
+         Content-Length: {}\r\n\r\n",
+        app.addr,
+        body.len()
+    );
+    write.write_all(head.as_bytes()).await.unwrap();
+    // 8 MiB is far more than the socket buffers hold: this only finishes if the server reads.
+    write
+        .write_all(&body)
+        .await
+        .expect("the server reads the refused body instead of resetting the connection");
+
+    /// Reads one response: its status line and its body (by Content-Length).
+    async fn response(read: &mut BufReader<tokio::net::tcp::OwnedReadHalf>) -> (String, String) {
+        let mut status = String::new();
+        read.read_line(&mut status).await.unwrap();
+        let mut length = 0;
+        loop {
+            let mut line = String::new();
+            read.read_line(&mut line).await.unwrap();
+            if line == "\r\n" {
+                break;
+            }
+            if let Some((name, value)) = line.split_once(':') {
+                if name.eq_ignore_ascii_case("content-length") {
+                    length = value.trim().parse().unwrap();
+                }
+            }
+        }
+        let mut body = vec![0; length];
+        read.read_exact(&mut body).await.unwrap();
+        (status, String::from_utf8(body).unwrap())
+    }
+
+    let (status, problem) = response(&mut read).await;
+    assert!(status.starts_with("HTTP/1.1 401"), "{status}");
+    assert!(problem.contains("Bearer"), "{problem}");
+    let get = format!("GET /healthz HTTP/1.1\r\nHost: {}\r\n\r\n", app.addr);
+    write.write_all(get.as_bytes()).await.unwrap();
+    let (status, _) = response(&mut read).await;
+    assert!(status.starts_with("HTTP/1.1 200"), "{status}");
+    app.stop().await;
+}
+
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn a_request_over_the_time_limit_is_a_503_problem() {
     let app = TestApp::spawn_with(|a| a.request_timeout = 0.02).await;

@@ -1,5 +1,5 @@
 //! The HTTP API: one router per resource over one [`AppState`], merged by [`app`] with the
-//! layers every route gets (time limit, body limit, problem+json for every error, optional
+//! layers every route gets (time limit, body limit, lingering close, problem+json for every error, optional
 //! CORS, request tracing), and the OpenAPI 3.1 document generated from the same handlers, so
 //! the document lists exactly the routes the router serves.
 //!
@@ -21,6 +21,7 @@ pub mod cache;
 pub mod error;
 pub mod extract;
 pub mod hands;
+mod linger;
 pub mod meta;
 pub mod replays;
 pub mod sessions;
@@ -145,6 +146,7 @@ pub fn app(state: AppState, layers: &LayerConfig) -> Router {
         .fallback(not_found)
         .with_state(state)
         .layer(DefaultBodyLimit::max(max_body))
+        .layer(middleware::from_fn_with_state(max_body, linger::linger))
         .layer(middleware::from_fn_with_state(
             layers.request_timeout,
             time_limit,
