@@ -6,8 +6,8 @@
 
 use axum::body::Body;
 use axum::extract::State;
-use axum::http::{header, HeaderValue, StatusCode};
-use axum::response::{IntoResponse, Response};
+use axum::http::{header, HeaderValue};
+use axum::response::Response;
 use dfs_core::hand::HandSpec;
 use serde::{Deserialize, Serialize};
 use services::store::{Hand, HandSummary};
@@ -15,6 +15,7 @@ use utoipa::ToSchema;
 use utoipa_axum::router::OpenApiRouter;
 use utoipa_axum::routes;
 
+use super::created;
 use super::error::{Problem, ProblemBody};
 use super::extract::{Json, Name, WriteAccess};
 use super::state::AppState;
@@ -262,11 +263,7 @@ async fn upload_hand(
     let hand = st.store().put_hand(spec, upload.urdf).await?;
     let name = hand.summary.name.clone();
     tracing::info!(hand = %name, dof = hand.summary.dof, "hand uploaded");
-    let mut r = (StatusCode::CREATED, axum::Json(HandBody::of(hand)?)).into_response();
-    if let Ok(v) = HeaderValue::from_str(&format!("/api/v1/hands/{name}")) {
-        r.headers_mut().insert(header::LOCATION, v);
-    }
-    Ok(r)
+    Ok(created(HandBody::of(hand)?, &format!("/api/v1/hands/{name}")))
 }
 
 #[cfg(test)]
@@ -302,7 +299,7 @@ mod tests {
         assert_eq!(spec_of(&up).unwrap().urdf, "g2.urdf");
         v["fingertips"][1]["radius"] = "big".into();
         let p = spec_of(&HandUpload { spec: v, ..up }).unwrap_err();
-        assert_eq!(p.status, StatusCode::UNPROCESSABLE_ENTITY);
+        assert_eq!(p.status, axum::http::StatusCode::UNPROCESSABLE_ENTITY);
         assert!(
             p.detail.contains("spec.fingertips[1].radius"),
             "{}",

@@ -164,6 +164,15 @@ pub fn app(state: AppState, layers: &LayerConfig) -> Router {
         .layer(TraceLayer::new_for_http())
 }
 
+/// 201 Created with `body` as JSON and a `Location` header naming the new resource.
+pub(crate) fn created(body: impl serde::Serialize, location: &str) -> Response {
+    let mut r = (axum::http::StatusCode::CREATED, axum::Json(body)).into_response();
+    if let Ok(v) = HeaderValue::from_str(location) {
+        r.headers_mut().insert(header::LOCATION, v);
+    }
+    r
+}
+
 async fn not_found() -> Problem {
     Problem::not_found("no such route; the API is described at /api/v1/openapi.json")
 }

@@ -6,8 +6,7 @@
 //! `GET /api/v1/replays/{id}/mcap` read them back. Replays go with their skill.
 
 use axum::extract::State;
-use axum::http::{header, HeaderValue, StatusCode};
-use axum::response::{IntoResponse, Response};
+use axum::response::Response;
 use dfs_core::replay::{ReplayParams, ReplayReport, SkillSpec};
 use serde::{Deserialize, Serialize};
 use services::replay::{replay_skill, skill_spec_from_json, ReplaySource};
@@ -16,6 +15,7 @@ use utoipa::ToSchema;
 use utoipa_axum::router::OpenApiRouter;
 use utoipa_axum::routes;
 
+use super::created;
 use super::error::{Problem, ProblemBody};
 use super::extract::{Id, Json, WriteAccess};
 use super::sessions::{send_mcap, McapFile};
@@ -233,20 +233,11 @@ async fn create_replay(
     };
     let spec = skill_spec_from_json(&skill.params, &source.skill_name)
         .map_err(|e| Problem::unprocessable(format!("skill {skill_id} cannot be replayed: {e}")))?;
-    let permit = st
-        .simulations()
-        .clone()
-        .acquire_owned()
-        .await
-        .map_err(|_| Problem::unavailable("the server is shutting down"))?;
     let scratch = st.scratch_dir().to_path_buf();
     let hand_name = hand.summary.name.clone();
-    let (report, bytes) = tokio::task::spawn_blocking(move || {
-        let _permit = permit;
-        replay_blocking(&hand, &spec, &source, &scratch)
-    })
-    .await
-    .map_err(|e| Problem::internal(&e))??;
+    let (report, bytes) = st
+        .run_limited(move || replay_blocking(&hand, &spec, &source, &scratch))
+        .await?;
     let replay = st
         .store()
         .insert_replay(skill_id, &hand_name, &report, bytes)
@@ -259,12 +250,8 @@ async fn create_replay(
         failure_reason = replay.failure_reason.as_deref().unwrap_or(""),
         "replay stored"
     );
-    let id = replay.id;
-    let mut r = (StatusCode::CREATED, axum::Json(ReplayBody::from(replay))).into_response();
-    if let Ok(v) = HeaderValue::from_str(&format!("/api/v1/replays/{id}")) {
-        r.headers_mut().insert(header::LOCATION, v);
-    }
-    Ok(r)
+    let location = format!("/api/v1/replays/{}", replay.id);
+    Ok(created(ReplayBody::from(replay), &location))
 }
 
 /// The replays of a skill.

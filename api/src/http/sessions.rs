@@ -12,6 +12,7 @@ use utoipa::{IntoParams, ToSchema};
 use utoipa_axum::router::OpenApiRouter;
 use utoipa_axum::routes;
 
+use super::created;
 use super::error::{Problem, ProblemBody};
 use super::extract::{Id, Query, WriteAccess};
 use super::skills::SkillBody;
@@ -154,18 +155,11 @@ impl StoredSession {
             created: out.created,
             skills,
         };
-        let status = if out.created {
-            StatusCode::CREATED
-        } else {
-            StatusCode::OK
-        };
-        let mut r = (status, axum::Json(body)).into_response();
         if out.created {
-            if let Ok(v) = HeaderValue::from_str(&format!("/api/v1/sessions/{}", out.session_id)) {
-                r.headers_mut().insert(header::LOCATION, v);
-            }
+            Ok(created(body, &format!("/api/v1/sessions/{}", out.session_id)))
+        } else {
+            Ok(axum::Json(body).into_response())
         }
-        Ok(r)
     }
 }
 

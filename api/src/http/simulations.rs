@@ -8,7 +8,7 @@ use axum::extract::State;
 use axum::response::Response;
 use dfs_core::scenario::Scenario;
 use serde::{Deserialize, Serialize};
-use services::store::{IngestOutcome, Store};
+use services::store::IngestOutcome;
 use utoipa::openapi::schema::{ObjectBuilder, OneOfBuilder, Schema, Type};
 use utoipa::openapi::RefOr;
 use utoipa::ToSchema;
@@ -210,36 +210,17 @@ fn simulate_blocking(
     Ok((bytes, meta, skills))
 }
 
-/// Simulates and stores a scenario; waits for one of the semaphore's permits, which the
-/// blocking work holds until it ends (even if the request is dropped meanwhile).
+/// Simulates and stores a scenario (see [`AppState::run_limited`]).
 pub async fn simulate_and_store(
     st: &AppState,
     scenario: Scenario,
     duration: Option<f64>,
 ) -> Result<IngestOutcome, Problem> {
-    let permit = st
-        .simulations()
-        .clone()
-        .acquire_owned()
-        .await
-        .map_err(|_| Problem::unavailable("the server is shutting down"))?;
     let scratch = st.scratch_dir().to_path_buf();
-    let (bytes, meta, skills) = tokio::task::spawn_blocking(move || {
-        let _permit = permit;
-        simulate_blocking(&scenario, duration, &scratch)
-    })
-    .await
-    .map_err(|e| Problem::internal(&e))??;
-    store(st.store(), bytes, meta, skills).await
-}
-
-async fn store(
-    store: &Store,
-    bytes: Vec<u8>,
-    meta: services::store::SessionMeta,
-    skills: Vec<services::store::NewSkill>,
-) -> Result<IngestOutcome, Problem> {
-    Ok(store.ingest(&bytes, meta, skills).await?)
+    let (bytes, meta, skills) = st
+        .run_limited(move || simulate_blocking(&scenario, duration, &scratch))
+        .await?;
+    Ok(st.store().ingest(&bytes, meta, skills).await?)
 }
 
 /// Runs a scenario server-side through the closed 1 kHz loop, records it as a session and

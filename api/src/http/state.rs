@@ -10,6 +10,7 @@ use services::store::Store;
 use tokio::sync::Semaphore;
 
 use super::cache::SkillCache;
+use super::error::Problem;
 
 /// What the handlers need besides the request. Cheap to clone.
 #[derive(Clone)]
@@ -82,9 +83,23 @@ impl AppState {
         self.inner.max_body
     }
 
-    /// Permits for simulations (each holds one while it runs on the blocking pool).
-    pub fn simulations(&self) -> &Arc<Semaphore> {
-        &self.inner.simulations
+    /// Runs `work` (a simulation or a replay) on the blocking pool once one of the
+    /// simulation permits is free; the work holds its permit until it ends, even if the
+    /// request is dropped meanwhile.
+    pub async fn run_limited<T: Send + 'static>(
+        &self,
+        work: impl FnOnce() -> Result<T, Problem> + Send + 'static,
+    ) -> Result<T, Problem> {
+        let permit = Arc::clone(&self.inner.simulations)
+            .acquire_owned()
+            .await
+            .map_err(|_| Problem::unavailable("the server is shutting down"))?;
+        tokio::task::spawn_blocking(move || {
+            let _permit = permit;
+            work()
+        })
+        .await
+        .map_err(|e| Problem::internal(&e))?
     }
 
     /// The hot-skill cache.
