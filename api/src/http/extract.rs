@@ -42,10 +42,7 @@ impl<S: Send + Sync> FromRequestParts<S> for Id {
     type Rejection = Problem;
 
     async fn from_request_parts(parts: &mut Parts, state: &S) -> Result<Self, Problem> {
-        let axum::extract::Path(raw) =
-            axum::extract::Path::<String>::from_request_parts(parts, state)
-                .await
-                .map_err(|e| Problem::bad_request(e.body_text()))?;
+        let Name(raw) = Name::from_request_parts(parts, state).await?;
         raw.parse::<i64>()
             .map(Id)
             .map_err(|_| Problem::bad_request(format!("id {raw:?} is not an integer")))

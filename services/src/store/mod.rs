@@ -646,14 +646,8 @@ impl Store {
             return Err(StoreError::SessionNotFound(id));
         };
         tx.commit().await?;
-        self.inner
-            .index
-            .write()
-            .expect("index lock")
-            .remove_many(&skill_ids);
         blobs.push(session_blob);
-        // The rows are gone; a leftover blob is harmless garbage.
-        self.remove_unreferenced_blobs(&blobs).await;
+        self.forget(&skill_ids, &blobs).await;
         Ok(())
     }
 
@@ -685,13 +679,19 @@ impl Store {
             return Err(StoreError::SkillNotFound(id));
         }
         tx.commit().await?;
+        self.forget(&[id], &blobs).await;
+        Ok(())
+    }
+
+    /// After a delete committed: drops the skills from the similarity index and removes the
+    /// blobs no row names any more (a leftover blob is harmless garbage).
+    async fn forget(&self, skill_ids: &[i64], blobs: &[(String, String)]) {
         self.inner
             .index
             .write()
             .expect("index lock")
-            .remove_many(&[id]);
-        self.remove_unreferenced_blobs(&blobs).await;
-        Ok(())
+            .remove_many(skill_ids);
+        self.remove_unreferenced_blobs(blobs).await;
     }
 
     /// Skills matching the filters of `q`, sorted by `q.sort`, one page after `q.cursor`.
