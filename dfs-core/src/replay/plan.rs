@@ -335,11 +335,20 @@ pub fn plan(
         let c = &contacts[k];
         let j = &kin.tip_jacobians[k];
         let r = c.rot_b.to_rotation_matrix();
+        // The force commanded for each intensity (the finger's own share of it).
+        let dofs = hand
+            .finger_groups
+            .iter()
+            .find(|g| g.tips.contains(&k))
+            .map_or(&[][..], |g| &g.dofs[..]);
+        let a = actuation_map(j, dofs, &c.normal_b());
         for d in 0..n_hand {
             let lin = Vector::new(j[(0, d)], j[(1, d)], j[(2, d)]);
             let ang = Vector::new(j[(3, d)], j[(4, d)], j[(5, d)]);
             for comp in 0..3 {
-                torque_map[(d, 4 * i + comp)] = lin.dot(&r.matrix().column(comp).into_owned());
+                let axis = r.matrix().column(comp).into_owned();
+                let commanded = a.map_or(axis, |a| a * axis);
+                torque_map[(d, 4 * i + comp)] = lin.dot(&commanded);
             }
             torque_map[(d, 4 * i + 3)] = ang.dot(&c.normal_b());
         }
@@ -398,6 +407,48 @@ pub(crate) fn load_at(skill: &SkillSpec, t: Real, gravity: &Vector) -> Wrench {
     let r = skill.reference(t).rotation;
     let f = r.inverse() * ((a - gravity) * skill.mass);
     Wrench::new(f.x, f.y, f.z, 0.0, 0.0, 0.0)
+}
+
+/// How a finger that cannot push in every direction realises a contact force: the force `a`
+/// to command through its joint torques (`τ = Jᵀ a`) for the contact force `f`, as a matrix
+/// `A` with `a = A f`, or `None` when the finger's linear Jacobian spans all three directions
+/// (then `a = f`).
+///
+/// In the DFS the fingertip force is `(Jᵀ)⁺ τ`, in the range of the finger's Jacobian; what
+/// is outside it (a finger with one actuated DOF pushes only along its motion) must come from
+/// the contact's stick friction, which is tangential. So `a` is in that range and has the
+/// planned normal component `nᵀ a = nᵀ f` (along the normal nothing else pushes: the normal
+/// forces balance as planned), with its tangential part as close to the planned one as the
+/// range allows; the rest of the planned tangential force is the stick friction's. `normal` is
+/// the contact's unit normal, `j` the tip's Jacobian, `dofs` its finger's DOFs.
+pub(crate) fn actuation_map(
+    j: &crate::hand::TipJacobian,
+    dofs: &[usize],
+    normal: &Vector,
+) -> Option<Matrix3<Real>> {
+    let col = |d: usize| Vector::new(j[(0, d)], j[(1, d)], j[(2, d)]);
+    let scale = dofs.iter().map(|&d| col(d).norm()).fold(0.0, Real::max);
+    let mut basis = [Vector::zeros(); 3];
+    let mut nb = 0;
+    for &d in dofs {
+        let mut c = col(d);
+        for b in &basis[..nb] {
+            c -= b * b.dot(&c);
+        }
+        if nb < 3 && c.norm() > 1e-6 * scale && scale > 0.0 {
+            basis[nb] = c.normalize();
+            nb += 1;
+        }
+    }
+    if nb == 3 {
+        return None;
+    }
+    let p: Matrix3<Real> = basis[..nb].iter().map(|b| b * b.transpose()).sum();
+    let pn = p * normal;
+    // A finger that can hardly push along the normal is refused by the planner; the floor only
+    // keeps this finite.
+    let k = pn.norm_squared().max(1.0 / 16.0);
+    Some(p + pn * (normal.transpose() * (Matrix3::identity() - p)) / k)
 }
 
 /// Fills the force schedule, and the failure when the cones or the torques cannot carry it.
@@ -1013,5 +1064,31 @@ mod tests {
             &mut kin,
             &mut q[..n]
         ));
+    }
+
+    #[test]
+    fn a_finger_that_pushes_only_along_its_motion_is_commanded_the_planned_normal_force() {
+        let mut j = crate::hand::TipJacobian::zeros();
+        // One DOF moving the tip along c, 20° off the normal.
+        let angle: Real = 20f64.to_radians();
+        let normal = Vector::z();
+        let c = Vector::new(angle.sin(), 0.0, angle.cos()) * 0.08;
+        for r in 0..3 {
+            j[(r, 2)] = c[r];
+        }
+        let f = Vector::new(0.3, -0.2, 2.0);
+        let a = actuation_map(&j, &[2], &normal).unwrap() * f;
+        // Along the finger's motion, with the planned normal component.
+        assert!(a.cross(&c).norm() < 1e-12, "{a}");
+        assert!((a.dot(&normal) - f.dot(&normal)).abs() < 1e-12);
+        // Two DOFs: in their plane, same normal component, the tangential part nearest f's.
+        j[(1, 3)] = 0.05;
+        let a = actuation_map(&j, &[2, 3], &normal).unwrap() * f;
+        assert!(a.dot(&c.cross(&Vector::y())).abs() < 1e-12, "{a}");
+        assert!((a.dot(&normal) - f.dot(&normal)).abs() < 1e-12);
+        assert!((a.y - f.y).abs() < 1e-12);
+        // A finger that pushes in every direction is commanded the force itself.
+        j[(0, 4)] = 0.07;
+        assert!(actuation_map(&j, &[2, 3, 4], &normal).is_none());
     }
 }
