@@ -56,6 +56,7 @@
 //!    turns by the least rotation that keeps that line horizontal while it follows the skill
 //!    (otherwise gravity pulls the object along a tilted line and one jaw opens).
 
+mod closing;
 mod plan;
 mod run;
 
