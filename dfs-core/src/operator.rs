@@ -481,7 +481,7 @@ pub(crate) fn push_alignment(hand: &HandModel, kin: &Kinematics, tip: usize, dir
 /// The directions (world, orthonormal) in which fingertip `tip` can push: eigenvectors of
 /// `Σ c cᵀ` over its finger group's Jacobian columns whose eigenvalue is at least 1/16 of the
 /// largest (singular value ≥ 1/4 of the largest).
-fn push_basis(hand: &HandModel, kin: &Kinematics, tip: usize) -> ([Vector; 3], usize) {
+pub(crate) fn push_basis(hand: &HandModel, kin: &Kinematics, tip: usize) -> ([Vector; 3], usize) {
     let mut out = [Vector::zeros(); 3];
     let Some(group) = hand.finger_groups.iter().find(|g| g.tips.contains(&tip)) else {
         return (out, 0);

@@ -37,11 +37,13 @@ fn replay(hand: &LoadedHand, skill: &SkillSpec) -> ReplayReport {
 }
 
 #[test]
-fn a_sphere_lift_recorded_with_glove10_replays_on_allegro_barrett_and_the_gripper() {
+fn a_sphere_lift_recorded_with_glove10_replays_on_allegro_barrett_inspire_and_the_gripper() {
     let skill = recorded_skill("sphere-lift");
     // The glove10 operator holds the sphere through the whole skill now.
     assert!(skill.held_until_s.is_none());
-    for name in ["allegro", "barrett", "gripper"] {
+    // Inspire's fingers have one actuated DOF each: its grasp comes from where they close onto
+    // the sphere head-on, not from the skill's contacts.
+    for name in ["allegro", "barrett", "inspire", "gripper"] {
         let r = replay(&load_builtin_hand(name).unwrap(), &skill);
         assert!(r.success, "{name}: {:?} {}", r.failure_reason, r.detail);
         assert!(r.lift_height_m > 0.07, "{name} lifted {}", r.lift_height_m);

@@ -37,8 +37,12 @@
 //!    finger curls, its DOFs swept from open to closed, until its tip first touches the
 //!    object; a finger whose curl misses stays open and out of the grasp
 //!    ([`Plan::active`]). Such a grasp counts only when its contacts are a force closure and
-//!    every finger can push along its contact normal inside the planned friction cone;
-//!    otherwise the replay fails with `unreachable`.
+//!    every finger can push along its contact normal inside the planned friction cone.
+//!    Failing that too (fingers with one actuated DOF push only along their motion, far off
+//!    the normals at the skill's contacts), the grasp comes from the hand's own closing
+//!    motion: the object is placed where fingers meet it head-on, the fingers that push inside
+//!    the planned cone take part and the others stay open (`closing.rs`). Otherwise the replay
+//!    fails with `unreachable`.
 //! 3. **Forces.** At the reference's samples (every [`ReplayParams::force_sample_s`]), the
 //!    least internal force that carries the object's load `m (a − g)` with exact friction cones,
 //!    a friction margin and the hand's torque limits `|Σ Jᵀ f| ≤ τ_max` (a second-order cone
@@ -48,14 +52,17 @@
 //!    without them `torque_limit`.
 //! 4. **Simulation.** [`run`]: the arm (the hand's base, moved kinematically like the
 //!    operator's) approaches with the fingers preshaped 2 cm off their contacts, the fingers
-//!    close under task-space steering, the grip ramps up to the planned forces `τ = Jᵀ f`, the
-//!    base follows the reference object motion (so the object follows only if the grasp holds
-//!    it), the grip ramps down, the fingers open and the hand retreats. Every torque is clamped
+//!    close under task-space steering, the grip ramps up to the planned forces `τ = Jᵀ f` (a
+//!    finger whose Jacobian does not span all directions is commanded the force in its range
+//!    with the planned normal component, stick friction giving the rest), the base follows the
+//!    reference object motion (so the object follows only if the grasp holds it), the grip
+//!    ramps down, the fingers open and the hand retreats. Every torque is clamped
 //!    to the hand's limit. Two jaws on one DOF squeeze with equal force and the DFS's surface
 //!    springs act on the fingers only, so a pinch carries no load along its jaw line: the hand
 //!    turns by the least rotation that keeps that line horizontal while it follows the skill
 //!    (otherwise gravity pulls the object along a tilted line and one jaw opens).
 
+mod closing;
 mod plan;
 mod run;
 

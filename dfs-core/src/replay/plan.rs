@@ -3,6 +3,7 @@
 //! exact friction cones and the hand's torque limits. See the module documentation of
 //! [`crate::replay`].
 
+use super::closing::closing_candidates;
 use super::{FailureReason, PlannedContact, ReplayParams, ReplayQuality, SkillSpec};
 use crate::contact::{ContactFrame, Intensity};
 use crate::error::{DfsError, Result};
@@ -15,7 +16,7 @@ use crate::operator::{push_alignment, with_free_base};
 use nalgebra::{DMatrix, Matrix3};
 
 /// Rolls of the hand about the grasp axis tried when choosing the base pose.
-const ROLLS: usize = 12;
+pub(super) const ROLLS: usize = 12;
 
 /// A retargeted grasp: where the hand goes, its joint angles, its contacts and the planned
 /// contact forces along the reference motion.
@@ -57,19 +58,19 @@ pub struct Plan {
 }
 
 /// One candidate base pose.
-struct Candidate {
-    score: Real,
+pub(super) struct Candidate {
+    pub(super) score: Real,
     /// Largest distance of a placed (key) fingertip from its target (m).
-    error: Real,
+    pub(super) error: Real,
     /// The placed fingertips reach and, for a curled grasp, the contacts that result are a
     /// force closure the fingers can push into.
-    ok: bool,
+    pub(super) ok: bool,
     /// Smallest alignment of a contact's normal with the directions its finger can push in.
-    align: Real,
-    rotation: Rotation,
-    approach: Vector,
-    q_free: [Real; MAX_DOF],
-    active: [bool; MAX_TIPS],
+    pub(super) align: Real,
+    pub(super) rotation: Rotation,
+    pub(super) approach: Vector,
+    pub(super) q_free: [Real; MAX_DOF],
+    pub(super) active: [bool; MAX_TIPS],
 }
 
 /// Which fingertips the base pose and inverse kinematics place on targets.
@@ -83,7 +84,7 @@ enum Keys {
 }
 
 /// Contacts of the skill on the thumb's side and on the opposing side.
-fn sides(skill: &SkillSpec) -> (Vec<usize>, Vec<usize>) {
+pub(super) fn sides(skill: &SkillSpec) -> (Vec<usize>, Vec<usize>) {
     let n = skill.contacts.len();
     let thumb = skill
         .contacts
@@ -103,7 +104,7 @@ fn sides(skill: &SkillSpec) -> (Vec<usize>, Vec<usize>) {
 }
 
 /// Mid-range joint angles (infinite limits read as ±1).
-fn mid_angles(hand: &HandModel) -> [Real; MAX_DOF] {
+pub(super) fn mid_angles(hand: &HandModel) -> [Real; MAX_DOF] {
     let mut q = [0.0; MAX_DOF];
     for d in 0..hand.dof() {
         let lo = hand.dof_lower[d].max(-1.0);
@@ -114,20 +115,20 @@ fn mid_angles(hand: &HandModel) -> [Real; MAX_DOF] {
 }
 
 /// The point on the surface nearest `p_b` and the inward normal there, both in B.
-fn on_surface(skill: &SkillSpec, p_b: &Vector) -> (Vector, Vector) {
+pub(super) fn on_surface(skill: &SkillSpec, p_b: &Vector) -> (Vector, Vector) {
     let (_, point, outward) = skill.shape.closest(p_b);
     (point, -outward)
 }
 
 /// Rotation taking the orthonormal pair (a, d) of one frame onto (a', d') of another.
-fn align(a_from: &Vector, d_from: &Vector, a_to: &Vector, d_to: &Vector) -> Rotation {
+pub(super) fn align(a_from: &Vector, d_from: &Vector, a_to: &Vector, d_to: &Vector) -> Rotation {
     let from = Matrix3::from_columns(&[*a_from, *d_from, a_from.cross(d_from)]);
     let to = Matrix3::from_columns(&[*a_to, *d_to, a_to.cross(d_to)]);
     Rotation::from_matrix(&(to * from.transpose()))
 }
 
 /// Unit vector of `v` with its component along unit `a` removed; `fallback` if that is ~0.
-fn perpendicular(v: &Vector, a: &Vector, fallback: &Vector) -> Vector {
+pub(super) fn perpendicular(v: &Vector, a: &Vector, fallback: &Vector) -> Vector {
     let p = v - a * a.dot(v);
     if p.norm() > 1e-9 {
         p.normalize()
@@ -139,7 +140,7 @@ fn perpendicular(v: &Vector, a: &Vector, fallback: &Vector) -> Vector {
 
 /// Where the ray from the centre along unit `dir` leaves the surface (B), with the outward
 /// normal there: bisection on the signed distance (the shapes are convex).
-fn surface_along(shape: &crate::object::Shape, dir: &Vector) -> (Vector, Vector) {
+pub(super) fn surface_along(shape: &crate::object::Shape, dir: &Vector) -> (Vector, Vector) {
     let (mut lo, mut hi) = (0.0, shape.bounding_radius() * 1.01 + 1e-6);
     for _ in 0..48 {
         let mid = 0.5 * (lo + hi);
@@ -250,6 +251,23 @@ pub fn plan(
             }
         }
     }
+    // Failing those too (fingers that push only along their own motion, off the normals at
+    // the skill's contacts), a grasp where the hand's fingers meet the object head-on.
+    // Why that was refused too: the best one's alignment, or `None` when no position of the
+    // object lets the thumb and another finger close onto it within the cones.
+    let mut closing_refused: Option<Option<Real>> = None;
+    if !best.as_ref().is_some_and(|c| c.ok) && nt >= 3 {
+        let closing = closing_candidates(hand, thumb, skill, params)
+            .into_iter()
+            .max_by(|a, b| a.score.total_cmp(&b.score));
+        match closing {
+            Some(c) if c.ok => {
+                best = Some(c);
+                curled_refused = None;
+            }
+            c => closing_refused = Some(c.map(|c| c.align)),
+        }
+    }
     let Some(best) = best else {
         return Err(DfsError::invalid("hand", "no candidate base pose"));
     };
@@ -335,11 +353,20 @@ pub fn plan(
         let c = &contacts[k];
         let j = &kin.tip_jacobians[k];
         let r = c.rot_b.to_rotation_matrix();
+        // The force commanded for each intensity (the finger's own share of it).
+        let dofs = hand
+            .finger_groups
+            .iter()
+            .find(|g| g.tips.contains(&k))
+            .map_or(&[][..], |g| &g.dofs[..]);
+        let a = actuation_map(j, dofs, &c.normal_b());
         for d in 0..n_hand {
             let lin = Vector::new(j[(0, d)], j[(1, d)], j[(2, d)]);
             let ang = Vector::new(j[(3, d)], j[(4, d)], j[(5, d)]);
             for comp in 0..3 {
-                torque_map[(d, 4 * i + comp)] = lin.dot(&r.matrix().column(comp).into_owned());
+                let axis = r.matrix().column(comp).into_owned();
+                let commanded = a.map_or(axis, |a| a * axis);
+                torque_map[(d, 4 * i + comp)] = lin.dot(&commanded);
             }
             torque_map[(d, 4 * i + 3)] = ang.dot(&c.normal_b());
         }
@@ -382,6 +409,21 @@ pub fn plan(
         } else {
             "the fingers that reach the object do not make a force closure".to_owned()
         };
+        let cone = (mu.atan()).to_degrees();
+        let why = match closing_refused {
+            None => why,
+            Some(None) => format!(
+                "{why}; nor does the hand's own closing motion: no position of the object lets \
+                 the thumb and another finger close onto it pushing within {cone:.1}° of the \
+                 normals with their normals balancing"
+            ),
+            Some(Some(align)) => format!(
+                "{why}; nor does the hand's own closing motion: its best grasp there has a \
+                 finger pushing {:.1}° off its normal (the planned cone allows {cone:.1}°), an \
+                 approach that touches the object, or no force closure",
+                align.clamp(-1.0, 1.0).acos().to_degrees()
+            ),
+        };
         plan.failure = Some((FailureReason::Unreachable, why));
         return Ok(plan);
     }
@@ -398,6 +440,48 @@ pub(crate) fn load_at(skill: &SkillSpec, t: Real, gravity: &Vector) -> Wrench {
     let r = skill.reference(t).rotation;
     let f = r.inverse() * ((a - gravity) * skill.mass);
     Wrench::new(f.x, f.y, f.z, 0.0, 0.0, 0.0)
+}
+
+/// How a finger that cannot push in every direction realises a contact force: the force `a`
+/// to command through its joint torques (`τ = Jᵀ a`) for the contact force `f`, as a matrix
+/// `A` with `a = A f`, or `None` when the finger's linear Jacobian spans all three directions
+/// (then `a = f`).
+///
+/// In the DFS the fingertip force is `(Jᵀ)⁺ τ`, in the range of the finger's Jacobian; what
+/// is outside it (a finger with one actuated DOF pushes only along its motion) must come from
+/// the contact's stick friction, which is tangential. So `a` is in that range and has the
+/// planned normal component `nᵀ a = nᵀ f` (along the normal nothing else pushes: the normal
+/// forces balance as planned), with its tangential part as close to the planned one as the
+/// range allows; the rest of the planned tangential force is the stick friction's. `normal` is
+/// the contact's unit normal, `j` the tip's Jacobian, `dofs` its finger's DOFs.
+pub(crate) fn actuation_map(
+    j: &crate::hand::TipJacobian,
+    dofs: &[usize],
+    normal: &Vector,
+) -> Option<Matrix3<Real>> {
+    let col = |d: usize| Vector::new(j[(0, d)], j[(1, d)], j[(2, d)]);
+    let scale = dofs.iter().map(|&d| col(d).norm()).fold(0.0, Real::max);
+    let mut basis = [Vector::zeros(); 3];
+    let mut nb = 0;
+    for &d in dofs {
+        let mut c = col(d);
+        for b in &basis[..nb] {
+            c -= b * b.dot(&c);
+        }
+        if nb < 3 && c.norm() > 1e-6 * scale && scale > 0.0 {
+            basis[nb] = c.normalize();
+            nb += 1;
+        }
+    }
+    if nb == 3 {
+        return None;
+    }
+    let p: Matrix3<Real> = basis[..nb].iter().map(|b| b * b.transpose()).sum();
+    let pn = p * normal;
+    // A finger that can hardly push along the normal is refused by the planner; the floor only
+    // keeps this finite.
+    let k = pn.norm_squared().max(1.0 / 16.0);
+    Some(p + pn * (normal.transpose() * (Matrix3::identity() - p)) / k)
 }
 
 /// Fills the force schedule, and the failure when the cones or the torques cannot carry it.
@@ -728,7 +812,7 @@ fn plan_candidates(
 /// surface; `q` then holds that first touch. A finger whose curl misses the object, or that
 /// touches it even when open, is left open and `false` returned. `inv_start` maps the world
 /// into B at the object's start pose.
-fn curl_onto(
+pub(super) fn curl_onto(
     hand: &HandModel,
     skill: &SkillSpec,
     inv_start: &Isometry,
@@ -1013,5 +1097,31 @@ mod tests {
             &mut kin,
             &mut q[..n]
         ));
+    }
+
+    #[test]
+    fn a_finger_that_pushes_only_along_its_motion_is_commanded_the_planned_normal_force() {
+        let mut j = crate::hand::TipJacobian::zeros();
+        // One DOF moving the tip along c, 20° off the normal.
+        let angle: Real = 20f64.to_radians();
+        let normal = Vector::z();
+        let c = Vector::new(angle.sin(), 0.0, angle.cos()) * 0.08;
+        for r in 0..3 {
+            j[(r, 2)] = c[r];
+        }
+        let f = Vector::new(0.3, -0.2, 2.0);
+        let a = actuation_map(&j, &[2], &normal).unwrap() * f;
+        // Along the finger's motion, with the planned normal component.
+        assert!(a.cross(&c).norm() < 1e-12, "{a}");
+        assert!((a.dot(&normal) - f.dot(&normal)).abs() < 1e-12);
+        // Two DOFs: in their plane, same normal component, the tangential part nearest f's.
+        j[(1, 3)] = 0.05;
+        let a = actuation_map(&j, &[2, 3], &normal).unwrap() * f;
+        assert!(a.dot(&c.cross(&Vector::y())).abs() < 1e-12, "{a}");
+        assert!((a.dot(&normal) - f.dot(&normal)).abs() < 1e-12);
+        assert!((a.y - f.y).abs() < 1e-12);
+        // A finger that pushes in every direction is commanded the force itself.
+        j[(0, 4)] = 0.07;
+        assert!(actuation_map(&j, &[2, 3, 4], &normal).is_none());
     }
 }

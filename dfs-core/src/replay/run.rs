@@ -1,7 +1,7 @@
 //! The simulated replay: the hand's controller drives its joints by torques in the DFS at
 //! 1 kHz (contacts, friction, object dynamics) through the skill's phases, and the report.
 
-use super::plan::{plan, Plan};
+use super::plan::{actuation_map, plan, Plan};
 use super::{FailureReason, ReplayParams, ReplayQuality, ReplayReport, SkillSpec, Timeline};
 use crate::dfs::{Dfs, DfsParams, GloveSample, TickOutput};
 use crate::error::Result;
@@ -292,7 +292,12 @@ impl Replay {
                         let tangential = c.rot_b * Vector::new(ck[0], ck[1], 0.0);
                         let normal = out.tips[k].frame.map_or(c.normal_b(), |f| f.normal_b());
                         let f_b = tangential + normal * ck[2].max(self.params.min_normal);
-                        obj.rotation * f_b * grip
+                        let f = obj.rotation * f_b * grip;
+                        // What the finger can push; stick friction makes up the rest.
+                        match actuation_map(j, &g.dofs, &(obj.rotation * normal)) {
+                            Some(a) => a * f,
+                            None => f,
+                        }
                     } else {
                         // Steer the fingertip to its contact, `offset` out along the normal.
                         let p = c.p_b - c.normal_b() * (tip.radius + offset);
