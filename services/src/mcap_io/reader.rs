@@ -92,12 +92,10 @@ impl TopicRecording {
     pub fn check_json(&self) -> Result<()> {
         self.check_json_encoding()?;
         for m in &self.messages {
-            serde_json::from_slice::<serde::de::IgnoredAny>(&m.data).map_err(|source| {
-                RecordingError::InvalidJson {
-                    topic: self.topic.clone(),
-                    log_time_ns: m.log_time_ns,
-                    source,
-                }
+            json_check::validate(&m.data).map_err(|source| RecordingError::InvalidJson {
+                topic: self.topic.clone(),
+                log_time_ns: m.log_time_ns,
+                source,
             })?;
         }
         Ok(())
