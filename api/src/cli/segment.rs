@@ -4,8 +4,11 @@
 use super::{print_json, CliError};
 use dfs_core::scenario::Scenario;
 use serde::Serialize;
+use services::mcap_io::ReadLimits;
 use services::segmentation::{median, score, segment, PhaseSpan, SegmentParams};
-use services::session::{read_session, record_simulation, Session};
+use services::session::{
+    read_session, read_session_file_with, record_simulation, DecodeTopics, Session,
+};
 use std::collections::BTreeMap;
 use std::path::PathBuf;
 use std::time::Instant;
@@ -22,8 +25,10 @@ pub struct SegmentArgs {
 
 /// Segments a session file and prints its skills.
 pub fn run_segment(a: SegmentArgs) -> Result<(), CliError> {
+    // Segmentation reads contacts and object state only; the other topics are still checked.
     let session =
-        read_session(&a.input).map_err(|e| CliError(format!("{}: {e}", a.input.display())))?;
+        read_session_file_with(&a.input, &ReadLimits::default(), DecodeTopics::SEGMENTATION)
+            .map_err(|e| CliError(format!("{}: {e}", a.input.display())))?;
     let seg = segment(&session, &SegmentParams::default());
     if a.json {
         return print_json(&seg);

@@ -14,12 +14,14 @@ use std::fs::File;
 use std::io::{BufReader, Read};
 use std::path::Path;
 
-use mcap::records::{op, Record};
+use mcap::records::{op, ChunkHeader, MessageHeader, Record};
 use mcap::sans_io::{LinearReadEvent, LinearReader, LinearReaderOptions};
 use mcap::McapError;
 use serde::de::DeserializeOwned;
 
-use super::bounded_zstd::BoundedZstd;
+use super::bounded_zstd::{BoundedZstd, MAX_WINDOW_LOG};
+use super::json_check;
+use super::par::{par_map, MESSAGES_PER_JOB};
 use super::writer::{MESSAGE_ENCODING, SCHEMA_ENCODING};
 use crate::error::{RecordingError, Result};
 
@@ -90,12 +92,10 @@ impl TopicRecording {
     pub fn check_json(&self) -> Result<()> {
         self.check_json_encoding()?;
         for m in &self.messages {
-            serde_json::from_slice::<serde::de::IgnoredAny>(&m.data).map_err(|source| {
-                RecordingError::InvalidJson {
-                    topic: self.topic.clone(),
-                    log_time_ns: m.log_time_ns,
-                    source,
-                }
+            json_check::validate(&m.data).map_err(|source| RecordingError::InvalidJson {
+                topic: self.topic.clone(),
+                log_time_ns: m.log_time_ns,
+                source,
             })?;
         }
         Ok(())
@@ -266,15 +266,305 @@ fn read_session_from<R: Read>(
     limits: &ReadLimits,
     decoded_topics: &[&str],
 ) -> Result<RecordedSession> {
+    let raw = read_raw(src, total_len, limits)?;
+    let skip: Vec<&str> = decoded_topics.to_vec();
+    raw.check_json(|topic| !skip.contains(&topic))?;
+    Ok(raw.into_recorded())
+}
+
+/// Where a message's payload lies: `buffers[buffer][start..end]` of a [`RawSession`].
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(crate) struct MessageRef {
+    /// Log time, ns.
+    pub log_time_ns: u64,
+    /// Publish time, ns.
+    pub publish_time_ns: u64,
+    /// Channel sequence number.
+    pub sequence: u32,
+    buffer: u32,
+    start: usize,
+    end: usize,
+}
+
+/// One topic of a [`RawSession`]: like [`TopicRecording`], with the payloads left in place.
+#[derive(Debug, Clone)]
+pub(crate) struct RawTopic {
+    pub topic: String,
+    pub message_encoding: String,
+    pub schema: Option<SchemaInfo>,
+    pub messages: Vec<MessageRef>,
+}
+
+impl RawTopic {
+    /// Same checks as [`RecordedSession::require_topic`].
+    pub(crate) fn require(&self, schema_name: &str) -> Result<()> {
+        check_json_encoding(&self.topic, &self.message_encoding)?;
+        match &self.schema {
+            Some(s) if s.name == schema_name => {
+                if s.encoding != SCHEMA_ENCODING {
+                    return Err(RecordingError::NonJsonEncoding {
+                        topic: self.topic.clone(),
+                        encoding: s.encoding.clone(),
+                        expected: SCHEMA_ENCODING,
+                    });
+                }
+                Ok(())
+            }
+            other => Err(RecordingError::UnknownSchema {
+                topic: self.topic.clone(),
+                expected: schema_name.to_owned(),
+                found: other.as_ref().map(|s| s.name.clone()),
+            }),
+        }
+    }
+
+    /// Whether the topic carries JSON messages.
+    pub(crate) fn is_json(&self) -> bool {
+        self.message_encoding == MESSAGE_ENCODING
+    }
+}
+
+/// A session read and checked structurally (CRCs, limits, links between records) but with
+/// every message payload still inside its decompressed chunk: no copy per message. Messages
+/// are not yet checked to be JSON: [`RawSession::check_json`] or a decoder does that.
+#[derive(Debug, Default)]
+pub(crate) struct RawSession {
+    pub profile: String,
+    pub library: String,
+    pub topics: BTreeMap<String, RawTopic>,
+    pub metadata: Vec<MetadataRecord>,
+    /// Decompressed chunk contents, then the payloads of messages outside chunks.
+    buffers: Vec<Vec<u8>>,
+}
+
+impl RawSession {
+    /// The payload of `m`.
+    pub(crate) fn data(&self, m: &MessageRef) -> &[u8] {
+        &self.buffers[m.buffer as usize][m.start..m.end]
+    }
+
+    /// The topic, which must exist, carry JSON messages, and have a `jsonschema` schema named
+    /// `schema_name`.
+    pub(crate) fn require_topic(&self, topic: &str, schema_name: &str) -> Result<&RawTopic> {
+        let t = self
+            .topics
+            .get(topic)
+            .ok_or_else(|| RecordingError::MissingTopic {
+                topic: topic.to_owned(),
+            })?;
+        t.require(schema_name)?;
+        Ok(t)
+    }
+
+    /// The first metadata record named `name`.
+    pub(crate) fn metadata(&self, name: &str) -> Option<&BTreeMap<String, String>> {
+        self.metadata
+            .iter()
+            .find(|m| m.name == name)
+            .map(|m| &m.entries)
+    }
+
+    /// Checks that every message of every `json` topic `check(topic)` selects is valid JSON,
+    /// in parallel; the first invalid message in topic and file order is the error.
+    pub(crate) fn check_json(&self, check: impl Fn(&str) -> bool) -> Result<()> {
+        let jobs: Vec<(&RawTopic, &[MessageRef])> = self
+            .topics
+            .values()
+            .filter(|t| t.is_json() && check(&t.topic))
+            .flat_map(|t| t.messages.chunks(MESSAGES_PER_JOB).map(move |m| (t, m)))
+            .collect();
+        par_map(jobs.len(), |i| {
+            let (t, messages) = jobs[i];
+            self.check_json_of(t, messages)
+        })
+        .into_iter()
+        .collect()
+    }
+
+    /// Checks that each of `messages` (of topic `t`) is valid JSON.
+    pub(crate) fn check_json_of(&self, t: &RawTopic, messages: &[MessageRef]) -> Result<()> {
+        for m in messages {
+            json_check::validate(self.data(m)).map_err(|source| RecordingError::InvalidJson {
+                topic: t.topic.clone(),
+                log_time_ns: m.log_time_ns,
+                source,
+            })?;
+        }
+        Ok(())
+    }
+
+    /// Each of `messages` (of topic `t`) decoded into `T`, with its log time.
+    pub(crate) fn decode_of<T: DeserializeOwned>(
+        &self,
+        t: &RawTopic,
+        messages: &[MessageRef],
+    ) -> Result<Vec<(u64, T)>> {
+        messages
+            .iter()
+            .map(|m| {
+                serde_json::from_slice(self.data(m))
+                    .map(|v| (m.log_time_ns, v))
+                    .map_err(|source| RecordingError::InvalidJson {
+                        topic: t.topic.clone(),
+                        log_time_ns: m.log_time_ns,
+                        source,
+                    })
+            })
+            .collect()
+    }
+
+    /// Messages per topic.
+    pub(crate) fn message_counts(&self) -> BTreeMap<String, usize> {
+        self.topics
+            .iter()
+            .map(|(k, t)| (k.clone(), t.messages.len()))
+            .collect()
+    }
+
+    /// The owned form: one `Vec` per message.
+    fn into_recorded(self) -> RecordedSession {
+        let topics = self
+            .topics
+            .values()
+            .map(|t| {
+                let messages = t
+                    .messages
+                    .iter()
+                    .map(|m| RecordedMessage {
+                        log_time_ns: m.log_time_ns,
+                        publish_time_ns: m.publish_time_ns,
+                        sequence: m.sequence,
+                        data: self.data(m).to_vec(),
+                    })
+                    .collect();
+                (
+                    t.topic.clone(),
+                    TopicRecording {
+                        topic: t.topic.clone(),
+                        message_encoding: t.message_encoding.clone(),
+                        schema: t.schema.clone(),
+                        messages,
+                    },
+                )
+            })
+            .collect();
+        RecordedSession {
+            profile: self.profile,
+            library: self.library,
+            topics,
+            metadata: self.metadata,
+        }
+    }
+}
+
+fn check_json_encoding(topic: &str, encoding: &str) -> Result<()> {
+    if encoding != MESSAGE_ENCODING {
+        return Err(RecordingError::NonJsonEncoding {
+            topic: topic.to_owned(),
+            encoding: encoding.to_owned(),
+            expected: MESSAGE_ENCODING,
+        });
+    }
+    Ok(())
+}
+
+/// [`read_raw`] of bytes in memory.
+pub(crate) fn read_raw_bytes(bytes: &[u8], limits: &ReadLimits) -> Result<RawSession> {
+    read_raw(bytes, Some(bytes.len() as u64), limits)
+}
+
+/// [`read_raw`] of a file.
+pub(crate) fn read_raw_file(path: &Path, limits: &ReadLimits) -> Result<RawSession> {
+    let file = File::open(path)
+        .map_err(|e| RecordingError::io(format!("opening {}", path.display()), e))?;
+    let len = file
+        .metadata()
+        .map_err(|e| RecordingError::io(format!("reading {}", path.display()), e))?
+        .len();
+    read_raw(BufReader::with_capacity(1 << 16, file), Some(len), limits)
+}
+
+/// Reads a whole MCAP session safely (see [`read_session_file`]) without checking its JSON.
+///
+/// Three steps. The scanner frames the top-level records and checks the data and summary
+/// section CRCs, keeping chunks compressed. Then every chunk is decompressed, checked against
+/// its CRC and split into records, in parallel (each chunk is independent). Then, in file
+/// order, schemas and channels are linked and each message is filed under its topic by
+/// reference into its chunk. Errors are reported in file order: the first bad record wins.
+fn read_raw<R: Read>(src: R, total_len: Option<u64>, limits: &ReadLimits) -> Result<RawSession> {
+    let mut batches: Vec<Batch> = Vec::new();
+    let mut chunk_bytes = 0u64;
+    let outcome = scan(src, total_len, limits, true, |batch| {
+        // Every decompressed chunk is held until the session is read: bound them together.
+        for r in &batch.records {
+            if let Record::Chunk { header, .. } = r {
+                chunk_bytes = chunk_bytes.saturating_add(header.uncompressed_size);
+                if chunk_bytes > limits.max_total_message_bytes {
+                    return Err(RecordingError::TooMuchData {
+                        limit: limits.max_total_message_bytes,
+                    });
+                }
+            }
+        }
+        batches.push(batch);
+        Ok(())
+    })?;
+    let chunks: Vec<(u64, &ChunkHeader, &[u8])> = batches
+        .iter()
+        .flat_map(|b| {
+            b.records.iter().filter_map(move |r| match r {
+                Record::Chunk { header, data } => Some((b.offset, header, &data[..])),
+                _ => None,
+            })
+        })
+        .collect();
+    let unpacked = par_map(chunks.len(), |i| {
+        let (offset, header, data) = chunks[i];
+        unpack_chunk(offset, header, data, limits)
+    });
     let mut builder = SessionBuilder {
-        session: RecordedSession::default(),
+        session: RawSession::default(),
+        topics: Vec::new(),
+        topic_index: HashMap::new(),
         schemas: HashMap::new(),
         channels: HashMap::new(),
         total_bytes: 0,
         limits: *limits,
-        decoded_topics,
+        loose: Vec::new(),
+        loose_buffer: u32::try_from(chunks.len()).map_err(|_| RecordingError::Corrupt {
+            offset: 0,
+            detail: "more than 2^32 chunks".into(),
+        })?,
     };
-    let outcome = scan(src, total_len, limits, |batch| builder.apply(batch))?;
+    drop(chunks);
+    let mut unpacked = unpacked.into_iter();
+    for batch in batches {
+        let offset = batch.offset;
+        for record in batch.records {
+            match record {
+                Record::Chunk { .. } => {
+                    let content = unpacked.next().expect("one result per chunk")?;
+                    let buffer = builder.session.buffers.len() as u32;
+                    for inner in content.records {
+                        match inner {
+                            Inner::Message { header, start, end } => {
+                                builder.message(offset, &header, buffer, start, end)?
+                            }
+                            Inner::Other(r) => builder.apply(offset, r)?,
+                        }
+                    }
+                    builder.session.buffers.push(content.data);
+                }
+                Record::Message { header, data } => {
+                    let start = builder.loose.len();
+                    builder.loose.extend_from_slice(&data);
+                    let end = builder.loose.len();
+                    builder.message(offset, &header, builder.loose_buffer, start, end)?;
+                }
+                other => builder.apply(offset, other)?,
+            }
+        }
+    }
     if let Some(err) = outcome.error {
         return Err(err);
     }
@@ -284,135 +574,283 @@ fn read_session_from<R: Read>(
             detail: "no footer".into(),
         });
     }
-    Ok(builder.session)
+    let mut session = builder.session;
+    session.buffers.push(builder.loose);
+    session.topics = builder
+        .topics
+        .into_iter()
+        .map(|t| (t.topic.clone(), t))
+        .collect();
+    Ok(session)
 }
 
-struct SessionBuilder<'a> {
-    session: RecordedSession,
+/// A record inside a chunk.
+enum Inner {
+    /// A message: its header, and where its payload lies in the chunk's content.
+    Message {
+        header: MessageHeader,
+        start: usize,
+        end: usize,
+    },
+    /// Anything else, parsed.
+    Other(Record<'static>),
+}
+
+/// A chunk decompressed, checked and split into records.
+struct ChunkContent {
+    data: Vec<u8>,
+    records: Vec<Inner>,
+}
+
+/// Length of a message record's header: channel id, sequence, log time, publish time.
+const MESSAGE_HEADER_LEN: usize = 2 + 4 + 8 + 8;
+
+/// Decompresses the chunk at `offset` into a buffer of its declared size (at most
+/// [`ReadLimits::max_record_bytes`]; single-pass zstd decoding allocates nothing more, so no
+/// window can be forced on us), checks its CRC, and frames its records.
+fn unpack_chunk(
+    offset: u64,
+    header: &ChunkHeader,
+    compressed: &[u8],
+    limits: &ReadLimits,
+) -> Result<ChunkContent> {
+    let corrupt = |detail: String| RecordingError::Corrupt { offset, detail };
+    if header.uncompressed_size > limits.max_record_bytes {
+        return Err(RecordingError::RecordTooLong {
+            offset,
+            opcode: op::CHUNK,
+            len: header.uncompressed_size,
+            limit: limits.max_record_bytes,
+        });
+    }
+    let size = header.uncompressed_size as usize;
+    let data = match header.compression.as_str() {
+        "" => compressed.to_vec(),
+        "zstd" => {
+            let mut out = Vec::with_capacity(size);
+            let mut dctx = zstd::zstd_safe::DCtx::create();
+            dctx.set_parameter(zstd::zstd_safe::DParameter::WindowLogMax(MAX_WINDOW_LOG))
+                .and_then(|_| dctx.decompress(&mut out, compressed))
+                .map_err(|code| {
+                    corrupt(format!("zstd: {}", zstd::zstd_safe::get_error_name(code)))
+                })?;
+            out
+        }
+        other => return Err(corrupt(format!("unsupported compression {other:?}"))),
+    };
+    if data.len() != size {
+        return Err(corrupt(format!(
+            "chunk content is {} bytes, its header says {size}",
+            data.len()
+        )));
+    }
+    if header.uncompressed_crc != 0 {
+        let calculated = crc32fast::hash(&data);
+        if calculated != header.uncompressed_crc {
+            return Err(RecordingError::ChunkCrcMismatch {
+                offset,
+                saved: header.uncompressed_crc,
+                calculated,
+            });
+        }
+    }
+    let mut records = Vec::new();
+    let mut pos = 0usize;
+    while pos < data.len() {
+        let rest = &data[pos..];
+        if rest.len() < OPCODE_LEN_SIZE as usize {
+            return Err(corrupt("chunk content ends inside a record header".into()));
+        }
+        let opcode = rest[0];
+        let len = u64::from_le_bytes(rest[1..9].try_into().expect("8 bytes"));
+        if len > limits.max_record_bytes {
+            return Err(RecordingError::RecordTooLong {
+                offset,
+                opcode,
+                len,
+                limit: limits.max_record_bytes,
+            });
+        }
+        let available = (rest.len() - OPCODE_LEN_SIZE as usize) as u64;
+        if len > available {
+            return Err(corrupt(format!(
+                "record (opcode {opcode:#04x}) in a chunk claims {len} bytes but only \
+                 {available} remain"
+            )));
+        }
+        let start = pos + OPCODE_LEN_SIZE as usize;
+        let end = start + len as usize;
+        let body = &data[start..end];
+        if opcode == op::MESSAGE {
+            if body.len() < MESSAGE_HEADER_LEN {
+                return Err(corrupt("message record shorter than its header".into()));
+            }
+            let u16_at = |i: usize| u16::from_le_bytes(body[i..i + 2].try_into().expect("2"));
+            let u32_at = |i: usize| u32::from_le_bytes(body[i..i + 4].try_into().expect("4"));
+            let u64_at = |i: usize| u64::from_le_bytes(body[i..i + 8].try_into().expect("8"));
+            records.push(Inner::Message {
+                header: MessageHeader {
+                    channel_id: u16_at(0),
+                    sequence: u32_at(2),
+                    log_time: u64_at(6),
+                    publish_time: u64_at(14),
+                },
+                start: start + MESSAGE_HEADER_LEN,
+                end,
+            });
+        } else {
+            match mcap::parse_record(opcode, body) {
+                Ok(Record::Unknown { opcode, .. }) if !known_or_private(opcode) => {
+                    return Err(corrupt(format!(
+                        "reserved record opcode {opcode:#04x} in a chunk"
+                    )));
+                }
+                Ok(Record::Chunk { .. }) => {
+                    return Err(corrupt("a chunk inside a chunk".into()));
+                }
+                Ok(r) => records.push(Inner::Other(r.into_owned())),
+                Err(e) => return Err(map_mcap_error(e, offset, limits)),
+            }
+        }
+        pos = end;
+    }
+    Ok(ChunkContent { data, records })
+}
+
+struct SessionBuilder {
+    /// Schemas, metadata and buffers (topics are in `topics` until the end).
+    session: RawSession,
+    /// Topics in order of first appearance.
+    topics: Vec<RawTopic>,
+    /// Topic name -> index in `topics`.
+    topic_index: HashMap<String, usize>,
     schemas: HashMap<u16, SchemaInfo>,
-    channels: HashMap<u16, String>,
+    /// Channel id -> (topic name, index in `topics`).
+    channels: HashMap<u16, (String, usize)>,
     total_bytes: u64,
     limits: ReadLimits,
-    /// Topics whose JSON the caller validates by decoding them.
-    decoded_topics: &'a [&'a str],
+    /// Payloads of messages outside chunks.
+    loose: Vec<u8>,
+    /// Index `loose` will have in the session's buffers.
+    loose_buffer: u32,
 }
 
-impl SessionBuilder<'_> {
-    fn apply(&mut self, batch: Batch) -> Result<()> {
-        let offset = batch.offset;
+impl SessionBuilder {
+    fn message(
+        &mut self,
+        offset: u64,
+        header: &MessageHeader,
+        buffer: u32,
+        start: usize,
+        end: usize,
+    ) -> Result<()> {
+        let (_, topic) =
+            self.channels
+                .get(&header.channel_id)
+                .ok_or_else(|| RecordingError::Corrupt {
+                    offset,
+                    detail: format!("message refers to unknown channel id {}", header.channel_id),
+                })?;
+        self.total_bytes += (end - start) as u64;
+        if self.total_bytes > self.limits.max_total_message_bytes {
+            return Err(RecordingError::TooMuchData {
+                limit: self.limits.max_total_message_bytes,
+            });
+        }
+        self.topics[*topic].messages.push(MessageRef {
+            log_time_ns: header.log_time,
+            publish_time_ns: header.publish_time,
+            sequence: header.sequence,
+            buffer,
+            start,
+            end,
+        });
+        Ok(())
+    }
+
+    fn apply(&mut self, offset: u64, record: Record<'static>) -> Result<()> {
         let corrupt = |detail: String| RecordingError::Corrupt { offset, detail };
-        for record in batch.records {
-            match record {
-                Record::Header(h) => {
-                    self.session.profile = h.profile;
-                    self.session.library = h.library;
-                }
-                Record::Schema { header, data } => {
-                    if header.id == 0 {
-                        return Err(corrupt("schema with id 0".into()));
-                    }
-                    let info = SchemaInfo {
-                        name: header.name,
-                        encoding: header.encoding,
-                        data: data.into_owned(),
-                    };
-                    if let Some(old) = self.schemas.get(&header.id) {
-                        if *old != info {
-                            return Err(corrupt(format!(
-                                "schema id {} redefined with different content",
-                                header.id
-                            )));
-                        }
-                    } else {
-                        self.schemas.insert(header.id, info);
-                    }
-                }
-                Record::Channel(c) => {
-                    let schema = if c.schema_id == 0 {
-                        None
-                    } else {
-                        Some(self.schemas.get(&c.schema_id).cloned().ok_or_else(|| {
-                            corrupt(format!(
-                                "channel {:?} refers to unknown schema id {}",
-                                c.topic, c.schema_id
-                            ))
-                        })?)
-                    };
-                    if let Some(old_topic) = self.channels.get(&c.id) {
-                        if *old_topic != c.topic {
-                            return Err(corrupt(format!(
-                                "channel id {} redefined with topic {:?}",
-                                c.id, c.topic
-                            )));
-                        }
-                    }
-                    match self.session.topics.get(&c.topic) {
-                        Some(t) => {
-                            if t.schema != schema || t.message_encoding != c.message_encoding {
-                                return Err(corrupt(format!(
-                                    "topic {:?} has two channels with different schemas or \
-                                     encodings",
-                                    c.topic
-                                )));
-                            }
-                        }
-                        None => {
-                            self.session.topics.insert(
-                                c.topic.clone(),
-                                TopicRecording {
-                                    topic: c.topic.clone(),
-                                    message_encoding: c.message_encoding.clone(),
-                                    schema,
-                                    messages: Vec::new(),
-                                },
-                            );
-                        }
-                    }
-                    self.channels.insert(c.id, c.topic);
-                }
-                Record::Message { header, data } => {
-                    let topic = self.channels.get(&header.channel_id).ok_or_else(|| {
-                        corrupt(format!(
-                            "message refers to unknown channel id {}",
-                            header.channel_id
-                        ))
-                    })?;
-                    self.total_bytes += data.len() as u64;
-                    if self.total_bytes > self.limits.max_total_message_bytes {
-                        return Err(RecordingError::TooMuchData {
-                            limit: self.limits.max_total_message_bytes,
-                        });
-                    }
-                    let t = self
-                        .session
-                        .topics
-                        .get_mut(topic)
-                        .expect("every channel has a topic entry");
-                    if t.message_encoding == MESSAGE_ENCODING
-                        && !self.decoded_topics.contains(&topic.as_str())
-                    {
-                        if let Err(source) = serde_json::from_slice::<serde::de::IgnoredAny>(&data)
-                        {
-                            return Err(RecordingError::InvalidJson {
-                                topic: topic.clone(),
-                                log_time_ns: header.log_time,
-                                source,
-                            });
-                        }
-                    }
-                    t.messages.push(RecordedMessage {
-                        log_time_ns: header.log_time,
-                        publish_time_ns: header.publish_time,
-                        sequence: header.sequence,
-                        data: data.into_owned(),
-                    });
-                }
-                Record::Metadata(m) => self.session.metadata.push(MetadataRecord {
-                    name: m.name,
-                    entries: m.metadata,
-                }),
-                _ => {}
+        match record {
+            Record::Header(h) => {
+                self.session.profile = h.profile;
+                self.session.library = h.library;
             }
+            Record::Schema { header, data } => {
+                if header.id == 0 {
+                    return Err(corrupt("schema with id 0".into()));
+                }
+                let info = SchemaInfo {
+                    name: header.name,
+                    encoding: header.encoding,
+                    data: data.into_owned(),
+                };
+                if let Some(old) = self.schemas.get(&header.id) {
+                    if *old != info {
+                        return Err(corrupt(format!(
+                            "schema id {} redefined with different content",
+                            header.id
+                        )));
+                    }
+                } else {
+                    self.schemas.insert(header.id, info);
+                }
+            }
+            Record::Channel(c) => {
+                let schema = if c.schema_id == 0 {
+                    None
+                } else {
+                    Some(self.schemas.get(&c.schema_id).cloned().ok_or_else(|| {
+                        corrupt(format!(
+                            "channel {:?} refers to unknown schema id {}",
+                            c.topic, c.schema_id
+                        ))
+                    })?)
+                };
+                if let Some((old_topic, _)) = self.channels.get(&c.id) {
+                    if *old_topic != c.topic {
+                        return Err(corrupt(format!(
+                            "channel id {} redefined with topic {:?}",
+                            c.id, c.topic
+                        )));
+                    }
+                }
+                let index = match self.topic_index.get(&c.topic) {
+                    Some(&index) => {
+                        let t = &self.topics[index];
+                        if t.schema != schema || t.message_encoding != c.message_encoding {
+                            return Err(corrupt(format!(
+                                "topic {:?} has two channels with different schemas or \
+                                 encodings",
+                                c.topic
+                            )));
+                        }
+                        index
+                    }
+                    None => {
+                        self.topics.push(RawTopic {
+                            topic: c.topic.clone(),
+                            message_encoding: c.message_encoding.clone(),
+                            schema,
+                            messages: Vec::new(),
+                        });
+                        self.topic_index
+                            .insert(c.topic.clone(), self.topics.len() - 1);
+                        self.topics.len() - 1
+                    }
+                };
+                self.channels.insert(c.id, (c.topic, index));
+            }
+            Record::Message { header, data } => {
+                let start = self.loose.len();
+                self.loose.extend_from_slice(&data);
+                let end = self.loose.len();
+                self.message(offset, &header, self.loose_buffer, start, end)?;
+            }
+            Record::Metadata(m) => self.session.metadata.push(MetadataRecord {
+                name: m.name,
+                entries: m.metadata,
+            }),
+            _ => {}
         }
         Ok(())
     }
@@ -441,12 +879,15 @@ pub(crate) struct ScanOutcome {
 const OPCODE_LEN_SIZE: u64 = 9;
 
 /// Reads `src` record by record, calling `on_batch` with the records of each complete
-/// top-level record. Stops at the first bad record or callback error and reports it in the
+/// top-level record. With `emit_chunks`, a chunk is handed over whole and still compressed (its
+/// bytes are covered by the data section CRC; the caller decompresses it and checks its own
+/// CRC); otherwise its records are, after its CRC matched. Stops at the first bad record or callback error and reports it in the
 /// outcome; only a bad magic (or an I/O error on the first bytes) is returned as `Err`.
 pub(crate) fn scan<R: Read>(
     mut src: R,
     total_len: Option<u64>,
     limits: &ReadLimits,
+    emit_chunks: bool,
     mut on_batch: impl FnMut(Batch) -> Result<()>,
 ) -> Result<ScanOutcome> {
     let mut magic = [0u8; 8];
@@ -462,7 +903,8 @@ pub(crate) fn scan<R: Read>(
             .with_prevalidate_chunk_crcs(true)
             .with_validate_data_section_crc(true)
             .with_validate_summary_section_crc(true)
-            .with_record_length_limit(record_limit),
+            .with_record_length_limit(record_limit)
+            .with_emit_chunks(emit_chunks),
     );
     // Replaces the built-in zstd decoder: same decoding, window capped at 16 MiB.
     reader.add_decompressor(BoundedZstd::default())?;

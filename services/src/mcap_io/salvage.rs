@@ -88,6 +88,7 @@ pub fn salvage(input: impl AsRef<Path>, output: impl AsRef<Path>) -> Result<Salv
         BufReader::with_capacity(1 << 16, file),
         Some(total_len),
         &limits,
+        false,
         |batch: Batch| {
             // Check the whole batch links up before writing any of it.
             let offset = batch.offset;

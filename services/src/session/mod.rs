@@ -40,8 +40,8 @@ mod time;
 
 pub use messages::*;
 pub use read::{
-    read_session, read_session_bytes, read_session_bytes_with, read_session_with_limits,
-    DecodeTopics, Session,
+    read_session, read_session_bytes, read_session_bytes_with, read_session_file_with,
+    read_session_with_limits, DecodeTopics, Session,
 };
 pub use recorder::{
     record_simulation, RecordSummary, SessionInfo, SessionRecorder, TickData, FORCE_STEPS_PER_UNIT,

@@ -7,7 +7,10 @@ use super::messages::*;
 use super::*;
 use crate::error::{RecordingError, Result};
 use crate::foxglove::{FRAME_TRANSFORMS_SCHEMA, JOINT_STATES_SCHEMA, SCENE_UPDATE_SCHEMA};
-use crate::mcap_io::{read_session_file_decoding, JsonSchema, ReadLimits, RecordedSession};
+use crate::mcap_io::{
+    par_map, read_raw_bytes, read_raw_file, JsonSchema, MessageRef, RawSession, RawTopic,
+    ReadLimits, MESSAGES_PER_JOB,
+};
 
 /// A session read back: metadata, ground truth and the raw topics tick by tick. Every sample
 /// is `(log_time_ns, message)` in file order.
@@ -91,9 +94,19 @@ pub fn read_session(path: impl AsRef<Path>) -> Result<Session> {
 /// [`RecordingError::UnknownSchema`] otherwise); Foxglove topics, if present, must carry their
 /// official schema names. A malformed `ground_truth` record is [`RecordingError::InvalidInput`].
 pub fn read_session_with_limits(path: impl AsRef<Path>, limits: &ReadLimits) -> Result<Session> {
+    read_session_file_with(path, limits, DecodeTopics::ALL)
+}
+
+/// [`read_session_with_limits`] decoding only the raw topics in `topics` (the others are
+/// checked and left empty).
+pub fn read_session_file_with(
+    path: impl AsRef<Path>,
+    limits: &ReadLimits,
+    topics: DecodeTopics,
+) -> Result<Session> {
     let path = path.as_ref();
-    let recorded = read_session_file_decoding(path, limits, &RAW_TOPICS)?;
-    from_recorded(&recorded, &path.display().to_string(), DecodeTopics::ALL)
+    let raw = read_raw_file(path, limits)?;
+    from_raw(&raw, &path.display().to_string(), topics)
 }
 
 /// Reads a session from bytes already in memory (for example an HTTP upload), with the same
@@ -110,26 +123,42 @@ pub fn read_session_bytes_with(
     limits: &ReadLimits,
     topics: DecodeTopics,
 ) -> Result<Session> {
-    let recorded = crate::mcap_io::read_session_bytes_decoding(bytes, limits, &RAW_TOPICS)?;
-    from_recorded(&recorded, name, topics)
+    let raw = read_raw_bytes(bytes, limits)?;
+    from_raw(&raw, name, topics)
 }
 
-fn from_recorded(recorded: &RecordedSession, name: &str, topics: DecodeTopics) -> Result<Session> {
+/// One job of [`from_raw`]: a block of one topic's messages, checked or decoded.
+enum Decoded {
+    Checked,
+    JointStates(Vec<(u64, GloveJointStates)>),
+    Feedback(Vec<(u64, GloveFeedback)>),
+    Contacts(Vec<(u64, Contacts)>),
+    Object(Vec<(u64, messages::ObjectState)>),
+}
+
+/// What a job does with its block.
+#[derive(Clone, Copy)]
+enum Job {
+    Check,
+    JointStates,
+    Feedback,
+    Contacts,
+    Object,
+}
+
+fn from_raw(raw: &RawSession, name: &str, topics: DecodeTopics) -> Result<Session> {
     let expected: [(&str, &JsonSchema); 3] = [
         (TOPIC_TF, &FRAME_TRANSFORMS_SCHEMA),
         (TOPIC_SCENE, &SCENE_UPDATE_SCHEMA),
         (TOPIC_JOINT_STATES, &JOINT_STATES_SCHEMA),
     ];
     for (topic, schema) in expected {
-        if recorded.topics.contains_key(topic) {
-            recorded.require_topic(topic, &schema.name)?;
+        if raw.topics.contains_key(topic) {
+            raw.require_topic(topic, &schema.name)?;
         }
     }
-    let metadata = recorded
-        .metadata(SESSION_METADATA)
-        .cloned()
-        .unwrap_or_default();
-    let phases = match recorded
+    let metadata = raw.metadata(SESSION_METADATA).cloned().unwrap_or_default();
+    let phases = match raw
         .metadata(GROUND_TRUTH_METADATA)
         .and_then(|m| m.get("phases"))
     {
@@ -139,53 +168,90 @@ fn from_recorded(recorded: &RecordedSession, name: &str, topics: DecodeTopics) -
             detail: e.to_string(),
         })?,
     };
-    // The four raw topics are most of the work of reading a session: decode them on two
-    // threads (contacts and feedback are the larger pair).
-    // A topic not decoded is still required with its schema and checked to hold valid JSON.
-    fn decode<T: serde::de::DeserializeOwned>(
-        recorded: &RecordedSession,
-        on: bool,
-        topic: &str,
-        schema: &JsonSchema,
-    ) -> Result<Vec<(u64, T)>> {
-        if on {
-            recorded.decode_topic(topic, &schema.name)
-        } else {
-            recorded.require_topic(topic, &schema.name)?.check_json()?;
-            Ok(Vec::new())
-        }
-    }
+    // The raw topics must be there with their schemas, decoded or not.
     let t = topics;
-    let (contacts, feedback, joint_states, object) = std::thread::scope(|scope| {
-        let other = scope.spawn(|| {
-            let contacts = decode(recorded, t.contacts, TOPIC_CONTACTS, &CONTACTS_SCHEMA);
-            let feedback = decode(
-                recorded,
-                t.feedback,
-                TOPIC_GLOVE_FEEDBACK,
-                &GLOVE_FEEDBACK_SCHEMA,
-            );
-            (contacts, feedback)
-        });
-        let joint_states = decode(
-            recorded,
-            t.joint_states,
+    let raw_topics = [
+        (
             TOPIC_GLOVE_JOINT_STATES,
             &GLOVE_JOINT_STATES_SCHEMA,
-        );
-        let object = decode(recorded, t.object, TOPIC_OBJECT_STATE, &OBJECT_STATE_SCHEMA);
-        let (contacts, feedback) = other.join().unwrap_or_else(|panic| {
-            std::panic::resume_unwind(panic);
-        });
-        (contacts, feedback, joint_states, object)
+            t.joint_states,
+            Job::JointStates,
+        ),
+        (
+            TOPIC_GLOVE_FEEDBACK,
+            &GLOVE_FEEDBACK_SCHEMA,
+            t.feedback,
+            Job::Feedback,
+        ),
+        (TOPIC_CONTACTS, &CONTACTS_SCHEMA, t.contacts, Job::Contacts),
+        (
+            TOPIC_OBJECT_STATE,
+            &OBJECT_STATE_SCHEMA,
+            t.object,
+            Job::Object,
+        ),
+    ];
+    for (topic, schema, _, _) in &raw_topics {
+        raw.require_topic(topic, &schema.name)?;
+    }
+    // Every JSON message is checked or decoded, in blocks spread over the cores: the other
+    // topics first (their errors come first, as in file order they would), then the raw ones.
+    let mut plan: Vec<(&RawTopic, Job)> = raw
+        .topics
+        .values()
+        .filter(|t| t.is_json() && !RAW_TOPICS.contains(&t.topic.as_str()))
+        .map(|t| (t, Job::Check))
+        .collect();
+    for (topic, _, decode, job) in raw_topics {
+        plan.push((&raw.topics[topic], if decode { job } else { Job::Check }));
+    }
+    let jobs: Vec<(&RawTopic, &[MessageRef], Job)> = plan
+        .iter()
+        .flat_map(|&(t, job)| {
+            t.messages
+                .chunks(MESSAGES_PER_JOB)
+                .map(move |m| (t, m, job))
+        })
+        .collect();
+    let done = par_map(jobs.len(), |i| -> Result<Decoded> {
+        let (t, m, job) = jobs[i];
+        Ok(match job {
+            Job::Check => {
+                raw.check_json_of(t, m)?;
+                Decoded::Checked
+            }
+            Job::JointStates => Decoded::JointStates(raw.decode_of(t, m)?),
+            Job::Feedback => Decoded::Feedback(raw.decode_of(t, m)?),
+            Job::Contacts => Decoded::Contacts(raw.decode_of(t, m)?),
+            Job::Object => Decoded::Object(raw.decode_of(t, m)?),
+        })
     });
-    Ok(Session {
+    let mut session = Session {
         metadata,
         phases,
-        joint_states: joint_states?,
-        feedback: feedback?,
-        contacts: contacts?,
-        object: object?,
-        message_counts: recorded.message_counts(),
-    })
+        joint_states: Vec::new(),
+        feedback: Vec::new(),
+        contacts: Vec::new(),
+        object: Vec::new(),
+        message_counts: raw.message_counts(),
+    };
+    for d in done {
+        match d? {
+            Decoded::Checked => {}
+            Decoded::JointStates(v) => append(&mut session.joint_states, v),
+            Decoded::Feedback(v) => append(&mut session.feedback, v),
+            Decoded::Contacts(v) => append(&mut session.contacts, v),
+            Decoded::Object(v) => append(&mut session.object, v),
+        }
+    }
+    Ok(session)
+}
+
+/// `out.extend(v)`, taking `v` itself when `out` is empty.
+fn append<T>(out: &mut Vec<T>, mut v: Vec<T>) {
+    if out.is_empty() {
+        *out = v;
+    } else {
+        out.append(&mut v);
+    }
 }
