@@ -263,7 +263,10 @@ async fn upload_hand(
     let hand = st.store().put_hand(spec, upload.urdf).await?;
     let name = hand.summary.name.clone();
     tracing::info!(hand = %name, dof = hand.summary.dof, "hand uploaded");
-    Ok(created(HandBody::of(hand)?, &format!("/api/v1/hands/{name}")))
+    Ok(created(
+        HandBody::of(hand)?,
+        &format!("/api/v1/hands/{name}"),
+    ))
 }
 
 #[cfg(test)]

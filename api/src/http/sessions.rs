@@ -156,7 +156,10 @@ impl StoredSession {
             skills,
         };
         if out.created {
-            Ok(created(body, &format!("/api/v1/sessions/{}", out.session_id)))
+            Ok(created(
+                body,
+                &format!("/api/v1/sessions/{}", out.session_id),
+            ))
         } else {
             Ok(axum::Json(body).into_response())
         }
