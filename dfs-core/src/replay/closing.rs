@@ -39,7 +39,8 @@
 //! tangential rest from stick friction ([`super::plan::actuation_map`]).
 
 use super::plan::{
-    align, curl_onto, mid_angles, on_surface, perpendicular, sides, surface_along, Candidate, ROLLS,
+    align, curl_onto, grasp_axis, mid_angles, on_surface, perpendicular, surface_along, Candidate,
+    ROLLS,
 };
 use super::{ReplayParams, SkillSpec};
 use crate::contact::ContactFrame;
@@ -414,22 +415,7 @@ pub(super) fn closing_candidates(
         kept.push(g);
     }
     // The skill's grasp axis, from its thumb's side to the other.
-    let (thumb_side, other_side) = sides(skill);
-    let centroid = |idx: &[usize]| -> Vector {
-        idx.iter()
-            .map(|&i| skill.contacts[i].position_b)
-            .sum::<Vector>()
-            / idx.len().max(1) as Real
-    };
-    let thumb_c = centroid(&thumb_side);
-    let other_c = if other_side.is_empty() {
-        -thumb_c
-    } else {
-        centroid(&other_side)
-    };
-    let a_s = (other_c - thumb_c)
-        .try_normalize(1e-9)
-        .unwrap_or_else(Vector::x);
+    let (_, _, a_s) = grasp_axis(skill);
     let up_perp = perpendicular(&-Vector::z(), &a_s, &Vector::x());
     let side = a_s.cross(&up_perp);
     let start = skill.start_pose();

@@ -582,16 +582,10 @@ fn plan_forces(plan: &mut Plan, skill: &SkillSpec, params: &ReplayParams) {
 /// Scored candidate base poses (rolls about the grasp axis), each with the joint angles from
 /// fingertip inverse kinematics on the hand with a free base position for the fingertips
 /// `keys` places, and the other fingers curled onto the surface ([`curl_onto`]).
-fn plan_candidates(
-    hand: &HandModel,
-    thumb: usize,
-    skill: &SkillSpec,
-    params: &ReplayParams,
-    keys: Keys,
-) -> Vec<Candidate> {
-    let nt = hand.fingertips.len();
-    let n_hand = hand.dof();
-    let start = skill.start_pose();
+/// The skill's grasp axis: the centroid of its thumb-side contacts, of the others (the thumb's
+/// mirror through the centre when there are none), and the unit axis from the first to the
+/// second (B).
+pub(super) fn grasp_axis(skill: &SkillSpec) -> (Vector, Vector, Vector) {
     let (thumb_side, other_side) = sides(skill);
     let centroid = |idx: &[usize]| -> Vector {
         idx.iter()
@@ -608,6 +602,21 @@ fn plan_candidates(
     let a_s = (other_c - thumb_c)
         .try_normalize(1e-9)
         .unwrap_or_else(Vector::x);
+    (thumb_c, other_c, a_s)
+}
+
+fn plan_candidates(
+    hand: &HandModel,
+    thumb: usize,
+    skill: &SkillSpec,
+    params: &ReplayParams,
+    keys: Keys,
+) -> Vec<Candidate> {
+    let nt = hand.fingertips.len();
+    let n_hand = hand.dof();
+    let start = skill.start_pose();
+    let (_, other_side) = sides(skill);
+    let (thumb_c, other_c, a_s) = grasp_axis(skill);
     // A two-fingertip hand pinches antipodally through the centre of mass, at its height: the
     // squeeze then makes no moment and gravity none about the contacts (the recording's own
     // contacts may be a few millimetres off that line).

@@ -124,14 +124,7 @@ impl TopicRecording {
     }
 
     fn check_json_encoding(&self) -> Result<()> {
-        if self.message_encoding != MESSAGE_ENCODING {
-            return Err(RecordingError::NonJsonEncoding {
-                topic: self.topic.clone(),
-                encoding: self.message_encoding.clone(),
-                expected: MESSAGE_ENCODING,
-            });
-        }
-        Ok(())
+        check_json_encoding(&self.topic, &self.message_encoding)
     }
 }
 
@@ -167,24 +160,8 @@ impl RecordedSession {
             .ok_or_else(|| RecordingError::MissingTopic {
                 topic: topic.to_owned(),
             })?;
-        t.check_json_encoding()?;
-        match &t.schema {
-            Some(s) if s.name == schema_name => {
-                if s.encoding != SCHEMA_ENCODING {
-                    return Err(RecordingError::NonJsonEncoding {
-                        topic: topic.to_owned(),
-                        encoding: s.encoding.clone(),
-                        expected: SCHEMA_ENCODING,
-                    });
-                }
-                Ok(t)
-            }
-            other => Err(RecordingError::UnknownSchema {
-                topic: topic.to_owned(),
-                expected: schema_name.to_owned(),
-                found: other.as_ref().map(|s| s.name.clone()),
-            }),
-        }
+        check_topic(topic, &t.message_encoding, t.schema.as_ref(), schema_name)?;
+        Ok(t)
     }
 
     /// [`require_topic`](Self::require_topic), then decode every message into `T`.
@@ -298,24 +275,12 @@ pub(crate) struct RawTopic {
 impl RawTopic {
     /// Same checks as [`RecordedSession::require_topic`].
     pub(crate) fn require(&self, schema_name: &str) -> Result<()> {
-        check_json_encoding(&self.topic, &self.message_encoding)?;
-        match &self.schema {
-            Some(s) if s.name == schema_name => {
-                if s.encoding != SCHEMA_ENCODING {
-                    return Err(RecordingError::NonJsonEncoding {
-                        topic: self.topic.clone(),
-                        encoding: s.encoding.clone(),
-                        expected: SCHEMA_ENCODING,
-                    });
-                }
-                Ok(())
-            }
-            other => Err(RecordingError::UnknownSchema {
-                topic: self.topic.clone(),
-                expected: schema_name.to_owned(),
-                found: other.as_ref().map(|s| s.name.clone()),
-            }),
-        }
+        check_topic(
+            &self.topic,
+            &self.message_encoding,
+            self.schema.as_ref(),
+            schema_name,
+        )
     }
 
     /// Whether the topic carries JSON messages.
@@ -454,6 +419,33 @@ impl RawSession {
             topics,
             metadata: self.metadata,
         }
+    }
+}
+
+/// A topic's messages are JSON and its schema is the `jsonschema` named `schema_name`.
+fn check_topic(
+    topic: &str,
+    message_encoding: &str,
+    schema: Option<&SchemaInfo>,
+    schema_name: &str,
+) -> Result<()> {
+    check_json_encoding(topic, message_encoding)?;
+    match schema {
+        Some(s) if s.name == schema_name => {
+            if s.encoding != SCHEMA_ENCODING {
+                return Err(RecordingError::NonJsonEncoding {
+                    topic: topic.to_owned(),
+                    encoding: s.encoding.clone(),
+                    expected: SCHEMA_ENCODING,
+                });
+            }
+            Ok(())
+        }
+        other => Err(RecordingError::UnknownSchema {
+            topic: topic.to_owned(),
+            expected: schema_name.to_owned(),
+            found: other.map(|s| s.name.clone()),
+        }),
     }
 }
 
