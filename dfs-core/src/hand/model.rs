@@ -330,6 +330,22 @@ impl Joint {
     }
 }
 
+impl Joint {
+    /// The joint frame in its parent link's frame for joint value `value`: `origin · motion`.
+    /// A rotation has no translation, so its product with the origin is only a quaternion
+    /// product (no vector rotated).
+    #[inline]
+    pub fn placed(&self, value: f64) -> Isometry {
+        match self.kind {
+            JointKind::Revolute | JointKind::Continuous => Isometry::from_parts(
+                self.origin.translation,
+                self.origin.rotation * Rotation::from_axis_angle(&self.axis, value),
+            ),
+            _ => self.origin * self.motion(value),
+        }
+    }
+}
+
 /// Solves `A x = b` for the symmetric positive-definite top-left `n × n` block of `a` by an
 /// in-place Cholesky factorisation (entries of `x` from `n` on are zero). Allocation-free;
 /// `None` when the block is not positive definite (or not finite) or `n > MAX_DOF`. Use it
@@ -837,8 +853,7 @@ impl HandModel {
         kin.link_poses[self.root] = *base;
         kin.parent_joint[self.root] = NO_JOINT;
         for (j, joint) in self.joints.iter().enumerate().take(MAX_LINKS) {
-            let motion = joint.motion(joint.drive.value(q));
-            let frame = kin.link_poses[joint.parent] * joint.origin * motion;
+            let frame = kin.link_poses[joint.parent] * joint.placed(joint.drive.value(q));
             kin.joint_frames[j] = frame;
             kin.joint_axes[j] = frame.rotation * joint.axis.into_inner();
             kin.link_poses[joint.child] = frame;
