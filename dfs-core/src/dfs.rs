@@ -271,7 +271,37 @@ pub struct Dfs {
     transmitted: [Intensity; MAX_CONTACTS],
     contact_tip: [usize; MAX_CONTACTS],
     grasp: Option<GraspMatrix>,
+    /// Per tip: the DOFs that move it (the wrist's and its finger's), ascending. Every other
+    /// column of its Jacobian is zero, so the per-tip joint-space sums skip them.
+    tip_dofs: [TipDofs; MAX_TIPS],
     out: TickOutput,
+}
+
+/// The DOFs moving one fingertip, ascending (fixed capacity).
+#[derive(Debug, Clone, Copy)]
+struct TipDofs {
+    dofs: [usize; MAX_DOF],
+    len: usize,
+}
+
+impl TipDofs {
+    fn of(hand: &HandModel, tip: usize) -> TipDofs {
+        let set = hand.dofs_moving_link(hand.fingertips[tip].link);
+        let mut t = TipDofs {
+            dofs: [0; MAX_DOF],
+            len: 0,
+        };
+        for d in (0..hand.dof().min(MAX_DOF)).filter(|&d| set & (1 << d) != 0) {
+            t.dofs[t.len] = d;
+            t.len += 1;
+        }
+        t
+    }
+
+    #[inline]
+    fn as_slice(&self) -> &[usize] {
+        &self.dofs[..self.len]
+    }
 }
 
 impl Dfs {
@@ -296,6 +326,13 @@ impl Dfs {
             ..TickOutput::default()
         };
         out.object = state;
+        let mut tip_dofs = [TipDofs {
+            dofs: [0; MAX_DOF],
+            len: 0,
+        }; MAX_TIPS];
+        for (k, t) in tip_dofs.iter_mut().enumerate().take(hand.fingertips.len()) {
+            *t = TipDofs::of(&hand, k);
+        }
         Ok(Dfs {
             hand,
             object,
@@ -318,6 +355,7 @@ impl Dfs {
             transmitted: [Intensity::zeros(); MAX_CONTACTS],
             contact_tip: [0; MAX_CONTACTS],
             grasp: None,
+            tip_dofs,
             out,
         })
     }
@@ -501,8 +539,9 @@ impl Dfs {
                 .unwrap_or_else(Vector::zeros);
             self.prev_tip_points[k] = Some(tip_point);
             let j = &self.kin.tip_jacobians[k];
+            let dofs = self.tip_dofs[k].as_slice();
             let mut v_joint = Vector::zeros();
-            for d in 0..self.hand.dof() {
+            for &d in dofs {
                 v_joint += Vector::new(j[(0, d)], j[(1, d)], j[(2, d)]) * self.qd[d];
             }
             self.spring_vel[k] = v_rel - v_joint;
@@ -515,7 +554,7 @@ impl Dfs {
             // Torsion (soft finger): the fingertip pad drags the object's spin about the normal
             // along, a torsional spring-damper from where it stuck.
             let mut w_tip = Vector::zeros();
-            for d in 0..self.hand.dof() {
+            for &d in dofs {
                 w_tip += Vector::new(j[(3, d)], j[(4, d)], j[(5, d)]) * self.qd[d];
             }
             let w_obj = rot * self.state.angular_velocity_b;
@@ -648,7 +687,9 @@ impl Dfs {
             // The feedback, less the passive friction part: the contact spring below carries
             // that on the finger side, implicitly.
             let f = t.feedback_force_world + self.passive_world[k];
-            for d in 0..ndof {
+            // Only the DOFs moving the tip: its other Jacobian columns are zero.
+            let dofs = self.tip_dofs[k].as_slice();
+            for &d in dofs {
                 fb_torque[d] += j[(0, d)] * f.x + j[(1, d)] * f.y + j[(2, d)] * f.z;
             }
             let Some(frame) = t.frame else { continue };
@@ -659,11 +700,11 @@ impl Dfs {
             let f = -self.spring_err[k] * p.surface_stiffness - proj_v * p.surface_damping;
             let c = dt * p.surface_damping + dt * dt * p.surface_stiffness;
             let mut cols = [Vector::zeros(); MAX_DOF];
-            for (d, col) in cols.iter_mut().enumerate().take(ndof) {
+            for (col, &d) in cols.iter_mut().zip(dofs) {
                 *col = Vector::new(j[(0, d)], j[(1, d)], j[(2, d)]);
             }
-            for d1 in 0..ndof {
-                let col1 = cols[d1];
+            let cols = &cols[..dofs.len()];
+            for (&col1, &d1) in cols.iter().zip(dofs) {
                 if col1 == Vector::zeros() {
                     continue;
                 }
@@ -673,8 +714,8 @@ impl Dfs {
                 } else {
                     z_world * z_world.dot(&col1)
                 } * c;
-                for d2 in 0..ndof {
-                    a[(d1, d2)] += pc1.dot(&cols[d2]);
+                for (col2, &d2) in cols.iter().zip(dofs) {
+                    a[(d1, d2)] += pc1.dot(col2);
                 }
             }
         }

@@ -64,19 +64,62 @@ pub fn all_finite<I: IntoIterator<Item = Real>>(values: I) -> bool {
 /// rank-deficient input (collinear contacts, a stretched finger). A well-conditioned matrix
 /// takes the fast Cholesky path; otherwise a symmetric eigen-decomposition. Allocation-free.
 pub fn sym_pinv6(a: &Mat6, rel_tol: Real) -> (Mat6, usize) {
-    if let Some(ch) = nalgebra::Cholesky::new(*a) {
-        let l = ch.l_dirty();
-        let (mut lo, mut hi) = (Real::INFINITY, 0.0_f64);
-        for i in 0..6 {
-            let d = l[(i, i)] * l[(i, i)];
-            lo = lo.min(d);
-            hi = hi.max(d);
+    match well_conditioned_cholesky(a, rel_tol) {
+        Some(ch) => (ch.inverse(), 6),
+        None => eigen_pinv6(a, rel_tol),
+    }
+}
+
+/// The pseudo-inverse of a symmetric positive semi-definite 6x6 matrix as [`sym_pinv6`]
+/// computes it, kept as the Cholesky factor when the matrix is well conditioned (applying
+/// it is then two triangular solves instead of forming the inverse).
+#[derive(Debug, Clone, Copy)]
+pub enum SymPinv6 {
+    /// Well conditioned: the Cholesky factorisation of the matrix itself.
+    Cholesky(nalgebra::Cholesky<Real, nalgebra::U6>),
+    /// Rank-deficient or ill-conditioned: the pseudo-inverse from the eigen-decomposition.
+    Explicit(Mat6),
+}
+
+impl SymPinv6 {
+    /// The pseudo-inverse of `a` and its rank, by the rule of [`sym_pinv6`].
+    pub fn new(a: &Mat6, rel_tol: Real) -> (SymPinv6, usize) {
+        if let Some(ch) = well_conditioned_cholesky(a, rel_tol) {
+            return (SymPinv6::Cholesky(ch), 6);
         }
-        // The squared pivots bracket the eigenvalues loosely; demand a wide safety factor.
-        if hi.is_finite() && lo > hi * rel_tol * 1e3 {
-            return (ch.inverse(), 6);
+        let (inv, rank) = eigen_pinv6(a, rel_tol);
+        (SymPinv6::Explicit(inv), rank)
+    }
+
+    /// `A⁺ v`.
+    #[inline]
+    pub fn apply(&self, v: &Wrench) -> Wrench {
+        match self {
+            SymPinv6::Cholesky(ch) => ch.solve(v),
+            SymPinv6::Explicit(inv) => inv * v,
         }
     }
+}
+
+/// The Cholesky factorisation of `a` when it exists and its squared pivots are within a wide
+/// safety factor of `rel_tol` (they bracket the eigenvalues loosely).
+fn well_conditioned_cholesky(
+    a: &Mat6,
+    rel_tol: Real,
+) -> Option<nalgebra::Cholesky<Real, nalgebra::U6>> {
+    let ch = nalgebra::Cholesky::new(*a)?;
+    let l = ch.l_dirty();
+    let (mut lo, mut hi) = (Real::INFINITY, 0.0_f64);
+    for i in 0..6 {
+        let d = l[(i, i)] * l[(i, i)];
+        lo = lo.min(d);
+        hi = hi.max(d);
+    }
+    (hi.is_finite() && lo > hi * rel_tol * 1e3).then_some(ch)
+}
+
+/// Pseudo-inverse and rank of a symmetric 6x6 matrix from its eigen-decomposition.
+fn eigen_pinv6(a: &Mat6, rel_tol: Real) -> (Mat6, usize) {
     let eig = nalgebra::SymmetricEigen::new(*a);
     let max = eig.eigenvalues.iter().fold(0.0_f64, |m, &v| m.max(v.abs()));
     if max <= 0.0 || !max.is_finite() {

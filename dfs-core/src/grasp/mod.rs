@@ -11,7 +11,7 @@ pub mod quality;
 
 use crate::contact::{ContactFrame, ContactModel, Intensity};
 use crate::hand::MAX_TIPS;
-use crate::math::{sym_pinv6, Mat6, Real, Wrench};
+use crate::math::{wrench, Mat6, Real, SymPinv6, Vector, Wrench};
 use nalgebra::SMatrix;
 
 /// Most contacts a grasp can have (one per fingertip).
@@ -29,7 +29,7 @@ pub struct GraspMatrix {
     /// Number of contacts.
     pub n: usize,
     /// `(W Wᵀ)⁺`.
-    wwt_pinv: Mat6,
+    wwt_pinv: SymPinv6,
     /// Rank of `W`.
     pub rank: usize,
 }
@@ -40,16 +40,37 @@ impl GraspMatrix {
         let mut w = SMatrix::<Real, 6, MAX_COLUMNS>::zeros();
         let n = contacts.len().min(MAX_CONTACTS);
         let mask = model.mask();
+        // W Wᵀ = Σ over the transmitted columns of col colᵀ (the zero columns add nothing).
+        let mut wwt = Mat6::zeros();
         for (i, c) in contacts.iter().take(n).enumerate() {
+            // Columns of Λ_i: the unit forces along the contact axes (columns of the frame's
+            // rotation) at p, and the unit moment about the normal (eq. 22, Table 1).
+            let r = c.rot_b.to_rotation_matrix();
+            let r = r.matrix();
             for k in 0..4 {
-                if mask[k] != 0.0 {
-                    let mut e = Intensity::zeros();
-                    e[k] = 1.0;
-                    w.set_column(4 * i + k, &c.wrench_b(&e));
+                if mask[k] == 0.0 {
+                    continue;
+                }
+                let col = if k < 3 {
+                    let f = r.column(k).into_owned();
+                    wrench(&f, &c.p_b.cross(&f))
+                } else {
+                    wrench(&Vector::zeros(), &r.column(2).into_owned())
+                };
+                w.set_column(4 * i + k, &col);
+                for a in 0..6 {
+                    for b in a..6 {
+                        wwt[(a, b)] += col[a] * col[b];
+                    }
                 }
             }
         }
-        let (wwt_pinv, rank) = sym_pinv6(&(w * w.transpose()), PINV_TOLERANCE);
+        for a in 0..6 {
+            for b in 0..a {
+                wwt[(a, b)] = wwt[(b, a)];
+            }
+        }
+        let (wwt_pinv, rank) = SymPinv6::new(&wwt, PINV_TOLERANCE);
         GraspMatrix {
             w,
             n,
@@ -69,7 +90,7 @@ impl GraspMatrix {
 
     /// The minimum-norm intensities `W⁺ f` (eq. 27), written into `out[..n]`.
     pub fn distribute(&self, f: &Wrench, out: &mut [Intensity]) {
-        let y = self.wwt_pinv * f;
+        let y = self.wwt_pinv.apply(f);
         for (i, o) in out.iter_mut().take(self.n).enumerate() {
             *o = self.w.fixed_view::<6, 4>(0, 4 * i).transpose() * y;
         }
@@ -84,7 +105,6 @@ impl GraspMatrix {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::math::Vector;
     use proptest::prelude::*;
 
     /// The paper's §3.4 sphere contacts, normals from each point through the centre; shared by

@@ -181,6 +181,10 @@ pub struct Kinematics {
     /// Scratch for [`HandModel::mass_matrix`]: composite spatial inertia of every subtree
     /// (only the hand's links are written).
     pub composite: [SpatialInertia; MAX_LINKS],
+    /// Scratch for [`HandModel::mass_matrix`]: every joint's motion subspace (velocity of the
+    /// body point at the world origin, angular velocity) per unit joint value. Kept here so
+    /// the 64-entry array is not zeroed on the stack every tick.
+    pub joint_motion: [(Vector, Vector); MAX_LINKS],
 }
 
 /// A rigid body's spatial inertia about the world origin, in the compact form the composite
@@ -208,13 +212,25 @@ impl SpatialInertia {
     };
 
     /// A link's inertia about the world origin for the link at `pose`.
+    #[inline]
     pub fn of_link(pose: &Isometry, inertial: &Inertial) -> SpatialInertia {
         let m = inertial.mass;
-        let c = (pose * Point::from(inertial.com)).coords;
         let r = pose.rotation.to_rotation_matrix();
-        let i_c = r.matrix() * inertial.inertia * r.matrix().transpose();
-        // −m [c]×[c]× = m (|c|² 1 − c cᵀ).
-        let i_o = i_c + (Mat3::identity() * c.norm_squared() - c * c.transpose()) * m;
+        let r = r.matrix();
+        let c = r * inertial.com + pose.translation.vector;
+        // I_o = R I_c Rᵀ − m [c]×[c]× with −[c]×[c]× = |c|² 1 − c cᵀ; symmetric, so the upper
+        // triangle is computed and mirrored.
+        let ri = r * inertial.inertia;
+        let c2 = c.norm_squared();
+        let mut i_o = Mat3::zeros();
+        for a in 0..3 {
+            for b in a..3 {
+                let rot = ri[(a, 0)] * r[(b, 0)] + ri[(a, 1)] * r[(b, 1)] + ri[(a, 2)] * r[(b, 2)];
+                let shift = if a == b { c2 } else { 0.0 } - c[a] * c[b];
+                i_o[(a, b)] = rot + shift * m;
+                i_o[(b, a)] = i_o[(a, b)];
+            }
+        }
         SpatialInertia {
             mass: m,
             h: c * m,
@@ -223,6 +239,7 @@ impl SpatialInertia {
     }
 
     /// The spatial force `I (v, ω)` = (m v − h × ω, h × v + I_o ω) for the twist `(v, ω)`.
+    #[inline]
     pub fn apply(&self, v: &Vector, w: &Vector) -> (Vector, Vector) {
         (
             v * self.mass - self.h.cross(w),
@@ -261,6 +278,7 @@ impl Default for Kinematics {
             tip_centres: [Point::origin(); MAX_TIPS],
             tip_jacobians: [TipJacobian::zeros(); MAX_TIPS],
             composite: [SpatialInertia::ZERO; MAX_LINKS],
+            joint_motion: [(Vector::zeros(), Vector::zeros()); MAX_LINKS],
         }
     }
 }
@@ -308,6 +326,22 @@ impl Joint {
                 self.axis.z * value,
             ),
             JointKind::Fixed => Isometry::identity(),
+        }
+    }
+}
+
+impl Joint {
+    /// The joint frame in its parent link's frame for joint value `value`: `origin · motion`.
+    /// A rotation has no translation, so its product with the origin is only a quaternion
+    /// product (no vector rotated).
+    #[inline]
+    pub fn placed(&self, value: f64) -> Isometry {
+        match self.kind {
+            JointKind::Revolute | JointKind::Continuous => Isometry::from_parts(
+                self.origin.translation,
+                self.origin.rotation * Rotation::from_axis_angle(&self.axis, value),
+            ),
+            _ => self.origin * self.motion(value),
         }
     }
 }
@@ -819,8 +853,7 @@ impl HandModel {
         kin.link_poses[self.root] = *base;
         kin.parent_joint[self.root] = NO_JOINT;
         for (j, joint) in self.joints.iter().enumerate().take(MAX_LINKS) {
-            let motion = joint.motion(joint.drive.value(q));
-            let frame = kin.link_poses[joint.parent] * joint.origin * motion;
+            let frame = kin.link_poses[joint.parent] * joint.placed(joint.drive.value(q));
             kin.joint_frames[j] = frame;
             kin.joint_axes[j] = frame.rotation * joint.axis.into_inner();
             kin.link_poses[joint.child] = frame;
@@ -950,6 +983,7 @@ impl HandModel {
             joint_frames,
             link_poses,
             parent_joint,
+            joint_motion: motion,
             ..
         } = kin;
         for (l, link) in self.links.iter().enumerate().take(MAX_LINKS) {
@@ -966,7 +1000,6 @@ impl HandModel {
         }
         // Every joint's motion subspace once: (velocity of the body point at the origin,
         // angular velocity) per unit joint value.
-        let mut motion = [(Vector::zeros(), Vector::zeros()); MAX_LINKS];
         for (j, joint) in joints.iter().enumerate() {
             let a = joint_axes[j];
             motion[j] = match joint.kind {
