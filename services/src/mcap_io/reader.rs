@@ -92,11 +92,7 @@ impl TopicRecording {
     pub fn check_json(&self) -> Result<()> {
         self.check_json_encoding()?;
         for m in &self.messages {
-            json_check::validate(&m.data).map_err(|source| RecordingError::InvalidJson {
-                topic: self.topic.clone(),
-                log_time_ns: m.log_time_ns,
-                source,
-            })?;
+            check_message(&self.topic, m.log_time_ns, &m.data)?;
         }
         Ok(())
     }
@@ -111,15 +107,7 @@ impl TopicRecording {
         self.check_json_encoding()?;
         self.messages
             .iter()
-            .map(|m| {
-                serde_json::from_slice(&m.data)
-                    .map(|v| (m.log_time_ns, v))
-                    .map_err(|source| RecordingError::InvalidJson {
-                        topic: self.topic.clone(),
-                        log_time_ns: m.log_time_ns,
-                        source,
-                    })
-            })
+            .map(|m| decode_message(&self.topic, m.log_time_ns, &m.data))
             .collect()
     }
 
@@ -349,11 +337,7 @@ impl RawSession {
     /// Checks that each of `messages` (of topic `t`) is valid JSON.
     pub(crate) fn check_json_of(&self, t: &RawTopic, messages: &[MessageRef]) -> Result<()> {
         for m in messages {
-            json_check::validate(self.data(m)).map_err(|source| RecordingError::InvalidJson {
-                topic: t.topic.clone(),
-                log_time_ns: m.log_time_ns,
-                source,
-            })?;
+            check_message(&t.topic, m.log_time_ns, self.data(m))?;
         }
         Ok(())
     }
@@ -366,15 +350,7 @@ impl RawSession {
     ) -> Result<Vec<(u64, T)>> {
         messages
             .iter()
-            .map(|m| {
-                serde_json::from_slice(self.data(m))
-                    .map(|v| (m.log_time_ns, v))
-                    .map_err(|source| RecordingError::InvalidJson {
-                        topic: t.topic.clone(),
-                        log_time_ns: m.log_time_ns,
-                        source,
-                    })
-            })
+            .map(|m| decode_message(&t.topic, m.log_time_ns, self.data(m)))
             .collect()
     }
 
@@ -420,6 +396,31 @@ impl RawSession {
             metadata: self.metadata,
         }
     }
+}
+
+/// One message's payload checked to be JSON; the error names its topic and log time.
+fn check_message(topic: &str, log_time_ns: u64, data: &[u8]) -> Result<()> {
+    json_check::validate(data).map_err(|source| RecordingError::InvalidJson {
+        topic: topic.to_owned(),
+        log_time_ns,
+        source,
+    })
+}
+
+/// One message's payload decoded into `T`, with its log time; the error names its topic and
+/// log time.
+fn decode_message<T: DeserializeOwned>(
+    topic: &str,
+    log_time_ns: u64,
+    data: &[u8],
+) -> Result<(u64, T)> {
+    serde_json::from_slice(data)
+        .map(|v| (log_time_ns, v))
+        .map_err(|source| RecordingError::InvalidJson {
+            topic: topic.to_owned(),
+            log_time_ns,
+            source,
+        })
 }
 
 /// A topic's messages are JSON and its schema is the `jsonschema` named `schema_name`.
