@@ -137,72 +137,74 @@ async fn bare_lookup(
     }))
 }
 
-/// Starts the bare server on its own 2-worker runtime; returns its address and a stopper.
-fn start_bare(db: &Path) -> (SocketAddr, tokio::sync::oneshot::Sender<()>) {
-    let db = db.to_path_buf();
+/// Runs a server on its own thread and 2-worker runtime: `serve` gets where to send its bound
+/// address and the signal to stop on. Returns the address and the stopper.
+fn on_own_runtime<F, Fut>(serve: F) -> (SocketAddr, tokio::sync::oneshot::Sender<()>)
+where
+    F: FnOnce(std::sync::mpsc::Sender<SocketAddr>, tokio::sync::oneshot::Receiver<()>) -> Fut
+        + Send
+        + 'static,
+    Fut: std::future::Future<Output = ()>,
+{
     let (addr_tx, addr_rx) = std::sync::mpsc::channel();
     let (stop_tx, stop_rx) = tokio::sync::oneshot::channel::<()>();
     std::thread::spawn(move || {
-        let rt = tokio::runtime::Builder::new_multi_thread()
+        tokio::runtime::Builder::new_multi_thread()
             .worker_threads(2)
             .enable_all()
             .build()
-            .unwrap();
-        rt.block_on(async move {
-            let opts = SqliteConnectOptions::new().filename(&db).read_only(true);
-            let pool = SqlitePoolOptions::new()
-                .max_connections(8)
-                .connect_with(opts)
-                .await
-                .unwrap();
-            let app = Router::new()
-                .route("/api/v1/skills/{id}", get(bare_lookup))
-                .with_state(pool.clone());
-            let listener = tokio::net::TcpListener::bind("127.0.0.1:0").await.unwrap();
-            addr_tx.send(listener.local_addr().unwrap()).unwrap();
-            axum::serve(listener, app)
-                .with_graceful_shutdown(async {
-                    let _ = stop_rx.await;
-                })
-                .await
-                .unwrap();
-            pool.close().await;
-        });
+            .unwrap()
+            .block_on(serve(addr_tx, stop_rx));
     });
     (addr_rx.recv().unwrap(), stop_tx)
 }
 
-/// Starts the ICMS server (the same `Application` as `icms serve`) on its own 2-worker runtime.
-fn start_icms(data: &Path, cache_skills: usize) -> (SocketAddr, tokio::sync::oneshot::Sender<()>) {
-    let data = data.to_path_buf();
-    let (addr_tx, addr_rx) = std::sync::mpsc::channel();
-    let (stop_tx, stop_rx) = tokio::sync::oneshot::channel::<()>();
-    std::thread::spawn(move || {
-        let rt = tokio::runtime::Builder::new_multi_thread()
-            .worker_threads(2)
-            .enable_all()
-            .build()
+/// Starts the bare server; returns its address and a stopper.
+fn start_bare(db: &Path) -> (SocketAddr, tokio::sync::oneshot::Sender<()>) {
+    let db = db.to_path_buf();
+    on_own_runtime(move |addr_tx, stop_rx| async move {
+        let opts = SqliteConnectOptions::new().filename(&db).read_only(true);
+        let pool = SqlitePoolOptions::new()
+            .max_connections(8)
+            .connect_with(opts)
+            .await
             .unwrap();
-        rt.block_on(async move {
-            let config = ServeArgs {
-                addr: SocketAddr::from(([127, 0, 0, 1], 0)),
-                data,
-                no_demo: true,
-                cache_skills,
-                ..ServeArgs::default()
-            }
-            .into_config()
-            .unwrap();
-            let app = Application::build(config).await.unwrap();
-            addr_tx.send(app.local_addr()).unwrap();
-            app.run_until(async {
+        let app = Router::new()
+            .route("/api/v1/skills/{id}", get(bare_lookup))
+            .with_state(pool.clone());
+        let listener = tokio::net::TcpListener::bind("127.0.0.1:0").await.unwrap();
+        addr_tx.send(listener.local_addr().unwrap()).unwrap();
+        axum::serve(listener, app)
+            .with_graceful_shutdown(async {
                 let _ = stop_rx.await;
             })
             .await
             .unwrap();
-        });
-    });
-    (addr_rx.recv().unwrap(), stop_tx)
+        pool.close().await;
+    })
+}
+
+/// Starts the ICMS server (the same `Application` as `icms serve`).
+fn start_icms(data: &Path, cache_skills: usize) -> (SocketAddr, tokio::sync::oneshot::Sender<()>) {
+    let data = data.to_path_buf();
+    on_own_runtime(move |addr_tx, stop_rx| async move {
+        let config = ServeArgs {
+            addr: SocketAddr::from(([127, 0, 0, 1], 0)),
+            data,
+            no_demo: true,
+            cache_skills,
+            ..ServeArgs::default()
+        }
+        .into_config()
+        .unwrap();
+        let app = Application::build(config).await.unwrap();
+        addr_tx.send(app.local_addr()).unwrap();
+        app.run_until(async {
+            let _ = stop_rx.await;
+        })
+        .await
+        .unwrap();
+    })
 }
 
 // ---- wrk --------------------------------------------------------------------------------
