@@ -516,7 +516,7 @@ impl Replay {
             base: &self.base,
             output: self.dfs.output(),
             kinematics: self.dfs.kinematics(),
-            reference: &self.base,
+            reference: &self.reference,
         }
     }
 }
@@ -576,11 +576,7 @@ pub fn run_with(
     }
     let mut replay = Replay::from_plan(plan, skill, params)?;
     while replay.step()? {
-        let tick = ReplayTick {
-            reference: &replay.reference,
-            ..replay.tick()
-        };
-        on_tick(&tick);
+        on_tick(&replay.tick());
     }
     Ok(replay.report())
 }
