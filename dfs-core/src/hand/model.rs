@@ -945,7 +945,9 @@ impl HandModel {
         } = kin;
         for (k, tip) in self.fingertips.iter().enumerate().take(MAX_TIPS) {
             let jac = &mut tip_jacobians[k];
-            jac.columns_mut(0, n).fill(0.0);
+            // Column-major: the first n columns are the first 6n entries (a slice fill is a
+            // memset; the column view's element iterator cost a fifth of the glove stage).
+            jac.as_mut_slice()[..6 * n].fill(0.0);
             self.add_chain_jacobian(
                 parent_joint,
                 joint_axes,
@@ -969,9 +971,7 @@ impl HandModel {
         // Only the block is written: filling all 24x24 entries every tick cost as much as the
         // algorithm itself.
         for c in 0..n {
-            for r in 0..n {
-                m[(r, c)] = 0.0;
-            }
+            m.as_mut_slice()[c * MAX_DOF..c * MAX_DOF + n].fill(0.0);
         }
         // Composite rigid-body algorithm in the world frame: the spatial inertia of every
         // subtree about the world origin, then H_ij = S_jᵀ I_subtree(i) S_i for every joint j
@@ -1010,27 +1010,41 @@ impl HandModel {
                 JointKind::Fixed => (Vector::zeros(), Vector::zeros()),
             };
         }
-        for (i, joint) in joints.iter().enumerate() {
-            let Some((di, gi)) = joint.drive.dof_and_gain() else {
+        // Per joint: its DOF and gain (`usize::MAX` for a fixed joint) and the joint above it
+        // (`NO_JOINT` below the root), so the ancestor walk below is one load per step.
+        let nj = joints.len();
+        let mut dof = [usize::MAX; MAX_LINKS];
+        let mut gain = [0.0; MAX_LINKS];
+        let mut up = [NO_JOINT; MAX_LINKS];
+        for (j, joint) in joints.iter().enumerate() {
+            if let Some((d, g)) = joint.drive.dof_and_gain() {
+                dof[j] = d;
+                gain[j] = g;
+            }
+            if joint.parent != self.root {
+                up[j] = parent_joint[joint.parent];
+            }
+        }
+        for i in 0..nj {
+            let di = dof[i];
+            if di == usize::MAX {
                 continue;
-            };
+            }
+            let gi = gain[i];
             let (v, w) = &motion[i];
-            let (f, t) = composite[joint.child].apply(v, w);
+            let (f, t) = composite[joints[i].child].apply(v, w);
             let mut j = i;
-            for _ in 0..MAX_LINKS {
-                let ancestor = &joints[j];
-                if let Some((dj, gj)) = ancestor.drive.dof_and_gain() {
+            while j < nj {
+                let dj = dof[j];
+                if dj != usize::MAX {
                     let (vj, wj) = &motion[j];
-                    let h = gi * gj * (vj.dot(&f) + wj.dot(&t));
+                    let h = gi * gain[j] * (vj.dot(&f) + wj.dot(&t));
                     m[(di, dj)] += h;
                     if j != i {
                         m[(dj, di)] += h;
                     }
                 }
-                if ancestor.parent == self.root || parent_joint[ancestor.parent] == NO_JOINT {
-                    break;
-                }
-                j = parent_joint[ancestor.parent];
+                j = up[j];
             }
         }
         for (i, a) in self.armature.iter().enumerate().take(n) {
