@@ -337,9 +337,25 @@ impl Joint {
     #[inline]
     pub fn placed(&self, value: f64) -> Isometry {
         match self.kind {
+            JointKind::Revolute | JointKind::Continuous => {
+                self.placed_rotated(value, (value / 2.0).sin_cos())
+            }
+            _ => self.origin * self.motion(value),
+        }
+    }
+
+    /// [`placed`](Self::placed) given `(sin, cos)` of half the joint value for a rotating
+    /// joint (the unit quaternion `Rotation::from_axis_angle` builds, bit for bit).
+    #[inline]
+    fn placed_rotated(&self, value: f64, (s, c): (f64, f64)) -> Isometry {
+        match self.kind {
             JointKind::Revolute | JointKind::Continuous => Isometry::from_parts(
                 self.origin.translation,
-                self.origin.rotation * Rotation::from_axis_angle(&self.axis, value),
+                self.origin.rotation
+                    * Rotation::new_unchecked(nalgebra::Quaternion::from_parts(
+                        c,
+                        self.axis.into_inner() * s,
+                    )),
             ),
             _ => self.origin * self.motion(value),
         }
@@ -852,8 +868,32 @@ impl HandModel {
     pub fn forward_kinematics(&self, base: &Isometry, q: &[f64], kin: &mut Kinematics) {
         kin.link_poses[self.root] = *base;
         kin.parent_joint[self.root] = NO_JOINT;
+        // The half-angle sines of the last few joint values: a mimic joint copying a DOF
+        // (glove10's ring and little fingers, a thumb IP following its MCP) reuses them
+        // instead of another `sin_cos` (a fifth of forward kinematics). Keyed by the exact
+        // bits, so the poses are bit-identical.
+        let mut recent = [(0_u64, (0.0, 1.0)); 4];
+        let (mut next, mut filled) = (0, 0);
         for (j, joint) in self.joints.iter().enumerate().take(MAX_LINKS) {
-            let frame = kin.link_poses[joint.parent] * joint.placed(joint.drive.value(q));
+            let value = joint.drive.value(q);
+            let placed = match joint.kind {
+                JointKind::Revolute | JointKind::Continuous => {
+                    let bits = value.to_bits();
+                    let sc = match recent[..filled].iter().find(|r| r.0 == bits) {
+                        Some(r) => r.1,
+                        None => {
+                            let sc = (value / 2.0).sin_cos();
+                            recent[next] = (bits, sc);
+                            next = (next + 1) % recent.len();
+                            filled = (filled + 1).min(recent.len());
+                            sc
+                        }
+                    };
+                    joint.placed_rotated(value, sc)
+                }
+                _ => joint.placed(value),
+            };
+            let frame = kin.link_poses[joint.parent] * placed;
             kin.joint_frames[j] = frame;
             kin.joint_axes[j] = frame.rotation * joint.axis.into_inner();
             kin.link_poses[joint.child] = frame;
