@@ -12,7 +12,7 @@
 //! model uses a subset: frictionless `c_z`; point with friction `c_x, c_y, c_z`; soft finger all
 //! four. Unused components are zero in every transmitted quantity.
 
-use crate::math::{Real, Rotation, Vector, Wrench};
+use crate::math::{Real, RotationMatrix, Vector, Wrench};
 use nalgebra::{Matrix3, Vector4};
 use serde::{Deserialize, Serialize};
 
@@ -93,8 +93,9 @@ impl Default for Friction {
 pub struct ContactFrame {
     /// Contact point in B (m).
     pub p_b: Vector,
-    /// Rotation of the contact frame C in B; its third column is the inward normal.
-    pub rot_b: Rotation,
+    /// Rotation of the contact frame C in B; its columns are the tangents x, y and the inward
+    /// normal. A rotation matrix: the DFS applies it a dozen times per contact and tick.
+    pub rot_b: RotationMatrix,
 }
 
 impl ContactFrame {
@@ -115,7 +116,7 @@ impl ContactFrame {
         // m is orthonormal by construction: convert it directly. (An iterative fit such as
         // `from_matrix_eps` started at the identity does not converge for frames far from it:
         // a normal of −z came out as +z.)
-        let rot_b = Rotation::from_rotation_matrix(&nalgebra::Rotation3::from_matrix_unchecked(m));
+        let rot_b = RotationMatrix::from_matrix_unchecked(m);
         ContactFrame { p_b, rot_b }
     }
 
@@ -126,7 +127,10 @@ impl ContactFrame {
 
     /// The pose `V_i⁻¹` of C in B, whose wrench map is `Λ_i`.
     pub fn pose_in_b(&self) -> crate::math::Isometry {
-        crate::math::Isometry::from_parts(self.p_b.into(), self.rot_b)
+        crate::math::Isometry::from_parts(
+            self.p_b.into(),
+            crate::math::Rotation::from_rotation_matrix(&self.rot_b),
+        )
     }
 
     /// Wrench in B produced by intensities `c` (the columns of `ᴮW` for this contact, eq. 22).
@@ -140,7 +144,7 @@ impl ContactFrame {
     /// Contact-frame intensities of a force (N) expressed in B acting at the contact point.
     #[inline]
     pub fn intensities_of_force_b(&self, f_b: &Vector) -> Intensity {
-        let f_c = self.rot_b.inverse() * f_b;
+        let f_c = self.rot_b.transpose() * f_b;
         Intensity::new(f_c.x, f_c.y, f_c.z, 0.0)
     }
 }
@@ -267,7 +271,7 @@ mod tests {
         let s = Shape::Sphere { radius: 0.1 };
         let d = detect(&s, &Vector::new(0.0, 0.0, -0.11), 0.01, 1e-3).unwrap();
         assert!((d.frame.normal_b() - Vector::z()).norm() < 1e-12);
-        let m = d.frame.rot_b.to_rotation_matrix().into_inner();
+        let m = d.frame.rot_b.into_inner();
         assert!((m.determinant() - 1.0).abs() < 1e-12);
         assert!(d.penetration.abs() < 1e-12);
         assert!(detect(&s, &Vector::new(0.0, 0.0, -0.2), 0.01, 1e-3).is_none());
@@ -291,7 +295,7 @@ mod tests {
                 "{n:?} -> {:?}",
                 fr.normal_b()
             );
-            let m = fr.rot_b.to_rotation_matrix().into_inner();
+            let m = fr.rot_b.into_inner();
             assert!((m.transpose() * m - Matrix3::identity()).norm() < 1e-12);
             assert!((m.determinant() - 1.0).abs() < 1e-12);
         }
@@ -360,7 +364,7 @@ mod tests {
             let w = fr.wrench_b(&c);
             prop_assert!((crate::math::force_of(&w) - force).norm() < 1e-9);
             prop_assert!((crate::math::moment_of(&w) - fr.p_b.cross(&force)).norm() < 1e-9);
-            let m = fr.rot_b.to_rotation_matrix().into_inner();
+            let m = fr.rot_b.into_inner();
             prop_assert!((m.determinant() - 1.0).abs() < 1e-9);
         }
     }

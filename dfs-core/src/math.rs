@@ -17,6 +17,9 @@ pub type UnitVector = nalgebra::Unit<Vector3<Real>>;
 pub type Isometry = nalgebra::Isometry3<Real>;
 /// A rotation as a unit quaternion.
 pub type Rotation = nalgebra::UnitQuaternion<Real>;
+/// A rotation as its orthonormal matrix (cheaper to apply than a quaternion; used where a
+/// rotation is built once and applied many times, as a contact frame is).
+pub type RotationMatrix = nalgebra::Rotation3<Real>;
 /// A wrench (force N, moment N·m).
 pub type Wrench = Vector6<Real>;
 /// A twist (linear m/s, angular rad/s).

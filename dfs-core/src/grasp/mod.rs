@@ -45,8 +45,7 @@ impl GraspMatrix {
         for (i, c) in contacts.iter().take(n).enumerate() {
             // Columns of Λ_i: the unit forces along the contact axes (columns of the frame's
             // rotation) at p, and the unit moment about the normal (eq. 22, Table 1).
-            let r = c.rot_b.to_rotation_matrix();
-            let r = r.matrix();
+            let r = c.rot_b.matrix();
             for k in 0..4 {
                 if mask[k] == 0.0 {
                     continue;

@@ -153,7 +153,7 @@ fn validate(
         return bad("the load is not finite".into());
     }
     for (i, c) in contacts.iter().enumerate() {
-        let q = c.rot_b.coords;
+        let q = c.rot_b.matrix();
         if !(c.p_b.iter().all(|v| v.is_finite()) && q.iter().all(|v| v.is_finite())) {
             return bad(format!("contact {i} is not finite"));
         }

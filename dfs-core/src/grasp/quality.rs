@@ -151,7 +151,8 @@ fn validate(contacts: &[ContactFrame], friction: &Friction, params: &QualityPara
         }
     }
     for (i, c) in contacts.iter().enumerate() {
-        if !(c.p_b.iter().all(|v| v.is_finite()) && c.rot_b.coords.iter().all(|v| v.is_finite())) {
+        if !(c.p_b.iter().all(|v| v.is_finite()) && c.rot_b.matrix().iter().all(|v| v.is_finite()))
+        {
             return Err(DfsError::invalid(format!("contacts[{i}]"), "not finite"));
         }
     }
@@ -837,7 +838,7 @@ mod tests {
             let axis = Vector::from(axis);
             prop_assume!(axis.norm() > 0.1);
             let r = Rotation::from_axis_angle(&nalgebra::Unit::new_normalize(axis), angle);
-            let rc: Vec<_> = c.iter().map(|f| ContactFrame { p_b: r * f.p_b, rot_b: r * f.rot_b }).collect();
+            let rc: Vec<_> = c.iter().map(|f| ContactFrame { p_b: r * f.p_b, rot_b: r.to_rotation_matrix() * f.rot_b }).collect();
             let p = QualityParams::default();
             let a = q(&c, model, mu, &p);
             let b = q(&rc, model, mu, &p);

@@ -352,7 +352,7 @@ pub fn plan(
     for (i, k) in (0..nt).filter(|&k| active[k]).enumerate() {
         let c = &contacts[k];
         let j = &kin.tip_jacobians[k];
-        let r = c.rot_b.to_rotation_matrix();
+        let r = c.rot_b;
         // The force commanded for each intensity (the finger's own share of it).
         let dofs = hand
             .finger_groups
