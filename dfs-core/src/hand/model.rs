@@ -185,6 +185,9 @@ pub struct Kinematics {
     /// body point at the world origin, angular velocity) per unit joint value. Kept here so
     /// the 64-entry array is not zeroed on the stack every tick.
     pub joint_motion: [(Vector, Vector); MAX_LINKS],
+    /// Scratch for [`HandModel::mass_matrix`]: per joint its DOF (`usize::MAX` when fixed),
+    /// drive gain and the joint above it ([`NO_JOINT`] below the root).
+    pub joint_walk: [(usize, f64, usize); MAX_LINKS],
 }
 
 /// A rigid body's spatial inertia about the world origin, in the compact form the composite
@@ -220,7 +223,25 @@ impl SpatialInertia {
         let c = r * inertial.com + pose.translation.vector;
         // I_o = R I_c Rᵀ − m [c]×[c]× with −[c]×[c]× = |c|² 1 − c cᵀ; symmetric, so the upper
         // triangle is computed and mirrored.
-        let ri = r * inertial.inertia;
+        let i_c = &inertial.inertia;
+        // Principal axes along the link frame (URDF and glove10 inertias mostly are): R I Rᵀ
+        // is then the three scaled outer products of R's columns, the same sums as the full
+        // product with its zero terms left out (bit-identical) at half the multiplications.
+        let diagonal = i_c[(0, 1)] == 0.0
+            && i_c[(0, 2)] == 0.0
+            && i_c[(1, 2)] == 0.0
+            && i_c[(1, 0)] == 0.0
+            && i_c[(2, 0)] == 0.0
+            && i_c[(2, 1)] == 0.0;
+        let ri = if diagonal {
+            let mut ri = *r;
+            for k in 0..3 {
+                ri.column_mut(k).scale_mut(i_c[(k, k)]);
+            }
+            ri
+        } else {
+            r * i_c
+        };
         let c2 = c.norm_squared();
         let mut i_o = Mat3::zeros();
         for a in 0..3 {
@@ -279,6 +300,7 @@ impl Default for Kinematics {
             tip_jacobians: [TipJacobian::zeros(); MAX_TIPS],
             composite: [SpatialInertia::ZERO; MAX_LINKS],
             joint_motion: [(Vector::zeros(), Vector::zeros()); MAX_LINKS],
+            joint_walk: [(usize::MAX, 0.0, NO_JOINT); MAX_LINKS],
         }
     }
 }
@@ -1024,6 +1046,7 @@ impl HandModel {
             link_poses,
             parent_joint,
             joint_motion: motion,
+            joint_walk: walk,
             ..
         } = kin;
         for (l, link) in self.links.iter().enumerate().take(MAX_LINKS) {
@@ -1053,38 +1076,34 @@ impl HandModel {
         // Per joint: its DOF and gain (`usize::MAX` for a fixed joint) and the joint above it
         // (`NO_JOINT` below the root), so the ancestor walk below is one load per step.
         let nj = joints.len();
-        let mut dof = [usize::MAX; MAX_LINKS];
-        let mut gain = [0.0; MAX_LINKS];
-        let mut up = [NO_JOINT; MAX_LINKS];
         for (j, joint) in joints.iter().enumerate() {
-            if let Some((d, g)) = joint.drive.dof_and_gain() {
-                dof[j] = d;
-                gain[j] = g;
-            }
-            if joint.parent != self.root {
-                up[j] = parent_joint[joint.parent];
-            }
+            let (d, g) = joint.drive.dof_and_gain().unwrap_or((usize::MAX, 0.0));
+            let up = if joint.parent != self.root {
+                parent_joint[joint.parent]
+            } else {
+                NO_JOINT
+            };
+            walk[j] = (d, g, up);
         }
         for i in 0..nj {
-            let di = dof[i];
+            let (di, gi, _) = walk[i];
             if di == usize::MAX {
                 continue;
             }
-            let gi = gain[i];
             let (v, w) = &motion[i];
             let (f, t) = composite[joints[i].child].apply(v, w);
             let mut j = i;
             while j < nj {
-                let dj = dof[j];
+                let (dj, gj, up) = walk[j];
                 if dj != usize::MAX {
                     let (vj, wj) = &motion[j];
-                    let h = gi * gain[j] * (vj.dot(&f) + wj.dot(&t));
+                    let h = gi * gj * (vj.dot(&f) + wj.dot(&t));
                     m[(di, dj)] += h;
                     if j != i {
                         m[(dj, di)] += h;
                     }
                 }
-                j = up[j];
+                j = up;
             }
         }
         for (i, a) in self.armature.iter().enumerate().take(n) {
