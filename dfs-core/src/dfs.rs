@@ -454,11 +454,12 @@ impl Dfs {
 
     /// Stage 2: contact detection between fingertip spheres and the object.
     pub fn stage_contacts(&mut self) {
-        let inv = self.state.pose.inverse();
+        let rot_inv = self.state.pose.rotation.to_rotation_matrix().transpose();
+        let pos = self.state.pose.translation.vector;
         for (k, tip) in self.hand.fingertips.iter().enumerate() {
             let c_world = self.kin.tip_centres[k];
             self.out.tip_centres[k] = c_world;
-            let c_b = (inv * c_world).coords;
+            let c_b = rot_inv * (c_world.coords - pos);
             let t = &mut self.out.tips[k];
             *t = TipContact::default();
             if let Some(d) = detect(
@@ -510,9 +511,12 @@ impl Dfs {
                 self.out.tips[tip].tip_force_world = f;
             }
         }
-        let rot = self.state.pose.rotation;
-        let rot_inv = rot.inverse();
-        let inv = self.state.pose.inverse();
+        // The object's orientation as a matrix: applied about ten times per touching tip.
+        let rot = self.state.pose.rotation.to_rotation_matrix();
+        let rot_inv = rot.transpose();
+        let pos = self.state.pose.translation.vector;
+        let v_lin = self.state.linear_velocity;
+        let w_b = self.state.angular_velocity_b;
         let dt = self.params.dt;
         let mut n = 0;
         for k in 0..self.hand.fingertips.len() {
@@ -529,11 +533,11 @@ impl Dfs {
             let z_world = rot * frame.normal_b();
             let tip_point =
                 self.out.tip_centres[k].coords + z_world * self.hand.fingertips[k].radius;
-            let tip_b = (inv * Point::from(tip_point)).coords;
+            let tip_b = rot_inv * (tip_point - pos);
             let anchor_b = self.anchors_b[k].unwrap_or(tip_b);
-            let mut err = tip_point - (self.state.pose * Point::from(anchor_b)).coords;
+            let mut err = tip_point - (rot * anchor_b + pos);
             err -= z_world * err.dot(&z_world);
-            let v_obj = self.state.point_velocity(&tip_b);
+            let v_obj = v_lin + rot * w_b.cross(&tip_b);
             let v_rel = self.prev_tip_points[k]
                 .map(|prev| (tip_point - prev) / dt - v_obj)
                 .unwrap_or_else(Vector::zeros);
@@ -557,7 +561,7 @@ impl Dfs {
             for &d in dofs {
                 w_tip += Vector::new(j[(3, d)], j[(4, d)], j[(5, d)]) * self.qd[d];
             }
-            let w_obj = rot * self.state.angular_velocity_b;
+            let w_obj = rot * w_b;
             let spin = (w_tip - w_obj).dot(&z_world);
             let twist = self.twist[k] + spin * dt;
             let torsion =
@@ -642,7 +646,7 @@ impl Dfs {
     /// finger dynamics (eq. 19-21) integrated implicitly to the motor commands.
     pub fn stage_feedback(&mut self, tau: &[Real]) {
         let n = self.out.n_contacts;
-        let rot = self.state.pose.rotation;
+        let rot = self.state.pose.rotation.to_rotation_matrix();
         if let Some(g) = &self.grasp {
             // The reaction is distributed over the transmitting contacts only; the table's
             // share of f_ext is not the fingers' to carry.
@@ -681,6 +685,7 @@ impl Dfs {
             rhs[i] = s + dt * tau[i];
         }
         let mut fb_torque = [0.0; MAX_DOF];
+        let rot = self.state.pose.rotation.to_rotation_matrix();
         for k in 0..self.hand.fingertips.len() {
             let t = &self.out.tips[k];
             let j = &self.kin.tip_jacobians[k];
@@ -693,7 +698,7 @@ impl Dfs {
                 fb_torque[d] += j[(0, d)] * f.x + j[(1, d)] * f.y + j[(2, d)] * f.z;
             }
             let Some(frame) = t.frame else { continue };
-            let z_world = self.state.pose.rotation * frame.normal_b();
+            let z_world = rot * frame.normal_b();
             let stick = self.stick[k];
             let v = self.spring_vel[k];
             let proj_v = if stick { v } else { z_world * v.dot(&z_world) };
