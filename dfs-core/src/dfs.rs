@@ -37,7 +37,8 @@ use crate::error::{DfsError, Result};
 use crate::grasp::{GraspMatrix, MAX_CONTACTS};
 use crate::hand::{DofMatrix, HandModel, Kinematics, MAX_DOF, MAX_TIPS};
 use crate::math::{
-    cholesky_solve_in_place, force_of, moment_of, wrench, Isometry, Point, Real, Vector, Wrench,
+    cholesky_solve_in_place, envelope_cholesky_solve, force_of, moment_of, wrench, Isometry, Point,
+    Real, Vector, Wrench,
 };
 use crate::object::{external_wrench_b, integrate, ObjectState, RigidObject};
 
@@ -274,7 +275,52 @@ pub struct Dfs {
     /// Per tip: the DOFs that move it (the wrist's and its finger's), ascending. Every other
     /// column of its Jacobian is zero, so the per-tip joint-space sums skip them.
     tip_dofs: [TipDofs; MAX_TIPS],
+    /// The implicit finger step's matrix (M(θ), damping, contact springs) is solved with its
+    /// DOFs in this order, finger groups first and the shared (wrist) DOFs last, where its
+    /// rows' nonzeros start at `solve_first`: no fill-in, a fraction of a dense Cholesky.
+    solve_order: [usize; MAX_DOF],
+    solve_first: [usize; MAX_DOF],
+    factor: DofMatrix,
     out: TickOutput,
+}
+
+/// The order and envelope for [`envelope_cholesky_solve`] of the implicit finger step: the
+/// DOFs of each finger group, then the rest (the wrist's, shared by every tip, and any that
+/// move no tip); `first[i]` is the first position coupled to position `i` through M(θ)
+/// ([`HandModel::inertia_coupling`]) or through a fingertip moved by both DOFs (its contact
+/// spring).
+fn finger_step_envelope(
+    hand: &HandModel,
+    tip_dofs: &[TipDofs; MAX_TIPS],
+) -> ([usize; MAX_DOF], [usize; MAX_DOF]) {
+    let n = hand.dof().min(MAX_DOF);
+    let mut pattern = hand.inertia_coupling();
+    for t in tip_dofs.iter().take(hand.fingertips.len()) {
+        let set = t.as_slice().iter().fold(0_u32, |s, &d| s | 1 << d);
+        for &d in t.as_slice() {
+            pattern[d] |= set;
+        }
+    }
+    let mut order = [0; MAX_DOF];
+    let mut placed = [false; MAX_DOF];
+    let mut len = 0;
+    let grouped = hand
+        .finger_groups
+        .iter()
+        .flat_map(|g| g.dofs.iter().copied());
+    for d in grouped.chain(0..n) {
+        if d < n && !placed[d] {
+            placed[d] = true;
+            order[len] = d;
+            len += 1;
+        }
+    }
+    let mut first = [0; MAX_DOF];
+    for i in 0..len {
+        let row = pattern[order[i]] | 1 << order[i];
+        first[i] = (0..=i).find(|&j| row & (1 << order[j]) != 0).unwrap_or(i);
+    }
+    (order, first)
 }
 
 /// The DOFs moving one fingertip, ascending (fixed capacity).
@@ -333,6 +379,7 @@ impl Dfs {
         for (k, t) in tip_dofs.iter_mut().enumerate().take(hand.fingertips.len()) {
             *t = TipDofs::of(&hand, k);
         }
+        let (solve_order, solve_first) = finger_step_envelope(&hand, &tip_dofs);
         Ok(Dfs {
             hand,
             object,
@@ -356,6 +403,9 @@ impl Dfs {
             contact_tip: [0; MAX_CONTACTS],
             grasp: None,
             tip_dofs,
+            solve_order,
+            solve_first,
+            factor: DofMatrix::zeros(),
             out,
         })
     }
@@ -728,7 +778,14 @@ impl Dfs {
             rhs[d] += dt * fb_torque[d];
         }
         self.out.feedback_torque[..ndof].copy_from_slice(&fb_torque[..ndof]);
-        if cholesky_solve_in_place(a, ndof, &mut rhs) {
+        let solved = envelope_cholesky_solve(
+            a,
+            &self.solve_order[..ndof],
+            &self.solve_first[..ndof],
+            &mut self.factor,
+            &mut rhs,
+        );
+        if solved {
             for d in 0..ndof {
                 let mut v = rhs[d];
                 let mut q = self.q[d] + dt * v;

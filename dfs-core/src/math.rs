@@ -191,9 +191,112 @@ pub fn cholesky_solve_in_place<const N: usize>(
     true
 }
 
+/// Solves `A x = b` for a symmetric positive-definite `A` whose nonzeros, with its rows and
+/// columns taken in the order `order`, lie within an *envelope*: row `i` (in that order) has
+/// no nonzero left of column `first[i]`. The Cholesky factor has the same envelope (no
+/// fill-in outside it), so only its entries are computed: for a hand with the finger DOFs
+/// first and the wrist's last, the factor is block-arrowhead and costs a fraction of a dense
+/// one. `a` is read at `a[(order[i], order[j])]` with `first[i] ≤ j ≤ i`; `u` is scratch (the
+/// factor, transposed: column `i` holds row `i` of L, with `1 / L[i][i]` on the diagonal);
+/// `b` is overwritten by `x` in the
+/// original order. Allocation-free; `false` when `A` is not positive definite (or not finite).
+pub fn envelope_cholesky_solve<const N: usize>(
+    a: &nalgebra::SMatrix<Real, N, N>,
+    order: &[usize],
+    first: &[usize],
+    u: &mut nalgebra::SMatrix<Real, N, N>,
+    b: &mut [Real],
+) -> bool {
+    let n = order.len().min(first.len()).min(N);
+    let u = u.as_mut_slice();
+    for i in 0..n {
+        let fi = first[i].min(i);
+        let oi = order[i];
+        for j in fi..i {
+            let fj = first[j].max(fi);
+            let mut s = a[(oi, order[j])];
+            for k in fj..j {
+                s -= u[i * N + k] * u[j * N + k];
+            }
+            // The diagonal holds 1 / L[j][j]: a multiplication here, not a division.
+            u[i * N + j] = s * u[j * N + j];
+        }
+        let mut d = a[(oi, oi)];
+        for k in fi..i {
+            d -= u[i * N + k] * u[i * N + k];
+        }
+        if d <= 0.0 || !d.is_finite() {
+            return false;
+        }
+        u[i * N + i] = 1.0 / d.sqrt();
+    }
+    // L y = P b, then Lᵀ x = y (column by column), x back in the original order.
+    let mut y = [0.0; N];
+    for i in 0..n {
+        let mut s = b[order[i]];
+        for k in first[i].min(i)..i {
+            s -= u[i * N + k] * y[k];
+        }
+        y[i] = s * u[i * N + i];
+    }
+    for i in (0..n).rev() {
+        let x = y[i] * u[i * N + i];
+        y[i] = x;
+        for k in first[i].min(i)..i {
+            y[k] -= u[i * N + k] * x;
+        }
+    }
+    for i in 0..n {
+        b[order[i]] = y[i];
+    }
+    true
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn the_envelope_solve_equals_the_dense_one_for_an_arrowhead_matrix() {
+        // Two 2x2 blocks coupled only through the last row and column, stored in a shuffled
+        // order: DOFs 3, 0 form one block, 1, 4 the other, 2 couples with all.
+        let mut a = nalgebra::SMatrix::<f64, 6, 6>::zeros();
+        let entries = [
+            (3, 3, 4.0),
+            (0, 0, 5.0),
+            (3, 0, 1.0),
+            (1, 1, 6.0),
+            (4, 4, 3.0),
+            (1, 4, -1.0),
+            (2, 2, 9.0),
+            (2, 3, 0.5),
+            (2, 0, -0.7),
+            (2, 1, 1.1),
+            (2, 4, 0.3),
+        ];
+        for (i, j, v) in entries {
+            a[(i, j)] = v;
+            a[(j, i)] = v;
+        }
+        let order = [3, 0, 1, 4, 2];
+        let first = [0, 0, 2, 2, 0];
+        let b0 = [1.0, -2.0, 0.5, 3.0, 0.25, 42.0];
+        let mut b = b0;
+        let mut u = nalgebra::SMatrix::<f64, 6, 6>::zeros();
+        assert!(envelope_cholesky_solve(&a, &order, &first, &mut u, &mut b));
+        let mut dense = a;
+        let mut bd = b0;
+        assert!(cholesky_solve_in_place(&mut dense, 5, &mut bd));
+        for k in 0..5 {
+            assert!((b[k] - bd[k]).abs() < 1e-12, "{k}: {} vs {}", b[k], bd[k]);
+        }
+        assert_eq!(b[5], 42.0, "entries outside the order are left alone");
+        let mut bad = a;
+        bad[(2, 2)] = -1.0;
+        assert!(!envelope_cholesky_solve(
+            &bad, &order, &first, &mut u, &mut b
+        ));
+    }
 
     #[test]
     fn cholesky_solves_the_top_left_block_only() {

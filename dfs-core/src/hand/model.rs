@@ -743,6 +743,29 @@ impl HandModel {
         Ok(())
     }
 
+    /// For every DOF, the set of DOFs it shares inertia with: those driving a joint on the
+    /// path from one of its joints to the root, or one below it. `M(θ)[a][b]` can be nonzero
+    /// only for such pairs (and `a == b`); DOFs of different fingers never couple.
+    pub fn inertia_coupling(&self) -> [u32; MAX_DOF] {
+        let mut c = [0 as DofSet; MAX_DOF];
+        for joint in &self.joints {
+            let Some((b, _)) = joint.drive.dof_and_gain() else {
+                continue;
+            };
+            if b >= MAX_DOF {
+                continue;
+            }
+            let above = self.dofs_moving_link(joint.child);
+            c[b] |= above;
+            for (a, row) in c.iter_mut().enumerate() {
+                if above & (1 << a) != 0 {
+                    *row |= 1 << b;
+                }
+            }
+        }
+        c
+    }
+
     /// The DOFs that move `link`, as a bit set (bit d set when DOF d moves it): those of every
     /// joint on the path from the root to it (a mimic joint counts for its source DOF). Needs
     /// a valid tree.
