@@ -156,6 +156,10 @@ pub struct GraspPlan {
     pub contacts_b: [Vector; MAX_TIPS],
     /// Per fingertip of the grasp: the outward surface normal there, in B.
     pub normals_b: [Vector; MAX_TIPS],
+    /// Per fingertip of the grasp: how well it can push along its contact normal at the grasp,
+    /// the cosine of the angle between the inward normal and the nearest direction the
+    /// fingertip can push in (1 = straight along the normal).
+    pub normal_alignment: [Real; MAX_TIPS],
 }
 
 /// Index of a fingertip by name.
@@ -167,7 +171,15 @@ fn tip_index(hand: &HandModel, name: &str) -> Option<usize> {
 /// down with the fingers along the object's x axis; the thumb goes to the object's −x side and
 /// the fingers to its +x side, at the height of the object's centre. Pinch uses thumb and index
 /// (the other fingers curled away); power uses every finger. The base position is solved
-/// together with the fingers by inverse kinematics; the wrist stays at zero.
+/// together with the fingers and the wrist by inverse kinematics.
+///
+/// In a power grasp each fingertip goes where its own flexion plane meets the object: the
+/// fingers push only within those planes (eq. 14 transmits only forces in the range of Jᵀ), and
+/// a hand's planes lie side by side, fixed by its anatomy (glove10: the thumb's 8 mm radial of
+/// the index's, the middle finger's 2 cm ulnar of it). The object's axis goes midway between
+/// the thumb's and the index's planes, so the two oppose each other across it and push along
+/// their contact normals; the other fingers meet a curved surface where it turns away from
+/// their planes, and only rest on it where it turns too far ([`GraspPlan::normal_alignment`]).
 pub fn plan_grasp(
     hand: &HandModel,
     object: &RigidObject,
@@ -248,11 +260,33 @@ pub fn plan_grasp(
         Shape::Cylinder { half_height, .. } => &[0.3 * half_height, 0.0][..],
     };
     let mut kin = Kinematics::default();
+    // Power: where each fingertip's flexion plane lies across the hand (m, along the index's
+    // distal joint axis in the hand's base frame at the start posture), relative to the middle
+    // between the thumb's and the index's planes.
+    let power = style == GraspStyle::Power;
+    let mut lateral = [0.0; MAX_TIPS];
+    if power {
+        hand.forward_kinematics(&Isometry::identity(), &q_hand0[..n_hand], &mut kin);
+        let index = fingers[0];
+        let axis = hand
+            .joints
+            .iter()
+            .find(|j| j.child == hand.fingertips[index].link)
+            .map(|j| kin.link_poses[j.child].rotation * j.axis.into_inner())
+            .unwrap_or(Vector::y());
+        for &k in std::iter::once(&thumb).chain(&fingers) {
+            lateral[k] = kin.tip_centres[k].coords.dot(&axis);
+        }
+        let mid = 0.5 * (lateral[thumb] + lateral[index]);
+        for v in lateral.iter_mut() {
+            *v -= mid;
+        }
+    }
     // Best candidate: (score, ik error, q, rotation, axis, height).
     let mut best: Option<(Real, Real, [Real; MAX_DOF], Rotation, Vector, Real)> = None;
     let mut best_err = Real::INFINITY;
     // Try grasp axes × hand orientations (yaw of the palm about the vertical) × heights.
-    let spreads: &[Real] = if fingers.len() > 1 {
+    let spreads: &[Real] = if fingers.len() > 1 && !power {
         &[0.02, -0.02][..]
     } else {
         &[0.0][..]
@@ -302,24 +336,46 @@ pub fn plan_grasp(
                 .iter()
                 .flat_map(|h| signs.into_iter().map(move |s| (h, s)))
             {
+                // Power: the flexion planes are parallel, so the thumb's axis points the
+                // same way as the fingers'.
+                if power && sign != thumb_sign {
+                    continue;
+                }
                 let across = |y: Real| match object.shape {
                     Shape::Sphere { radius } => (radius * radius - h * h - y * y).max(0.0).sqrt(),
                     Shape::Cylinder { radius, .. } => (radius * radius - y * y).max(0.0).sqrt(),
                     Shape::Box { .. } => half,
                 };
+                // Where fingertip `k` of radius `r` meets the surface at `y` across the grasp
+                // axis, along the axis from the centre: a power grasp puts the fingertip's
+                // centre on the cylinder's surface grown by its radius, off the axis line too.
+                let reach = |y: Real, r: Real| match object.shape {
+                    Shape::Cylinder { radius, .. } if power => {
+                        ((radius + r) * (radius + r) - y * y).max(0.0).sqrt()
+                    }
+                    _ => across(y) + r,
+                };
                 let mut targets: Vec<(usize, Point)> = Vec::new();
                 let up = Vector::z() * h;
-                let thumb_p = centre - a * (across(0.0) + hand.fingertips[thumb].radius) + up;
+                let thumb_y = sign * lateral[thumb];
+                let thumb_p = centre - a * reach(thumb_y, hand.fingertips[thumb].radius)
+                    + side * thumb_y
+                    + up;
                 targets.push((0, Point::from(thumb_p)));
                 targets.push((
                     real.len(),
                     Point::from(thumb_p + side * (0.02 * thumb_sign)),
                 ));
                 for (i, &f) in fingers.iter().enumerate() {
-                    // Fingertips side by side, about 2 cm apart, as a hand's fingers lie.
-                    let y = (spread * (0.5 - i as Real)).clamp(-0.7 * half, 0.7 * half);
+                    // Pinch: the fingertip opposite the thumb. Power: each fingertip in its
+                    // own flexion plane.
+                    let y = if power {
+                        sign * lateral[f]
+                    } else {
+                        (spread * (0.5 - i as Real)).clamp(-0.7 * half, 0.7 * half)
+                    };
                     let r = hand.fingertips[f].radius;
-                    let p = centre + a * (across(y) + r) + side * y + up;
+                    let p = centre + a * reach(y, r) + side * y + up;
                     targets.push((1 + i, Point::from(p)));
                     targets.push((real.len() + 1 + i, Point::from(p + side * (0.02 * sign))));
                 }
@@ -346,18 +402,28 @@ pub fn plan_grasp(
                 // Prefer grasps whose fingertips can push along their contact normals: a
                 // finger with few joints only pushes within the range of its Jacobian.
                 free.tip_jacobians(&mut kin);
-                let mut align: Real = 1.0;
+                // The thumb and the finger opposite it squeeze: they must push along their
+                // normals. To lift by friction, the thumb must push along the vertical, and so
+                // must a finger on the other side (a pinch: both).
+                let (mut along_normal, mut thumb_up, mut finger_up): (Real, Real, Real) =
+                    (1.0, 1.0, 0.0);
                 for &(tip, target) in targets.iter().filter(|(t, _)| *t < real.len()) {
                     let normal = {
                         let mut v = centre + Vector::z() * h - target.coords;
                         v.z = 0.0;
                         v.normalize()
                     };
-                    // The fingertip must push along the normal and, to lift by friction, along
-                    // the vertical.
-                    align = align.min(push_alignment(&free, &kin, tip, &normal));
-                    align = align.min(push_alignment(&free, &kin, tip, &Vector::z()));
+                    let up = push_alignment(&free, &kin, tip, &Vector::z());
+                    if tip <= 1 {
+                        along_normal = along_normal.min(push_alignment(&free, &kin, tip, &normal));
+                    }
+                    if tip == 0 {
+                        thumb_up = up;
+                    } else {
+                        finger_up = finger_up.max(up);
+                    }
                 }
+                let align = along_normal.min(thumb_up).min(finger_up);
                 let score = align - r.max_error * 20.0;
                 if best.as_ref().is_none_or(|b| score > b.0 + 1e-9) {
                     best = Some((score, r.max_error, q, rot, a, h));
@@ -444,12 +510,15 @@ pub fn plan_grasp(
     }
     let mut contacts_b = [Vector::zeros(); MAX_TIPS];
     let mut normals_b = [Vector::zeros(); MAX_TIPS];
+    let mut normal_alignment = [0.0; MAX_TIPS];
     hand.forward_kinematics(&base_pose, &q_grasp[..n_hand], &mut kin);
+    hand.tip_jacobians(&mut kin);
     for (k, _) in tips.iter().enumerate().filter(|(_, &t)| t) {
         let c_b = (inv_obj * kin.tip_centres[k]).coords;
         let (_, _, n_out) = object.shape.closest(&c_b);
         contacts_b[k] = c_b;
         normals_b[k] = n_out;
+        normal_alignment[k] = push_alignment(hand, &kin, k, &-(pose.rotation * n_out));
     }
     Ok(GraspPlan {
         base,
@@ -461,6 +530,7 @@ pub fn plan_grasp(
         style,
         contacts_b,
         normals_b,
+        normal_alignment,
     })
 }
 
