@@ -726,6 +726,9 @@ pub struct Simulation {
     hold_in_mount: [Option<(Vector, Vector)>; MAX_TIPS],
     /// Per fingertip: the link its finger is mounted on ([`mount_link`]).
     mount: [usize; MAX_TIPS],
+    /// Per fingertip of the grasp: it rests on the object instead of squeezing it
+    /// ([`resting_tips`]).
+    resting: [bool; MAX_TIPS],
     base: Isometry,
     base_acceleration: Vector,
     q_intent: [Real; MAX_DOF],
@@ -846,6 +849,7 @@ impl Simulation {
             offset: 0.03,
             seen_object: pose,
             hold_in_mount: [None; MAX_TIPS],
+            resting: [false; MAX_TIPS],
             mount,
             base: start_base,
             base_acceleration: Vector::zeros(),
@@ -972,6 +976,12 @@ impl Simulation {
             Phase::Approach => {
                 let pose = self.dfs.object_state().pose;
                 self.plan = plan_grasp(self.dfs.hand(), self.dfs.object(), &pose, self.style)?;
+                self.resting = resting_tips(
+                    &self.plan,
+                    self.dfs.hand(),
+                    self.operator_mu,
+                    self.params.grip_safety,
+                );
                 self.to_base = approach_pose(&self.plan.base, &self.dfs.object().shape);
                 self.to_q = self.plan.q_open;
                 self.to_grip = 0.0;
@@ -1124,7 +1134,7 @@ impl Simulation {
         // on the object; until then each closes softly on its spot, so the first to touch does
         // not shove the object away from the others.
         let all_touch = (0..out.n_tips.min(MAX_TIPS))
-            .filter(|&k| self.plan.tips[k])
+            .filter(|&k| self.plan.tips[k] && !self.resting[k])
             .all(|k| out.tips[k].touching);
         let mut in_grasp = [false; MAX_DOF];
         let mut tau = [0.0; MAX_DOF];
@@ -1254,30 +1264,28 @@ impl Simulation {
         let kin = self.dfs.kinematics();
         let hand = self.dfs.hand();
         let p = &self.params;
-        let planned = self
-            .plan
-            .tips
-            .iter()
-            .take(out.n_tips)
-            .filter(|&&t| t)
+        let planned = (0..out.n_tips.min(MAX_TIPS))
+            .filter(|&k| self.plan.tips[k] && !self.resting[k])
             .count();
         // Fixed-capacity lists: this runs every tick of a session.
         let mut touching = [0usize; MAX_TIPS];
         let mut nt = 0;
+        let mut squeezing = 0;
         for k in 0..out.n_tips.min(MAX_TIPS) {
             if self.plan.tips[k] && out.tips[k].frame.is_some() {
                 touching[nt] = k;
                 nt += 1;
+                squeezing += usize::from(!self.resting[k]);
             }
         }
         let touching = &touching[..nt];
-        // Squeeze only once every finger of the grasp is on the object.
-        if touching.is_empty() || touching.len() < planned {
+        // Squeeze only once every squeezing finger of the grasp is on the object.
+        if squeezing == 0 || squeezing < planned {
             return (mags, unit, lift);
         }
         let load_force = (self.base_acceleration - g) * obj.mass;
         let load = load_force.norm();
-        let normal = (p.grip_safety * load / (self.operator_mu * touching.len() as Real))
+        let normal = (p.grip_safety * load / (self.operator_mu * squeezing as Real))
             .max(p.min_normal)
             * self.grip
             * (1.0 + self.grip_boost);
@@ -1305,11 +1313,17 @@ impl Simulation {
                 range[k] -= d * d.transpose();
             }
         }
+        // The squeeze and the load are the squeezing fingertips'; a resting one only presses
+        // lightly along its push.
         let mut ks = [0usize; MAX_TIPS];
         let mut m = 0;
         for &k in touching.iter().filter(|&&k| ok[k]) {
-            ks[m] = k;
-            m += 1;
+            if self.resting[k] {
+                mags[k] = p.min_normal * self.grip;
+            } else {
+                ks[m] = k;
+                m += 1;
+            }
         }
         let mut sys = nalgebra::SMatrix::<Real, MAX_TIPS, MAX_TIPS>::identity();
         let wanted = [normal; MAX_TIPS];
@@ -1422,6 +1436,27 @@ impl GraspStyle {
             self
         }
     }
+}
+
+/// The fingertips of `plan` that rest on the object instead of squeezing it: those beside the
+/// squeezing pair (thumb and index) that cannot push within the friction cone the operator
+/// expects with its safety margin even before any load, i.e. whose push direction nearest the
+/// contact normal ([`GraspPlan::normal_alignment`], cos θ) leans off it by tan θ > μ / safety.
+/// Pressing harder with such a finger only makes it slide on the surface (a finger whose
+/// flexion plane passes beside a cylinder's axis meets a surface turned away from the plane);
+/// it closes until it touches and presses with the least force.
+fn resting_tips(plan: &GraspPlan, hand: &HandModel, mu: Real, safety: Real) -> [bool; MAX_TIPS] {
+    let mut out = [false; MAX_TIPS];
+    let pair = [tip_index(hand, "thumb"), tip_index(hand, "index")];
+    for (k, rest) in out.iter_mut().enumerate().take(hand.fingertips.len()) {
+        if !plan.tips[k] || pair.contains(&Some(k)) {
+            continue;
+        }
+        let c = plan.normal_alignment[k].clamp(1e-6, 1.0);
+        let tan = (1.0 - c * c).sqrt() / c;
+        *rest = tan * safety > mu;
+    }
+    out
 }
 
 /// Where the hand waits before closing in: beside the grasp pose along the palm's y axis (the
