@@ -1027,6 +1027,19 @@ impl Simulation {
                 self.to_q = self.plan.q_pre;
                 self.to_grip = 0.0;
                 self.to_offset = 0.015;
+                // Let go from where each fingertip holds the object, not from where the plan
+                // put it: an object that turned or slid in the hand (set down on a tilted
+                // edge, say) would otherwise be dragged back by fingertips steering to their
+                // planned spots as they open.
+                let out = self.dfs.output();
+                for k in 0..out.n_tips.min(MAX_TIPS) {
+                    if let (true, Some(frame)) = (self.plan.tips[k], out.tips[k].frame) {
+                        let n_out = -frame.normal_b();
+                        let r = self.dfs.hand().fingertips[k].radius;
+                        self.plan.contacts_b[k] = frame.p_b + n_out * r;
+                        self.plan.normals_b[k] = n_out;
+                    }
+                }
             }
             Phase::Retreat => {
                 self.to_base = raise(&self.from_base, 0.10);
