@@ -1654,6 +1654,136 @@ mod tests {
         }
     }
 
+    /// What happens to the object over a run of `scenario`: its height above the start at the
+    /// end of `lift`, the least height and contacts during `hold`, the least height during
+    /// `transport` and its sideways travel, and at the end its height above the start, its
+    /// tilt from upright (rad) and the contacts left.
+    struct Outcome {
+        lifted: Real,
+        hold_low: Real,
+        hold_contacts: usize,
+        transport_low: Real,
+        carried: Real,
+        end: Real,
+        tilt: Real,
+        end_contacts: usize,
+    }
+
+    fn outcome(scenario: &Scenario) -> Outcome {
+        let mut sim = Simulation::new(scenario, HandModel::glove10(), None).unwrap();
+        let start = sim.dfs().object_state().pose.translation.vector;
+        let mut o = Outcome {
+            lifted: 0.0,
+            hold_low: Real::INFINITY,
+            hold_contacts: usize::MAX,
+            transport_low: Real::INFINITY,
+            carried: 0.0,
+            end: 0.0,
+            tilt: 0.0,
+            end_contacts: 0,
+        };
+        while sim.step().unwrap() {
+            let p = sim.dfs().object_state().pose.translation.vector - start;
+            match sim.phase() {
+                Phase::Lift => o.lifted = p.z,
+                Phase::Hold => {
+                    o.hold_low = o.hold_low.min(p.z);
+                    o.hold_contacts = o.hold_contacts.min(sim.output().n_contacts);
+                }
+                Phase::Transport => {
+                    o.transport_low = o.transport_low.min(p.z);
+                    o.carried = p.y;
+                }
+                _ => {}
+            }
+        }
+        let st = sim.dfs().object_state();
+        o.end = st.pose.translation.z - start.z;
+        o.tilt = (st.pose.rotation * Vector::z()).angle(&Vector::z());
+        o.end_contacts = sim.output().n_contacts;
+        o
+    }
+
+    #[test]
+    fn cylinder_power_grasp_lifts_holds_carries_and_sets_down_the_cylinder_for_every_seed() {
+        for seed in 0..6 {
+            let o = outcome(&Scenario::builtin("cylinder-power-grasp", seed).unwrap());
+            assert!(o.lifted > 0.05, "seed {seed}: lifted only {} m", o.lifted);
+            assert!(
+                o.hold_low > 0.05 && o.hold_contacts >= 3,
+                "seed {seed}: held at {} m on {} contacts",
+                o.hold_low,
+                o.hold_contacts
+            );
+            assert!(
+                o.transport_low > 0.05 && (o.carried - 0.15).abs() < 0.02,
+                "seed {seed}: carried {} m sideways, as low as {} m",
+                o.carried,
+                o.transport_low
+            );
+            assert!(
+                o.end.abs() < 0.005 && o.tilt < 0.05,
+                "seed {seed}: set down at {} m, tilted {} rad",
+                o.end,
+                o.tilt
+            );
+            assert_eq!(o.end_contacts, 0, "seed {seed}: released");
+        }
+    }
+
+    /// Thinner, thicker, lighter and heavier upright cylinders than the built-in's are lifted
+    /// and carried as well. (Setting the slenderest, heaviest ones down upright is another
+    /// matter: a pinch-like grasp lets a tall object turn about the thumb-index axis when it
+    /// lands tilted.)
+    #[test]
+    fn power_grasps_lift_and_carry_cylinders_of_25_to_45_mm_radius_and_200_to_800_g() {
+        for (radius, mass) in [(0.025, 0.2), (0.025, 0.8), (0.045, 0.2), (0.045, 0.8)] {
+            let mut s = Scenario::builtin("cylinder-power-grasp", 1).unwrap();
+            s.object.radius = Some(radius);
+            s.object.mass = mass;
+            let o = outcome(&s);
+            assert!(
+                o.lifted > 0.05 && o.hold_low > 0.05 && o.transport_low > 0.05,
+                "r {radius} m {mass}: lifted {}, held {}, carried as low as {}",
+                o.lifted,
+                o.hold_low,
+                o.transport_low
+            );
+            assert!(
+                o.hold_contacts >= 2,
+                "r {radius} m {mass}: {} contacts",
+                o.hold_contacts
+            );
+        }
+    }
+
+    #[test]
+    fn a_power_grasp_opposes_thumb_and_index_across_the_cylinder_along_their_normals() {
+        let s = Scenario::builtin("cylinder-power-grasp", 0).unwrap();
+        let (object, _) = s.resolve().unwrap();
+        let pose = Isometry::translation(0.0, 0.0, 0.09);
+        let hand = HandModel::glove10();
+        let plan = plan_grasp(&hand, &object, &pose, GraspStyle::Power).unwrap();
+        let [thumb, index, middle] =
+            ["thumb", "index", "middle"].map(|n| tip_index(&hand, n).unwrap());
+        assert!(plan.tips[thumb] && plan.tips[index] && plan.tips[middle]);
+        for k in [thumb, index] {
+            assert!(
+                plan.normal_alignment[k] > 0.98,
+                "tip {k} pushes {} along its normal",
+                plan.normal_alignment[k]
+            );
+        }
+        // Opposite across the axis, each in its own flexion plane (8 mm apart on glove10).
+        assert!(plan.normals_b[thumb].dot(&plan.normals_b[index]) < -0.95);
+        let across = (plan.contacts_b[thumb] - plan.contacts_b[index]).y.abs();
+        assert!((across - 0.008).abs() < 0.002, "{across}");
+        // The middle finger's plane passes 2.4 cm beside the axis: it only rests on the
+        // curved surface.
+        let resting = resting_tips(&plan, &hand, 0.7, OperatorParams::default().grip_safety);
+        assert!(resting[middle] && !resting[thumb] && !resting[index]);
+    }
+
     #[test]
     fn every_builtin_scenario_plans_a_grasp_and_runs_its_first_second() {
         for name in Scenario::BUILTINS {
