@@ -156,6 +156,10 @@ pub struct GraspPlan {
     pub contacts_b: [Vector; MAX_TIPS],
     /// Per fingertip of the grasp: the outward surface normal there, in B.
     pub normals_b: [Vector; MAX_TIPS],
+    /// Per fingertip of the grasp: how well it can push along its contact normal at the grasp,
+    /// the cosine of the angle between the inward normal and the nearest direction the
+    /// fingertip can push in (1 = straight along the normal).
+    pub normal_alignment: [Real; MAX_TIPS],
 }
 
 /// Index of a fingertip by name.
@@ -167,7 +171,15 @@ fn tip_index(hand: &HandModel, name: &str) -> Option<usize> {
 /// down with the fingers along the object's x axis; the thumb goes to the object's −x side and
 /// the fingers to its +x side, at the height of the object's centre. Pinch uses thumb and index
 /// (the other fingers curled away); power uses every finger. The base position is solved
-/// together with the fingers by inverse kinematics; the wrist stays at zero.
+/// together with the fingers and the wrist by inverse kinematics.
+///
+/// In a power grasp each fingertip goes where its own flexion plane meets the object: the
+/// fingers push only within those planes (eq. 14 transmits only forces in the range of Jᵀ), and
+/// a hand's planes lie side by side, fixed by its anatomy (glove10: the thumb's 8 mm radial of
+/// the index's, the middle finger's 2 cm ulnar of it). The object's axis goes midway between
+/// the thumb's and the index's planes, so the two oppose each other across it and push along
+/// their contact normals; the other fingers meet a curved surface where it turns away from
+/// their planes, and only rest on it where it turns too far ([`GraspPlan::normal_alignment`]).
 pub fn plan_grasp(
     hand: &HandModel,
     object: &RigidObject,
@@ -248,11 +260,33 @@ pub fn plan_grasp(
         Shape::Cylinder { half_height, .. } => &[0.3 * half_height, 0.0][..],
     };
     let mut kin = Kinematics::default();
+    // Power: where each fingertip's flexion plane lies across the hand (m, along the index's
+    // distal joint axis in the hand's base frame at the start posture), relative to the middle
+    // between the thumb's and the index's planes.
+    let power = style == GraspStyle::Power;
+    let mut lateral = [0.0; MAX_TIPS];
+    if power {
+        hand.forward_kinematics(&Isometry::identity(), &q_hand0[..n_hand], &mut kin);
+        let index = fingers[0];
+        let axis = hand
+            .joints
+            .iter()
+            .find(|j| j.child == hand.fingertips[index].link)
+            .map(|j| kin.link_poses[j.child].rotation * j.axis.into_inner())
+            .unwrap_or(Vector::y());
+        for &k in std::iter::once(&thumb).chain(&fingers) {
+            lateral[k] = kin.tip_centres[k].coords.dot(&axis);
+        }
+        let mid = 0.5 * (lateral[thumb] + lateral[index]);
+        for v in lateral.iter_mut() {
+            *v -= mid;
+        }
+    }
     // Best candidate: (score, ik error, q, rotation, axis, height).
     let mut best: Option<(Real, Real, [Real; MAX_DOF], Rotation, Vector, Real)> = None;
     let mut best_err = Real::INFINITY;
     // Try grasp axes × hand orientations (yaw of the palm about the vertical) × heights.
-    let spreads: &[Real] = if fingers.len() > 1 {
+    let spreads: &[Real] = if fingers.len() > 1 && !power {
         &[0.02, -0.02][..]
     } else {
         &[0.0][..]
@@ -302,24 +336,46 @@ pub fn plan_grasp(
                 .iter()
                 .flat_map(|h| signs.into_iter().map(move |s| (h, s)))
             {
+                // Power: the flexion planes are parallel, so the thumb's axis points the
+                // same way as the fingers'.
+                if power && sign != thumb_sign {
+                    continue;
+                }
                 let across = |y: Real| match object.shape {
                     Shape::Sphere { radius } => (radius * radius - h * h - y * y).max(0.0).sqrt(),
                     Shape::Cylinder { radius, .. } => (radius * radius - y * y).max(0.0).sqrt(),
                     Shape::Box { .. } => half,
                 };
+                // Where fingertip `k` of radius `r` meets the surface at `y` across the grasp
+                // axis, along the axis from the centre: a power grasp puts the fingertip's
+                // centre on the cylinder's surface grown by its radius, off the axis line too.
+                let reach = |y: Real, r: Real| match object.shape {
+                    Shape::Cylinder { radius, .. } if power => {
+                        ((radius + r) * (radius + r) - y * y).max(0.0).sqrt()
+                    }
+                    _ => across(y) + r,
+                };
                 let mut targets: Vec<(usize, Point)> = Vec::new();
                 let up = Vector::z() * h;
-                let thumb_p = centre - a * (across(0.0) + hand.fingertips[thumb].radius) + up;
+                let thumb_y = sign * lateral[thumb];
+                let thumb_p = centre - a * reach(thumb_y, hand.fingertips[thumb].radius)
+                    + side * thumb_y
+                    + up;
                 targets.push((0, Point::from(thumb_p)));
                 targets.push((
                     real.len(),
                     Point::from(thumb_p + side * (0.02 * thumb_sign)),
                 ));
                 for (i, &f) in fingers.iter().enumerate() {
-                    // Fingertips side by side, about 2 cm apart, as a hand's fingers lie.
-                    let y = (spread * (0.5 - i as Real)).clamp(-0.7 * half, 0.7 * half);
+                    // Pinch: the fingertip opposite the thumb. Power: each fingertip in its
+                    // own flexion plane.
+                    let y = if power {
+                        sign * lateral[f]
+                    } else {
+                        (spread * (0.5 - i as Real)).clamp(-0.7 * half, 0.7 * half)
+                    };
                     let r = hand.fingertips[f].radius;
-                    let p = centre + a * (across(y) + r) + side * y + up;
+                    let p = centre + a * reach(y, r) + side * y + up;
                     targets.push((1 + i, Point::from(p)));
                     targets.push((real.len() + 1 + i, Point::from(p + side * (0.02 * sign))));
                 }
@@ -346,18 +402,28 @@ pub fn plan_grasp(
                 // Prefer grasps whose fingertips can push along their contact normals: a
                 // finger with few joints only pushes within the range of its Jacobian.
                 free.tip_jacobians(&mut kin);
-                let mut align: Real = 1.0;
+                // The thumb and the finger opposite it squeeze: they must push along their
+                // normals. To lift by friction, the thumb must push along the vertical, and so
+                // must a finger on the other side (a pinch: both).
+                let (mut along_normal, mut thumb_up, mut finger_up): (Real, Real, Real) =
+                    (1.0, 1.0, 0.0);
                 for &(tip, target) in targets.iter().filter(|(t, _)| *t < real.len()) {
                     let normal = {
                         let mut v = centre + Vector::z() * h - target.coords;
                         v.z = 0.0;
                         v.normalize()
                     };
-                    // The fingertip must push along the normal and, to lift by friction, along
-                    // the vertical.
-                    align = align.min(push_alignment(&free, &kin, tip, &normal));
-                    align = align.min(push_alignment(&free, &kin, tip, &Vector::z()));
+                    let up = push_alignment(&free, &kin, tip, &Vector::z());
+                    if tip <= 1 {
+                        along_normal = along_normal.min(push_alignment(&free, &kin, tip, &normal));
+                    }
+                    if tip == 0 {
+                        thumb_up = up;
+                    } else {
+                        finger_up = finger_up.max(up);
+                    }
                 }
+                let align = along_normal.min(thumb_up).min(finger_up);
                 let score = align - r.max_error * 20.0;
                 if best.as_ref().is_none_or(|b| score > b.0 + 1e-9) {
                     best = Some((score, r.max_error, q, rot, a, h));
@@ -444,12 +510,15 @@ pub fn plan_grasp(
     }
     let mut contacts_b = [Vector::zeros(); MAX_TIPS];
     let mut normals_b = [Vector::zeros(); MAX_TIPS];
+    let mut normal_alignment = [0.0; MAX_TIPS];
     hand.forward_kinematics(&base_pose, &q_grasp[..n_hand], &mut kin);
+    hand.tip_jacobians(&mut kin);
     for (k, _) in tips.iter().enumerate().filter(|(_, &t)| t) {
         let c_b = (inv_obj * kin.tip_centres[k]).coords;
         let (_, _, n_out) = object.shape.closest(&c_b);
         contacts_b[k] = c_b;
         normals_b[k] = n_out;
+        normal_alignment[k] = push_alignment(hand, &kin, k, &-(pose.rotation * n_out));
     }
     Ok(GraspPlan {
         base,
@@ -461,6 +530,7 @@ pub fn plan_grasp(
         style,
         contacts_b,
         normals_b,
+        normal_alignment,
     })
 }
 
@@ -656,6 +726,9 @@ pub struct Simulation {
     hold_in_mount: [Option<(Vector, Vector)>; MAX_TIPS],
     /// Per fingertip: the link its finger is mounted on ([`mount_link`]).
     mount: [usize; MAX_TIPS],
+    /// Per fingertip of the grasp: it rests on the object instead of squeezing it
+    /// ([`resting_tips`]).
+    resting: [bool; MAX_TIPS],
     base: Isometry,
     base_acceleration: Vector,
     q_intent: [Real; MAX_DOF],
@@ -776,6 +849,7 @@ impl Simulation {
             offset: 0.03,
             seen_object: pose,
             hold_in_mount: [None; MAX_TIPS],
+            resting: [false; MAX_TIPS],
             mount,
             base: start_base,
             base_acceleration: Vector::zeros(),
@@ -902,6 +976,12 @@ impl Simulation {
             Phase::Approach => {
                 let pose = self.dfs.object_state().pose;
                 self.plan = plan_grasp(self.dfs.hand(), self.dfs.object(), &pose, self.style)?;
+                self.resting = resting_tips(
+                    &self.plan,
+                    self.dfs.hand(),
+                    self.operator_mu,
+                    self.params.grip_safety,
+                );
                 self.to_base = approach_pose(&self.plan.base, &self.dfs.object().shape);
                 self.to_q = self.plan.q_open;
                 self.to_grip = 0.0;
@@ -947,6 +1027,19 @@ impl Simulation {
                 self.to_q = self.plan.q_pre;
                 self.to_grip = 0.0;
                 self.to_offset = 0.015;
+                // Let go from where each fingertip holds the object, not from where the plan
+                // put it: an object that turned or slid in the hand (set down on a tilted
+                // edge, say) would otherwise be dragged back by fingertips steering to their
+                // planned spots as they open.
+                let out = self.dfs.output();
+                for k in 0..out.n_tips.min(MAX_TIPS) {
+                    if let (true, Some(frame)) = (self.plan.tips[k], out.tips[k].frame) {
+                        let n_out = -frame.normal_b();
+                        let r = self.dfs.hand().fingertips[k].radius;
+                        self.plan.contacts_b[k] = frame.p_b + n_out * r;
+                        self.plan.normals_b[k] = n_out;
+                    }
+                }
             }
             Phase::Retreat => {
                 self.to_base = raise(&self.from_base, 0.10);
@@ -1054,7 +1147,7 @@ impl Simulation {
         // on the object; until then each closes softly on its spot, so the first to touch does
         // not shove the object away from the others.
         let all_touch = (0..out.n_tips.min(MAX_TIPS))
-            .filter(|&k| self.plan.tips[k])
+            .filter(|&k| self.plan.tips[k] && !self.resting[k])
             .all(|k| out.tips[k].touching);
         let mut in_grasp = [false; MAX_DOF];
         let mut tau = [0.0; MAX_DOF];
@@ -1184,30 +1277,28 @@ impl Simulation {
         let kin = self.dfs.kinematics();
         let hand = self.dfs.hand();
         let p = &self.params;
-        let planned = self
-            .plan
-            .tips
-            .iter()
-            .take(out.n_tips)
-            .filter(|&&t| t)
+        let planned = (0..out.n_tips.min(MAX_TIPS))
+            .filter(|&k| self.plan.tips[k] && !self.resting[k])
             .count();
         // Fixed-capacity lists: this runs every tick of a session.
         let mut touching = [0usize; MAX_TIPS];
         let mut nt = 0;
+        let mut squeezing = 0;
         for k in 0..out.n_tips.min(MAX_TIPS) {
             if self.plan.tips[k] && out.tips[k].frame.is_some() {
                 touching[nt] = k;
                 nt += 1;
+                squeezing += usize::from(!self.resting[k]);
             }
         }
         let touching = &touching[..nt];
-        // Squeeze only once every finger of the grasp is on the object.
-        if touching.is_empty() || touching.len() < planned {
+        // Squeeze only once every squeezing finger of the grasp is on the object.
+        if squeezing == 0 || squeezing < planned {
             return (mags, unit, lift);
         }
         let load_force = (self.base_acceleration - g) * obj.mass;
         let load = load_force.norm();
-        let normal = (p.grip_safety * load / (self.operator_mu * touching.len() as Real))
+        let normal = (p.grip_safety * load / (self.operator_mu * squeezing as Real))
             .max(p.min_normal)
             * self.grip
             * (1.0 + self.grip_boost);
@@ -1235,11 +1326,17 @@ impl Simulation {
                 range[k] -= d * d.transpose();
             }
         }
+        // The squeeze and the load are the squeezing fingertips'; a resting one only presses
+        // lightly along its push.
         let mut ks = [0usize; MAX_TIPS];
         let mut m = 0;
         for &k in touching.iter().filter(|&&k| ok[k]) {
-            ks[m] = k;
-            m += 1;
+            if self.resting[k] {
+                mags[k] = p.min_normal * self.grip;
+            } else {
+                ks[m] = k;
+                m += 1;
+            }
         }
         let mut sys = nalgebra::SMatrix::<Real, MAX_TIPS, MAX_TIPS>::identity();
         let wanted = [normal; MAX_TIPS];
@@ -1352,6 +1449,27 @@ impl GraspStyle {
             self
         }
     }
+}
+
+/// The fingertips of `plan` that rest on the object instead of squeezing it: those beside the
+/// squeezing pair (thumb and index) that cannot push within the friction cone the operator
+/// expects with its safety margin even before any load, i.e. whose push direction nearest the
+/// contact normal ([`GraspPlan::normal_alignment`], cos θ) leans off it by tan θ > μ / safety.
+/// Pressing harder with such a finger only makes it slide on the surface (a finger whose
+/// flexion plane passes beside a cylinder's axis meets a surface turned away from the plane);
+/// it closes until it touches and presses with the least force.
+fn resting_tips(plan: &GraspPlan, hand: &HandModel, mu: Real, safety: Real) -> [bool; MAX_TIPS] {
+    let mut out = [false; MAX_TIPS];
+    let pair = [tip_index(hand, "thumb"), tip_index(hand, "index")];
+    for (k, rest) in out.iter_mut().enumerate().take(hand.fingertips.len()) {
+        if !plan.tips[k] || pair.contains(&Some(k)) {
+            continue;
+        }
+        let c = plan.normal_alignment[k].clamp(1e-6, 1.0);
+        let tan = (1.0 - c * c).sqrt() / c;
+        *rest = tan * safety > mu;
+    }
+    out
 }
 
 /// Where the hand waits before closing in: beside the grasp pose along the palm's y axis (the
@@ -1534,6 +1652,136 @@ mod tests {
             assert!(contacts >= 2, "seed {seed}: dropped");
             assert!(drift < 1e-6, "seed {seed}: drift {} um/s", drift * 1e6);
         }
+    }
+
+    /// What happens to the object over a run of `scenario`: its height above the start at the
+    /// end of `lift`, the least height and contacts during `hold`, the least height during
+    /// `transport` and its sideways travel, and at the end its height above the start, its
+    /// tilt from upright (rad) and the contacts left.
+    struct Outcome {
+        lifted: Real,
+        hold_low: Real,
+        hold_contacts: usize,
+        transport_low: Real,
+        carried: Real,
+        end: Real,
+        tilt: Real,
+        end_contacts: usize,
+    }
+
+    fn outcome(scenario: &Scenario) -> Outcome {
+        let mut sim = Simulation::new(scenario, HandModel::glove10(), None).unwrap();
+        let start = sim.dfs().object_state().pose.translation.vector;
+        let mut o = Outcome {
+            lifted: 0.0,
+            hold_low: Real::INFINITY,
+            hold_contacts: usize::MAX,
+            transport_low: Real::INFINITY,
+            carried: 0.0,
+            end: 0.0,
+            tilt: 0.0,
+            end_contacts: 0,
+        };
+        while sim.step().unwrap() {
+            let p = sim.dfs().object_state().pose.translation.vector - start;
+            match sim.phase() {
+                Phase::Lift => o.lifted = p.z,
+                Phase::Hold => {
+                    o.hold_low = o.hold_low.min(p.z);
+                    o.hold_contacts = o.hold_contacts.min(sim.output().n_contacts);
+                }
+                Phase::Transport => {
+                    o.transport_low = o.transport_low.min(p.z);
+                    o.carried = p.y;
+                }
+                _ => {}
+            }
+        }
+        let st = sim.dfs().object_state();
+        o.end = st.pose.translation.z - start.z;
+        o.tilt = (st.pose.rotation * Vector::z()).angle(&Vector::z());
+        o.end_contacts = sim.output().n_contacts;
+        o
+    }
+
+    #[test]
+    fn cylinder_power_grasp_lifts_holds_carries_and_sets_down_the_cylinder_for_every_seed() {
+        for seed in 0..6 {
+            let o = outcome(&Scenario::builtin("cylinder-power-grasp", seed).unwrap());
+            assert!(o.lifted > 0.05, "seed {seed}: lifted only {} m", o.lifted);
+            assert!(
+                o.hold_low > 0.05 && o.hold_contacts >= 3,
+                "seed {seed}: held at {} m on {} contacts",
+                o.hold_low,
+                o.hold_contacts
+            );
+            assert!(
+                o.transport_low > 0.05 && (o.carried - 0.15).abs() < 0.02,
+                "seed {seed}: carried {} m sideways, as low as {} m",
+                o.carried,
+                o.transport_low
+            );
+            assert!(
+                o.end.abs() < 0.005 && o.tilt < 0.05,
+                "seed {seed}: set down at {} m, tilted {} rad",
+                o.end,
+                o.tilt
+            );
+            assert_eq!(o.end_contacts, 0, "seed {seed}: released");
+        }
+    }
+
+    /// Thinner, thicker, lighter and heavier upright cylinders than the built-in's are lifted
+    /// and carried as well. (Setting the slenderest, heaviest ones down upright is another
+    /// matter: a pinch-like grasp lets a tall object turn about the thumb-index axis when it
+    /// lands tilted.)
+    #[test]
+    fn power_grasps_lift_and_carry_cylinders_of_25_to_45_mm_radius_and_200_to_800_g() {
+        for (radius, mass) in [(0.025, 0.2), (0.025, 0.8), (0.045, 0.2), (0.045, 0.8)] {
+            let mut s = Scenario::builtin("cylinder-power-grasp", 1).unwrap();
+            s.object.radius = Some(radius);
+            s.object.mass = mass;
+            let o = outcome(&s);
+            assert!(
+                o.lifted > 0.05 && o.hold_low > 0.05 && o.transport_low > 0.05,
+                "r {radius} m {mass}: lifted {}, held {}, carried as low as {}",
+                o.lifted,
+                o.hold_low,
+                o.transport_low
+            );
+            assert!(
+                o.hold_contacts >= 2,
+                "r {radius} m {mass}: {} contacts",
+                o.hold_contacts
+            );
+        }
+    }
+
+    #[test]
+    fn a_power_grasp_opposes_thumb_and_index_across_the_cylinder_along_their_normals() {
+        let s = Scenario::builtin("cylinder-power-grasp", 0).unwrap();
+        let (object, _) = s.resolve().unwrap();
+        let pose = Isometry::translation(0.0, 0.0, 0.09);
+        let hand = HandModel::glove10();
+        let plan = plan_grasp(&hand, &object, &pose, GraspStyle::Power).unwrap();
+        let [thumb, index, middle] =
+            ["thumb", "index", "middle"].map(|n| tip_index(&hand, n).unwrap());
+        assert!(plan.tips[thumb] && plan.tips[index] && plan.tips[middle]);
+        for k in [thumb, index] {
+            assert!(
+                plan.normal_alignment[k] > 0.98,
+                "tip {k} pushes {} along its normal",
+                plan.normal_alignment[k]
+            );
+        }
+        // Opposite across the axis, each in its own flexion plane (8 mm apart on glove10).
+        assert!(plan.normals_b[thumb].dot(&plan.normals_b[index]) < -0.95);
+        let across = (plan.contacts_b[thumb] - plan.contacts_b[index]).y.abs();
+        assert!((across - 0.008).abs() < 0.002, "{across}");
+        // The middle finger's plane passes 2.4 cm beside the axis: it only rests on the
+        // curved surface.
+        let resting = resting_tips(&plan, &hand, 0.7, OperatorParams::default().grip_safety);
+        assert!(resting[middle] && !resting[thumb] && !resting[index]);
     }
 
     #[test]

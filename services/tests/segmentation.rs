@@ -185,6 +185,29 @@ fn skill_parameters_are_finite_in_the_object_frame_with_a_16_dim_feature() {
 }
 
 #[test]
+fn the_cylinder_power_grasp_skill_holds_the_cylinder_on_three_contacts_in_force_closure() {
+    let s = session("cylinder-power-grasp", 0, None);
+    let seg = segment(&s, &SegmentParams::default());
+    assert_eq!(seg.skills.len(), 1, "{}", describe(&seg, &s));
+    let p = &seg.skills[0].parameters;
+    assert!(p.contact_count >= 3, "{:?}", p.contacts);
+    let q = p.quality.as_ref().expect("a grasp quality");
+    assert!(q.force_closure && q.epsilon > 0.0, "{q:?}");
+    // The object goes up with the hand and is carried sideways (B at the grasp's start).
+    let top = p
+        .motion
+        .iter()
+        .map(|k| k.position[2])
+        .fold(f64::MIN, f64::max);
+    let side = p
+        .motion
+        .iter()
+        .map(|k| k.position[1])
+        .fold(f64::MIN, f64::max);
+    assert!(top > 0.05 && side > 0.1, "rose {top} m, carried {side} m");
+}
+
+#[test]
 fn every_builtin_scenario_is_segmented_close_to_its_ground_truth() {
     // A summary for the log; the thresholds here are loose, `icms bench segmentation` reports.
     for name in Scenario::BUILTINS {
