@@ -14,7 +14,7 @@ use std::time::Instant;
 const DESCRIPTIONS: &[(&str, &str)] = &[
     (
         "sphere-lift",
-        "power grasp of a 1 kg sphere (r 0.04 m, μ 0.8): lift, hold 2 s, place, release",
+        "thumb-index pinch of a 0.3 kg sphere (r 0.04 m, μ 0.8): lift, hold 2 s, place, release",
     ),
     (
         "box-pinch-lift",
@@ -22,11 +22,11 @@ const DESCRIPTIONS: &[(&str, &str)] = &[
     ),
     (
         "cylinder-power-grasp",
-        "power grasp of a 0.5 kg upright cylinder: lift, hold, carry 0.15 m sideways, place",
+        "thumb and index opposed across a 0.5 kg upright cylinder (r 35 mm, μ 0.7), the middle finger resting on it: lift, hold, carry 0.15 m sideways, place",
     ),
     (
         "sphere-rotate",
-        "power grasp of the sphere, lifted and turned 0.8 rad about the vertical, placed back",
+        "pinch of the sphere, lifted and turned 0.8 rad about the vertical, placed back",
     ),
     (
         "box-slip",
