@@ -195,7 +195,7 @@ pub fn grasp_quality(
         }
     };
     let volume = h.volume();
-    let min_offset = h.facets.iter().map(|f| f.d).fold(Real::INFINITY, Real::min);
+    let min_offset = h.facets().map(|f| f.d).fold(Real::INFINITY, Real::min);
     let force_closure = min_offset > tol;
     Ok(GraspQuality {
         epsilon: if force_closure { min_offset } else { 0.0 },
@@ -211,34 +211,58 @@ mod reference;
 /// A Quickhull in six dimensions with simplicial facets.
 mod hull {
     use nalgebra::SVector;
+    use std::collections::BinaryHeap;
 
     const D: usize = 6;
     type P = SVector<f64, D>;
     /// No facet, no point.
-    const NONE: usize = usize::MAX;
+    const NONE: u32 = u32::MAX;
+    /// In `Topo::back` of a facet that the current round removes: the neighbour across this
+    /// ridge is the round's new facet on it.
+    const NEW: u8 = u8::MAX;
 
-    /// A facet: `n · x = d` with `n` the outward unit normal; `nb[k]` is the neighbour across
-    /// the ridge opposite vertex `v[k]`.
-    pub(super) struct Facet {
-        pub v: [usize; D],
-        pub n: P,
-        pub d: f64,
-        /// 5! times the facet's 5-dimensional volume.
-        measure: f64,
-        nb: [usize; D],
-        /// The first point of the outside set, a list threaded through `Build::next`, or NONE.
-        outside: usize,
-        /// The outside point farthest above the facet, and its distance.
-        far: usize,
-        far_dist: f64,
-        /// The last round whose visibility search looked at the facet.
-        seen: usize,
+    /// A facet's place in the hull, in one cache line: `nb[k]` is the neighbour across the
+    /// ridge opposite vertex `v[k]`, and this facet is its neighbour `back[k]`.
+    #[derive(Clone, Copy)]
+    #[repr(align(64))]
+    struct Topo {
+        nb: [u32; D],
+        v: [u32; D],
+        back: [u8; D],
         alive: bool,
+        /// The last round whose visibility search looked at the facet.
+        seen: u32,
     }
 
-    /// The hull: its live facets and a point strictly inside.
+    /// A facet's hyperplane `n · x = d` (`n` the outward unit normal) and 5! times its
+    /// 5-dimensional volume, in one cache line.
+    #[derive(Clone, Copy)]
+    #[repr(align(64))]
+    pub(super) struct Plane {
+        pub n: P,
+        pub d: f64,
+        measure: f64,
+    }
+
+    /// A facet's outside set: the first point of a list threaded through `Build::next` (or
+    /// NONE), and the farthest point with its distance above the facet.
+    #[derive(Clone, Copy)]
+    struct Outside {
+        first: u32,
+        far: u32,
+        far_dist: f64,
+    }
+
+    const NO_OUTSIDE: Outside = Outside {
+        first: NONE,
+        far: NONE,
+        far_dist: 0.0,
+    };
+
+    /// The hull: its facets (live and removed), and a point strictly inside.
     pub(super) struct Hull {
-        pub facets: Vec<Facet>,
+        topo: Vec<Topo>,
+        planes: Vec<Plane>,
         interior: P,
     }
 
@@ -252,133 +276,133 @@ mod hull {
     }
 
     impl Hull {
+        /// The facets' hyperplanes.
+        pub fn facets(&self) -> impl Iterator<Item = &Plane> {
+            self.topo
+                .iter()
+                .zip(&self.planes)
+                .filter(|(t, _)| t.alive)
+                .map(|(_, p)| p)
+        }
+
         /// Volume: the simplices spanned by each facet and the interior point, each the facet's
         /// 5-volume times its height above the interior point over 6.
         pub fn volume(&self) -> f64 {
             let mut vol = 0.0;
-            for f in &self.facets {
+            for f in self.facets() {
                 vol += f.measure * (f.d - f.n.dot(&self.interior));
             }
             vol / 720.0
         }
     }
 
-    /// A facet's hyperplane `n · x = d` and 5! times its 5-volume.
-    pub(super) struct Plane {
-        pub n: P,
-        pub d: f64,
-        measure: f64,
+    /// Step `K` of the QR factorisation in [`plane`]: the Householder reflection that maps
+    /// edge `K`'s components `K..D` onto coordinate `K`, stored in place of them and applied to
+    /// the edges after it. Returns `|r_KK|`, the distance of edge `K` from the span of the
+    /// edges before it, and the reflection's factor `2 / |v|²`.
+    #[inline(always)]
+    fn reflect<const K: usize>(a: &mut [[f64; D]; D - 1]) -> (f64, f64) {
+        let (top, rest) = a.split_at_mut(K + 1);
+        let x = &mut top[K];
+        let mut sq = 0.0;
+        for i in K..D {
+            sq += x[i] * x[i];
+        }
+        let r = sq.sqrt();
+        // v = x − α e_K with α = −sign(x_K) r, so that |v|² = 2 r (r + |x_K|) loses nothing.
+        let tau = 1.0 / (r * (r + x[K].abs()));
+        x[K] += if x[K] > 0.0 { r } else { -r };
+        for y in rest.iter_mut() {
+            let mut s = 0.0;
+            for i in K..D {
+                s += x[i] * y[i];
+            }
+            let s = s * tau;
+            for i in K..D {
+                y[i] -= s * x[i];
+            }
+        }
+        (r, tau)
+    }
+
+    /// Applies reflection `K` of [`reflect`] to `z`.
+    #[inline(always)]
+    fn apply<const K: usize>(a: &[[f64; D]; D - 1], tau: f64, z: &mut [f64; D]) {
+        let v = &a[K];
+        let mut s = 0.0;
+        for i in K..D {
+            s += v[i] * z[i];
+        }
+        let s = s * tau;
+        for i in K..D {
+            z[i] -= s * v[i];
+        }
     }
 
     /// The hyperplane through the facet's vertices, oriented away from `inside`. The normal is
-    /// the null vector of the 5×6 matrix of the edges `p_i − p_0`: Gaussian elimination with
-    /// complete pivoting, then back-substitution with 1 in the column left without a pivot.
-    /// The generalised cross product of the edges (whose norm is 5! times the facet's volume)
-    /// is that null vector times the product of the pivots, up to sign.
-    pub(super) fn plane(pts: &[P], v: &[usize; D], inside: &P) -> Option<Plane> {
-        let o = pts[v[0]];
-        let mut a = [[0.0_f64; D]; D - 1];
-        for (i, row) in a.iter_mut().enumerate() {
-            let p = &pts[v[i + 1]];
+    /// the last column of Q in the Householder QR factorisation `[e_1 … e_5] = Q R` of the
+    /// edges `e_i = p_i − p_0` (backward stable without pivoting, and the same test for
+    /// degenerate facets as Gram-Schmidt: `|r_ii|` is edge i's distance from the span of the
+    /// edges before it, which must exceed `1e-12 |e_i|`). `|det R|`, the product of those
+    /// distances, is 5! times the facet's volume. `None` for a degenerate facet.
+    pub(super) fn plane(pts: &[P], v: &[u32; D], inside: &P) -> Option<Plane> {
+        let o: [f64; D] = pts[v[0] as usize].into();
+        let mut sum = o;
+        let mut a = [[0.0; D]; D - 1];
+        let mut scale = [0.0; D - 1];
+        for i in 0..D - 1 {
+            let p: [f64; D] = pts[v[i + 1] as usize].into();
             for c in 0..D {
-                row[c] = p[c] - o[c];
+                a[i][c] = p[c] - o[c];
+                sum[c] += p[c];
+                scale[i] += a[i][c] * a[i][c];
             }
         }
-        let mut col = [0, 1, 2, 3, 4, 5];
-        let mut scale = 0.0;
+        let r = [
+            reflect::<0>(&mut a),
+            reflect::<1>(&mut a),
+            reflect::<2>(&mut a),
+            reflect::<3>(&mut a),
+            reflect::<4>(&mut a),
+        ];
         let mut measure = 1.0;
-        for k in 0..D - 1 {
-            let (mut pr, mut pc, mut best) = (k, k, -1.0_f64);
-            for (i, row) in a.iter().enumerate().skip(k) {
-                for c in k..D {
-                    let x = row[c].abs();
-                    if x > best {
-                        (pr, pc, best) = (i, c, x);
-                    }
-                }
-            }
-            if k == 0 {
-                scale = best;
-            }
-            // An edge (numerically) in the span of the others: no hyperplane.
-            if !(best > 1e-12 * scale && best.is_finite()) {
+        for i in 0..D - 1 {
+            // |r_ii| ≤ 1e-12 |e_i| (or NaN): the edge is (numerically) in the span of the edges
+            // before it, no hyperplane.
+            let independent = r[i].0 * r[i].0 > 1e-24 * scale[i];
+            if !independent {
                 return None;
             }
-            a.swap(k, pr);
-            if pc != k {
-                for row in a.iter_mut() {
-                    row.swap(k, pc);
-                }
-                col.swap(k, pc);
-            }
-            measure *= best;
-            let (top, rest) = a.split_at_mut(k + 1);
-            let pivot_row = &top[k];
-            for row in rest {
-                let l = row[k] / pivot_row[k];
-                for c in k + 1..D {
-                    row[c] -= l * pivot_row[c];
-                }
-            }
+            measure *= r[i].0;
         }
-        let mut y = [0.0; D];
-        y[D - 1] = 1.0;
-        for k in (0..D - 1).rev() {
-            let mut s = 0.0;
-            for c in k + 1..D {
-                s += a[k][c] * y[c];
-            }
-            y[k] = -s / a[k][k];
+        let mut z = [0.0; D];
+        z[D - 1] = 1.0;
+        apply::<4>(&a, r[4].1, &mut z);
+        apply::<3>(&a, r[3].1, &mut z);
+        apply::<2>(&a, r[2].1, &mut z);
+        apply::<1>(&a, r[1].1, &mut z);
+        apply::<0>(&a, r[0].1, &mut z);
+        // Q is orthogonal: z is a unit vector up to rounding.
+        let mut sq = 0.0;
+        for c in 0..D {
+            sq += z[c] * z[c];
         }
-        let mut n = P::zeros();
-        for k in 0..D {
-            n[col[k]] = y[k];
-        }
-        let norm = n.norm();
-        if !norm.is_finite() {
+        let norm = sq.sqrt();
+        if !(norm > 0.5 && norm.is_finite() && measure.is_finite()) {
             return None;
         }
-        n /= norm;
+        let mut n = P::from(z) / norm;
         // Offset from the mean of the vertices (less rounding than one vertex).
-        let mean = v.iter().map(|&i| pts[i]).sum::<P>() / D as f64;
-        let mut d = n.dot(&mean);
+        let mut d = n.dot(&P::from(sum)) / D as f64;
         if n.dot(inside) > d {
             n = -n;
             d = -d;
         }
-        Some(Plane {
-            n,
-            d,
-            measure: measure * norm,
-        })
+        Some(Plane { n, d, measure })
     }
 
-    fn dist(f: &Facet, p: &P) -> f64 {
+    fn dist(f: &Plane, p: &P) -> f64 {
         f.n.dot(p) - f.d
-    }
-
-    impl Facet {
-        fn new(v: [usize; D], plane: Plane, nb: [usize; D]) -> Facet {
-            Facet {
-                v,
-                n: plane.n,
-                d: plane.d,
-                measure: plane.measure,
-                nb,
-                outside: NONE,
-                far: NONE,
-                far_dist: 0.0,
-                seen: 0,
-                alive: true,
-            }
-        }
-    }
-
-    /// Where `x` is in `a`.
-    fn position(a: &[usize; D], x: usize) -> Result<usize, HullError> {
-        a.iter()
-            .position(|&y| y == x)
-            .ok_or(HullError::Numerical("broken adjacency"))
     }
 
     /// The state of a build.
@@ -386,28 +410,62 @@ mod hull {
         pts: &'a [P],
         tol: f64,
         interior: P,
-        facets: Vec<Facet>,
+        topo: Vec<Topo>,
+        planes: Vec<Plane>,
+        outside: Vec<Outside>,
         /// The next point in the same outside set, or NONE.
-        next: Vec<usize>,
-        /// Facets that were given outside points (some may have died since).
-        work: Vec<usize>,
+        next: Vec<u32>,
+        /// Facets with outside points by the distance of the farthest (as bits, which order
+        /// like the non-negative distances); stale entries are skipped when taken.
+        work: BinaryHeap<(u64, u32)>,
+        /// Slots of facets removed in earlier rounds, for new facets.
+        free: Vec<u32>,
     }
 
     impl Build<'_> {
         /// Puts point `i`, `dist` above facet `f`, into `f`'s outside set.
         fn add_outside(&mut self, f: usize, i: usize, dist: f64) {
-            let fa = &mut self.facets[f];
-            if fa.outside == NONE {
-                self.work.push(f);
-                fa.far = i;
-                fa.far_dist = dist;
-            } else if dist > fa.far_dist {
-                fa.far = i;
-                fa.far_dist = dist;
+            let o = &mut self.outside[f];
+            if o.first == NONE || dist > o.far_dist {
+                o.far = i as u32;
+                o.far_dist = dist;
+                self.work.push((dist.to_bits(), f as u32));
             }
-            self.next[i] = fa.outside;
-            fa.outside = i;
+            self.next[i] = o.first;
+            o.first = i as u32;
         }
+
+        /// Stores a new facet, in a free slot if there is one; its index.
+        fn add_facet(&mut self, topo: Topo, plane: Plane) -> Result<usize, HullError> {
+            Ok(match self.free.pop() {
+                Some(id) => {
+                    let id = id as usize;
+                    self.topo[id] = topo;
+                    self.planes[id] = plane;
+                    self.outside[id] = NO_OUTSIDE;
+                    id
+                }
+                None => {
+                    if self.topo.len() >= NONE as usize {
+                        return Err(HullError::Numerical("too many facets"));
+                    }
+                    self.topo.push(topo);
+                    self.planes.push(plane);
+                    self.outside.push(NO_OUTSIDE);
+                    self.topo.len() - 1
+                }
+            })
+        }
+    }
+
+    /// A horizon ridge: the visible facet, the index of the ridge in it, and the hidden
+    /// neighbour with the ridge's index there.
+    #[derive(Clone, Copy)]
+    struct Ridge {
+        f: usize,
+        j: usize,
+        g: usize,
+        slot: u8,
     }
 
     /// Builds the convex hull of `pts` (tolerance `tol` for "outside").
@@ -415,6 +473,9 @@ mod hull {
         let npts = pts.len();
         if npts < D + 1 {
             return Err(HullError::Flat);
+        }
+        if npts >= NONE as usize {
+            return Err(HullError::Numerical("too many points"));
         }
         // Initial simplex: greedily the points farthest from the affine hull of those chosen.
         let centroid = pts.iter().sum::<P>() / npts as f64;
@@ -453,31 +514,42 @@ mod hull {
             pts,
             tol,
             interior,
-            facets: Vec::with_capacity(64 * npts),
+            topo: Vec::with_capacity(16 * npts),
+            planes: Vec::with_capacity(16 * npts),
+            outside: Vec::with_capacity(16 * npts),
             next: vec![NONE; npts],
-            work: Vec::new(),
+            work: BinaryHeap::new(),
+            free: Vec::new(),
         };
         for k in 0..=D {
-            let mut v = [0; D];
-            let mut nb = [0; D];
+            let mut t = Topo {
+                nb: [0; D],
+                v: [0; D],
+                back: [0; D],
+                alive: true,
+                seen: 0,
+            };
             let mut j = 0;
             for (m, &c) in chosen.iter().enumerate() {
                 if m != k {
-                    v[j] = c;
-                    nb[j] = m; // the facet omitting chosen[m] shares all but chosen[m]
+                    // The facet omitting chosen[m] shares all but chosen[m]; in it, chosen[k]
+                    // comes at k or, after the omitted chosen[m], at k − 1.
+                    t.v[j] = c as u32;
+                    t.nb[j] = m as u32;
+                    t.back[j] = if k < m { k as u8 } else { (k - 1) as u8 };
                     j += 1;
                 }
             }
-            let pl = plane(pts, &v, &interior)
+            let pl = plane(pts, &t.v, &interior)
                 .ok_or(HullError::Numerical("degenerate simplex facet"))?;
-            b.facets.push(Facet::new(v, pl, nb));
+            b.add_facet(t, pl)?;
         }
         for (i, p) in pts.iter().enumerate() {
             if chosen.contains(&i) {
                 continue;
             }
             if let Some((f, d)) = (0..=D)
-                .map(|f| (f, dist(&b.facets[f], p)))
+                .map(|f| (f, dist(&b.planes[f], p)))
                 .find(|&(_, d)| d > tol)
             {
                 b.add_outside(f, i, d);
@@ -485,233 +557,232 @@ mod hull {
         }
 
         let mut visible: Vec<usize> = Vec::new();
-        // The visible facet and the index of the horizon ridge each new facet was built on.
-        let mut origin: Vec<(usize, usize)> = Vec::new();
-        // Each round turns one outside point into a vertex: at most npts rounds.
-        for round in 1..=npts + 1 {
+        let mut horizon: Vec<Ridge> = Vec::new();
+        // The new facets, in the order of the horizon ridges they were built on.
+        let mut new: Vec<usize> = Vec::new();
+        // Each round turns one outside point, the farthest above any facet, into a vertex: at
+        // most npts rounds.
+        for round in 1..=npts as u32 + 1 {
             let fi = loop {
                 match b.work.pop() {
                     None => return finish(b),
-                    Some(f) if b.facets[f].alive && b.facets[f].outside != NONE => break f,
-                    Some(_) => {}
+                    Some((key, f)) => {
+                        let f = f as usize;
+                        let o = &b.outside[f];
+                        if b.topo[f].alive && o.first != NONE && o.far_dist.to_bits() == key {
+                            break f;
+                        }
+                    }
                 }
             };
-            let pi = b.facets[fi].far;
+            let pi = b.outside[fi].far as usize;
             let p = pts[pi];
             // Visible facets: connected to fi, with p strictly outside.
-            let facets = &mut b.facets;
             visible.clear();
             visible.push(fi);
-            facets[fi].alive = false;
-            facets[fi].seen = round;
+            b.topo[fi].alive = false;
+            b.topo[fi].seen = round;
             let mut s = 0;
             while s < visible.len() {
                 let f = visible[s];
                 s += 1;
                 for j in 0..D {
-                    let g = facets[f].nb[j];
-                    let fg = &mut facets[g];
-                    if fg.seen != round {
-                        fg.seen = round;
-                        if dist(fg, &p) > tol {
-                            fg.alive = false;
+                    let g = b.topo[f].nb[j] as usize;
+                    let tg = &mut b.topo[g];
+                    if tg.seen != round {
+                        tg.seen = round;
+                        if dist(&b.planes[g], &p) > tol {
+                            tg.alive = false;
                             visible.push(g);
                         }
                     }
                 }
             }
-            // New facets on the horizon ridges; the visible facet's side of the ridge is
-            // pointed at the new facet too.
-            let first = facets.len();
-            origin.clear();
+            // New facets on the horizon ridges.
+            horizon.clear();
             for &f in &visible {
+                let tf = &b.topo[f];
                 for j in 0..D {
-                    let g = facets[f].nb[j];
-                    if !facets[g].alive {
-                        continue;
+                    let g = tf.nb[j] as usize;
+                    if b.topo[g].alive {
+                        let slot = tf.back[j];
+                        if b.topo[g].nb[slot as usize] as usize != f {
+                            return Err(HullError::Numerical("broken adjacency"));
+                        }
+                        horizon.push(Ridge { f, j, g, slot });
                     }
-                    let mut v = facets[f].v;
-                    v[j] = pi;
-                    let pl = plane(pts, &v, &interior)
-                        .ok_or(HullError::Numerical("degenerate new facet"))?;
-                    if pl.d - pl.n.dot(&interior) <= 0.0 {
-                        return Err(HullError::Numerical("interior point on a facet"));
-                    }
-                    let id = facets.len();
-                    let slot = position(&facets[g].nb, f)?;
-                    facets[g].nb[slot] = id;
-                    facets[f].nb[j] = id;
-                    let mut nb = [NONE; D];
-                    nb[j] = g;
-                    facets.push(Facet::new(v, pl, nb));
-                    origin.push((f, j));
                 }
             }
-            if facets.len() == first {
+            if horizon.is_empty() {
                 return Err(HullError::Numerical("horizon is not closed"));
             }
-            // The new facets pair up across the ridges through p. The new facet N on ridge
-            // (f, j) shares with its neighbour opposite v[k] the 4 vertices S = f.v less v[j]
+            new.clear();
+            for r in &horizon {
+                let mut t = Topo {
+                    nb: [NONE; D],
+                    v: b.topo[r.f].v,
+                    back: [0; D],
+                    alive: true,
+                    seen: 0,
+                };
+                t.v[r.j] = pi as u32;
+                t.nb[r.j] = r.g as u32;
+                t.back[r.j] = r.slot;
+                let pl = plane(pts, &t.v, &interior)
+                    .ok_or(HullError::Numerical("degenerate new facet"))?;
+                if pl.d - pl.n.dot(&interior) <= 0.0 {
+                    return Err(HullError::Numerical("interior point on a facet"));
+                }
+                let id = b.add_facet(t, pl)?;
+                let tg = &mut b.topo[r.g];
+                tg.nb[r.slot as usize] = id as u32;
+                tg.back[r.slot as usize] = r.j as u8;
+                // The removed facet's side of the ridge points at the new facet too.
+                let tf = &mut b.topo[r.f];
+                tf.nb[r.j] = id as u32;
+                tf.back[r.j] = NEW;
+                new.push(id);
+            }
+            // The new facets pair up across the ridges through p. The new facet on ridge (f, j)
+            // shares with its neighbour opposite v[k] the 4 vertices S of f other than v[j]
             // and v[k]: turning about S through the visible facets from f, across the ridge
-            // opposite v[k], leads to the next horizon ridge about S, whose new facet is it.
-            for id in first..facets.len() {
-                let (f, j) = origin[id - first];
+            // opposite v[k], leads to the next horizon ridge about S, whose new facet it is.
+            let topo = &mut b.topo;
+            for (r, &id) in horizon.iter().zip(&new) {
                 for k in 0..D {
-                    if k == j || facets[id].nb[k] != NONE {
+                    if k == r.j || topo[id].nb[k] != NONE {
                         continue;
                     }
-                    // h holds S and {a, c}; cross the ridge opposite a.
-                    let (mut h, mut a, mut c) = (f, facets[f].v[k], facets[f].v[j]);
+                    // h holds S and two more vertices, at ia and ic: cross the ridge opposite ia.
+                    let (mut h, mut ia, mut ic) = (r.f, k, r.j);
                     let mut steps = 0;
                     let (m, slot) = loop {
+                        let th = &topo[h];
+                        let across = th.nb[ia] as usize;
+                        if th.back[ia] == NEW {
+                            // Built on h's ridge opposite ia: its vertices are h's, in order.
+                            break (across, ic);
+                        }
                         steps += 1;
-                        if steps > visible.len() {
+                        let ta = &topo[across];
+                        if steps > visible.len() || ta.alive || ta.seen != round {
                             return Err(HullError::Numerical("horizon is not closed"));
                         }
-                        let across = facets[h].nb[position(&facets[h].v, a)?];
-                        if across >= first {
-                            break (across, position(&facets[across].v, c)?);
-                        }
-                        if facets[across].alive || facets[across].seen != round {
-                            return Err(HullError::Numerical("horizon is not closed"));
-                        }
-                        let x = facets[across].v[position(&facets[across].nb, h)?];
-                        (h, a, c) = (across, c, x);
+                        let c = th.v[ic];
+                        let Some(ic_across) = ta.v.iter().position(|&x| x == c) else {
+                            return Err(HullError::Numerical("broken adjacency"));
+                        };
+                        (h, ia, ic) = (across, ic_across, th.back[ia] as usize);
                     };
-                    if m == id || (facets[m].nb[slot] != NONE && facets[m].nb[slot] != id) {
+                    let taken = topo[m].nb[slot];
+                    if m == id || (taken != NONE && taken as usize != id) {
                         return Err(HullError::Numerical("horizon is not closed"));
                     }
-                    facets[id].nb[k] = m;
-                    facets[m].nb[slot] = id;
+                    topo[id].nb[k] = m as u32;
+                    topo[id].back[k] = slot as u8;
+                    topo[m].nb[slot] = id as u32;
+                    topo[m].back[slot] = k as u8;
                 }
             }
             // The visible facets' outside points go to the first new facet they are above
             // (those on their own horizon ridges first), or are inside.
             for &f in &visible {
-                let mut q = b.facets[f].outside;
-                b.facets[f].outside = NONE;
+                let mut q = b.outside[f].first;
+                b.outside[f].first = NONE;
                 while q != NONE {
-                    let after = b.next[q];
-                    if q != pi {
-                        let pq = &pts[q];
-                        let fa = &b.facets;
-                        let above = |g: usize| {
-                            let d = dist(&fa[g], pq);
-                            (d > tol).then_some((g, d))
-                        };
-                        let to = fa[f]
-                            .nb
-                            .iter()
-                            .filter(|&&g| g >= first)
-                            .find_map(|&g| above(g))
-                            .or_else(|| (first..fa.len()).find_map(above));
-                        if let Some((g, d)) = to {
-                            b.add_outside(g, q, d);
-                        }
+                    let qi = q as usize;
+                    q = b.next[qi];
+                    if qi == pi {
+                        continue;
                     }
-                    q = after;
+                    let pq = &pts[qi];
+                    let tf = &b.topo[f];
+                    let planes = &b.planes;
+                    let above = |g: usize| {
+                        let d = dist(&planes[g], pq);
+                        (d > tol).then_some((g, d))
+                    };
+                    let to = (0..D)
+                        .filter(|&j| tf.back[j] == NEW)
+                        .find_map(|j| above(tf.nb[j] as usize))
+                        .or_else(|| new.iter().copied().find_map(above));
+                    if let Some((g, d)) = to {
+                        b.add_outside(g, qi, d);
+                    }
                 }
             }
+            b.free.extend(visible.iter().map(|&f| f as u32));
         }
         Err(HullError::Numerical("too many rounds"))
     }
 
-    /// Keeps the live facets and checks the result.
+    /// Checks the result: each ridge of a live facet is shared with a live facet, and every
+    /// point is inside every facet (with a margin of `1e3 tol` for the merged near-coplanar
+    /// facets).
     fn finish(b: Build) -> Result<Hull, HullError> {
         let Build {
             pts,
             tol,
             interior,
-            facets,
+            topo,
+            planes,
             ..
         } = b;
-        let mut index = vec![NONE; facets.len()];
-        let mut count = 0;
-        for (i, f) in facets.iter().enumerate() {
-            if f.alive {
-                index[i] = count;
-                count += 1;
-            }
-        }
-        let mut out = Vec::with_capacity(count);
-        for f in facets {
-            if !f.alive {
+        for (i, t) in topo.iter().enumerate() {
+            if !t.alive {
                 continue;
             }
-            let mut nb = f.nb;
-            for x in nb.iter_mut() {
-                if *x >= index.len() || index[*x] == NONE {
+            for k in 0..D {
+                let Some(g) = topo.get(t.nb[k] as usize) else {
+                    return Err(HullError::Numerical("a live facet borders a removed one"));
+                };
+                let s = t.back[k] as usize;
+                if !g.alive {
                     return Err(HullError::Numerical("a live facet borders a removed one"));
                 }
-                *x = index[*x];
-            }
-            out.push(Facet { nb, ..f });
-        }
-        // Adjacency is symmetric: each ridge is shared by two facets.
-        for (i, f) in out.iter().enumerate() {
-            for &g in &f.nb {
-                if !out[g].nb.contains(&i) {
+                if s >= D || g.nb[s] as usize != i || g.back[s] as usize != k {
                     return Err(HullError::Numerical("adjacency is not symmetric"));
                 }
             }
         }
-        check_points(&out, pts, tol)?;
-        Ok(Hull {
-            facets: out,
-            interior,
-        })
-    }
-
-    /// Checks every point inside every facet, with a margin of `1e3 tol` for the merged
-    /// near-coplanar facets. Neighbouring facets whose hyperplanes agree within `tol` on the
-    /// points' ball (`|n − n'| r + |d − d'| ≤ tol`, `r` the largest point norm) are grouped,
-    /// and each group is checked once against its representative's hyperplane with the margin
-    /// less the group's largest such deviation: the same guarantee, a fraction of the work.
-    fn check_points(facets: &[Facet], pts: &[P], tol: f64) -> Result<(), HullError> {
-        let r = pts.iter().fold(0.0_f64, |m, p| m.max(p.norm()));
-        let dev = |a: &Facet, b: &Facet| (a.n - b.n).norm() * r + (a.d - b.d).abs();
-        let mut parent: Vec<usize> = (0..facets.len()).collect();
-        fn root(parent: &mut [usize], mut i: usize) -> usize {
-            while parent[i] != i {
-                parent[i] = parent[parent[i]];
-                i = parent[i];
-            }
-            i
-        }
-        for (i, f) in facets.iter().enumerate() {
-            for &g in &f.nb {
-                if g > i && dev(f, &facets[g]) <= tol {
-                    let (ri, rg) = (root(&mut parent, i), root(&mut parent, g));
-                    parent[rg] = ri;
-                }
+        // The points by coordinate, so that the products vectorise.
+        let npts = pts.len();
+        let mut cols = vec![0.0; D * npts];
+        for (i, p) in pts.iter().enumerate() {
+            for c in 0..D {
+                cols[c * npts + i] = p[c];
             }
         }
-        // The margin each facet is checked with: NaN for a facet covered by its group's.
-        let mut margin = vec![f64::NAN; facets.len()];
-        for i in 0..facets.len() {
-            let ri = root(&mut parent, i);
-            let e = dev(&facets[i], &facets[ri]);
-            if e <= tol {
-                let m = 1e3 * tol - e;
-                if margin[ri].is_nan() || margin[ri] > m {
-                    margin[ri] = m;
-                }
-            } else {
-                margin[i] = 1e3 * tol;
-            }
-        }
-        for (f, &m) in facets.iter().zip(&margin) {
-            if m.is_nan() {
+        let (x0, rest) = cols.split_at(npts);
+        let (x1, rest) = rest.split_at(npts);
+        let (x2, rest) = rest.split_at(npts);
+        let (x3, rest) = rest.split_at(npts);
+        let (x4, x5) = rest.split_at(npts);
+        for (t, f) in topo.iter().zip(&planes) {
+            if !t.alive {
                 continue;
             }
-            for p in pts {
-                let d = dist(f, p);
-                if d > m || d.is_nan() {
-                    return Err(HullError::Numerical("a point is outside the hull"));
-                }
+            let n = &f.n;
+            let limit = f.d + 1e3 * tol;
+            let mut inside = 0;
+            for i in 0..npts {
+                let s = n[0] * x0[i]
+                    + n[1] * x1[i]
+                    + n[2] * x2[i]
+                    + n[3] * x3[i]
+                    + n[4] * x4[i]
+                    + n[5] * x5[i];
+                inside += usize::from(s <= limit);
+            }
+            if inside != npts {
+                return Err(HullError::Numerical("a point is outside the hull"));
             }
         }
-        Ok(())
+        Ok(Hull {
+            topo,
+            planes,
+            interior,
+        })
     }
 
     #[cfg(test)]
@@ -732,8 +803,8 @@ mod hull {
             pts.push(P::zeros());
             pts.push(P::from_element(0.1));
             let h = build(&pts, 1e-9).unwrap();
-            assert_eq!(h.facets.len(), 64);
-            for f in &h.facets {
+            assert_eq!(h.facets().count(), 64);
+            for f in h.facets() {
                 assert!((f.d - 1.0 / 6f64.sqrt()).abs() < 1e-12);
             }
             assert!((h.volume() - 64.0 / 720.0).abs() < 1e-12);
@@ -751,7 +822,7 @@ mod hull {
             pts.push(P::zeros());
             let h = build(&pts, 1e-9).unwrap();
             assert!((h.volume() - 64.0).abs() < 1e-9, "{}", h.volume());
-            for f in &h.facets {
+            for f in h.facets() {
                 assert!((f.d - 1.0).abs() < 1e-9);
             }
         }
@@ -770,7 +841,7 @@ mod hull {
                 let n = pts.len();
                 let mut idx = [0usize, 1, 2, 3, 4, 5];
                 loop {
-                    if let Some(Plane { n: nn, d, .. }) = plane(&pts, &idx, &centroid) {
+                    if let Some(Plane { n: nn, d, .. }) = plane(&pts, &idx.map(|x| x as u32), &centroid) {
                         if pts.iter().all(|p| nn.dot(p) - d <= 1e-9) {
                             brute.push(d);
                         }
@@ -788,12 +859,50 @@ mod hull {
                         idx[j] = idx[j - 1] + 1;
                     }
                 }
-                let mut mine: Vec<f64> = h.facets.iter().map(|f| f.d).collect();
+                let mut mine: Vec<f64> = h.facets().map(|f| f.d).collect();
                 mine.sort_by(f64::total_cmp);
                 brute.sort_by(f64::total_cmp);
                 proptest::prop_assert_eq!(mine.len(), brute.len());
                 for (a, b) in mine.iter().zip(&brute) {
                     proptest::prop_assert!((a - b).abs() < 1e-9);
+                }
+            }
+        }
+
+        /// Point sets for the comparison with the previous hull: uniform, on the lattice
+        /// {-1, 0, 1}⁶ (many coplanar points), doubled, or in a hyperplane.
+        fn point_sets() -> impl proptest::strategy::Strategy<Value = Vec<P>> {
+            use proptest::prelude::*;
+            let raw = proptest::collection::vec(proptest::array::uniform6(-1.0..1.0f64), 7..40);
+            (raw, 0usize..4).prop_map(|(raw, shape)| {
+                let mut pts: Vec<P> = raw.iter().map(|a| P::from_row_slice(a)).collect();
+                match shape {
+                    1 => pts.iter_mut().for_each(|p| p.apply(|x| *x = x.round())),
+                    2 => pts.extend(pts.clone()),
+                    3 => pts.iter_mut().for_each(|p| p[5] = 0.5 * p[0] - p[1]),
+                    _ => {}
+                }
+                pts
+            })
+        }
+
+        proptest::proptest! {
+            #![proptest_config(proptest::prelude::ProptestConfig::with_cases(256))]
+            #[test]
+            fn the_hull_has_the_volume_and_offsets_of_the_previous_one(pts in point_sets()) {
+                use super::super::reference;
+                let new = build(&pts, 1e-9);
+                let old = reference::build(&pts, 1e-9);
+                match (new, old) {
+                    (Ok(a), Ok(b)) => {
+                        let (va, vb) = (a.volume(), b.volume(&pts));
+                        proptest::prop_assert!((va - vb).abs() <= 1e-11 * vb, "{} vs {}", va, vb);
+                        let min = |it: &mut dyn Iterator<Item = f64>| it.fold(f64::INFINITY, f64::min);
+                        let (ea, eb) = (min(&mut a.facets().map(|f| f.d)), min(&mut b.facets.iter().map(|f| f.d)));
+                        proptest::prop_assert!((ea - eb).abs() <= 1e-12, "{} vs {}", ea, eb);
+                    }
+                    (Err(HullError::Flat), Err(reference::HullError::Flat)) => {}
+                    (a, b) => proptest::prop_assert!(false, "{:?} vs {:?}", a.err(), b.err()),
                 }
             }
         }
