@@ -234,8 +234,8 @@ mod hull {
         seen: u32,
     }
 
-    /// A facet's hyperplane `n · x = d` (`n` the outward unit normal) and 5! times its
-    /// 5-dimensional volume, in one cache line.
+    /// A facet's hyperplane `n · x = d` (`n` the outward unit normal) and, once the hull is
+    /// built, 5! times the facet's 5-dimensional volume; one cache line.
     #[derive(Clone, Copy)]
     #[repr(align(64))]
     pub(super) struct Plane {
@@ -343,8 +343,7 @@ mod hull {
     /// the last column of Q in the Householder QR factorisation `[e_1 … e_5] = Q R` of the
     /// edges `e_i = p_i − p_0` (backward stable without pivoting, and the same test for
     /// degenerate facets as Gram-Schmidt: `|r_ii|` is edge i's distance from the span of the
-    /// edges before it, which must exceed `1e-12 |e_i|`). `|det R|`, the product of those
-    /// distances, is 5! times the facet's volume. `None` for a degenerate facet.
+    /// edges before it, which must exceed `1e-12 |e_i|`). `None` for a degenerate facet.
     pub(super) fn plane(pts: &[P], v: &[u32; D], inside: &P) -> Option<Plane> {
         let o: [f64; D] = pts[v[0] as usize].into();
         let mut sum = o;
@@ -365,7 +364,6 @@ mod hull {
             reflect::<3>(&mut a),
             reflect::<4>(&mut a),
         ];
-        let mut measure = 1.0;
         for i in 0..D - 1 {
             // |r_ii| ≤ 1e-12 |e_i| (or NaN): the edge is (numerically) in the span of the edges
             // before it, no hyperplane.
@@ -373,7 +371,6 @@ mod hull {
             if !independent {
                 return None;
             }
-            measure *= r[i].0;
         }
         let mut z = [0.0; D];
         z[D - 1] = 1.0;
@@ -388,7 +385,7 @@ mod hull {
             sq += z[c] * z[c];
         }
         let norm = sq.sqrt();
-        if !(norm > 0.5 && norm.is_finite() && measure.is_finite()) {
+        if !(norm > 0.5 && norm.is_finite()) {
             return None;
         }
         let mut n = P::from(z) / norm;
@@ -398,7 +395,103 @@ mod hull {
             n = -n;
             d = -d;
         }
-        Some(Plane { n, d, measure })
+        Some(Plane {
+            n,
+            d,
+            measure: f64::NAN,
+        })
+    }
+
+    /// The hyperplane through a horizon ridge and the new point, turned about the ridge from
+    /// the hyperplanes of its visible and hidden facets: `a n_g − b n_f` with `a`, `b` the
+    /// new point's heights above them. Accepted only if every vertex is within `exact` of
+    /// it (the backward error of a direct computation), else `None`.
+    fn turn(
+        pts: &[P],
+        v: &[u32; D],
+        (pf, a): (&Plane, f64),
+        (pg, b): (&Plane, f64),
+        inside: &P,
+        exact: f64,
+    ) -> Option<Plane> {
+        let m = pg.n * a - pf.n * b;
+        let norm = m.norm();
+        let mut n = m / norm;
+        let mut at = [0.0; D];
+        let mut d = 0.0;
+        for i in 0..D {
+            at[i] = n.dot(&pts[v[i] as usize]);
+            d += at[i];
+        }
+        d /= D as f64;
+        let mut worst = 0.0;
+        for x in at {
+            let e = (x - d).abs();
+            if e > worst {
+                worst = e;
+            }
+        }
+        let ok = worst <= exact && norm > 0.0 && norm.is_finite();
+        if !ok {
+            return None;
+        }
+        if n.dot(inside) > d {
+            n = -n;
+            d = -d;
+        }
+        Some(Plane {
+            n,
+            d,
+            measure: f64::NAN,
+        })
+    }
+
+    /// 5! times the 5-volume of the facet with vertices `v` and unit normal `n`: the norm of the
+    /// generalised cross product `m = ±|m| n` of the edges `e_i = p_i − p_0`, whose coordinate
+    /// `c` is ± the determinant of the edges without coordinate `c`. That 5×5 determinant is
+    /// taken (by Gaussian elimination with partial pivoting) where `|n_c| ≥ 1/√6` is largest.
+    fn measure(pts: &[P], v: &[u32; D], n: &P) -> f64 {
+        let mut drop = 0;
+        for c in 1..D {
+            if n[c].abs() > n[drop].abs() {
+                drop = c;
+            }
+        }
+        let o = &pts[v[0] as usize];
+        let mut a = [[0.0; D - 1]; D - 1];
+        for (i, row) in a.iter_mut().enumerate() {
+            let p = &pts[v[i + 1] as usize];
+            let mut k = 0;
+            for c in 0..D {
+                if c != drop {
+                    row[k] = p[c] - o[c];
+                    k += 1;
+                }
+            }
+        }
+        let mut det = 1.0;
+        for k in 0..D - 1 {
+            let mut pr = k;
+            for i in k + 1..D - 1 {
+                if a[i][k].abs() > a[pr][k].abs() {
+                    pr = i;
+                }
+            }
+            a.swap(k, pr);
+            let pivot = a[k][k];
+            det *= pivot;
+            if pivot == 0.0 {
+                break;
+            }
+            let row = a[k];
+            for below in a[k + 1..].iter_mut() {
+                let l = below[k] / pivot;
+                for c in k + 1..D - 1 {
+                    below[c] -= l * row[c];
+                }
+            }
+        }
+        (det / n[drop]).abs()
     }
 
     fn dist(f: &Plane, p: &P) -> f64 {
@@ -413,6 +506,8 @@ mod hull {
         topo: Vec<Topo>,
         planes: Vec<Plane>,
         outside: Vec<Outside>,
+        /// How far the current round's point is above the facets its visibility search met.
+        above: Vec<f64>,
         /// The next point in the same outside set, or NONE.
         next: Vec<u32>,
         /// Facets with outside points by the distance of the farthest (as bits, which order
@@ -452,6 +547,7 @@ mod hull {
                     self.topo.push(topo);
                     self.planes.push(plane);
                     self.outside.push(NO_OUTSIDE);
+                    self.above.push(0.0);
                     self.topo.len() - 1
                 }
             })
@@ -510,6 +606,9 @@ mod hull {
             chosen.push(best);
         }
         let interior = chosen.iter().map(|&i| pts[i]).sum::<P>() / (D + 1) as f64;
+        let size = pts.iter().fold(0.0_f64, |m, p| m.max(p.norm()));
+        // What a backward-stable computation of a hyperplane may leave at its vertices.
+        let exact = 16.0 * f64::EPSILON * size;
         let mut b = Build {
             pts,
             tol,
@@ -517,6 +616,7 @@ mod hull {
             topo: Vec::with_capacity(16 * npts),
             planes: Vec::with_capacity(16 * npts),
             outside: Vec::with_capacity(16 * npts),
+            above: Vec::with_capacity(16 * npts),
             next: vec![NONE; npts],
             work: BinaryHeap::new(),
             free: Vec::new(),
@@ -582,6 +682,7 @@ mod hull {
             visible.push(fi);
             b.topo[fi].alive = false;
             b.topo[fi].seen = round;
+            b.above[fi] = dist(&b.planes[fi], &p);
             let mut s = 0;
             while s < visible.len() {
                 let f = visible[s];
@@ -591,7 +692,9 @@ mod hull {
                     let tg = &mut b.topo[g];
                     if tg.seen != round {
                         tg.seen = round;
-                        if dist(&b.planes[g], &p) > tol {
+                        let above = dist(&b.planes[g], &p);
+                        b.above[g] = above;
+                        if above > tol {
                             tg.alive = false;
                             visible.push(g);
                         }
@@ -628,8 +731,13 @@ mod hull {
                 t.v[r.j] = pi as u32;
                 t.nb[r.j] = r.g as u32;
                 t.back[r.j] = r.slot;
-                let pl = plane(pts, &t.v, &interior)
-                    .ok_or(HullError::Numerical("degenerate new facet"))?;
+                let (pf, pg) = (&b.planes[r.f], &b.planes[r.g]);
+                let (af, ag) = (b.above[r.f], b.above[r.g]);
+                let pl = match turn(pts, &t.v, (pf, af), (pg, ag), &interior, exact) {
+                    Some(pl) => pl,
+                    None => plane(pts, &t.v, &interior)
+                        .ok_or(HullError::Numerical("degenerate new facet"))?,
+                };
                 if pl.d - pl.n.dot(&interior) <= 0.0 {
                     return Err(HullError::Numerical("interior point on a facet"));
                 }
@@ -669,9 +777,15 @@ mod hull {
                             return Err(HullError::Numerical("horizon is not closed"));
                         }
                         let c = th.v[ic];
-                        let Some(ic_across) = ta.v.iter().position(|&x| x == c) else {
+                        let mut ic_across = D;
+                        for (i, &x) in ta.v.iter().enumerate() {
+                            if x == c {
+                                ic_across = i;
+                            }
+                        }
+                        if ic_across == D {
                             return Err(HullError::Numerical("broken adjacency"));
-                        };
+                        }
                         (h, ia, ic) = (across, ic_across, th.back[ia] as usize);
                     };
                     let taken = topo[m].nb[slot];
@@ -725,7 +839,7 @@ mod hull {
             tol,
             interior,
             topo,
-            planes,
+            mut planes,
             ..
         } = b;
         for (i, t) in topo.iter().enumerate() {
@@ -776,6 +890,11 @@ mod hull {
             }
             if inside != npts {
                 return Err(HullError::Numerical("a point is outside the hull"));
+            }
+        }
+        for (t, f) in topo.iter().zip(planes.iter_mut()) {
+            if t.alive {
+                f.measure = measure(pts, &t.v, &f.n);
             }
         }
         Ok(Hull {
