@@ -446,52 +446,79 @@ mod hull {
         })
     }
 
-    /// 5! times the 5-volume of the facet with vertices `v` and unit normal `n`: the norm of the
-    /// generalised cross product `m = ±|m| n` of the edges `e_i = p_i − p_0`, whose coordinate
-    /// `c` is ± the determinant of the edges without coordinate `c`. That 5×5 determinant is
-    /// taken (by Gaussian elimination with partial pivoting) where `|n_c| ≥ 1/√6` is largest.
-    fn measure(pts: &[P], v: &[u32; D], n: &P) -> f64 {
-        let mut drop = 0;
-        for c in 1..D {
-            if n[c].abs() > n[drop].abs() {
-                drop = c;
+    /// How many facets [`measures`] takes side by side.
+    const LANES: usize = 4;
+
+    /// `LANES` facets' edges, coordinate by coordinate, facet by facet.
+    type Edges = [[[f64; LANES]; D]; D - 1];
+
+    /// Step `K` of the QR factorisations in [`measures`]: the Householder reflection that maps
+    /// edge `K`'s components `K..D` onto coordinate `K`, applied to the edges after it, for each
+    /// facet; `|r_KK|`, the distance of edge `K` from the span of the edges before it.
+    #[inline(always)]
+    fn reflect_lanes<const K: usize>(a: &mut Edges) -> [f64; LANES] {
+        let (top, rest) = a.split_at_mut(K + 1);
+        let x = &mut top[K];
+        let mut r = [0.0; LANES];
+        for i in K..D {
+            for l in 0..LANES {
+                r[l] += x[i][l] * x[i][l];
             }
         }
-        let o = &pts[v[0] as usize];
-        let mut a = [[0.0; D - 1]; D - 1];
-        for (i, row) in a.iter_mut().enumerate() {
-            let p = &pts[v[i + 1] as usize];
-            let mut k = 0;
-            for c in 0..D {
-                if c != drop {
-                    row[k] = p[c] - o[c];
-                    k += 1;
+        let mut tau = [0.0; LANES];
+        for l in 0..LANES {
+            r[l] = r[l].sqrt();
+            // v = x + sign(x_K) r e_K, so that |v|² = 2 r (r + |x_K|) loses nothing.
+            tau[l] = 1.0 / (r[l] * (r[l] + x[K][l].abs()));
+            x[K][l] += r[l].copysign(x[K][l]);
+        }
+        for y in rest.iter_mut() {
+            let mut s = [0.0; LANES];
+            for i in K..D {
+                for l in 0..LANES {
+                    s[l] += x[i][l] * y[i][l];
+                }
+            }
+            for l in 0..LANES {
+                s[l] *= tau[l];
+            }
+            for i in K..D {
+                for l in 0..LANES {
+                    y[i][l] -= s[l] * x[i][l];
                 }
             }
         }
-        let mut det = 1.0;
-        for k in 0..D - 1 {
-            let mut pr = k;
-            for i in k + 1..D - 1 {
-                if a[i][k].abs() > a[pr][k].abs() {
-                    pr = i;
-                }
-            }
-            a.swap(k, pr);
-            let pivot = a[k][k];
-            det *= pivot;
-            if pivot == 0.0 {
-                break;
-            }
-            let row = a[k];
-            for below in a[k + 1..].iter_mut() {
-                let l = below[k] / pivot;
-                for c in k + 1..D - 1 {
-                    below[c] -= l * row[c];
+        r
+    }
+
+    /// 5! times the 5-volumes of `LANES` facets with vertices `vs[l]`: `|det R|` in the
+    /// Householder QR factorisation of the edges `e_i = p_i − p_0` (backward stable), the
+    /// product of each edge's distance from the span of the edges before it.
+    fn measures(pts: &[P], vs: &[[u32; D]; LANES]) -> [f64; LANES] {
+        let mut a: Edges = [[[0.0; LANES]; D]; D - 1];
+        for l in 0..LANES {
+            let o = &pts[vs[l][0] as usize];
+            for i in 0..D - 1 {
+                let p = &pts[vs[l][i + 1] as usize];
+                for c in 0..D {
+                    a[i][c][l] = p[c] - o[c];
                 }
             }
         }
-        (det / n[drop]).abs()
+        let r = [
+            reflect_lanes::<0>(&mut a),
+            reflect_lanes::<1>(&mut a),
+            reflect_lanes::<2>(&mut a),
+            reflect_lanes::<3>(&mut a),
+            reflect_lanes::<4>(&mut a),
+        ];
+        let mut out = [1.0; LANES];
+        for ri in r {
+            for l in 0..LANES {
+                out[l] *= ri[l];
+            }
+        }
+        out
     }
 
     fn dist(f: &Plane, p: &P) -> f64 {
@@ -776,14 +803,15 @@ mod hull {
                         if steps > visible.len() || ta.alive || ta.seen != round {
                             return Err(HullError::Numerical("horizon is not closed"));
                         }
+                        // Where h's vertex c is in across, without branches.
                         let c = th.v[ic];
-                        let mut ic_across = D;
+                        let (mut ic_across, mut found) = (0, 0);
                         for (i, &x) in ta.v.iter().enumerate() {
-                            if x == c {
-                                ic_across = i;
-                            }
+                            let here = usize::from(x == c);
+                            ic_across += i * here;
+                            found += here;
                         }
-                        if ic_across == D {
+                        if found != 1 {
                             return Err(HullError::Numerical("broken adjacency"));
                         }
                         (h, ia, ic) = (across, ic_across, th.back[ia] as usize);
@@ -892,9 +920,15 @@ mod hull {
                 return Err(HullError::Numerical("a point is outside the hull"));
             }
         }
-        for (t, f) in topo.iter().zip(planes.iter_mut()) {
-            if t.alive {
-                f.measure = measure(pts, &t.v, &f.n);
+        let live: Vec<usize> = (0..topo.len()).filter(|&i| topo[i].alive).collect();
+        for chunk in live.chunks(LANES) {
+            let mut vs = [topo[chunk[0]].v; LANES];
+            for (l, &i) in chunk.iter().enumerate() {
+                vs[l] = topo[i].v;
+            }
+            let m = measures(pts, &vs);
+            for (l, &i) in chunk.iter().enumerate() {
+                planes[i].measure = m[l];
             }
         }
         Ok(Hull {
