@@ -415,26 +415,28 @@ mod hull {
         exact: f64,
     ) -> Option<Plane> {
         let m = pg.n * a - pf.n * b;
-        let norm = m.norm();
-        let mut n = m / norm;
+        // Heights along m (not yet normalised, so that the square root is off the path).
         let mut at = [0.0; D];
-        let mut d = 0.0;
+        let mut mean = 0.0;
         for i in 0..D {
-            at[i] = n.dot(&pts[v[i] as usize]);
-            d += at[i];
+            at[i] = m.dot(&pts[v[i] as usize]);
+            mean += at[i];
         }
-        d /= D as f64;
+        mean /= D as f64;
         let mut worst = 0.0;
         for x in at {
-            let e = (x - d).abs();
+            let e = (x - mean).abs();
             if e > worst {
                 worst = e;
             }
         }
-        let ok = worst <= exact && norm > 0.0 && norm.is_finite();
+        let norm = m.norm();
+        let ok = worst <= exact * norm && norm > 0.0 && norm.is_finite();
         if !ok {
             return None;
         }
+        let mut n = m / norm;
+        let mut d = mean / norm;
         if n.dot(inside) > d {
             n = -n;
             d = -d;
@@ -704,8 +706,10 @@ mod hull {
             };
             let pi = b.outside[fi].far as usize;
             let p = pts[pi];
-            // Visible facets: connected to fi, with p strictly outside.
+            // Visible facets: connected to fi, with p strictly outside; and the horizon ridges
+            // between them and the hidden ones.
             visible.clear();
+            horizon.clear();
             visible.push(fi);
             b.topo[fi].alive = false;
             b.topo[fi].seen = round;
@@ -726,16 +730,8 @@ mod hull {
                             visible.push(g);
                         }
                     }
-                }
-            }
-            // New facets on the horizon ridges.
-            horizon.clear();
-            for &f in &visible {
-                let tf = &b.topo[f];
-                for j in 0..D {
-                    let g = tf.nb[j] as usize;
-                    if b.topo[g].alive {
-                        let slot = tf.back[j];
+                    if tg.alive {
+                        let slot = b.topo[f].back[j];
                         if b.topo[g].nb[slot as usize] as usize != f {
                             return Err(HullError::Numerical("broken adjacency"));
                         }
