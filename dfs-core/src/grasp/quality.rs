@@ -267,11 +267,41 @@ mod hull {
         far_dist: 0.0,
     };
 
-    /// The hull: its facets (live and removed), and a point strictly inside.
+    /// The hull: its facets (live and removed), and a point strictly inside. When dropped, it
+    /// leaves its buffers to the next build on the same thread.
     pub(super) struct Hull {
+        buffers: Buffers,
+        interior: P,
+    }
+
+    /// The arrays of a build. A thread keeps those of its last hull, so that the next build
+    /// reuses them instead of allocating (and faulting in) a few hundred fresh kB.
+    #[derive(Default)]
+    struct Buffers {
         topo: Vec<Topo>,
         planes: Vec<Plane>,
-        interior: P,
+        outside: Vec<Outside>,
+        above: Vec<f64>,
+        next: Vec<u32>,
+        work: BinaryHeap<(u64, u32)>,
+        free: Vec<u32>,
+    }
+
+    /// Buffers larger than this many facets are not kept.
+    const KEEP: usize = 1 << 15;
+
+    thread_local! {
+        static SPARE: std::cell::Cell<Option<Buffers>> = const { std::cell::Cell::new(None) };
+    }
+
+    impl Drop for Hull {
+        fn drop(&mut self) {
+            if self.buffers.topo.capacity() <= KEEP {
+                let buffers = std::mem::take(&mut self.buffers);
+                // Not during the thread's teardown, when the slot may be gone.
+                let _ = SPARE.try_with(|s| s.set(Some(buffers)));
+            }
+        }
     }
 
     /// Why no hull was built.
@@ -286,9 +316,10 @@ mod hull {
     impl Hull {
         /// The facets' hyperplanes.
         pub fn facets(&self) -> impl Iterator<Item = &Plane> {
-            self.topo
+            self.buffers
+                .topo
                 .iter()
-                .zip(&self.planes)
+                .zip(&self.buffers.planes)
                 .filter(|(t, _)| t.alive)
                 .map(|(_, p)| p)
         }
@@ -646,17 +677,38 @@ mod hull {
         let size = pts.iter().fold(0.0_f64, |m, p| m.max(p.norm()));
         // What a backward-stable computation of a hyperplane may leave at its vertices.
         let exact = 16.0 * f64::EPSILON * size;
+        let Buffers {
+            mut topo,
+            mut planes,
+            mut outside,
+            mut above,
+            mut next,
+            mut work,
+            mut free,
+        } = SPARE
+            .try_with(|s| s.take())
+            .ok()
+            .flatten()
+            .unwrap_or_default();
+        topo.clear();
+        planes.clear();
+        outside.clear();
+        above.clear();
+        next.clear();
+        next.resize(npts, NONE);
+        work.clear();
+        free.clear();
         let mut b = Build {
             pts,
             tol,
             interior,
-            topo: Vec::with_capacity(16 * npts),
-            planes: Vec::with_capacity(16 * npts),
-            outside: Vec::with_capacity(16 * npts),
-            above: Vec::with_capacity(16 * npts),
-            next: vec![NONE; npts],
-            work: BinaryHeap::new(),
-            free: Vec::new(),
+            topo,
+            planes,
+            outside,
+            above,
+            next,
+            work,
+            free,
         };
         for k in 0..=D {
             let mut t = Topo {
@@ -872,7 +924,11 @@ mod hull {
             interior,
             topo,
             mut planes,
-            ..
+            outside,
+            above,
+            next,
+            work,
+            free,
         } = b;
         for (i, t) in topo.iter().enumerate() {
             if !t.alive {
@@ -966,8 +1022,15 @@ mod hull {
             }
         }
         Ok(Hull {
-            topo,
-            planes,
+            buffers: Buffers {
+                topo,
+                planes,
+                outside,
+                above,
+                next,
+                work,
+                free,
+            },
             interior,
         })
     }
