@@ -983,20 +983,24 @@ mod hull {
             // Below limit − slack, rounded down.
             let below = limit - slack;
             let limit32 = (below - below.abs() * 2f64.powi(-23)) as f32;
-            let m: [f32; D] = std::array::from_fn(|c| n[c] as f32);
-            // Counted in u32, the width of an f32 comparison, so that the loop vectorises.
-            let mut inside32 = 0_u32;
-            for i in 0..npts {
-                let s = m[0] * y0[i]
-                    + m[1] * y1[i]
-                    + m[2] * y2[i]
-                    + m[3] * y3[i]
-                    + m[4] * y4[i]
-                    + m[5] * y5[i];
-                inside32 += u32::from(s <= limit32);
-            }
-            if inside32 as usize == npts {
-                continue;
+            // Only well inside f32's normal range (where its rounding is relative); else
+            // straight to f64.
+            if (1e-30..1e30).contains(&r) && limit.abs() < 1e30 {
+                let m: [f32; D] = std::array::from_fn(|c| n[c] as f32);
+                // Counted in u32, the width of an f32 comparison, so that the loop vectorises.
+                let mut inside32 = 0_u32;
+                for i in 0..npts {
+                    let s = m[0] * y0[i]
+                        + m[1] * y1[i]
+                        + m[2] * y2[i]
+                        + m[3] * y3[i]
+                        + m[4] * y4[i]
+                        + m[5] * y5[i];
+                    inside32 += u32::from(s <= limit32);
+                }
+                if inside32 as usize == npts {
+                    continue;
+                }
             }
             let mut inside = 0;
             for i in 0..npts {
@@ -1060,6 +1064,26 @@ mod hull {
                 assert!((f.d - 1.0 / 6f64.sqrt()).abs() < 1e-12);
             }
             assert!((h.volume() - 64.0 / 720.0).abs() < 1e-12);
+        }
+
+        #[test]
+        fn tiny_and_huge_hulls_pass_their_checks() {
+            // The final check runs in f32 only well inside its range: here partly or not at all.
+            for s in [1e-35, 1e-20, 1.0, 1e20, 1e35] {
+                let mut pts = Vec::new();
+                for i in 0..D {
+                    for sign in [1.0, -1.0] {
+                        let mut p = P::zeros();
+                        p[i] = sign * s;
+                        pts.push(p);
+                    }
+                }
+                pts.push(P::from_element(0.1 * s));
+                let h = build(&pts, 1e-9 * s).unwrap();
+                assert_eq!(h.facets().count(), 64);
+                let v = h.volume() / s.powi(6);
+                assert!((v - 64.0 / 720.0).abs() < 1e-12, "{s}: {v}");
+            }
         }
 
         #[test]
