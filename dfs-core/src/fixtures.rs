@@ -1,6 +1,7 @@
-//! Ready-made set-ups shared by the tick benchmark, the allocation test and `icms bench tick`.
+//! Ready-made set-ups shared by the tick and grasp-quality benchmarks, the allocation test and
+//! `icms bench tick`.
 
-use crate::contact::{ContactModel, Friction, Intensity};
+use crate::contact::{ContactFrame, ContactModel, Friction, Intensity};
 use crate::dfs::{Dfs, DfsParams, GloveSample};
 use crate::error::Result;
 use crate::hand::{HandModel, Kinematics, MAX_DOF};
@@ -119,6 +120,23 @@ pub fn glove10_holding_paper_sphere() -> Result<(Dfs, Vec<Real>, Vec<Real>, Isom
     })?;
     dfs.set_object_state(ObjectState::at_rest(pose));
     Ok((dfs, q, tau, base))
+}
+
+/// The paper's §3.4 sphere grasp: four contacts on a sphere centred at B's origin, normals
+/// from each point through the centre (the grasp-quality benchmark's input).
+pub fn paper_sphere_contacts() -> Vec<ContactFrame> {
+    [
+        [0.054, 0.054, -0.059],
+        [0.0, 0.076, -0.059],
+        [-0.054, 0.054, -0.059],
+        [0.0, -0.076, -0.059],
+    ]
+    .iter()
+    .map(|p| {
+        let p = Vector::from(*p);
+        ContactFrame::from_normal(p, -p.normalize())
+    })
+    .collect()
 }
 
 #[cfg(test)]
