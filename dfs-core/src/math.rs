@@ -198,8 +198,8 @@ pub fn cholesky_solve_in_place<const N: usize>(
 /// first and the wrist's last, the factor is block-arrowhead and costs a fraction of a dense
 /// one. `a` is read at `a[(order[i], order[j])]` with `first[i] ≤ j ≤ i`; `u` is scratch (the
 /// factor, transposed: column `i` holds row `i` of L, with `1 / L[i][i]` on the diagonal);
-/// `b` is overwritten by `x` in the
-/// original order. Allocation-free; `false` when `A` is not positive definite (or not finite).
+/// `b` is overwritten by `x` in the original order. Allocation-free; `false` when `A` is not
+/// positive definite (or not finite).
 pub fn envelope_cholesky_solve<const N: usize>(
     a: &nalgebra::SMatrix<Real, N, N>,
     order: &[usize],

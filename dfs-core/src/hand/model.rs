@@ -1646,6 +1646,48 @@ pub(crate) mod tests {
     }
 
     #[test]
+    fn the_inertia_coupling_covers_every_nonzero_of_the_mass_matrix() {
+        // The implicit finger step's envelope Cholesky relies on it: an entry of M(θ) outside
+        // the coupling would be silently dropped.
+        let mut hands = vec![HandModel::glove10(), test_hand()];
+        for name in ["allegro", "barrett", "inspire", "gripper"] {
+            hands.push(crate::hand::builtin::builtin_hand(name).expect(name));
+        }
+        for hand in &hands {
+            let n = hand.dof();
+            let coupling = hand.inertia_coupling();
+            for seed in 0..5 {
+                let u: Vec<f64> = (0..n)
+                    .map(|d| ((d * 7 + seed * 13) % 11) as f64 / 10.0)
+                    .collect();
+                let q = angles_from_unit(hand, &u);
+                let mut kin = Kinematics::default();
+                hand.forward_kinematics(&base(), &q, &mut kin);
+                let mut m = DofMatrix::zeros();
+                hand.mass_matrix(&mut kin, &mut m);
+                for a in 0..n {
+                    assert!(
+                        coupling[a] & (1 << a) != 0,
+                        "{}: DOF {a} not coupled to itself",
+                        hand.name
+                    );
+                    for b in 0..n {
+                        if coupling[a] & (1 << b) == 0 {
+                            assert_eq!(
+                                m[(a, b)],
+                                0.0,
+                                "{}: M[{a}][{b}] outside the coupling",
+                                hand.name
+                            );
+                        }
+                        assert_eq!(coupling[a] & (1 << b) != 0, coupling[b] & (1 << a) != 0);
+                    }
+                }
+            }
+        }
+    }
+
+    #[test]
     fn a_stretched_finger_gives_finite_jacobians_and_inertia() {
         let glove = HandModel::glove10();
         let mut kin = fk(&glove, &[0.0; 10]);
