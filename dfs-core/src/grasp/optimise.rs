@@ -662,11 +662,15 @@ impl ForceSolver {
             let Some(direction) = direction else {
                 break;
             };
-            // Backtracking on the dual (it must rise).
+            // Backtracking on the dual (it must rise). Cold, at λ = 0, every normal force sits
+            // at its minimum and the squeeze direction is flat: the step is then some 1e11
+            // times too long, and up to 64 halvings (each one projection) find the kink where
+            // the curvature starts. Two antipodal soft pads (a gripper) never got past it with
+            // 30, so every load of theirs went to Clarabel.
             let mut t = 1.0;
             let slope = g.dot(&direction);
             let mut accepted = false;
-            for _ in 0..30 {
+            for _ in 0..64 {
                 let trial = lambda + direction * t;
                 let v = self.dual_at(&trial, &b);
                 if v >= value + 1e-4 * t * slope || (v - value).abs() <= 1e-15 * (1.0 + value.abs())
@@ -894,6 +898,59 @@ mod tests {
             }
             assert!(solved >= 30, "{model:?}: {solved} of 60 loads held");
         }
+    }
+
+    #[test]
+    fn an_antipodal_soft_pair_along_a_lift_is_answered_by_the_dual_newton_method() {
+        // A parallel gripper's two pads. Cold, at λ = 0, every normal force sits at its
+        // minimum and the squeeze direction is flat in the dual: the Newton step is huge and
+        // only a long backtrack finds the kink. (It used to give up there, so every load went
+        // to Clarabel.)
+        let r = 0.04;
+        let contacts = [
+            ContactFrame::from_normal(Vector::new(-r, 0.0, 0.0), Vector::x()),
+            ContactFrame::from_normal(Vector::new(r, 0.0, 0.0), -Vector::x()),
+        ];
+        let params = OptimiseParams {
+            margin: 0.5,
+            min_normal: 0.5,
+        };
+        let friction = Friction {
+            mu: 0.8,
+            mu_torsion: 0.005,
+        };
+        let mut solver = ForceSolver::new(
+            &contacts,
+            ContactModel::SoftFinger,
+            &friction,
+            &params,
+            None,
+        )
+        .unwrap();
+        let mut fast = vec![Intensity::zeros(); 2];
+        let mut reference = vec![Intensity::zeros(); 2];
+        let (mut held, mut by_newton) = (0, 0);
+        for load in lift_loads(60) {
+            let before = solver.solve_counts();
+            let Ok(residual) = solver.solve_into(&load, &mut fast) else {
+                continue;
+            };
+            held += 1;
+            assert!(residual <= CHECK_TOLERANCE * (1.0 + load.norm()));
+            if solver.solve_counts().0 > before.0 {
+                by_newton += 1;
+                solver.solve_clarabel(&load, &mut reference).unwrap();
+                let scale = 1.0 + reference.iter().fold(0.0_f64, |a, c| a.max(c.amax()));
+                for (f, c) in fast.iter().zip(&reference) {
+                    assert!((f - c).amax() < 1e-5 * scale, "{f:?} vs {c:?}");
+                }
+            }
+        }
+        assert!(held >= 30, "{held} of 60 loads held");
+        assert!(
+            by_newton * 10 >= held * 9,
+            "Newton answered {by_newton} of {held}"
+        );
     }
 
     #[test]
