@@ -15,6 +15,8 @@ use std::task::{Context, Poll};
 
 use axum::body::{Body, HttpBody};
 use axum::extract::{Request, State};
+use axum::http::header::CONNECTION;
+use axum::http::HeaderValue;
 use axum::middleware::Next;
 use axum::response::Response;
 use bytes::Bytes;
@@ -66,7 +68,8 @@ impl Drop for Returning {
 }
 
 /// Middleware: runs the request, then reads and discards what its handler left of the body,
-/// at most `max_body` bytes (beyond that the connection is closed as before).
+/// at most `max_body` bytes (beyond that the connection is closed, and the answer carries
+/// `Connection: close`).
 pub async fn linger(State(max_body): State<usize>, req: Request, next: Next) -> Response {
     let (parts, body) = req.into_parts();
     if body.is_end_stream() {
@@ -77,22 +80,36 @@ pub async fn linger(State(max_body): State<usize>, req: Request, next: Next) -> 
         inner: Some(body),
         slot: Arc::clone(&slot),
     });
-    let response = next.run(Request::from_parts(parts, body)).await;
+    let mut response = next.run(Request::from_parts(parts, body)).await;
     let rest = slot.lock().unwrap_or_else(PoisonError::into_inner).take();
     if let Some(rest) = rest {
-        discard(rest, max_body).await;
+        if !discard(rest, max_body).await {
+            // The rest is too long to read (an upload over the limit answered 413): the
+            // connection closes after this answer, and saying so keeps the client from sending
+            // its next request on it (it would find the connection gone: "incomplete message").
+            response
+                .headers_mut()
+                .insert(CONNECTION, HeaderValue::from_static("close"));
+        }
     }
     response
 }
 
-/// Reads `body` to its end or until more than `max` bytes came, dropping the bytes.
-async fn discard(mut body: Body, max: usize) {
+/// Reads `body` to its end or until more than `max` bytes came, dropping the bytes; `true`
+/// when it was read to its end.
+async fn discard(mut body: Body, max: usize) -> bool {
     let mut left = max;
-    while let Some(Ok(frame)) = body.frame().await {
-        if let Some(data) = frame.data_ref() {
-            match left.checked_sub(data.len()) {
-                Some(l) => left = l,
-                None => return,
+    loop {
+        match body.frame().await {
+            None => return true,
+            Some(Err(_)) => return false,
+            Some(Ok(frame)) => {
+                if let Some(data) = frame.data_ref() {
+                    match left.checked_sub(data.len()) {
+                        Some(l) => left = l,
+                        None => return false,
+                    }
+                }
             }
         }
     }
