@@ -715,10 +715,11 @@ impl Dfs {
                 t.feedback_force_world = -(rot * fb);
             }
         }
-        self.integrate_fingers(tau);
+        self.integrate_fingers(tau, &rot);
     }
 
-    fn integrate_fingers(&mut self, tau: &[Real]) {
+    /// The implicit finger step; `rot` is the object's orientation as a matrix.
+    fn integrate_fingers(&mut self, tau: &[Real], rot: &nalgebra::Rotation3<Real>) {
         let ndof = self.hand.dof();
         let p = &self.params;
         let dt = p.dt;
@@ -735,7 +736,6 @@ impl Dfs {
             rhs[i] = s + dt * tau[i];
         }
         let mut fb_torque = [0.0; MAX_DOF];
-        let rot = self.state.pose.rotation.to_rotation_matrix();
         for k in 0..self.hand.fingertips.len() {
             let t = &self.out.tips[k];
             let j = &self.kin.tip_jacobians[k];

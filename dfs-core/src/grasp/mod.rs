@@ -109,18 +109,7 @@ mod tests {
     /// The paper's §3.4 sphere contacts, normals from each point through the centre; shared by
     /// the grasp tests.
     pub(crate) fn paper_contacts() -> Vec<ContactFrame> {
-        [
-            [0.054, 0.054, -0.059],
-            [0.0, 0.076, -0.059],
-            [-0.054, 0.054, -0.059],
-            [0.0, -0.076, -0.059],
-        ]
-        .iter()
-        .map(|p| {
-            let p = Vector::from(*p);
-            ContactFrame::from_normal(p, -p.normalize())
-        })
-        .collect()
+        crate::fixtures::paper_sphere_contacts()
     }
 
     #[test]
