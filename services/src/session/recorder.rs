@@ -412,17 +412,23 @@ impl Drop for SessionRecorder {
     }
 }
 
-/// Serialises `msg` at the end of the batch. serde_json writes NaN and infinities as `null`,
-/// and no field of ours is ever null, so a `null` in the output means a non-finite number.
+/// Serialises `msg` at the end of the batch. serde_json writes NaN and infinities as `null`
+/// (through [`ShortDecimals`]), and no field of ours is ever null, so a `null`
+/// means a non-finite number.
 fn push<T: serde::Serialize>(batch: &mut Batch, topic: u8, t: u64, msg: &T) -> Result<()> {
     let start = batch.data.len();
     let topic_name = ALL_TOPICS[topic as usize];
-    serde_json::to_writer(&mut batch.data, msg).map_err(|e| RecordingError::Serialize {
+    let mut wrote_null = false;
+    let formatter = ShortDecimals {
+        wrote_null: &mut wrote_null,
+    };
+    let mut ser = serde_json::Serializer::with_formatter(&mut batch.data, formatter);
+    serde::Serialize::serialize(msg, &mut ser).map_err(|e| RecordingError::Serialize {
         topic: topic_name.to_owned(),
         detail: e.to_string(),
     })?;
     let end = batch.data.len();
-    if contains_null(&batch.data[start..end]) {
+    if wrote_null {
         let path = serde_json::from_slice::<serde_json::Value>(&batch.data[start..end])
             .ok()
             .and_then(|v| find_null(&v, String::new()))
@@ -437,9 +443,115 @@ fn push<T: serde::Serialize>(batch: &mut Batch, topic: u8, t: u64, msg: &T) -> R
     Ok(())
 }
 
-fn contains_null(bytes: &[u8]) -> bool {
-    bytes.windows(4).any(|w| w == b"null")
+/// serde_json's compact output, with numbers that are whole multiples of 1e-9 (every number
+/// the recorder rounds, see [`GEOMETRY_STEPS_PER_UNIT`]) written as scaled integers: the same
+/// decimal a shortest-round-trip formatter finds for them, or one with more digits where it
+/// would switch to exponent form (below 1e-5), at a fraction of the cost. Anything else goes
+/// to serde_json's own formatter. Notes whether a `null` was written.
+struct ShortDecimals<'a> {
+    wrote_null: &'a mut bool,
 }
+
+/// Largest magnitude written as a scaled integer: 16 significant digits, so the 1e-9 grid is
+/// finer than the doubles' spacing and the decimal names exactly one double.
+const SHORT_DECIMAL_LIMIT: f64 = 1e6;
+
+impl serde_json::ser::Formatter for ShortDecimals<'_> {
+    fn write_null<W: ?Sized + std::io::Write>(&mut self, writer: &mut W) -> std::io::Result<()> {
+        *self.wrote_null = true;
+        writer.write_all(b"null")
+    }
+
+    fn write_f64<W: ?Sized + std::io::Write>(
+        &mut self,
+        writer: &mut W,
+        value: f64,
+    ) -> std::io::Result<()> {
+        match short_decimal(value) {
+            Some((buf, len)) => writer.write_all(&buf[..len]),
+            None => serde_json::ser::Formatter::write_f64(
+                &mut serde_json::ser::CompactFormatter,
+                writer,
+                value,
+            ),
+        }
+    }
+}
+
+/// `value` as a decimal with at most nine fractional digits (at least one, like `1.0`), when
+/// `value` is the double nearest to such a decimal and below [`SHORT_DECIMAL_LIMIT`]; the
+/// text parses back to exactly `value`.
+fn short_decimal(value: f64) -> Option<([u8; 24], usize)> {
+    let scaled = value * 1e9;
+    // Also refuses NaN (never passed here: serde_json writes it as null).
+    if scaled.is_nan() || scaled.abs() >= SHORT_DECIMAL_LIMIT * 1e9 {
+        return None;
+    }
+    // Round half away from zero (the cast truncates; |scaled| < 1e15 < 2^53). `f64::round`
+    // is a libm call on the baseline x86-64 target.
+    let k = (scaled + 0.5f64.copysign(scaled)) as i64;
+    if k as f64 / 1e9 != value {
+        return None;
+    }
+    let mut out = [0u8; 24];
+    let mut len = 0;
+    if k < 0 {
+        out[0] = b'-';
+        len = 1;
+    }
+    let k = k.unsigned_abs();
+    let (whole, frac) = (k / 1_000_000_000, (k % 1_000_000_000) as u32);
+    // Integer part, at most 6 digits.
+    if whole < 10 {
+        out[len] = b'0' + whole as u8;
+        len += 1;
+    } else {
+        let mut digits = [0u8; 8];
+        let mut n = 0;
+        let mut w = whole;
+        while w > 0 {
+            digits[n] = b'0' + (w % 10) as u8;
+            n += 1;
+            w /= 10;
+        }
+        for i in (0..n).rev() {
+            out[len] = digits[i];
+            len += 1;
+        }
+    }
+    out[len] = b'.';
+    len += 1;
+    if frac == 0 {
+        out[len] = b'0';
+        return Some((out, len + 1));
+    }
+    // Nine fractional digits, two at a time, then the trailing zeros dropped.
+    out[len] = b'0' + (frac / 100_000_000) as u8;
+    let mut rest = frac % 100_000_000;
+    for pair in (0..4).rev() {
+        let two = (rest % 100) as usize * 2;
+        rest /= 100;
+        let at = len + 1 + pair * 2;
+        out[at..at + 2].copy_from_slice(&DIGIT_PAIRS[two..two + 2]);
+    }
+    len += 9;
+    while out[len - 1] == b'0' {
+        len -= 1;
+    }
+    Some((out, len))
+}
+
+/// "00", "01", … "99".
+const DIGIT_PAIRS: [u8; 200] = {
+    let mut t = [0u8; 200];
+    let mut i = 0;
+    while i < 100 {
+        t[2 * i] = b'0' + (i / 10) as u8;
+        t[2 * i + 1] = b'0' + (i % 10) as u8;
+        i += 1;
+    }
+    t
+};
 
 fn find_null(v: &serde_json::Value, path: String) -> Option<String> {
     match v {
@@ -792,4 +904,67 @@ pub fn record_simulation(
         }
     }
     recorder.finish()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn written(value: f64) -> String {
+        let mut out = Vec::new();
+        let mut wrote_null = false;
+        let mut ser = serde_json::Serializer::with_formatter(
+            &mut out,
+            ShortDecimals {
+                wrote_null: &mut wrote_null,
+            },
+        );
+        serde::Serialize::serialize(&value, &mut ser).unwrap();
+        assert_eq!(wrote_null, !value.is_finite());
+        String::from_utf8(out).unwrap()
+    }
+
+    /// A small deterministic generator (xorshift) so the test needs no RNG crate.
+    fn values(seed: u64, n: usize) -> impl Iterator<Item = f64> {
+        let mut s = seed;
+        (0..n).map(move |i| {
+            s ^= s << 13;
+            s ^= s >> 7;
+            s ^= s << 17;
+            let unit = (s >> 11) as f64 / (1u64 << 53) as f64;
+            let scale = 10f64.powi((i % 14) as i32 - 8);
+            (unit - 0.5) * 2.0 * scale
+        })
+    }
+
+    #[test]
+    fn recorded_numbers_read_back_exactly_and_match_the_shortest_decimal() {
+        for x in values(0x9e37_79b9_7f4a_7c15, 200_000) {
+            for v in [g(x), f(x), x] {
+                let text = written(v);
+                let back: f64 = serde_json::from_str(&text).unwrap();
+                assert_eq!(back.to_bits(), v.to_bits(), "{v:e} written as {text}");
+                // Where the shortest-round-trip formatter does not use an exponent, the
+                // text is the same as serde_json's own.
+                let plain = serde_json::to_string(&v).unwrap();
+                if !plain.contains('e') {
+                    assert_eq!(text, plain, "{v:e}");
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn whole_numbers_zero_and_small_values_are_written_as_json_numbers() {
+        assert_eq!(written(0.0), "0.0");
+        assert_eq!(written(-0.0), "0.0");
+        assert_eq!(written(1.0), "1.0");
+        assert_eq!(written(-12.5), "-12.5");
+        assert_eq!(written(g(1.1e-8)), "0.000000011");
+        assert_eq!(written(999_999.999_999_999), "999999.999999999");
+        assert_eq!(written(1e6), "1000000.0");
+        assert_eq!(written(1e-10), "1e-10");
+        assert_eq!(written(f64::NAN), "null");
+        assert_eq!(written(f64::INFINITY), "null");
+    }
 }
