@@ -680,3 +680,35 @@ fn raw_topics_whose_log_times_go_back_or_span_more_than_an_hour_are_refused() {
         }
     }
 }
+
+#[test]
+fn glove_mcap_input_spanning_more_than_an_hour_is_rejected_naming_the_message() {
+    let hand = HandModel::glove10();
+    let dir = tempfile::tempdir().unwrap();
+    let input = dir.path().join("glove.mcap");
+    let mut w = SessionWriter::create(&input).unwrap();
+    w.register_channel("/glove", &JOINT_STATES_SCHEMA).unwrap();
+    let msg = services::foxglove::JointStates {
+        timestamp: Default::default(),
+        joints: hand
+            .dof_names
+            .iter()
+            .map(|name| services::foxglove::JointState {
+                name: name.clone(),
+                position: Some(0.0),
+                effort: Some(0.0),
+                ..Default::default()
+            })
+            .collect(),
+    };
+    // Replayed at 1 kHz, the second message would ask for 10^15 ticks.
+    for t in [0, 1_000_000, 1_000_000_000_000_000_000] {
+        w.write("/glove", t, &msg).unwrap();
+    }
+    w.finish().unwrap();
+    let e = read_glove_mcap(&input, &hand).unwrap_err().to_string();
+    assert!(
+        e.contains("message 2") && e.contains("log time") && e.contains("one hour"),
+        "{e}"
+    );
+}
