@@ -712,3 +712,18 @@ fn glove_mcap_input_spanning_more_than_an_hour_is_rejected_naming_the_message() 
         "{e}"
     );
 }
+
+#[test]
+fn a_glove_csv_saved_with_a_byte_order_mark_reads_like_one_without() {
+    let hand = HandModel::glove10();
+    let header: Vec<String> = std::iter::once("time_s".to_owned())
+        .chain(hand.dof_names.iter().cloned())
+        .chain(hand.dof_names.iter().map(|n| format!("tau_{n}")))
+        .collect();
+    let zeros = vec!["0.0"; header.len() - 1].join(",");
+    let text = format!("{}\n0.0,{zeros}\n0.01,{zeros}\n", header.join(","));
+    let plain = parse_glove_csv(&text, "g.csv", &hand).unwrap();
+    let with_bom = parse_glove_csv(&format!("\u{feff}{text}"), "g.csv", &hand).unwrap();
+    assert_eq!(with_bom, plain);
+    assert_eq!(plain.len(), 2);
+}

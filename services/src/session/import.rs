@@ -116,6 +116,8 @@ pub fn read_glove_csv(path: &Path, hand: &HandModel) -> Result<GloveRecording> {
 /// Parses glove CSV text; `name` (e.g. the file name) prefixes error locations.
 pub fn parse_glove_csv(text: &str, name: &str, hand: &HandModel) -> Result<GloveRecording> {
     let n = hand.dof();
+    // Spreadsheets export UTF-8 with a byte order mark; it is not part of the first column.
+    let text = text.strip_prefix('\u{feff}').unwrap_or(text);
     let mut lines = text
         .lines()
         .enumerate()
