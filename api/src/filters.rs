@@ -15,19 +15,19 @@ pub struct SkillFilters {
     #[arg(long)]
     pub shape: Option<String>,
     /// Least object mass, kg.
-    #[arg(long)]
+    #[arg(long, allow_negative_numbers = true)]
     pub mass_min: Option<f64>,
     /// Largest object mass, kg.
-    #[arg(long)]
+    #[arg(long, allow_negative_numbers = true)]
     pub mass_max: Option<f64>,
     /// Least Coulomb friction coefficient.
-    #[arg(long)]
+    #[arg(long, allow_negative_numbers = true)]
     pub mu_min: Option<f64>,
     /// Largest Coulomb friction coefficient.
-    #[arg(long)]
+    #[arg(long, allow_negative_numbers = true)]
     pub mu_max: Option<f64>,
     /// Number of fingertip contacts.
-    #[arg(long)]
+    #[arg(long, allow_negative_numbers = true)]
     #[param(minimum = 0)]
     pub contacts: Option<i64>,
     /// Contact model: frictionless, point_with_friction or soft_finger.
@@ -37,16 +37,16 @@ pub struct SkillFilters {
     #[arg(long)]
     pub grasp_type: Option<String>,
     /// Least Ferrari-Canny grasp quality ε.
-    #[arg(long)]
+    #[arg(long, allow_negative_numbers = true)]
     pub min_quality: Option<f64>,
     /// The skill has a phase of this name (with phase_min_s / phase_max_s: of that duration).
     #[arg(long)]
     pub phase: Option<String>,
     /// Least duration of `phase`, s (needs `phase`).
-    #[arg(long)]
+    #[arg(long, allow_negative_numbers = true)]
     pub phase_min_s: Option<f64>,
     /// Largest duration of `phase`, s (needs `phase`).
-    #[arg(long)]
+    #[arg(long, allow_negative_numbers = true)]
     pub phase_max_s: Option<f64>,
     /// Sort: id, quality, mass or duration, optionally with `:asc` / `:desc` (or a leading `-`
     /// for descending). Default: id ascending.

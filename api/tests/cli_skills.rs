@@ -84,3 +84,49 @@ fn a_corrupt_file_is_refused_with_its_reason_and_stores_nothing() {
     assert_ne!(c, 0);
     assert!(e.contains("cursor"), "{e}");
 }
+
+#[test]
+fn negative_filters_and_an_out_of_range_similar_limit_are_refused_with_a_clear_message() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let args = [
+        "simulate",
+        "--scenario",
+        "box-pinch-lift",
+        "--duration",
+        "3.5",
+        "--out",
+        "a.mcap",
+    ];
+    let (c, _, e) = icms(d, &args);
+    assert_eq!(c, 0, "{e}");
+    let (c, out, e) = icms(d, &["ingest", "a.mcap", "--json"]);
+    assert_eq!(c, 0, "{e}");
+    let v: Value = serde_json::from_str(&out).unwrap();
+    let id = v["sessions"][0]["skill_ids"][0]
+        .as_i64()
+        .unwrap()
+        .to_string();
+
+    for (flags, want) in [
+        (&["--mass-min", "-1"][..], "mass min -1 is negative"),
+        (&["--contacts", "-3"][..], "contacts -3 is negative"),
+        (
+            &["--phase", "hold", "--phase-min-s", "-5"][..],
+            "phase duration min -5 is negative",
+        ),
+        (&["--similar-to", &id, "--limit", "0"][..], "--limit 0"),
+        // k = 2^32 - 1 neighbours used to reserve 64 GiB and abort.
+        (
+            &["--similar-to", &id, "--limit", "4294967295"][..],
+            "--limit 4294967295 is outside 1..=1000",
+        ),
+        (&["--similar-to", "-1"][..], "no skill with id -1"),
+    ] {
+        let mut a = vec!["skills"];
+        a.extend_from_slice(flags);
+        let (c, _, e) = icms(d, &a);
+        assert_eq!(c, 1, "{flags:?}: {e}");
+        assert!(e.contains(want), "{flags:?}: {e}");
+    }
+}

@@ -151,7 +151,7 @@ pub struct Task {
     /// Which phase (`approach`, `preshape`, `grasp`, `lift`, `hold`, `transport`, `place`,
     /// `release`, `retreat`).
     pub phase: String,
-    /// Duration (s), > 0 and ≤ 600.
+    /// Duration (s), > 0 and ≤ 600; the whole script ≤ [`MAX_SCRIPT_S`].
     pub duration: Real,
     /// `lift`: height (m) to raise the object. Default 0.10.
     #[serde(default, skip_serializing_if = "Option::is_none")]
@@ -185,6 +185,10 @@ pub struct Scenario {
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub operator_mu: Option<Real>,
 }
+
+/// Longest script (s): the sum of a scenario's task durations, like `icms simulate --duration`.
+/// A minute of session is about 30 MB of MCAP.
+pub const MAX_SCRIPT_S: Real = 3600.0;
 
 /// A task with its phase resolved and defaults filled in.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -291,6 +295,12 @@ impl Scenario {
                 turn,
             });
         }
+        let total: Real = out.iter().map(|t| t.duration).sum();
+        check(
+            "tasks".into(),
+            total <= MAX_SCRIPT_S,
+            format!("the script lasts {total} s; a session lasts at most {MAX_SCRIPT_S} s"),
+        )?;
         Ok((object, out))
     }
 
@@ -483,5 +493,24 @@ mod tests {
             .unwrap_err()
             .to_string()
             .contains("tasks[0].duration"));
+    }
+
+    #[test]
+    fn a_script_longer_than_an_hour_is_refused_naming_the_tasks() {
+        let mut s = Scenario::builtin("sphere-lift", 0).unwrap();
+        s.tasks = vec![
+            Task {
+                phase: "hold".into(),
+                duration: 600.0,
+                height: None,
+                offset: None,
+                turn: None,
+            };
+            7
+        ];
+        let e = s.resolve().unwrap_err().to_string();
+        assert!(e.contains("invalid tasks: the script lasts 4200 s"), "{e}");
+        s.tasks.pop();
+        s.resolve().unwrap();
     }
 }

@@ -122,3 +122,44 @@ fn bad_hand_specs_are_refused_naming_the_problem() {
     let err = load_hand_from_texts(spec, urdf, "spec.json").unwrap_err();
     assert!(err.to_string().contains("no link named \"nail\""), "{err}");
 }
+
+#[test]
+fn a_skill_file_with_phases_longer_than_an_hour_or_a_far_key_pose_is_refused_naming_the_field() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("session.mcap");
+    let s = Scenario::builtin("box-pinch-lift", 0).unwrap();
+    record_simulation(&s, Some(3.5), &path, |_, _| {}).unwrap();
+    let session = read_session(&path).unwrap();
+    let seg = segment(&session, &SegmentParams::default());
+    let skill = serde_json::to_value(&seg.skills[0]).unwrap();
+    let gripper = load_builtin_hand("gripper").unwrap();
+    let run = |json: &serde_json::Value| {
+        let spec = skill_spec_from_json(json, "skill.json").unwrap();
+        replay_skill(
+            &gripper,
+            &spec,
+            &ReplayParams::default(),
+            &ReplaySource::default(),
+            None,
+        )
+    };
+
+    // A hold of 10^9 s: replayed at 1 kHz it would run for ever.
+    let mut long = skill.clone();
+    let phases = long["phases"].as_array_mut().unwrap();
+    let end = phases.last().unwrap()["end_ns"].as_u64().unwrap();
+    phases.push(serde_json::json!({"name": "hold", "start_ns": end, "end_ns": end + 1_000_000_000_000_000_000u64}));
+    let e = run(&long).unwrap_err().to_string();
+    assert!(
+        e.contains("skill.phases") && e.contains("at most 3600 s"),
+        "{e}"
+    );
+
+    let mut far = skill.clone();
+    far["motion"] = serde_json::json!([
+        {"time_s": 0.0, "position": [0.0, 0.0, 0.0], "rotation": [0.0, 0.0, 0.0]},
+        {"time_s": 1.0, "position": [0.0, 0.0, 1e300], "rotation": [0.0, 0.0, 0.0]}
+    ]);
+    let e = run(&far).unwrap_err().to_string();
+    assert!(e.contains("skill.motion[1]"), "{e}");
+}

@@ -623,3 +623,107 @@ fn a_topic_left_undecoded_is_still_checked_for_valid_json() {
     assert_eq!((s.joint_states.len(), s.feedback.len()), (0, 0));
     assert_eq!(s.message_counts[TOPIC_GLOVE_FEEDBACK], 1);
 }
+
+/// A file with the four raw topics, one message each per `(topic, log time)` of `times`.
+fn raw_topics_file(times: &[(&str, u64)]) -> Vec<u8> {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("times.mcap");
+    let mut w = SessionWriter::create(&path).unwrap();
+    for (topic, schema) in RAW_TOPICS.iter().zip(ICMS_SCHEMAS.iter()) {
+        w.register_channel(topic, schema).unwrap();
+    }
+    for &(topic, t) in times {
+        match topic {
+            TOPIC_CONTACTS => w.write(topic, t, &Contacts::default()),
+            TOPIC_OBJECT_STATE => w.write(topic, t, &ObjectState::default()),
+            TOPIC_GLOVE_JOINT_STATES => w.write(topic, t, &GloveJointStates::default()),
+            _ => w.write(topic, t, &GloveFeedback::default()),
+        }
+        .unwrap();
+    }
+    w.finish().unwrap();
+    std::fs::read(&path).unwrap()
+}
+
+#[test]
+fn raw_topics_whose_log_times_go_back_or_span_more_than_an_hour_are_refused() {
+    let ticks = |topic| (0..3).map(move |k| (topic, k * 1_000_000));
+    let ok: Vec<(&str, u64)> = RAW_TOPICS.iter().flat_map(|t| ticks(*t)).collect();
+    let session = read_session_bytes(&raw_topics_file(&ok), "ok", &Default::default()).unwrap();
+    assert_eq!(session.object.len(), 3);
+
+    // One object state a day after the rest: segmentation would resample the whole day.
+    let mut far = ok.clone();
+    far.push((TOPIC_OBJECT_STATE, 86_400_000_000_000));
+    // An object state that goes back in time.
+    let mut back = ok.clone();
+    back.push((TOPIC_OBJECT_STATE, 500_000));
+    // A log time the store's signed columns cannot hold.
+    let mut huge = ok.clone();
+    huge.push((TOPIC_OBJECT_STATE, u64::MAX));
+    for (times, want) in [
+        (far, "a session spans at most 3660 s"),
+        (back, "goes back before the previous message's"),
+        (huge, "beyond 2^63 ns"),
+    ] {
+        let bytes = raw_topics_file(&times);
+        for topics in [DecodeTopics::ALL, DecodeTopics::SEGMENTATION] {
+            let e = read_session_bytes_with(&bytes, "odd.mcap", &Default::default(), topics)
+                .unwrap_err();
+            let text = e.to_string();
+            assert!(
+                matches!(e, RecordingError::InvalidInput { .. })
+                    && text.contains("topic /object/state message 3 (log time")
+                    && text.contains(want),
+                "{text}"
+            );
+        }
+    }
+}
+
+#[test]
+fn glove_mcap_input_spanning_more_than_an_hour_is_rejected_naming_the_message() {
+    let hand = HandModel::glove10();
+    let dir = tempfile::tempdir().unwrap();
+    let input = dir.path().join("glove.mcap");
+    let mut w = SessionWriter::create(&input).unwrap();
+    w.register_channel("/glove", &JOINT_STATES_SCHEMA).unwrap();
+    let msg = services::foxglove::JointStates {
+        timestamp: Default::default(),
+        joints: hand
+            .dof_names
+            .iter()
+            .map(|name| services::foxglove::JointState {
+                name: name.clone(),
+                position: Some(0.0),
+                effort: Some(0.0),
+                ..Default::default()
+            })
+            .collect(),
+    };
+    // Replayed at 1 kHz, the second message would ask for 10^15 ticks.
+    for t in [0, 1_000_000, 1_000_000_000_000_000_000] {
+        w.write("/glove", t, &msg).unwrap();
+    }
+    w.finish().unwrap();
+    let e = read_glove_mcap(&input, &hand).unwrap_err().to_string();
+    assert!(
+        e.contains("message 2") && e.contains("log time") && e.contains("one hour"),
+        "{e}"
+    );
+}
+
+#[test]
+fn a_glove_csv_saved_with_a_byte_order_mark_reads_like_one_without() {
+    let hand = HandModel::glove10();
+    let header: Vec<String> = std::iter::once("time_s".to_owned())
+        .chain(hand.dof_names.iter().cloned())
+        .chain(hand.dof_names.iter().map(|n| format!("tau_{n}")))
+        .collect();
+    let zeros = vec!["0.0"; header.len() - 1].join(",");
+    let text = format!("{}\n0.0,{zeros}\n0.01,{zeros}\n", header.join(","));
+    let plain = parse_glove_csv(&text, "g.csv", &hand).unwrap();
+    let with_bom = parse_glove_csv(&format!("\u{feff}{text}"), "g.csv", &hand).unwrap();
+    assert_eq!(with_bom, plain);
+    assert_eq!(plain.len(), 2);
+}

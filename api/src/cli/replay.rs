@@ -96,14 +96,16 @@ fn resolve_hand(name_or_path: &str, data: Option<&Path>) -> Result<(LoadedHand, 
     match data {
         Some(d) if has_store(d) => {
             let name = name_or_path.to_owned();
-            let hand = with_store(d, async move |s| s.get_hand(&name).await?.load())
-                .map_err(|CliError(e)| {
+            let hand = with_store(d, async move |s| s.get_hand(&name).await?.load()).map_err(
+                |CliError(e)| {
                     CliError(format!(
-                        "--hand {name_or_path:?} is neither a built-in hand ({}), a spec file,                          nor a hand in {}: {e}",
+                        "--hand {name_or_path:?} is neither a built-in hand ({}), a spec file, \
+                         nor a hand in {}: {e}",
                         BUILTIN_HANDS.join(", "),
                         d.display()
                     ))
-                })?;
+                },
+            )?;
             Ok((hand, false))
         }
         _ => Ok((load_hand(name_or_path)?, false)),

@@ -155,7 +155,15 @@ pub fn run_import(a: ImportArgs) -> Result<(), CliError> {
         a.input.with_file_name(format!("{stem}.session.mcap"))
     });
     let hand = dfs_core::hand::HandModel::glove10();
-    let recording = read_glove_file(&a.input, &hand)?;
+    let recording = read_glove_file(&a.input, &hand).map_err(|e| {
+        // Errors about the file's content name it already; the MCAP reader's do not.
+        let (msg, input) = (e.to_string(), a.input.display().to_string());
+        CliError(if msg.contains(&input) {
+            msg
+        } else {
+            format!("{input}: {msg}")
+        })
+    })?;
     let name = a
         .input
         .file_name()

@@ -3,7 +3,7 @@
 use super::{print_json, CliError};
 use crate::filters::SkillFilters;
 use services::ingest::ingest_bytes;
-use services::store::{Store, DEFAULT_LIMIT};
+use services::store::{Store, DEFAULT_LIMIT, MAX_LIMIT};
 use std::path::PathBuf;
 
 /// Arguments of `icms ingest`.
@@ -28,7 +28,7 @@ pub struct SkillsArgs {
     filters: SkillFilters,
     /// The k nearest skills to this skill id instead of a filtered list (k = --limit, default
     /// 50).
-    #[arg(long)]
+    #[arg(long, allow_negative_numbers = true)]
     similar_to: Option<i64>,
     /// Data directory.
     #[arg(long, default_value = "icms-data")]
@@ -92,8 +92,15 @@ pub fn run_skills(a: SkillsArgs) -> Result<(), CliError> {
             .await
             .map_err(|e| CliError(format!("{}: {e}", a.data.display())))?;
         if let Some(id) = a.similar_to {
-            let k = a.filters.limit.unwrap_or(DEFAULT_LIMIT) as usize;
-            let near = store.nearest_to_skill(id, k)?;
+            // The same bounds as `GET /skills/{id}/similar?k=`.
+            let k = a.filters.limit.unwrap_or(DEFAULT_LIMIT);
+            if !(1..=MAX_LIMIT).contains(&k) {
+                store.close().await;
+                return Err(CliError(format!(
+                    "--limit {k} is outside 1..={MAX_LIMIT} (the number of similar skills)"
+                )));
+            }
+            let near = store.nearest_to_skill(id, k as usize)?;
             let items: Vec<_> = near
                 .iter()
                 .map(|(id, d)| serde_json::json!({ "skill_id": id, "distance": d }))

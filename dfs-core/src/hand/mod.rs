@@ -18,4 +18,4 @@ pub mod urdf;
 
 pub use builtin::{builtin_hand, builtin_spec, thumb_of, BUILTIN_HANDS};
 pub use model::*;
-pub use urdf::{FingertipSpec, HandSpec, DEFAULT_ARMATURE};
+pub use urdf::{FingertipSpec, HandSpec, DEFAULT_ARMATURE, MAX_HAND_EXTENT};

@@ -36,6 +36,11 @@ use crate::math::{Isometry, Mat3, Rotation, UnitVector, Vector};
 /// 1:369 gears), large enough to keep massless links and 1 kHz explicit control well posed.
 pub const DEFAULT_ARMATURE: f64 = 1e-4;
 
+/// Largest length in a hand (m): a joint origin's distance from its parent link, a fingertip's
+/// offset and radius. Far beyond any hand; larger values (1e300) overflowed the kinematics
+/// into NaN.
+pub const MAX_HAND_EXTENT: f64 = 1.0;
+
 /// One fingertip of a hand spec.
 #[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -111,14 +116,18 @@ impl HandSpec {
             return Err(DfsError::invalid("fingertips", reason));
         }
         for (i, t) in self.fingertips.iter().enumerate() {
-            if !t.offset.iter().all(|v| v.is_finite()) {
+            let offset = Vector::from(t.offset);
+            if !(offset.iter().all(|v| v.is_finite()) && offset.norm() <= MAX_HAND_EXTENT) {
                 return Err(DfsError::invalid(
                     format!("fingertips[{i}].offset"),
-                    "must be finite",
+                    format!("must be finite and within {MAX_HAND_EXTENT} m of the link"),
                 ));
             }
-            if !(t.radius.is_finite() && t.radius > 0.0) {
-                let reason = format!("radius {} must be a finite number > 0", t.radius);
+            if !(t.radius.is_finite() && t.radius > 0.0 && t.radius <= MAX_HAND_EXTENT) {
+                let reason = format!(
+                    "radius {} must be a finite number in (0, {MAX_HAND_EXTENT}] m",
+                    t.radius
+                );
                 return Err(DfsError::invalid(format!("fingertips[{i}].radius"), reason));
             }
         }
@@ -479,8 +488,12 @@ impl HandModel {
                 Vector::x_axis()
             };
             let origin = pose(&joint.origin);
-            if !origin.translation.vector.iter().all(|v| v.is_finite()) {
-                return Err(DfsError::invalid(field(), "origin is not finite"));
+            let xyz = origin.translation.vector;
+            if !(xyz.iter().all(|v| v.is_finite()) && xyz.norm() <= MAX_HAND_EXTENT) {
+                return Err(DfsError::invalid(
+                    field(),
+                    format!("origin must be finite and within {MAX_HAND_EXTENT} m of its parent"),
+                ));
             }
             hand_joints.push(Joint {
                 name: joint.name.clone(),
@@ -816,6 +829,28 @@ mod tests {
             assert_eq!(f, field, "{r}");
             assert!(r.contains(reason), "{field}: {r:?} lacks {reason:?}");
         }
+    }
+
+    #[test]
+    fn lengths_far_beyond_a_hand_are_refused_naming_the_field() {
+        let spec = gripper_spec();
+        let mut far_tip = spec.clone();
+        far_tip.fingertips[0].offset = [1e300, 0.0, 0.0];
+        let (f, r) = error_of(HandModel::from_urdf(GRIPPER_URDF, &far_tip));
+        assert_eq!(f, "fingertips[0].offset", "{r}");
+        let mut huge_tip = spec.clone();
+        huge_tip.fingertips[1].radius = 2.0;
+        let (f, r) = error_of(HandModel::from_urdf(GRIPPER_URDF, &huge_tip));
+        assert_eq!(f, "fingertips[1].radius", "{r}");
+        let far_joint = edited(
+            "<origin xyz=\"0 0 0.04\" rpy=\"0 0 0\"/>",
+            "<origin xyz=\"1e300 0 0.04\" rpy=\"0 0 0\"/>",
+        );
+        let (f, r) = error_of(HandModel::from_urdf(&far_joint, &spec));
+        assert!(
+            f.starts_with("urdf joint") && r.contains("within 1 m"),
+            "{f}: {r}"
+        );
     }
 
     #[test]

@@ -13,6 +13,7 @@ use crate::hand::ik::{solve_tips, IkParams};
 use crate::hand::{HandModel, Kinematics, MAX_DOF, MAX_TIPS};
 use crate::math::{Isometry, Point, Real, Rotation, Vector, Wrench};
 use crate::operator::{push_alignment, with_free_base};
+use crate::scenario::MAX_SCRIPT_S;
 use nalgebra::{DMatrix, Matrix3};
 
 /// Rolls of the hand about the grasp axis tried when choosing the base pose.
@@ -187,6 +188,41 @@ fn validate(skill: &SkillSpec, thumb: usize, hand: &HandModel) -> Result<()> {
             "skill.object.mu",
             "must be finite and ≥ 0",
         ));
+    }
+    if !(skill.friction.mu_torsion.is_finite() && skill.friction.mu_torsion >= 0.0) {
+        return Err(DfsError::invalid(
+            "skill.object.mu_torsion",
+            "must be finite and ≥ 0",
+        ));
+    }
+    for (i, (_, d)) in skill.phases.iter().enumerate() {
+        if !(d.is_finite() && *d >= 0.0) {
+            return Err(DfsError::invalid(
+                format!("skill.phases[{i}]"),
+                format!("duration {d} s must be finite and ≥ 0"),
+            ));
+        }
+    }
+    let total: Real = skill.phases.iter().map(|(_, d)| d).sum();
+    if total > MAX_SCRIPT_S {
+        return Err(DfsError::invalid(
+            "skill.phases",
+            format!("the phases last {total:.1} s; a replay lasts at most {MAX_SCRIPT_S} s"),
+        ));
+    }
+    for (i, k) in skill.motion.iter().enumerate() {
+        let finite = k.time_s.is_finite()
+            && k.position
+                .iter()
+                .chain(k.rotation.iter())
+                .all(|v| v.is_finite())
+            && k.position.norm() <= 10.0;
+        if !finite {
+            return Err(DfsError::invalid(
+                format!("skill.motion[{i}]"),
+                "time, position and rotation must be finite, the position within 10 m",
+            ));
+        }
     }
     if skill.contacts.is_empty() {
         return Err(DfsError::invalid(

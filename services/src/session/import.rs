@@ -95,6 +95,10 @@ impl GloveRecording {
     }
 }
 
+/// Longest glove recording imported (ns from the first to the last sample): one hour, replayed
+/// at 1 kHz into 3.6 million ticks.
+pub const MAX_RECORDING_NS: u64 = 3_600_000_000_000;
+
 fn invalid(location: impl Into<String>, detail: impl Into<String>) -> RecordingError {
     RecordingError::InvalidInput {
         location: location.into(),
@@ -112,6 +116,8 @@ pub fn read_glove_csv(path: &Path, hand: &HandModel) -> Result<GloveRecording> {
 /// Parses glove CSV text; `name` (e.g. the file name) prefixes error locations.
 pub fn parse_glove_csv(text: &str, name: &str, hand: &HandModel) -> Result<GloveRecording> {
     let n = hand.dof();
+    // Spreadsheets export UTF-8 with a byte order mark; it is not part of the first column.
+    let text = text.strip_prefix('\u{feff}').unwrap_or(text);
     let mut lines = text
         .lines()
         .enumerate()
@@ -204,7 +210,7 @@ pub fn parse_glove_csv(text: &str, name: &str, hand: &HandModel) -> Result<Glove
         let t = number(0)?;
         let start = *t0.get_or_insert(t);
         let t_ns = ((t - start) * 1e9).round();
-        if !(0.0..=3.6e12).contains(&t_ns) {
+        if !(0.0..=MAX_RECORDING_NS as f64).contains(&t_ns) {
             return Err(invalid(
                 format!("{name} line {line_no}, column time_s"),
                 "time must not go back before the first sample, nor exceed one hour after it",
@@ -322,6 +328,12 @@ pub fn read_glove_mcap(path: &Path, hand: &HandModel) -> Result<GloveRecording> 
             return Err(invalid(
                 at("log time".into()),
                 "not after the previous message",
+            ));
+        }
+        if t > MAX_RECORDING_NS {
+            return Err(invalid(
+                at("log time".into()),
+                "more than one hour after the first message",
             ));
         }
         rec.times_ns.push(t);

@@ -74,6 +74,12 @@ pub const RAW_TOPICS: [&str; 4] = [
 /// The Foxglove topics, written every [`FOXGLOVE_DECIMATION`]th tick.
 pub const FOXGLOVE_TOPICS: [&str; 3] = [TOPIC_TF, TOPIC_SCENE, TOPIC_JOINT_STATES];
 
+/// Longest span of log times a session read back may cover on its raw topics (ns): the longest
+/// session icms writes is an hour (`simulate --duration` and scenario scripts ≤ 3600 s, glove
+/// imports ≤ 1 h), a replay adds a few seconds. Segmentation resamples a session onto a 1 ms
+/// grid, so an unbounded span (one message with a far-future log time) would ask for terabytes.
+pub const MAX_SESSION_NS: u64 = 3_660_000_000_000;
+
 /// Foxglove topics are written on ticks whose index is a multiple of this (50 Hz at 1 kHz).
 pub const FOXGLOVE_DECIMATION: u64 = 20;
 /// Length of a contact force arrow in `/scene` per newton of force (m/N).

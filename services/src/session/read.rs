@@ -194,6 +194,7 @@ fn from_raw(raw: &RawSession, name: &str, topics: DecodeTopics) -> Result<Sessio
     for (topic, schema, _, _) in &raw_topics {
         raw.require_topic(topic, &schema.name)?;
     }
+    check_raw_log_times(raw)?;
     // Every JSON message is checked or decoded, in blocks spread over the cores: the other
     // topics first (their errors come first, as in file order they would), then the raw ones.
     let mut plan: Vec<(&RawTopic, Job)> = raw
@@ -245,6 +246,51 @@ fn from_raw(raw: &RawSession, name: &str, topics: DecodeTopics) -> Result<Sessio
         }
     }
     Ok(session)
+}
+
+/// The raw topics are tick streams: each in time order, all within [`MAX_SESSION_NS`] of the
+/// session's first raw message, and every log time fits the store's signed 64-bit columns.
+/// The error names the topic, the message and its log time (callers add the file's name).
+fn check_raw_log_times(raw: &RawSession) -> Result<()> {
+    let Some(t0) = RAW_TOPICS
+        .iter()
+        .filter_map(|t| raw.topics[*t].messages.first())
+        .map(|m| m.log_time_ns)
+        .min()
+    else {
+        return Ok(());
+    };
+    for topic in RAW_TOPICS {
+        let mut prev = t0;
+        for (i, m) in raw.topics[topic].messages.iter().enumerate() {
+            let t = m.log_time_ns;
+            let problem = if t > i64::MAX as u64 {
+                Some("the log time is beyond 2^63 ns".to_owned())
+            } else if t < prev {
+                Some(format!(
+                    "the log time goes back before the previous message's ({prev} ns): a raw \
+                     topic must be in time order"
+                ))
+            } else if t - t0 > MAX_SESSION_NS {
+                Some(format!(
+                    "the log time is {:.1} s after the session's first message; a session \
+                     spans at most {} s",
+                    (t - t0) as f64 * 1e-9,
+                    MAX_SESSION_NS / 1_000_000_000
+                ))
+            } else {
+                None
+            };
+            if let Some(detail) = problem {
+                return Err(RecordingError::InvalidInput {
+                    location: format!("topic {topic} message {i} (log time {t} ns)"),
+                    detail,
+                });
+            }
+            prev = t;
+        }
+    }
+    Ok(())
 }
 
 /// `out.extend(v)`, taking `v` itself when `out` is empty.

@@ -66,7 +66,8 @@ impl FeatureIndex {
             return Vec::new();
         }
         // `best` stays sorted by (distance², id); its last element is the worst kept so far.
-        let mut best: Vec<(f32, i64)> = Vec::with_capacity(k + 1);
+        // Never more than every entry: `k` comes from callers (a page size, a CLI flag).
+        let mut best: Vec<(f32, i64)> = Vec::with_capacity(k.min(self.entries.len()) + 1);
         for (id, f) in &self.entries {
             let mut d2 = 0.0f32;
             for i in 0..FEATURE_DIM {
@@ -108,6 +109,15 @@ mod tests {
         assert_eq!(got, vec![(1, 1.0), (2, 1.0), (4, 2.0)]);
         let got = idx.nearest(&f(1.0), 2, Some(1));
         assert_eq!(got, vec![(2, 0.0), (3, 2.0)]);
+    }
+
+    #[test]
+    fn asking_for_more_neighbours_than_there_are_skills_returns_them_all() {
+        let idx = FeatureIndex::from_entries(vec![(1, f(1.0)), (2, f(2.0))]);
+        assert_eq!(
+            idx.nearest(&f(0.0), usize::MAX, None),
+            vec![(1, 1.0), (2, 2.0)]
+        );
     }
 
     #[test]

@@ -236,6 +236,11 @@ fn check_range(name: &str, min: Option<f64>, max: Option<f64>) -> Result<(), Sto
                     "{name} {bound} must be finite"
                 )));
             }
+            if v < 0.0 {
+                return Err(StoreError::InvalidQuery(format!(
+                    "{name} {bound} {v} is negative; every {name} is ≥ 0"
+                )));
+            }
         }
     }
     if let (Some(lo), Some(hi)) = (min, max) {
@@ -265,6 +270,11 @@ pub(crate) fn build(q: &SkillQuery) -> Result<QueryBuilder<'_, Sqlite>, StoreErr
     check_range("mu", q.mu_min, q.mu_max)?;
     check_range("quality", q.min_quality, None)?;
     check_range("phase duration", q.phase_min_s, q.phase_max_s)?;
+    if let Some(n) = q.contact_count.filter(|&n| n < 0) {
+        return Err(StoreError::InvalidQuery(format!(
+            "contacts {n} is negative; a skill has 0 or more contacts"
+        )));
+    }
     if q.phase.is_none() && (q.phase_min_s.is_some() || q.phase_max_s.is_some()) {
         return Err(StoreError::InvalidQuery(
             "phase_min_s and phase_max_s need phase (the phase name)".into(),
