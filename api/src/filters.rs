@@ -33,7 +33,7 @@ pub struct SkillFilters {
     /// Contact model: frictionless, point_with_friction or soft_finger.
     #[arg(long)]
     pub contact_model: Option<String>,
-    /// Grasp type label, e.g. precision-2vf.
+    /// Grasp type: precision or power (or a whole label such as precision-2vf).
     #[arg(long)]
     pub grasp_type: Option<String>,
     /// Least Ferrari-Canny grasp quality ε.

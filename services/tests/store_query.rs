@@ -34,7 +34,10 @@ fn matches(q: &SkillQuery, s: &Skill) -> bool {
         && q.contact_model
             .as_ref()
             .is_none_or(|x| *x == s.contact_model)
-        && q.grasp_type.as_ref().is_none_or(|x| *x == s.grasp_type)
+        && q.grasp_type.as_ref().is_none_or(|x| {
+            // A family (`precision`) matches its bare label and its `-<n>vf` labels.
+            *x == s.grasp_type || s.grasp_type.starts_with(&format!("{x}-"))
+        })
         && ge(s.quality, q.min_quality)
         && q.phase.as_ref().is_none_or(|p| {
             s.phase_durations
@@ -102,6 +105,11 @@ async fn filters_sorts_and_cursors_walk_every_matching_skill_exactly_once() {
         },
         SkillQuery {
             phase: Some("retreat".into()),
+            ..SkillQuery::default()
+        },
+        SkillQuery {
+            grasp_type: Some("precision".into()),
+            mass_max: Some(0.8),
             ..SkillQuery::default()
         },
     ];
@@ -251,6 +259,57 @@ async fn out_of_range_queries_are_invalid() {
             ),
             "{q:?}"
         );
+    }
+    // A value no skill can have is a typo, not an empty page: the error names the filter.
+    let unknown = [
+        (
+            "shape",
+            SkillQuery {
+                object_shape: Some("torus".into()),
+                ..SkillQuery::default()
+            },
+        ),
+        (
+            "shape",
+            SkillQuery {
+                object_shape: Some("Sphere".into()),
+                ..SkillQuery::default()
+            },
+        ),
+        (
+            "contact_model",
+            SkillQuery {
+                contact_model: Some("magic".into()),
+                ..SkillQuery::default()
+            },
+        ),
+        (
+            "phase",
+            SkillQuery {
+                phase: Some("juggle".into()),
+                ..SkillQuery::default()
+            },
+        ),
+        (
+            "grasp_type",
+            SkillQuery {
+                grasp_type: Some("pinch".into()),
+                ..SkillQuery::default()
+            },
+        ),
+        (
+            "grasp_type",
+            SkillQuery {
+                grasp_type: Some("power-xvf".into()),
+                ..SkillQuery::default()
+            },
+        ),
+    ];
+    for (field, q) in unknown {
+        match store.query_skills(&q).await {
+            Err(StoreError::InvalidQuery(m)) => assert!(m.starts_with(field), "{m}"),
+            other => panic!("{q:?} gave {other:?}"),
+        }
     }
     assert!(matches!(
         store.list_sessions(0, None).await,

@@ -27,6 +27,21 @@ async fn invalid_filters_cursors_ids_and_parameters_are_400() {
     c.get("/api/v1/skills?limit=5000").await.problem(400);
     c.get("/api/v1/skills?sort=colour").await.problem(400);
     c.get("/api/v1/skills?phase_min_s=1").await.problem(400);
+    // A value no skill can have is refused, naming the parameter, not answered with an empty
+    // page.
+    for (query, name) in [
+        ("shape=torus", "shape"),
+        ("contact_model=magic", "contact_model"),
+        ("grasp_type=pinch", "grasp_type"),
+        ("phase=juggle", "phase"),
+    ] {
+        let d = c.get(&format!("/api/v1/skills?{query}")).await.problem(400);
+        assert!(d.contains(name), "{query}: {d}");
+    }
+    assert_eq!(
+        c.get("/api/v1/skills?grasp_type=precision").await.status,
+        200
+    );
     let d = c
         .get("/api/v1/skills?cursor=not-a-cursor")
         .await

@@ -37,9 +37,9 @@ use crate::math::{Isometry, Mat3, Rotation, UnitVector, Vector};
 pub const DEFAULT_ARMATURE: f64 = 1e-4;
 
 /// Largest length in a hand (m): a joint origin's distance from its parent link, a fingertip's
-/// offset and radius. Far beyond any hand; larger values (1e300) overflowed the kinematics
-/// into NaN.
-pub const MAX_HAND_EXTENT: f64 = 1.0;
+/// offset and radius. Far beyond any hand, and room for a URDF that mounts its hand on an arm
+/// or a stand; larger values (1e300) overflowed the kinematics into NaN.
+pub const MAX_HAND_EXTENT: f64 = 10.0;
 
 /// One fingertip of a hand spec.
 #[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
@@ -839,7 +839,7 @@ mod tests {
         let (f, r) = error_of(HandModel::from_urdf(GRIPPER_URDF, &far_tip));
         assert_eq!(f, "fingertips[0].offset", "{r}");
         let mut huge_tip = spec.clone();
-        huge_tip.fingertips[1].radius = 2.0;
+        huge_tip.fingertips[1].radius = 20.0;
         let (f, r) = error_of(HandModel::from_urdf(GRIPPER_URDF, &huge_tip));
         assert_eq!(f, "fingertips[1].radius", "{r}");
         let far_joint = edited(
@@ -848,7 +848,7 @@ mod tests {
         );
         let (f, r) = error_of(HandModel::from_urdf(&far_joint, &spec));
         assert!(
-            f.starts_with("urdf joint") && r.contains("within 1 m"),
+            f.starts_with("urdf joint") && r.contains("within 10 m"),
             "{f}: {r}"
         );
     }

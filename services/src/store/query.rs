@@ -6,6 +6,7 @@ use serde::{Deserialize, Serialize};
 use sqlx::{QueryBuilder, Sqlite};
 
 use super::error::StoreError;
+use dfs_core::scenario::Phase;
 
 /// Largest page size.
 pub const MAX_LIMIT: u32 = 1000;
@@ -228,6 +229,55 @@ pub(crate) fn decode_cursor(tag: &str, real: bool, cursor: &str) -> Result<After
     Ok(after)
 }
 
+/// Object shapes a skill can have.
+const SHAPES: [&str; 3] = ["sphere", "box", "cylinder"];
+/// Contact models a skill can have.
+const CONTACT_MODELS: [&str; 3] = ["frictionless", "point_with_friction", "soft_finger"];
+/// Grasp type families. Segmented skills store the family as their label; a label may also
+/// name the opposing virtual fingers, `<family>-<n>vf` (the synthetic bench skills do).
+const GRASP_FAMILIES: [&str; 2] = ["precision", "power"];
+
+/// A filter value that no skill can have is a mistake (a typo, a wrong case), not an empty
+/// result: refused naming the accepted values.
+fn check_one_of(name: &str, value: Option<&str>, allowed: &[&str]) -> Result<(), StoreError> {
+    match value {
+        Some(v) if !allowed.contains(&v) => Err(StoreError::InvalidQuery(format!(
+            "{name} {v:?} is not one of {}",
+            allowed.join(", ")
+        ))),
+        _ => Ok(()),
+    }
+}
+
+/// The `grasp_type` filter: a family (`precision`, `power`: every label of it) or a whole
+/// label (`precision-2vf`).
+enum GraspFilter<'a> {
+    Label(&'a str),
+    Family(&'a str),
+}
+
+impl<'a> GraspFilter<'a> {
+    fn parse(v: &'a str) -> Result<Self, StoreError> {
+        if GRASP_FAMILIES.contains(&v) {
+            return Ok(GraspFilter::Family(v));
+        }
+        let label = v.split_once('-').is_some_and(|(family, vf)| {
+            GRASP_FAMILIES.contains(&family)
+                && vf.strip_suffix("vf").is_some_and(|n| {
+                    !n.is_empty() && n.len() <= 2 && n.bytes().all(|b| b.is_ascii_digit())
+                })
+        });
+        if label {
+            Ok(GraspFilter::Label(v))
+        } else {
+            Err(StoreError::InvalidQuery(format!(
+                "grasp_type {v:?} is neither precision nor power, nor a label such as \
+                 precision-2vf (family, then the number of opposing virtual fingers)"
+            )))
+        }
+    }
+}
+
 fn check_range(name: &str, min: Option<f64>, max: Option<f64>) -> Result<(), StoreError> {
     for (bound, v) in [("min", min), ("max", max)] {
         if let Some(v) = v {
@@ -275,6 +325,15 @@ pub(crate) fn build(q: &SkillQuery) -> Result<QueryBuilder<'_, Sqlite>, StoreErr
             "contacts {n} is negative; a skill has 0 or more contacts"
         )));
     }
+    check_one_of("shape", q.object_shape.as_deref(), &SHAPES)?;
+    check_one_of("contact_model", q.contact_model.as_deref(), &CONTACT_MODELS)?;
+    let phases = Phase::ALL.map(Phase::name);
+    check_one_of("phase", q.phase.as_deref(), &phases)?;
+    let grasp = q
+        .grasp_type
+        .as_deref()
+        .map(GraspFilter::parse)
+        .transpose()?;
     if q.phase.is_none() && (q.phase_min_s.is_some() || q.phase_max_s.is_some()) {
         return Err(StoreError::InvalidQuery(
             "phase_min_s and phase_max_s need phase (the phase name)".into(),
@@ -294,7 +353,9 @@ pub(crate) fn build(q: &SkillQuery) -> Result<QueryBuilder<'_, Sqlite>, StoreErr
     // match of a range filter. A unary `+` keeps SQLite from driving the scan by that column.
     let shape_leads =
         q.object_shape.is_some() && matches!(sort.field, SortField::Quality | SortField::Mass);
-    let grasp_leads = !shape_leads && q.grasp_type.is_some() && sort.field == SortField::Quality;
+    let grasp_leads = !shape_leads
+        && matches!(grasp, Some(GraspFilter::Label(_)))
+        && sort.field == SortField::Quality;
     let plus = |driving: bool| if driving { "" } else { "+" };
     let mut b = QueryBuilder::new(format!("SELECT {SKILL_COLUMNS} FROM skills WHERE 1 = 1"));
     if let Some(v) = &q.object_shape {
@@ -322,9 +383,20 @@ pub(crate) fn build(q: &SkillQuery) -> Result<QueryBuilder<'_, Sqlite>, StoreErr
     if let Some(v) = &q.contact_model {
         b.push(" AND +contact_model = ").push_bind(v.as_str());
     }
-    if let Some(v) = &q.grasp_type {
-        b.push(format!(" AND {}grasp_type = ", plus(grasp_leads)))
-            .push_bind(v.as_str());
+    match grasp {
+        Some(GraspFilter::Label(v)) => {
+            b.push(format!(" AND {}grasp_type = ", plus(grasp_leads)))
+                .push_bind(v);
+        }
+        // The family's bare label and every `<family>-<n>vf` label: `precision` ≤ label <
+        // `precision.` ('.' follows '-').
+        Some(GraspFilter::Family(f)) => {
+            b.push(" AND +grasp_type >= ")
+                .push_bind(f)
+                .push(" AND +grasp_type < ")
+                .push_bind(format!("{f}."));
+        }
+        None => {}
     }
     if let Some(v) = q.min_quality {
         let by_quality = sort.field == SortField::Quality;
