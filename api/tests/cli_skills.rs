@@ -86,6 +86,45 @@ fn a_corrupt_file_is_refused_with_its_reason_and_stores_nothing() {
 }
 
 #[test]
+fn a_bad_file_among_several_is_reported_and_the_good_ones_are_still_stored() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let (c, _, e) = icms(
+        d,
+        &[
+            "simulate",
+            "--scenario",
+            "box-pinch-lift",
+            "--duration",
+            "3.5",
+            "--out",
+            "good.mcap",
+        ],
+    );
+    assert_eq!(c, 0, "{e}");
+    std::fs::write(d.join("bad.mcap"), b"not an mcap file at all").unwrap();
+    let (c, out, e) = icms(
+        d,
+        &["ingest", "bad.mcap", "missing.mcap", "good.mcap", "--json"],
+    );
+    assert_ne!(c, 0, "a file was not stored: the command fails");
+    assert!(e.contains("2 of 3"), "{e}");
+    assert!(e.contains("bad.mcap") && e.contains("missing.mcap"), "{e}");
+    let v: Value = serde_json::from_str(&out).unwrap();
+    let stored = v["sessions"].as_array().unwrap();
+    assert_eq!(stored.len(), 1);
+    assert_eq!(stored[0]["file"], "good.mcap");
+    let failed = v["failed"].as_array().unwrap();
+    assert_eq!(failed.len(), 2);
+    assert_eq!(failed[0]["file"], "bad.mcap");
+    assert!(failed[0]["error"].as_str().unwrap().contains("MCAP"));
+    let (c, out, _) = icms(d, &["skills", "--json"]);
+    assert_eq!(c, 0);
+    let v: Value = serde_json::from_str(&out).unwrap();
+    assert!(!v["items"].as_array().unwrap().is_empty());
+}
+
+#[test]
 fn negative_filters_and_an_out_of_range_similar_limit_are_refused_with_a_clear_message() {
     let dir = tempfile::tempdir().unwrap();
     let d = dir.path();

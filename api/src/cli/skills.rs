@@ -45,18 +45,34 @@ fn runtime() -> Result<tokio::runtime::Runtime, CliError> {
         .map_err(|e| CliError(format!("tokio: {e}")))
 }
 
-/// Reads, segments and stores each file; the same file twice is stored once.
+/// Reads, segments and stores each file; the same file twice is stored once. A file that
+/// cannot be stored (unreadable, not a valid session) is reported and skipped, the others are
+/// still stored (each file is its own transaction), and the command then fails naming it.
 pub fn run_ingest(a: IngestArgs) -> Result<(), CliError> {
     runtime()?.block_on(async {
         let store = Store::open(&a.data)
             .await
             .map_err(|e| CliError(format!("{}: {e}", a.data.display())))?;
         let mut results = Vec::new();
+        let mut failed = Vec::new();
         for f in &a.files {
-            let bytes = std::fs::read(f).map_err(|e| CliError(format!("{}: {e}", f.display())))?;
-            let out = ingest_bytes(&store, bytes, f.display().to_string())
-                .await
-                .map_err(|e| CliError(format!("{}: {e}", f.display())))?;
+            let stored = match std::fs::read(f) {
+                Ok(bytes) => ingest_bytes(&store, bytes, f.display().to_string())
+                    .await
+                    .map_err(|e| e.to_string()),
+                Err(e) => Err(e.to_string()),
+            };
+            let out = match stored {
+                Ok(out) => out,
+                Err(e) => {
+                    eprintln!("{}: not stored: {e}", f.display());
+                    failed.push(serde_json::json!({
+                        "file": f.display().to_string(),
+                        "error": e,
+                    }));
+                    continue;
+                }
+            };
             if !a.json {
                 println!(
                     "{}: session {} ({}), {} skill(s)",
@@ -79,9 +95,17 @@ pub fn run_ingest(a: IngestArgs) -> Result<(), CliError> {
         }
         store.close().await;
         if a.json {
-            print_json(&serde_json::json!({ "sessions": results }))?;
+            print_json(&serde_json::json!({ "sessions": results, "failed": failed }))?;
         }
-        Ok(())
+        if failed.is_empty() {
+            Ok(())
+        } else {
+            Err(CliError(format!(
+                "{} of {} file(s) not stored (see above)",
+                failed.len(),
+                a.files.len()
+            )))
+        }
     })
 }
 
