@@ -6,7 +6,7 @@ use thiserror::Error;
 #[derive(Debug, Error, Clone, PartialEq)]
 pub enum DfsError {
     /// A joint angle or torque (or other input) is NaN or infinite.
-    #[error("{what} is not finite (index {index}: {value})")]
+    #[error("{what} is not finite (index {index}: {value:?})")]
     NotFinite {
         /// Which input (for example "joint angle").
         what: &'static str,
@@ -15,8 +15,9 @@ pub enum DfsError {
         /// The value found.
         value: f64,
     },
-    /// An input is finite but outside its allowed range.
-    #[error("{what} {index} = {value} is outside [{lower}, {upper}]")]
+    /// An input is finite but outside its allowed range. (Numbers in `Debug` form: 1e300, not
+    /// three hundred digits.)
+    #[error("{what} {index} = {value:?} is outside [{lower:?}, {upper:?}]")]
     OutOfRange {
         /// Which input (for example "joint angle").
         what: &'static str,
@@ -61,3 +62,20 @@ impl DfsError {
 
 /// Result alias of dfs-core.
 pub type Result<T> = std::result::Result<T, DfsError>;
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn huge_values_are_printed_short() {
+        let e = DfsError::OutOfRange {
+            what: "joint angle",
+            index: 3,
+            value: 1e300,
+            lower: -0.5,
+            upper: 1.5,
+        };
+        assert_eq!(e.to_string(), "joint angle 3 = 1e300 is outside [-0.5, 1.5]");
+    }
+}
