@@ -17,7 +17,7 @@ use utoipa_axum::routes;
 
 use super::created;
 use super::error::{Problem, ProblemBody};
-use super::extract::{Json, Name, WriteAccess};
+use super::extract::{field_error, Json, Name, WriteAccess};
 use super::state::AppState;
 
 /// Largest URDF text an upload may hold, bytes (the built-in hands' are under 20 kB).
@@ -180,7 +180,7 @@ fn spec_of(upload: &HandUpload) -> Result<HandSpec, Problem> {
         obj.insert("urdf".into(), format!("{name}.urdf").into());
     }
     serde_path_to_error::deserialize(spec)
-        .map_err(|e| Problem::unprocessable(format!("spec.{}: {}", e.path(), e.inner())))
+        .map_err(|e| Problem::unprocessable(field_error("spec", &e)))
 }
 
 /// Every hand: built-in and uploaded.
