@@ -198,6 +198,7 @@ async fn list_hands(State(st): State<AppState>) -> Result<axum::Json<HandList>, 
     params(("id" = String, Path, description = "The hand's name")),
     responses(
         (status = 200, description = "The hand", body = HandBody),
+        (status = 400, description = "The name is not valid UTF-8 once percent-decoded", body = ProblemBody, content_type = "application/problem+json"),
         (status = 404, description = "No hand with this name", body = ProblemBody, content_type = "application/problem+json"),
     ))]
 async fn get_hand(
@@ -212,6 +213,7 @@ async fn get_hand(
     params(("id" = String, Path, description = "The hand's name")),
     responses(
         (status = 200, description = "The URDF", content_type = "application/xml", body = String),
+        (status = 400, description = "The name is not valid UTF-8 once percent-decoded", body = ProblemBody, content_type = "application/problem+json"),
         (status = 404, description = "No hand with this name, or glove10 (built in code, no URDF)", body = ProblemBody, content_type = "application/problem+json"),
     ))]
 async fn get_hand_urdf(State(st): State<AppState>, Name(name): Name) -> Result<Response, Problem> {
