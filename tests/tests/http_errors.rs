@@ -289,6 +289,60 @@ async fn writes_need_the_token_when_one_is_configured_and_reads_stay_open() {
     app.stop().await;
 }
 
+/// A JSON body of the wrong shape inside a nested object names the field as `outer: ...`,
+/// without a stray `..` (the path of the object itself).
+#[tokio::test]
+async fn a_nested_object_missing_a_field_is_named_without_stray_dots() {
+    let app = TestApp::spawn().await;
+    let c = &app.client;
+    let d = c
+        .post_json("/api/v1/simulations", &json!({"scenario": {}}), None)
+        .await
+        .problem(422);
+    assert!(!d.contains(".."), "{d}");
+    assert!(d.starts_with("scenario: ") && d.contains("`name`"), "{d}");
+    let d = c
+        .post_json(
+            "/api/v1/hands",
+            &json!({"spec": {}, "urdf": "<robot/>"}),
+            None,
+        )
+        .await
+        .problem(422);
+    assert!(!d.contains(".."), "{d}");
+    assert!(d.starts_with("spec: ") && d.contains("`name`"), "{d}");
+    app.stop().await;
+}
+
+/// The authentication scheme is case-insensitive (RFC 9110 §11.1): `BEARER`, `bearer` and
+/// `Bearer` all carry the token; another scheme is refused naming the one to use.
+#[tokio::test]
+async fn the_bearer_scheme_is_accepted_in_any_case_and_another_scheme_is_named() {
+    let app = TestApp::spawn_with(|a| a.token = Some(TOKEN.into())).await;
+    let http = reqwest::Client::new();
+    let delete = |auth: String| {
+        http.delete(format!("{}/api/v1/skills/999", app.client.base))
+            .header(reqwest::header::AUTHORIZATION, auth)
+            .send()
+    };
+    for scheme in ["Bearer", "bearer", "BEARER", "bEaReR"] {
+        let r = delete(format!("{scheme} {TOKEN}")).await.unwrap();
+        // Past the token check: the skill does not exist.
+        assert_eq!(r.status(), 404, "{scheme}");
+    }
+    let r = delete(format!("Bearer   {TOKEN}")).await.unwrap();
+    assert_eq!(r.status(), 404, "several spaces after the scheme");
+    for auth in [format!("Basic {TOKEN}"), TOKEN.to_string()] {
+        let r = delete(auth.clone()).await.unwrap();
+        assert_eq!(r.status(), 401, "{auth}");
+        let p: serde_json::Value = serde_json::from_slice(&r.bytes().await.unwrap()).unwrap();
+        assert!(p["detail"].as_str().unwrap().contains("Bearer"), "{p}");
+    }
+    let r = delete(format!("BEARER {TOKEN}x")).await.unwrap();
+    assert_eq!(r.status(), 401);
+    app.stop().await;
+}
+
 /// A write refused before its body is read (401 here) still reads the body: the client, which
 /// sends the whole body before it looks for an answer, gets the 401 rather than a reset
 /// connection, and can send its next request on the same connection.

@@ -412,3 +412,66 @@ async fn deleting_a_session_deletes_the_replays_of_its_skills() {
     assert_eq!(c.get("/api/v1/hands/tiny").await.status, 200);
     app.stop().await;
 }
+
+/// A session file without the object's metadata (here a replay's MCAP, uploaded as a
+/// session) gives skills whose object shape is `unknown`: the shape filter finds them, rather
+/// than refusing `unknown` as a shape no skill can have.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn skills_of_a_session_without_object_metadata_are_found_by_shape_unknown() {
+    let app = TestApp::spawn().await;
+    let c = &app.client;
+    let r = c
+        .post_json(
+            "/api/v1/simulations",
+            &json!({"scenario": "box-pinch-lift"}),
+            None,
+        )
+        .await;
+    assert_eq!(r.status, 201, "{}", String::from_utf8_lossy(&r.body));
+    let skill_id = r.json()["skills"][0]["id"].as_i64().unwrap();
+    let r = c
+        .post_json(
+            &format!("/api/v1/skills/{skill_id}/replays"),
+            &json!({"hand": "gripper"}),
+            None,
+        )
+        .await;
+    assert_eq!(r.status, 201, "{}", String::from_utf8_lossy(&r.body));
+    let mcap = c.get(r.json()["mcap_url"].as_str().unwrap()).await;
+    assert_eq!(mcap.status, 200);
+    let r = c.upload(&mcap.body, None).await;
+    assert_eq!(r.status, 201, "{}", String::from_utf8_lossy(&r.body));
+    let unknown: Vec<i64> = r.json()["skills"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .filter(|s| s["object_shape"] == "unknown")
+        .map(|s| s["id"].as_i64().unwrap())
+        .collect();
+    assert!(!unknown.is_empty(), "{}", r.json());
+    let page = c.get("/api/v1/skills?shape=unknown").await;
+    assert_eq!(page.status, 200, "{}", String::from_utf8_lossy(&page.body));
+    let found: Vec<i64> = page.json()["items"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|s| s["id"].as_i64().unwrap())
+        .collect();
+    assert_eq!(found, unknown);
+    // The document lists the shapes the filter takes, `unknown` among them.
+    let doc = c.get("/api/v1/openapi.json").await.json();
+    let shape = doc["paths"]["/api/v1/skills"]["get"]["parameters"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .find(|p| p["name"] == "shape")
+        .unwrap()
+        .clone();
+    assert_eq!(
+        shape["schema"]["enum"],
+        json!(["sphere", "box", "cylinder", "unknown"]),
+        "{shape}"
+    );
+    c.get("/api/v1/skills?shape=cone").await.problem(400);
+    app.stop().await;
+}

@@ -182,3 +182,80 @@ async fn with_a_token_configured_the_document_requires_it_on_writes_only() {
     }
     app.stop().await;
 }
+
+/// Sends `request` over a fresh connection; returns the status and the body of the answer.
+async fn raw(app: &TestApp, request: &[u8]) -> (u16, Value) {
+    use tokio::io::{AsyncReadExt, AsyncWriteExt};
+    let mut stream = tokio::net::TcpStream::connect(app.addr).await.unwrap();
+    stream.write_all(request).await.unwrap();
+    let mut answer = Vec::new();
+    // Every request here ends with `Connection: close`.
+    stream.read_to_end(&mut answer).await.unwrap();
+    let answer = String::from_utf8(answer).unwrap();
+    let (head, body) = answer.split_once("\r\n\r\n").expect("a whole answer");
+    let status = head[9..12].parse().unwrap();
+    assert!(
+        head.to_ascii_lowercase()
+            .contains("content-type: application/problem+json"),
+        "{head}"
+    );
+    (status, serde_json::from_str(body).expect("a JSON problem"))
+}
+
+/// Requests the well-behaved clients of the other tests never send (a body that is not valid
+/// chunked encoding, a path that is not UTF-8) are answered with statuses the document lists
+/// for their operation; and every operation lists 503, which the time limit (and a server
+/// that is stopping) gives on any route.
+#[tokio::test]
+async fn odd_requests_get_statuses_the_document_lists_for_their_operation() {
+    let app = TestApp::spawn().await;
+    let doc = app.client.get("/api/v1/openapi.json").await.json();
+    let cases: &[(&str, &str, &str)] = &[
+        (
+            "post",
+            "/api/v1/sessions",
+            "POST /api/v1/sessions HTTP/1.1\r\nHost: x\r\nConnection: close\r\n\
+             Content-Type: application/x-mcap\r\nTransfer-Encoding: chunked\r\n\r\n\
+             ZZ\r\nhello\r\n0\r\n\r\n",
+        ),
+        (
+            "post",
+            "/api/v1/simulations",
+            "POST /api/v1/simulations HTTP/1.1\r\nHost: x\r\nConnection: close\r\n\
+             Content-Type: application/json\r\nTransfer-Encoding: chunked\r\n\r\n\
+             ZZ\r\nhello\r\n0\r\n\r\n",
+        ),
+        (
+            "get",
+            "/api/v1/hands/{id}",
+            "GET /api/v1/hands/%ff%fe HTTP/1.1\r\nHost: x\r\nConnection: close\r\n\r\n",
+        ),
+        (
+            "get",
+            "/api/v1/hands/{id}/urdf",
+            "GET /api/v1/hands/%ff%fe/urdf HTTP/1.1\r\nHost: x\r\nConnection: close\r\n\r\n",
+        ),
+    ];
+    for (method, path, request) in cases {
+        let (status, problem) = raw(&app, request.as_bytes()).await;
+        assert_eq!(status, 400, "{method} {path}: {problem}");
+        assert!(
+            doc["paths"][path][method]["responses"]
+                .get(status.to_string())
+                .is_some(),
+            "{method} {path} answers {status} ({problem}) but the document does not list it"
+        );
+    }
+    for (m, p) in documented(&doc) {
+        let r = &doc["paths"][&p][&m]["responses"]["503"];
+        assert!(
+            r["content"]["application/problem+json"].is_object(),
+            "{m} {p} does not list 503: {r}"
+        );
+    }
+    assert_eq!(
+        app.client.get("/api/v1/sessions").await.json()["items"],
+        serde_json::json!([])
+    );
+    app.stop().await;
+}

@@ -105,6 +105,20 @@ impl<T: DeserializeOwned, S: Send + Sync> FromRequest<S> for Json<T> {
     }
 }
 
+/// A deserialisation error inside the field `prefix` of a body, as `prefix.path: reason`, or
+/// `prefix: reason` when the error is about the field's value itself (its path is `.`).
+pub(crate) fn field_error(
+    prefix: &str,
+    e: &serde_path_to_error::Error<serde_json::Error>,
+) -> String {
+    let path = e.path().to_string();
+    if path == "." {
+        format!("{prefix}: {}", e.inner())
+    } else {
+        format!("{prefix}.{path}: {}", e.inner())
+    }
+}
+
 /// Proof that the request may write: the configured bearer token was sent
 /// (`Authorization: Bearer TOKEN`), or no token is configured. Otherwise 401.
 #[derive(Debug, Clone, Copy)]
@@ -122,19 +136,27 @@ impl FromRequestParts<AppState> for WriteAccess {
                 "this endpoint writes and needs the server's token: Authorization: Bearer TOKEN",
             ));
         };
-        let sent = value
-            .to_str()
-            .ok()
-            .and_then(|v| {
-                v.strip_prefix("Bearer ")
-                    .or_else(|| v.strip_prefix("bearer "))
-            })
-            .map(str::trim);
-        match sent {
+        match bearer_token(value.as_bytes()) {
             Some(t) if constant_time_eq(t.as_bytes(), expected.as_bytes()) => Ok(WriteAccess),
-            _ => Err(Problem::unauthorized("wrong bearer token")),
+            Some(_) => Err(Problem::unauthorized("wrong bearer token")),
+            None => Err(Problem::unauthorized(
+                "the Authorization header is not a bearer token: send Authorization: Bearer TOKEN",
+            )),
         }
     }
+}
+
+/// The token of an `Authorization: Bearer TOKEN` header value. The scheme is matched without
+/// regard to case (RFC 9110 §11.1: `Bearer`, `bearer`, `BEARER` are one scheme) and may be
+/// followed by several spaces; `None` for another scheme or no token.
+fn bearer_token(value: &[u8]) -> Option<&str> {
+    let value = std::str::from_utf8(value).ok()?;
+    let (scheme, token) = value.split_once(' ')?;
+    if !scheme.eq_ignore_ascii_case("bearer") {
+        return None;
+    }
+    let token = token.trim();
+    (!token.is_empty()).then_some(token)
 }
 
 /// Compares without an early exit, so the time taken does not tell how many leading bytes of a
@@ -148,7 +170,30 @@ fn constant_time_eq(a: &[u8], b: &[u8]) -> bool {
 
 #[cfg(test)]
 mod tests {
-    use super::constant_time_eq;
+    use super::{bearer_token, constant_time_eq};
+
+    #[test]
+    fn the_bearer_scheme_is_matched_in_any_case() {
+        for v in [
+            "Bearer t0k",
+            "bearer t0k",
+            "BEARER t0k",
+            "BeArEr   t0k ",
+            "Bearer t0k\t",
+        ] {
+            assert_eq!(bearer_token(v.as_bytes()), Some("t0k"), "{v:?}");
+        }
+        for v in [
+            "Basic dDBr",
+            "t0k",
+            "Bearer",
+            "Bearer ",
+            "Bearert0k",
+            "Token t0k",
+        ] {
+            assert_eq!(bearer_token(v.as_bytes()), None, "{v:?}");
+        }
+    }
 
     #[test]
     fn tokens_compare_equal_only_when_identical() {

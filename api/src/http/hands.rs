@@ -17,7 +17,7 @@ use utoipa_axum::routes;
 
 use super::created;
 use super::error::{Problem, ProblemBody};
-use super::extract::{Json, Name, WriteAccess};
+use super::extract::{field_error, Json, Name, WriteAccess};
 use super::state::AppState;
 
 /// Largest URDF text an upload may hold, bytes (the built-in hands' are under 20 kB).
@@ -180,7 +180,7 @@ fn spec_of(upload: &HandUpload) -> Result<HandSpec, Problem> {
         obj.insert("urdf".into(), format!("{name}.urdf").into());
     }
     serde_path_to_error::deserialize(spec)
-        .map_err(|e| Problem::unprocessable(format!("spec.{}: {}", e.path(), e.inner())))
+        .map_err(|e| Problem::unprocessable(field_error("spec", &e)))
 }
 
 /// Every hand: built-in and uploaded.
@@ -198,6 +198,7 @@ async fn list_hands(State(st): State<AppState>) -> Result<axum::Json<HandList>, 
     params(("id" = String, Path, description = "The hand's name")),
     responses(
         (status = 200, description = "The hand", body = HandBody),
+        (status = 400, description = "The name is not valid UTF-8 once percent-decoded", body = ProblemBody, content_type = "application/problem+json"),
         (status = 404, description = "No hand with this name", body = ProblemBody, content_type = "application/problem+json"),
     ))]
 async fn get_hand(
@@ -212,6 +213,7 @@ async fn get_hand(
     params(("id" = String, Path, description = "The hand's name")),
     responses(
         (status = 200, description = "The URDF", content_type = "application/xml", body = String),
+        (status = 400, description = "The name is not valid UTF-8 once percent-decoded", body = ProblemBody, content_type = "application/problem+json"),
         (status = 404, description = "No hand with this name, or glove10 (built in code, no URDF)", body = ProblemBody, content_type = "application/problem+json"),
     ))]
 async fn get_hand_urdf(State(st): State<AppState>, Name(name): Name) -> Result<Response, Problem> {

@@ -37,10 +37,13 @@ use axum::middleware::{self, Next};
 use axum::response::{IntoResponse, Response};
 use axum::Router;
 use bytes::Bytes;
+use dfs_core::scenario::Phase;
+use services::store::{CONTACT_MODELS, SHAPES};
 use tower_http::cors::{AllowOrigin, CorsLayer};
 use tower_http::trace::TraceLayer;
+use utoipa::openapi::schema::{ObjectBuilder, Type};
 use utoipa::openapi::security::{Http, HttpAuthScheme, SecurityScheme};
-use utoipa::openapi::{InfoBuilder, OpenApi};
+use utoipa::openapi::{ContentBuilder, InfoBuilder, OpenApi, Ref, RefOr, ResponseBuilder};
 use utoipa::{PartialSchema, ToSchema};
 use utoipa_axum::router::OpenApiRouter;
 
@@ -107,7 +110,24 @@ fn finish_openapi(mut api: OpenApi, writes_need_token: bool) -> OpenApi {
             SecurityScheme::Http(Http::new(HttpAuthScheme::Bearer)),
         );
     }
+    document_filter_values(&mut api);
     for item in api.paths.paths.values_mut() {
+        for op in [
+            &mut item.get,
+            &mut item.post,
+            &mut item.delete,
+            &mut item.put,
+            &mut item.patch,
+        ]
+        .into_iter()
+        .flatten()
+        {
+            // The time limit applies to every route, and a stopping server answers 503 too.
+            op.responses
+                .responses
+                .entry("503".into())
+                .or_insert_with(unavailable_response);
+        }
         for op in [
             &mut item.post,
             &mut item.delete,
@@ -131,6 +151,46 @@ fn finish_openapi(mut api: OpenApi, writes_need_token: bool) -> OpenApi {
         }
     }
     api
+}
+
+/// The 503 problem every operation may answer.
+fn unavailable_response() -> RefOr<utoipa::openapi::Response> {
+    ResponseBuilder::new()
+        .description("Over the server's time limit, or the server is stopping")
+        .content(
+            error::PROBLEM_JSON,
+            ContentBuilder::new()
+                .schema(Some(Ref::from_schema_name("ProblemBody")))
+                .build(),
+        )
+        .build()
+        .into()
+}
+
+/// The skill filters that take one of a few names (any other is 400) list those names.
+fn document_filter_values(api: &mut OpenApi) {
+    let Some(op) = api
+        .paths
+        .paths
+        .get_mut(&format!("{API_PREFIX}/skills"))
+        .and_then(|item| item.get.as_mut())
+    else {
+        return;
+    };
+    for p in op.parameters.iter_mut().flatten() {
+        let values: Vec<&str> = match p.name.as_str() {
+            "shape" => SHAPES.to_vec(),
+            "contact_model" => CONTACT_MODELS.to_vec(),
+            "phase" => Phase::ALL.map(Phase::name).to_vec(),
+            _ => continue,
+        };
+        p.schema = Some(
+            ObjectBuilder::new()
+                .schema_type(Type::String)
+                .enum_values(Some(values))
+                .into(),
+        );
+    }
 }
 
 /// The application: every route over `state`, with its layers. Also stores the OpenAPI

@@ -47,7 +47,7 @@ pub struct SessionMetaBody {
     pub seed: Option<u64>,
     /// Hand (glove) that performed the session, e.g. glove10.
     pub hand: String,
-    /// Object shape: sphere, box or cylinder.
+    /// Object shape: sphere, box, cylinder, or unknown (a session file without the object).
     pub object_shape: String,
     /// Object mass, kg.
     pub object_mass: f64,
@@ -193,6 +193,7 @@ fn is_mcap(headers: &HeaderMap) -> bool {
         (status = 201, description = "Stored; `Location` names the new session", body = StoredSession,
             headers(("Location" = String, description = "URL of the session"))),
         (status = 200, description = "The same bytes were already stored: that session", body = StoredSession),
+        (status = 400, description = "The body could not be read (e.g. broken chunked encoding); nothing was stored", body = ProblemBody, content_type = "application/problem+json"),
         (status = 401, description = "A token is configured and was not sent, or a wrong one", body = ProblemBody, content_type = "application/problem+json"),
         (status = 413, description = "The body is over the server's limit", body = ProblemBody, content_type = "application/problem+json"),
         (status = 415, description = "Content-Type is not application/x-mcap", body = ProblemBody, content_type = "application/problem+json"),

@@ -16,7 +16,7 @@ use utoipa_axum::router::OpenApiRouter;
 use utoipa_axum::routes;
 
 use super::error::{Problem, ProblemBody};
-use super::extract::{Json, WriteAccess};
+use super::extract::{field_error, Json, WriteAccess};
 use super::sessions::StoredSession;
 use super::state::AppState;
 
@@ -148,9 +148,8 @@ fn scenario_of(req: &SimulationRequest) -> Result<Scenario, Problem> {
                 ))
             })?,
         v @ serde_json::Value::Object(_) => {
-            let s: Scenario = serde_path_to_error::deserialize(v).map_err(|e| {
-                Problem::unprocessable(format!("scenario.{}: {}", e.path(), e.inner()))
-            })?;
+            let s: Scenario = serde_path_to_error::deserialize(v)
+                .map_err(|e| Problem::unprocessable(field_error("scenario", &e)))?;
             s
         }
         _ => {

@@ -30,7 +30,9 @@ use sqlx::{Connection as _, QueryBuilder, Row as _, Sqlite, SqliteConnection};
 
 pub use error::StoreError;
 pub use hands::MAX_HAND_NAME;
-pub use query::{SkillQuery, SortField, SortKey, SortOrder, DEFAULT_LIMIT, MAX_LIMIT};
+pub use query::{
+    SkillQuery, SortField, SortKey, SortOrder, CONTACT_MODELS, DEFAULT_LIMIT, MAX_LIMIT, SHAPES,
+};
 pub use types::{
     Hand, HandSummary, IngestOutcome, NewSkill, Page, Replay, Session, SessionMeta, Skill,
     FEATURE_DIM,

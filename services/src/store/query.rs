@@ -229,10 +229,11 @@ pub(crate) fn decode_cursor(tag: &str, real: bool, cursor: &str) -> Result<After
     Ok(after)
 }
 
-/// Object shapes a skill can have.
-const SHAPES: [&str; 3] = ["sphere", "box", "cylinder"];
+/// Object shapes a skill can have: `unknown` is the shape of a skill from a session file
+/// without the object's metadata (see `services::ingest::analyse`).
+pub const SHAPES: [&str; 4] = ["sphere", "box", "cylinder", "unknown"];
 /// Contact models a skill can have.
-const CONTACT_MODELS: [&str; 3] = ["frictionless", "point_with_friction", "soft_finger"];
+pub const CONTACT_MODELS: [&str; 3] = ["frictionless", "point_with_friction", "soft_finger"];
 /// Grasp type families. Segmented skills store the family as their label; a label may also
 /// name the opposing virtual fingers, `<family>-<n>vf` (the synthetic bench skills do).
 const GRASP_FAMILIES: [&str; 2] = ["precision", "power"];
