@@ -76,6 +76,9 @@ mod tests {
             lower: -0.5,
             upper: 1.5,
         };
-        assert_eq!(e.to_string(), "joint angle 3 = 1e300 is outside [-0.5, 1.5]");
+        assert_eq!(
+            e.to_string(),
+            "joint angle 3 = 1e300 is outside [-0.5, 1.5]"
+        );
     }
 }
