@@ -6,7 +6,7 @@ use crate::error::RecordingError;
 use crate::mcap_io::ReadLimits;
 use crate::segmentation::{segment, SegmentParams, Skill};
 use crate::session::{read_session_bytes_with, DecodeTopics};
-use crate::store::{IngestOutcome, NewSkill, SessionMeta, Store, StoreError};
+use crate::store::{IngestOutcome, NewSkill, SessionMeta, Store, StoreError, UNKNOWN_SHAPE};
 
 /// Why an ingest failed. Nothing is stored in either case.
 #[derive(Debug, thiserror::Error)]
@@ -62,7 +62,7 @@ fn to_new_skill(s: &Skill) -> NewSkill {
     let p = &s.parameters;
     let (shape, mass, mu) = match &p.object {
         Some(o) => (o.shape.clone(), o.mass, o.mu),
-        None => ("unknown".to_string(), 0.0, 0.0),
+        None => (UNKNOWN_SHAPE.to_owned(), 0.0, 0.0),
     };
     let start = s
         .phases

@@ -112,31 +112,23 @@ fn finish_openapi(mut api: OpenApi, writes_need_token: bool) -> OpenApi {
     }
     document_filter_values(&mut api);
     for item in api.paths.paths.values_mut() {
-        for op in [
-            &mut item.get,
-            &mut item.post,
-            &mut item.delete,
-            &mut item.put,
-            &mut item.patch,
-        ]
-        .into_iter()
-        .flatten()
-        {
+        let ops = [
+            (&mut item.get, false),
+            (&mut item.post, true),
+            (&mut item.delete, true),
+            (&mut item.put, true),
+            (&mut item.patch, true),
+        ];
+        for (op, writes) in ops {
+            let Some(op) = op else { continue };
             // The time limit applies to every route, and a stopping server answers 503 too.
             op.responses
                 .responses
                 .entry("503".into())
                 .or_insert_with(unavailable_response);
-        }
-        for op in [
-            &mut item.post,
-            &mut item.delete,
-            &mut item.put,
-            &mut item.patch,
-        ]
-        .into_iter()
-        .flatten()
-        {
+            if !writes {
+                continue;
+            }
             if writes_need_token {
                 // Drop the empty (anonymous) alternative: a token is required.
                 if let Some(sec) = op.security.as_mut() {

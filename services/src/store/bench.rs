@@ -7,7 +7,7 @@ use serde::{Deserialize, Serialize};
 
 use super::{
     NewSkill, SessionMeta, SkillQuery, SortField, SortKey, SortOrder, Store, StoreError,
-    FEATURE_DIM,
+    CONTACT_MODELS, FEATURE_DIM,
 };
 
 /// Skills per synthetic session.
@@ -17,9 +17,6 @@ pub const SYNTHETIC_SESSIONS_PER_TRANSACTION: usize = 10;
 
 /// Object shapes the generator draws from.
 pub const SYNTHETIC_SHAPES: [&str; 3] = ["sphere", "box", "cylinder"];
-/// Contact models the generator draws from.
-pub const SYNTHETIC_CONTACT_MODELS: [&str; 3] =
-    ["frictionless", "point_with_friction", "soft_finger"];
 /// Grasp types the generator draws from.
 pub const SYNTHETIC_GRASP_TYPES: [&str; 4] =
     ["precision-2vf", "precision-3vf", "power-2vf", "power-3vf"];
@@ -70,7 +67,7 @@ pub fn synthetic_skill(rng: &mut SplitMix64) -> NewSkill {
         object_mass: rng.range(0.05, 2.0),
         mu: rng.range(0.3, 1.5),
         contact_count: 2 + rng.index(4) as i64,
-        contact_model: SYNTHETIC_CONTACT_MODELS[rng.index(3)].into(),
+        contact_model: CONTACT_MODELS[rng.index(3)].into(),
         grasp_type: SYNTHETIC_GRASP_TYPES[rng.index(4)].into(),
         quality: rng.range(0.0, 0.5),
         volume: rng.range(0.0, 0.01),

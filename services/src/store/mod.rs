@@ -32,6 +32,7 @@ pub use error::StoreError;
 pub use hands::MAX_HAND_NAME;
 pub use query::{
     SkillQuery, SortField, SortKey, SortOrder, CONTACT_MODELS, DEFAULT_LIMIT, MAX_LIMIT, SHAPES,
+    UNKNOWN_SHAPE,
 };
 pub use types::{
     Hand, HandSummary, IngestOutcome, NewSkill, Page, Replay, Session, SessionMeta, Skill,

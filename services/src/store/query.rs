@@ -229,9 +229,10 @@ pub(crate) fn decode_cursor(tag: &str, real: bool, cursor: &str) -> Result<After
     Ok(after)
 }
 
-/// Object shapes a skill can have: `unknown` is the shape of a skill from a session file
-/// without the object's metadata (see `services::ingest::analyse`).
-pub const SHAPES: [&str; 4] = ["sphere", "box", "cylinder", "unknown"];
+/// The object shape of a skill from a session file without the object's metadata.
+pub const UNKNOWN_SHAPE: &str = "unknown";
+/// Object shapes a skill can have.
+pub const SHAPES: [&str; 4] = ["sphere", "box", "cylinder", UNKNOWN_SHAPE];
 /// Contact models a skill can have.
 pub const CONTACT_MODELS: [&str; 3] = ["frictionless", "point_with_friction", "soft_finger"];
 /// Grasp type families. Segmented skills store the family as their label; a label may also
