@@ -4,7 +4,7 @@
 //! way writes on a full disk do, without needing a small file system.
 
 mod common;
-use common::icms_in as icms;
+use common::{icms_in as icms, simulate_in};
 
 use std::path::Path;
 use std::process::Command;
@@ -61,19 +61,7 @@ fn skill_count(dir: &Path) -> usize {
 fn a_full_disk_during_ingest_is_an_error_and_leaves_no_partial_rows_or_files() {
     let dir = tempfile::tempdir().unwrap();
     let d = dir.path();
-    let (c, _, e) = icms(
-        d,
-        &[
-            "simulate",
-            "--scenario",
-            "box-pinch-lift",
-            "--seed",
-            "2",
-            "--out",
-            "s.mcap",
-        ],
-    );
-    assert_eq!(c, 0, "{e}");
+    simulate_in(d, "box-pinch-lift", &["--seed", "2"], "s.mcap");
     let size_kib = std::fs::metadata(d.join("s.mcap")).unwrap().len() / 1024;
     assert!(
         size_kib > 256,

@@ -3,7 +3,7 @@
 //! problem.
 
 mod common;
-use common::icms_in as icms;
+use common::{icms_in as icms, simulate_in};
 
 use serde_json::Value;
 use services::store::Store;
@@ -30,17 +30,7 @@ fn json(out: &str) -> Value {
 fn a_stored_skill_replays_into_the_data_base_with_its_hand() {
     let dir = tempfile::tempdir().unwrap();
     let d = dir.path();
-    let (c, _, e) = icms(
-        d,
-        &[
-            "simulate",
-            "--scenario",
-            "box-pinch-lift",
-            "--out",
-            "a.mcap",
-        ],
-    );
-    assert_eq!(c, 0, "{e}");
+    simulate_in(d, "box-pinch-lift", &[], "a.mcap");
     let (c, out, e) = icms(d, &["ingest", "a.mcap", "--json"]);
     assert_eq!(c, 0, "{e}");
     let skill = json(&out)["sessions"][0]["skill_ids"][0].as_i64().unwrap();

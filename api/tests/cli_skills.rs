@@ -1,7 +1,7 @@
 //! `icms ingest` and `icms skills` end to end: sessions into the skill data base and back.
 
 mod common;
-use common::icms_in as icms;
+use common::{icms_in as icms, simulate_in};
 
 use serde_json::Value;
 
@@ -9,19 +9,7 @@ use serde_json::Value;
 fn sessions_are_ingested_once_with_their_skills_and_can_be_queried() {
     let dir = tempfile::tempdir().unwrap();
     let d = dir.path();
-    let (c, _, e) = icms(
-        d,
-        &[
-            "simulate",
-            "--scenario",
-            "two-grasps",
-            "--seed",
-            "4",
-            "--out",
-            "a.mcap",
-        ],
-    );
-    assert_eq!(c, 0, "{e}");
+    simulate_in(d, "two-grasps", &["--seed", "4"], "a.mcap");
     let (c, out, e) = icms(d, &["ingest", "a.mcap", "a.mcap", "--json"]);
     assert_eq!(c, 0, "{e}");
     let v: Value = serde_json::from_str(&out).unwrap();
@@ -89,19 +77,7 @@ fn a_corrupt_file_is_refused_with_its_reason_and_stores_nothing() {
 fn a_bad_file_among_several_is_reported_and_the_good_ones_are_still_stored() {
     let dir = tempfile::tempdir().unwrap();
     let d = dir.path();
-    let (c, _, e) = icms(
-        d,
-        &[
-            "simulate",
-            "--scenario",
-            "box-pinch-lift",
-            "--duration",
-            "3.5",
-            "--out",
-            "good.mcap",
-        ],
-    );
-    assert_eq!(c, 0, "{e}");
+    simulate_in(d, "box-pinch-lift", &["--duration", "3.5"], "good.mcap");
     std::fs::write(d.join("bad.mcap"), b"not an mcap file at all").unwrap();
     let (c, out, e) = icms(
         d,
@@ -128,17 +104,7 @@ fn a_bad_file_among_several_is_reported_and_the_good_ones_are_still_stored() {
 fn negative_filters_and_an_out_of_range_similar_limit_are_refused_with_a_clear_message() {
     let dir = tempfile::tempdir().unwrap();
     let d = dir.path();
-    let args = [
-        "simulate",
-        "--scenario",
-        "box-pinch-lift",
-        "--duration",
-        "3.5",
-        "--out",
-        "a.mcap",
-    ];
-    let (c, _, e) = icms(d, &args);
-    assert_eq!(c, 0, "{e}");
+    simulate_in(d, "box-pinch-lift", &["--duration", "3.5"], "a.mcap");
     let (c, out, e) = icms(d, &["ingest", "a.mcap", "--json"]);
     assert_eq!(c, 0, "{e}");
     let v: Value = serde_json::from_str(&out).unwrap();

@@ -416,13 +416,18 @@ fn an_import_that_fails_midway_leaves_a_readable_file_up_to_the_failure() {
     assert_eq!(partial.ticks() as u64, time_ns / 1_000_000);
 }
 
+/// The columns of a glove CSV: time, the angles, then the torques (`tau_<dof>`).
+fn glove_csv_header(hand: &HandModel) -> Vec<String> {
+    std::iter::once("time_s".to_owned())
+        .chain(hand.dof_names.iter().cloned())
+        .chain(hand.dof_names.iter().map(|n| format!("tau_{n}")))
+        .collect()
+}
+
 #[test]
 fn bad_glove_csv_input_is_rejected_naming_the_line_and_column() {
     let hand = HandModel::glove10();
-    let header: Vec<String> = std::iter::once("time_s".to_owned())
-        .chain(hand.dof_names.iter().cloned())
-        .chain(hand.dof_names.iter().map(|n| format!("tau_{n}")))
-        .collect();
+    let header = glove_csv_header(&hand);
     let row = |v: &str| {
         let mut r = vec!["0.0".to_owned()];
         r.extend(std::iter::repeat_n(v.to_owned(), header.len() - 1));
@@ -716,10 +721,7 @@ fn glove_mcap_input_spanning_more_than_an_hour_is_rejected_naming_the_message() 
 #[test]
 fn a_glove_csv_saved_with_a_byte_order_mark_reads_like_one_without() {
     let hand = HandModel::glove10();
-    let header: Vec<String> = std::iter::once("time_s".to_owned())
-        .chain(hand.dof_names.iter().cloned())
-        .chain(hand.dof_names.iter().map(|n| format!("tau_{n}")))
-        .collect();
+    let header = glove_csv_header(&hand);
     let zeros = vec!["0.0"; header.len() - 1].join(",");
     let text = format!("{}\n0.0,{zeros}\n0.01,{zeros}\n", header.join(","));
     let plain = parse_glove_csv(&text, "g.csv", &hand).unwrap();

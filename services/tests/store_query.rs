@@ -261,51 +261,22 @@ async fn out_of_range_queries_are_invalid() {
         );
     }
     // A value no skill can have is a typo, not an empty page: the error names the filter.
-    let unknown = [
-        (
-            "shape",
-            SkillQuery {
-                object_shape: Some("torus".into()),
-                ..SkillQuery::default()
-            },
-        ),
-        (
-            "shape",
-            SkillQuery {
-                object_shape: Some("Sphere".into()),
-                ..SkillQuery::default()
-            },
-        ),
-        (
-            "contact_model",
-            SkillQuery {
-                contact_model: Some("magic".into()),
-                ..SkillQuery::default()
-            },
-        ),
-        (
-            "phase",
-            SkillQuery {
-                phase: Some("juggle".into()),
-                ..SkillQuery::default()
-            },
-        ),
-        (
-            "grasp_type",
-            SkillQuery {
-                grasp_type: Some("pinch".into()),
-                ..SkillQuery::default()
-            },
-        ),
-        (
-            "grasp_type",
-            SkillQuery {
-                grasp_type: Some("power-xvf".into()),
-                ..SkillQuery::default()
-            },
-        ),
-    ];
-    for (field, q) in unknown {
+    for (field, value) in [
+        ("shape", "torus"),
+        ("shape", "Sphere"),
+        ("contact_model", "magic"),
+        ("phase", "juggle"),
+        ("grasp_type", "pinch"),
+        ("grasp_type", "power-xvf"),
+    ] {
+        let mut q = SkillQuery::default();
+        let v = Some(value.to_owned());
+        match field {
+            "shape" => q.object_shape = v,
+            "contact_model" => q.contact_model = v,
+            "phase" => q.phase = v,
+            _ => q.grasp_type = v,
+        }
         match store.query_skills(&q).await {
             Err(StoreError::InvalidQuery(m)) => assert!(m.starts_with(field), "{m}"),
             other => panic!("{q:?} gave {other:?}"),

@@ -33,6 +33,15 @@ fn blob_path(data: &Path, sha256: &str) -> std::path::PathBuf {
     ))
 }
 
+/// Runs `POST /simulations` with `body`: the stored session and the id of its first skill.
+async fn simulate(c: &Client, body: Value) -> (Value, i64) {
+    let r = c.post_json("/api/v1/simulations", &body, None).await;
+    assert_eq!(r.status, 201, "{}", String::from_utf8_lossy(&r.body));
+    let sim = r.json();
+    let skill_id = sim["skills"][0]["id"].as_i64().unwrap();
+    (sim, skill_id)
+}
+
 async fn hand_names(c: &Client) -> Vec<String> {
     let r = c.get("/api/v1/hands").await;
     assert_eq!(r.status, 200);
@@ -224,15 +233,7 @@ async fn hand_uploads_and_replays_need_the_token_when_one_is_configured() {
 async fn a_stored_skill_replays_on_hands_and_its_replays_are_fetched_and_deleted_with_it() {
     let app = TestApp::spawn().await;
     let c = &app.client;
-    let r = c
-        .post_json(
-            "/api/v1/simulations",
-            &json!({"scenario": "box-pinch-lift"}),
-            None,
-        )
-        .await;
-    assert_eq!(r.status, 201, "{}", String::from_utf8_lossy(&r.body));
-    let skill_id = r.json()["skills"][0]["id"].as_i64().unwrap();
+    let (_, skill_id) = simulate(c, json!({"scenario": "box-pinch-lift"})).await;
     let replays = format!("/api/v1/skills/{skill_id}/replays");
 
     // On the built-in gripper: held.
@@ -370,16 +371,7 @@ async fn a_stored_skill_replays_on_hands_and_its_replays_are_fetched_and_deleted
 async fn deleting_a_session_deletes_the_replays_of_its_skills() {
     let app = TestApp::spawn().await;
     let c = &app.client;
-    let r = c
-        .post_json(
-            "/api/v1/simulations",
-            &json!({"scenario": "box-pinch-lift", "seed": 2}),
-            None,
-        )
-        .await;
-    assert_eq!(r.status, 201, "{}", String::from_utf8_lossy(&r.body));
-    let sim = r.json();
-    let skill_id = sim["skills"][0]["id"].as_i64().unwrap();
+    let (sim, skill_id) = simulate(c, json!({"scenario": "box-pinch-lift", "seed": 2})).await;
     // A too-small gripper fails at planning: a fast replay.
     let tiny_urdf = gripper_urdf().replace("upper=\"0.055\"", "upper=\"0.010\"");
     let upload = json!({"spec": gripper_spec("tiny"), "urdf": tiny_urdf});
@@ -420,15 +412,7 @@ async fn deleting_a_session_deletes_the_replays_of_its_skills() {
 async fn skills_of_a_session_without_object_metadata_are_found_by_shape_unknown() {
     let app = TestApp::spawn().await;
     let c = &app.client;
-    let r = c
-        .post_json(
-            "/api/v1/simulations",
-            &json!({"scenario": "box-pinch-lift"}),
-            None,
-        )
-        .await;
-    assert_eq!(r.status, 201, "{}", String::from_utf8_lossy(&r.body));
-    let skill_id = r.json()["skills"][0]["id"].as_i64().unwrap();
+    let (_, skill_id) = simulate(c, json!({"scenario": "box-pinch-lift"})).await;
     let r = c
         .post_json(
             &format!("/api/v1/skills/{skill_id}/replays"),

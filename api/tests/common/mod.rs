@@ -17,6 +17,15 @@ pub fn icms_in(dir: &Path, args: &[&str]) -> (i32, String, String) {
         .args(args))
 }
 
+/// Runs `icms simulate --scenario SCENARIO ARGS… --out OUT` in `dir` and asserts it succeeded.
+pub fn simulate_in(dir: &Path, scenario: &str, args: &[&str], out: &str) {
+    let mut all = vec!["simulate", "--scenario", scenario];
+    all.extend_from_slice(args);
+    all.extend_from_slice(&["--out", out]);
+    let (c, _, e) = icms_in(dir, &all);
+    assert_eq!(c, 0, "icms {all:?}: {e}");
+}
+
 fn run(cmd: &mut Command) -> (i32, String, String) {
     let out = cmd.output().expect("run icms");
     (
