@@ -35,7 +35,7 @@
 use crate::contact::{apply_friction, detect, ContactFrame, ContactModel, Friction, Intensity};
 use crate::error::{DfsError, Result};
 use crate::grasp::{GraspMatrix, MAX_CONTACTS};
-use crate::hand::{DofMatrix, HandModel, Kinematics, MAX_DOF, MAX_TIPS};
+use crate::hand::{DofMatrix, HandModel, Kinematics, MassPlan, MAX_DOF, MAX_TIPS};
 use crate::math::{
     cholesky_solve_in_place, envelope_cholesky_solve, force_of, moment_of, wrench, Isometry, Point,
     Real, Vector, Wrench,
@@ -280,6 +280,8 @@ pub struct Dfs {
     /// rows' nonzeros start at `solve_first`: no fill-in, a fraction of a dense Cholesky.
     solve_order: [usize; MAX_DOF],
     solve_first: [usize; MAX_DOF],
+    /// The hand's structure for M(θ), made once.
+    mass_plan: MassPlan,
     factor: DofMatrix,
     out: TickOutput,
 }
@@ -380,6 +382,7 @@ impl Dfs {
             *t = TipDofs::of(&hand, k);
         }
         let (solve_order, solve_first) = finger_step_envelope(&hand, &tip_dofs);
+        let mass_plan = hand.mass_plan();
         Ok(Dfs {
             hand,
             object,
@@ -405,6 +408,7 @@ impl Dfs {
             tip_dofs,
             solve_order,
             solve_first,
+            mass_plan,
             factor: DofMatrix::zeros(),
             out,
         })
@@ -498,7 +502,8 @@ impl Dfs {
         }
         self.hand.forward_kinematics(&s.base, s.q, &mut self.kin);
         self.hand.tip_jacobians(&mut self.kin);
-        self.hand.mass_matrix(&mut self.kin, &mut self.mass);
+        self.hand
+            .mass_matrix_planned(&self.mass_plan, &mut self.kin, &mut self.mass);
         Ok(())
     }
 

@@ -64,6 +64,19 @@ pub struct Inertial {
     pub inertia: Mat3,
 }
 
+impl Inertial {
+    /// The inertia tensor is diagonal: the link frame's axes are its principal axes.
+    pub fn principal_in_link_frame(&self) -> bool {
+        let i = &self.inertia;
+        i[(0, 1)] == 0.0
+            && i[(0, 2)] == 0.0
+            && i[(1, 2)] == 0.0
+            && i[(1, 0)] == 0.0
+            && i[(2, 0)] == 0.0
+            && i[(2, 1)] == 0.0
+    }
+}
+
 impl Default for Inertial {
     /// No mass.
     fn default() -> Self {
@@ -181,13 +194,10 @@ pub struct Kinematics {
     /// Scratch for [`HandModel::mass_matrix`]: composite spatial inertia of every subtree
     /// (only the hand's links are written).
     pub composite: [SpatialInertia; MAX_LINKS],
-    /// Scratch for [`HandModel::mass_matrix`]: every joint's motion subspace (velocity of the
-    /// body point at the world origin, angular velocity) per unit joint value. Kept here so
+    /// Scratch for [`HandModel::mass_matrix`]: every driven joint's motion subspace (velocity
+    /// of the body point at the world origin, angular velocity) per unit DOF value. Kept here so
     /// the 64-entry array is not zeroed on the stack every tick.
     pub joint_motion: [(Vector, Vector); MAX_LINKS],
-    /// Scratch for [`HandModel::mass_matrix`]: per joint its DOF (`usize::MAX` when fixed),
-    /// drive gain and the joint above it ([`NO_JOINT`] below the root).
-    pub joint_walk: [(usize, f64, usize); MAX_LINKS],
 }
 
 /// A rigid body's spatial inertia about the world origin, in the compact form the composite
@@ -217,6 +227,13 @@ impl SpatialInertia {
     /// A link's inertia about the world origin for the link at `pose`.
     #[inline]
     pub fn of_link(pose: &Isometry, inertial: &Inertial) -> SpatialInertia {
+        Self::of_link_with_axes(pose, inertial, inertial.principal_in_link_frame())
+    }
+
+    /// [`of_link`](Self::of_link) when it is known whether the link's inertia tensor is
+    /// diagonal in its frame ([`Inertial::principal_in_link_frame`]).
+    #[inline(always)]
+    fn of_link_with_axes(pose: &Isometry, inertial: &Inertial, diagonal: bool) -> SpatialInertia {
         let m = inertial.mass;
         let r = pose.rotation.to_rotation_matrix();
         let r = r.matrix();
@@ -227,12 +244,6 @@ impl SpatialInertia {
         // Principal axes along the link frame (URDF and glove10 inertias mostly are): R I Rᵀ
         // is then the three scaled outer products of R's columns, the same sums as the full
         // product with its zero terms left out (bit-identical) at half the multiplications.
-        let diagonal = i_c[(0, 1)] == 0.0
-            && i_c[(0, 2)] == 0.0
-            && i_c[(1, 2)] == 0.0
-            && i_c[(1, 0)] == 0.0
-            && i_c[(2, 0)] == 0.0
-            && i_c[(2, 1)] == 0.0;
         let ri = if diagonal {
             let mut ri = *r;
             for k in 0..3 {
@@ -300,7 +311,6 @@ impl Default for Kinematics {
             tip_jacobians: [TipJacobian::zeros(); MAX_TIPS],
             composite: [SpatialInertia::ZERO; MAX_LINKS],
             joint_motion: [(Vector::zeros(), Vector::zeros()); MAX_LINKS],
-            joint_walk: [(usize::MAX, 0.0, NO_JOINT); MAX_LINKS],
         }
     }
 }
@@ -1052,6 +1062,60 @@ impl HandModel {
     /// the link's centre of mass and J_ω its angular Jacobian (world frame), evaluated by the
     /// composite rigid-body algorithm; a mimic joint enters with its multiplier.
     pub fn mass_matrix(&self, kin: &mut Kinematics, m: &mut DofMatrix) {
+        self.mass_matrix_planned(&self.mass_plan(), kin, m);
+    }
+
+    /// The structure [`mass_matrix_planned`](Self::mass_matrix_planned) walks: the driven
+    /// joints, their DOFs and gains, and each one's nearest driven ancestor. It depends on the
+    /// hand only, so a caller computing M(θ) every tick makes it once. Allocation-free.
+    pub fn mass_plan(&self) -> MassPlan {
+        let mut plan = MassPlan {
+            driven: [DrivenJoint {
+                joint: 0,
+                dof: 0,
+                gain: 0.0,
+                prismatic: false,
+                up: NO_JOINT,
+            }; MAX_LINKS],
+            len: 0,
+            link_axes: [LinkAxes::Massless; MAX_LINKS],
+        };
+        for (l, link) in self.links.iter().enumerate().take(MAX_LINKS) {
+            if l != self.root && link.inertial.mass > 0.0 {
+                plan.link_axes[l] = if link.inertial.principal_in_link_frame() {
+                    LinkAxes::Principal
+                } else {
+                    LinkAxes::General
+                };
+            }
+        }
+        // The driven-list index of the nearest driven joint at or above every link.
+        let mut driven_above = [NO_JOINT; MAX_LINKS];
+        let joints = &self.joints[..self.joints.len().min(MAX_LINKS)];
+        // Joints come parent first (`validate`), so a joint's parent link is settled before it.
+        for (j, joint) in joints.iter().enumerate() {
+            let above = driven_above.get(joint.parent).copied().unwrap_or(NO_JOINT);
+            let mut here = above;
+            if let Some((dof, gain)) = joint.drive.dof_and_gain() {
+                plan.driven[plan.len] = DrivenJoint {
+                    joint: j,
+                    dof,
+                    gain,
+                    prismatic: joint.kind == JointKind::Prismatic,
+                    up: above,
+                };
+                here = plan.len;
+                plan.len += 1;
+            }
+            if let Some(slot) = driven_above.get_mut(joint.child) {
+                *slot = here;
+            }
+        }
+        plan
+    }
+
+    /// [`mass_matrix`](Self::mass_matrix) with the hand's [`MassPlan`] made beforehand.
+    pub fn mass_matrix_planned(&self, plan: &MassPlan, kin: &mut Kinematics, m: &mut DofMatrix) {
         let n = self.dof().min(MAX_DOF);
         // Only the block is written: filling all 24x24 entries every tick cost as much as the
         // algorithm itself.
@@ -1059,24 +1123,25 @@ impl HandModel {
             m.as_mut_slice()[c * MAX_DOF..c * MAX_DOF + n].fill(0.0);
         }
         // Composite rigid-body algorithm in the world frame: the spatial inertia of every
-        // subtree about the world origin, then H_ij = S_jᵀ I_subtree(i) S_i for every joint j
-        // on the path to joint i, mapped onto the DOFs by the drive gains. The subtree
-        // inertias live in the kinematics' scratch (disjoint field borrows).
+        // subtree about the world origin, then H_ij = S_jᵀ I_subtree(i) S_i for every driven
+        // joint j on the path to driven joint i, the motion subspaces S scaled by the drive
+        // gains (a mimic joint enters with its multiplier). The subtree inertias live in the
+        // kinematics' scratch (disjoint field borrows).
         let Kinematics {
             composite,
             joint_axes,
             joint_frames,
             link_poses,
-            parent_joint,
             joint_motion: motion,
-            joint_walk: walk,
             ..
         } = kin;
         for (l, link) in self.links.iter().enumerate().take(MAX_LINKS) {
-            composite[l] = if l != self.root && link.inertial.mass > 0.0 {
-                SpatialInertia::of_link(&link_poses[l], &link.inertial)
-            } else {
+            let axes = plan.link_axes.get(l).copied().unwrap_or(LinkAxes::Massless);
+            composite[l] = if axes == LinkAxes::Massless {
                 SpatialInertia::ZERO
+            } else {
+                let principal = axes == LinkAxes::Principal;
+                SpatialInertia::of_link_with_axes(&link_poses[l], &link.inertial, principal)
             };
         }
         let joints = &self.joints[..self.joints.len().min(MAX_LINKS)];
@@ -1084,55 +1149,67 @@ impl HandModel {
             let child = composite[joint.child];
             composite[joint.parent] += child;
         }
-        // Every joint's motion subspace once: (velocity of the body point at the origin,
-        // angular velocity) per unit joint value.
-        for (j, joint) in joints.iter().enumerate() {
-            let a = joint_axes[j];
-            motion[j] = match joint.kind {
-                JointKind::Revolute | JointKind::Continuous => {
-                    (joint_frames[j].translation.vector.cross(&a), a)
-                }
-                JointKind::Prismatic => (a, Vector::zeros()),
-                JointKind::Fixed => (Vector::zeros(), Vector::zeros()),
-            };
-        }
-        // Per joint: its DOF and gain (`usize::MAX` for a fixed joint) and the joint above it
-        // (`NO_JOINT` below the root), so the ancestor walk below is one load per step.
-        let nj = joints.len();
-        for (j, joint) in joints.iter().enumerate() {
-            let (d, g) = joint.drive.dof_and_gain().unwrap_or((usize::MAX, 0.0));
-            let up = if joint.parent != self.root {
-                parent_joint[joint.parent]
+        let driven = &plan.driven[..plan.len.min(MAX_LINKS)];
+        // Every driven joint's motion subspace once, times its gain: (velocity of the body
+        // point at the origin, angular velocity) per unit DOF value.
+        for (s, d) in motion.iter_mut().zip(driven) {
+            let a = joint_axes[d.joint] * d.gain;
+            *s = if d.prismatic {
+                (a, Vector::zeros())
             } else {
-                NO_JOINT
+                (joint_frames[d.joint].translation.vector.cross(&a), a)
             };
-            walk[j] = (d, g, up);
         }
-        for i in 0..nj {
-            let (di, gi, _) = walk[i];
-            if di == usize::MAX {
-                continue;
-            }
+        for (i, di) in driven.iter().enumerate() {
             let (v, w) = &motion[i];
-            let (f, t) = composite[joints[i].child].apply(v, w);
+            let (f, t) = composite[joints[di.joint].child].apply(v, w);
             let mut j = i;
-            while j < nj {
-                let (dj, gj, up) = walk[j];
-                if dj != usize::MAX {
-                    let (vj, wj) = &motion[j];
-                    let h = gi * gj * (vj.dot(&f) + wj.dot(&t));
-                    m[(di, dj)] += h;
-                    if j != i {
-                        m[(dj, di)] += h;
-                    }
+            while let (Some(dj), Some((vj, wj))) = (driven.get(j), motion.get(j)) {
+                let h = vj.dot(&f) + wj.dot(&t);
+                m[(di.dof, dj.dof)] += h;
+                if j != i {
+                    m[(dj.dof, di.dof)] += h;
                 }
-                j = up;
+                j = dj.up;
             }
         }
         for (i, a) in self.armature.iter().enumerate().take(n) {
             m[(i, i)] += a;
         }
     }
+}
+
+/// A driven (non-fixed) joint as the composite rigid-body algorithm walks it.
+#[derive(Debug, Clone, Copy)]
+struct DrivenJoint {
+    /// Index into `HandModel::joints`.
+    joint: usize,
+    /// The DOF driving it.
+    dof: usize,
+    /// `∂(joint value)/∂θ[dof]`: 1, or a mimic joint's multiplier.
+    gain: f64,
+    prismatic: bool,
+    /// Index in [`MassPlan::driven`] of the nearest driven joint above it, [`NO_JOINT`] if none.
+    up: usize,
+}
+
+/// The hand structure M(θ) needs, made once per hand by [`HandModel::mass_plan`]: the driven
+/// joints parent first, each with its nearest driven ancestor.
+#[derive(Debug, Clone, Copy)]
+pub struct MassPlan {
+    driven: [DrivenJoint; MAX_LINKS],
+    len: usize,
+    /// Per link: no mass (or the root, which does not move), or the form of its inertia.
+    link_axes: [LinkAxes; MAX_LINKS],
+}
+
+/// How a link enters M(θ).
+#[derive(Debug, Clone, Copy, PartialEq)]
+enum LinkAxes {
+    Massless,
+    /// Inertia tensor diagonal in the link frame.
+    Principal,
+    General,
 }
 
 #[cfg(test)]
