@@ -596,4 +596,63 @@ mod tests {
         );
         assert_eq!(r.ticks, 0);
     }
+
+    /// glove10's own three-finger cylinder grasp (contacts of a `cylinder-power-grasp`
+    /// recording): its ring and little fingers follow the middle finger's DOFs, so no pose
+    /// puts a contact under each of its five tips, yet the demonstrating hand obviously reaches
+    /// the three it used. The plan takes each contact on the finger of its name and leaves the
+    /// coupled fingers out of the object.
+    #[test]
+    fn glove10_reaches_its_own_three_finger_cylinder_grasp() {
+        let hand = builtin_hand("glove10").unwrap();
+        let contact = |finger: &str, p: [Real; 3], n: [Real; 3]| SkillContact {
+            finger: finger.into(),
+            position_b: Vector::from(p),
+            normal_b: Vector::from(n).normalize(),
+        };
+        let mut skill = box_pinch(0.5);
+        skill.shape = Shape::Cylinder {
+            radius: 0.035,
+            half_height: 0.045,
+        };
+        skill.friction.mu = 0.7;
+        skill.contacts = vec![
+            contact(
+                "thumb",
+                [-0.0349, 0.0026, 0.02468],
+                [0.99724, -0.07419, 0.0],
+            ),
+            contact(
+                "index",
+                [0.03484, -0.00329, 0.02019],
+                [-0.99556, 0.09408, 0.0],
+            ),
+            contact(
+                "middle",
+                [0.02951, -0.01882, 0.03071],
+                [-0.84306, 0.53782, 0.0],
+            ),
+        ];
+        let thumb = thumb_of(&hand);
+        let p = plan(&hand, thumb, &skill, &ReplayParams::default()).unwrap();
+        assert!(
+            !matches!(p.failure, Some((FailureReason::Unreachable, _))),
+            "{:?}",
+            p.failure
+        );
+        assert!(p.ik_error <= ReplayParams::default().reach_tolerance);
+        for (k, tip) in hand.fingertips.iter().enumerate() {
+            let used = ["thumb", "index", "middle"].contains(&tip.name.as_str());
+            assert_eq!(p.active[k], used, "{}", tip.name);
+            if used {
+                let i = skill
+                    .contacts
+                    .iter()
+                    .position(|c| c.finger == tip.name)
+                    .unwrap();
+                let miss = (p.contacts[k].p_b - skill.contacts[i].position_b).norm();
+                assert!(miss < 2e-3, "{} lands {miss} m from its contact", tip.name);
+            }
+        }
+    }
 }

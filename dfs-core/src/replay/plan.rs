@@ -82,6 +82,20 @@ enum Keys {
     /// The thumb and this many opposing fingertips (those nearest the thumb); every other
     /// finger curls until it meets the surface, or stays out of the grasp.
     Nearest(usize),
+    /// The fingertips named like the skill's contacts on those contacts (a skill replayed on
+    /// a hand with its demonstrator's finger names, glove10 itself among them); a finger
+    /// coupled to a placed one goes where the coupling takes it and must not press into the
+    /// object, any other curls onto the surface or stays out of the grasp.
+    Named,
+}
+
+/// Per fingertip of `hand`, the skill contact of the same finger name, if any.
+fn named_contacts(hand: &HandModel, skill: &SkillSpec) -> [Option<usize>; MAX_TIPS] {
+    let mut named = [None; MAX_TIPS];
+    for (k, tip) in hand.fingertips.iter().enumerate().take(MAX_TIPS) {
+        named[k] = skill.contacts.iter().position(|c| c.finger == tip.name);
+    }
+    named
 }
 
 /// Contacts of the skill on the thumb's side and on the opposing side.
@@ -285,6 +299,23 @@ pub fn plan(
                 }
                 _ => {}
             }
+        }
+    }
+    // Failing those, a hand with the demonstrator's finger names (glove10 replaying its own
+    // skill, whose coupled fingers cannot each reach a contact of their own) takes each
+    // contact on its own finger; the fingers the skill does not use go where their coupling
+    // takes them, or curl.
+    let named = named_contacts(hand, skill);
+    let named_count = named.iter().flatten().count();
+    if !best.as_ref().is_some_and(|c| c.ok)
+        && named[thumb].is_some()
+        && named_count == skill.contacts.len()
+        && named_count >= 2
+        && named_count < nt
+    {
+        if let Some(c) = best_of(Keys::Named).filter(|c| c.ok) {
+            best = Some(c);
+            curled_refused = None;
         }
     }
     // Failing those too (fingers that push only along their own motion, off the normals at
@@ -667,8 +698,13 @@ fn plan_candidates(
     let mut kin = Kinematics::default();
     hand.forward_kinematics(&Isometry::identity(), &q_mid[..n_hand], &mut kin);
     let p_t = kin.tip_centres[thumb].coords;
-    // The opposing fingertips placed on targets: all, or those nearest the thumb.
+    // The opposing fingertips placed on targets: all, those nearest the thumb, or those named
+    // like the skill's contacts.
+    let named = named_contacts(hand, skill);
     let mut others: Vec<usize> = (0..nt).filter(|&k| k != thumb).collect();
+    if keys == Keys::Named {
+        others.retain(|&k| named[k].is_some());
+    }
     if let Keys::Nearest(n) = keys {
         others.sort_by(|&a, &b| {
             let d = |k: usize| (kin.tip_centres[k].coords - p_t).norm();
@@ -725,21 +761,30 @@ fn plan_candidates(
             let (p, n_in) = on_surface(skill, &p_b);
             start * Point::from(p - n_in * hand.fingertips[k].radius)
         };
-        targets.push((thumb, target_of(thumb, thumb_c)));
-        if lateral.len() == other_side.len() && !other_side.is_empty() && nt != 2 {
-            let mut skill_lat: Vec<(usize, Real)> = other_side
-                .iter()
-                .map(|&i| (i, skill.contacts[i].position_b.dot(&lat_w)))
-                .collect();
-            skill_lat.sort_by(|a, b| a.1.total_cmp(&b.1));
-            for ((k, _), (i, _)) in lateral.iter().zip(&skill_lat) {
-                targets.push((*k, target_of(*k, skill.contacts[*i].position_b)));
+        if keys == Keys::Named {
+            // Each placed fingertip on the contact of its own name.
+            for &k in std::iter::once(&thumb).chain(&others) {
+                if let Some(i) = named[k] {
+                    targets.push((k, target_of(k, skill.contacts[i].position_b)));
+                }
             }
         } else {
-            let mean = lateral.iter().map(|l| l.1).sum::<Real>() / lateral.len().max(1) as Real;
-            for &(k, u) in &lateral {
-                let off = (u - mean).clamp(-0.8 * half_width, 0.8 * half_width);
-                targets.push((k, target_of(k, other_c + lat_w * off)));
+            targets.push((thumb, target_of(thumb, thumb_c)));
+            if lateral.len() == other_side.len() && !other_side.is_empty() && nt != 2 {
+                let mut skill_lat: Vec<(usize, Real)> = other_side
+                    .iter()
+                    .map(|&i| (i, skill.contacts[i].position_b.dot(&lat_w)))
+                    .collect();
+                skill_lat.sort_by(|a, b| a.1.total_cmp(&b.1));
+                for ((k, _), (i, _)) in lateral.iter().zip(&skill_lat) {
+                    targets.push((*k, target_of(*k, skill.contacts[*i].position_b)));
+                }
+            } else {
+                let mean = lateral.iter().map(|l| l.1).sum::<Real>() / lateral.len().max(1) as Real;
+                for &(k, u) in &lateral {
+                    let off = (u - mean).clamp(-0.8 * half_width, 0.8 * half_width);
+                    targets.push((k, target_of(k, other_c + lat_w * off)));
+                }
             }
         }
         let free = with_free_base(hand, rot);
@@ -759,7 +804,7 @@ fn plan_candidates(
             &mut kin,
             &mut q[..n],
         );
-        if keys != Keys::All {
+        if let Keys::Nearest(_) = keys {
             // The opposing fingers of an underactuated hand need only touch the surface near
             // their targets: each target moves to the surface point nearest the tip (tip
             // spheres resting on it), and the thumb stays on its contact.
@@ -803,6 +848,17 @@ fn plan_candidates(
         if below {
             error = error.max(1.0);
         }
+        if keys == Keys::Named {
+            // A finger the skill does not use, carried by a placed finger's coupled DOFs,
+            // must stay out of the object: the demonstrator's did, or it would be a contact.
+            let presses = (0..nt).any(|k| {
+                let c_b = (inv_start * kin.tip_centres[k]).coords;
+                !active[k] && skill.shape.closest(&c_b).0 < hand.fingertips[k].radius
+            });
+            if presses {
+                error = error.max(1.0);
+            }
+        }
         free.tip_jacobians(&mut kin);
         let mut align_min: Real = 1.0;
         let mut frames = Vec::with_capacity(nt);
@@ -818,7 +874,8 @@ fn plan_candidates(
         // is most of the planning time); curled grasps differ and need it here.
         let mu = skill.friction.mu * (1.0 - params.friction_margin);
         let pushes = align_min >= 1.0 / (1.0 + mu * mu).sqrt();
-        let quality = if keys == Keys::All || error > params.reach_tolerance || !pushes {
+        let placed_all = matches!(keys, Keys::All | Keys::Named);
+        let quality = if placed_all || error > params.reach_tolerance || !pushes {
             None
         } else {
             grasp_quality(
@@ -835,7 +892,7 @@ fn plan_candidates(
         // also hold.
         // A finger that cannot push along its contact normal within the planned friction cone
         // only slides over the surface (`pushes`).
-        let ok = error <= params.reach_tolerance && (keys == Keys::All || (closure && pushes));
+        let ok = error <= params.reach_tolerance && (placed_all || (closure && pushes));
         let reach_penalty = if ok { 0.0 } else { 10.0 };
         let score = -reach_penalty - 20.0 * error + align_min + 2.0 * eps - 0.3 * approach.z;
         out.push(Candidate {
