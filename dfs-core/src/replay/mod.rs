@@ -41,8 +41,12 @@
 //!    Failing that too (fingers with one actuated DOF push only along their motion, far off
 //!    the normals at the skill's contacts), the grasp comes from the hand's own closing
 //!    motion: the object is placed where fingers meet it head-on, the fingers that push inside
-//!    the planned cone take part and the others stay open (`closing.rs`). Otherwise the replay
-//!    fails with `unreachable`.
+//!    the planned cone take part and the others stay open (`closing.rs`). Last, a hand whose
+//!    fingertips carry the names of the skill's contacts (glove10 replaying its own skill,
+//!    whose ring and little fingers move with the middle finger's DOFs) puts each contact on
+//!    the fingertip of its name; a finger the skill does not use goes where its coupling to a
+//!    placed finger takes it (the pose is refused if that presses it into the object), or
+//!    curls as above. Otherwise the replay fails with `unreachable`.
 //! 3. **Forces.** At the reference's samples (every [`ReplayParams::force_sample_s`]), the
 //!    least internal force that carries the object's load `m (a − g)` with exact friction cones,
 //!    a friction margin and the hand's torque limits `|Σ Jᵀ f| ≤ τ_max` (a second-order cone

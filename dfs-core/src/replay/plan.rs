@@ -301,23 +301,6 @@ pub fn plan(
             }
         }
     }
-    // Failing those, a hand with the demonstrator's finger names (glove10 replaying its own
-    // skill, whose coupled fingers cannot each reach a contact of their own) takes each
-    // contact on its own finger; the fingers the skill does not use go where their coupling
-    // takes them, or curl.
-    let named = named_contacts(hand, skill);
-    let named_count = named.iter().flatten().count();
-    if !best.as_ref().is_some_and(|c| c.ok)
-        && named[thumb].is_some()
-        && named_count == skill.contacts.len()
-        && named_count >= 2
-        && named_count < nt
-    {
-        if let Some(c) = best_of(Keys::Named).filter(|c| c.ok) {
-            best = Some(c);
-            curled_refused = None;
-        }
-    }
     // Failing those too (fingers that push only along their own motion, off the normals at
     // the skill's contacts), a grasp where the hand's fingers meet the object head-on.
     // Why that was refused too: the best one's alignment, or `None` when no position of the
@@ -333,6 +316,24 @@ pub fn plan(
                 curled_refused = None;
             }
             c => closing_refused = Some(c.map(|c| c.align)),
+        }
+    }
+    // Failing all of those, a hand with the demonstrator's finger names (glove10 replaying
+    // its own skill, whose coupled fingers cannot each reach a contact of their own) takes
+    // each contact on its own finger; the fingers the skill does not use go where their
+    // coupling takes them, or curl. Last, so that no replay planned before changes.
+    let named = named_contacts(hand, skill);
+    let named_count = named.iter().flatten().count();
+    if !best.as_ref().is_some_and(|c| c.ok)
+        && named[thumb].is_some()
+        && named_count == skill.contacts.len()
+        && named_count >= 2
+        && named_count < nt
+    {
+        if let Some(c) = best_of(Keys::Named).filter(|c| c.ok) {
+            best = Some(c);
+            curled_refused = None;
+            closing_refused = None;
         }
     }
     let Some(best) = best else {
