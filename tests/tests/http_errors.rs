@@ -416,3 +416,40 @@ async fn a_request_over_the_time_limit_is_a_503_problem() {
     assert!(d.contains("limit"), "{d}");
     app.stop().await;
 }
+
+/// A replay's MCAP reads like a session; uploaded as one it is refused as a replay recording
+/// (it used to be stored as a skill of shape `unknown` with no parameters).
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_replay_recording_uploaded_as_a_session_is_refused_as_one() {
+    let app = TestApp::spawn().await;
+    let c = &app.client;
+    let r = c
+        .post_json(
+            "/api/v1/simulations",
+            &json!({"scenario": "box-pinch-lift"}),
+            None,
+        )
+        .await;
+    assert_eq!(r.status, 201, "{}", String::from_utf8_lossy(&r.body));
+    let skill_id = r.json()["skills"][0]["id"].as_i64().unwrap();
+    let r = c
+        .post_json(
+            &format!("/api/v1/skills/{skill_id}/replays"),
+            &json!({"hand": "gripper"}),
+            None,
+        )
+        .await;
+    assert_eq!(r.status, 201, "{}", String::from_utf8_lossy(&r.body));
+    let mcap = c.get(r.json()["mcap_url"].as_str().unwrap()).await;
+    assert_eq!(mcap.status, 200);
+    let d = c.upload(&mcap.body, None).await.problem(422);
+    assert!(
+        d.contains("replay recording")
+            && d.contains("gripper")
+            && d.contains("not a grasp session"),
+        "{d}"
+    );
+    let sessions = c.get("/api/v1/sessions").await.json();
+    assert_eq!(sessions["items"].as_array().unwrap().len(), 1, "{sessions}");
+    app.stop().await;
+}

@@ -197,7 +197,7 @@ fn is_mcap(headers: &HeaderMap) -> bool {
         (status = 401, description = "A token is configured and was not sent, or a wrong one", body = ProblemBody, content_type = "application/problem+json"),
         (status = 413, description = "The body is over the server's limit", body = ProblemBody, content_type = "application/problem+json"),
         (status = 415, description = "Content-Type is not application/x-mcap", body = ProblemBody, content_type = "application/problem+json"),
-        (status = 422, description = "Not a valid session file, with the reason; nothing was stored", body = ProblemBody, content_type = "application/problem+json"),
+        (status = 422, description = "Not a valid session file, with the reason (a replay recording, as `icms replay --out` or a replay's MCAP download writes, is not a session); nothing was stored", body = ProblemBody, content_type = "application/problem+json"),
         (status = 503, description = "Over the server's time limit", body = ProblemBody, content_type = "application/problem+json"),
     ))]
 async fn upload_session(
