@@ -453,3 +453,71 @@ async fn a_replay_recording_uploaded_as_a_session_is_refused_as_one() {
     assert_eq!(sessions["items"].as_array().unwrap().len(), 1, "{sessions}");
     app.stop().await;
 }
+
+/// serde_json keeps the last of two equal keys, so `{"hand": "allegro", "hand": "barrett"}`
+/// would silently replay on Barrett: a JSON body with a key twice, at any depth, is refused
+/// naming the key, before anything runs or is stored.
+#[tokio::test]
+async fn a_json_body_with_a_key_twice_is_refused_naming_the_key() {
+    let app = TestApp::spawn().await;
+    let c = &app.client;
+    let post = |path: &'static str, body: &'static str| {
+        c.send(
+            Method::POST,
+            path,
+            Some(("application/json", body.as_bytes().to_vec())),
+            None,
+        )
+    };
+    let d = post(
+        "/api/v1/simulations",
+        r#"{"scenario": "box-slip", "seed": 1, "scenario": "two-grasps"}"#,
+    )
+    .await
+    .problem(400);
+    assert!(d.contains("duplicate") && d.contains("\"scenario\""), "{d}");
+    let d = post(
+        "/api/v1/simulations",
+        r#"{"scenario": {"name": "x", "object": {"shape": "box", "mass": 1, "mass": 2}}}"#,
+    )
+    .await
+    .problem(400);
+    assert!(
+        d.contains("duplicate") && d.contains("\"mass\"") && d.contains("scenario.object"),
+        "{d}"
+    );
+    let d = post(
+        "/api/v1/skills/1/replays",
+        r#"{"hand": "allegro", "hand": "barrett"}"#,
+    )
+    .await
+    .problem(400);
+    assert!(d.contains("\"hand\""), "{d}");
+    let d = post(
+        "/api/v1/hands",
+        r#"{"spec": {"name": "a"}, "urdf": "<robot/>", "urdf": "<robot/>"}"#,
+    )
+    .await
+    .problem(400);
+    assert!(d.contains("\"urdf\""), "{d}");
+    // Equal keys in different objects, and in the objects of a list, are fine: this body is
+    // read, and refused only for its negative mass.
+    let d = post(
+        "/api/v1/simulations",
+        r#"{"scenario": {"name": "x", "object": {"shape": "box", "mass": -1, "mu": 0.5,
+            "half_extents": [0.02, 0.02, 0.04]}, "tasks": [{"phase": "grasp", "duration": 1},
+            {"phase": "lift", "duration": 1}]}}"#,
+    )
+    .await
+    .problem(422);
+    assert!(d.contains("mass"), "{d}");
+    assert_eq!(c.get("/api/v1/sessions").await.json()["items"], json!([]));
+    assert_eq!(
+        c.get("/api/v1/hands").await.json()["items"]
+            .as_array()
+            .unwrap()
+            .len(),
+        5
+    );
+    app.stop().await;
+}
