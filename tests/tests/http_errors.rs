@@ -521,3 +521,101 @@ async fn a_json_body_with_a_key_twice_is_refused_naming_the_key() {
     );
     app.stop().await;
 }
+
+/// Sends `request` on a fresh connection and reads one answer: its status line, its headers
+/// (names lower-cased) and its body (by Content-Length).
+async fn raw_exchange(
+    addr: std::net::SocketAddr,
+    request: &[u8],
+) -> (String, Vec<(String, String)>, Vec<u8>) {
+    use tokio::io::{AsyncBufReadExt, AsyncReadExt, AsyncWriteExt, BufReader};
+    let stream = tokio::net::TcpStream::connect(addr).await.unwrap();
+    let (read, mut write) = stream.into_split();
+    write.write_all(request).await.unwrap();
+    let mut read = BufReader::new(read);
+    let mut status = String::new();
+    read.read_line(&mut status).await.unwrap();
+    let mut headers = Vec::new();
+    loop {
+        let mut line = String::new();
+        read.read_line(&mut line).await.unwrap();
+        if line == "\r\n" || line.is_empty() {
+            break;
+        }
+        let (name, value) = line.split_once(':').expect("a header line");
+        headers.push((name.trim().to_ascii_lowercase(), value.trim().to_owned()));
+    }
+    let length: usize = headers
+        .iter()
+        .find(|(n, _)| n == "content-length")
+        .map_or(0, |(_, v)| v.parse().unwrap());
+    let mut body = vec![0; length];
+    read.read_exact(&mut body).await.unwrap();
+    (status.trim_end().to_owned(), headers, body)
+}
+
+/// Asserts a raw answer is the problem `status`; returns its detail.
+fn raw_problem(answer: &(String, Vec<(String, String)>, Vec<u8>), status: u16) -> String {
+    let (line, headers, body) = answer;
+    assert!(
+        line.starts_with(&format!("HTTP/1.1 {status} ")),
+        "{line}: {}",
+        String::from_utf8_lossy(body)
+    );
+    let content_type = headers.iter().find(|(n, _)| n == "content-type");
+    assert_eq!(
+        content_type.map(|(_, v)| v.as_str()),
+        Some("application/problem+json"),
+        "{line} {headers:?}"
+    );
+    let p: serde_json::Value = serde_json::from_slice(body)
+        .unwrap_or_else(|e| panic!("{line}: not JSON ({e}): {}", String::from_utf8_lossy(body)));
+    assert_eq!(p["status"], status, "{p}");
+    assert!(p["title"].as_str().is_some_and(|t| !t.is_empty()), "{p}");
+    p["detail"].as_str().expect("a detail").to_owned()
+}
+
+/// Requests hyper refuses before the router sees them (a Content-Length that is not a number,
+/// more headers than it takes) and bodies that break while they are read are all answered with
+/// a problem, not an empty body.
+#[tokio::test]
+async fn requests_refused_while_parsing_or_reading_the_body_are_problems_too() {
+    let app = TestApp::spawn().await;
+    let host = app.addr;
+    for path in ["/api/v1/simulations", "/api/v1/sessions", "/healthz"] {
+        let request = format!(
+            "POST {path} HTTP/1.1\r\nHost: {host}\r\nContent-Type: application/json\r\n\
+             Content-Length: ten\r\n\r\n"
+        );
+        let answer = raw_exchange(app.addr, request.as_bytes()).await;
+        let d = raw_problem(&answer, 400);
+        assert!(d.contains("Content-Length"), "{path}: {d}");
+        assert!(
+            answer
+                .1
+                .iter()
+                .any(|(n, v)| n == "connection" && v == "close"),
+            "{:?}",
+            answer.1
+        );
+    }
+    let many: String = (0..150).map(|i| format!("X-Header-{i}: {i}\r\n")).collect();
+    let request = format!("GET /healthz HTTP/1.1\r\nHost: {host}\r\n{many}\r\n");
+    let answer = raw_exchange(app.addr, request.as_bytes()).await;
+    raw_problem(&answer, 431);
+    // A chunked body whose chunk size is not hexadecimal: the body cannot be read.
+    for (path, content_type) in [
+        ("/api/v1/simulations", "application/json"),
+        ("/api/v1/sessions", "application/x-mcap"),
+    ] {
+        let request = format!(
+            "POST {path} HTTP/1.1\r\nHost: {host}\r\nContent-Type: {content_type}\r\n\
+             Transfer-Encoding: chunked\r\n\r\nzz\r\n{{}}\r\n0\r\n\r\n"
+        );
+        let d = raw_problem(&raw_exchange(app.addr, request.as_bytes()).await, 400);
+        assert!(d.contains("request body"), "{path}: {d}");
+    }
+    // The server still answers.
+    assert_eq!(app.client.get("/healthz").await.status, 200);
+    app.stop().await;
+}
