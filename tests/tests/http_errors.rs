@@ -619,3 +619,30 @@ async fn requests_refused_while_parsing_or_reading_the_body_are_problems_too() {
     assert_eq!(app.client.get("/healthz").await.status, 200);
     app.stop().await;
 }
+
+/// Every endpoint that takes query parameters refuses one it does not know (a typo would
+/// otherwise answer as if no filter were given), naming it; endpoints that take none ignore
+/// them (cache busters such as `?_=123`).
+#[tokio::test]
+async fn unknown_query_parameters_are_refused_where_parameters_are_taken() {
+    let app = TestApp::spawn().await;
+    let c = &app.client;
+    for (path, name) in [
+        ("/api/v1/skills?shpe=sphere", "shpe"),
+        ("/api/v1/skills?shape=box&limt=5", "limt"),
+        ("/api/v1/sessions?limt=5", "limt"),
+        ("/api/v1/skills/1/similar?kk=3", "kk"),
+    ] {
+        let d = c.get(path).await.problem(400);
+        assert!(d.contains(&format!("`{name}`")), "{path}: {d}");
+    }
+    for path in [
+        "/healthz?_=123",
+        "/api/v1/openapi.json?_=123",
+        "/api/v1/hands?_=123",
+        "/api/v1/hands/allegro?_=123",
+    ] {
+        assert_eq!(c.get(path).await.status, 200, "{path}");
+    }
+    app.stop().await;
+}

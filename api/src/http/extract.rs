@@ -13,7 +13,8 @@ use serde::de::DeserializeOwned;
 use super::error::Problem;
 use super::state::AppState;
 
-/// A query string deserialised into `T`; anything malformed or unknown is 400.
+/// A query string deserialised into `T`; anything malformed, unknown (`T` denies unknown
+/// fields) or repeated is 400, naming the parameter.
 #[derive(Debug, Clone)]
 pub struct Query<T>(pub T);
 
@@ -26,11 +27,24 @@ impl<T: DeserializeOwned, S: Send + Sync> FromRequestParts<S> for Query<T> {
         serde_path_to_error::deserialize(de)
             .map(Query)
             .map_err(|e| {
+                let inner = e.inner().to_string();
+                // The parameter structs deny unknown fields: a typo (`?shpe=box`) is refused
+                // rather than answered as if the filter were absent. Say "parameter".
+                if let Some(rest) = inner.strip_prefix("unknown field ") {
+                    return Problem::bad_request(format!(
+                        "invalid query: unknown parameter {rest}"
+                    ));
+                }
+                if let Some(name) = inner.strip_prefix("duplicate field ") {
+                    return Problem::bad_request(format!(
+                        "invalid query: the parameter {name} is given twice"
+                    ));
+                }
                 let path = e.path().to_string();
                 if path == "." {
-                    Problem::bad_request(format!("invalid query string: {}", e.inner()))
+                    Problem::bad_request(format!("invalid query string: {inner}"))
                 } else {
-                    Problem::bad_request(format!("invalid query parameter {path}: {}", e.inner()))
+                    Problem::bad_request(format!("invalid query parameter {path}: {inner}"))
                 }
             })
     }
