@@ -116,7 +116,9 @@ impl Application {
         tracing::info!(addr = %self.addr, data = %self.state.store().data_dir().display(),
             writes_need_token = self.state.token().is_some(), "serving the ICMS API");
         let stop = stopping.clone();
-        let served = axum::serve(self.listener, self.router)
+        // hyper's own answers to requests it cannot parse get problem bodies too.
+        let listener = http::hyper_errors::ProblemListener(self.listener);
+        let served = axum::serve(listener, self.router)
             .with_graceful_shutdown(async move {
                 shutdown.await;
                 tracing::info!("shutting down: finishing in-flight requests");

@@ -50,6 +50,17 @@ fn files_under(dir: &Path) -> Vec<String> {
     out
 }
 
+fn create_data_base(data: &Path) {
+    let rt = tokio::runtime::Builder::new_current_thread()
+        .enable_all()
+        .build()
+        .unwrap();
+    rt.block_on(async {
+        let store = services::store::Store::open(data).await.unwrap();
+        store.close().await;
+    });
+}
+
 fn skill_count(dir: &Path) -> usize {
     let (c, out, e) = icms(dir, &["skills", "--json"]);
     assert_eq!(c, 0, "{e}");
@@ -67,7 +78,9 @@ fn a_full_disk_during_ingest_is_an_error_and_leaves_no_partial_rows_or_files() {
         size_kib > 256,
         "the session must be larger than the limit ({size_kib} KiB)"
     );
-    // The data base exists and is migrated before the disk fills up.
+    // The data base exists and is migrated before the disk fills up (as after `icms serve` or
+    // an earlier ingest; `icms skills` only reads and would refuse a missing one).
+    create_data_base(&d.join("icms-data"));
     assert_eq!(skill_count(d), 0);
     let before = files_under(&d.join("icms-data"));
 

@@ -84,3 +84,58 @@ fn segment_refuses_a_truncated_file_with_its_reason() {
     assert_ne!(code, 0);
     assert!(err.contains("error:"), "{err}");
 }
+
+/// A replay's MCAP (`icms replay --out`) reads like a session but holds a robot hand replaying
+/// a skill: segmenting or ingesting it would store a skill of shape `unknown` with no
+/// parameters. Both refuse it, saying what it is, and the data base stays empty.
+#[test]
+fn segment_and_ingest_refuse_a_replay_recording_saying_what_it_is() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let path = |name: &str| d.join(name).to_str().unwrap().to_owned();
+    let (code, _, err) = icms(&[
+        "simulate",
+        "--scenario",
+        "box-pinch-lift",
+        "--out",
+        &path("pinch.mcap"),
+    ]);
+    assert_eq!(code, 0, "{err}");
+    let (code, out, err) = icms(&["segment", &path("pinch.mcap"), "--json"]);
+    assert_eq!(code, 0, "{err}");
+    let v: Value = serde_json::from_str(&out).unwrap();
+    std::fs::write(d.join("skill.json"), v["skills"][0].to_string()).unwrap();
+    let (code, _, err) = icms(&[
+        "replay",
+        "--skill",
+        &path("skill.json"),
+        "--hand",
+        "gripper",
+        "--data",
+        &path("db"),
+        "--out",
+        &path("replay.mcap"),
+    ]);
+    assert_eq!(code, 0, "{err}");
+
+    let (code, out, err) = icms(&["segment", &path("replay.mcap"), "--json"]);
+    assert_ne!(code, 0, "{out}");
+    assert!(out.is_empty(), "{out}");
+    assert!(
+        err.contains("replay.mcap")
+            && err.contains("replay recording")
+            && err.contains("gripper")
+            && err.contains("not a grasp session"),
+        "{err}"
+    );
+    let (code, _, err) = icms(&["ingest", &path("replay.mcap"), "--data", &path("db")]);
+    assert_ne!(code, 0);
+    assert!(
+        err.contains("replay recording") && err.contains("not a grasp session"),
+        "{err}"
+    );
+    let (code, out, err) = icms(&["skills", "--data", &path("db"), "--json"]);
+    assert_eq!(code, 0, "{err}");
+    let page: Value = serde_json::from_str(&out).unwrap();
+    assert_eq!(page["items"], serde_json::json!([]), "nothing was stored");
+}

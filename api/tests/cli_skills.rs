@@ -135,3 +135,43 @@ fn negative_filters_and_an_out_of_range_similar_limit_are_refused_with_a_clear_m
         assert!(e.contains(want), "{flags:?}: {e}");
     }
 }
+
+/// The commands that only read the data base refuse a directory without one, naming it, and
+/// create nothing there (they used to create an empty data base and list nothing).
+#[test]
+fn read_only_commands_refuse_a_directory_without_a_data_base_and_create_nothing() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let empty = d.join("empty");
+    std::fs::create_dir(&empty).unwrap();
+    for data in ["nowhere", "empty"] {
+        for args in [
+            &["skills", "--data", data][..],
+            &["skills", "--data", data, "--json", "--shape", "box"],
+            &["skills", "--data", data, "--similar-to", "1"],
+            &["hands", "--data", data],
+            &["hands", "--data", data, "--json"],
+            &["hands", "my-hand", "--data", data],
+        ] {
+            let (c, out, e) = icms(d, args);
+            assert_ne!(c, 0, "{args:?}: {out}");
+            assert!(out.is_empty(), "{args:?}: {out}");
+            assert!(
+                e.contains(&format!("no ICMS data base at {data}"))
+                    && e.contains("icms ingest")
+                    && e.contains("icms serve"),
+                "{args:?}: {e}"
+            );
+        }
+    }
+    assert!(!d.join("nowhere").exists(), "nothing created the directory");
+    assert_eq!(
+        std::fs::read_dir(&empty).unwrap().count(),
+        0,
+        "nothing created in the empty directory"
+    );
+    // A built-in hand needs no data base.
+    let (c, _, e) = icms(d, &["hands", "allegro", "--data", "nowhere"]);
+    assert_eq!(c, 0, "{e}");
+    assert!(!d.join("nowhere").exists());
+}

@@ -176,6 +176,21 @@ pub enum RecordingError {
         detail: String,
     },
 
+    /// The file is a replay recording (`icms replay --out`, a stored replay's MCAP), not a grasp
+    /// session: a robot hand driven along a skill, with no object description and no skill of
+    /// its own to find. Refused by segmentation and ingest.
+    #[error(
+        "{name} is a replay recording{what} (written by `icms replay --out` or a stored \
+         replay), not a grasp session: it holds no skills of its own; segment or ingest the \
+         grasp session the skill came from"
+    )]
+    ReplayRecording {
+        /// The file (or upload) name.
+        name: String,
+        /// What was replayed, e.g. ` of skill 3 on the hand allegro` (may be empty).
+        what: String,
+    },
+
     /// The writer thread died (panicked) without reporting an error.
     #[error("the session writer thread panicked")]
     WriterThreadPanicked,

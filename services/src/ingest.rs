@@ -20,7 +20,8 @@ pub enum IngestError {
 }
 
 /// Reads, validates and segments a session held in memory: the session's metadata for the
-/// store and one [`NewSkill`] per grasp (with the full parameters as JSON).
+/// store and one [`NewSkill`] per grasp (with the full parameters as JSON). A replay recording
+/// is refused ([`RecordingError::ReplayRecording`]).
 pub fn analyse(bytes: &[u8], name: &str) -> Result<(SessionMeta, Vec<NewSkill>), RecordingError> {
     let session = read_session_bytes_with(
         bytes,
@@ -28,6 +29,9 @@ pub fn analyse(bytes: &[u8], name: &str) -> Result<(SessionMeta, Vec<NewSkill>),
         &ReadLimits::default(),
         DecodeTopics::SEGMENTATION,
     )?;
+    // A replay's MCAP reads like a session but is a robot replaying a skill: its "skill" would
+    // be shape `unknown` with no parameters.
+    session.ensure_grasp_session(name)?;
     let seg = segment(&session, &SegmentParams::default());
     let m = &session.metadata;
     let object: serde_json::Value = m

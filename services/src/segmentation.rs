@@ -103,7 +103,8 @@ pub struct Segmentation {
 /// One grasp of a session: its phases and its hand-independent parameters.
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct Skill {
-    /// Phases, in time order, contiguous.
+    /// Phases, in time order, never overlapping (nor the phases of other skills), inside the
+    /// session; contiguous except where odd data leaves a gap.
     pub phases: Vec<PhaseSpan>,
     /// The skill's parameters (flattened into the skill's JSON).
     #[serde(flatten)]
@@ -706,24 +707,61 @@ pub fn segment(session: &Session, params: &SegmentParams) -> Segmentation {
         }
         skills_spans.push(spans);
     }
-    let grid_ns = |x: f64| g.t0 + (x.max(0.0) * g.dt_ns as f64).round() as u64;
-    let skills = skills_spans
+    let skills = well_formed(skills_spans, &g, last)
         .into_iter()
-        .map(|spans| {
-            let phases: Vec<PhaseSpan> = spans
-                .into_iter()
-                .filter(|(_, a, b)| b > a)
-                .map(|(name, a, b)| PhaseSpan {
-                    name,
-                    start_ns: if a <= 0.0 { 0 } else { grid_ns(a) },
-                    end_ns: grid_ns(b),
-                })
-                .collect();
+        .map(|phases| {
             let parameters = skill_parameters(session, &phases, params);
             Skill { phases, parameters }
         })
         .collect();
     Segmentation { skills }
+}
+
+/// The skills' spans (grid indices) as phases in ns, well formed whatever the data: every
+/// phase non-empty, in time order across all skills, never overlapping, inside the session
+/// (`0` to the grid's `last` index); a skill left without a phase is dropped.
+///
+/// The grammar in [`segment`] can produce disordered spans on odd recordings: a move that starts
+/// before the first touch and ends after it (the approach runs to the touch, the move from its
+/// own start), contacts that flicker or come back after the object was dropped, a retreat that
+/// runs past the next grasp's start. Each span is clipped to start where the previous phase
+/// ended; one left empty goes.
+fn well_formed(
+    skills_spans: Vec<Vec<(String, f64, f64)>>,
+    g: &Grid,
+    last: f64,
+) -> Vec<Vec<PhaseSpan>> {
+    let grid_ns = |x: f64| g.t0 + (x.max(0.0) * g.dt_ns as f64).round() as u64;
+    // End of the previous phase, as a grid index and in ns.
+    let mut floor = 0.0f64;
+    let mut floor_ns = 0u64;
+    let mut skills = Vec::with_capacity(skills_spans.len());
+    for spans in skills_spans {
+        let mut phases = Vec::with_capacity(spans.len());
+        for (name, a, b) in spans {
+            let (a, b) = (a.max(floor), b.min(last));
+            if b.partial_cmp(&a) != Some(std::cmp::Ordering::Greater) {
+                continue;
+            }
+            // The first phase of a session starts at the session's start.
+            let start_ns = if a <= 0.0 { 0 } else { grid_ns(a) }.max(floor_ns);
+            let end_ns = grid_ns(b);
+            if end_ns <= start_ns {
+                continue;
+            }
+            floor = b;
+            floor_ns = end_ns;
+            phases.push(PhaseSpan {
+                name,
+                start_ns,
+                end_ns,
+            });
+        }
+        if !phases.is_empty() {
+            skills.push(phases);
+        }
+    }
+    skills
 }
 
 fn object_params(session: &Session) -> Option<ObjectParams> {

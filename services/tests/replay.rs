@@ -12,6 +12,7 @@ use services::segmentation::{segment, SegmentParams};
 use services::session::{
     read_session, record_simulation, TOPIC_JOINT_STATES, TOPIC_SCENE, TOPIC_TF,
 };
+use services::RecordingError;
 
 /// The first skill of a built-in scenario recorded with glove10 (seed 0).
 fn recorded_skill(scenario: &str) -> SkillSpec {
@@ -79,6 +80,36 @@ fn a_box_pinch_lift_recorded_with_glove10_replays_on_the_gripper_into_an_mcap() 
     assert_eq!(meta["skill_id"], "7");
     let report: serde_json::Value = serde_json::from_str(&meta["report"]).unwrap();
     assert_eq!(report["success"], true);
+
+    // It reads like a session, but it is a replay: segmenting or ingesting it would store a
+    // skill of shape `unknown` with no parameters. Ingest refuses it, naming what it is.
+    let replay = read_session(&out).unwrap();
+    assert!(replay.is_replay());
+    let err = replay.ensure_grasp_session("replay.mcap").unwrap_err();
+    assert!(
+        matches!(err, RecordingError::ReplayRecording { .. }),
+        "{err}"
+    );
+    let bytes = std::fs::read(&out).unwrap();
+    let err = services::ingest::analyse(&bytes, "replay.mcap").unwrap_err();
+    let text = err.to_string();
+    assert!(
+        text.contains("replay.mcap is a replay recording of box-pinch-lift on the hand gripper")
+            && text.contains("not a grasp session"),
+        "{text}"
+    );
+}
+
+#[test]
+fn a_simulated_session_is_a_grasp_session_not_a_replay() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("session.mcap");
+    let s = Scenario::builtin("box-pinch-lift", 0).unwrap();
+    record_simulation(&s, Some(1.0), &path, |_, _| {}).unwrap();
+    let session = read_session(&path).unwrap();
+    assert!(!session.is_replay());
+    session.ensure_grasp_session("session.mcap").unwrap();
+    assert!(services::ingest::analyse(&std::fs::read(&path).unwrap(), "s").is_ok());
 }
 
 #[test]

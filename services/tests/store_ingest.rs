@@ -301,6 +301,52 @@ async fn a_foreign_sqlite_file_is_refused_untouched() {
     assert_eq!(std::fs::read(&path).unwrap(), before);
 }
 
+/// `open_existing` (for commands that only read) never creates a data base: a missing
+/// directory, an empty one or one with an empty database file is `NoDataBase`, left as it was.
+#[tokio::test]
+async fn opening_an_existing_store_creates_nothing_where_there_is_none() {
+    let tmp = tempfile::tempdir().unwrap();
+    let missing = tmp.path().join("missing");
+    let err = Store::open_existing(&missing).await.unwrap_err();
+    assert!(
+        matches!(&err, StoreError::NoDataBase(p) if p == &missing),
+        "{err}"
+    );
+    assert!(err.to_string().contains("no ICMS data base at"), "{err}");
+    assert!(!missing.exists());
+    let empty = tmp.path().join("empty");
+    std::fs::create_dir(&empty).unwrap();
+    assert!(matches!(
+        Store::open_existing(&empty).await,
+        Err(StoreError::NoDataBase(_))
+    ));
+    assert_eq!(std::fs::read_dir(&empty).unwrap().count(), 0);
+    std::fs::write(empty.join(DB_FILE), b"").unwrap();
+    assert!(matches!(
+        Store::open_existing(&empty).await,
+        Err(StoreError::NoDataBase(_))
+    ));
+    assert_eq!(std::fs::read(empty.join(DB_FILE)).unwrap(), b"");
+    // A file where the directory should be.
+    let file = tmp.path().join("file");
+    std::fs::write(&file, b"x").unwrap();
+    assert!(matches!(
+        Store::open_existing(&file).await,
+        Err(StoreError::NoDataBase(_))
+    ));
+
+    let made = tmp.path().join("made");
+    let store = Store::open(&made).await.unwrap();
+    store
+        .ingest(&fake_mcap(1, 1000), meta(1, 2), skills(1, 2))
+        .await
+        .unwrap();
+    store.close().await;
+    let store = Store::open_existing(&made).await.unwrap();
+    assert_eq!(store.skill_count(), 2);
+    store.close().await;
+}
+
 #[tokio::test]
 async fn a_database_with_another_application_id_is_refused() {
     let tmp = tempfile::tempdir().unwrap();

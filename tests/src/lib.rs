@@ -235,6 +235,41 @@ pub fn session_bytes(scenario: &str, seed: u64, duration: Option<f64>) -> Vec<u8
     std::fs::read(&path).expect("session file")
 }
 
+/// The bytes of a session like [`session_bytes`] (script length) whose `session` record does
+/// not describe the object, as a recorder that does not know it writes it: its skills have the
+/// shape `unknown`.
+pub fn session_bytes_without_object(scenario: &str, seed: u64) -> Vec<u8> {
+    use services::session::{SessionInfo, SessionRecorder, TickData};
+    let s = dfs_core::scenario::Scenario::builtin(scenario, seed).expect("built-in scenario");
+    let mut sim =
+        dfs_core::operator::Simulation::new(&s, dfs_core::hand::HandModel::glove10(), None)
+            .expect("the scenario sets up");
+    let dir = tempfile::tempdir().expect("temporary directory");
+    let path = dir.path().join("s.mcap");
+    let info = SessionInfo {
+        scenario: s.name.clone(),
+        seed: Some(seed),
+        source: "simulation".to_owned(),
+        ..SessionInfo::default()
+    };
+    let mut recorder = SessionRecorder::create(&path, sim.dfs().hand(), sim.dfs().object(), &info)
+        .expect("recorder");
+    while sim.step().expect("simulation step") {
+        let (q, tau, base) = sim.sample();
+        let tick = TickData {
+            time_ns: sim.time_ns(),
+            q,
+            tau,
+            base,
+            output: sim.output(),
+            kinematics: sim.dfs().kinematics(),
+        };
+        recorder.record(&tick).expect("record a tick");
+    }
+    recorder.finish().expect("finish the session file");
+    std::fs::read(&path).expect("session file")
+}
+
 /// The real `icms` binary running `icms serve` as a child process.
 #[derive(Debug)]
 pub struct ServerProcess {

@@ -416,3 +416,233 @@ async fn a_request_over_the_time_limit_is_a_503_problem() {
     assert!(d.contains("limit"), "{d}");
     app.stop().await;
 }
+
+/// A replay's MCAP reads like a session; uploaded as one it is refused as a replay recording
+/// (it used to be stored as a skill of shape `unknown` with no parameters).
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_replay_recording_uploaded_as_a_session_is_refused_as_one() {
+    let app = TestApp::spawn().await;
+    let c = &app.client;
+    let r = c
+        .post_json(
+            "/api/v1/simulations",
+            &json!({"scenario": "box-pinch-lift"}),
+            None,
+        )
+        .await;
+    assert_eq!(r.status, 201, "{}", String::from_utf8_lossy(&r.body));
+    let skill_id = r.json()["skills"][0]["id"].as_i64().unwrap();
+    let r = c
+        .post_json(
+            &format!("/api/v1/skills/{skill_id}/replays"),
+            &json!({"hand": "gripper"}),
+            None,
+        )
+        .await;
+    assert_eq!(r.status, 201, "{}", String::from_utf8_lossy(&r.body));
+    let mcap = c.get(r.json()["mcap_url"].as_str().unwrap()).await;
+    assert_eq!(mcap.status, 200);
+    let d = c.upload(&mcap.body, None).await.problem(422);
+    assert!(
+        d.contains("replay recording")
+            && d.contains("gripper")
+            && d.contains("not a grasp session"),
+        "{d}"
+    );
+    let sessions = c.get("/api/v1/sessions").await.json();
+    assert_eq!(sessions["items"].as_array().unwrap().len(), 1, "{sessions}");
+    app.stop().await;
+}
+
+/// serde_json keeps the last of two equal keys, so `{"hand": "allegro", "hand": "barrett"}`
+/// would silently replay on Barrett: a JSON body with a key twice, at any depth, is refused
+/// naming the key, before anything runs or is stored.
+#[tokio::test]
+async fn a_json_body_with_a_key_twice_is_refused_naming_the_key() {
+    let app = TestApp::spawn().await;
+    let c = &app.client;
+    let post = |path: &'static str, body: &'static str| {
+        c.send(
+            Method::POST,
+            path,
+            Some(("application/json", body.as_bytes().to_vec())),
+            None,
+        )
+    };
+    let d = post(
+        "/api/v1/simulations",
+        r#"{"scenario": "box-slip", "seed": 1, "scenario": "two-grasps"}"#,
+    )
+    .await
+    .problem(400);
+    assert!(d.contains("duplicate") && d.contains("\"scenario\""), "{d}");
+    let d = post(
+        "/api/v1/simulations",
+        r#"{"scenario": {"name": "x", "object": {"shape": "box", "mass": 1, "mass": 2}}}"#,
+    )
+    .await
+    .problem(400);
+    assert!(
+        d.contains("duplicate") && d.contains("\"mass\"") && d.contains("scenario.object"),
+        "{d}"
+    );
+    let d = post(
+        "/api/v1/skills/1/replays",
+        r#"{"hand": "allegro", "hand": "barrett"}"#,
+    )
+    .await
+    .problem(400);
+    assert!(d.contains("\"hand\""), "{d}");
+    let d = post(
+        "/api/v1/hands",
+        r#"{"spec": {"name": "a"}, "urdf": "<robot/>", "urdf": "<robot/>"}"#,
+    )
+    .await
+    .problem(400);
+    assert!(d.contains("\"urdf\""), "{d}");
+    // Equal keys in different objects, and in the objects of a list, are fine: this body is
+    // read, and refused only for its negative mass.
+    let d = post(
+        "/api/v1/simulations",
+        r#"{"scenario": {"name": "x", "object": {"shape": "box", "mass": -1, "mu": 0.5,
+            "half_extents": [0.02, 0.02, 0.04]}, "tasks": [{"phase": "grasp", "duration": 1},
+            {"phase": "lift", "duration": 1}]}}"#,
+    )
+    .await
+    .problem(422);
+    assert!(d.contains("mass"), "{d}");
+    assert_eq!(c.get("/api/v1/sessions").await.json()["items"], json!([]));
+    assert_eq!(
+        c.get("/api/v1/hands").await.json()["items"]
+            .as_array()
+            .unwrap()
+            .len(),
+        5
+    );
+    app.stop().await;
+}
+
+/// Sends `request` on a fresh connection and reads one answer: its status line, its headers
+/// (names lower-cased) and its body (by Content-Length).
+async fn raw_exchange(
+    addr: std::net::SocketAddr,
+    request: &[u8],
+) -> (String, Vec<(String, String)>, Vec<u8>) {
+    use tokio::io::{AsyncBufReadExt, AsyncReadExt, AsyncWriteExt, BufReader};
+    let stream = tokio::net::TcpStream::connect(addr).await.unwrap();
+    let (read, mut write) = stream.into_split();
+    write.write_all(request).await.unwrap();
+    let mut read = BufReader::new(read);
+    let mut status = String::new();
+    read.read_line(&mut status).await.unwrap();
+    let mut headers = Vec::new();
+    loop {
+        let mut line = String::new();
+        read.read_line(&mut line).await.unwrap();
+        if line == "\r\n" || line.is_empty() {
+            break;
+        }
+        let (name, value) = line.split_once(':').expect("a header line");
+        headers.push((name.trim().to_ascii_lowercase(), value.trim().to_owned()));
+    }
+    let length: usize = headers
+        .iter()
+        .find(|(n, _)| n == "content-length")
+        .map_or(0, |(_, v)| v.parse().unwrap());
+    let mut body = vec![0; length];
+    read.read_exact(&mut body).await.unwrap();
+    (status.trim_end().to_owned(), headers, body)
+}
+
+/// Asserts a raw answer is the problem `status`; returns its detail.
+fn raw_problem(answer: &(String, Vec<(String, String)>, Vec<u8>), status: u16) -> String {
+    let (line, headers, body) = answer;
+    assert!(
+        line.starts_with(&format!("HTTP/1.1 {status} ")),
+        "{line}: {}",
+        String::from_utf8_lossy(body)
+    );
+    let content_type = headers.iter().find(|(n, _)| n == "content-type");
+    assert_eq!(
+        content_type.map(|(_, v)| v.as_str()),
+        Some("application/problem+json"),
+        "{line} {headers:?}"
+    );
+    let p: serde_json::Value = serde_json::from_slice(body)
+        .unwrap_or_else(|e| panic!("{line}: not JSON ({e}): {}", String::from_utf8_lossy(body)));
+    assert_eq!(p["status"], status, "{p}");
+    assert!(p["title"].as_str().is_some_and(|t| !t.is_empty()), "{p}");
+    p["detail"].as_str().expect("a detail").to_owned()
+}
+
+/// Requests hyper refuses before the router sees them (a Content-Length that is not a number,
+/// more headers than it takes) and bodies that break while they are read are all answered with
+/// a problem, not an empty body.
+#[tokio::test]
+async fn requests_refused_while_parsing_or_reading_the_body_are_problems_too() {
+    let app = TestApp::spawn().await;
+    let host = app.addr;
+    for path in ["/api/v1/simulations", "/api/v1/sessions", "/healthz"] {
+        let request = format!(
+            "POST {path} HTTP/1.1\r\nHost: {host}\r\nContent-Type: application/json\r\n\
+             Content-Length: ten\r\n\r\n"
+        );
+        let answer = raw_exchange(app.addr, request.as_bytes()).await;
+        let d = raw_problem(&answer, 400);
+        assert!(d.contains("Content-Length"), "{path}: {d}");
+        assert!(
+            answer
+                .1
+                .iter()
+                .any(|(n, v)| n == "connection" && v == "close"),
+            "{:?}",
+            answer.1
+        );
+    }
+    let many: String = (0..150).map(|i| format!("X-Header-{i}: {i}\r\n")).collect();
+    let request = format!("GET /healthz HTTP/1.1\r\nHost: {host}\r\n{many}\r\n");
+    let answer = raw_exchange(app.addr, request.as_bytes()).await;
+    raw_problem(&answer, 431);
+    // A chunked body whose chunk size is not hexadecimal: the body cannot be read.
+    for (path, content_type) in [
+        ("/api/v1/simulations", "application/json"),
+        ("/api/v1/sessions", "application/x-mcap"),
+    ] {
+        let request = format!(
+            "POST {path} HTTP/1.1\r\nHost: {host}\r\nContent-Type: {content_type}\r\n\
+             Transfer-Encoding: chunked\r\n\r\nzz\r\n{{}}\r\n0\r\n\r\n"
+        );
+        let d = raw_problem(&raw_exchange(app.addr, request.as_bytes()).await, 400);
+        assert!(d.contains("request body"), "{path}: {d}");
+    }
+    // The server still answers.
+    assert_eq!(app.client.get("/healthz").await.status, 200);
+    app.stop().await;
+}
+
+/// Every endpoint that takes query parameters refuses one it does not know (a typo would
+/// otherwise answer as if no filter were given), naming it; endpoints that take none ignore
+/// them (cache busters such as `?_=123`).
+#[tokio::test]
+async fn unknown_query_parameters_are_refused_where_parameters_are_taken() {
+    let app = TestApp::spawn().await;
+    let c = &app.client;
+    for (path, name) in [
+        ("/api/v1/skills?shpe=sphere", "shpe"),
+        ("/api/v1/skills?shape=box&limt=5", "limt"),
+        ("/api/v1/sessions?limt=5", "limt"),
+        ("/api/v1/skills/1/similar?kk=3", "kk"),
+    ] {
+        let d = c.get(path).await.problem(400);
+        assert!(d.contains(&format!("`{name}`")), "{path}: {d}");
+    }
+    for path in [
+        "/healthz?_=123",
+        "/api/v1/openapi.json?_=123",
+        "/api/v1/hands?_=123",
+        "/api/v1/hands/allegro?_=123",
+    ] {
+        assert_eq!(c.get(path).await.status, 200, "{path}");
+    }
+    app.stop().await;
+}

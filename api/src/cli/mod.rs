@@ -95,6 +95,27 @@ pub fn run() -> ExitCode {
     }
 }
 
+/// Opens the data base in `data` for a command that only reads it (`icms skills`,
+/// `icms hands --data`): a directory without one is an error naming it, and nothing is created
+/// there (a mistyped `--data` would otherwise leave an empty data base behind and list nothing).
+pub(crate) async fn open_existing_store(
+    data: &std::path::Path,
+) -> Result<services::store::Store, CliError> {
+    use services::store::{Store, StoreError};
+    Store::open_existing(data).await.map_err(|e| match e {
+        StoreError::NoDataBase(_) => CliError(no_data_base(data)),
+        e => CliError(format!("{}: {e}", data.display())),
+    })
+}
+
+/// The message for a `--data` directory that holds no data base.
+pub(crate) fn no_data_base(data: &std::path::Path) -> String {
+    format!(
+        "no ICMS data base at {}; create one with `icms ingest` or `icms serve`",
+        data.display()
+    )
+}
+
 /// Parses JSON into `T`; the error names the path of the offending field
 /// (`contacts[0].position: invalid length 2, ...`).
 pub fn parse_json<T: serde::de::DeserializeOwned>(text: &str) -> Result<T, String> {

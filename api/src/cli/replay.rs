@@ -3,7 +3,7 @@
 //! the DFS, with its report and optionally an MCAP. A replay of a stored skill (`--skill ID`) is
 //! stored in the data base beside it, with its MCAP, like `POST /api/v1/skills/{id}/replays`.
 
-use super::{print_json, CliError};
+use super::{no_data_base, open_existing_store, print_json, CliError};
 use dfs_core::hand::BUILTIN_HANDS;
 use dfs_core::replay::ReplayParams;
 use serde::Serialize;
@@ -32,13 +32,14 @@ fn runtime() -> Result<tokio::runtime::Runtime, CliError> {
         .map_err(|e| CliError(format!("starting the runtime: {e}")))
 }
 
-/// Runs `f` on the store in `data`, then closes it.
+/// Runs `f` on the existing store in `data` (it only reads: a directory without a data base
+/// is an error and nothing is created), then closes it.
 fn with_store<T>(
     data: &Path,
     f: impl AsyncFnOnce(&Store) -> Result<T, StoreError>,
 ) -> Result<T, CliError> {
     runtime()?.block_on(async {
-        let store = Store::open(data).await?;
+        let store = open_existing_store(data).await?;
         let out = f(&store).await;
         store.close().await;
         Ok(out?)
@@ -108,7 +109,13 @@ fn resolve_hand(name_or_path: &str, data: Option<&Path>) -> Result<(LoadedHand, 
             )?;
             Ok((hand, false))
         }
-        _ => Ok((load_hand(name_or_path)?, false)),
+        Some(d) => Err(CliError(format!(
+            "--hand {name_or_path:?} is neither a built-in hand ({}) nor a spec file, and \
+             there is no uploaded hand to look it up in: {}",
+            BUILTIN_HANDS.join(", "),
+            no_data_base(d)
+        ))),
+        None => Ok((load_hand(name_or_path)?, false)),
     }
 }
 

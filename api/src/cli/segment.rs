@@ -23,12 +23,13 @@ pub struct SegmentArgs {
     json: bool,
 }
 
-/// Segments a session file and prints its skills.
+/// Segments a session file and prints its skills; a replay recording is refused.
 pub fn run_segment(a: SegmentArgs) -> Result<(), CliError> {
     // Segmentation reads contacts and object state only; the other topics are still checked.
     let session =
         read_session_file_with(&a.input, &ReadLimits::default(), DecodeTopics::SEGMENTATION)
             .map_err(|e| CliError(format!("{}: {e}", a.input.display())))?;
+    session.ensure_grasp_session(&a.input.display().to_string())?;
     let seg = segment(&session, &SegmentParams::default());
     if a.json {
         return print_json(&seg);

@@ -1,6 +1,6 @@
 //! `icms ingest` and `icms skills`: the skill data base from the command line.
 
-use super::{print_json, CliError};
+use super::{open_existing_store, print_json, CliError};
 use crate::filters::SkillFilters;
 use services::ingest::ingest_bytes;
 use services::store::{Store, DEFAULT_LIMIT, MAX_LIMIT};
@@ -110,11 +110,10 @@ pub fn run_ingest(a: IngestArgs) -> Result<(), CliError> {
 }
 
 /// Lists skills matching the filters (one page), or the nearest skills to one.
+/// Reads only: a `--data` directory without a data base is an error, and nothing is created.
 pub fn run_skills(a: SkillsArgs) -> Result<(), CliError> {
     runtime()?.block_on(async {
-        let store = Store::open(&a.data)
-            .await
-            .map_err(|e| CliError(format!("{}: {e}", a.data.display())))?;
+        let store = open_existing_store(&a.data).await?;
         if let Some(id) = a.similar_to {
             // The same bounds as `GET /skills/{id}/similar?k=`.
             let k = a.filters.limit.unwrap_or(DEFAULT_LIMIT);

@@ -1,17 +1,20 @@
 //! Request extractors whose rejections are problems: query strings, path ids and JSON bodies
-//! (axum's own would answer in plain text), and [`WriteAccess`], the bearer-token check of
-//! every write endpoint.
+//! (axum's own would answer in plain text; a JSON body with a key twice is refused rather than
+//! read as its last value), reading a whole body ([`read_body`]), and [`WriteAccess`], the
+//! bearer-token check of every write endpoint.
 
-use axum::extract::rejection::JsonRejection;
+use axum::body::Body;
 use axum::extract::{FromRequest, FromRequestParts, Request};
 use axum::http::request::Parts;
-use axum::http::{header, StatusCode};
+use axum::http::{header, HeaderMap};
+use bytes::Bytes;
 use serde::de::DeserializeOwned;
 
 use super::error::Problem;
 use super::state::AppState;
 
-/// A query string deserialised into `T`; anything malformed or unknown is 400.
+/// A query string deserialised into `T`; anything malformed, unknown (`T` denies unknown
+/// fields) or repeated is 400, naming the parameter.
 #[derive(Debug, Clone)]
 pub struct Query<T>(pub T);
 
@@ -24,11 +27,24 @@ impl<T: DeserializeOwned, S: Send + Sync> FromRequestParts<S> for Query<T> {
         serde_path_to_error::deserialize(de)
             .map(Query)
             .map_err(|e| {
+                let inner = e.inner().to_string();
+                // The parameter structs deny unknown fields: a typo (`?shpe=box`) is refused
+                // rather than answered as if the filter were absent. Say "parameter".
+                if let Some(rest) = inner.strip_prefix("unknown field ") {
+                    return Problem::bad_request(format!(
+                        "invalid query: unknown parameter {rest}"
+                    ));
+                }
+                if let Some(name) = inner.strip_prefix("duplicate field ") {
+                    return Problem::bad_request(format!(
+                        "invalid query: the parameter {name} is given twice"
+                    ));
+                }
                 let path = e.path().to_string();
                 if path == "." {
-                    Problem::bad_request(format!("invalid query string: {}", e.inner()))
+                    Problem::bad_request(format!("invalid query string: {inner}"))
                 } else {
-                    Problem::bad_request(format!("invalid query parameter {path}: {}", e.inner()))
+                    Problem::bad_request(format!("invalid query parameter {path}: {inner}"))
                 }
             })
     }
@@ -66,33 +82,24 @@ impl<S: Send + Sync> FromRequestParts<S> for Name {
 }
 
 /// A JSON body deserialised into `T`: 415 without `Content-Type: application/json`, 413 over
-/// the body limit, 400 for malformed JSON, 422 for JSON of the wrong shape (naming the field).
+/// the body limit, 400 for a body that cannot be read or malformed JSON (an object with a key
+/// twice included, naming the key), 422 for JSON of the wrong shape (naming the field).
 #[derive(Debug, Clone)]
 pub struct Json<T>(pub T);
 
-impl<T: DeserializeOwned, S: Send + Sync> FromRequest<S> for Json<T> {
+impl<T: DeserializeOwned> FromRequest<AppState> for Json<T> {
     type Rejection = Problem;
 
-    async fn from_request(req: Request, state: &S) -> Result<Self, Problem> {
-        let bytes = match axum::Json::<serde_json::Value>::from_request(req, state).await {
-            Ok(axum::Json(v)) => v,
-            Err(JsonRejection::MissingJsonContentType(_)) => {
-                return Err(Problem::unsupported_media_type(
-                    "this endpoint takes a JSON body: send Content-Type: application/json",
-                ))
-            }
-            Err(JsonRejection::JsonSyntaxError(e)) => {
-                return Err(Problem::bad_request(format!(
-                    "malformed JSON: {}",
-                    e.body_text()
-                )))
-            }
-            Err(e) if e.status() == StatusCode::PAYLOAD_TOO_LARGE => {
-                return Err(Problem::new(StatusCode::PAYLOAD_TOO_LARGE, e.body_text()))
-            }
-            Err(e) => return Err(Problem::new(e.status(), e.body_text())),
-        };
-        serde_path_to_error::deserialize(bytes)
+    async fn from_request(req: Request, state: &AppState) -> Result<Self, Problem> {
+        if !is_json(req.headers()) {
+            return Err(Problem::unsupported_media_type(
+                "this endpoint takes a JSON body: send Content-Type: application/json",
+            ));
+        }
+        let bytes = read_body(req.into_body(), state.max_body()).await?;
+        let value = parse_json_unique_keys(&bytes)
+            .map_err(|e| Problem::bad_request(format!("malformed JSON: {e}")))?;
+        serde_path_to_error::deserialize(value)
             .map(Json)
             .map_err(|e| {
                 let path = e.path().to_string();
@@ -102,6 +109,131 @@ impl<T: DeserializeOwned, S: Send + Sync> FromRequest<S> for Json<T> {
                     Problem::unprocessable(format!("{path}: {}", e.inner()))
                 }
             })
+    }
+}
+
+/// Whether `headers` declare a JSON body: `application/json` or `application/*+json`,
+/// parameters after `;` ignored (as axum's own `Json` decides).
+fn is_json(headers: &HeaderMap) -> bool {
+    let Some(essence) = headers
+        .get(header::CONTENT_TYPE)
+        .and_then(|v| v.to_str().ok())
+        .and_then(|v| v.split(';').next())
+    else {
+        return false;
+    };
+    let Some((kind, sub)) = essence.trim().split_once('/') else {
+        return false;
+    };
+    let sub = sub.trim().to_ascii_lowercase();
+    kind.eq_ignore_ascii_case("application") && (sub == "json" || sub.ends_with("+json"))
+}
+
+/// Reads a whole request body of at most `limit` bytes: over it 413, a body that cannot be read
+/// (a connection closed early, a broken chunked encoding) 400, both as problems.
+pub(crate) async fn read_body(body: Body, limit: usize) -> Result<Bytes, Problem> {
+    axum::body::to_bytes(body, limit).await.map_err(|e| {
+        let over = std::error::Error::source(&e)
+            .is_some_and(|s| s.is::<http_body_util::LengthLimitError>());
+        if over {
+            return Problem::too_large(limit);
+        }
+        // The chain names the cause (hyper's "invalid chunk size line", ...).
+        let mut detail = format!("could not read the request body: {e}");
+        let mut source = std::error::Error::source(&e);
+        while let Some(s) = source {
+            let text = s.to_string();
+            if !detail.contains(&text) {
+                detail.push_str(": ");
+                detail.push_str(&text);
+            }
+            source = s.source();
+        }
+        Problem::bad_request(detail)
+    })
+}
+
+/// Parses JSON text into a value, refusing an object that has a key twice: serde_json would
+/// keep the last one silently, so `{"hand": "allegro", "hand": "barrett"}` would replay on
+/// Barrett. The error names the key and, inside nested objects, where
+/// (`scenario.object: duplicate key "mass"`). One pass, as parsing into a `Value` is.
+pub(crate) fn parse_json_unique_keys(bytes: &[u8]) -> Result<serde_json::Value, String> {
+    let mut de = serde_json::Deserializer::from_slice(bytes);
+    let value = serde_path_to_error::deserialize::<_, UniqueKeys>(&mut de).map_err(|e| {
+        let path = e.path().to_string();
+        if path == "." {
+            e.inner().to_string()
+        } else {
+            format!("{path}: {}", e.inner())
+        }
+    })?;
+    de.end().map_err(|e| e.to_string())?;
+    Ok(value.0)
+}
+
+/// A JSON value whose objects were checked for duplicate keys while it was read.
+struct UniqueKeys(serde_json::Value);
+
+impl<'de> serde::Deserialize<'de> for UniqueKeys {
+    fn deserialize<D: serde::Deserializer<'de>>(d: D) -> Result<Self, D::Error> {
+        d.deserialize_any(UniqueKeysVisitor).map(UniqueKeys)
+    }
+}
+
+struct UniqueKeysVisitor;
+
+impl<'de> serde::de::Visitor<'de> for UniqueKeysVisitor {
+    type Value = serde_json::Value;
+
+    fn expecting(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str("any JSON value")
+    }
+    fn visit_bool<E>(self, v: bool) -> Result<Self::Value, E> {
+        Ok(v.into())
+    }
+    fn visit_i64<E>(self, v: i64) -> Result<Self::Value, E> {
+        Ok(v.into())
+    }
+    fn visit_u64<E>(self, v: u64) -> Result<Self::Value, E> {
+        Ok(v.into())
+    }
+    fn visit_f64<E>(self, v: f64) -> Result<Self::Value, E> {
+        Ok(serde_json::Number::from_f64(v).map_or(serde_json::Value::Null, Into::into))
+    }
+    fn visit_str<E>(self, v: &str) -> Result<Self::Value, E> {
+        Ok(v.into())
+    }
+    fn visit_string<E>(self, v: String) -> Result<Self::Value, E> {
+        Ok(v.into())
+    }
+    fn visit_unit<E>(self) -> Result<Self::Value, E> {
+        Ok(serde_json::Value::Null)
+    }
+    fn visit_none<E>(self) -> Result<Self::Value, E> {
+        Ok(serde_json::Value::Null)
+    }
+    fn visit_some<D: serde::Deserializer<'de>>(self, d: D) -> Result<Self::Value, D::Error> {
+        d.deserialize_any(self)
+    }
+    fn visit_seq<A: serde::de::SeqAccess<'de>>(self, mut seq: A) -> Result<Self::Value, A::Error> {
+        let mut items = Vec::with_capacity(seq.size_hint().unwrap_or(0).min(4096));
+        while let Some(UniqueKeys(v)) = seq.next_element()? {
+            items.push(v);
+        }
+        Ok(serde_json::Value::Array(items))
+    }
+    fn visit_map<A: serde::de::MapAccess<'de>>(self, mut map: A) -> Result<Self::Value, A::Error> {
+        let mut object = serde_json::Map::new();
+        while let Some(key) = map.next_key::<String>()? {
+            if object.contains_key(&key) {
+                return Err(serde::de::Error::custom(format_args!(
+                    "duplicate key {key:?} (each key may appear once in an object)"
+                )));
+            }
+            let UniqueKeys(v) = map.next_value()?;
+            object.insert(key, v);
+        }
+        Ok(serde_json::Value::Object(object))
     }
 }
 

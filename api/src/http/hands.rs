@@ -243,7 +243,7 @@ async fn get_hand_urdf(State(st): State<AppState>, Name(name): Name) -> Result<R
     responses(
         (status = 201, description = "Stored; `Location` names the new hand", body = HandBody,
             headers(("Location" = String, description = "URL of the hand"))),
-        (status = 400, description = "Malformed JSON", body = ProblemBody, content_type = "application/problem+json"),
+        (status = 400, description = "Malformed JSON (a key twice in one object included, named), or a body that could not be read", body = ProblemBody, content_type = "application/problem+json"),
         (status = 401, description = "A token is configured and was not sent, or a wrong one", body = ProblemBody, content_type = "application/problem+json"),
         (status = 409, description = "The name is a built-in hand's or a stored hand's", body = ProblemBody, content_type = "application/problem+json"),
         (status = 413, description = "The body is over the server's limit", body = ProblemBody, content_type = "application/problem+json"),

@@ -21,6 +21,7 @@ pub mod cache;
 pub mod error;
 pub mod extract;
 pub mod hands;
+pub mod hyper_errors;
 mod linger;
 pub mod meta;
 pub mod replays;
@@ -91,8 +92,11 @@ fn finish_openapi(mut api: OpenApi, writes_need_token: bool) -> OpenApi {
         .description(Some(
             "Record grasp sessions (MCAP), simulate scenarios server-side, query and browse the \
              skill data base, upload robot hands (URDF + hand spec) and replay skills on them. \
-             Errors are application/problem+json (RFC 9457). A request \
-             over the server's time limit is answered 503.",
+             Errors are application/problem+json (RFC 9457), also those for requests that do \
+             not parse as HTTP. A request over the server's time limit is answered 503. \
+             Operations that take query parameters refuse unknown ones (400, naming them); \
+             the others ignore a query string. A JSON body with a key twice in one object is \
+             refused (400, naming the key).",
         ))
         .build();
     let components = api.components.get_or_insert_with(Default::default);

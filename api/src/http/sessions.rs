@@ -14,7 +14,7 @@ use utoipa_axum::routes;
 
 use super::created;
 use super::error::{Problem, ProblemBody};
-use super::extract::{Id, Query, WriteAccess};
+use super::extract::{read_body, Id, Query, WriteAccess};
 use super::skills::SkillBody;
 use super::state::AppState;
 
@@ -197,7 +197,7 @@ fn is_mcap(headers: &HeaderMap) -> bool {
         (status = 401, description = "A token is configured and was not sent, or a wrong one", body = ProblemBody, content_type = "application/problem+json"),
         (status = 413, description = "The body is over the server's limit", body = ProblemBody, content_type = "application/problem+json"),
         (status = 415, description = "Content-Type is not application/x-mcap", body = ProblemBody, content_type = "application/problem+json"),
-        (status = 422, description = "Not a valid session file, with the reason; nothing was stored", body = ProblemBody, content_type = "application/problem+json"),
+        (status = 422, description = "Not a valid session file, with the reason (a replay recording, as `icms replay --out` or a replay's MCAP download writes, is not a session); nothing was stored", body = ProblemBody, content_type = "application/problem+json"),
         (status = 503, description = "Over the server's time limit", body = ProblemBody, content_type = "application/problem+json"),
     ))]
 async fn upload_session(
@@ -219,15 +219,7 @@ async fn upload_session(
     if declared.is_some_and(|n| n > limit as u64) {
         return Err(Problem::too_large(limit));
     }
-    let bytes = axum::body::to_bytes(body, limit).await.map_err(|e| {
-        let over = std::error::Error::source(&e)
-            .is_some_and(|s| s.is::<http_body_util::LengthLimitError>());
-        if over {
-            Problem::too_large(limit)
-        } else {
-            Problem::bad_request(format!("could not read the request body: {e}"))
-        }
-    })?;
+    let bytes = read_body(body, limit).await?;
     let size = bytes.len();
     let out = ingest_bytes(st.store(), Vec::from(bytes), "upload".into()).await?;
     tracing::info!(

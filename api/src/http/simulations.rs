@@ -232,7 +232,7 @@ pub async fn simulate_and_store(
         (status = 201, description = "Simulated and stored; `Location` names the new session", body = StoredSession,
             headers(("Location" = String, description = "URL of the session"))),
         (status = 200, description = "An identical session was already stored: that session", body = StoredSession),
-        (status = 400, description = "Malformed JSON", body = ProblemBody, content_type = "application/problem+json"),
+        (status = 400, description = "Malformed JSON (a key twice in one object included, named), or a body that could not be read", body = ProblemBody, content_type = "application/problem+json"),
         (status = 401, description = "A token is configured and was not sent, or a wrong one", body = ProblemBody, content_type = "application/problem+json"),
         (status = 413, description = "The body is over the server's limit", body = ProblemBody, content_type = "application/problem+json"),
         (status = 415, description = "Content-Type is not application/json", body = ProblemBody, content_type = "application/problem+json"),

@@ -202,7 +202,7 @@ async fn delete_skill(
     params(("id" = i64, Path, description = "Skill id"), SimilarParams),
     responses(
         (status = 200, description = "The nearest skills, nearest first", body = SimilarSkills),
-        (status = 400, description = "The id is not an integer, or k is out of range", body = ProblemBody, content_type = "application/problem+json"),
+        (status = 400, description = "The id is not an integer, k is out of range, or an unknown parameter", body = ProblemBody, content_type = "application/problem+json"),
         (status = 404, description = "No skill with this id", body = ProblemBody, content_type = "application/problem+json"),
     ))]
 async fn similar_skills(

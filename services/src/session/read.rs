@@ -11,6 +11,7 @@ use crate::mcap_io::{
     par_map, read_raw_bytes, read_raw_file, JsonSchema, MessageRef, RawSession, RawTopic,
     ReadLimits, MESSAGES_PER_JOB,
 };
+use crate::replay::REPLAY_METADATA;
 
 /// A session read back: metadata, ground truth and the raw topics tick by tick. Every sample
 /// is `(log_time_ns, message)` in file order.
@@ -30,6 +31,9 @@ pub struct Session {
     pub object: Vec<(u64, messages::ObjectState)>,
     /// Messages per topic, all topics of the file.
     pub message_counts: BTreeMap<String, usize>,
+    /// The `replay` metadata record ([`crate::replay::REPLAY_METADATA`]): present only in a
+    /// replay recording (`icms replay --out`, a stored replay's MCAP), `None` in a grasp session.
+    pub replay: Option<BTreeMap<String, String>>,
 }
 
 impl Session {
@@ -42,6 +46,44 @@ impl Session {
     /// The scenario name from the `session` record.
     pub fn scenario(&self) -> Option<&str> {
         self.metadata.get("scenario").map(String::as_str)
+    }
+
+    /// Whether this is a replay recording rather than a grasp session: it has a `replay`
+    /// metadata record, or its `session` record says `source: replay` (both written by
+    /// [`crate::replay::replay_skill`]). A replay records a robot hand driven along a skill,
+    /// with no object description in its `session` record: segmenting it would find a skill of
+    /// shape `unknown` with no parameters, a copy of a copy.
+    pub fn is_replay(&self) -> bool {
+        self.replay.is_some() || self.metadata.get("source").is_some_and(|s| s == "replay")
+    }
+
+    /// `Ok` for a grasp session; [`RecordingError::ReplayRecording`] (naming `name`, the
+    /// replayed skill and the hand) for a replay recording, which has no skills to find. For
+    /// everything that segments or stores a file as a session.
+    pub fn ensure_grasp_session(&self, name: &str) -> Result<()> {
+        if !self.is_replay() {
+            return Ok(());
+        }
+        let get = |key: &str| {
+            self.replay
+                .as_ref()
+                .and_then(|r| r.get(key))
+                .filter(|v| !v.is_empty())
+        };
+        let hand = get("hand")
+            .or_else(|| self.metadata.get("replay_hand"))
+            .or_else(|| self.metadata.get("hand"));
+        let skill = get("skill").or_else(|| self.metadata.get("scenario"));
+        let what = match (skill, hand) {
+            (Some(s), Some(h)) => format!(" of {s} on the hand {h}"),
+            (None, Some(h)) => format!(" on the hand {h}"),
+            (Some(s), None) => format!(" of {s}"),
+            (None, None) => String::new(),
+        };
+        Err(RecordingError::ReplayRecording {
+            name: name.to_owned(),
+            what,
+        })
     }
 }
 
@@ -235,6 +277,7 @@ fn from_raw(raw: &RawSession, name: &str, topics: DecodeTopics) -> Result<Sessio
         contacts: Vec::new(),
         object: Vec::new(),
         message_counts: raw.message_counts(),
+        replay: raw.metadata(REPLAY_METADATA).cloned(),
     };
     for d in done {
         match d? {

@@ -14,6 +14,10 @@ pub enum StoreError {
          refusing to touch it — choose another data directory"
     )]
     NotOurs(PathBuf),
+    /// [`crate::store::Store::open_existing`] found no data base in this directory (no
+    /// database file, or an empty one); nothing was created.
+    #[error("no ICMS data base at {0}")]
+    NoDataBase(PathBuf),
     /// The database was migrated by a newer binary than this one.
     #[error(
         "the database schema is version {found}, newer than this binary supports ({supported}); \

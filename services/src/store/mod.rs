@@ -307,21 +307,41 @@ impl Store {
     /// migrated ([`StoreError::SchemaTooNew`]) before touching it. Settings: WAL journal,
     /// `foreign_keys=ON`, busy timeout 5 s, `synchronous=NORMAL`. Loads the feature index.
     pub async fn open(data_dir: &Path) -> Result<Store, StoreError> {
-        tokio::fs::create_dir_all(data_dir)
-            .await
-            .map_err(|e| StoreError::io(data_dir, e))?;
+        Self::open_with(data_dir, true).await
+    }
+
+    /// Opens the store in `data_dir` like [`Store::open`], but only if a data base is already
+    /// there: without one (no database file, or an empty file) it fails with
+    /// [`StoreError::NoDataBase`] and creates nothing, neither the directory nor a file. For
+    /// commands that only read (`icms skills`, `icms hands --data`): a mistyped directory must
+    /// not leave an empty data base behind and answer as if it held no skills. An existing data
+    /// base of an older schema is still migrated.
+    pub async fn open_existing(data_dir: &Path) -> Result<Store, StoreError> {
+        Self::open_with(data_dir, false).await
+    }
+
+    async fn open_with(data_dir: &Path, create: bool) -> Result<Store, StoreError> {
+        if create {
+            tokio::fs::create_dir_all(data_dir)
+                .await
+                .map_err(|e| StoreError::io(data_dir, e))?;
+        }
         let db_path = data_dir.join(DB_FILE);
         let exists = match tokio::fs::metadata(&db_path).await {
             Ok(md) => md.len() > 0,
             Err(e) if e.kind() == std::io::ErrorKind::NotFound => false,
+            // A missing directory, or a file where the directory should be.
+            Err(e) if !create && e.kind() == std::io::ErrorKind::NotADirectory => false,
             Err(e) => return Err(StoreError::io(&db_path, e)),
         };
         if exists {
             check_existing(&db_path).await?;
+        } else if !create {
+            return Err(StoreError::NoDataBase(data_dir.to_path_buf()));
         }
         let opts = SqliteConnectOptions::new()
             .filename(&db_path)
-            .create_if_missing(true)
+            .create_if_missing(create)
             .journal_mode(SqliteJournalMode::Wal)
             .foreign_keys(true)
             .busy_timeout(Duration::from_secs(5))
