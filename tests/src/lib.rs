@@ -239,7 +239,7 @@ pub fn session_bytes(scenario: &str, seed: u64, duration: Option<f64>) -> Vec<u8
 /// not describe the object, as a recorder that does not know it writes it: its skills have the
 /// shape `unknown`.
 pub fn session_bytes_without_object(scenario: &str, seed: u64) -> Vec<u8> {
-    use services::session::{SessionInfo, SessionRecorder, TickData};
+    use services::session::{record_ticks, SessionInfo, SessionRecorder};
     let s = dfs_core::scenario::Scenario::builtin(scenario, seed).expect("built-in scenario");
     let mut sim =
         dfs_core::operator::Simulation::new(&s, dfs_core::hand::HandModel::glove10(), None)
@@ -252,21 +252,9 @@ pub fn session_bytes_without_object(scenario: &str, seed: u64) -> Vec<u8> {
         source: "simulation".to_owned(),
         ..SessionInfo::default()
     };
-    let mut recorder = SessionRecorder::create(&path, sim.dfs().hand(), sim.dfs().object(), &info)
+    let recorder = SessionRecorder::create(&path, sim.dfs().hand(), sim.dfs().object(), &info)
         .expect("recorder");
-    while sim.step().expect("simulation step") {
-        let (q, tau, base) = sim.sample();
-        let tick = TickData {
-            time_ns: sim.time_ns(),
-            q,
-            tau,
-            base,
-            output: sim.output(),
-            kinematics: sim.dfs().kinematics(),
-        };
-        recorder.record(&tick).expect("record a tick");
-    }
-    recorder.finish().expect("finish the session file");
+    record_ticks(&mut sim, recorder, |_, _| {}).expect("record the session");
     std::fs::read(&path).expect("session file")
 }
 

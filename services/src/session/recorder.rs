@@ -834,7 +834,7 @@ pub fn record_simulation(
     scenario: &Scenario,
     duration: Option<f64>,
     out: &Path,
-    mut progress: impl FnMut(u64, u64),
+    progress: impl FnMut(u64, u64),
 ) -> Result<RecordSummary> {
     // Set-up errors (a bad field, an unreachable object, a bad duration) come before any file.
     let mut sim = Simulation::new(scenario, HandModel::glove10(), duration).map_err(|e| {
@@ -869,7 +869,18 @@ pub fn record_simulation(
             .collect(),
     };
     let dfs = sim.dfs();
-    let mut recorder = SessionRecorder::create(out, dfs.hand(), dfs.object(), &info)?;
+    let recorder = SessionRecorder::create(out, dfs.hand(), dfs.object(), &info)?;
+    record_ticks(&mut sim, recorder, progress)
+}
+
+/// Steps `sim` to its end, recording every tick with `recorder`, then finishes the file.
+/// `progress(done, total)` is called every 100 ticks and at the end. If the simulation or a
+/// write fails midway, the file is still finished with every tick recorded before it.
+pub fn record_ticks(
+    sim: &mut Simulation,
+    mut recorder: SessionRecorder,
+    mut progress: impl FnMut(u64, u64),
+) -> Result<RecordSummary> {
     let total = sim.total_ticks();
     loop {
         let next_time = sim.ticks() * dfs_core::operator::TICK_NS;
