@@ -251,11 +251,13 @@ fn describe(seg: &Segmentation) -> String {
         .join(", ")
 }
 
-fn assert_well_formed(plan: &Plan) {
+/// Segments the session `plan` builds and panics, naming `case`, unless its phases are well
+/// formed.
+fn assert_well_formed(case: &str, plan: &Plan) {
     let s = build(plan);
     let seg = segment(&s, &SegmentParams::default());
     if let Err(e) = check(&seg, &s) {
-        panic!("{e}\nphases: {}\nplan: {plan:#?}", describe(&seg));
+        panic!("{case}: {e}\nphases: {}\nplan: {plan:#?}", describe(&seg));
     }
 }
 
@@ -364,11 +366,7 @@ fn odd_sessions_give_sorted_non_overlapping_phases_inside_the_session() {
         ),
     ];
     for (name, plan) in cases {
-        let s = build(&plan);
-        let seg = segment(&s, &SegmentParams::default());
-        if let Err(e) = check(&seg, &s) {
-            panic!("{name}: {e}\nphases: {}", describe(&seg));
-        }
+        assert_well_formed(name, &plan);
     }
 }
 
@@ -418,6 +416,6 @@ proptest! {
 
     #[test]
     fn any_session_gives_sorted_non_overlapping_phases_inside_the_session(p in plan()) {
-        assert_well_formed(&p);
+        assert_well_formed("generated session", &p);
     }
 }
