@@ -101,6 +101,24 @@ fn a_box_pinch_lift_recorded_with_glove10_replays_on_the_gripper_into_an_mcap() 
 }
 
 #[test]
+fn a_box_pinch_lift_recorded_with_glove10_replays_on_barrett_with_both_fingers_opposing_the_thumb()
+{
+    // glove10 pinched the box between the thumb and one finger; Barrett's two fingers are
+    // spread over the face opposite the thumb, not onto its edges, where they would touch the
+    // side faces and only friction would oppose the thumb (the box turned and slipped).
+    let skill = recorded_skill("box-pinch-lift");
+    let r = replay(&load_builtin_hand("barrett").unwrap(), &skill);
+    assert!(r.success, "{:?} {}", r.failure_reason, r.detail);
+    assert!(r.lift_height_m > 0.07, "lifted {}", r.lift_height_m);
+    assert!(r.position_error_max_m < 0.02, "{}", r.position_error_max_m);
+    let thumb = r.contacts.iter().find(|c| c.finger == "thumb").unwrap();
+    for c in r.contacts.iter().filter(|c| c.finger != "thumb") {
+        let dot: f64 = (0..3).map(|i| c.normal_b[i] * thumb.normal_b[i]).sum();
+        assert!(dot < -0.99, "{} pushes along {:?}", c.finger, c.normal_b);
+    }
+}
+
+#[test]
 fn a_simulated_session_is_a_grasp_session_not_a_replay() {
     let dir = tempfile::tempdir().unwrap();
     let path = dir.path().join("session.mcap");

@@ -18,7 +18,10 @@
 //!    hand's thumb ([`crate::hand::thumb_of`] or the spec's `thumb`) takes the thumb side; its
 //!    other fingertips the opposing side: one-to-one when the counts match, else a new contact
 //!    set: the opposing side's centre spread across the grasp axis at the hand's own finger
-//!    spacing (or merged into one point), projected onto the surface. A hand with two
+//!    spacing (or merged into one point), projected onto the surface, each point at most as
+//!    far out as keeps its fingertip on the same face (a fingertip radius inside a box's edges:
+//!    on an edge the finger would push along the neighbouring face's normal, square to the
+//!    thumb's, and only friction would oppose the thumb). A hand with two
 //!    fingertips (a parallel gripper) pinches antipodally through the centre of mass, at its
 //!    height, along the skill's grasp axis made horizontal (a box's or cylinder's face normal
 //!    when that is close).

@@ -169,6 +169,39 @@ pub(super) fn surface_along(shape: &crate::object::Shape, dir: &Vector) -> (Vect
     (p, shape.closest(&p).2)
 }
 
+/// How far (m, at most `limit`) a contact can move from the surface point nearest `p_b` along
+/// unit `dir` (B) and stay at least `margin` inside the smooth part of the surface it starts
+/// on: all the way, the surface within `margin` of the contact turns by less than 45° from the
+/// normal at the contact (a box's face up to `margin` from its edges, a cylinder's side up to
+/// `margin` from its rims; a sphere, or a cylinder's side around it, is never cut short).
+/// Steps of 0.5 mm.
+pub(super) fn face_extent(
+    shape: &crate::object::Shape,
+    p_b: &Vector,
+    dir: &Vector,
+    limit: Real,
+    margin: Real,
+) -> Real {
+    const STEP: Real = 5e-4;
+    let cos_45 = std::f64::consts::FRAC_1_SQRT_2;
+    let inside = |q: &Vector| -> bool {
+        let (_, point, n) = shape.closest(q);
+        let t1 = perpendicular(&Vector::x(), &n, &Vector::y());
+        let t2 = n.cross(&t1);
+        [t1, -t1, t2, -t2]
+            .iter()
+            .all(|t| shape.closest(&(point + t * margin)).2.dot(&n) >= cos_45)
+    };
+    let mut s = 0.0;
+    while s + STEP <= limit && inside(&(p_b + dir * (s + STEP))) {
+        s += STEP;
+    }
+    if s + STEP > limit && inside(&(p_b + dir * limit)) {
+        return limit;
+    }
+    s
+}
+
 /// Two antipodal contact points through the centre of mass for a pinch along `axis` (from the
 /// thumb's side to the other): the axis is made horizontal (the contacts at the height of the
 /// centre of mass, so gravity makes no moment about the line between them) and, where the
@@ -783,8 +816,19 @@ fn plan_candidates(
             } else {
                 let mean = lateral.iter().map(|l| l.1).sum::<Real>() / lateral.len().max(1) as Real;
                 for &(k, u) in &lateral {
-                    let off = (u - mean).clamp(-0.8 * half_width, 0.8 * half_width);
-                    targets.push((k, target_of(k, other_c + lat_w * off)));
+                    // Spread over the opposing side's own face: a box's edge has the next
+                    // face's normal, square to the thumb's, and only friction opposes the
+                    // thumb there.
+                    let dir = if u >= mean { lat_w } else { -lat_w };
+                    let room = face_extent(
+                        &skill.shape,
+                        &other_c,
+                        &dir,
+                        0.8 * half_width,
+                        hand.fingertips[k].radius,
+                    );
+                    let off = (u - mean).abs().min(room);
+                    targets.push((k, target_of(k, other_c + dir * off)));
                 }
             }
         }
@@ -1135,6 +1179,33 @@ mod tests {
         assert!((a - Vector::x()).norm() < 1e-9, "{a}");
         assert!((o - Vector::new(0.025, 0.0, 0.0)).norm() < 1e-9, "{o}");
         assert!((t + o).norm() < 1e-9, "{t}");
+    }
+
+    #[test]
+    fn a_spread_stays_a_margin_inside_a_box_face_and_is_not_cut_short_on_a_sphere() {
+        let shape = Shape::Box {
+            half_extents: [0.025, 0.025, 0.04],
+        };
+        let centre = Vector::new(0.025, 0.0, 0.01);
+        // Along y the +x face ends 25 mm away: 15 mm leaves a 10 mm fingertip on the face.
+        let y = face_extent(&shape, &centre, &Vector::y(), 0.05, 0.01);
+        assert!((y - 0.015).abs() <= 5e-4, "{y}");
+        let down = face_extent(&shape, &centre, &-Vector::z(), 0.05, 0.01);
+        assert!((down - 0.04).abs() <= 5e-4, "{down}");
+        // Diagonally, the nearer edge counts.
+        let d = Vector::new(0.0, 1.0, 1.0).normalize();
+        let diag = face_extent(&shape, &centre, &d, 0.05, 0.01);
+        assert!((diag * d.y - 0.015).abs() <= 5e-4, "{diag}");
+        // A sphere curves but has no edge: the limit.
+        let sphere = Shape::Sphere { radius: 0.04 };
+        let s = face_extent(
+            &sphere,
+            &Vector::new(0.04, 0.0, 0.0),
+            &Vector::y(),
+            0.032,
+            0.012,
+        );
+        assert_eq!(s, 0.032);
     }
 
     #[test]
