@@ -119,6 +119,28 @@ fn a_box_pinch_lift_recorded_with_glove10_replays_on_barrett_with_both_fingers_o
 }
 
 #[test]
+fn a_box_pinch_lift_on_inspire_fails_up_front_as_unreachable_rather_than_dropping_the_box() {
+    // Inspire's index has one DOF: on the box's face opposite the thumb it pushes ~58° off the
+    // normal, outside the friction cone (39° at μ 0.8). Replayed, the box turned over and fell
+    // with the thumb at 1.5 times its torque limit; the plan now refuses it, and nothing runs.
+    let skill = recorded_skill("box-pinch-lift");
+    let r = replay(&load_builtin_hand("inspire").unwrap(), &skill);
+    assert!(!r.success);
+    assert_eq!(
+        r.failure_reason,
+        Some(FailureReason::Unreachable),
+        "{}",
+        r.detail
+    );
+    assert!(
+        r.detail.contains("outside even the friction cone"),
+        "{}",
+        r.detail
+    );
+    assert_eq!(r.ticks, 0);
+}
+
+#[test]
 fn a_simulated_session_is_a_grasp_session_not_a_replay() {
     let dir = tempfile::tempdir().unwrap();
     let path = dir.path().join("session.mcap");

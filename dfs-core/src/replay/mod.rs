@@ -49,7 +49,10 @@
 //!    whose ring and little fingers move with the middle finger's DOFs) puts each contact on
 //!    the fingertip of its name; a finger the skill does not use goes where its coupling to a
 //!    placed finger takes it (the pose is refused if that presses it into the object), or
-//!    curls as above. Otherwise the replay fails with `unreachable`.
+//!    curls as above; every placed finger must push along its contact normal within the real
+//!    friction cone (the recording held there, so not the planned one; a one-DOF finger that
+//!    meets the contact at a slant would only turn the object out of the grasp). Otherwise
+//!    the replay fails with `unreachable`.
 //! 3. **Forces.** At the reference's samples (every [`ReplayParams::force_sample_s`]), the
 //!    least internal force that carries the object's load `m (a − g)` with exact friction cones,
 //!    a friction margin and the hand's torque limits `|Σ Jᵀ f| ≤ τ_max` (a second-order cone
@@ -594,6 +597,29 @@ mod tests {
         skill.contacts[0].position_b.x = -0.09;
         skill.contacts[1].position_b.x = 0.09;
         let r = run(&hand, thumb_of(&hand), &skill, &ReplayParams::default()).unwrap();
+        assert!(!r.success);
+        assert_eq!(
+            r.failure_reason,
+            Some(FailureReason::Unreachable),
+            "{}",
+            r.detail
+        );
+        assert_eq!(r.ticks, 0);
+    }
+
+    /// Inspire's thumb and index carry the names of a thumb-index pinch's contacts, but its
+    /// one-DOF index meets the box's face far off the normal: pushing there only turns the box
+    /// out of the grasp, so the plan is refused before anything runs.
+    #[test]
+    fn a_named_grasp_whose_finger_pushes_outside_the_friction_cone_is_unreachable() {
+        let hand = builtin_hand("inspire").unwrap();
+        let r = run(
+            &hand,
+            thumb_of(&hand),
+            &box_pinch(0.2),
+            &ReplayParams::default(),
+        )
+        .unwrap();
         assert!(!r.success);
         assert_eq!(
             r.failure_reason,

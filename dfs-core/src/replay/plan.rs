@@ -357,16 +357,22 @@ pub fn plan(
     // coupling takes them, or curl. Last, so that no replay planned before changes.
     let named = named_contacts(hand, skill);
     let named_count = named.iter().flatten().count();
+    // Why that was refused: the alignment of its worst finger's push with its normal.
+    let mut named_refused: Option<Real> = None;
     if !best.as_ref().is_some_and(|c| c.ok)
         && named[thumb].is_some()
         && named_count == skill.contacts.len()
         && named_count >= 2
         && named_count < nt
     {
-        if let Some(c) = best_of(Keys::Named).filter(|c| c.ok) {
-            best = Some(c);
-            curled_refused = None;
-            closing_refused = None;
+        match best_of(Keys::Named) {
+            Some(c) if c.ok => {
+                best = Some(c);
+                curled_refused = None;
+                closing_refused = None;
+            }
+            Some(c) if c.error <= params.reach_tolerance => named_refused = Some(c.align),
+            _ => {}
         }
     }
     let Some(best) = best else {
@@ -523,6 +529,15 @@ pub fn plan(
                  finger pushing {:.1}° off its normal (the planned cone allows {cone:.1}°), an \
                  approach that touches the object, or no force closure",
                 align.clamp(-1.0, 1.0).acos().to_degrees()
+            ),
+        };
+        let why = match named_refused {
+            None => why,
+            Some(align) => format!(
+                "{why}; the fingers named like the skill's contacts reach them, but one pushes \
+                 {:.1}° off its contact normal, outside even the friction cone ({:.1}°)",
+                align.clamp(-1.0, 1.0).acos().to_degrees(),
+                skill.friction.mu.atan().to_degrees()
             ),
         };
         plan.failure = Some((FailureReason::Unreachable, why));
@@ -936,8 +951,18 @@ fn plan_candidates(
         // Every tip placed: reaching is enough (the force check follows); a curled grasp must
         // also hold.
         // A finger that cannot push along its contact normal within the planned friction cone
-        // only slides over the surface (`pushes`).
-        let ok = error <= params.reach_tolerance && (placed_all || (closure && pushes));
+        // only slides over the surface (`pushes`). The demonstrator's own contacts on the
+        // fingers of their names held in the recording, so there the real cone will do; but a
+        // finger pushing outside even that cannot hold its contact whatever the forces (a
+        // one-DOF finger meeting a box's face at a slant: its push turns the box, the thumb
+        // saturates, the box falls).
+        let pushes_at_all = align_min >= 1.0 / (1.0 + skill.friction.mu.powi(2)).sqrt();
+        let ok = error <= params.reach_tolerance
+            && match keys {
+                Keys::All => true,
+                Keys::Named => pushes_at_all,
+                Keys::Nearest(_) => closure && pushes,
+            };
         let reach_penalty = if ok { 0.0 } else { 10.0 };
         let score = -reach_penalty - 20.0 * error + align_min + 2.0 * eps - 0.3 * approach.z;
         out.push(Candidate {
