@@ -181,6 +181,8 @@ fn a_sphere_heavier_than_the_torque_limits_allow_fails_with_torque_limit() {
         "{}",
         r.detail
     );
+    // Not even at rest: refused before it runs, not simulated dropping the sphere.
+    assert_eq!(r.ticks, 0);
 }
 
 #[test]

@@ -59,7 +59,9 @@
 //!    programme, [`crate::grasp::optimise::ForceSolver`]: set up once for the contacts, each
 //!    load solved by Newton's method on its dual, warm-started, with Clarabel when a torque
 //!    limit binds); infeasible without the torque limits is `no_force_closure`, feasible only
-//!    without them `torque_limit`.
+//!    without them `torque_limit`. When that is so already for the object at rest at the
+//!    grasp ([`Plan::fails_at_rest`]), the replay is refused without being simulated; a load
+//!    the torques cannot carry only later along the motion is a warning, and the replay runs.
 //! 4. **Simulation.** [`run`]: the arm (the hand's base, moved kinematically like the
 //!    operator's) approaches with the fingers preshaped 2 cm off their contacts, the fingers
 //!    close under task-space steering, the grip ramps up to the planned forces `τ = Jᵀ f` (a
@@ -585,6 +587,8 @@ mod tests {
             "{}",
             r.detail
         );
+        // Not even at rest: refused up front, nothing simulated.
+        assert_eq!(r.ticks, 0);
     }
 
     #[test]

@@ -56,6 +56,11 @@ pub struct Plan {
     pub torque_map: DMatrix<Real>,
     /// A reason the grasp cannot work, found while planning, with a sentence.
     pub failure: Option<(FailureReason, String)>,
+    /// The failure (`no_force_closure` or `torque_limit`) is there already at the grasp, with
+    /// the object at rest: the contacts cannot carry its weight at all, so the replay is not
+    /// simulated (it could only drop the object). A failure later along the motion (a
+    /// transient the torques cannot follow) is a warning: the replay runs and tells.
+    pub fails_at_rest: bool,
 }
 
 /// One candidate base pose.
@@ -494,6 +499,7 @@ pub fn plan(
         forces: Vec::new(),
         torque_map,
         failure: None,
+        fails_at_rest: false,
     };
     if !reachable {
         let mu = skill.friction.mu * (1.0 - params.friction_margin);
@@ -643,6 +649,7 @@ fn plan_forces(plan: &mut Plan, skill: &SkillSpec, params: &ReplayParams) {
     // Static load first, without torque limits: can the contacts carry it at all?
     let static_load = load_at(skill, tl.grasp_start, &g);
     if let Err(e) = cones_only.solve_into(&static_load, &mut dist) {
+        plan.fails_at_rest = true;
         let reason = match e.kind {
             InfeasibleKind::NoDistribution
             | InfeasibleKind::Solver
@@ -665,6 +672,7 @@ fn plan_forces(plan: &mut Plan, skill: &SkillSpec, params: &ReplayParams) {
         let solved = match with_limits.solve_into(&load, &mut dist) {
             Ok(_) => true,
             Err(e) => {
+                plan.fails_at_rest |= t == tl.grasp_start;
                 if plan.failure.is_none() {
                     plan.failure = Some((
                         FailureReason::TorqueLimit,
