@@ -101,6 +101,46 @@ fn a_box_pinch_lift_recorded_with_glove10_replays_on_the_gripper_into_an_mcap() 
 }
 
 #[test]
+fn a_box_pinch_lift_recorded_with_glove10_replays_on_barrett_with_both_fingers_opposing_the_thumb()
+{
+    // glove10 pinched the box between the thumb and one finger; Barrett's two fingers are
+    // spread over the face opposite the thumb, not onto its edges, where they would touch the
+    // side faces and only friction would oppose the thumb (the box turned and slipped).
+    let skill = recorded_skill("box-pinch-lift");
+    let r = replay(&load_builtin_hand("barrett").unwrap(), &skill);
+    assert!(r.success, "{:?} {}", r.failure_reason, r.detail);
+    assert!(r.lift_height_m > 0.07, "lifted {}", r.lift_height_m);
+    assert!(r.position_error_max_m < 0.02, "{}", r.position_error_max_m);
+    let thumb = r.contacts.iter().find(|c| c.finger == "thumb").unwrap();
+    for c in r.contacts.iter().filter(|c| c.finger != "thumb") {
+        let dot: f64 = (0..3).map(|i| c.normal_b[i] * thumb.normal_b[i]).sum();
+        assert!(dot < -0.99, "{} pushes along {:?}", c.finger, c.normal_b);
+    }
+}
+
+#[test]
+fn a_box_pinch_lift_on_inspire_fails_up_front_as_unreachable_rather_than_dropping_the_box() {
+    // Inspire's index has one DOF: on the box's face opposite the thumb it pushes ~58° off the
+    // normal, outside the friction cone (39° at μ 0.8). Replayed, the box turned over and fell
+    // with the thumb at 1.5 times its torque limit; the plan now refuses it, and nothing runs.
+    let skill = recorded_skill("box-pinch-lift");
+    let r = replay(&load_builtin_hand("inspire").unwrap(), &skill);
+    assert!(!r.success);
+    assert_eq!(
+        r.failure_reason,
+        Some(FailureReason::Unreachable),
+        "{}",
+        r.detail
+    );
+    assert!(
+        r.detail.contains("outside even the friction cone"),
+        "{}",
+        r.detail
+    );
+    assert_eq!(r.ticks, 0);
+}
+
+#[test]
 fn a_simulated_session_is_a_grasp_session_not_a_replay() {
     let dir = tempfile::tempdir().unwrap();
     let path = dir.path().join("session.mcap");
@@ -141,6 +181,8 @@ fn a_sphere_heavier_than_the_torque_limits_allow_fails_with_torque_limit() {
         "{}",
         r.detail
     );
+    // Not even at rest: refused before it runs, not simulated dropping the sphere.
+    assert_eq!(r.ticks, 0);
 }
 
 #[test]

@@ -18,7 +18,10 @@
 //!    hand's thumb ([`crate::hand::thumb_of`] or the spec's `thumb`) takes the thumb side; its
 //!    other fingertips the opposing side: one-to-one when the counts match, else a new contact
 //!    set: the opposing side's centre spread across the grasp axis at the hand's own finger
-//!    spacing (or merged into one point), projected onto the surface. A hand with two
+//!    spacing (or merged into one point), projected onto the surface, each point at most as
+//!    far out as keeps its fingertip on the same face (a fingertip radius inside a box's edges:
+//!    on an edge the finger would push along the neighbouring face's normal, square to the
+//!    thumb's, and only friction would oppose the thumb). A hand with two
 //!    fingertips (a parallel gripper) pinches antipodally through the centre of mass, at its
 //!    height, along the skill's grasp axis made horizontal (a box's or cylinder's face normal
 //!    when that is close).
@@ -46,14 +49,19 @@
 //!    whose ring and little fingers move with the middle finger's DOFs) puts each contact on
 //!    the fingertip of its name; a finger the skill does not use goes where its coupling to a
 //!    placed finger takes it (the pose is refused if that presses it into the object), or
-//!    curls as above. Otherwise the replay fails with `unreachable`.
+//!    curls as above; every placed finger must push along its contact normal within the real
+//!    friction cone (the recording held there, so not the planned one; a one-DOF finger that
+//!    meets the contact at a slant would only turn the object out of the grasp). Otherwise
+//!    the replay fails with `unreachable`.
 //! 3. **Forces.** At the reference's samples (every [`ReplayParams::force_sample_s`]), the
 //!    least internal force that carries the object's load `m (a − g)` with exact friction cones,
 //!    a friction margin and the hand's torque limits `|Σ Jᵀ f| ≤ τ_max` (a second-order cone
 //!    programme, [`crate::grasp::optimise::ForceSolver`]: set up once for the contacts, each
 //!    load solved by Newton's method on its dual, warm-started, with Clarabel when a torque
 //!    limit binds); infeasible without the torque limits is `no_force_closure`, feasible only
-//!    without them `torque_limit`.
+//!    without them `torque_limit`. When that is so already for the object at rest at the
+//!    grasp ([`Plan::fails_at_rest`]), the replay is refused without being simulated; a load
+//!    the torques cannot carry only later along the motion is a warning, and the replay runs.
 //! 4. **Simulation.** [`run`]: the arm (the hand's base, moved kinematically like the
 //!    operator's) approaches with the fingers preshaped 2 cm off their contacts, the fingers
 //!    close under task-space steering, the grip ramps up to the planned forces `τ = Jᵀ f` (a
@@ -579,6 +587,8 @@ mod tests {
             "{}",
             r.detail
         );
+        // Not even at rest: refused up front, nothing simulated.
+        assert_eq!(r.ticks, 0);
     }
 
     #[test]
@@ -591,6 +601,29 @@ mod tests {
         skill.contacts[0].position_b.x = -0.09;
         skill.contacts[1].position_b.x = 0.09;
         let r = run(&hand, thumb_of(&hand), &skill, &ReplayParams::default()).unwrap();
+        assert!(!r.success);
+        assert_eq!(
+            r.failure_reason,
+            Some(FailureReason::Unreachable),
+            "{}",
+            r.detail
+        );
+        assert_eq!(r.ticks, 0);
+    }
+
+    /// Inspire's thumb and index carry the names of a thumb-index pinch's contacts, but its
+    /// one-DOF index meets the box's face far off the normal: pushing there only turns the box
+    /// out of the grasp, so the plan is refused before anything runs.
+    #[test]
+    fn a_named_grasp_whose_finger_pushes_outside_the_friction_cone_is_unreachable() {
+        let hand = builtin_hand("inspire").unwrap();
+        let r = run(
+            &hand,
+            thumb_of(&hand),
+            &box_pinch(0.2),
+            &ReplayParams::default(),
+        )
+        .unwrap();
         assert!(!r.success);
         assert_eq!(
             r.failure_reason,

@@ -56,6 +56,11 @@ pub struct Plan {
     pub torque_map: DMatrix<Real>,
     /// A reason the grasp cannot work, found while planning, with a sentence.
     pub failure: Option<(FailureReason, String)>,
+    /// The failure (`no_force_closure` or `torque_limit`) is there already at the grasp, with
+    /// the object at rest: the contacts cannot carry its weight at all, so the replay is not
+    /// simulated (it could only drop the object). A failure later along the motion (a
+    /// transient the torques cannot follow) is a warning: the replay runs and tells.
+    pub fails_at_rest: bool,
 }
 
 /// One candidate base pose.
@@ -167,6 +172,39 @@ pub(super) fn surface_along(shape: &crate::object::Shape, dir: &Vector) -> (Vect
     }
     let p = dir * hi;
     (p, shape.closest(&p).2)
+}
+
+/// How far (m, at most `limit`) a contact can move from the surface point nearest `p_b` along
+/// unit `dir` (B) and stay at least `margin` inside the smooth part of the surface it starts
+/// on: all the way, the surface within `margin` of the contact turns by less than 45° from the
+/// normal at the contact (a box's face up to `margin` from its edges, a cylinder's side up to
+/// `margin` from its rims; a sphere, or a cylinder's side around it, is never cut short).
+/// Steps of 0.5 mm.
+pub(super) fn face_extent(
+    shape: &crate::object::Shape,
+    p_b: &Vector,
+    dir: &Vector,
+    limit: Real,
+    margin: Real,
+) -> Real {
+    const STEP: Real = 5e-4;
+    let cos_45 = std::f64::consts::FRAC_1_SQRT_2;
+    let inside = |q: &Vector| -> bool {
+        let (_, point, n) = shape.closest(q);
+        let t1 = perpendicular(&Vector::x(), &n, &Vector::y());
+        let t2 = n.cross(&t1);
+        [t1, -t1, t2, -t2]
+            .iter()
+            .all(|t| shape.closest(&(point + t * margin)).2.dot(&n) >= cos_45)
+    };
+    let mut s = 0.0;
+    while s + STEP <= limit && inside(&(p_b + dir * (s + STEP))) {
+        s += STEP;
+    }
+    if s + STEP > limit && inside(&(p_b + dir * limit)) {
+        return limit;
+    }
+    s
 }
 
 /// Two antipodal contact points through the centre of mass for a pinch along `axis` (from the
@@ -324,16 +362,22 @@ pub fn plan(
     // coupling takes them, or curl. Last, so that no replay planned before changes.
     let named = named_contacts(hand, skill);
     let named_count = named.iter().flatten().count();
+    // Why that was refused: the alignment of its worst finger's push with its normal.
+    let mut named_refused: Option<Real> = None;
     if !best.as_ref().is_some_and(|c| c.ok)
         && named[thumb].is_some()
         && named_count == skill.contacts.len()
         && named_count >= 2
         && named_count < nt
     {
-        if let Some(c) = best_of(Keys::Named).filter(|c| c.ok) {
-            best = Some(c);
-            curled_refused = None;
-            closing_refused = None;
+        match best_of(Keys::Named) {
+            Some(c) if c.ok => {
+                best = Some(c);
+                curled_refused = None;
+                closing_refused = None;
+            }
+            Some(c) if c.error <= params.reach_tolerance => named_refused = Some(c.align),
+            _ => {}
         }
     }
     let Some(best) = best else {
@@ -455,6 +499,7 @@ pub fn plan(
         forces: Vec::new(),
         torque_map,
         failure: None,
+        fails_at_rest: false,
     };
     if !reachable {
         let mu = skill.friction.mu * (1.0 - params.friction_margin);
@@ -490,6 +535,15 @@ pub fn plan(
                  finger pushing {:.1}° off its normal (the planned cone allows {cone:.1}°), an \
                  approach that touches the object, or no force closure",
                 align.clamp(-1.0, 1.0).acos().to_degrees()
+            ),
+        };
+        let why = match named_refused {
+            None => why,
+            Some(align) => format!(
+                "{why}; the fingers named like the skill's contacts reach them, but one pushes \
+                 {:.1}° off its contact normal, outside even the friction cone ({:.1}°)",
+                align.clamp(-1.0, 1.0).acos().to_degrees(),
+                skill.friction.mu.atan().to_degrees()
             ),
         };
         plan.failure = Some((FailureReason::Unreachable, why));
@@ -595,6 +649,7 @@ fn plan_forces(plan: &mut Plan, skill: &SkillSpec, params: &ReplayParams) {
     // Static load first, without torque limits: can the contacts carry it at all?
     let static_load = load_at(skill, tl.grasp_start, &g);
     if let Err(e) = cones_only.solve_into(&static_load, &mut dist) {
+        plan.fails_at_rest = true;
         let reason = match e.kind {
             InfeasibleKind::NoDistribution
             | InfeasibleKind::Solver
@@ -617,6 +672,7 @@ fn plan_forces(plan: &mut Plan, skill: &SkillSpec, params: &ReplayParams) {
         let solved = match with_limits.solve_into(&load, &mut dist) {
             Ok(_) => true,
             Err(e) => {
+                plan.fails_at_rest |= t == tl.grasp_start;
                 if plan.failure.is_none() {
                     plan.failure = Some((
                         FailureReason::TorqueLimit,
@@ -783,8 +839,19 @@ fn plan_candidates(
             } else {
                 let mean = lateral.iter().map(|l| l.1).sum::<Real>() / lateral.len().max(1) as Real;
                 for &(k, u) in &lateral {
-                    let off = (u - mean).clamp(-0.8 * half_width, 0.8 * half_width);
-                    targets.push((k, target_of(k, other_c + lat_w * off)));
+                    // Spread over the opposing side's own face: a box's edge has the next
+                    // face's normal, square to the thumb's, and only friction opposes the
+                    // thumb there.
+                    let dir = if u >= mean { lat_w } else { -lat_w };
+                    let room = face_extent(
+                        &skill.shape,
+                        &other_c,
+                        &dir,
+                        0.8 * half_width,
+                        hand.fingertips[k].radius,
+                    );
+                    let off = (u - mean).abs().min(room);
+                    targets.push((k, target_of(k, other_c + dir * off)));
                 }
             }
         }
@@ -892,8 +959,18 @@ fn plan_candidates(
         // Every tip placed: reaching is enough (the force check follows); a curled grasp must
         // also hold.
         // A finger that cannot push along its contact normal within the planned friction cone
-        // only slides over the surface (`pushes`).
-        let ok = error <= params.reach_tolerance && (placed_all || (closure && pushes));
+        // only slides over the surface (`pushes`). The demonstrator's own contacts on the
+        // fingers of their names held in the recording, so there the real cone will do; but a
+        // finger pushing outside even that cannot hold its contact whatever the forces (a
+        // one-DOF finger meeting a box's face at a slant: its push turns the box, the thumb
+        // saturates, the box falls).
+        let pushes_at_all = align_min >= 1.0 / (1.0 + skill.friction.mu.powi(2)).sqrt();
+        let ok = error <= params.reach_tolerance
+            && match keys {
+                Keys::All => true,
+                Keys::Named => pushes_at_all,
+                Keys::Nearest(_) => closure && pushes,
+            };
         let reach_penalty = if ok { 0.0 } else { 10.0 };
         let score = -reach_penalty - 20.0 * error + align_min + 2.0 * eps - 0.3 * approach.z;
         out.push(Candidate {
@@ -1135,6 +1212,33 @@ mod tests {
         assert!((a - Vector::x()).norm() < 1e-9, "{a}");
         assert!((o - Vector::new(0.025, 0.0, 0.0)).norm() < 1e-9, "{o}");
         assert!((t + o).norm() < 1e-9, "{t}");
+    }
+
+    #[test]
+    fn a_spread_stays_a_margin_inside_a_box_face_and_is_not_cut_short_on_a_sphere() {
+        let shape = Shape::Box {
+            half_extents: [0.025, 0.025, 0.04],
+        };
+        let centre = Vector::new(0.025, 0.0, 0.01);
+        // Along y the +x face ends 25 mm away: 15 mm leaves a 10 mm fingertip on the face.
+        let y = face_extent(&shape, &centre, &Vector::y(), 0.05, 0.01);
+        assert!((y - 0.015).abs() <= 5e-4, "{y}");
+        let down = face_extent(&shape, &centre, &-Vector::z(), 0.05, 0.01);
+        assert!((down - 0.04).abs() <= 5e-4, "{down}");
+        // Diagonally, the nearer edge counts.
+        let d = Vector::new(0.0, 1.0, 1.0).normalize();
+        let diag = face_extent(&shape, &centre, &d, 0.05, 0.01);
+        assert!((diag * d.y - 0.015).abs() <= 5e-4, "{diag}");
+        // A sphere curves but has no edge: the limit.
+        let sphere = Shape::Sphere { radius: 0.04 };
+        let s = face_extent(
+            &sphere,
+            &Vector::new(0.04, 0.0, 0.0),
+            &Vector::y(),
+            0.032,
+            0.012,
+        );
+        assert_eq!(s, 0.032);
     }
 
     #[test]

@@ -521,8 +521,9 @@ impl Replay {
     }
 }
 
-/// A report for a plan that cannot be simulated (unreachable contacts): nothing ran.
-fn unreachable_report(plan: &Plan) -> ReplayReport {
+/// A report for a plan that is not simulated (unreachable contacts, or contacts that cannot
+/// carry the object at rest, [`Plan::fails_at_rest`]): nothing ran.
+fn refused_report(plan: &Plan) -> ReplayReport {
     let (reason, detail) = plan
         .failure
         .clone()
@@ -571,8 +572,8 @@ pub fn run_with(
     mut on_tick: impl FnMut(&ReplayTick<'_>),
 ) -> Result<ReplayReport> {
     let plan = plan(hand, thumb, skill, params)?;
-    if matches!(plan.failure, Some((FailureReason::Unreachable, _))) {
-        return Ok(unreachable_report(&plan));
+    if plan.fails_at_rest || matches!(plan.failure, Some((FailureReason::Unreachable, _))) {
+        return Ok(refused_report(&plan));
     }
     let mut replay = Replay::from_plan(plan, skill, params)?;
     while replay.step()? {
