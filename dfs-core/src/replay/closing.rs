@@ -12,7 +12,8 @@
 //!    together from one end of their range to the other; a finger with more DOFs holds its
 //!    first one at a few preset values and sweeps the others. Each sample keeps the tip centre
 //!    and the directions the finger can push in ([`crate::operator::push_alignment`]'s basis).
-//! 2. **Object positions** (hand frame). Where a finger pushes exactly along the normal, the
+//! 2. **Object positions** (hand frame), with the object in a given orientation there. Where a
+//!    finger pushes exactly along the normal, the
 //!    object's centre lies on the finger's motion line, the object's depth ahead of the tip:
 //!    one candidate per sample of every finger but the thumb, and the midpoints of two
 //!    fingers' candidates (a pair side by side, both slightly off their lines). For each
@@ -25,13 +26,19 @@
 //!    no forces in the cones balance). Candidates are scored by the worst alignment of a
 //!    finger's push with its normal (cosine of the angle) minus δ, plus a little per finger
 //!    taking part; the best few are refined by a pattern search over the position.
-//! 3. **Base pose** (world). As for the other grasps, the grasp's own axis (thumb contact to
-//!    the centroid of the others) is aligned with the skill's and rolls about it are tried
-//!    (the palm not from below the table); in each, the fingers close onto the object at its
-//!    start pose in the world, and the grasp counts only when every finger taking part still
-//!    pushes within the cone, δ < sin α, no fingertip or the base is below the table, the open
-//!    fingers clear the object and the approach (the preshaped hand moving in along the
-//!    approach direction) touches nothing. The best that counts must also be a force closure
+//! 3. **Base pose** (world). A sphere looks the same from every side: its hand-frame grasps
+//!    are found once, and as for the other grasps the grasp's own axis (thumb contact to the
+//!    centroid of the others) is aligned with the skill's and rolls about it are tried (the
+//!    palm not from below the table). Any other shape is not: the rolls come first (the hand's
+//!    own axis, thumb tip to the other fingertips at mid-range angles, along the skill's), and
+//!    each roll's hand-frame grasps are found with the object in the orientation that roll
+//!    gives it in the hand (a box probed along the hand's own axes and then turned with the
+//!    hand met the fingers at other angles than probed: Inspire found no grasp of a box or a
+//!    cylinder, glove10 none of its own cylinder). In each, the fingers close onto the object
+//!    at its start pose in the world, and the grasp counts only when every finger taking part
+//!    still pushes within the cone, δ < sin α, no fingertip or the base is below the table,
+//!    the open fingers clear the object and the approach (the preshaped hand moving in along
+//!    the approach direction) touches nothing. The best that counts must also be a force closure
 //!    inside the planned cones (Ferrari-Canny ε > 1e-3 with μ (1 − margin): one hull, more only
 //!    when it fails).
 //!
@@ -46,7 +53,7 @@ use super::{ReplayParams, SkillSpec};
 use crate::contact::ContactFrame;
 use crate::grasp::quality::{grasp_quality, QualityParams};
 use crate::hand::{HandModel, Kinematics, MAX_DOF, MAX_TIPS};
-use crate::math::{Isometry, Point, Real, Vector};
+use crate::math::{Isometry, Point, Real, Rotation, Vector};
 use crate::object::Shape;
 use crate::operator::{push_alignment, push_basis, with_free_base};
 
@@ -115,10 +122,11 @@ struct HandGrasp {
     open: [Option<(usize, Real)>; MAX_TIPS],
 }
 
-/// The object in the hand frame: shape and centre (B aligned with the hand frame; exact for a
-/// sphere, a first guess for other shapes, which the world stage checks at the real pose).
+/// The object in the hand frame: shape, orientation and centre.
 struct Probe<'a> {
     shape: &'a Shape,
+    /// Rotation of B in the hand frame.
+    orient: Rotation,
     paths: &'a [Path],
     radius: &'a [Real],
     thumb: usize,
@@ -130,7 +138,10 @@ struct Probe<'a> {
 
 impl Probe<'_> {
     fn gap(&self, centre: &Vector, p: &Vector, tip: usize) -> Real {
-        self.shape.closest(&(p - centre)).0 - self.radius[tip]
+        self.shape
+            .closest(&self.orient.inverse_transform_vector(&(p - centre)))
+            .0
+            - self.radius[tip]
     }
 
     /// Path `pi` closing from its open end (the end farther from the surface): that end and
@@ -156,8 +167,10 @@ impl Probe<'_> {
                 let a = prev / (prev - g).max(1e-12);
                 let ip = idx(j - 1);
                 let p = path.p[ip] + (path.p[i] - path.p[ip]) * a;
-                let (_, point, outward) = self.shape.closest(&(p - centre));
-                let normal = -outward;
+                let (_, point_b, outward_b) = self
+                    .shape
+                    .closest(&self.orient.inverse_transform_vector(&(p - centre)));
+                let (point, normal) = (self.orient * point_b, -(self.orient * outward_b));
                 let (b, nb) = &path.basis[if a < 0.5 { ip } else { i }];
                 let align = b
                     .iter()
@@ -344,45 +357,21 @@ fn closing_paths(hand: &HandModel, q_rest: &[Real]) -> Vec<Path> {
     out
 }
 
-/// Candidate base poses for a grasp planned from the hand's closing motion (module
-/// documentation). Empty when the hand has no such grasp of the object.
-pub(super) fn closing_candidates(
-    hand: &HandModel,
-    thumb: usize,
-    skill: &SkillSpec,
-    params: &ReplayParams,
-) -> Vec<Candidate> {
-    let nt = hand.fingertips.len();
-    let n_hand = hand.dof();
-    let q_rest = mid_angles(hand);
-    let paths = closing_paths(hand, &q_rest);
-    let tips: Vec<usize> = (0..nt)
-        .filter(|&k| paths.iter().any(|p| p.tip == k))
-        .collect();
-    if !tips.contains(&thumb) {
-        return Vec::new();
-    }
-    let radius: Vec<Real> = hand.fingertips.iter().map(|t| t.radius).collect();
-    let mu = skill.friction.mu * (1.0 - params.friction_margin);
-    let probe = Probe {
-        shape: &skill.shape,
-        paths: &paths,
-        radius: &radius,
-        thumb,
-        tips: &tips,
-        need: 1.0 / (1.0 + mu * mu).sqrt(),
-        need_sin: mu / (1.0 + mu * mu).sqrt(),
-    };
-    // Object centres on the fingers' motion lines, the object's depth ahead of the tip.
+/// The hand-frame grasps of the object as `probe` holds it: object centres on the fingers'
+/// motion lines, the object's depth ahead of the tip, and midway between two fingers' such
+/// centres; the best few distinct ones refined, those whose normals can balance inside the
+/// planned cones kept (at most [`KEEP`]).
+fn hand_grasps(probe: &Probe<'_>, paths: &[Path], radius: &[Real]) -> Vec<HandGrasp> {
     let mut heads: Vec<Vec<Vector>> = Vec::new();
-    for path in paths.iter().filter(|p| p.tip != thumb) {
+    for path in paths.iter().filter(|p| p.tip != probe.thumb) {
         let mut h = Vec::with_capacity(2 * SAMPLES);
         for i in 1..SAMPLES - 1 {
             let Some(m) = (path.p[i + 1] - path.p[i - 1]).try_normalize(1e-9) else {
                 continue;
             };
             for dir in [m, -m] {
-                let depth = surface_along(&skill.shape, &-dir).0.norm();
+                let dir_b = probe.orient.inverse_transform_vector(&-dir);
+                let depth = surface_along(probe.shape, &dir_b).0.norm();
                 h.push(path.p[i] + dir * (radius[path.tip] + depth));
             }
         }
@@ -414,108 +403,177 @@ pub(super) fn closing_candidates(
         }
         kept.push(g);
     }
+    kept
+}
+
+/// Candidate base poses for a grasp planned from the hand's closing motion (module
+/// documentation). Empty when the hand has no such grasp of the object.
+pub(super) fn closing_candidates(
+    hand: &HandModel,
+    thumb: usize,
+    skill: &SkillSpec,
+    params: &ReplayParams,
+) -> Vec<Candidate> {
+    let nt = hand.fingertips.len();
+    let n_hand = hand.dof();
+    let q_rest = mid_angles(hand);
+    let paths = closing_paths(hand, &q_rest);
+    let tips: Vec<usize> = (0..nt)
+        .filter(|&k| paths.iter().any(|p| p.tip == k))
+        .collect();
+    if !tips.contains(&thumb) {
+        return Vec::new();
+    }
+    let radius: Vec<Real> = hand.fingertips.iter().map(|t| t.radius).collect();
+    let mu = skill.friction.mu * (1.0 - params.friction_margin);
+    let need = 1.0 / (1.0 + mu * mu).sqrt();
+    let need_sin = mu / (1.0 + mu * mu).sqrt();
+    let probe_in = |orient: Rotation| Probe {
+        shape: &skill.shape,
+        orient,
+        paths: &paths,
+        radius: &radius,
+        thumb,
+        tips: &tips,
+        need,
+        need_sin,
+    };
     // The skill's grasp axis, from its thumb's side to the other.
     let (_, _, a_s) = grasp_axis(skill);
     let up_perp = perpendicular(&-Vector::z(), &a_s, &Vector::x());
     let side = a_s.cross(&up_perp);
     let start = skill.start_pose();
     let inv_start = start.inverse();
+    // The hand's rotation for a hand-frame grasp (its own grasp axis along the skill's) at
+    // roll `r` about it, with the approach direction; `None` from below the table.
+    let roll = |a_h: &Vector, d_h: &Vector, r: usize| -> Option<(Rotation, Vector)> {
+        let psi = r as Real * std::f64::consts::TAU / ROLLS as Real;
+        let d_w = up_perp * psi.cos() + side * psi.sin();
+        // The palm would come from below the table.
+        (d_w.z <= 0.35).then(|| (align(a_h, d_h, &a_s, &d_w), d_w))
+    };
+    // Each hand-frame grasp with the rotations of the hand tried for it in the world. A
+    // sphere looks the same from every side: its grasps are found once and the hand is
+    // rolled about their own axes. Any other shape is found in the orientation the world
+    // will give it: for each roll of the hand's own grasp axis (thumb to the other
+    // fingertips, at mid-range angles) about the skill's, B in the hand frame is the inverse
+    // of the hand's rotation.
+    let mut trials: Vec<(HandGrasp, Rotation, Vector)> = Vec::new();
+    if matches!(skill.shape, Shape::Sphere { .. }) {
+        for g in hand_grasps(&probe_in(Rotation::identity()), &paths, &radius) {
+            let Some(t_thumb) = g.touches[thumb] else {
+                continue;
+            };
+            let used = (0..nt).filter(|&k| k != thumb && g.touches[k].is_some());
+            let n_used = used.clone().count();
+            let others = used
+                .filter_map(|k| g.touches[k].map(|t| t.point))
+                .sum::<Vector>()
+                / n_used.max(1) as Real;
+            let a_h = (others - t_thumb.point)
+                .try_normalize(1e-9)
+                .unwrap_or_else(Vector::x);
+            let d_h = perpendicular(&g.centre, &a_h, &Vector::z());
+            for r in 0..ROLLS {
+                if let Some((rot, d_w)) = roll(&a_h, &d_h, r) {
+                    trials.push((g.clone(), rot, d_w));
+                }
+            }
+        }
+    } else {
+        let mut kin = Kinematics::default();
+        hand.forward_kinematics(&Isometry::identity(), &q_rest[..n_hand], &mut kin);
+        let p_t = kin.tip_centres[thumb].coords;
+        let others: Vec<usize> = tips.iter().copied().filter(|&k| k != thumb).collect();
+        let p_o = others
+            .iter()
+            .map(|&k| kin.tip_centres[k].coords)
+            .sum::<Vector>()
+            / others.len().max(1) as Real;
+        let a_h = (p_o - p_t).try_normalize(1e-9).unwrap_or_else(Vector::x);
+        let d_h = perpendicular(&(0.5 * (p_t + p_o)), &a_h, &Vector::z());
+        for r in 0..ROLLS {
+            let Some((rot, d_w)) = roll(&a_h, &d_h, r) else {
+                continue;
+            };
+            let orient = rot.inverse() * start.rotation;
+            for g in hand_grasps(&probe_in(orient), &paths, &radius) {
+                trials.push((g, rot, d_w));
+            }
+        }
+    }
     let mut kin = Kinematics::default();
     let mut out = Vec::new();
     let mut frames: Vec<Vec<ContactFrame>> = Vec::new();
-    for g in &kept {
+    for &(ref g, rot, d_w) in &trials {
         let used: Vec<usize> = (0..nt).filter(|&k| g.touches[k].is_some()).collect();
-        let Some(t_thumb) = g.touches[thumb] else {
-            continue;
-        };
-        let others = used
-            .iter()
-            .filter(|&&k| k != thumb)
-            .filter_map(|&k| g.touches[k].map(|t| t.point))
-            .sum::<Vector>()
-            / (used.len() - 1).max(1) as Real;
-        let a_h = (others - t_thumb.point)
-            .try_normalize(1e-9)
-            .unwrap_or_else(Vector::x);
-        let d_h = perpendicular(&g.centre, &a_h, &Vector::z());
-        for r in 0..ROLLS {
-            let psi = r as Real * std::f64::consts::TAU / ROLLS as Real;
-            let d_w = up_perp * psi.cos() + side * psi.sin();
-            if d_w.z > 0.35 {
-                continue; // the palm would come from below the table
+        let free = with_free_base(hand, rot);
+        let n = free.dof();
+        let base = start.translation.vector - rot * g.centre;
+        let mut q = [0.0; MAX_DOF];
+        q[..3].copy_from_slice(base.as_slice());
+        q[3..n].copy_from_slice(&q_rest[..n_hand]);
+        let mut active = [false; MAX_TIPS];
+        for k in 0..nt {
+            if let Some(t) = g.touches[k] {
+                paths[t.path].set(hand, t.s, 3, &mut q);
+                active[k] = true;
+            } else if let Some((pi, end)) = g.open[k] {
+                paths[pi].set(hand, end, 3, &mut q);
             }
-            let rot = align(&a_h, &d_h, &a_s, &d_w);
-            let free = with_free_base(hand, rot);
-            let n = free.dof();
-            let base = start.translation.vector - rot * g.centre;
-            let mut q = [0.0; MAX_DOF];
-            q[..3].copy_from_slice(base.as_slice());
-            q[3..n].copy_from_slice(&q_rest[..n_hand]);
-            let mut active = [false; MAX_TIPS];
-            for k in 0..nt {
-                if let Some(t) = g.touches[k] {
-                    paths[t.path].set(hand, t.s, 3, &mut q);
-                    active[k] = true;
-                } else if let Some((pi, end)) = g.open[k] {
-                    paths[pi].set(hand, end, 3, &mut q);
-                }
-            }
-            // Close the fingers taking part onto the object where it really lies.
-            for &k in &used {
-                let path = &paths[g.touches[k].map_or(0, |t| t.path)];
-                let dofs: Vec<usize> = path.swept.iter().map(|&d| d + 3).collect();
-                active[k] = curl_onto(&free, skill, &inv_start, k, &dofs, &mut kin, &mut q[..n]);
-            }
-            free.forward_kinematics(&Isometry::identity(), &q[..n], &mut kin);
-            free.tip_jacobians(&mut kin);
-            let gap = |p: &Point, k: usize| -> Real {
-                skill.shape.closest(&(inv_start * p).coords).0 - radius[k]
-            };
-            let mut ok = active[thumb] && active.iter().filter(|&&a| a).count() >= 2;
-            ok &= q[2] >= 0.0;
-            let mut worst: Real = 1.0;
-            let mut error: Real = 0.0;
-            let mut contacts = Vec::with_capacity(nt);
-            let mut normals = [Vector::zeros(); MAX_TIPS];
-            for k in 0..nt {
-                let c = kin.tip_centres[k];
-                ok &= c.z >= radius[k] - 0.002;
-                if active[k] {
-                    let c_b = (inv_start * c).coords;
-                    let (p, n_in) = on_surface(skill, &c_b);
-                    let n_world = start.rotation * n_in;
-                    normals[contacts.len()] = n_in;
-                    contacts.push(ContactFrame::from_normal(p, n_in));
-                    worst = worst.min(push_alignment(&free, &kin, k, &n_world));
-                    error = error.max(gap(&c, k).abs());
-                    // The preshaped tip moving in along the approach touches nothing.
-                    let pre =
-                        start * Point::from(p - n_in * (radius[k] + params.preshape_clearance));
-                    ok &=
-                        (1..=8).all(|i| gap(&(pre - d_w * (APPROACH * i as Real / 8.0)), k) > 0.0);
-                } else {
-                    ok &= gap(&c, k) >= CLEARANCE;
-                    ok &= (1..=8).all(|i| gap(&(c - d_w * (APPROACH * i as Real / 8.0)), k) > 0.0);
-                }
-            }
-            ok &= worst >= probe.need && error <= params.reach_tolerance;
-            let delta = hull_distance(&normals[..contacts.len()]);
-            ok &= delta < probe.need_sin;
-            let score = if ok { 0.0 } else { -10.0 } + worst - delta
-                + 0.02 * contacts.len() as Real
-                - 0.3 * d_w.z;
-            out.push(Candidate {
-                score,
-                error,
-                ok,
-                align: worst,
-                rotation: rot,
-                approach: d_w,
-                q_free: q,
-                active,
-            });
-            frames.push(contacts);
         }
+        // Close the fingers taking part onto the object where it really lies.
+        for &k in &used {
+            let path = &paths[g.touches[k].map_or(0, |t| t.path)];
+            let dofs: Vec<usize> = path.swept.iter().map(|&d| d + 3).collect();
+            active[k] = curl_onto(&free, skill, &inv_start, k, &dofs, &mut kin, &mut q[..n]);
+        }
+        free.forward_kinematics(&Isometry::identity(), &q[..n], &mut kin);
+        free.tip_jacobians(&mut kin);
+        let gap = |p: &Point, k: usize| -> Real {
+            skill.shape.closest(&(inv_start * p).coords).0 - radius[k]
+        };
+        let mut ok = active[thumb] && active.iter().filter(|&&a| a).count() >= 2;
+        ok &= q[2] >= 0.0;
+        let mut worst: Real = 1.0;
+        let mut error: Real = 0.0;
+        let mut contacts = Vec::with_capacity(nt);
+        let mut normals = [Vector::zeros(); MAX_TIPS];
+        for k in 0..nt {
+            let c = kin.tip_centres[k];
+            ok &= c.z >= radius[k] - 0.002;
+            if active[k] {
+                let c_b = (inv_start * c).coords;
+                let (p, n_in) = on_surface(skill, &c_b);
+                let n_world = start.rotation * n_in;
+                normals[contacts.len()] = n_in;
+                contacts.push(ContactFrame::from_normal(p, n_in));
+                worst = worst.min(push_alignment(&free, &kin, k, &n_world));
+                error = error.max(gap(&c, k).abs());
+                // The preshaped tip moving in along the approach touches nothing.
+                let pre = start * Point::from(p - n_in * (radius[k] + params.preshape_clearance));
+                ok &= (1..=8).all(|i| gap(&(pre - d_w * (APPROACH * i as Real / 8.0)), k) > 0.0);
+            } else {
+                ok &= gap(&c, k) >= CLEARANCE;
+                ok &= (1..=8).all(|i| gap(&(c - d_w * (APPROACH * i as Real / 8.0)), k) > 0.0);
+            }
+        }
+        ok &= worst >= need && error <= params.reach_tolerance;
+        let delta = hull_distance(&normals[..contacts.len()]);
+        ok &= delta < need_sin;
+        let score = if ok { 0.0 } else { -10.0 } + worst - delta + 0.02 * contacts.len() as Real
+            - 0.3 * d_w.z;
+        out.push(Candidate {
+            score,
+            error,
+            ok,
+            align: worst,
+            rotation: rot,
+            approach: d_w,
+            q_free: q,
+            active,
+        });
+        frames.push(contacts);
     }
     // The best that is a force closure inside the planned cones (μ with the margin, as the
     // forces are planned): one hull for the chosen grasp, more only when it fails.

@@ -81,7 +81,7 @@ pub(super) struct Candidate {
 
 /// Which fingertips the base pose and inverse kinematics place on targets.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
-enum Keys {
+pub(super) enum Keys {
     /// Every fingertip on its own contact.
     All,
     /// The thumb and this many opposing fingertips (those nearest the thumb); every other
@@ -729,7 +729,7 @@ pub(super) fn grasp_axis(skill: &SkillSpec) -> (Vector, Vector, Vector) {
     (thumb_c, other_c, a_s)
 }
 
-fn plan_candidates(
+pub(super) fn plan_candidates(
     hand: &HandModel,
     thumb: usize,
     skill: &SkillSpec,
