@@ -37,6 +37,13 @@ fn replay(hand: &LoadedHand, skill: &SkillSpec) -> ReplayReport {
     .unwrap()
 }
 
+/// A failed replay with `reason`, refused by the plan: nothing was simulated.
+fn assert_refused_up_front(r: &ReplayReport, reason: FailureReason) {
+    assert!(!r.success);
+    assert_eq!(r.failure_reason, Some(reason), "{}", r.detail);
+    assert_eq!(r.ticks, 0);
+}
+
 #[test]
 fn a_sphere_lift_recorded_with_glove10_replays_on_allegro_barrett_inspire_and_the_gripper() {
     let skill = recorded_skill("sphere-lift");
@@ -125,19 +132,12 @@ fn a_box_pinch_lift_on_inspire_fails_up_front_as_unreachable_rather_than_droppin
     // with the thumb at 1.5 times its torque limit; the plan now refuses it, and nothing runs.
     let skill = recorded_skill("box-pinch-lift");
     let r = replay(&load_builtin_hand("inspire").unwrap(), &skill);
-    assert!(!r.success);
-    assert_eq!(
-        r.failure_reason,
-        Some(FailureReason::Unreachable),
-        "{}",
-        r.detail
-    );
+    assert_refused_up_front(&r, FailureReason::Unreachable);
     assert!(
         r.detail.contains("outside even the friction cone"),
         "{}",
         r.detail
     );
-    assert_eq!(r.ticks, 0);
 }
 
 #[test]
@@ -159,30 +159,16 @@ fn a_hand_too_small_to_reach_the_object_fails_with_unreachable() {
     let urdf = dfs_core::hand::builtin::GRIPPER_URDF.replace("upper=\"0.055\"", "upper=\"0.015\"");
     let spec = serde_json::to_string(&dfs_core::hand::builtin_spec("gripper").unwrap().0).unwrap();
     let small = load_hand_from_texts(&spec, &urdf, "small gripper").unwrap();
-    let r = replay(&small, &skill);
-    assert!(!r.success);
-    assert_eq!(
-        r.failure_reason,
-        Some(FailureReason::Unreachable),
-        "{}",
-        r.detail
-    );
+    assert_refused_up_front(&replay(&small, &skill), FailureReason::Unreachable);
 }
 
 #[test]
 fn a_sphere_heavier_than_the_torque_limits_allow_fails_with_torque_limit() {
     let mut skill = recorded_skill("sphere-lift");
     skill.mass *= 20.0; // 6 kg on 0.7 N·m joints
+                        // Not even at rest: refused before it runs, not simulated dropping the sphere.
     let r = replay(&load_builtin_hand("allegro").unwrap(), &skill);
-    assert!(!r.success);
-    assert_eq!(
-        r.failure_reason,
-        Some(FailureReason::TorqueLimit),
-        "{}",
-        r.detail
-    );
-    // Not even at rest: refused before it runs, not simulated dropping the sphere.
-    assert_eq!(r.ticks, 0);
+    assert_refused_up_front(&r, FailureReason::TorqueLimit);
 }
 
 #[test]

@@ -553,16 +553,22 @@ mod tests {
         assert!(down.abs() < 1e-9, "{down}");
     }
 
+    /// `skill` replayed on the built-in hand `name` with the default parameters.
+    fn replay_on(name: &str, skill: &SkillSpec) -> ReplayReport {
+        let hand = builtin_hand(name).unwrap();
+        run(&hand, thumb_of(&hand), skill, &ReplayParams::default()).unwrap()
+    }
+
+    /// A failed replay with `reason`, refused by the plan: nothing was simulated.
+    fn assert_refused_up_front(r: &ReplayReport, reason: FailureReason) {
+        assert!(!r.success);
+        assert_eq!(r.failure_reason, Some(reason), "{}", r.detail);
+        assert_eq!(r.ticks, 0);
+    }
+
     #[test]
     fn a_box_pinch_replays_on_the_gripper_and_lifts_the_box() {
-        let hand = builtin_hand("gripper").unwrap();
-        let r = run(
-            &hand,
-            thumb_of(&hand),
-            &box_pinch(0.2),
-            &ReplayParams::default(),
-        )
-        .unwrap();
+        let r = replay_on("gripper", &box_pinch(0.2));
         assert!(r.success, "{:?}: {}", r.failure_reason, r.detail);
         assert!(r.lift_height_m > 0.06, "{}", r.lift_height_m);
         assert!(r.position_error_max_m < 0.02);
@@ -572,43 +578,22 @@ mod tests {
 
     #[test]
     fn a_box_too_heavy_for_the_torque_limits_fails_with_torque_limit() {
-        let hand = builtin_hand("gripper").unwrap();
-        let r = run(
-            &hand,
-            thumb_of(&hand),
-            &box_pinch(8.0),
-            &ReplayParams::default(),
-        )
-        .unwrap();
-        assert!(!r.success);
-        assert_eq!(
-            r.failure_reason,
-            Some(FailureReason::TorqueLimit),
-            "{}",
-            r.detail
-        );
         // Not even at rest: refused up front, nothing simulated.
-        assert_eq!(r.ticks, 0);
+        assert_refused_up_front(
+            &replay_on("gripper", &box_pinch(8.0)),
+            FailureReason::TorqueLimit,
+        );
     }
 
     #[test]
     fn a_box_wider_than_the_gripper_opens_fails_with_unreachable() {
-        let hand = builtin_hand("gripper").unwrap();
         let mut skill = box_pinch(0.2);
         skill.shape = Shape::Box {
             half_extents: [0.09, 0.05, 0.04],
         };
         skill.contacts[0].position_b.x = -0.09;
         skill.contacts[1].position_b.x = 0.09;
-        let r = run(&hand, thumb_of(&hand), &skill, &ReplayParams::default()).unwrap();
-        assert!(!r.success);
-        assert_eq!(
-            r.failure_reason,
-            Some(FailureReason::Unreachable),
-            "{}",
-            r.detail
-        );
-        assert_eq!(r.ticks, 0);
+        assert_refused_up_front(&replay_on("gripper", &skill), FailureReason::Unreachable);
     }
 
     /// Inspire's thumb and index carry the names of a thumb-index pinch's contacts, but its
@@ -616,22 +601,10 @@ mod tests {
     /// out of the grasp, so the plan is refused before anything runs.
     #[test]
     fn a_named_grasp_whose_finger_pushes_outside_the_friction_cone_is_unreachable() {
-        let hand = builtin_hand("inspire").unwrap();
-        let r = run(
-            &hand,
-            thumb_of(&hand),
-            &box_pinch(0.2),
-            &ReplayParams::default(),
-        )
-        .unwrap();
-        assert!(!r.success);
-        assert_eq!(
-            r.failure_reason,
-            Some(FailureReason::Unreachable),
-            "{}",
-            r.detail
+        assert_refused_up_front(
+            &replay_on("inspire", &box_pinch(0.2)),
+            FailureReason::Unreachable,
         );
-        assert_eq!(r.ticks, 0);
     }
 
     /// glove10's own three-finger cylinder grasp (contacts of a `cylinder-power-grasp`
@@ -673,14 +646,7 @@ mod tests {
     /// but its closing motion, searched with the cylinder as the hand will meet it, holds it.
     #[test]
     fn glove10_replays_its_own_three_finger_cylinder_grasp() {
-        let hand = builtin_hand("glove10").unwrap();
-        let r = run(
-            &hand,
-            thumb_of(&hand),
-            &glove10_cylinder_skill(),
-            &ReplayParams::default(),
-        )
-        .unwrap();
+        let r = replay_on("glove10", &glove10_cylinder_skill());
         assert!(r.success, "{:?}: {}", r.failure_reason, r.detail);
         assert!(r.lift_height_m > 0.06, "{}", r.lift_height_m);
     }
