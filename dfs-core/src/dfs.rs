@@ -325,6 +325,24 @@ fn finger_step_envelope(
     (order, first)
 }
 
+/// The first part of an object update that is not finite, if any.
+fn not_finite(state: &ObjectState, f_ext: &Wrench) -> Option<&'static str> {
+    let finite = |v: &[Real]| v.iter().all(|x| x.is_finite());
+    if !finite(f_ext.as_slice()) {
+        Some("wrench")
+    } else if !(finite(state.pose.translation.vector.as_slice())
+        && finite(state.pose.rotation.coords.as_slice()))
+    {
+        Some("pose")
+    } else if !(finite(state.linear_velocity.as_slice())
+        && finite(state.angular_velocity_b.as_slice()))
+    {
+        Some("velocity")
+    } else {
+        None
+    }
+}
+
 /// The DOFs moving one fingertip, ascending (fixed capacity).
 #[derive(Debug, Clone, Copy)]
 struct TipDofs {
@@ -450,12 +468,22 @@ impl Dfs {
         self.out.object = state;
     }
 
-    /// One DFS tick. On an error (bad sample) nothing changes and no output is produced.
+    /// One DFS tick. On an error (bad sample) nothing changes and no output is produced. A
+    /// tick whose object update is not finite (the explicit step diverged) is refused with
+    /// [`DfsError::Diverged`]; the object keeps its last finite state, so no output ever
+    /// holds a NaN.
     pub fn step(&mut self, sample: &GloveSample<'_>) -> Result<&TickOutput> {
         self.stage_glove(sample)?;
         self.stage_contacts();
         self.stage_forces(sample.tau);
+        let before = self.state;
         self.stage_object();
+        if let Some(what) = not_finite(&self.state, &self.out.f_ext_b) {
+            self.state = before;
+            self.out.object = before;
+            self.out.f_ext_b = Wrench::zeros();
+            return Err(DfsError::Diverged { what });
+        }
         self.stage_feedback(sample.tau);
         Ok(&self.out)
     }
@@ -971,6 +999,29 @@ mod tests {
             })
             .is_err());
         assert!(all_finite(dfs.output()));
+    }
+
+    #[test]
+    fn a_diverging_object_update_is_refused_and_no_output_holds_a_nan() {
+        let (mut dfs, q, tau, base) = glove10_holding_paper_sphere().unwrap();
+        // An angular velocity whose gyroscopic term overflows: the update is not finite.
+        let mut s = *dfs.object_state();
+        s.angular_velocity_b = Vector::new(1e200, -1e200, 1e200);
+        dfs.set_object_state(s);
+        let sample = GloveSample {
+            q: &q,
+            tau: &tau,
+            base,
+        };
+        let err = dfs.step(&sample).unwrap_err();
+        assert!(matches!(err, DfsError::Diverged { .. }), "{err}");
+        assert!(err.to_string().contains("diverged"), "{err}");
+        assert_eq!(*dfs.object_state(), s, "the last finite state is kept");
+        assert!(all_finite(dfs.output()));
+        // A sane state afterwards ticks normally again.
+        let (fresh, ..) = glove10_holding_paper_sphere().unwrap();
+        dfs.set_object_state(*fresh.object_state());
+        assert!(dfs.step(&sample).is_ok());
     }
 
     #[test]

@@ -40,6 +40,17 @@ pub enum DfsError {
         /// Number expected.
         expected: usize,
     },
+    /// The simulation became unstable: the object's state would no longer be finite. The
+    /// tick is refused and the object keeps its last finite state.
+    #[error(
+        "the simulation diverged: the object's {what} is no longer finite (the DFS steps the \
+         object explicitly at its tick; a very light or thin object against the contact springs \
+         is outside its stable range)"
+    )]
+    Diverged {
+        /// What went non-finite (for example "pose").
+        what: &'static str,
+    },
     /// A model or parameter is invalid; the message names the field.
     #[error("invalid {field}: {reason}")]
     Invalid {

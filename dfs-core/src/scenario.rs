@@ -142,7 +142,31 @@ impl ScenarioObject {
     pub fn to_object(&self) -> Result<RigidObject> {
         self.spec().to_object()
     }
+
+    /// The rigid object, validated for the closed loop: as [`to_object`](Self::to_object),
+    /// and at least [`MIN_SIMULATED_MASS`].
+    pub fn to_simulated_object(&self) -> Result<RigidObject> {
+        let object = self.to_object()?;
+        if self.mass < MIN_SIMULATED_MASS {
+            return Err(DfsError::invalid(
+                "object.mass",
+                format!(
+                    "must be at least {MIN_SIMULATED_MASS} kg for the closed loop, got {}: the DFS \
+                     steps the object explicitly at 1 kHz against its contact springs, and \
+                     lighter objects are not stable there (1 g diverges)",
+                    self.mass
+                ),
+            ));
+        }
+        Ok(object)
+    }
 }
+
+/// The lightest object (kg) a scenario or an imported glove recording may hold: the DFS steps
+/// the object explicitly at 1 ms against 3 kN/m contact springs; a 1 g box diverges at
+/// lift-off, 2 g does not, and 5 g keeps a margin of 2.5 in mass. A thin object above it may
+/// still diverge: the tick then refuses with [`DfsError::Diverged`].
+pub const MIN_SIMULATED_MASS: Real = 0.005;
 
 /// One task of the script.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -217,7 +241,7 @@ impl Scenario {
     /// Validates the scenario and resolves its tasks; every error names the field.
     pub fn resolve(&self) -> Result<(RigidObject, Vec<ResolvedTask>)> {
         let o = &self.object;
-        let object = o.to_object()?;
+        let object = o.to_simulated_object()?;
         check(
             "object.mu".into(),
             o.mu.is_finite() && o.mu >= 0.0,
@@ -469,6 +493,12 @@ mod tests {
         let mut s = Scenario::builtin("sphere-lift", 0).unwrap();
         s.object.mass = -1.0;
         assert!(s.resolve().unwrap_err().to_string().contains("object.mass"));
+        // Too light for the explicit object step (1 g diverged at lift-off): refused up front.
+        s.object.mass = 0.001;
+        let e = s.resolve().unwrap_err().to_string();
+        assert!(e.contains("object.mass") && e.contains("0.005"), "{e}");
+        s.object.mass = MIN_SIMULATED_MASS;
+        assert!(s.resolve().is_ok());
         let mut s = Scenario::builtin("sphere-lift", 0).unwrap();
         s.object.mu = -0.2;
         assert!(s.resolve().unwrap_err().to_string().contains("object.mu"));

@@ -220,6 +220,18 @@ async fn bad_simulation_requests_are_400_or_422_naming_the_field() {
         .await
         .problem(422);
     assert!(d.contains("mass"), "{d}");
+    // A 1 g box made the explicit object step diverge at lift-off and the server answered 500:
+    // it is refused up front now, naming the field and the bound.
+    let d = c
+        .post_json(
+            "/api/v1/simulations",
+            &json!({"scenario": {"name": "x", "object": {"shape": "box", "mass": 0.001, "mu": 0.8,
+                "half_extents": [0.025, 0.025, 0.04]}, "tasks": [{"phase": "grasp", "duration": 1}]}}),
+            None,
+        )
+        .await
+        .problem(422);
+    assert!(d.contains("object.mass") && d.contains("0.005"), "{d}");
     let d = c
         .post_json(
             "/api/v1/simulations",
