@@ -80,7 +80,10 @@ pub enum RecordingError {
     },
 
     /// A topic is present but its schema is not the one expected.
-    #[error("topic {topic:?} has schema {found:?}, expected {expected:?}")]
+    #[error(
+        "topic {topic:?} has {}, expected schema {expected:?}",
+        .found.as_ref().map_or("no schema".to_owned(), |f| format!("schema {f:?}"))
+    )]
     UnknownSchema {
         /// The topic.
         topic: String,

@@ -178,6 +178,31 @@ enum Decoded {
     Object(Vec<(u64, messages::ObjectState)>),
 }
 
+/// The `session` metadata's `object` (when there is one, not empty) must describe a real object: a known
+/// shape with positive finite sizes and mass, μ and torsional μ finite and ≥ 0. Skills carry
+/// it into the store's filters and onto robot hands, so an impossible one is refused here, at
+/// the boundary, naming the field.
+fn check_session_object(metadata: &BTreeMap<String, String>, name: &str) -> Result<()> {
+    let Some(text) = metadata.get("object").filter(|t| !t.trim().is_empty()) else {
+        return Ok(());
+    };
+    let invalid = |detail: String| RecordingError::InvalidInput {
+        location: format!("{name}: metadata session.object"),
+        detail,
+    };
+    let o: dfs_core::scenario::ScenarioObject =
+        serde_json::from_str(text).map_err(|e| invalid(e.to_string()))?;
+    o.to_object().map_err(|e| invalid(e.to_string()))?;
+    for (field, v) in [("mu", o.mu), ("mu_torsion", o.mu_torsion)] {
+        if !(v.is_finite() && v >= 0.0) {
+            return Err(invalid(format!(
+                "invalid object.{field}: must be a finite number ≥ 0, got {v}"
+            )));
+        }
+    }
+    Ok(())
+}
+
 /// What a job does with its block.
 #[derive(Clone, Copy)]
 enum Job {
@@ -200,6 +225,11 @@ fn from_raw(raw: &RawSession, name: &str, topics: DecodeTopics) -> Result<Sessio
         }
     }
     let metadata = raw.metadata(SESSION_METADATA).cloned().unwrap_or_default();
+    if raw.metadata(REPLAY_METADATA).is_none()
+        && metadata.get("source").is_none_or(|s| s != "replay")
+    {
+        check_session_object(&metadata, name)?;
+    }
     let phases = match raw
         .metadata(GROUND_TRUTH_METADATA)
         .and_then(|m| m.get("phases"))
