@@ -80,7 +80,12 @@ fn to_new_skill(s: &Skill) -> NewSkill {
         mu,
         contact_count: p.contact_count as i64,
         contact_model: p.contact_model.clone(),
-        grasp_type: p.grasp_type.label.clone(),
+        // The label the store's `grasp_type` filter documents: the family and the number of
+        // opposing virtual fingers, e.g. `precision-2vf` (the family alone filters all of them).
+        grasp_type: format!(
+            "{}-{}vf",
+            p.grasp_type.label, p.grasp_type.opposing_virtual_fingers
+        ),
         quality: p.quality.as_ref().map(|q| q.epsilon).unwrap_or(0.0),
         volume: p.quality.as_ref().map(|q| q.volume).unwrap_or(0.0),
         duration_s: end.saturating_sub(start) as f64 * 1e-9,

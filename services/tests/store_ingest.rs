@@ -468,3 +468,37 @@ async fn nearest_returns_the_exact_neighbours_of_a_small_set() {
         Err(StoreError::SkillNotFound(-1))
     ));
 }
+
+#[tokio::test]
+async fn an_ingested_skill_is_labelled_and_found_by_its_whole_grasp_type() {
+    // The store documents labels such as `precision-2vf` and filters by them, but stored only
+    // the family (`precision`): a filter by the whole label never found a real skill.
+    let tmp = tempfile::tempdir().unwrap();
+    let path = tmp.path().join("s.mcap");
+    let scenario = dfs_core::scenario::Scenario::builtin("sphere-lift", 3).unwrap();
+    services::session::record_simulation(&scenario, None, &path, |_, _| {}).unwrap();
+    let bytes = std::fs::read(&path).unwrap();
+    let (meta, skills) = services::ingest::analyse(&bytes, "s.mcap").unwrap();
+    assert_eq!(skills.len(), 1);
+    let label = skills[0].grasp_type.clone();
+    let params = &skills[0].params["grasp_type"];
+    assert_eq!(
+        label,
+        format!(
+            "{}-{}vf",
+            params["label"].as_str().unwrap(),
+            params["opposing_virtual_fingers"]
+        )
+    );
+    let store = Store::open(&tmp.path().join("data")).await.unwrap();
+    let s = store.ingest(&bytes, meta, skills).await.unwrap();
+    for filter in [label.as_str(), label.split('-').next().unwrap()] {
+        let q = services::store::SkillQuery {
+            grasp_type: Some(filter.to_owned()),
+            ..Default::default()
+        };
+        let page = store.query_skills(&q).await.unwrap();
+        let ids: Vec<i64> = page.items.iter().map(|k| k.id).collect();
+        assert_eq!(ids, s.skill_ids, "grasp_type={filter}");
+    }
+}

@@ -46,7 +46,9 @@ pub struct SkillBody {
     pub start_ns: i64,
     /// End of the skill, ns since the session's start.
     pub end_ns: i64,
-    /// Phases in order with their durations: `[name, seconds]` pairs.
+    /// Time spent in each phase: `[name, seconds]` pairs, one per phase name in alphabetical
+    /// order, summed when a phase occurs more than once (the `phase_min_s` / `phase_max_s`
+    /// filters compare these sums). The phases in time order are in the full parameters.
     pub phase_durations: Vec<(String, f64)>,
     /// Feature vector for similarity search (16 values).
     #[schema(min_items = 16, max_items = 16)]

@@ -53,7 +53,8 @@ pub struct NewSkill {
     pub start_ns: i64,
     /// End of the skill in its session, ns since the session's start.
     pub end_ns: i64,
-    /// Phases in order with their durations: (name, seconds).
+    /// Time spent in each phase: (name, seconds), one per phase name in alphabetical order,
+    /// summed when a phase occurs more than once.
     pub phase_durations: Vec<(String, f64)>,
     /// Feature vector for similarity search, exactly [`FEATURE_DIM`] finite values.
     pub feature: Vec<f32>,
@@ -90,7 +91,8 @@ pub struct Skill {
     pub start_ns: i64,
     /// End, ns since the session's start.
     pub end_ns: i64,
-    /// Phases in order with their durations: (name, seconds).
+    /// Time spent in each phase: (name, seconds), one per phase name in alphabetical order,
+    /// summed when a phase occurs more than once.
     pub phase_durations: Vec<(String, f64)>,
     /// Feature vector ([`FEATURE_DIM`] values).
     pub feature: Vec<f32>,
