@@ -88,8 +88,11 @@ pub enum ConfigError {
     /// An empty token.
     #[error("the token is empty")]
     EmptyToken,
-    /// A CORS origin that is not a valid header value.
-    #[error("--cors-origin {0:?} is not a valid origin")]
+    /// A CORS origin that is not an origin (`scheme://host[:port]`, as browsers send it).
+    #[error(
+        "--cors-origin {0:?} is not an origin: expected http:// or https:// followed by a host \
+         and an optional port, with no path (for example http://localhost:5173)"
+    )]
     BadOrigin(String),
     /// A setting out of range.
     #[error("{0}")]
@@ -118,10 +121,20 @@ impl ServeArgs {
                 "--max-body must be at least 1".into(),
             ));
         }
+        if self.max_simulations == 0 {
+            return Err(ConfigError::OutOfRange(
+                "--max-simulations must be at least 1".into(),
+            ));
+        }
         let cors_origins = self
             .cors_origins
             .iter()
-            .map(|o| HeaderValue::from_str(o).map_err(|_| ConfigError::BadOrigin(o.clone())))
+            .map(|o| {
+                is_origin(o)
+                    .then(|| HeaderValue::from_str(o).ok())
+                    .flatten()
+                    .ok_or_else(|| ConfigError::BadOrigin(o.clone()))
+            })
             .collect::<Result<Vec<_>, _>>()?;
         Ok(ServeConfig {
             addr: self.addr,
@@ -130,7 +143,7 @@ impl ServeArgs {
             state: StateConfig {
                 token,
                 max_body: self.max_body,
-                max_simulations: self.max_simulations.max(1),
+                max_simulations: self.max_simulations,
                 cache_capacity: self.cache_skills,
             },
             layers: LayerConfig {
@@ -141,9 +154,84 @@ impl ServeArgs {
     }
 }
 
+/// `scheme://host[:port]` with an http(s) scheme and nothing after the authority: the form of
+/// a browser's `Origin` header, the only thing a CORS allow-list entry can match.
+fn is_origin(o: &str) -> bool {
+    let rest = o
+        .strip_prefix("http://")
+        .or_else(|| o.strip_prefix("https://"));
+    let Some(authority) = rest else {
+        return false;
+    };
+    // An IPv6 literal is bracketed: its colons are not the port's.
+    let (host, after) = match authority.strip_prefix('[') {
+        Some(v6) => match v6.split_once(']') {
+            Some((addr, after)) => (addr, after),
+            None => return false,
+        },
+        None => {
+            let end = authority.find(':').unwrap_or(authority.len());
+            authority.split_at(end)
+        }
+    };
+    let port_ok = after.is_empty()
+        || after
+            .strip_prefix(':')
+            .is_some_and(|p| p.parse::<u16>().is_ok());
+    !host.is_empty()
+        && host
+            .chars()
+            .all(|c| c.is_ascii_alphanumeric() || "-.:".contains(c))
+        && port_ok
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn cors_origins_must_be_origins_and_simulations_at_least_one() {
+        for good in [
+            "http://localhost:5173",
+            "https://example.org",
+            "http://127.0.0.1:8080",
+            "http://[::1]:3000",
+            "http://[::1]",
+        ] {
+            let a = ServeArgs {
+                cors_origins: vec![good.into()],
+                ..ServeArgs::default()
+            };
+            assert!(a.into_config().is_ok(), "{good}");
+        }
+        for bad in [
+            "notaurl",
+            "*",
+            "http://",
+            "ftp://example.org",
+            "https://example.org/",
+            "https://example.org/app",
+            "http://localhost:99999",
+            "http://exa mple.org",
+            "http://a:b:c",
+            "http://[::1",
+        ] {
+            let a = ServeArgs {
+                cors_origins: vec![bad.into()],
+                ..ServeArgs::default()
+            };
+            assert!(
+                matches!(a.into_config(), Err(ConfigError::BadOrigin(_))),
+                "{bad}"
+            );
+        }
+        let a = ServeArgs {
+            max_simulations: 0,
+            ..ServeArgs::default()
+        };
+        let e = a.into_config().unwrap_err().to_string();
+        assert!(e.contains("--max-simulations"), "{e}");
+    }
 
     #[test]
     fn serving_beyond_loopback_needs_a_token() {

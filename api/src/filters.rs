@@ -53,7 +53,7 @@ pub struct SkillFilters {
     #[arg(long, allow_hyphen_values = true)]
     pub sort: Option<String>,
     /// Page size, 1 to 1000. Default 50.
-    #[arg(long)]
+    #[arg(long, allow_negative_numbers = true)]
     #[param(minimum = 1, maximum = 1000)]
     pub limit: Option<u32>,
     /// `next_cursor` of the previous page, passed back unchanged with the same filters and sort.

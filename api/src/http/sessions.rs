@@ -281,8 +281,14 @@ async fn download_session(State(st): State<AppState>, Id(id): Id) -> Result<Resp
     send_mcap(
         &path,
         &format!("session-{id}.mcap"),
-        // Deleted between the lookup and the open.
-        || Problem::not_found(format!("no session with id {id}")),
+        // Deleted between the lookup and the open, or the file was removed from the data
+        // directory behind the server's back: say both rather than deny the session exists.
+        || {
+            Problem::not_found(format!(
+                "no MCAP file for session {id}: the session was just deleted, or its file is \
+                 missing from the data directory"
+            ))
+        },
     )
     .await
 }
