@@ -333,3 +333,32 @@ fn contacts_carrying_no_force_are_in_their_cones_and_not_pulling() {
         .iter()
         .all(|c| c["in_cone"] == Value::Bool(true)));
 }
+
+#[test]
+fn a_grasp_file_that_is_not_a_json_object_is_refused_in_user_words() {
+    for (name, text) in [
+        (
+            "arr7",
+            r#"[{"shape":"sphere","radius":0.1,"mass":1.0},[0,0,-9.81],"point_with_friction",1.5,0.0,[{"position":[0,0,-0.1]}],[0,0,0,0,0,0]]"#,
+        ),
+        ("array", "[]"),
+        ("null", "null"),
+    ] {
+        let (code, out, err) = run_grasp(name, text, &[]);
+        assert_eq!(code, 1, "{name}: {out}");
+        assert!(
+            err.contains("expected a grasp file: a JSON object") && !err.contains("struct"),
+            "{name}: {err}"
+        );
+    }
+    let (code, _, err) = run_grasp(
+        "contact-array",
+        r#"{"object": {"shape": "sphere", "radius": 0.1, "mass": 1}, "mu": 1, "contacts": [[[0, 0, -0.1]]]}"#,
+        &[],
+    );
+    assert_eq!(code, 1);
+    assert!(
+        err.contains("contacts[0]") && err.contains("expected a contact"),
+        "{err}"
+    );
+}

@@ -96,7 +96,11 @@ fn check_norm(field: &str, values: &[Real], max: Real, unit: &str) -> Result<()>
 /// A box takes `half_extents: [x, y, z]`, a cylinder `radius` and `half_height` (m, MuJoCo's
 /// convention of half sizes); the cylinder's axis is B's z.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields)]
+#[serde(
+    deny_unknown_fields,
+    remote = "Self",
+    expecting = "an object {\"shape\": ..., \"mass\": ...}"
+)]
 pub struct ObjectSpec {
     /// "sphere", "box" or "cylinder".
     pub shape: String,
@@ -214,7 +218,11 @@ impl ObjectSpec {
 
 /// One contact of a grasp file.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields)]
+#[serde(
+    deny_unknown_fields,
+    remote = "Self",
+    expecting = "a contact {\"position\": [x, y, z]}"
+)]
 pub struct ContactSpec {
     /// Contact point in the object frame B (m).
     pub position: [Real; 3],
@@ -225,6 +233,22 @@ pub struct ContactSpec {
     pub normal: Option<[Real; 3]>,
 }
 
+crate::object_only!(
+    ObjectSpec,
+    "an object {\"shape\": ..., \"mass\": ...}",
+    serialize
+);
+crate::object_only!(
+    ContactSpec,
+    "a contact {\"position\": [x, y, z]}",
+    serialize
+);
+crate::object_only!(
+    GraspSpec,
+    "a grasp file: a JSON object {\"object\": ..., \"contacts\": [...], ...}",
+    serialize
+);
+
 fn default_gravity() -> [Real; 3] {
     [0.0, 0.0, -crate::math::STANDARD_GRAVITY]
 }
@@ -232,7 +256,11 @@ fn default_gravity() -> [Real; 3] {
 /// A grasp file (DESIGN.md, "Grasp file"): an object, contacts in B, contact and friction
 /// model, gravity in B and a requested object acceleration.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields)]
+#[serde(
+    deny_unknown_fields,
+    remote = "Self",
+    expecting = "a grasp file: a JSON object {\"object\": ..., \"contacts\": [...], ...}"
+)]
 pub struct GraspSpec {
     /// The object.
     pub object: ObjectSpec,
@@ -1061,5 +1089,44 @@ mod tests {
             let e = analyse(&s, 1.0).unwrap_err().to_string();
             assert!(e.contains("mu") && e.contains("missing"), "{e}");
         }
+    }
+
+    #[test]
+    fn a_grasp_file_object_or_contact_must_be_a_json_object() {
+        let err = |text: &str| {
+            serde_json::from_str::<GraspSpec>(text)
+                .unwrap_err()
+                .to_string()
+        };
+        let e = err(
+            r#"[{"shape":"sphere","radius":0.1,"mass":1.0},[0,0,-9.81],"point_with_friction",1.5,0.0,[{"position":[0,0,-0.1]}],[0,0,0,0,0,0]]"#,
+        );
+        assert!(
+            e.contains("invalid type: sequence, expected a grasp file: a JSON object"),
+            "{e}"
+        );
+        let e = err("[]");
+        assert!(
+            e.contains("expected a grasp file") && !e.contains("struct"),
+            "{e}"
+        );
+        let e = err("null");
+        assert!(
+            e.contains("expected a grasp file") && !e.contains("GraspSpec"),
+            "{e}"
+        );
+        let e = err(
+            r#"{"object": ["sphere", 0.1, null, null, 1.0], "mu": 1, "contacts": [{"position": [0, 0, -0.1]}]}"#,
+        );
+        assert!(e.contains("sequence, expected an object {\"shape\""), "{e}");
+        let e = err(
+            r#"{"object": {"shape": "sphere", "radius": 0.1, "mass": 1}, "mu": 1, "contacts": [[[0, 0, -0.1]]]}"#,
+        );
+        assert!(e.contains("sequence, expected a contact"), "{e}");
+        // Objects still parse, with their defaults and unknown-field checks, and round-trip.
+        let spec = GraspSpec::paper_sphere();
+        let back: GraspSpec = serde_json::from_str(&serde_json::to_string(&spec).unwrap()).unwrap();
+        assert_eq!(back, spec);
+        assert!(err(r#"{"object": {"shape": "sphere", "radius": 0.1, "mass": 1, "colour": 1}, "mu": 1, "contacts": []}"#).contains("unknown field `colour`"));
     }
 }
