@@ -51,6 +51,13 @@ pub enum DfsError {
         /// What went non-finite (for example "pose").
         what: &'static str,
     },
+    /// A result overflowed: a computed value is NaN or infinite although every input was
+    /// finite and in range (the guard that keeps NaN out of every output).
+    #[error("{what} is not a finite number: the computation overflowed")]
+    Overflow {
+        /// The output that overflowed (for example "contacts[2].feedback").
+        what: String,
+    },
     /// A model or parameter is invalid; the message names the field.
     #[error("invalid {field}: {reason}")]
     Invalid {

@@ -14,6 +14,7 @@ pub mod fixtures;
 pub mod frames;
 pub mod grasp;
 pub mod hand;
+pub mod json_object;
 pub mod math;
 pub mod object;
 pub mod operator;

@@ -94,7 +94,11 @@ pub enum GraspStyle {
 
 /// The object of a scenario: shape, mass, friction and start pose.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields)]
+#[serde(
+    deny_unknown_fields,
+    remote = "Self",
+    expecting = "an object {\"shape\": ..., \"mass\": ..., \"mu\": ...}"
+)]
 pub struct ScenarioObject {
     /// "sphere", "box" or "cylinder".
     pub shape: String,
@@ -122,6 +126,22 @@ pub struct ScenarioObject {
     #[serde(default)]
     pub yaw: Real,
 }
+
+crate::object_only!(
+    ScenarioObject,
+    "an object {\"shape\": ..., \"mass\": ..., \"mu\": ...}",
+    serialize
+);
+crate::object_only!(
+    Task,
+    "a task {\"phase\": ..., \"duration\": ...}",
+    serialize
+);
+crate::object_only!(
+    Scenario,
+    "a scenario: a JSON object {\"name\": ..., \"object\": ..., \"tasks\": [...]}",
+    serialize
+);
 
 fn default_mu_torsion() -> Real {
     0.005
@@ -170,7 +190,11 @@ pub const MIN_SIMULATED_MASS: Real = 0.005;
 
 /// One task of the script.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields)]
+#[serde(
+    deny_unknown_fields,
+    remote = "Self",
+    expecting = "a task {\"phase\": ..., \"duration\": ...}"
+)]
 pub struct Task {
     /// Which phase (`approach`, `preshape`, `grasp`, `lift`, `hold`, `transport`, `place`,
     /// `release`, `retreat`).
@@ -190,7 +214,11 @@ pub struct Task {
 
 /// A scenario file.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields)]
+#[serde(
+    deny_unknown_fields,
+    remote = "Self",
+    expecting = "a scenario: a JSON object {\"name\": ..., \"object\": ..., \"tasks\": [...]}"
+)]
 pub struct Scenario {
     /// Name.
     pub name: String,

@@ -14,22 +14,93 @@
 //!
 //! With the paper's sphere and `scale = 1.5`, `f_ext = (0, 0, 4.905, 0, 0, 0)` and the feedback
 //! equals the static case: the operator feels the sphere's weight.
+//!
+//! Bad input. Every number of a grasp file must lie in a physically sensible range (the
+//! constants below; an error names the field and the range): a hand holds objects of 1 mg to
+//! 10 t, 0.1 mm to 10 m in half size, under at most 10 g, with μ ≤ 10. Within those ranges
+//! every output is finite; a final guard still refuses a result with a NaN or an infinite value
+//! ([`DfsError::Overflow`], naming it), and an optimised distribution that does not balance the
+//! load is reported infeasible, never as a solution. A contact must lie on the object's surface
+//! within [`SURFACE_TOLERANCE`] of the object's smallest half size. Forces up to
+//! [`FORCE_TOLERANCE`] `· (1 N + ‖L‖)` count as zero: a contact carrying no force lies in its
+//! (closed) friction cone and is not reported as pulling.
 
 use crate::contact::{
-    apply_friction, in_cone, normal_and_tangential, ContactFrame, ContactModel, Friction, Intensity,
+    apply_friction, normal_and_tangential, ContactFrame, ContactModel, Friction, Intensity,
 };
 use crate::error::{DfsError, Result};
+use crate::grasp::optimise::CHECK_TOLERANCE;
 use crate::grasp::optimise::{optimise, OptimiseParams};
 use crate::grasp::{GraspMatrix, MAX_CONTACTS};
 use crate::math::{force_of, moment_of, wrench, Real, Rotation, Vector, Wrench};
 use crate::object::{gravity_wrench_b, RigidObject, Shape};
 use serde::{Deserialize, Serialize};
 
+/// Allowed object mass (kg) in a grasp file: 1 mg to 10 t.
+pub const MASS_RANGE: (Real, Real) = (1e-6, 1e4);
+/// Allowed radius, half extent and half height (m) in a grasp file: 0.1 mm to 10 m.
+pub const SIZE_RANGE: (Real, Real) = (1e-4, 10.0);
+/// Largest gravity (m/s², norm) in a grasp file: about 10 g, beyond any load a hand holds.
+pub const MAX_GRAVITY: Real = 100.0;
+/// Largest requested linear object acceleration (m/s², norm) in a grasp file.
+pub const MAX_LINEAR_ACCELERATION: Real = 1e3;
+/// Largest requested angular object acceleration (rad/s², norm) in a grasp file.
+pub const MAX_ANGULAR_ACCELERATION: Real = 1e4;
+/// Allowed Coulomb coefficient μ: real surfaces stay below 2 or so.
+pub const MU_RANGE: (Real, Real) = (0.0, 10.0);
+/// Allowed torsional coefficient μ_t (m): a fingertip pad's is a few millimetres.
+pub const MU_TORSION_RANGE: (Real, Real) = (0.0, 1.0);
+/// Allowed `scale` of [`analyse`]: the operator pushes 0 to 100 times the holding intensities.
+pub const SCALE_RANGE: (Real, Real) = (0.0, 100.0);
+/// How far (as a fraction of the object's smallest half size: a sphere's radius, a box's
+/// smallest half extent, the smaller of a cylinder's radius and half height) a contact
+/// position may lie from the object's surface. 5 %: the paper's §3.4 contact points are
+/// rounded to 1 mm and lie 3.5 to 3.8 mm inside its 0.1 m sphere.
+pub const SURFACE_TOLERANCE: Real = 0.05;
+/// Forces (N) up to `FORCE_TOLERANCE · (1 N + ‖L‖)`, `L` the load the hand carries, count as
+/// zero: a contact carrying no force lies in its closed friction cone (at its apex) and is not
+/// reported as pulling. 10⁻⁶, the optimiser's own check tolerance
+/// ([`crate::grasp::optimise::CHECK_TOLERANCE`]).
+pub const FORCE_TOLERANCE: Real = CHECK_TOLERANCE;
+
+fn check_range(
+    field: impl Into<String>,
+    v: Real,
+    (lo, hi): (Real, Real),
+    unit: &str,
+) -> Result<()> {
+    if v.is_finite() && (lo..=hi).contains(&v) {
+        Ok(())
+    } else {
+        Err(DfsError::invalid(
+            field,
+            format!("must be a number in [{lo:?}, {hi:?}]{unit}, got {v:?}"),
+        ))
+    }
+}
+
+fn check_norm(field: &str, values: &[Real], max: Real, unit: &str) -> Result<()> {
+    finite_field(field.into(), values)?;
+    let n = values.iter().map(|v| v * v).sum::<Real>().sqrt();
+    if n <= max {
+        Ok(())
+    } else {
+        Err(DfsError::invalid(
+            field,
+            format!("its magnitude must be at most {max:?} {unit}, got {n:?}"),
+        ))
+    }
+}
+
 /// The object of a grasp file, as written: `{"shape": "sphere", "radius": 0.1, "mass": 1.0}`.
 /// A box takes `half_extents: [x, y, z]`, a cylinder `radius` and `half_height` (m, MuJoCo's
 /// convention of half sizes); the cylinder's axis is B's z.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields)]
+#[serde(
+    deny_unknown_fields,
+    remote = "Self",
+    expecting = "an object {\"shape\": ..., \"mass\": ...}"
+)]
 pub struct ObjectSpec {
     /// "sphere", "box" or "cylinder".
     pub shape: String,
@@ -103,6 +174,24 @@ impl ObjectSpec {
         RigidObject::new(shape, self.mass)
     }
 
+    /// Checks that the mass and every size given lie in [`MASS_RANGE`] and [`SIZE_RANGE`]
+    /// (a grasp file's ranges); errors name the field and the range.
+    pub fn check_ranges(&self) -> Result<()> {
+        check_range("object.mass", self.mass, MASS_RANGE, " kg")?;
+        if let Some(r) = self.radius {
+            check_range("object.radius", r, SIZE_RANGE, " m")?;
+        }
+        if let Some(h) = self.half_extents {
+            for (i, v) in h.iter().enumerate() {
+                check_range(format!("object.half_extents[{i}]"), *v, SIZE_RANGE, " m")?;
+            }
+        }
+        if let Some(h) = self.half_height {
+            check_range("object.half_height", h, SIZE_RANGE, " m")?;
+        }
+        Ok(())
+    }
+
     /// The spec of an object.
     pub fn from_shape(shape: &Shape, mass: Real) -> Self {
         let mut s = ObjectSpec {
@@ -129,7 +218,11 @@ impl ObjectSpec {
 
 /// One contact of a grasp file.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields)]
+#[serde(
+    deny_unknown_fields,
+    remote = "Self",
+    expecting = "a contact {\"position\": [x, y, z]}"
+)]
 pub struct ContactSpec {
     /// Contact point in the object frame B (m).
     pub position: [Real; 3],
@@ -140,6 +233,22 @@ pub struct ContactSpec {
     pub normal: Option<[Real; 3]>,
 }
 
+crate::object_only!(
+    ObjectSpec,
+    "an object {\"shape\": ..., \"mass\": ...}",
+    serialize
+);
+crate::object_only!(
+    ContactSpec,
+    "a contact {\"position\": [x, y, z]}",
+    serialize
+);
+crate::object_only!(
+    GraspSpec,
+    "a grasp file: a JSON object {\"object\": ..., \"contacts\": [...], ...}",
+    serialize
+);
+
 fn default_gravity() -> [Real; 3] {
     [0.0, 0.0, -crate::math::STANDARD_GRAVITY]
 }
@@ -147,7 +256,11 @@ fn default_gravity() -> [Real; 3] {
 /// A grasp file (DESIGN.md, "Grasp file"): an object, contacts in B, contact and friction
 /// model, gravity in B and a requested object acceleration.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields)]
+#[serde(
+    deny_unknown_fields,
+    remote = "Self",
+    expecting = "a grasp file: a JSON object {\"object\": ..., \"contacts\": [...], ...}"
+)]
 pub struct GraspSpec {
     /// The object.
     pub object: ObjectSpec,
@@ -157,9 +270,11 @@ pub struct GraspSpec {
     /// Contact model. Default point with friction.
     #[serde(default)]
     pub contact_model: ContactModel,
-    /// Coulomb coefficient μ ≥ 0.
-    pub mu: Real,
-    /// Torsional coefficient μ_t ≥ 0 (m), for the soft finger. Default 0.
+    /// Coulomb coefficient μ in [`MU_RANGE`]. Required, except for the frictionless model,
+    /// which transmits no tangential force and ignores it (default 0).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub mu: Option<Real>,
+    /// Torsional coefficient μ_t (m) in [`MU_TORSION_RANGE`], for the soft finger. Default 0.
     #[serde(default)]
     pub mu_torsion: Real,
     /// Contacts, 1 to 6.
@@ -193,7 +308,7 @@ impl GraspSpec {
             object: ObjectSpec::from_shape(&Shape::Sphere { radius: 0.1 }, 1.0),
             gravity: default_gravity(),
             contact_model: ContactModel::PointWithFriction,
-            mu: 1.5,
+            mu: Some(1.5),
             mu_torsion: 0.0,
             contacts: pts
                 .iter()
@@ -217,23 +332,51 @@ impl GraspSpec {
     /// Names of the built-in grasps.
     pub const BUILTINS: &'static [&'static str] = &["paper-sphere"];
 
-    /// Validates every field and builds the object and contact frames; errors name the field.
+    /// The friction coefficients, validated: `mu` is required except for the frictionless
+    /// model (default 0 there); both lie in their ranges.
+    pub fn friction(&self) -> Result<Friction> {
+        let mu = match (self.mu, self.contact_model) {
+            (Some(mu), _) => mu,
+            (None, ContactModel::Frictionless) => 0.0,
+            (None, model) => {
+                let name = match model {
+                    ContactModel::SoftFinger => "soft_finger",
+                    _ => "point_with_friction",
+                };
+                return Err(DfsError::invalid(
+                    "mu",
+                    format!("missing (required for the {name} contact model; only a frictionless grasp may omit it)"),
+                ));
+            }
+        };
+        check_range("mu", mu, MU_RANGE, "")?;
+        check_range("mu_torsion", self.mu_torsion, MU_TORSION_RANGE, " m")?;
+        Ok(Friction {
+            mu,
+            mu_torsion: self.mu_torsion,
+        })
+    }
+
+    /// Validates every field and builds the object and contact frames; errors name the field
+    /// and, for a number out of range, the range.
     pub fn resolve(&self) -> Result<(RigidObject, Vec<ContactFrame>)> {
+        self.object.check_ranges()?;
         let object = self.object.to_object()?;
-        finite_field("gravity".into(), &self.gravity)?;
+        check_norm("gravity", &self.gravity, MAX_GRAVITY, "m/s²")?;
         finite_field("object_acceleration".into(), &self.object_acceleration)?;
-        if !(self.mu.is_finite() && self.mu >= 0.0) {
-            return Err(DfsError::invalid(
-                "mu",
-                format!("must be a finite number ≥ 0, got {}", self.mu),
-            ));
-        }
-        if !(self.mu_torsion.is_finite() && self.mu_torsion >= 0.0) {
-            return Err(DfsError::invalid(
-                "mu_torsion",
-                format!("must be a finite number ≥ 0, got {}", self.mu_torsion),
-            ));
-        }
+        check_norm(
+            "object_acceleration (linear part)",
+            &self.object_acceleration[..3],
+            MAX_LINEAR_ACCELERATION,
+            "m/s²",
+        )?;
+        check_norm(
+            "object_acceleration (angular part)",
+            &self.object_acceleration[3..],
+            MAX_ANGULAR_ACCELERATION,
+            "rad/s²",
+        )?;
+        self.friction()?;
         if self.contacts.is_empty() || self.contacts.len() > MAX_CONTACTS {
             return Err(DfsError::invalid(
                 "contacts",
@@ -247,27 +390,65 @@ impl GraspSpec {
         for (i, c) in self.contacts.iter().enumerate() {
             finite_field(format!("contacts[{i}].position"), &c.position)?;
             let p = Vector::from(c.position);
+            let (distance, _, n_out) = object.shape.closest(&p);
+            let tol = surface_tolerance(&object.shape);
+            if distance.is_nan() || distance.abs() > tol {
+                return Err(DfsError::invalid(
+                    format!("contacts[{i}].position"),
+                    format!(
+                        "must be on the object's surface within {:.3e} m ({} % of the object's smallest half size), but contact {i} is not on the surface: it lies {}",
+                        tol,
+                        SURFACE_TOLERANCE * 100.0,
+                        if distance.is_finite() {
+                            format!("{:.4e} m from it", distance.abs())
+                        } else {
+                            "too far from it to measure".to_string()
+                        }
+                    ),
+                ));
+            }
             let z = match c.normal {
                 Some(n) => {
                     finite_field(format!("contacts[{i}].normal"), &n)?;
                     let n = Vector::from(n);
-                    if n.norm() < 1e-9 {
+                    // Scaled first: a normal such as (1e308, 1e308, 0) has an infinite norm.
+                    let big = n.amax();
+                    if big < 1e-9 {
                         return Err(DfsError::invalid(
                             format!("contacts[{i}].normal"),
                             "must not be the zero vector",
                         ));
                     }
-                    n.normalize()
+                    (n / big).normalize()
                 }
-                None => {
-                    let (_, _, n_out) = object.shape.closest(&p);
-                    -n_out
-                }
+                None => -n_out,
             };
             frames.push(ContactFrame::from_normal(p, z));
         }
         Ok((object, frames))
     }
+}
+
+/// The largest distance (m) a contact may lie from the surface of `shape`:
+/// [`SURFACE_TOLERANCE`] times its smallest half size.
+pub fn surface_tolerance(shape: &Shape) -> Real {
+    let smallest = match *shape {
+        Shape::Sphere { radius } => radius,
+        Shape::Box { half_extents } => half_extents.iter().copied().fold(Real::INFINITY, Real::min),
+        Shape::Cylinder {
+            radius,
+            half_height,
+        } => radius.min(half_height),
+    };
+    SURFACE_TOLERANCE * smallest
+}
+
+/// Whether `c` lies within `tol` (N) of the model's closed friction cone: its distance to the
+/// part the cone transmits. A zero force (up to `tol`) lies at the apex, inside.
+fn in_closed_cone(model: ContactModel, friction: &Friction, c: &Intensity, tol: Real) -> bool {
+    let masked = c.component_mul(&model.mask());
+    let t = apply_friction(model, friction, c).transmitted;
+    (t - masked).norm() <= tol.max(1e-9 * (1.0 + masked.norm()))
 }
 
 /// Per-contact results of the static analysis.
@@ -284,7 +465,8 @@ pub struct ContactResult {
     pub normal_force: Real,
     /// Magnitude of the tangential force (N).
     pub tangential_force: Real,
-    /// Whether the intensities lie inside the friction cone.
+    /// Whether the intensities lie inside the (closed) friction cone, within
+    /// [`FORCE_TOLERANCE`]: a contact carrying no force is inside.
     pub in_cone: bool,
     /// The transmitted (friction-limited) intensities, same order.
     pub transmitted: Vec<Real>,
@@ -300,6 +482,7 @@ impl ContactResult {
         c: &Intensity,
         t: &Intensity,
         fb: &Intensity,
+        tol: Real,
     ) -> Self {
         let (n, tan) = normal_and_tangential(&c.component_mul(&model.mask()));
         let list = |v: &Intensity| {
@@ -312,7 +495,7 @@ impl ContactResult {
             intensity: list(c),
             normal_force: n,
             tangential_force: tan,
-            in_cone: in_cone(model, friction, c),
+            in_cone: in_closed_cone(model, friction, c, tol),
             transmitted: list(t),
             feedback: list(fb),
         }
@@ -352,25 +535,40 @@ pub struct StaticAnalysis {
 }
 
 /// Static analysis of a grasp file with the operator pushing `scale` times the minimum-norm
-/// holding intensities (see the module docs).
+/// holding intensities (see the module docs). `scale` must lie in [`SCALE_RANGE`].
 pub fn analyse(spec: &GraspSpec, scale: Real) -> Result<StaticAnalysis> {
-    if !scale.is_finite() {
-        return Err(DfsError::invalid(
-            "scale",
-            format!("must be finite, got {scale}"),
-        ));
-    }
+    check_range("scale", scale, SCALE_RANGE, "")?;
     let (object, frames) = spec.resolve()?;
-    let model = spec.contact_model;
-    let friction = Friction {
-        mu: spec.mu,
-        mu_torsion: spec.mu_torsion,
-    };
-    let n = frames.len();
-    let g = GraspMatrix::new(&frames, model);
-    let gravity_b = gravity_wrench_b(&object, &Rotation::identity(), &Vector::from(spec.gravity));
+    let friction = spec.friction()?;
     let acc = Wrench::from_row_slice(&spec.object_acceleration);
-    let load = object.spatial_inertia_times(&acc) - gravity_b;
+    analyse_resolved(
+        &object,
+        &frames,
+        spec.contact_model,
+        &friction,
+        &Vector::from(spec.gravity),
+        &acc,
+        scale,
+    )
+}
+
+/// [`analyse`] after validation: the computation, the check that the optimised distribution
+/// balances the load and the final guard against non-finite outputs.
+fn analyse_resolved(
+    object: &RigidObject,
+    frames: &[ContactFrame],
+    model: ContactModel,
+    friction: &Friction,
+    gravity: &Vector,
+    acc: &Wrench,
+    scale: Real,
+) -> Result<StaticAnalysis> {
+    let friction = *friction;
+    let n = frames.len();
+    let g = GraspMatrix::new(frames, model);
+    let gravity_b = gravity_wrench_b(object, &Rotation::identity(), gravity);
+    let load = object.spatial_inertia_times(acc) - gravity_b;
+    let tol = FORCE_TOLERANCE * (1.0 + load.norm());
 
     let mut c_static = [Intensity::zeros(); MAX_CONTACTS];
     g.distribute(&load, &mut c_static);
@@ -381,12 +579,22 @@ pub fn analyse(spec: &GraspSpec, scale: Real) -> Result<StaticAnalysis> {
         c_h[i] = c_static[i] * scale;
         let split = apply_friction(model, &friction, &c_h[i]);
         c_t[i] = split.transmitted;
-        if split.separating && c_h[i].norm() > 1e-12 {
+        let masked = c_h[i].component_mul(&model.mask());
+        if in_closed_cone(model, &friction, &c_h[i], tol) {
+            continue;
+        }
+        let (normal, tangential) = normal_and_tangential(&masked);
+        if split.separating && normal < -tol {
             warnings.push(format!(
-                "contact {i} would have to pull (normal intensity {:.4} N): it transmits nothing",
-                c_h[i][2]
+                "contact {i} would have to pull (normal intensity {} N): it transmits nothing",
+                short(normal)
             ));
-        } else if split.slip {
+        } else if split.separating {
+            warnings.push(format!(
+                "contact {i} would need a tangential force ({} N) with no normal force: it transmits nothing",
+                short(tangential)
+            ));
+        } else {
             warnings.push(format!("contact {i} is outside its friction cone: it slips and transmits only the cone's part"));
         }
     }
@@ -402,7 +610,7 @@ pub fn analyse(spec: &GraspSpec, scale: Real) -> Result<StaticAnalysis> {
         .map(|i| {
             let reaction = apply_friction(model, &friction, &c_o[i]).transmitted;
             let fb = c_t[i] - reaction;
-            ContactResult::new(&frames[i], model, &friction, &c_h[i], &c_t[i], &fb)
+            ContactResult::new(&frames[i], model, &friction, &c_h[i], &c_t[i], &fb, tol)
         })
         .collect();
     if n == 1 {
@@ -421,27 +629,30 @@ pub fn analyse(spec: &GraspSpec, scale: Real) -> Result<StaticAnalysis> {
     }
 
     let params = OptimiseParams::default();
-    let (optimised, optimised_reason) = match optimise(&frames, model, &friction, &load, &params) {
-        Ok(d) => {
-            let contacts: Vec<ContactResult> = d
-                .intensities
-                .iter()
-                .zip(&frames)
-                .map(|(c, f)| ContactResult::new(f, model, &friction, c, c, c))
-                .collect();
-            let total = contacts.iter().map(|c| c.normal_force).sum();
-            (
-                Some(OptimisedResult {
-                    margin: params.margin,
-                    contacts,
-                    total_normal_force: total,
-                }),
-                None,
-            )
-        }
+    let (optimised, optimised_reason) = match optimise(frames, model, &friction, &load, &params) {
+        Ok(d) => match unbalanced(&g, &d.intensities, &load) {
+            Some(reason) => (None, Some(reason)),
+            None => {
+                let contacts: Vec<ContactResult> = d
+                    .intensities
+                    .iter()
+                    .zip(frames)
+                    .map(|(c, f)| ContactResult::new(f, model, &friction, c, c, c, tol))
+                    .collect();
+                let total = contacts.iter().map(|c| c.normal_force).sum();
+                (
+                    Some(OptimisedResult {
+                        margin: params.margin,
+                        contacts,
+                        total_normal_force: total,
+                    }),
+                    None,
+                )
+            }
+        },
         Err(e) => (None, Some(e.reason)),
     };
-    Ok(StaticAnalysis {
+    let r = StaticAnalysis {
         contacts,
         object_force: object_force.into(),
         f_ext: f_ext.into(),
@@ -450,7 +661,80 @@ pub fn analyse(spec: &GraspSpec, scale: Real) -> Result<StaticAnalysis> {
         warnings,
         optimised,
         optimised_reason,
-    })
+    };
+    ensure_finite(&r)?;
+    Ok(r)
+}
+
+/// A number for a message: four decimals, or four significant digits when it is small.
+fn short(v: Real) -> String {
+    if v == 0.0 || v.abs() >= 1e-3 {
+        format!("{v:.4}")
+    } else {
+        format!("{v:.3e}")
+    }
+}
+
+/// Why an optimiser's distribution is no solution: it does not balance `load` (within the
+/// optimiser's own check tolerance) or is not finite. `None` when it is one.
+fn unbalanced(g: &GraspMatrix, c: &[Intensity], load: &Wrench) -> Option<String> {
+    let finite = c.iter().all(|c| c.iter().all(|v| v.is_finite()));
+    let residual = if finite {
+        (load - g.wrench(c)).norm()
+    } else {
+        Real::NAN
+    };
+    if residual <= CHECK_TOLERANCE * (1.0 + load.norm()) {
+        None
+    } else {
+        Some(format!(
+            "infeasible: the optimiser's distribution does not balance the load (residual {residual:.3e} N or N·m for a load of {:.3e}): no solution found",
+            load.norm()
+        ))
+    }
+}
+
+/// The final guard: every number of the analysis is finite, or an error names the first
+/// one that is not.
+fn ensure_finite(r: &StaticAnalysis) -> Result<()> {
+    fn check(what: impl FnOnce() -> String, values: &[Real]) -> Result<()> {
+        if values.iter().all(|v| v.is_finite()) {
+            Ok(())
+        } else {
+            Err(DfsError::Overflow { what: what() })
+        }
+    }
+    fn contact(prefix: &str, i: usize, c: &ContactResult) -> Result<()> {
+        let fields: [(&str, &[Real]); 7] = [
+            ("position", &c.position),
+            ("normal", &c.normal),
+            ("intensity", &c.intensity),
+            ("normal_force", &[c.normal_force]),
+            ("tangential_force", &[c.tangential_force]),
+            ("transmitted", &c.transmitted),
+            ("feedback", &c.feedback),
+        ];
+        for (name, v) in fields {
+            check(|| format!("{prefix}contacts[{i}].{name}"), v)?;
+        }
+        Ok(())
+    }
+    for (i, c) in r.contacts.iter().enumerate() {
+        contact("", i, c)?;
+    }
+    check(|| "object_force".into(), &r.object_force)?;
+    check(|| "f_ext".into(), &r.f_ext)?;
+    check(|| "object_acceleration".into(), &r.object_acceleration)?;
+    if let Some(o) = &r.optimised {
+        for (i, c) in o.contacts.iter().enumerate() {
+            contact("optimised.", i, c)?;
+        }
+        check(
+            || "optimised.total_normal_force".into(),
+            &[o.total_normal_force, o.margin],
+        )?;
+    }
+    Ok(())
 }
 
 #[cfg(test)]
@@ -509,7 +793,7 @@ mod tests {
     #[test]
     fn too_little_friction_makes_contacts_slip_and_the_sphere_fall() {
         let mut spec = GraspSpec::paper_sphere();
-        spec.mu = 0.5;
+        spec.mu = Some(0.5);
         let r = analyse(&spec, 1.0).unwrap();
         assert!(r.contacts.iter().all(|c| !c.in_cone));
         assert!(r.object_acceleration[2] < 0.0);
@@ -519,7 +803,7 @@ mod tests {
     #[test]
     fn bad_grasp_files_name_the_field() {
         let mut spec = GraspSpec::paper_sphere();
-        spec.mu = -0.1;
+        spec.mu = Some(-0.1);
         assert!(analyse(&spec, 1.0).unwrap_err().to_string().contains("mu"));
         let mut spec = GraspSpec::paper_sphere();
         spec.object.shape = "torus".into();
@@ -571,5 +855,278 @@ mod tests {
             .contacts
             .iter()
             .all(|c| c.intensity.iter().all(|v| v.is_finite())));
+    }
+
+    fn on_sphere(points: &[[Real; 3]]) -> GraspSpec {
+        let mut spec = GraspSpec::paper_sphere();
+        spec.contacts = points
+            .iter()
+            .map(|p| ContactSpec {
+                position: *p,
+                normal: None,
+            })
+            .collect();
+        spec
+    }
+
+    #[test]
+    fn numbers_outside_their_ranges_are_refused_naming_the_field_and_the_range() {
+        let err = |spec: &GraspSpec, scale: Real| analyse(spec, scale).unwrap_err().to_string();
+        let mut spec = GraspSpec::paper_sphere();
+        spec.object.mass = 1e300;
+        let e = err(&spec, 1.0);
+        assert!(
+            e.contains("object.mass") && e.contains("10000.0") && e.contains("1e300"),
+            "{e}"
+        );
+        let mut spec = GraspSpec::paper_sphere();
+        spec.object.radius = Some(1e-300);
+        assert!(err(&spec, 1.0).contains("object.radius"));
+        let mut spec = GraspSpec::paper_sphere();
+        spec.gravity = [0.0, 0.0, -1e308];
+        let e = err(&spec, 1.0);
+        assert!(e.contains("gravity") && e.contains("100.0"), "{e}");
+        let mut spec = GraspSpec::paper_sphere();
+        spec.object_acceleration = [0.0, 0.0, 0.0, 0.0, 1e300, 0.0];
+        assert!(err(&spec, 1.0).contains("object_acceleration (angular part)"));
+        let mut spec = GraspSpec::paper_sphere();
+        spec.contacts[0].position = [1e308; 3];
+        let e = err(&spec, 1.0);
+        assert!(e.contains("contacts[0].position"), "{e}");
+        let mut spec = GraspSpec::paper_sphere();
+        spec.mu = Some(1e12);
+        assert!(err(&spec, 1.0).contains("mu"));
+        let mut spec = GraspSpec::paper_sphere();
+        spec.mu_torsion = 5.0;
+        assert!(err(&spec, 1.0).contains("mu_torsion"));
+        for scale in [1e308, -1.0, Real::NAN] {
+            let e = err(&GraspSpec::paper_sphere(), scale);
+            assert!(e.contains("scale") && e.contains("100.0"), "{e}");
+        }
+        // The extremes of the ranges still give finite results.
+        let mut spec = GraspSpec::paper_sphere();
+        spec.object.mass = MASS_RANGE.1;
+        spec.gravity = [0.0, MAX_GRAVITY * 0.6, -MAX_GRAVITY * 0.8];
+        spec.object_acceleration = [
+            MAX_LINEAR_ACCELERATION,
+            0.0,
+            0.0,
+            0.0,
+            0.0,
+            MAX_ANGULAR_ACCELERATION,
+        ];
+        analyse(&spec, SCALE_RANGE.1).unwrap();
+    }
+
+    #[test]
+    fn an_overflowing_load_is_never_reported_as_a_feasible_distribution_or_as_nan() {
+        // Past the grasp file's ranges (what `analyse` now refuses up front): the guards behind
+        // them must still hold.
+        let spec = GraspSpec::paper_sphere();
+        let (_, frames) = spec.resolve().unwrap();
+        let friction = spec.friction().unwrap();
+        for (mass, g) in [(1e300, -9.81), (1.0, -1e308), (1e150, -9.81)] {
+            let object = RigidObject::new(Shape::Sphere { radius: 0.1 }, mass).unwrap();
+            let r = analyse_resolved(
+                &object,
+                &frames,
+                ContactModel::PointWithFriction,
+                &friction,
+                &Vector::new(0.0, 0.0, g),
+                &Wrench::zeros(),
+                1.0,
+            );
+            match r {
+                Err(e) => assert!(
+                    matches!(e, DfsError::Overflow { .. })
+                        && e.to_string().contains("not a finite number"),
+                    "{e}"
+                ),
+                Ok(r) => {
+                    if let Some(o) = &r.optimised {
+                        let total: Real = o.contacts.iter().map(|c| c.normal_force).sum();
+                        assert!(total > 0.0, "mass {mass} g {g}: an all-zero distribution");
+                    }
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn the_final_guard_names_the_output_that_is_not_finite() {
+        let mut r = analyse(&GraspSpec::paper_sphere(), 1.0).unwrap();
+        ensure_finite(&r).unwrap();
+        r.contacts[2].feedback[1] = Real::NAN;
+        let e = ensure_finite(&r).unwrap_err().to_string();
+        assert!(e.contains("contacts[2].feedback"), "{e}");
+        r.contacts[2].feedback[1] = 0.0;
+        r.optimised.as_mut().unwrap().contacts[1].normal_force = Real::INFINITY;
+        let e = ensure_finite(&r).unwrap_err().to_string();
+        assert!(e.contains("optimised.contacts[1].normal_force"), "{e}");
+    }
+
+    #[test]
+    fn a_distribution_that_does_not_balance_the_load_is_no_solution() {
+        let spec = GraspSpec::paper_sphere();
+        let (_, frames) = spec.resolve().unwrap();
+        let g = GraspMatrix::new(&frames, ContactModel::PointWithFriction);
+        let load = Wrench::new(0.0, 0.0, 9.81, 0.0, 0.0, 0.0);
+        let zeros = vec![Intensity::zeros(); 4];
+        assert!(unbalanced(&g, &zeros, &load)
+            .unwrap()
+            .contains("does not balance"));
+        let mut c = [Intensity::zeros(); MAX_CONTACTS];
+        g.distribute(&load, &mut c);
+        assert!(unbalanced(&g, &c[..4], &load).is_none());
+        c[0][0] = Real::NAN;
+        assert!(unbalanced(&g, &c[..4], &load).is_some());
+    }
+
+    #[test]
+    fn contacts_off_the_surface_are_refused_naming_the_contact_and_its_distance() {
+        let spec = on_sphere(&[[0.5, 0.5, 0.5], [0.0, 0.076, -0.059], [0.0, -0.076, -0.059]]);
+        let e = analyse(&spec, 1.0).unwrap_err().to_string();
+        assert!(
+            e.contains("contacts[0].position")
+                && e.contains("not on the surface")
+                && e.contains("7.6603e-1 m"),
+            "{e}"
+        );
+        let spec = on_sphere(&[[0.0, 0.076, -0.059], [0.0, 0.0, 0.0]]);
+        let e = analyse(&spec, 1.0).unwrap_err().to_string();
+        assert!(
+            e.contains("contacts[1].position") && e.contains("1.0000e-1 m"),
+            "{e}"
+        );
+        // Within 5 % of the radius (the paper's rounded points are 3.8 mm inside): accepted.
+        analyse(&on_sphere(&[[0.0, 0.0, -0.1049], [0.0, 0.0, 0.0951]]), 1.0).unwrap();
+        assert!(analyse(&on_sphere(&[[0.0, 0.0, -0.1051], [0.0, 0.0, 0.1]]), 1.0).is_err());
+        // Boxes and cylinders: on a face, an edge, a cap; inside them the nearest face counts.
+        let mut spec = on_sphere(&[[0.05, 0.01, 0.0], [-0.05, 0.03, 0.04], [0.0, 0.0, -0.0395]]);
+        spec.object = ObjectSpec::from_shape(
+            &Shape::Box {
+                half_extents: [0.05, 0.03, 0.04],
+            },
+            0.5,
+        );
+        analyse(&spec, 1.0).unwrap();
+        spec.contacts[2].position = [0.0, 0.0, 0.0];
+        assert!(analyse(&spec, 1.0)
+            .unwrap_err()
+            .to_string()
+            .contains("contacts[2]"));
+        let mut spec = on_sphere(&[[0.035, 0.0, 0.02], [-0.035, 0.0, 0.02], [0.0, 0.0, 0.06]]);
+        spec.object = ObjectSpec::from_shape(
+            &Shape::Cylinder {
+                radius: 0.035,
+                half_height: 0.06,
+            },
+            0.5,
+        );
+        analyse(&spec, 1.0).unwrap();
+        spec.contacts[1].position = [0.0, 0.0, 0.02];
+        assert!(analyse(&spec, 1.0)
+            .unwrap_err()
+            .to_string()
+            .contains("contacts[1]"));
+    }
+
+    #[test]
+    fn a_contact_carrying_no_force_lies_in_its_cone_and_does_not_pull() {
+        let mut spec = GraspSpec::paper_sphere();
+        spec.gravity = [0.0; 3];
+        let r = analyse(&spec, 1.0).unwrap();
+        assert!(r.contacts.iter().all(|c| c.in_cone));
+        assert!(r.optimised.unwrap().contacts.iter().all(|c| c.in_cone));
+        assert!(r.warnings.is_empty(), "{:?}", r.warnings);
+        // A frictionless box on six faces: only the bottom carries the weight; the top would
+        // have to pull in the minimum-norm distribution.
+        let mut spec = on_sphere(&[
+            [0.05, 0.0, 0.0],
+            [-0.05, 0.0, 0.0],
+            [0.0, 0.05, 0.0],
+            [0.0, -0.05, 0.0],
+            [0.0, 0.0, -0.05],
+            [0.0, 0.0, 0.05],
+        ]);
+        spec.object = ObjectSpec::from_shape(
+            &Shape::Box {
+                half_extents: [0.05; 3],
+            },
+            1.0,
+        );
+        spec.contact_model = ContactModel::Frictionless;
+        spec.mu = None;
+        let r = analyse(&spec, 1.0).unwrap();
+        let in_cone: Vec<bool> = r.contacts.iter().map(|c| c.in_cone).collect();
+        assert_eq!(in_cone, [true, true, true, true, true, false]);
+        assert!(r
+            .warnings
+            .iter()
+            .any(|w| w.starts_with("contact 5 would have to pull")));
+        assert!(
+            !r.warnings
+                .iter()
+                .any(|w| w.contains("contact 0") || w.contains("0.0000 N")),
+            "{:?}",
+            r.warnings
+        );
+        assert!(r.optimised.unwrap().contacts.iter().all(|c| c.in_cone));
+    }
+
+    #[test]
+    fn a_frictionless_grasp_needs_no_mu_and_the_others_do() {
+        let mut spec = on_sphere(&[[0.0, 0.0, -0.1], [0.1, 0.0, 0.0]]);
+        spec.contact_model = ContactModel::Frictionless;
+        spec.mu = None;
+        analyse(&spec, 1.0).unwrap();
+        let spec: GraspSpec = serde_json::from_str(r#"{"object": {"shape": "sphere", "radius": 0.1, "mass": 1}, "contact_model": "frictionless", "contacts": [{"position": [0, 0, -0.1]}]}"#).unwrap();
+        assert_eq!(spec.mu, None);
+        analyse(&spec, 1.0).unwrap();
+        for model in [ContactModel::PointWithFriction, ContactModel::SoftFinger] {
+            let mut s = spec.clone();
+            s.contact_model = model;
+            let e = analyse(&s, 1.0).unwrap_err().to_string();
+            assert!(e.contains("mu") && e.contains("missing"), "{e}");
+        }
+    }
+
+    #[test]
+    fn a_grasp_file_object_or_contact_must_be_a_json_object() {
+        let err = |text: &str| {
+            serde_json::from_str::<GraspSpec>(text)
+                .unwrap_err()
+                .to_string()
+        };
+        let e = err(
+            r#"[{"shape":"sphere","radius":0.1,"mass":1.0},[0,0,-9.81],"point_with_friction",1.5,0.0,[{"position":[0,0,-0.1]}],[0,0,0,0,0,0]]"#,
+        );
+        assert!(
+            e.contains("invalid type: sequence, expected a grasp file: a JSON object"),
+            "{e}"
+        );
+        let e = err("[]");
+        assert!(
+            e.contains("expected a grasp file") && !e.contains("struct"),
+            "{e}"
+        );
+        let e = err("null");
+        assert!(
+            e.contains("expected a grasp file") && !e.contains("GraspSpec"),
+            "{e}"
+        );
+        let e = err(
+            r#"{"object": ["sphere", 0.1, null, null, 1.0], "mu": 1, "contacts": [{"position": [0, 0, -0.1]}]}"#,
+        );
+        assert!(e.contains("sequence, expected an object {\"shape\""), "{e}");
+        let e = err(
+            r#"{"object": {"shape": "sphere", "radius": 0.1, "mass": 1}, "mu": 1, "contacts": [[[0, 0, -0.1]]]}"#,
+        );
+        assert!(e.contains("sequence, expected a contact"), "{e}");
+        // Objects still parse, with their defaults and unknown-field checks, and round-trip.
+        let spec = GraspSpec::paper_sphere();
+        let back: GraspSpec = serde_json::from_str(&serde_json::to_string(&spec).unwrap()).unwrap();
+        assert_eq!(back, spec);
+        assert!(err(r#"{"object": {"shape": "sphere", "radius": 0.1, "mass": 1, "colour": 1}, "mu": 1, "contacts": []}"#).contains("unknown field `colour`"));
     }
 }

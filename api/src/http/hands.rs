@@ -152,7 +152,10 @@ impl HandBody {
 
 /// An upload: a hand spec and its URDF text.
 #[derive(Debug, Clone, Deserialize, ToSchema)]
-#[serde(deny_unknown_fields)]
+#[serde(
+    deny_unknown_fields,
+    expecting = "a hand upload: a JSON object {\"spec\": {...}, \"urdf\": \"<robot ...>\"}"
+)]
 pub struct HandUpload {
     /// The hand spec (its `urdf` file name may be omitted).
     #[schema(value_type = HandSpecDoc)]

@@ -23,7 +23,10 @@ use super::state::AppState;
 
 /// A replay to run.
 #[derive(Debug, Clone, Deserialize, ToSchema)]
-#[serde(deny_unknown_fields)]
+#[serde(
+    deny_unknown_fields,
+    expecting = "a replay request: a JSON object {\"hand\": ...}"
+)]
 pub struct ReplayRequest {
     /// Name of the hand: built-in or uploaded (see `GET /api/v1/hands`).
     pub hand: String,

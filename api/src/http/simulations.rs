@@ -26,7 +26,10 @@ pub const MAX_SIMULATED_S: f64 = 120.0;
 
 /// A simulation to run.
 #[derive(Debug, Clone, Deserialize, ToSchema)]
-#[serde(deny_unknown_fields)]
+#[serde(
+    deny_unknown_fields,
+    expecting = "a simulation request: a JSON object {\"scenario\": ..., \"seed\": ..., \"duration\": ...}"
+)]
 pub struct SimulationRequest {
     /// A built-in scenario's name (see `icms scenarios`) or a scenario object as accepted by
     /// `icms simulate --scenario FILE`.
@@ -288,5 +291,40 @@ mod tests {
             .unwrap_err()
             .detail
             .contains("sphere-lift"));
+    }
+
+    #[test]
+    fn request_and_scenario_errors_speak_user_words_not_rust_type_names() {
+        let e = serde_json::from_value::<SimulationRequest>(serde_json::json!(7))
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains("expected a simulation request: a JSON object") && !e.contains("struct"),
+            "{e}"
+        );
+        let e = serde_json::from_value::<crate::http::replays::ReplayRequest>(serde_json::json!(
+            "allegro"
+        ))
+        .unwrap_err()
+        .to_string();
+        assert!(
+            e.contains("expected a replay request") && !e.contains("struct"),
+            "{e}"
+        );
+        let e = serde_json::from_value::<crate::http::hands::HandUpload>(serde_json::json!(null))
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains("expected a hand upload") && !e.contains("struct"),
+            "{e}"
+        );
+        // A scenario in its sequence form is refused: a scenario is a JSON object.
+        let e = serde_json::from_value::<Scenario>(serde_json::json!(["x", {}, "auto", [], 0]))
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains("sequence, expected a scenario: a JSON object"),
+            "{e}"
+        );
     }
 }

@@ -43,7 +43,11 @@ pub const MAX_HAND_EXTENT: f64 = 10.0;
 
 /// One fingertip of a hand spec.
 #[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
-#[serde(deny_unknown_fields)]
+#[serde(
+    deny_unknown_fields,
+    remote = "Self",
+    expecting = "a fingertip {\"link\": ..., \"offset\": [x, y, z], \"radius\": ...}"
+)]
 pub struct FingertipSpec {
     /// Name of the fingertip (for example `thumb`); default the link's name.
     #[serde(default)]
@@ -56,6 +60,17 @@ pub struct FingertipSpec {
     pub radius: f64,
 }
 
+crate::object_only!(
+    FingertipSpec,
+    "a fingertip {\"link\": ..., \"offset\": [x, y, z], \"radius\": ...}",
+    serialize
+);
+crate::object_only!(
+    HandSpec,
+    "a hand spec: a JSON object {\"name\": ..., \"urdf\": ..., \"fingertips\": [...], ...}",
+    serialize
+);
+
 /// A hand spec: what the URDF does not say. JSON:
 ///
 /// ```json
@@ -66,7 +81,11 @@ pub struct FingertipSpec {
 ///   "base_link": "base_link", "armature": 0.0001 }
 /// ```
 #[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
-#[serde(deny_unknown_fields)]
+#[serde(
+    deny_unknown_fields,
+    remote = "Self",
+    expecting = "a hand spec: a JSON object {\"name\": ..., \"urdf\": ..., \"fingertips\": [...], ...}"
+)]
 pub struct HandSpec {
     /// Name of the hand model.
     pub name: String,
