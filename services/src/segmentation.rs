@@ -11,7 +11,13 @@
 //! each move's start and end are refined from its progress curve: the times at which it has
 //! covered 10 %, 50 % and 90 % of its displacement give its centre and duration (for a
 //! minimum-jerk profile the 10-90 % time is 50.7 % of the whole), which is much less biased
-//! than a speed threshold.
+//! than a speed threshold. The thresholds cut off a move's slow start and end, which for a long,
+//! gentle move (a retreat that `--duration` stretches over the rest of the session) is seconds:
+//! each fast move extends outward while the speed over a 3× wider window (the one a second pass
+//! uses to find slow moves in the rests) stays above a quarter of the exit threshold, and the
+//! progress window is widened to the fitted start and end (within
+//! the rests around the move) and fitted again until it holds the whole move. A rest whose ends
+//! are [`SegmentParams::slow_move_m`] apart holds a move too slow for either threshold.
 //!
 //! Contact *episodes* (at least two fingers transmitting force, with minimum duration and gap
 //! merging) are the grasps; a single finger bumping into the object is not one. Around each episode the moves and the rests between them are labelled by a small
@@ -49,6 +55,9 @@ pub struct SegmentParams {
     pub min_move_s: f64,
     /// Smallest move displacement (m, rotations counted × `rotation_radius`). Default 0.0015.
     pub min_move_m: f64,
+    /// A rest between the moves found by speed whose ends are this far apart (m) holds a move
+    /// too slow for the speed thresholds. Default 0.005.
+    pub slow_move_m: f64,
     /// Shortest contact episode (s). Default 0.1.
     pub min_contact_s: f64,
     /// Contact gaps shorter than this are bridged (s). Default 0.3.
@@ -72,6 +81,7 @@ impl Default for SegmentParams {
             move_exit_speed: 0.003,
             min_move_s: 0.08,
             min_move_m: 0.0015,
+            slow_move_m: 0.005,
             min_contact_s: 0.1,
             contact_gap_s: 0.3,
             vertical_fraction: 0.6,
@@ -499,6 +509,58 @@ fn hysteresis(speed: &[f64], enter: f64, exit: f64, from: usize, to: usize) -> V
     raw
 }
 
+/// A minimum-jerk fit of the hand's motion over the grid window `[a, b]`: the times (grid
+/// indices) at which it covered 10 %, 50 % and 90 % of the window's displacement give the
+/// move's start and end. Also the displacement and rotation vector over the window.
+struct Fit {
+    start: f64,
+    end: f64,
+    dp: Vector,
+    rv: Vector,
+}
+
+fn fit_min_jerk(g: &Grid, params: &SegmentParams, a: usize, b: usize, tau10: f64) -> Fit {
+    let dp = g.base_p[b] - g.base_p[a];
+    let ra = g.base_r[a].inverse();
+    let rv = (ra * g.base_r[b]).scaled_axis();
+    let d2 = (dp.norm_squared() + (params.rotation_radius * rv.norm()).powi(2)).max(1e-30);
+    // Progress along the window's displacement (translation and rotation together).
+    let progress = |i: usize| -> f64 {
+        let p = g.base_p[i] - g.base_p[a];
+        let r = (ra * g.base_r[i]).scaled_axis();
+        (p.dot(&dp) + params.rotation_radius.powi(2) * r.dot(&rv)) / d2
+    };
+    // First crossings of 10 %, 50 % and 90 %, in one pass.
+    let levels = [0.1, 0.5, 0.9];
+    let mut at = [b as f64; 3];
+    let mut k = 0;
+    let mut prev = progress(a);
+    for i in a + 1..=b {
+        let cur = progress(i);
+        while k < 3 && cur >= levels[k] {
+            let f = if cur > prev {
+                (levels[k] - prev) / (cur - prev)
+            } else {
+                1.0
+            };
+            at[k] = (i - 1) as f64 + f.clamp(0.0, 1.0);
+            k += 1;
+        }
+        if k == 3 {
+            break;
+        }
+        prev = cur;
+    }
+    let [t10, t50, t90] = at;
+    let dur = (t90 - t10) / (1.0 - 2.0 * tau10);
+    Fit {
+        start: t50 - 0.5 * dur,
+        end: t50 + 0.5 * dur,
+        dp,
+        rv,
+    }
+}
+
 fn find_moves(g: &Grid, params: &SegmentParams) -> Vec<Move> {
     let n = g.len();
     let dt = g.dt_ns as f64 * 1e-9;
@@ -510,9 +572,27 @@ fn find_moves(g: &Grid, params: &SegmentParams) -> Vec<Move> {
         0,
         n,
     );
-    // Second pass for slow, small moves in the rests between the fast ones: a wider window
-    // (less noise) and a quarter of the thresholds.
+    // A wider window (less noise) for slow motion, with a quarter of the thresholds.
     let slow = speed_profile(g, params, 3.0 * params.speed_window_s);
+    let slow_exit = 0.25 * params.move_exit_speed;
+    // A long, gentle move (a retreat stretched over many seconds by `--duration`) spends its
+    // first and last seconds below the fast exit speed: extend each fast run outward while the
+    // hand is still moving at the slow exit speed, up to its neighbours. Otherwise the slow pass
+    // below finds its slow start and end as moves of their own (a 2 mm "retreat" ahead of the
+    // real one, which then started 0.7 s late).
+    for i in 0..raw.len() {
+        let lo = if i > 0 { raw[i - 1].1 } else { 0 };
+        let hi = raw.get(i + 1).map_or(n.saturating_sub(1), |r| r.0);
+        let (mut a, mut b) = raw[i];
+        while a > lo && slow[a - 1] > slow_exit {
+            a -= 1;
+        }
+        while b < hi && slow[b + 1] > slow_exit {
+            b += 1;
+        }
+        raw[i] = (a, b);
+    }
+    // Second pass for slow, small moves in the rests between the fast ones.
     let margin = (3.0 * params.speed_window_s / params.grid_s) as usize;
     let mut gaps = Vec::new();
     let mut prev = 0usize;
@@ -526,51 +606,57 @@ fn find_moves(g: &Grid, params: &SegmentParams) -> Vec<Move> {
             raw.extend(hysteresis(
                 &slow,
                 0.25 * params.move_enter_speed,
-                0.25 * params.move_exit_speed,
+                slow_exit,
                 a,
                 b,
             ));
         }
     }
     raw.sort_unstable();
+    // Last, moves too slow for either threshold (a 0.1 m retreat stretched over two minutes
+    // peaks at 1.6 mm/s): a rest between the runs at whose ends the hand is
+    // [`SegmentParams::slow_move_m`] apart held a move; the fit below finds it in the rest.
+    let mut prev = 0usize;
+    let mut slow_moves = Vec::new();
+    for &(a, b) in raw.iter().chain(std::iter::once(&(n - 1, n - 1))) {
+        if a > prev && (g.base_p[a] - g.base_p[prev]).norm() >= params.slow_move_m {
+            slow_moves.push((prev, a));
+        }
+        prev = prev.max(b);
+    }
+    if !slow_moves.is_empty() {
+        raw.extend(slow_moves);
+        raw.sort_unstable();
+    }
     let tau10 = min_jerk_tau(0.1);
     let mut moves = Vec::new();
-    for (a, b) in raw {
+    for (i, &(a, b)) in raw.iter().enumerate() {
         if (b - a) as f64 * dt < params.min_move_s {
             continue;
         }
-        let dp = g.base_p[b] - g.base_p[a];
-        let rot = g.base_r[a].inverse() * g.base_r[b];
-        let rv = rot.scaled_axis();
-        let d2 = dp.norm_squared() + (params.rotation_radius * rv.norm()).powi(2);
+        let mut fit = fit_min_jerk(g, params, a, b, tau10);
+        let d2 = fit.dp.norm_squared() + (params.rotation_radius * fit.rv.norm()).powi(2);
         if d2.sqrt() < params.min_move_m {
             continue;
         }
-        // Progress along the move's displacement (translation and rotation together).
-        let progress = |i: usize| -> f64 {
-            let p = g.base_p[i] - g.base_p[a];
-            let r = (g.base_r[a].inverse() * g.base_r[i]).scaled_axis();
-            (p.dot(&dp) + params.rotation_radius.powi(2) * r.dot(&rv)) / d2
-        };
-        let crossing = |level: f64| -> f64 {
-            let mut prev = progress(a);
-            for i in a + 1..=b {
-                let cur = progress(i);
-                if cur >= level {
-                    let f = if cur > prev {
-                        (level - prev) / (cur - prev)
-                    } else {
-                        1.0
-                    };
-                    return (i - 1) as f64 + f.clamp(0.0, 1.0);
-                }
-                prev = cur;
+        // The thresholds cut off the move's slow start and end, which for a long move can be a
+        // large part of it: widen the window to the fit's start and end (plus a quarter of its
+        // duration) within the rests around it, and fit again, until it holds the whole move.
+        // Rests add nothing to the displacement, so the fit then sees the complete profile.
+        let lo = if i > 0 { raw[i - 1].1.min(a) } else { 0 };
+        let hi = raw.get(i + 1).map_or(n - 1, |r| r.0.max(b));
+        let (mut wa, mut wb) = (a, b);
+        for _ in 0..6 {
+            let pad = 0.25 * (fit.end - fit.start).max(0.0);
+            let na = (fit.start - pad).floor().max(lo as f64) as usize;
+            let nb = ((fit.end + pad).ceil().min(hi as f64) as usize).max(na);
+            if na >= wa && nb <= wb {
+                break;
             }
-            b as f64
-        };
-        let (t10, t50, t90) = (crossing(0.1), crossing(0.5), crossing(0.9));
-        let dur = (t90 - t10) / (1.0 - 2.0 * tau10);
-        let (mut s, mut e) = (t50 - 0.5 * dur, t50 + 0.5 * dur);
+            (wa, wb) = (wa.min(na), wb.max(nb));
+            fit = fit_min_jerk(g, params, wa, wb, tau10);
+        }
+        let (mut s, mut e) = (fit.start, fit.end);
         // The fit should not move a boundary far outside what the threshold saw.
         let slack = 0.3 * (b - a) as f64;
         s = s.clamp(a as f64 - slack, a as f64 + slack).max(0.0);
@@ -580,8 +666,8 @@ fn find_moves(g: &Grid, params: &SegmentParams) -> Vec<Move> {
         moves.push(Move {
             start: s,
             end: e,
-            dp,
-            angle: rv.norm(),
+            dp: fit.dp,
+            angle: fit.rv.norm(),
         });
     }
     // Neighbouring moves must not overlap after refinement.

@@ -16,13 +16,17 @@ fn session(name: &str, seed: u64, duration: Option<f64>) -> Session {
     if let Some((_, s)) = cache.lock().unwrap().iter().find(|(k, _)| *k == key) {
         return s.clone();
     }
-    let dir = tempfile::tempdir().unwrap();
-    let path = dir.path().join("s.mcap");
-    let scenario = Scenario::builtin(name, seed).unwrap();
-    record_simulation(&scenario, duration, &path, |_, _| {}).unwrap();
-    let s = read_session(&path).unwrap();
+    let s = simulate(&Scenario::builtin(name, seed).unwrap(), duration);
     cache.lock().unwrap().push((key, s.clone()));
     s
+}
+
+/// A scenario simulated, recorded and read back.
+fn simulate(scenario: &Scenario, duration: Option<f64>) -> Session {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("s.mcap");
+    record_simulation(scenario, duration, &path, |_, _| {}).unwrap();
+    read_session(&path).unwrap()
 }
 
 fn found(seg: &Segmentation) -> Vec<PhaseSpan> {
@@ -221,5 +225,29 @@ fn every_builtin_scenario_is_segmented_close_to_its_ground_truth() {
             describe(&seg, &s)
         );
         assert!(sc.phases_found_fraction >= 0.5, "{name}: {sc:?}");
+    }
+}
+
+/// `--duration` beyond the script stretches its last phase: the operator's retreat, 0.1 m up,
+/// then takes the rest of the session (13 s at 20 s, 113 s at 120 s) and creeps off at a few
+/// mm/s or less. The segmentation found only its middle by speed and took its slow start for a
+/// 2 mm move of its own, so the retreat began 0.74 s late at 20 s (1.23 s for two-grasps at
+/// 30 s), and at 120 s it was not found at all.
+#[test]
+fn a_session_extended_by_duration_keeps_every_boundary_within_30_ms() {
+    for (name, seed, duration) in [
+        ("sphere-lift", 0, 20.0),
+        ("two-grasps", 1, 30.0),
+        ("sphere-lift", 0, 120.0),
+    ] {
+        let s = session(name, seed, Some(duration));
+        let seg = segment(&s, &SegmentParams::default());
+        let sc = score(&found(&seg), &s.phases);
+        let worst = sc.boundary_errors_ms.iter().copied().fold(0.0, f64::max);
+        assert!(
+            sc.phases_found_fraction == 1.0 && worst <= 30.0,
+            "{name} seed {seed} for {duration} s: {sc:?}\n{}",
+            describe(&seg, &s)
+        );
     }
 }
