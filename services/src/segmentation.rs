@@ -20,7 +20,20 @@
 //! are [`SegmentParams::slow_move_m`] apart holds a move too slow for either threshold.
 //!
 //! Contact *episodes* (at least two fingers transmitting force, with minimum duration and gap
-//! merging) are the grasps; a single finger bumping into the object is not one. Around each episode the moves and the rests between them are labelled by a small
+//! merging) are the candidate grasps; a single finger bumping into the object is not one.
+//!
+//! # What counts as a grasp
+//!
+//! An episode yields a skill only if its contacts carried the object: while at least two
+//! fingertips transmitted force, the object moved [`SegmentParams::min_carry_m`] (5 mm) or more
+//! from where it was when they closed on it, and moved with the hand (its displacement relative
+//! to the hand's base less than half its displacement in the world); and the skill has at least
+//! two contacts (fingertips touching for 30 % of the held part) that oppose each other (mean
+//! normals more than 90° apart). Fingers that squeeze an object they cannot lift (too heavy, too small, μ = 0),
+//! or push or knock it away, make no skill: such a session is stored with zero skills. An object
+//! lifted and then dropped (`box-slip`) is a grasp: it was carried.
+//!
+//! Around each episode the moves and the rests between them are labelled by a small
 //! grammar: moves before the first touch are `approach` (and the last of two or more is
 //! `preshape`); the rest from the last of them to the first move in contact is `grasp`; moves in
 //! contact are `lift` (mostly up), `place` (mostly down) or `transport` (otherwise, or a turn);
@@ -69,6 +82,9 @@ pub struct SegmentParams {
     /// Key poses of the object's motion every this many seconds (plus phase boundaries).
     /// Default 0.25.
     pub keyframe_s: f64,
+    /// A grasp must carry the object at least this far (m) from where the fingers closed on
+    /// it, see [`segment`]. Default 0.005.
+    pub min_carry_m: f64,
 }
 
 impl Default for SegmentParams {
@@ -87,6 +103,7 @@ impl Default for SegmentParams {
             vertical_fraction: 0.6,
             profile_points: 50,
             keyframe_s: 0.25,
+            min_carry_m: 0.005,
         }
     }
 }
@@ -708,7 +725,8 @@ fn find_episodes(g: &Grid, params: &SegmentParams) -> Vec<(usize, usize)> {
     merged
 }
 
-/// Segments a session into skills, one per grasp. Pure: no I/O.
+/// Segments a session into skills, one per grasp (see the module's "What counts as a grasp";
+/// a session without one has no skill). Pure: no I/O.
 pub fn segment(session: &Session, params: &SegmentParams) -> Segmentation {
     let Some(g) = build_grid(session, params) else {
         return Segmentation { skills: Vec::new() };
@@ -793,14 +811,90 @@ pub fn segment(session: &Session, params: &SegmentParams) -> Segmentation {
         }
         skills_spans.push(spans);
     }
+    let carry = CarryTrack::new(session);
     let skills = well_formed(skills_spans, &g, last)
         .into_iter()
+        .filter(|phases| carry.carried(session, phases, params))
         .map(|phases| {
             let parameters = skill_parameters(session, &phases, params);
             Skill { phases, parameters }
         })
+        .filter(|s| is_grasp(&s.parameters))
         .collect();
     Segmentation { skills }
+}
+
+/// The object's position in the world and relative to the hand's base, by time.
+struct CarryTrack {
+    samples: Vec<(u64, Vector, Vector)>,
+}
+
+impl CarryTrack {
+    fn new(session: &Session) -> CarryTrack {
+        let mut samples: Vec<(u64, Vector, Vector)> = session
+            .object
+            .iter()
+            .map(|(t, o)| (*t, v3(&o.pose.position), v3(&o.pose_in_hand.position)))
+            .filter(|(_, p, h)| p.iter().chain(h.iter()).all(|v| v.is_finite()))
+            .collect();
+        samples.sort_by_key(|(t, _, _)| *t);
+        CarryTrack { samples }
+    }
+
+    /// The sample at or just before `t` (the first one if none is).
+    fn at(&self, t: u64) -> Option<&(u64, Vector, Vector)> {
+        let i = self.samples.partition_point(|(ts, _, _)| *ts <= t);
+        self.samples.get(i.saturating_sub(1))
+    }
+
+    /// Whether the hand carried the object during a skill's `phases` (from the start of
+    /// `grasp`): at some contact sample with at least two fingertips transmitting force, the
+    /// object is [`SegmentParams::min_carry_m`] or more from where it was when two fingertips
+    /// first transmitted force, and it moved with the hand: its displacement relative to the
+    /// hand's base is less than half its displacement in the world. An object the fingers
+    /// squeeze but cannot lift (too heavy, too small to hold, frictionless), one pushed or
+    /// knocked away, or one that only rocks in the fingers is not carried.
+    fn carried(&self, session: &Session, phases: &[PhaseSpan], params: &SegmentParams) -> bool {
+        let (Some(first), Some(last)) = (phases.first(), phases.last()) else {
+            return false;
+        };
+        let from = phases
+            .iter()
+            .find(|p| p.name == "grasp")
+            .map_or(first.start_ns, |p| p.start_ns);
+        let to = last.end_ns;
+        let mut reference: Option<(Vector, Vector)> = None;
+        for (t, c) in &session.contacts {
+            if *t < from || *t >= to || c.fingers.iter().filter(|f| f.in_contact).count() < 2 {
+                continue;
+            }
+            let Some((_, p, h)) = self.at(*t) else {
+                return false;
+            };
+            match reference {
+                None => reference = Some((*p, *h)),
+                Some((p0, h0)) => {
+                    let moved = (p - p0).norm();
+                    if moved >= params.min_carry_m && (h - h0).norm() < 0.5 * moved {
+                        return true;
+                    }
+                }
+            }
+        }
+        false
+    }
+}
+
+/// A skill is a grasp only if contacts carried the object ([`CarryTrack::carried`]) and it has
+/// at least two contacts (fingertips touching for 30 % of the held part) of which two oppose
+/// each other (mean normals more than 90° apart). Checked on the parameters, so that no skill
+/// is ever stored with fewer than two contacts.
+fn is_grasp(p: &SkillParameters) -> bool {
+    p.contacts.iter().enumerate().any(|(i, a)| {
+        p.contacts[i + 1..]
+            .iter()
+            .any(|b| Vector::from(a.normal_b).dot(&Vector::from(b.normal_b)) < 0.0)
+    })
 }
 
 /// The skills' spans (grid indices) as phases in ns, well formed whatever the data: every

@@ -225,6 +225,13 @@ fn every_builtin_scenario_is_segmented_close_to_its_ground_truth() {
             describe(&seg, &s)
         );
         assert!(sc.phases_found_fraction >= 0.5, "{name}: {sc:?}");
+        for skill in &seg.skills {
+            let p = &skill.parameters;
+            assert!(
+                p.contact_count >= 2 && p.grasp_type.opposing_virtual_fingers >= 2,
+                "{name}: {p:?}"
+            );
+        }
     }
 }
 
@@ -249,5 +256,70 @@ fn a_session_extended_by_duration_keeps_every_boundary_within_30_ms() {
             "{name} seed {seed} for {duration} s: {sc:?}\n{}",
             describe(&seg, &s)
         );
+    }
+}
+
+/// The README's box scenario with another object.
+fn box_scenario(object: &str) -> Scenario {
+    let json = format!(
+        r#"{{ "name": "odd-box", "object": {object}, "grasp": "pinch",
+             "tasks": [ {{ "phase": "approach", "duration": 0.8 }}, {{ "phase": "preshape", "duration": 0.5 }},
+                        {{ "phase": "grasp", "duration": 0.8 }}, {{ "phase": "lift", "duration": 1.0, "height": 0.1 }},
+                        {{ "phase": "hold", "duration": 1.0 }}, {{ "phase": "place", "duration": 1.0 }},
+                        {{ "phase": "release", "duration": 0.6 }}, {{ "phase": "retreat", "duration": 0.6 }} ],
+             "seed": 1 }}"#
+    );
+    serde_json::from_str(&json).unwrap()
+}
+
+/// Fingers that close on an object but never carry it make no skill (the session is stored
+/// with zero skills): before, each of these gave a skill with lift, hold and place phases,
+/// `contact_count: 0`, slip events and a grip force.
+#[test]
+fn a_grasp_that_never_carried_the_object_yields_no_skill() {
+    for (what, object) in [
+        (
+            "a 5 kg box (too heavy: the fingers slide up its faces)",
+            r#"{"shape": "box", "half_extents": [0.025, 0.025, 0.04], "mass": 5.0, "mu": 0.8, "position": [0, 0, 0.04]}"#,
+        ),
+        (
+            "a 4 mm box (the fingers meet over it)",
+            r#"{"shape": "box", "half_extents": [0.002, 0.002, 0.002], "mass": 0.2, "mu": 0.8, "position": [0, 0, 0.002]}"#,
+        ),
+        (
+            "a frictionless box (squeezed, it cannot be lifted)",
+            r#"{"shape": "box", "half_extents": [0.025, 0.025, 0.04], "mass": 0.2, "mu": 0.0, "position": [0, 0, 0.04]}"#,
+        ),
+    ] {
+        let s = simulate(&box_scenario(object), None);
+        assert!(
+            s.contacts
+                .iter()
+                .any(|(_, c)| c.fingers.iter().filter(|f| f.in_contact).count() >= 2),
+            "{what}: the fingers should touch it"
+        );
+        let seg = segment(&s, &SegmentParams::default());
+        assert!(seg.skills.is_empty(), "{what}: {}", describe(&seg, &s));
+    }
+}
+
+/// box-slip lifts the box about 8 cm before it slips out and falls: the contacts carried it,
+/// so that is a grasp, with its two opposing contacts.
+#[test]
+fn a_box_lifted_then_dropped_is_still_a_grasp_with_two_opposing_contacts() {
+    for seed in 0..2 {
+        let s = session("box-slip", seed, None);
+        let seg = segment(&s, &SegmentParams::default());
+        assert_eq!(seg.skills.len(), 1, "{}", describe(&seg, &s));
+        let p = &seg.skills[0].parameters;
+        assert_eq!(p.contact_count, 2, "{:?}", p.contacts);
+        assert_eq!(p.grasp_type.opposing_virtual_fingers, 2);
+        assert!(p.quality.is_some());
+        let top = p
+            .motion
+            .iter()
+            .map(|k| k.position[2])
+            .fold(f64::MIN, f64::max);
+        assert!(top > 0.05, "rose {top} m");
     }
 }
