@@ -11,10 +11,29 @@
 //! each move's start and end are refined from its progress curve: the times at which it has
 //! covered 10 %, 50 % and 90 % of its displacement give its centre and duration (for a
 //! minimum-jerk profile the 10-90 % time is 50.7 % of the whole), which is much less biased
-//! than a speed threshold.
+//! than a speed threshold. The thresholds cut off a move's slow start and end, which for a long,
+//! gentle move (a retreat that `--duration` stretches over the rest of the session) is seconds:
+//! each fast move extends outward while the speed over a 3× wider window (the one a second pass
+//! uses to find slow moves in the rests) stays above a quarter of the exit threshold, and the
+//! progress window is widened to the fitted start and end (within
+//! the rests around the move) and fitted again until it holds the whole move. A rest whose ends
+//! are [`SegmentParams::slow_move_m`] apart holds a move too slow for either threshold.
 //!
 //! Contact *episodes* (at least two fingers transmitting force, with minimum duration and gap
-//! merging) are the grasps; a single finger bumping into the object is not one. Around each episode the moves and the rests between them are labelled by a small
+//! merging) are the candidate grasps; a single finger bumping into the object is not one.
+//!
+//! # What counts as a grasp
+//!
+//! An episode yields a skill only if its contacts carried the object: while at least two
+//! fingertips transmitted force, the object moved [`SegmentParams::min_carry_m`] (5 mm) or more
+//! from where it was when they closed on it, and moved with the hand (its displacement relative
+//! to the hand's base less than half its displacement in the world); and the skill has at least
+//! two contacts (fingertips touching for 30 % of the held part) that oppose each other (mean
+//! normals more than 90° apart). Fingers that squeeze an object they cannot lift (too heavy, too small, μ = 0),
+//! or push or knock it away, make no skill: such a session is stored with zero skills. An object
+//! lifted and then dropped (`box-slip`) is a grasp: it was carried.
+//!
+//! Around each episode the moves and the rests between them are labelled by a small
 //! grammar: moves before the first touch are `approach` (and the last of two or more is
 //! `preshape`); the rest from the last of them to the first move in contact is `grasp`; moves in
 //! contact are `lift` (mostly up), `place` (mostly down) or `transport` (otherwise, or a turn);
@@ -49,6 +68,9 @@ pub struct SegmentParams {
     pub min_move_s: f64,
     /// Smallest move displacement (m, rotations counted × `rotation_radius`). Default 0.0015.
     pub min_move_m: f64,
+    /// A rest between the moves found by speed whose ends are this far apart (m) holds a move
+    /// too slow for the speed thresholds. Default 0.005.
+    pub slow_move_m: f64,
     /// Shortest contact episode (s). Default 0.1.
     pub min_contact_s: f64,
     /// Contact gaps shorter than this are bridged (s). Default 0.3.
@@ -60,6 +82,9 @@ pub struct SegmentParams {
     /// Key poses of the object's motion every this many seconds (plus phase boundaries).
     /// Default 0.25.
     pub keyframe_s: f64,
+    /// A grasp must carry the object at least this far (m) from where the fingers closed on
+    /// it, see [`segment`]. Default 0.005.
+    pub min_carry_m: f64,
 }
 
 impl Default for SegmentParams {
@@ -72,11 +97,13 @@ impl Default for SegmentParams {
             move_exit_speed: 0.003,
             min_move_s: 0.08,
             min_move_m: 0.0015,
+            slow_move_m: 0.005,
             min_contact_s: 0.1,
             contact_gap_s: 0.3,
             vertical_fraction: 0.6,
             profile_points: 50,
             keyframe_s: 0.25,
+            min_carry_m: 0.005,
         }
     }
 }
@@ -499,6 +526,65 @@ fn hysteresis(speed: &[f64], enter: f64, exit: f64, from: usize, to: usize) -> V
     raw
 }
 
+/// A minimum-jerk fit of the hand's motion over the grid window `[a, b]`: the times (grid
+/// indices) at which it covered 10 %, 50 % and 90 % of the window's displacement give the
+/// move's start and end. Also the displacement and rotation vector over the window.
+struct Fit {
+    start: f64,
+    end: f64,
+    dp: Vector,
+    rv: Vector,
+}
+
+fn fit_min_jerk(g: &Grid, params: &SegmentParams, a: usize, b: usize, tau10: f64) -> Fit {
+    let dp = g.base_p[b] - g.base_p[a];
+    let ra = g.base_r[a].inverse();
+    let rv = (ra * g.base_r[b]).scaled_axis();
+    let d2 = (dp.norm_squared() + (params.rotation_radius * rv.norm()).powi(2)).max(1e-30);
+    // Progress along the window's displacement (translation and rotation together). A
+    // rotation under 1 % of the displacement is left out: it changes the progress by less than
+    // 1e-4, and its rotations cost most of the time on a long window.
+    let turns = (params.rotation_radius * rv.norm()).powi(2) > 1e-4 * d2;
+    let progress = |i: usize| -> f64 {
+        let p = g.base_p[i] - g.base_p[a];
+        let r = if turns {
+            params.rotation_radius.powi(2) * (ra * g.base_r[i]).scaled_axis().dot(&rv)
+        } else {
+            0.0
+        };
+        (p.dot(&dp) + r) / d2
+    };
+    // First crossings of 10 %, 50 % and 90 %, in one pass.
+    let levels = [0.1, 0.5, 0.9];
+    let mut at = [b as f64; 3];
+    let mut k = 0;
+    let mut prev = progress(a);
+    for i in a + 1..=b {
+        let cur = progress(i);
+        while k < 3 && cur >= levels[k] {
+            let f = if cur > prev {
+                (levels[k] - prev) / (cur - prev)
+            } else {
+                1.0
+            };
+            at[k] = (i - 1) as f64 + f.clamp(0.0, 1.0);
+            k += 1;
+        }
+        if k == 3 {
+            break;
+        }
+        prev = cur;
+    }
+    let [t10, t50, t90] = at;
+    let dur = (t90 - t10) / (1.0 - 2.0 * tau10);
+    Fit {
+        start: t50 - 0.5 * dur,
+        end: t50 + 0.5 * dur,
+        dp,
+        rv,
+    }
+}
+
 fn find_moves(g: &Grid, params: &SegmentParams) -> Vec<Move> {
     let n = g.len();
     let dt = g.dt_ns as f64 * 1e-9;
@@ -510,9 +596,27 @@ fn find_moves(g: &Grid, params: &SegmentParams) -> Vec<Move> {
         0,
         n,
     );
-    // Second pass for slow, small moves in the rests between the fast ones: a wider window
-    // (less noise) and a quarter of the thresholds.
+    // A wider window (less noise) for slow motion, with a quarter of the thresholds.
     let slow = speed_profile(g, params, 3.0 * params.speed_window_s);
+    let slow_exit = 0.25 * params.move_exit_speed;
+    // A long, gentle move (a retreat stretched over many seconds by `--duration`) spends its
+    // first and last seconds below the fast exit speed: extend each fast run outward while the
+    // hand is still moving at the slow exit speed, up to its neighbours. Otherwise the slow pass
+    // below finds its slow start and end as moves of their own (a 2 mm "retreat" ahead of the
+    // real one, which then started 0.7 s late).
+    for i in 0..raw.len() {
+        let lo = if i > 0 { raw[i - 1].1 } else { 0 };
+        let hi = raw.get(i + 1).map_or(n.saturating_sub(1), |r| r.0);
+        let (mut a, mut b) = raw[i];
+        while a > lo && slow[a - 1] > slow_exit {
+            a -= 1;
+        }
+        while b < hi && slow[b + 1] > slow_exit {
+            b += 1;
+        }
+        raw[i] = (a, b);
+    }
+    // Second pass for slow, small moves in the rests between the fast ones.
     let margin = (3.0 * params.speed_window_s / params.grid_s) as usize;
     let mut gaps = Vec::new();
     let mut prev = 0usize;
@@ -526,51 +630,57 @@ fn find_moves(g: &Grid, params: &SegmentParams) -> Vec<Move> {
             raw.extend(hysteresis(
                 &slow,
                 0.25 * params.move_enter_speed,
-                0.25 * params.move_exit_speed,
+                slow_exit,
                 a,
                 b,
             ));
         }
     }
     raw.sort_unstable();
+    // Last, moves too slow for either threshold (a 0.1 m retreat stretched over two minutes
+    // peaks at 1.6 mm/s): a rest between the runs at whose ends the hand is
+    // [`SegmentParams::slow_move_m`] apart held a move; the fit below finds it in the rest.
+    let mut prev = 0usize;
+    let mut slow_moves = Vec::new();
+    for &(a, b) in raw.iter().chain(std::iter::once(&(n - 1, n - 1))) {
+        if a > prev && (g.base_p[a] - g.base_p[prev]).norm() >= params.slow_move_m {
+            slow_moves.push((prev, a));
+        }
+        prev = prev.max(b);
+    }
+    if !slow_moves.is_empty() {
+        raw.extend(slow_moves);
+        raw.sort_unstable();
+    }
     let tau10 = min_jerk_tau(0.1);
     let mut moves = Vec::new();
-    for (a, b) in raw {
+    for (i, &(a, b)) in raw.iter().enumerate() {
         if (b - a) as f64 * dt < params.min_move_s {
             continue;
         }
-        let dp = g.base_p[b] - g.base_p[a];
-        let rot = g.base_r[a].inverse() * g.base_r[b];
-        let rv = rot.scaled_axis();
-        let d2 = dp.norm_squared() + (params.rotation_radius * rv.norm()).powi(2);
+        let mut fit = fit_min_jerk(g, params, a, b, tau10);
+        let d2 = fit.dp.norm_squared() + (params.rotation_radius * fit.rv.norm()).powi(2);
         if d2.sqrt() < params.min_move_m {
             continue;
         }
-        // Progress along the move's displacement (translation and rotation together).
-        let progress = |i: usize| -> f64 {
-            let p = g.base_p[i] - g.base_p[a];
-            let r = (g.base_r[a].inverse() * g.base_r[i]).scaled_axis();
-            (p.dot(&dp) + params.rotation_radius.powi(2) * r.dot(&rv)) / d2
-        };
-        let crossing = |level: f64| -> f64 {
-            let mut prev = progress(a);
-            for i in a + 1..=b {
-                let cur = progress(i);
-                if cur >= level {
-                    let f = if cur > prev {
-                        (level - prev) / (cur - prev)
-                    } else {
-                        1.0
-                    };
-                    return (i - 1) as f64 + f.clamp(0.0, 1.0);
-                }
-                prev = cur;
+        // The thresholds cut off the move's slow start and end, which for a long move can be a
+        // large part of it: widen the window to the fit's start and end (plus a quarter of its
+        // duration) within the rests around it, and fit again, until it holds the whole move.
+        // Rests add nothing to the displacement, so the fit then sees the complete profile.
+        let lo = if i > 0 { raw[i - 1].1.min(a) } else { 0 };
+        let hi = raw.get(i + 1).map_or(n - 1, |r| r.0.max(b));
+        let (mut wa, mut wb) = (a, b);
+        for _ in 0..6 {
+            let pad = 0.25 * (fit.end - fit.start).max(0.0);
+            let na = (fit.start - pad).floor().max(lo as f64) as usize;
+            let nb = ((fit.end + pad).ceil().min(hi as f64) as usize).max(na);
+            if na >= wa && nb <= wb {
+                break;
             }
-            b as f64
-        };
-        let (t10, t50, t90) = (crossing(0.1), crossing(0.5), crossing(0.9));
-        let dur = (t90 - t10) / (1.0 - 2.0 * tau10);
-        let (mut s, mut e) = (t50 - 0.5 * dur, t50 + 0.5 * dur);
+            (wa, wb) = (wa.min(na), wb.max(nb));
+            fit = fit_min_jerk(g, params, wa, wb, tau10);
+        }
+        let (mut s, mut e) = (fit.start, fit.end);
         // The fit should not move a boundary far outside what the threshold saw.
         let slack = 0.3 * (b - a) as f64;
         s = s.clamp(a as f64 - slack, a as f64 + slack).max(0.0);
@@ -580,8 +690,8 @@ fn find_moves(g: &Grid, params: &SegmentParams) -> Vec<Move> {
         moves.push(Move {
             start: s,
             end: e,
-            dp,
-            angle: rv.norm(),
+            dp: fit.dp,
+            angle: fit.rv.norm(),
         });
     }
     // Neighbouring moves must not overlap after refinement.
@@ -622,7 +732,8 @@ fn find_episodes(g: &Grid, params: &SegmentParams) -> Vec<(usize, usize)> {
     merged
 }
 
-/// Segments a session into skills, one per grasp. Pure: no I/O.
+/// Segments a session into skills, one per grasp (see the module's "What counts as a grasp";
+/// a session without one has no skill). Pure: no I/O.
 pub fn segment(session: &Session, params: &SegmentParams) -> Segmentation {
     let Some(g) = build_grid(session, params) else {
         return Segmentation { skills: Vec::new() };
@@ -707,14 +818,90 @@ pub fn segment(session: &Session, params: &SegmentParams) -> Segmentation {
         }
         skills_spans.push(spans);
     }
+    let carry = CarryTrack::new(session);
     let skills = well_formed(skills_spans, &g, last)
         .into_iter()
+        .filter(|phases| carry.carried(session, phases, params))
         .map(|phases| {
             let parameters = skill_parameters(session, &phases, params);
             Skill { phases, parameters }
         })
+        .filter(|s| is_grasp(&s.parameters))
         .collect();
     Segmentation { skills }
+}
+
+/// The object's position in the world and relative to the hand's base, by time.
+struct CarryTrack {
+    samples: Vec<(u64, Vector, Vector)>,
+}
+
+impl CarryTrack {
+    fn new(session: &Session) -> CarryTrack {
+        let mut samples: Vec<(u64, Vector, Vector)> = session
+            .object
+            .iter()
+            .map(|(t, o)| (*t, v3(&o.pose.position), v3(&o.pose_in_hand.position)))
+            .filter(|(_, p, h)| p.iter().chain(h.iter()).all(|v| v.is_finite()))
+            .collect();
+        samples.sort_by_key(|(t, _, _)| *t);
+        CarryTrack { samples }
+    }
+
+    /// The sample at or just before `t` (the first one if none is).
+    fn at(&self, t: u64) -> Option<&(u64, Vector, Vector)> {
+        let i = self.samples.partition_point(|(ts, _, _)| *ts <= t);
+        self.samples.get(i.saturating_sub(1))
+    }
+
+    /// Whether the hand carried the object during a skill's `phases` (from the start of
+    /// `grasp`): at some contact sample with at least two fingertips transmitting force, the
+    /// object is [`SegmentParams::min_carry_m`] or more from where it was when two fingertips
+    /// first transmitted force, and it moved with the hand: its displacement relative to the
+    /// hand's base is less than half its displacement in the world. An object the fingers
+    /// squeeze but cannot lift (too heavy, too small to hold, frictionless), one pushed or
+    /// knocked away, or one that only rocks in the fingers is not carried.
+    fn carried(&self, session: &Session, phases: &[PhaseSpan], params: &SegmentParams) -> bool {
+        let (Some(first), Some(last)) = (phases.first(), phases.last()) else {
+            return false;
+        };
+        let from = phases
+            .iter()
+            .find(|p| p.name == "grasp")
+            .map_or(first.start_ns, |p| p.start_ns);
+        let to = last.end_ns;
+        let mut reference: Option<(Vector, Vector)> = None;
+        for (t, c) in &session.contacts {
+            if *t < from || *t >= to || c.fingers.iter().filter(|f| f.in_contact).count() < 2 {
+                continue;
+            }
+            let Some((_, p, h)) = self.at(*t) else {
+                return false;
+            };
+            match reference {
+                None => reference = Some((*p, *h)),
+                Some((p0, h0)) => {
+                    let moved = (p - p0).norm();
+                    if moved >= params.min_carry_m && (h - h0).norm() < 0.5 * moved {
+                        return true;
+                    }
+                }
+            }
+        }
+        false
+    }
+}
+
+/// A skill is a grasp only if contacts carried the object ([`CarryTrack::carried`]) and it has
+/// at least two contacts (fingertips touching for 30 % of the held part) of which two oppose
+/// each other (mean normals more than 90° apart). Checked on the parameters, so that no skill
+/// is ever stored with fewer than two contacts.
+fn is_grasp(p: &SkillParameters) -> bool {
+    p.contacts.iter().enumerate().any(|(i, a)| {
+        p.contacts[i + 1..]
+            .iter()
+            .any(|b| Vector::from(a.normal_b).dot(&Vector::from(b.normal_b)) < 0.0)
+    })
 }
 
 /// The skills' spans (grid indices) as phases in ns, well formed whatever the data: every

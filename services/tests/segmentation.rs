@@ -16,13 +16,17 @@ fn session(name: &str, seed: u64, duration: Option<f64>) -> Session {
     if let Some((_, s)) = cache.lock().unwrap().iter().find(|(k, _)| *k == key) {
         return s.clone();
     }
-    let dir = tempfile::tempdir().unwrap();
-    let path = dir.path().join("s.mcap");
-    let scenario = Scenario::builtin(name, seed).unwrap();
-    record_simulation(&scenario, duration, &path, |_, _| {}).unwrap();
-    let s = read_session(&path).unwrap();
+    let s = simulate(&Scenario::builtin(name, seed).unwrap(), duration);
     cache.lock().unwrap().push((key, s.clone()));
     s
+}
+
+/// A scenario simulated, recorded and read back.
+fn simulate(scenario: &Scenario, duration: Option<f64>) -> Session {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("s.mcap");
+    record_simulation(scenario, duration, &path, |_, _| {}).unwrap();
+    read_session(&path).unwrap()
 }
 
 fn found(seg: &Segmentation) -> Vec<PhaseSpan> {
@@ -221,5 +225,101 @@ fn every_builtin_scenario_is_segmented_close_to_its_ground_truth() {
             describe(&seg, &s)
         );
         assert!(sc.phases_found_fraction >= 0.5, "{name}: {sc:?}");
+        for skill in &seg.skills {
+            let p = &skill.parameters;
+            assert!(
+                p.contact_count >= 2 && p.grasp_type.opposing_virtual_fingers >= 2,
+                "{name}: {p:?}"
+            );
+        }
+    }
+}
+
+/// `--duration` beyond the script stretches its last phase: the operator's retreat, 0.1 m up,
+/// then takes the rest of the session (13 s at 20 s, 113 s at 120 s) and creeps off at a few
+/// mm/s or less. The segmentation found only its middle by speed and took its slow start for a
+/// 2 mm move of its own, so the retreat began 0.74 s late at 20 s (1.23 s for two-grasps at
+/// 30 s), and at 120 s it was not found at all.
+#[test]
+fn a_session_extended_by_duration_keeps_every_boundary_within_30_ms() {
+    for (name, seed, duration) in [
+        ("sphere-lift", 0, 20.0),
+        ("two-grasps", 1, 30.0),
+        ("sphere-lift", 0, 120.0),
+    ] {
+        let s = session(name, seed, Some(duration));
+        let seg = segment(&s, &SegmentParams::default());
+        let sc = score(&found(&seg), &s.phases);
+        let worst = sc.boundary_errors_ms.iter().copied().fold(0.0, f64::max);
+        assert!(
+            sc.phases_found_fraction == 1.0 && worst <= 30.0,
+            "{name} seed {seed} for {duration} s: {sc:?}\n{}",
+            describe(&seg, &s)
+        );
+    }
+}
+
+/// The README's box scenario with another object.
+fn box_scenario(object: &str) -> Scenario {
+    let json = format!(
+        r#"{{ "name": "odd-box", "object": {object}, "grasp": "pinch",
+             "tasks": [ {{ "phase": "approach", "duration": 0.8 }}, {{ "phase": "preshape", "duration": 0.5 }},
+                        {{ "phase": "grasp", "duration": 0.8 }}, {{ "phase": "lift", "duration": 1.0, "height": 0.1 }},
+                        {{ "phase": "hold", "duration": 1.0 }}, {{ "phase": "place", "duration": 1.0 }},
+                        {{ "phase": "release", "duration": 0.6 }}, {{ "phase": "retreat", "duration": 0.6 }} ],
+             "seed": 1 }}"#
+    );
+    serde_json::from_str(&json).unwrap()
+}
+
+/// Fingers that close on an object but never carry it make no skill (the session is stored
+/// with zero skills): before, each of these gave a skill with lift, hold and place phases,
+/// `contact_count: 0`, slip events and a grip force.
+#[test]
+fn a_grasp_that_never_carried_the_object_yields_no_skill() {
+    for (what, object) in [
+        (
+            "a 5 kg box (too heavy: the fingers slide up its faces)",
+            r#"{"shape": "box", "half_extents": [0.025, 0.025, 0.04], "mass": 5.0, "mu": 0.8, "position": [0, 0, 0.04]}"#,
+        ),
+        (
+            "a 4 mm box (the fingers meet over it)",
+            r#"{"shape": "box", "half_extents": [0.002, 0.002, 0.002], "mass": 0.2, "mu": 0.8, "position": [0, 0, 0.002]}"#,
+        ),
+        (
+            "a frictionless box (squeezed, it cannot be lifted)",
+            r#"{"shape": "box", "half_extents": [0.025, 0.025, 0.04], "mass": 0.2, "mu": 0.0, "position": [0, 0, 0.04]}"#,
+        ),
+    ] {
+        let s = simulate(&box_scenario(object), None);
+        assert!(
+            s.contacts
+                .iter()
+                .any(|(_, c)| c.fingers.iter().filter(|f| f.in_contact).count() >= 2),
+            "{what}: the fingers should touch it"
+        );
+        let seg = segment(&s, &SegmentParams::default());
+        assert!(seg.skills.is_empty(), "{what}: {}", describe(&seg, &s));
+    }
+}
+
+/// box-slip lifts the box about 8 cm before it slips out and falls: the contacts carried it,
+/// so that is a grasp, with its two opposing contacts.
+#[test]
+fn a_box_lifted_then_dropped_is_still_a_grasp_with_two_opposing_contacts() {
+    for seed in 0..2 {
+        let s = session("box-slip", seed, None);
+        let seg = segment(&s, &SegmentParams::default());
+        assert_eq!(seg.skills.len(), 1, "{}", describe(&seg, &s));
+        let p = &seg.skills[0].parameters;
+        assert_eq!(p.contact_count, 2, "{:?}", p.contacts);
+        assert_eq!(p.grasp_type.opposing_virtual_fingers, 2);
+        assert!(p.quality.is_some());
+        let top = p
+            .motion
+            .iter()
+            .map(|k| k.position[2])
+            .fold(f64::MIN, f64::max);
+        assert!(top > 0.05, "rose {top} m");
     }
 }
