@@ -158,9 +158,21 @@ impl ScenarioObject {
         }
     }
 
-    /// The rigid object, validated.
+    /// The rigid object, validated with its friction: shape, sizes and mass as
+    /// [`ObjectSpec::to_object`] checks them, `mu` and `mu_torsion` finite and ≥ 0.
     pub fn to_object(&self) -> Result<RigidObject> {
-        self.spec().to_object()
+        let object = self.spec().to_object()?;
+        for (field, v) in [
+            ("object.mu", self.mu),
+            ("object.mu_torsion", self.mu_torsion),
+        ] {
+            check(
+                field.into(),
+                v.is_finite() && v >= 0.0,
+                format!("must be a finite number ≥ 0, got {v}"),
+            )?;
+        }
+        Ok(object)
     }
 
     /// The rigid object, validated for the closed loop: as [`to_object`](Self::to_object),
@@ -270,16 +282,6 @@ impl Scenario {
     pub fn resolve(&self) -> Result<(RigidObject, Vec<ResolvedTask>)> {
         let o = &self.object;
         let object = o.to_simulated_object()?;
-        check(
-            "object.mu".into(),
-            o.mu.is_finite() && o.mu >= 0.0,
-            format!("must be a finite number ≥ 0, got {}", o.mu),
-        )?;
-        check(
-            "object.mu_torsion".into(),
-            o.mu_torsion.is_finite() && o.mu_torsion >= 0.0,
-            format!("must be a finite number ≥ 0, got {}", o.mu_torsion),
-        )?;
         if let Some(p) = o.position {
             check(
                 "object.position".into(),

@@ -379,14 +379,6 @@ pub fn replay_glove(
     }
     let at_object = |source: dfs_core::DfsError| invalid("object", source.to_string());
     let rigid = object.to_simulated_object().map_err(at_object)?;
-    for (field, v) in [("mu", object.mu), ("mu_torsion", object.mu_torsion)] {
-        if !(v.is_finite() && v >= 0.0) {
-            return Err(invalid(
-                format!("object.{field}"),
-                format!("must be a finite number ≥ 0, got {v}"),
-            ));
-        }
-    }
     let depth = rigid.shape.support_depth(&Rotation::identity());
     let position = object
         .position

@@ -193,13 +193,6 @@ fn check_session_object(metadata: &BTreeMap<String, String>, name: &str) -> Resu
     let o: dfs_core::scenario::ScenarioObject =
         serde_json::from_str(text).map_err(|e| invalid(e.to_string()))?;
     o.to_object().map_err(|e| invalid(e.to_string()))?;
-    for (field, v) in [("mu", o.mu), ("mu_torsion", o.mu_torsion)] {
-        if !(v.is_finite() && v >= 0.0) {
-            return Err(invalid(format!(
-                "invalid object.{field}: must be a finite number ≥ 0, got {v}"
-            )));
-        }
-    }
     Ok(())
 }
 
