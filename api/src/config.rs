@@ -191,6 +191,13 @@ mod tests {
 
     #[test]
     fn cors_origins_must_be_origins_and_simulations_at_least_one() {
+        let with_origin = |o: &str| {
+            ServeArgs {
+                cors_origins: vec![o.into()],
+                ..ServeArgs::default()
+            }
+            .into_config()
+        };
         for good in [
             "http://localhost:5173",
             "https://example.org",
@@ -198,11 +205,7 @@ mod tests {
             "http://[::1]:3000",
             "http://[::1]",
         ] {
-            let a = ServeArgs {
-                cors_origins: vec![good.into()],
-                ..ServeArgs::default()
-            };
-            assert!(a.into_config().is_ok(), "{good}");
+            assert!(with_origin(good).is_ok(), "{good}");
         }
         for bad in [
             "notaurl",
@@ -216,12 +219,8 @@ mod tests {
             "http://a:b:c",
             "http://[::1",
         ] {
-            let a = ServeArgs {
-                cors_origins: vec![bad.into()],
-                ..ServeArgs::default()
-            };
             assert!(
-                matches!(a.into_config(), Err(ConfigError::BadOrigin(_))),
+                matches!(with_origin(bad), Err(ConfigError::BadOrigin(_))),
                 "{bad}"
             );
         }

@@ -1002,12 +1002,16 @@ mod tests {
         analyse(&on_sphere(&[[0.0, 0.0, -0.1049], [0.0, 0.0, 0.0951]]), 1.0).unwrap();
         assert!(analyse(&on_sphere(&[[0.0, 0.0, -0.1051], [0.0, 0.0, 0.1]]), 1.0).is_err());
         // Boxes and cylinders: on a face, an edge, a cap; inside them the nearest face counts.
-        let mut spec = on_sphere(&[[0.05, 0.01, 0.0], [-0.05, 0.03, 0.04], [0.0, 0.0, -0.0395]]);
-        spec.object = ObjectSpec::from_shape(
-            &Shape::Box {
+        let on = |shape: Shape, points: &[[Real; 3]]| {
+            let mut spec = on_sphere(points);
+            spec.object = ObjectSpec::from_shape(&shape, 0.5);
+            spec
+        };
+        let mut spec = on(
+            Shape::Box {
                 half_extents: [0.05, 0.03, 0.04],
             },
-            0.5,
+            &[[0.05, 0.01, 0.0], [-0.05, 0.03, 0.04], [0.0, 0.0, -0.0395]],
         );
         analyse(&spec, 1.0).unwrap();
         spec.contacts[2].position = [0.0, 0.0, 0.0];
@@ -1015,13 +1019,12 @@ mod tests {
             .unwrap_err()
             .to_string()
             .contains("contacts[2]"));
-        let mut spec = on_sphere(&[[0.035, 0.0, 0.02], [-0.035, 0.0, 0.02], [0.0, 0.0, 0.06]]);
-        spec.object = ObjectSpec::from_shape(
-            &Shape::Cylinder {
+        let mut spec = on(
+            Shape::Cylinder {
                 radius: 0.035,
                 half_height: 0.06,
             },
-            0.5,
+            &[[0.035, 0.0, 0.02], [-0.035, 0.0, 0.02], [0.0, 0.0, 0.06]],
         );
         analyse(&spec, 1.0).unwrap();
         spec.contacts[1].position = [0.0, 0.0, 0.02];

@@ -603,20 +603,7 @@ fn a_topic_left_undecoded_is_still_checked_for_valid_json() {
         );
     }
     // Decoding only what segmentation needs leaves the other raw topics empty.
-    let good = dir.path().join("good.mcap");
-    let mut w = SessionWriter::create(&good).unwrap();
-    for (topic, schema) in RAW_TOPICS.iter().zip(ICMS_SCHEMAS.iter()) {
-        w.register_channel(topic, schema).unwrap();
-    }
-    w.write(TOPIC_CONTACTS, 0, &Contacts::default()).unwrap();
-    w.write(TOPIC_OBJECT_STATE, 0, &ObjectState::default())
-        .unwrap();
-    w.write(TOPIC_GLOVE_JOINT_STATES, 0, &GloveJointStates::default())
-        .unwrap();
-    w.write(TOPIC_GLOVE_FEEDBACK, 0, &GloveFeedback::default())
-        .unwrap();
-    w.finish().unwrap();
-    let bytes = std::fs::read(&good).unwrap();
+    let bytes = raw_topics_file(&one_message_each(), None);
     let s = read_session_bytes_with(
         &bytes,
         "good",
@@ -629,26 +616,16 @@ fn a_topic_left_undecoded_is_still_checked_for_valid_json() {
     assert_eq!(s.message_counts[TOPIC_GLOVE_FEEDBACK], 1);
 }
 
+/// One message per raw topic, all at log time 0.
+fn one_message_each() -> Vec<(&'static str, u64)> {
+    RAW_TOPICS.iter().map(|t| (*t, 0)).collect()
+}
+
 /// A file with the four raw topics (one default message each) and a `session` metadata record
 /// whose `object` is `object`.
 fn file_with_session_object(object: &str) -> Vec<u8> {
-    let dir = tempfile::tempdir().unwrap();
-    let path = dir.path().join("object.mcap");
-    let mut w = SessionWriter::create(&path).unwrap();
-    for (topic, schema) in RAW_TOPICS.iter().zip(ICMS_SCHEMAS.iter()) {
-        w.register_channel(topic, schema).unwrap();
-    }
-    w.write(TOPIC_CONTACTS, 0, &Contacts::default()).unwrap();
-    w.write(TOPIC_OBJECT_STATE, 0, &ObjectState::default())
-        .unwrap();
-    w.write(TOPIC_GLOVE_JOINT_STATES, 0, &GloveJointStates::default())
-        .unwrap();
-    w.write(TOPIC_GLOVE_FEEDBACK, 0, &GloveFeedback::default())
-        .unwrap();
     let meta = BTreeMap::from([("object".to_owned(), object.to_owned())]);
-    w.add_metadata(SESSION_METADATA, meta).unwrap();
-    w.finish().unwrap();
-    std::fs::read(&path).unwrap()
+    raw_topics_file(&one_message_each(), Some(meta))
 }
 
 #[test]
@@ -683,8 +660,9 @@ fn a_session_whose_object_is_impossible_is_refused_naming_the_field() {
     }
 }
 
-/// A file with the four raw topics, one message each per `(topic, log time)` of `times`.
-fn raw_topics_file(times: &[(&str, u64)]) -> Vec<u8> {
+/// A file with the four raw topics, one message each per `(topic, log time)` of `times`, and
+/// `session` metadata when given.
+fn raw_topics_file(times: &[(&str, u64)], session: Option<BTreeMap<String, String>>) -> Vec<u8> {
     let dir = tempfile::tempdir().unwrap();
     let path = dir.path().join("times.mcap");
     let mut w = SessionWriter::create(&path).unwrap();
@@ -700,6 +678,9 @@ fn raw_topics_file(times: &[(&str, u64)]) -> Vec<u8> {
         }
         .unwrap();
     }
+    if let Some(meta) = session {
+        w.add_metadata(SESSION_METADATA, meta).unwrap();
+    }
     w.finish().unwrap();
     std::fs::read(&path).unwrap()
 }
@@ -708,7 +689,8 @@ fn raw_topics_file(times: &[(&str, u64)]) -> Vec<u8> {
 fn raw_topics_whose_log_times_go_back_or_span_more_than_an_hour_are_refused() {
     let ticks = |topic| (0..3).map(move |k| (topic, k * 1_000_000));
     let ok: Vec<(&str, u64)> = RAW_TOPICS.iter().flat_map(|t| ticks(*t)).collect();
-    let session = read_session_bytes(&raw_topics_file(&ok), "ok", &Default::default()).unwrap();
+    let session =
+        read_session_bytes(&raw_topics_file(&ok, None), "ok", &Default::default()).unwrap();
     assert_eq!(session.object.len(), 3);
 
     // One object state a day after the rest: segmentation would resample the whole day.
@@ -725,7 +707,7 @@ fn raw_topics_whose_log_times_go_back_or_span_more_than_an_hour_are_refused() {
         (back, "goes back before the previous message's"),
         (huge, "beyond 2^63 ns"),
     ] {
-        let bytes = raw_topics_file(&times);
+        let bytes = raw_topics_file(&times, None);
         for topics in [DecodeTopics::ALL, DecodeTopics::SEGMENTATION] {
             let e = read_session_bytes_with(&bytes, "odd.mcap", &Default::default(), topics)
                 .unwrap_err();
