@@ -23,7 +23,10 @@
 //!   the operator's intensities, the total is kept inside the Coulomb cone, and beyond it the
 //!   contact slips and the anchor moves with the fingertip (a pad that only turns on the surface
 //!   keeps its tangential anchor and the twist the torsional cone allows). At rest the springs
-//!   hold a fixed deflection instead of creeping; near the cone's edge slow slip remains.
+//!   hold a fixed deflection instead of creeping; near the cone's edge slow slip remains. The
+//!   object is stepped explicitly, so the tangential damping is limited to what that step can
+//!   carry ([`STABLE_DAMPING`]); only light objects (a solid sphere under about 0.1 kg) meet
+//!   the limit.
 //!
 //! **Table.** An optional horizontal support plane carries the object before it is grasped
 //! and after it is placed: it cancels downward force and velocity of a resting object and
@@ -41,6 +44,15 @@ use crate::math::{
     Real, Vector, Wrench,
 };
 use crate::object::{external_wrench_b, integrate, ObjectState, RigidObject};
+
+/// How much of the explicit object step's damping limit the contacts' tangential dampers may
+/// use: `Σ_k c_k dt / m_k ≤ STABLE_DAMPING`, with `m_k` the object's least effective mass at
+/// contact `k` for a push across the normal ([`inverse_mass_across`]), shared equally. An
+/// explicit (symplectic Euler) step of a damper `c` on a mass `m` is stable for
+/// `c dt / m < 2`; beyond it a light object rattles between the fingertips from tick to tick
+/// (a 50 g solid sphere of 4 cm radius pinched by two pads at 30 N·s/m: 4.2) and is
+/// flung out of the grasp. A damper stronger than that cannot act within one tick anyway.
+pub const STABLE_DAMPING: Real = 1.5;
 
 /// Parameters of the DFS. Units SI.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -63,7 +75,11 @@ pub struct DfsParams {
     /// Stiffness (N/m) keeping a touching fingertip on the surface (finger side only).
     /// Default 3000.
     pub surface_stiffness: Real,
-    /// Damping (N·s/m) of the same. Default 30.
+    /// Damping (N·s/m) of the same, and of a sticking fingertip's tangential spring to its
+    /// anchor on the object. Default 30. The tangential part acts on the object too, whose
+    /// step is explicit: it is limited per contact to what that step can carry (see
+    /// [`STABLE_DAMPING`]), which only a light object (a solid sphere under about 0.1 kg)
+    /// ever meets.
     pub surface_damping: Real,
     /// Viscous torsional coupling between a soft fingertip pad and the object (N·m·s/rad),
     /// limited by the torsional friction cone. Default 0.005: with the torsional stiffness,
@@ -265,6 +281,13 @@ pub struct Dfs {
     spring_err: [Vector; MAX_TIPS],
     spring_vel: [Vector; MAX_TIPS],
     stick: [bool; MAX_TIPS],
+    /// Per tip: the tangential damping of its contact spring this tick (N·s/m), the surface
+    /// damping limited by [`STABLE_DAMPING`].
+    tangential_damping: [Real; MAX_TIPS],
+    /// The object's inverse mass (1/kg) and largest inverse principal moment of inertia
+    /// (1/(kg·m²)), for a bound on the inverse effective mass at a contact.
+    object_inv_mass: Real,
+    object_inv_inertia_max: Real,
     /// Per tip: how far the pad has twisted about the normal since it stuck (rad).
     twist: [Real; MAX_TIPS],
     passive_world: [Vector; MAX_TIPS],
@@ -323,6 +346,31 @@ fn finger_step_envelope(
         first[i] = (0..=i).find(|&j| row & (1 << order[j]) != 0).unwrap_or(i);
     }
     (order, first)
+}
+
+/// The object's largest inverse effective mass (1/kg) at the contact `frame` for a push across
+/// its normal: the maximum over unit tangents `t` of `1/m + (r × t)ᵀ I⁻¹ (r × t)`, `r` the
+/// contact point from the centre of mass (B), the larger eigenvalue of a 2x2 matrix.
+fn inverse_mass_across(object: &RigidObject, frame: &ContactFrame) -> Real {
+    let r = frame.p_b;
+    let m = frame.rot_b.matrix();
+    let u1 = r.cross(&Vector::new(m[(0, 0)], m[(1, 0)], m[(2, 0)]));
+    let u2 = r.cross(&Vector::new(m[(0, 1)], m[(1, 1)], m[(2, 1)]));
+    let (iu1, iu2) = (object.inertia_inv * u1, object.inertia_inv * u2);
+    let (a, b, c) = (u1.dot(&iu1), u1.dot(&iu2), u2.dot(&iu2));
+    let half_gap = 0.5 * (a - c);
+    1.0 / object.mass + 0.5 * (a + c) + (half_gap * half_gap + b * b).sqrt()
+}
+
+/// How a touching fingertip's contact spring-damper acts on the finger in the implicit step.
+#[derive(Clone, Copy)]
+enum Spring {
+    /// Sliding: along the normal only.
+    Normal,
+    /// Sticking, damped alike in every direction.
+    Isotropic,
+    /// Sticking, damped less across the normal (the object's step limits it).
+    StiffNormal,
 }
 
 /// The first part of an object update that is not finite, if any.
@@ -401,6 +449,7 @@ impl Dfs {
         }
         let (solve_order, solve_first) = finger_step_envelope(&hand, &tip_dofs);
         let mass_plan = hand.mass_plan();
+        let object_inv_inertia_max = object.inertia_inv.symmetric_eigenvalues().max();
         Ok(Dfs {
             hand,
             object,
@@ -417,6 +466,9 @@ impl Dfs {
             spring_err: [Vector::zeros(); MAX_TIPS],
             spring_vel: [Vector::zeros(); MAX_TIPS],
             stick: [false; MAX_TIPS],
+            tangential_damping: [params.surface_damping; MAX_TIPS],
+            object_inv_mass: 1.0 / object.mass,
+            object_inv_inertia_max,
             twist: [0.0; MAX_TIPS],
             passive_world: [Vector::zeros(); MAX_TIPS],
             frames: [ContactFrame::from_normal(Vector::zeros(), Vector::z()); MAX_CONTACTS],
@@ -601,6 +653,13 @@ impl Dfs {
         let v_lin = self.state.linear_velocity;
         let w_b = self.state.angular_velocity_b;
         let dt = self.params.dt;
+        let touching = self.out.tips[..self.hand.fingertips.len()]
+            .iter()
+            .filter(|t| t.frame.is_some())
+            .count();
+        // The tangential damping the object's explicit step can carry, shared by the touching
+        // tips ([`STABLE_DAMPING`]): per tip, `c / m_eff` may not exceed this.
+        let damping_budget = STABLE_DAMPING / (touching.max(1) as Real * dt);
         let mut n = 0;
         for k in 0..self.hand.fingertips.len() {
             self.passive_world[k] = Vector::zeros();
@@ -632,11 +691,20 @@ impl Dfs {
                 v_joint += Vector::new(j[(0, d)], j[(1, d)], j[(2, d)]) * self.qd[d];
             }
             self.spring_vel[k] = v_rel - v_joint;
+            // The tangential damping at this contact: a cheap bound on the inverse effective
+            // mass first (|r × t| ≤ |r|), the exact one only when that bound limits it.
+            let mut damping = self.params.surface_damping;
+            let bound =
+                self.object_inv_mass + frame.p_b.norm_squared() * self.object_inv_inertia_max;
+            if damping * bound > damping_budget {
+                damping = damping.min(damping_budget / inverse_mass_across(&self.object, &frame));
+            }
+            self.tangential_damping[k] = damping;
             // Passive friction: a sticking fingertip drags the object along with it (tangential
             // spring-damper to the anchor), within the Coulomb cone together with the operator's
             // own tangential force.
             let passive_w = err * self.params.surface_stiffness
-                + (v_rel - z_world * v_rel.dot(&z_world)) * self.params.surface_damping;
+                + (v_rel - z_world * v_rel.dot(&z_world)) * damping;
             let passive_c = frame.intensities_of_force_b(&(rot_inv * passive_w));
             // Torsion (soft finger): the fingertip pad drags the object's spin about the normal
             // along, a torsional spring-damper from where it stuck.
@@ -784,9 +852,25 @@ impl Dfs {
             let z_world = rot * frame.normal_b();
             let stick = self.stick[k];
             let v = self.spring_vel[k];
-            let proj_v = if stick { v } else { z_world * v.dot(&z_world) };
-            let f = -self.spring_err[k] * p.surface_stiffness - proj_v * p.surface_damping;
+            // A sticking tip is damped across the normal as the object is (`damping`), along it
+            // by the surface damping; a sliding one along the normal only.
+            let damping = self.tangential_damping[k];
+            let extra_normal = p.surface_damping - damping;
+            // How each tip is sprung: along the normal only (sliding), alike in every direction
+            // (sticking, the tangential damping not limited) or more along the normal.
+            let spring = match (stick, extra_normal == 0.0) {
+                (false, _) => Spring::Normal,
+                (true, true) => Spring::Isotropic,
+                (true, false) => Spring::StiffNormal,
+            };
+            let f = -self.spring_err[k] * p.surface_stiffness
+                - match spring {
+                    Spring::Normal => z_world * v.dot(&z_world) * p.surface_damping,
+                    Spring::Isotropic => v * damping,
+                    Spring::StiffNormal => v * damping + z_world * (v.dot(&z_world) * extra_normal),
+                };
             let c = dt * p.surface_damping + dt * dt * p.surface_stiffness;
+            let c_stick = dt * damping + dt * dt * p.surface_stiffness;
             let mut cols = [Vector::zeros(); MAX_DOF];
             for (col, &d) in cols.iter_mut().zip(dofs) {
                 *col = Vector::new(j[(0, d)], j[(1, d)], j[(2, d)]);
@@ -797,11 +881,13 @@ impl Dfs {
                     continue;
                 }
                 rhs[d1] += dt * col1.dot(&f);
-                let pc1 = if stick {
-                    col1
-                } else {
-                    z_world * z_world.dot(&col1)
-                } * c;
+                let pc1 = match spring {
+                    Spring::Normal => z_world * z_world.dot(&col1) * c,
+                    Spring::Isotropic => col1 * c_stick,
+                    Spring::StiffNormal => {
+                        col1 * c_stick + z_world * (z_world.dot(&col1) * (dt * extra_normal))
+                    }
+                };
                 for (col2, &d2) in cols.iter().zip(dofs) {
                     a[(d1, d2)] += pc1.dot(col2);
                 }
@@ -1065,6 +1151,67 @@ mod tests {
             trace
         };
         assert_eq!(run(), run());
+    }
+
+    #[test]
+    fn the_effective_mass_across_a_contact_counts_the_turn_it_causes() {
+        // A solid sphere pushed tangentially at its surface: 1/m + r²/(2/5 m r²) = 3.5/m in
+        // every tangent direction.
+        let (m, r) = (0.05, 0.04);
+        let sphere = RigidObject::new(crate::object::Shape::Sphere { radius: r }, m).unwrap();
+        let at = ContactFrame::from_normal(Vector::new(r, 0.0, 0.0), -Vector::x());
+        assert!((inverse_mass_across(&sphere, &at) - 3.5 / m).abs() < 1e-9);
+        // A box pushed across the normal at the centre of its +x face, (a, 0, 0): a push along
+        // y also turns it about z, one along z about y; the easier turn counts.
+        let h = Vector::new(0.025, 0.025, 0.04);
+        let b = RigidObject::new(
+            crate::object::Shape::Box {
+                half_extents: [h.x, h.y, h.z],
+            },
+            0.2,
+        )
+        .unwrap();
+        let at = ContactFrame::from_normal(Vector::new(h.x, 0.0, 0.0), -Vector::x());
+        let (iy, iz) = (b.inertia[(1, 1)], b.inertia[(2, 2)]);
+        let expected = 1.0 / 0.2 + h.x * h.x / iy.min(iz);
+        assert!((inverse_mass_across(&b, &at) - expected).abs() < 1e-9);
+    }
+
+    #[test]
+    fn a_light_objects_tangential_damping_is_limited_to_what_its_step_can_carry() {
+        // The paper sphere (1 kg) keeps the surface damping; the same grasp of a 20 g sphere
+        // gets what the explicit step allows for four contacts.
+        let (mut heavy, q, tau, base) = glove10_holding_paper_sphere().unwrap();
+        let sample = GloveSample {
+            q: &q,
+            tau: &tau,
+            base,
+        };
+        heavy.step(&sample).unwrap();
+        let c = heavy.params().surface_damping;
+        let touching: Vec<usize> = (0..heavy.output().n_tips)
+            .filter(|&k| heavy.output().tips[k].frame.is_some())
+            .collect();
+        assert_eq!(touching.len(), 4);
+        for &k in &touching {
+            assert_eq!(heavy.tangential_damping[k], c);
+        }
+        let light_object = RigidObject::new(heavy.object().shape, 0.02).unwrap();
+        let mut light = Dfs::new(
+            heavy.hand().clone(),
+            light_object,
+            *heavy.object_state(),
+            *heavy.params(),
+        )
+        .unwrap();
+        light.step(&sample).unwrap();
+        let dt = light.params().dt;
+        for &k in &touching {
+            let frame = light.output().tips[k].frame.unwrap();
+            let limit = STABLE_DAMPING / (inverse_mass_across(&light_object, &frame) * 4.0 * dt);
+            assert!(limit < c);
+            assert!((light.tangential_damping[k] - limit).abs() < 1e-9 * c);
+        }
     }
 
     #[test]
