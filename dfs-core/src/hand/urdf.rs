@@ -21,8 +21,9 @@
 //!   positive definite. Negative masses and inertias that are not positive semi-definite are
 //!   refused, naming the link.
 //! * Geometry (visual and collision meshes) is not needed and ignored.
-//! * The tree: exactly one root (or the spec's `base_link`, whose subtree becomes the hand),
-//!   no link with two parents, no loops; every error names the link or joint.
+//! * The tree: exactly one root, no link with two parents, no loops; every error names the
+//!   link or joint. A spec's `base_link` makes that link's subtree the hand (the links above it
+//!   are dropped).
 
 use std::collections::BTreeMap;
 
@@ -281,9 +282,27 @@ impl HandModel {
     /// a negative mass or radius, more than [`MAX_DOF`] DOFs or [`MAX_LINKS`] links.
     pub fn from_urdf(urdf: &str, spec: &HandSpec) -> Result<HandModel> {
         spec.validate()?;
-        let robot = urdf_rs::read_from_string(urdf)
-            .map_err(|e| DfsError::invalid("urdf", format!("does not parse: {e}")))?;
+        let robot = urdf_rs::read_from_string(urdf).map_err(|e| {
+            let e = e.to_string();
+            let e = e.strip_prefix("custom: ").unwrap_or(&e);
+            // urdf-rs names the missing attribute but not the element: say where it belongs.
+            let hint = if e.contains("`velocity`") || e.contains("`effort`") {
+                " (every joint <limit> needs both effort and velocity, as URDF requires)"
+            } else {
+                ""
+            };
+            DfsError::invalid("urdf", format!("does not parse: {e}{hint}"))
+        })?;
         let links = &robot.links;
+        if links.is_empty() {
+            return Err(DfsError::invalid(
+                "urdf",
+                format!(
+                    "robot {:?} has no links: a hand needs at least its base link",
+                    robot.name
+                ),
+            ));
+        }
         let mut link_index: BTreeMap<&str, usize> = BTreeMap::new();
         for (i, l) in links.iter().enumerate() {
             if link_index.insert(l.name.as_str(), i).is_some() {
@@ -495,16 +514,19 @@ impl HandModel {
             } else {
                 JointDrive::Dof(dof_of[&joint.name])
             };
-            let axis = Vector::from(joint.axis.xyz.0);
-            if kind != JointKind::Fixed
-                && !(axis.iter().all(|v| v.is_finite()) && axis.norm() > 1e-9)
-            {
-                return Err(DfsError::invalid(field(), "axis must be a non-zero vector"));
-            }
-            let axis = if axis.norm() > 1e-9 {
-                UnitVector::new_normalize(axis)
-            } else {
+            // The axis is a direction, normalised as URDF readers do: scaled by its largest
+            // component first, so that (0, 1e200, 0) does not overflow the norm.
+            let raw = Vector::from(joint.axis.xyz.0);
+            let largest = raw.amax();
+            let axis = if raw.iter().all(|v| v.is_finite()) && largest > 0.0 {
+                UnitVector::new_normalize(raw / largest)
+            } else if kind == JointKind::Fixed {
                 Vector::x_axis()
+            } else {
+                return Err(DfsError::invalid(
+                    field(),
+                    "axis must be a finite, non-zero vector",
+                ));
             };
             let origin = pose(&joint.origin);
             let xyz = origin.translation.vector;
@@ -842,6 +864,24 @@ mod tests {
                 "base_link",
                 "no link named \"forearm\"",
             ),
+            (
+                "<robot name=\"x\"></robot>".into(),
+                spec.clone(),
+                "urdf",
+                "robot \"x\" has no links",
+            ),
+            (
+                edited("effort=\"5\" velocity=\"3\"", "effort=\"5\""),
+                spec.clone(),
+                "urdf",
+                "missing field `velocity` (every joint <limit> needs both effort and velocity",
+            ),
+            (
+                edited("<axis xyz=\"0 0 1\"/>", "<axis xyz=\"0 0 0\"/>"),
+                spec.clone(),
+                "urdf joint \"wrist_roll\"",
+                "axis must be a finite, non-zero vector",
+            ),
         ];
         for (urdf, spec, field, reason) in cases {
             let (f, r) = error_of(HandModel::from_urdf(&urdf, &spec));
@@ -899,6 +939,17 @@ mod tests {
         let (field, reason) = error_of(HandModel::from_urdf(&urdf, &spec));
         assert_eq!(field, "urdf");
         assert!(reason.contains("25 DOFs > 24"), "{reason}");
+    }
+
+    #[test]
+    fn an_axis_is_a_direction_whatever_its_length() {
+        let spec = gripper_spec();
+        let unit = HandModel::from_urdf(GRIPPER_URDF, &spec).unwrap();
+        for axis in ["0 0 1e200", "0 0 1e-200", "0 0 7"] {
+            let urdf = edited("<axis xyz=\"0 0 1\"/>", &format!("<axis xyz=\"{axis}\"/>"));
+            let hand = HandModel::from_urdf(&urdf, &spec).unwrap();
+            assert_eq!(hand.joints, unit.joints, "axis {axis}");
+        }
     }
 
     #[test]
