@@ -15,8 +15,9 @@ pub const DEFAULT_MAX_BODY: usize = 256 * 1024 * 1024;
 /// Arguments of `icms serve`.
 #[derive(Debug, Clone, clap::Args)]
 pub struct ServeArgs {
-    /// Address to listen on. Anything but a loopback address needs a token.
-    #[arg(long, default_value = "127.0.0.1:8080")]
+    /// Address to listen on, host:port (a host name such as localhost is resolved). Anything
+    /// but a loopback address needs a token.
+    #[arg(long, default_value = "127.0.0.1:8080", value_parser = listen_address)]
     pub addr: SocketAddr,
     /// Data directory: SQLite database and MCAP blobs, created and migrated on first start.
     #[arg(long, default_value = "icms-data")]
@@ -43,6 +44,21 @@ pub struct ServeArgs {
     /// Skills whose JSON the server keeps in memory for `GET /api/v1/skills/{id}`.
     #[arg(long, default_value_t = 100_000)]
     pub cache_skills: usize,
+}
+
+/// `--addr`: an IP address and port, or a host name and port resolved to its first address
+/// (`localhost:8080`).
+fn listen_address(s: &str) -> Result<SocketAddr, String> {
+    if let Ok(addr) = s.parse() {
+        return Ok(addr);
+    }
+    let expected = "expected host:port, e.g. 127.0.0.1:8080, [::1]:8080 or localhost:8080";
+    match std::net::ToSocketAddrs::to_socket_addrs(s) {
+        Ok(mut addrs) => addrs
+            .next()
+            .ok_or_else(|| format!("{s:?} resolves to no address; {expected}")),
+        Err(e) => Err(format!("{s:?}: {e}; {expected}")),
+    }
 }
 
 impl Default for ServeArgs {
@@ -251,6 +267,20 @@ mod tests {
             ServeArgs::default().into_config().is_ok(),
             "loopback is fine"
         );
+    }
+
+    #[test]
+    fn a_listen_address_may_name_its_host() {
+        let local = listen_address("localhost:8080").unwrap();
+        assert!(local.ip().is_loopback() && local.port() == 8080, "{local}");
+        assert_eq!(
+            listen_address("[::1]:9").unwrap(),
+            "[::1]:9".parse().unwrap()
+        );
+        for bad in ["localhost", "8080", "localhost:port", ""] {
+            let e = listen_address(bad).unwrap_err();
+            assert!(e.contains("expected host:port"), "{bad}: {e}");
+        }
     }
 
     #[test]

@@ -101,6 +101,35 @@ fn a_bad_file_among_several_is_reported_and_the_good_ones_are_still_stored() {
 }
 
 #[test]
+fn ingest_of_no_file_and_a_data_directory_that_is_a_file_are_refused_creating_nothing() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let (c, _, e) = icms(d, &["ingest", "missing.mcap", "--data", "fresh"]);
+    assert_ne!(c, 0);
+    assert!(e.contains("missing.mcap: not stored: no such file"), "{e}");
+    assert!(
+        !d.join("fresh").exists(),
+        "no empty data base is left behind"
+    );
+    simulate_in(d, "box-pinch-lift", &["--duration", "3.5"], "a.mcap");
+    std::fs::write(d.join("plain"), b"").unwrap();
+    let (c, _, e) = icms(d, &["ingest", "a.mcap", "--data", "plain"]);
+    assert_ne!(c, 0);
+    assert!(e.contains("plain") && e.contains("not a directory"), "{e}");
+}
+
+#[test]
+fn similar_skills_take_no_filters() {
+    let dir = tempfile::tempdir().unwrap();
+    let (c, _, e) = icms(
+        dir.path(),
+        &["skills", "--similar-to", "1", "--shape", "box"],
+    );
+    assert_eq!(c, 2, "a usage error: {e}");
+    assert!(e.contains("--similar-to") && e.contains("--shape"), "{e}");
+}
+
+#[test]
 fn negative_filters_and_an_out_of_range_similar_limit_are_refused_with_a_clear_message() {
     let dir = tempfile::tempdir().unwrap();
     let d = dir.path();

@@ -27,8 +27,11 @@ pub struct SkillsArgs {
     #[command(flatten)]
     filters: SkillFilters,
     /// The k nearest skills to this skill id instead of a filtered list (k = --limit, default
-    /// 50).
-    #[arg(long, allow_negative_numbers = true)]
+    /// 50). Takes no filters, sort or cursor.
+    #[arg(long, allow_negative_numbers = true, conflicts_with_all = [
+        "shape", "mass_min", "mass_max", "mu_min", "mu_max", "contacts", "contact_model",
+        "grasp_type", "min_quality", "phase", "phase_min_s", "phase_max_s", "sort", "cursor",
+    ])]
     similar_to: Option<i64>,
     /// Data directory.
     #[arg(long, default_value = "icms-data")]
@@ -49,6 +52,21 @@ fn runtime() -> Result<tokio::runtime::Runtime, CliError> {
 /// cannot be stored (unreadable, not a valid session) is reported and skipped, the others are
 /// still stored (each file is its own transaction), and the command then fails naming it.
 pub fn run_ingest(a: IngestArgs) -> Result<(), CliError> {
+    // Nothing to store: say so without creating a data base.
+    if !a.files.iter().any(|f| f.is_file()) {
+        for f in &a.files {
+            let why = if f.exists() {
+                "not a file"
+            } else {
+                "no such file"
+            };
+            eprintln!("{}: not stored: {why}", f.display());
+        }
+        return Err(CliError(format!(
+            "none of the {} path(s) is a file; nothing stored",
+            a.files.len()
+        )));
+    }
     runtime()?.block_on(async {
         let store = Store::open(&a.data)
             .await
@@ -65,6 +83,9 @@ pub fn run_ingest(a: IngestArgs) -> Result<(), CliError> {
             let out = match stored {
                 Ok(out) => out,
                 Err(e) => {
+                    // The reader's errors already start with the file's name.
+                    let name = format!("{}: ", f.display());
+                    let e = e.strip_prefix(&name).map(str::to_owned).unwrap_or(e);
                     eprintln!("{}: not stored: {e}", f.display());
                     failed.push(serde_json::json!({
                         "file": f.display().to_string(),

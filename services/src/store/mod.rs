@@ -322,6 +322,20 @@ impl Store {
 
     async fn open_with(data_dir: &Path, create: bool) -> Result<Store, StoreError> {
         if create {
+            // create_dir_all on a file says only "File exists".
+            if tokio::fs::metadata(data_dir)
+                .await
+                .is_ok_and(|m| !m.is_dir())
+            {
+                return Err(StoreError::io(
+                    data_dir,
+                    std::io::Error::new(
+                        std::io::ErrorKind::NotADirectory,
+                        "it is a file, not a directory (the data directory holds the data base \
+                         and the session files)",
+                    ),
+                ));
+            }
             tokio::fs::create_dir_all(data_dir)
                 .await
                 .map_err(|e| StoreError::io(data_dir, e))?;
