@@ -119,6 +119,32 @@ fn ingest_of_no_file_and_a_data_directory_that_is_a_file_are_refused_creating_no
 }
 
 #[test]
+fn a_second_demo_with_the_same_seed_stores_nothing_twice() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let count = || {
+        let (c, out, e) = icms(d, &["skills", "--json", "--limit", "1000"]);
+        assert_eq!(c, 0, "{e}");
+        let v: Value = serde_json::from_str(&out).unwrap();
+        v["items"].as_array().unwrap().len()
+    };
+    let (c, out, e) = icms(d, &["demo", "--seed", "3"]);
+    assert_eq!(c, 0, "{e}");
+    assert!(!out.contains("kept"), "{out}");
+    let first = count();
+    assert!(first >= 6, "{first} skills");
+    let (c, out, e) = icms(d, &["demo", "--seed", "3"]);
+    assert_eq!(c, 0, "{e}");
+    assert_eq!(out.matches("(recorded before)").count(), 6, "{out}");
+    assert_eq!(count(), first);
+    let leftovers = std::fs::read_dir(d.join("icms-data").join("sessions"))
+        .unwrap()
+        .filter(|f| f.as_ref().unwrap().path().extension().unwrap() != "mcap")
+        .count();
+    assert_eq!(leftovers, 0, "no partial recordings");
+}
+
+#[test]
 fn similar_skills_take_no_filters() {
     let dir = tempfile::tempdir().unwrap();
     let (c, _, e) = icms(

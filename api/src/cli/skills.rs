@@ -194,7 +194,8 @@ pub struct DemoArgs {
 
 /// The main job end to end on the embedded default: every built-in scenario is simulated
 /// (closed 1 kHz DFS loop) and recorded under `DATA/sessions/`, ingested into the skill data
-/// base (segmented into skills, SQLite), and the stored skills are listed.
+/// base (segmented into skills, SQLite), and the stored skills are listed. Run again with the
+/// same seed it keeps the recordings and stores nothing twice.
 pub fn run_demo(a: DemoArgs) -> Result<(), CliError> {
     use dfs_core::scenario::Scenario;
     let dir = a.data.join("sessions");
@@ -203,13 +204,27 @@ pub fn run_demo(a: DemoArgs) -> Result<(), CliError> {
     for name in Scenario::BUILTINS {
         let scenario = Scenario::builtin(name, a.seed).expect("built-in scenario");
         let out = dir.join(format!("{name}-seed{}.mcap", a.seed));
-        let summary = services::session::record_simulation(&scenario, None, &out, |_, _| {})
-            .map_err(|e| CliError(format!("{name}: {e}")))?;
-        println!(
-            "simulated {name:<22} {:>6} ticks -> {}",
-            summary.ticks,
-            out.display()
-        );
+        // A second run with the same seed keeps the recording (its bytes, so the store sees the
+        // same session) instead of simulating it again: a new recording differs in its
+        // `started_at` and would be stored twice. Recorded under a temporary name and renamed
+        // when complete, so a file under the final name is always whole.
+        if out.is_file() {
+            println!(
+                "kept      {name:<22} (recorded before) -> {}",
+                out.display()
+            );
+        } else {
+            let part = out.with_extension("mcap.part");
+            let summary = services::session::record_simulation(&scenario, None, &part, |_, _| {})
+                .map_err(|e| CliError(format!("{name}: {e}")))?;
+            std::fs::rename(&part, &out)
+                .map_err(|e| CliError(format!("{}: {e}", out.display())))?;
+            println!(
+                "simulated {name:<22} {:>6} ticks -> {}",
+                summary.ticks,
+                out.display()
+            );
+        }
         files.push(out);
     }
     run_ingest(IngestArgs {
