@@ -8,7 +8,7 @@ use dfs_core::hand::{builtin_spec, HandSpec};
 use dfs_core::replay::{ReplayParams, ReplayReport};
 use services::replay::{load_builtin_hand, replay_skill, skill_spec_from_json, ReplaySource};
 use services::store::{Store, StoreError};
-use store_common::{fake_mcap, meta, skills};
+use store_common::{blob_count, fake_mcap, meta, skills};
 
 fn gripper_spec(name: &str) -> HandSpec {
     let mut spec = builtin_spec("gripper").unwrap().0;
@@ -163,6 +163,15 @@ async fn replays_are_stored_with_their_blob_and_go_with_their_skill_or_session()
         store.insert_replay(999, "gripper", &report, bytes).await,
         Err(StoreError::SkillNotFound(999))
     ));
+    // A replay whose skill is gone (deleted while it ran) leaves no blob of its own behind.
+    let before = blob_count(tmp.path());
+    assert!(matches!(
+        store
+            .insert_replay(999, "gripper", &report, fake_mcap(101, 5000))
+            .await,
+        Err(StoreError::SkillNotFound(999))
+    ));
+    assert_eq!(blob_count(tmp.path()), before);
 
     // Deleting skill 1 takes replay a; the blob stays while replay b names it.
     store.delete_skill(s1).await.unwrap();

@@ -10,26 +10,7 @@ use sha2::{Digest, Sha256};
 use sqlx::{Connection, SqliteConnection};
 
 use services::store::{Store, StoreError, DB_FILE, FEATURE_DIM};
-use store_common::{fake_mcap, meta, skills};
-
-fn blob_count(dir: &Path) -> usize {
-    fn walk(p: &Path, n: &mut usize) {
-        for e in std::fs::read_dir(p).unwrap() {
-            let e = e.unwrap();
-            if e.file_type().unwrap().is_dir() {
-                walk(&e.path(), n);
-            } else if e.path().extension().is_some_and(|x| x == "mcap") {
-                *n += 1;
-            }
-        }
-    }
-    let mut n = 0;
-    let root = dir.join("blobs");
-    if root.exists() {
-        walk(&root, &mut n);
-    }
-    n
-}
+use store_common::{blob_count, fake_mcap, meta, skills};
 
 async fn raw_conn(path: &Path) -> SqliteConnection {
     let opts = sqlx::sqlite::SqliteConnectOptions::new()

@@ -258,7 +258,7 @@ impl Store {
         mcap: Vec<u8>,
     ) -> Result<Replay, StoreError> {
         let report_json = serde_json::to_string(report)?;
-        let _guard = self.inner.blob_lock.read().await;
+        let guard = self.inner.blob_lock.read().await;
         let dir = self.inner.dir.clone();
         let size = mcap.len() as i64;
         let (sha256, rel) = tokio::task::spawn_blocking(move || {
@@ -284,8 +284,12 @@ impl Store {
         .fetch_optional(&self.inner.pool)
         .await?;
         let Some(row) = row else {
-            // The blob stays as unreferenced garbage, like an interrupted ingest's: removing
-            // it here could race with another writer of the same bytes under this read lock.
+            // The skill was deleted while the replay ran: remove the blob unless a row names
+            // the same bytes. Under the exclusive lock no writer of the same bytes is between
+            // writing its blob and inserting its row.
+            drop(guard);
+            let _exclusive = self.inner.blob_lock.write().await;
+            self.remove_unreferenced_blobs(&[(sha256, rel)]).await;
             return Err(StoreError::SkillNotFound(skill_id));
         };
         let replay = row_to_replay(&row)?;

@@ -1,6 +1,8 @@
 //! Helpers shared by the store tests: deterministic fake MCAP bytes, metadata and skills.
 #![allow(dead_code)]
 
+use std::path::Path;
+
 use services::store::bench::{synthetic_skill, SplitMix64};
 use services::store::{NewSkill, SessionMeta};
 
@@ -34,4 +36,24 @@ pub fn meta(i: u64, n_skills: usize) -> SessionMeta {
 pub fn skills(seed: u64, n: usize) -> Vec<NewSkill> {
     let mut rng = SplitMix64::new(seed);
     (0..n).map(|_| synthetic_skill(&mut rng)).collect()
+}
+
+/// The MCAP blobs under a data directory.
+pub fn blob_count(dir: &Path) -> usize {
+    fn walk(p: &Path, n: &mut usize) {
+        for e in std::fs::read_dir(p).unwrap() {
+            let e = e.unwrap();
+            if e.file_type().unwrap().is_dir() {
+                walk(&e.path(), n);
+            } else if e.path().extension().is_some_and(|x| x == "mcap") {
+                *n += 1;
+            }
+        }
+    }
+    let mut n = 0;
+    let root = dir.join("blobs");
+    if root.exists() {
+        walk(&root, &mut n);
+    }
+    n
 }
