@@ -159,9 +159,12 @@ impl ScenarioObject {
     }
 
     /// The rigid object, validated with its friction: shape, sizes and mass as
-    /// [`ObjectSpec::to_object`] checks them, `mu` and `mu_torsion` finite and ≥ 0.
+    /// [`ObjectSpec::to_object`] checks them and within a grasp file's ranges
+    /// ([`ObjectSpec::check_ranges`]), `mu` and `mu_torsion` finite and ≥ 0.
     pub fn to_object(&self) -> Result<RigidObject> {
-        let object = self.spec().to_object()?;
+        let spec = self.spec();
+        let object = spec.to_object()?;
+        spec.check_ranges()?;
         for (field, v) in [
             ("object.mu", self.mu),
             ("object.mu_torsion", self.mu_torsion),
@@ -529,6 +532,15 @@ mod tests {
         assert!(e.contains("object.mass") && e.contains("0.005"), "{e}");
         s.object.mass = MIN_SIMULATED_MASS;
         assert!(s.resolve().is_ok());
+        // A grasp file's ranges hold for scenario objects too: a 1e30 kg sphere or one 1 km
+        // across is not a hand-held object.
+        s.object.mass = 1e30;
+        let e = s.resolve().unwrap_err().to_string();
+        assert!(e.contains("object.mass"), "{e}");
+        let mut s = Scenario::builtin("sphere-lift", 0).unwrap();
+        s.object.radius = Some(500.0);
+        let e = s.resolve().unwrap_err().to_string();
+        assert!(e.contains("object.radius"), "{e}");
         let mut s = Scenario::builtin("sphere-lift", 0).unwrap();
         s.object.mu = -0.2;
         assert!(s.resolve().unwrap_err().to_string().contains("object.mu"));

@@ -153,6 +153,7 @@ impl HandBody {
 /// An upload: a hand spec and its URDF text.
 #[derive(Debug, Clone, Deserialize, ToSchema)]
 #[serde(
+    remote = "Self",
     deny_unknown_fields,
     expecting = "a hand upload: a JSON object {\"spec\": {...}, \"urdf\": \"<robot ...>\"}"
 )]
@@ -163,6 +164,12 @@ pub struct HandUpload {
     /// The URDF text (`<robot …>…</robot>`), at most 4 MiB.
     pub urdf: String,
 }
+
+// Only a JSON object: serde would also take the fields in a JSON array.
+dfs_core::object_only!(
+    HandUpload,
+    "a hand upload: a JSON object {\"spec\": {...}, \"urdf\": \"<robot ...>\"}"
+);
 
 /// The routes of this resource.
 pub fn router() -> OpenApiRouter<AppState> {

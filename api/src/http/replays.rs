@@ -24,6 +24,7 @@ use super::state::AppState;
 /// A replay to run.
 #[derive(Debug, Clone, Deserialize, ToSchema)]
 #[serde(
+    remote = "Self",
     deny_unknown_fields,
     expecting = "a replay request: a JSON object {\"hand\": ...}"
 )]
@@ -31,6 +32,12 @@ pub struct ReplayRequest {
     /// Name of the hand: built-in or uploaded (see `GET /api/v1/hands`).
     pub hand: String,
 }
+
+// Only a JSON object: serde would also take the fields in a JSON array.
+dfs_core::object_only!(
+    ReplayRequest,
+    "a replay request: a JSON object {\"hand\": ...}"
+);
 
 /// A retargeted contact of a replay.
 #[derive(Debug, Clone, Deserialize, Serialize, ToSchema)]

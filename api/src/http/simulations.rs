@@ -27,6 +27,7 @@ pub const MAX_SIMULATED_S: f64 = 120.0;
 /// A simulation to run.
 #[derive(Debug, Clone, Deserialize, ToSchema)]
 #[serde(
+    remote = "Self",
     deny_unknown_fields,
     expecting = "a simulation request: a JSON object {\"scenario\": ..., \"seed\": ..., \"duration\": ...}"
 )]
@@ -43,6 +44,12 @@ pub struct SimulationRequest {
     #[schema(exclusive_minimum = 0.0, maximum = 120.0)]
     pub duration: Option<f64>,
 }
+
+// Only a JSON object: serde would also take the fields in a JSON array.
+dfs_core::object_only!(
+    SimulationRequest,
+    "a simulation request: a JSON object {\"scenario\": ..., \"seed\": ..., \"duration\": ...}"
+);
 
 fn scenario_ref_schema() -> impl Into<RefOr<Schema>> {
     let names = ObjectBuilder::new()
