@@ -216,7 +216,11 @@ pub fn run_demo(a: DemoArgs) -> Result<(), CliError> {
         } else {
             let part = out.with_extension("mcap.part");
             let summary = services::session::record_simulation(&scenario, None, &part, |_, _| {})
-                .map_err(|e| CliError(format!("{name}: {e}")))?;
+                .map_err(|e| {
+                // What was written of it is of no use: the next run records it anew.
+                let _ = std::fs::remove_file(&part);
+                CliError(format!("{name}: {e}"))
+            })?;
             std::fs::rename(&part, &out)
                 .map_err(|e| CliError(format!("{}: {e}", out.display())))?;
             println!(
