@@ -114,7 +114,8 @@ pub struct PhaseSpan {
     /// Phase name (`approach`, `preshape`, `grasp`, `lift`, `hold`, `transport`, `place`,
     /// `release`, `retreat`).
     pub name: String,
-    /// Start, ns since the session start.
+    /// Start, ns since the session start: the log time of its first `/object/state` sample
+    /// (0 in the files `icms simulate` records; recorders that log epoch times start later).
     pub start_ns: u64,
     /// End (exclusive), ns since the session start.
     pub end_ns: u64,
@@ -228,7 +229,7 @@ pub struct SkillSource {
     pub metadata: BTreeMap<String, String>,
     /// Start of the skill's first phase (ns since the session start).
     pub start_ns: u64,
-    /// End of the skill's last phase (ns).
+    /// End of the skill's last phase (ns since the session start).
     pub end_ns: u64,
 }
 
@@ -418,7 +419,8 @@ fn build_grid(session: &Session, params: &SegmentParams) -> Option<Grid> {
         let (ta, a) = &obj[k];
         let (tb, b) = &obj[(k + 1).min(obj.len() - 1)];
         let s = if tb > ta {
-            ((t as f64 - *ta as f64) / (*tb as f64 - *ta as f64)).clamp(0.0, 1.0)
+            // In offsets: epoch-based log times (1.7e18 ns) lose 256 ns as f64.
+            (t.saturating_sub(*ta) as f64 / (tb - ta) as f64).clamp(0.0, 1.0)
         } else {
             0.0
         };
@@ -827,6 +829,17 @@ pub fn segment(session: &Session, params: &SegmentParams) -> Segmentation {
             Skill { phases, parameters }
         })
         .filter(|s| is_grasp(&s.parameters))
+        .map(|mut s| {
+            // Log times to session time: recorders need not start their clocks at 0 (ROS
+            // bags and most MCAP writers log epoch times).
+            for p in &mut s.phases {
+                p.start_ns -= g.t0;
+                p.end_ns -= g.t0;
+            }
+            s.parameters.source.start_ns -= g.t0;
+            s.parameters.source.end_ns -= g.t0;
+            s
+        })
         .collect();
     Segmentation { skills }
 }
@@ -921,7 +934,7 @@ fn well_formed(
     let grid_ns = |x: f64| g.t0 + (x.max(0.0) * g.dt_ns as f64).round() as u64;
     // End of the previous phase, as a grid index and in ns.
     let mut floor = 0.0f64;
-    let mut floor_ns = 0u64;
+    let mut floor_ns = g.t0;
     let mut skills = Vec::with_capacity(skills_spans.len());
     for spans in skills_spans {
         let mut phases = Vec::with_capacity(spans.len());
@@ -930,8 +943,9 @@ fn well_formed(
             if b.partial_cmp(&a) != Some(std::cmp::Ordering::Greater) {
                 continue;
             }
-            // The first phase of a session starts at the session's start.
-            let start_ns = if a <= 0.0 { 0 } else { grid_ns(a) }.max(floor_ns);
+            // The first phase of a session starts at the session's start, the grid's first
+            // sample (log times need not start at 0: real recorders log epoch times).
+            let start_ns = grid_ns(a).max(floor_ns);
             let end_ns = grid_ns(b);
             if end_ns <= start_ns {
                 continue;
@@ -1159,8 +1173,11 @@ fn skill_parameters(
             let mut grip_profile = Vec::with_capacity(npts);
             let mut j = 0;
             for k in 0..npts {
-                let t = grasp_start as f64 + span * k as f64 / (npts - 1) as f64;
-                while j + 1 < a.profile_t.len() && (a.profile_t[j + 1].0 as f64) <= t {
+                // Offsets from the grasp's start: log times need not start at 0.
+                let t = span * k as f64 / (npts - 1) as f64;
+                while j + 1 < a.profile_t.len()
+                    && (a.profile_t[j + 1].0.saturating_sub(grasp_start) as f64) <= t
+                {
                     j += 1;
                 }
                 grip_profile.push(a.profile_t.get(j).map_or(0.0, |p| p.1));

@@ -323,3 +323,32 @@ fn a_box_lifted_then_dropped_is_still_a_grasp_with_two_opposing_contacts() {
         assert!(top > 0.05, "rose {top} m");
     }
 }
+
+/// A recorder that logs epoch times (as ROS bags and most MCAP writers do) gives the same
+/// skills as one that starts at 0, timed from the session's start: the first phase began at 0 and
+/// lasted 56 years.
+#[test]
+fn a_session_logged_in_epoch_time_gives_the_same_skills() {
+    const EPOCH_NS: u64 = 1_700_000_000_000_000_000;
+    for name in ["sphere-lift", "two-grasps"] {
+        let s = session(name, 1, None);
+        let mut shifted = s.clone();
+        for (t, _) in &mut shifted.joint_states {
+            *t += EPOCH_NS;
+        }
+        for (t, _) in &mut shifted.feedback {
+            *t += EPOCH_NS;
+        }
+        for (t, _) in &mut shifted.contacts {
+            *t += EPOCH_NS;
+        }
+        for (t, _) in &mut shifted.object {
+            *t += EPOCH_NS;
+        }
+        let params = SegmentParams::default();
+        let (a, b) = (segment(&s, &params), segment(&shifted, &params));
+        assert_eq!(a.skills.len(), b.skills.len(), "{name}");
+        // Times are since the session's start: the same numbers.
+        assert_eq!(a, b, "{name}");
+    }
+}

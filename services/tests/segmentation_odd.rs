@@ -198,7 +198,10 @@ fn build(plan: &Plan) -> Session {
 /// Every phase non-empty, in time order across skills, not overlapping, inside
 /// `[0, last object sample]`; each skill's source span is its phases' span.
 fn check(seg: &Segmentation, s: &Session) -> Result<(), String> {
-    let end = s.object.iter().map(|(t, _)| *t).max().unwrap_or(0);
+    // Phases are timed from the session's start, its first object sample (sessions need not
+    // start at 0).
+    let start = s.object.iter().map(|(t, _)| *t).min().unwrap_or(0);
+    let end = s.object.iter().map(|(t, _)| *t).max().unwrap_or(0) - start;
     let mut prev_end = 0u64;
     let mut prev_name = String::from("(session start)");
     for (k, skill) in seg.skills.iter().enumerate() {
