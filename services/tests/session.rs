@@ -723,6 +723,68 @@ fn raw_topics_whose_log_times_go_back_or_span_more_than_an_hour_are_refused() {
 }
 
 #[test]
+fn raw_topics_that_are_empty_stand_still_or_stop_early_are_refused_naming_the_topic() {
+    // 0.5 s of ticks on every raw topic but `short`, which has `short_ticks` of them from
+    // `from`.
+    let file = |short: &'static str, from: u64, short_ticks: u64, step: u64| {
+        let times: Vec<(&str, u64)> = RAW_TOPICS
+            .iter()
+            .flat_map(|&t| {
+                let (a, n, dt) = if t == short {
+                    (from, short_ticks, step)
+                } else {
+                    (0, 500, 1_000_000)
+                };
+                (0..n).map(move |k| (t, a + k * dt))
+            })
+            .collect();
+        raw_topics_file(&times, None)
+    };
+    let ms = 1_000_000;
+    read_session_bytes(
+        &file(TOPIC_OBJECT_STATE, 0, 500, ms),
+        "whole",
+        &Default::default(),
+    )
+    .unwrap();
+    // Each was read as a session (an upload stored it): with no contacts or no object states
+    // it gave no skill, with an object stream that stops at 0.2 s a shorter skill than the
+    // glove stream says.
+    let mut cases = vec![];
+    for topic in RAW_TOPICS {
+        cases.push((file(topic, 0, 0, ms), topic, "has no messages".to_owned()));
+        cases.push((
+            file(topic, 0, 500, 0),
+            topic,
+            "the same log time".to_owned(),
+        ));
+    }
+    cases.push((
+        file(TOPIC_OBJECT_STATE, 0, 200, ms),
+        TOPIC_OBJECT_STATE,
+        "ends at 0.199 s, 0.300 s before the session's last raw message".to_owned(),
+    ));
+    cases.push((
+        file(TOPIC_CONTACTS, 300 * ms, 200, ms),
+        TOPIC_CONTACTS,
+        "starts at 0.300 s".to_owned(),
+    ));
+    for (bytes, topic, want) in cases {
+        for topics in [DecodeTopics::ALL, DecodeTopics::SEGMENTATION] {
+            let e = read_session_bytes_with(&bytes, "odd.mcap", &Default::default(), topics)
+                .unwrap_err();
+            let text = e.to_string();
+            assert!(
+                matches!(e, RecordingError::InvalidInput { .. })
+                    && text.contains(&format!("topic {topic}"))
+                    && text.contains(&want),
+                "{topic} {want}: {text}"
+            );
+        }
+    }
+}
+
+#[test]
 fn glove_mcap_input_spanning_more_than_an_hour_is_rejected_naming_the_message() {
     let hand = HandModel::glove10();
     let dir = tempfile::tempdir().unwrap();
@@ -764,4 +826,77 @@ fn a_glove_csv_saved_with_a_byte_order_mark_reads_like_one_without() {
     let with_bom = parse_glove_csv(&format!("\u{feff}{text}"), "g.csv", &hand).unwrap();
     assert_eq!(with_bom, plain);
     assert_eq!(plain.len(), 2);
+}
+
+/// `bytes` written again with every chunk compressed by `compression` (messages, schemas,
+/// channels and metadata as they were), by the mcap crate's own writer.
+fn recompressed(bytes: &[u8], compression: mcap::Compression) -> Vec<u8> {
+    let mut out = std::io::Cursor::new(Vec::new());
+    let mut w = mcap::WriteOptions::new()
+        .compression(Some(compression))
+        .create(&mut out)
+        .unwrap();
+    for m in mcap::MessageStream::new(bytes).unwrap() {
+        w.write(&m.unwrap()).unwrap();
+    }
+    for r in mcap::read::LinearReader::new(bytes).unwrap() {
+        if let mcap::records::Record::Metadata(m) = r.unwrap() {
+            w.write_metadata(&m).unwrap();
+        }
+    }
+    w.finish().unwrap();
+    drop(w);
+    out.into_inner()
+}
+
+#[test]
+fn a_session_in_lz4_chunks_reads_and_salvages_like_the_zstd_one() {
+    // LZ4 is the MCAP CLI's and Foxglove's other chunk compression: it was refused as an
+    // "unsupported compression".
+    let (_, path, _) = sphere_session();
+    let zstd = std::fs::read(path).unwrap();
+    let lz4 = recompressed(&zstd, mcap::Compression::Lz4);
+    let expected = read_session(path).unwrap();
+    let read = read_session_bytes(&lz4, "lz4.mcap", &Default::default()).unwrap();
+    assert_eq!(read, expected);
+    let dir = tempfile::tempdir().unwrap();
+    let (input, out) = (dir.path().join("lz4.mcap"), dir.path().join("out.mcap"));
+    std::fs::write(&input, &lz4).unwrap();
+    let report = services::mcap_io::salvage(&input, &out).unwrap();
+    assert!(
+        report.input_was_complete && report.stop_reason.is_none(),
+        "{report:?}"
+    );
+    assert_eq!(read_session(&out).unwrap(), expected);
+}
+
+#[test]
+fn chunks_in_an_unknown_compression_are_refused_and_salvage_recovers_nothing_from_them() {
+    let (_, path, _) = sphere_session();
+    let mut bytes = recompressed(&std::fs::read(path).unwrap(), mcap::Compression::Lz4);
+    // Every chunk (and chunk index) says "zz4" instead of "lz4".
+    let mut renamed = 0;
+    for i in 0..bytes.len() - 7 {
+        if bytes[i..i + 7] == [3, 0, 0, 0, b'l', b'z', b'4'] {
+            bytes[i + 4] = b'z';
+            renamed += 1;
+        }
+    }
+    assert!(renamed >= 2, "{renamed}");
+    let e = read_session_bytes(&bytes, "odd.mcap", &Default::default()).unwrap_err();
+    assert!(
+        e.to_string().contains("unsupported compression \"zz4\""),
+        "{e}"
+    );
+    // Salvage said it recovered a file (0 messages, exit 0) and left an empty one behind.
+    let dir = tempfile::tempdir().unwrap();
+    let (input, out) = (dir.path().join("odd.mcap"), dir.path().join("out.mcap"));
+    std::fs::write(&input, &bytes).unwrap();
+    let e = services::mcap_io::salvage(&input, &out).unwrap_err();
+    let text = e.to_string();
+    assert!(
+        text.contains("no message could be recovered") && text.contains("zz4"),
+        "{text}"
+    );
+    assert!(!out.exists());
 }

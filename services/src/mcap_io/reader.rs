@@ -600,7 +600,8 @@ const MESSAGE_HEADER_LEN: usize = 2 + 4 + 8 + 8;
 
 /// Decompresses the chunk at `offset` into a buffer of its declared size (at most
 /// [`ReadLimits::max_record_bytes`]; single-pass zstd decoding allocates nothing more, so no
-/// window can be forced on us), checks its CRC, and frames its records.
+/// window can be forced on us, and an lz4 frame is read to one byte past that size at most),
+/// checks its CRC, and frames its records. Compressions: zstd, lz4, none.
 fn unpack_chunk(
     offset: u64,
     header: &ChunkHeader,
@@ -629,7 +630,20 @@ fn unpack_chunk(
                 })?;
             out
         }
-        other => return Err(corrupt(format!("unsupported compression {other:?}"))),
+        "lz4" => {
+            // An LZ4 frame, read to at most one byte past the declared size: the size check
+            // below refuses a chunk that decodes to more, before it can grow without bound.
+            let mut out = Vec::with_capacity(size);
+            lz4::Decoder::new(compressed)
+                .and_then(|d| d.take(size as u64 + 1).read_to_end(&mut out))
+                .map_err(|e| corrupt(format!("lz4: {e}")))?;
+            out
+        }
+        other => {
+            return Err(corrupt(format!(
+                "unsupported compression {other:?} (supported: zstd, lz4, none)"
+            )))
+        }
     };
     if data.len() != size {
         return Err(corrupt(format!(

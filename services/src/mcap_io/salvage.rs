@@ -41,7 +41,9 @@ pub struct SalvageReport {
 /// file at `output` (zstd chunks, indexes, summary). A chunk is recovered whole or not at all:
 /// its CRC must match.
 ///
-/// Fails only if `input` is not an MCAP file or a file cannot be opened/written.
+/// Fails if `input` is not an MCAP file, if not one message could be recovered from it (the
+/// output is then removed: an empty file would read as a recovered one), or if a file cannot
+/// be opened or written.
 pub fn salvage(input: impl AsRef<Path>, output: impl AsRef<Path>) -> Result<SalvageReport> {
     let (input, output) = (input.as_ref(), output.as_ref());
     let file = File::open(input)
@@ -203,6 +205,19 @@ pub fn salvage(input: impl AsRef<Path>, output: impl AsRef<Path>) -> Result<Salv
         report.dropped_bytes = report.dropped_bytes.saturating_sub(8);
     }
     report.stop_reason = outcome.error.map(|e| e.to_string());
+    if report.messages == 0 {
+        // Nothing to keep (a first chunk that cannot be decoded, a writer that died before
+        // its first flush): an empty output would read as a recovered file.
+        drop(writer);
+        let _ = std::fs::remove_file(output);
+        return Err(RecordingError::InvalidInput {
+            location: format!("salvaging {}", input.display()),
+            detail: match report.stop_reason {
+                Some(reason) => format!("no message could be recovered: {reason}"),
+                None => "the input holds no message".into(),
+            },
+        });
+    }
 
     writer.finish()?;
     let file = writer.into_inner().into_inner().map_err(|e| {

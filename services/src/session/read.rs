@@ -314,18 +314,33 @@ fn from_raw(raw: &RawSession, name: &str, topics: DecodeTopics) -> Result<Sessio
     Ok(session)
 }
 
-/// The raw topics are tick streams: each in time order, all within [`MAX_SESSION_NS`] of the
-/// session's first raw message, and every log time fits the store's signed 64-bit columns.
-/// The error names the topic, the message and its log time (callers add the file's name).
+/// How far apart the raw topics' first (and last) log times may lie (ns): they are written
+/// together, tick by tick, so a session's topics start and end within a tick of each other;
+/// a file in which one stops early (a writer that lost a stream) would segment as a shorter
+/// session than its glove stream says.
+pub const RAW_TOPIC_SKEW_NS: u64 = 100_000_000;
+
+/// The raw topics are tick streams recorded together: each has messages, is in time order,
+/// advances (more than one message do not share one log time), starts and ends within
+/// [`RAW_TOPIC_SKEW_NS`] of the others, and lies within [`MAX_SESSION_NS`] of the session's
+/// first raw message; every log time fits the store's signed 64-bit columns. The error names
+/// the topic, the message and its log time (callers add the file's name).
 fn check_raw_log_times(raw: &RawSession) -> Result<()> {
-    let Some(t0) = RAW_TOPICS
-        .iter()
-        .filter_map(|t| raw.topics[*t].messages.first())
-        .map(|m| m.log_time_ns)
-        .min()
-    else {
-        return Ok(());
+    let invalid =
+        |location: String, detail: String| RecordingError::InvalidInput { location, detail };
+    for topic in RAW_TOPICS {
+        if raw.topics[topic].messages.is_empty() {
+            return Err(invalid(
+                format!("topic {topic}"),
+                "has no messages: a session records every raw topic at every tick".into(),
+            ));
+        }
+    }
+    let span = |topic: &str| {
+        let m = &raw.topics[topic].messages;
+        (m[0].log_time_ns, m[m.len() - 1].log_time_ns)
     };
+    let t0 = RAW_TOPICS.iter().map(|t| span(t).0).min().unwrap_or(0);
     for topic in RAW_TOPICS {
         let mut prev = t0;
         for (i, m) in raw.topics[topic].messages.iter().enumerate() {
@@ -348,13 +363,41 @@ fn check_raw_log_times(raw: &RawSession) -> Result<()> {
                 None
             };
             if let Some(detail) = problem {
-                return Err(RecordingError::InvalidInput {
-                    location: format!("topic {topic} message {i} (log time {t} ns)"),
+                return Err(invalid(
+                    format!("topic {topic} message {i} (log time {t} ns)"),
                     detail,
-                });
+                ));
             }
             prev = t;
         }
+    }
+    let t1 = RAW_TOPICS.iter().map(|t| span(t).1).max().unwrap_or(0);
+    let s = |ns: u64| (ns - t0) as f64 * 1e-9;
+    for topic in RAW_TOPICS {
+        let (first, last) = span(topic);
+        let n = raw.topics[topic].messages.len();
+        let detail = if n > 1 && first == last {
+            format!(
+                "all {n} messages have the same log time ({first} ns): a raw topic is a tick \
+                 stream, one message per 1 ms tick"
+            )
+        } else if first - t0 > RAW_TOPIC_SKEW_NS {
+            format!(
+                "starts at {:.3} s, after the session's first raw message: the raw topics are \
+                 recorded together, tick by tick",
+                s(first)
+            )
+        } else if t1 - last > RAW_TOPIC_SKEW_NS {
+            format!(
+                "ends at {:.3} s, {:.3} s before the session's last raw message: the raw topics \
+                 are recorded together, tick by tick",
+                s(last),
+                (t1 - last) as f64 * 1e-9
+            )
+        } else {
+            continue;
+        };
+        return Err(invalid(format!("topic {topic}"), detail));
     }
     Ok(())
 }
