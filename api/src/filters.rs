@@ -11,7 +11,8 @@ use services::store::{SkillQuery, SortKey, StoreError, DEFAULT_LIMIT};
 #[serde(default, deny_unknown_fields)]
 #[into_params(parameter_in = Query)]
 pub struct SkillFilters {
-    /// Object shape: sphere, box, cylinder, or unknown (a session file without the object).
+    /// Object shape: sphere, box, cylinder, or unknown (a session stored before sessions had
+    /// to name their object).
     #[arg(long)]
     pub shape: Option<String>,
     /// Least object mass, kg.

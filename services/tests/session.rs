@@ -900,3 +900,41 @@ fn chunks_in_an_unknown_compression_are_refused_and_salvage_recovers_nothing_fro
     );
     assert!(!out.exists());
 }
+
+#[test]
+fn a_session_that_does_not_name_its_object_is_not_segmented_or_stored() {
+    // It was stored with skills of shape "unknown", mass 0 and μ 0, which no replay can use.
+    let ticks: Vec<(&str, u64)> = RAW_TOPICS
+        .iter()
+        .flat_map(|&t| (0..300).map(move |k| (t, k * 1_000_000)))
+        .collect();
+    let object = r#"{"shape":"box","half_extents":[0.025,0.025,0.04],"mass":0.2,"mu":0.8}"#;
+    let with = |meta: Option<&[(&str, &str)]>| {
+        let meta = meta.map(|m| {
+            m.iter()
+                .map(|(k, v)| (k.to_string(), v.to_string()))
+                .collect()
+        });
+        raw_topics_file(&ticks, meta)
+    };
+    services::ingest::analyse(&with(Some(&[("object", object)])), "named.mcap").unwrap();
+    for (bytes, want) in [
+        (with(None), "has no `session` metadata record"),
+        (
+            with(Some(&[("scenario", "mine")])),
+            "has no `object` in its `session` metadata record",
+        ),
+        (with(Some(&[("object", " ")])), "has no `object`"),
+    ] {
+        let e = services::ingest::analyse(&bytes, "odd.mcap").unwrap_err();
+        let text = e.to_string();
+        assert!(
+            matches!(e, RecordingError::InvalidInput { .. })
+                && text.starts_with("odd.mcap: ")
+                && text.contains(want),
+            "{text}"
+        );
+        let session = read_session_bytes(&bytes, "odd.mcap", &Default::default()).unwrap();
+        assert!(session.ensure_grasp_session("odd.mcap").is_err());
+    }
+}

@@ -24,7 +24,8 @@ pub struct SkillBody {
     pub id: i64,
     /// Id of the session the skill was found in.
     pub session_id: i64,
-    /// Object shape: sphere, box, cylinder, or unknown (a session file without the object).
+    /// Object shape: sphere, box, cylinder, or unknown (a session stored before sessions had
+    /// to name their object).
     pub object_shape: String,
     /// Object mass, kg.
     pub object_mass: f64,

@@ -58,10 +58,31 @@ impl Session {
     }
 
     /// `Ok` for a grasp session; [`RecordingError::ReplayRecording`] (naming `name`, the
-    /// replayed skill and the hand) for a replay recording, which has no skills to find. For
-    /// everything that segments or stores a file as a session.
+    /// replayed skill and the hand) for a replay recording, which has no skills to find;
+    /// [`RecordingError::InvalidInput`] for a file whose `session` metadata does not name its
+    /// object (the reader has checked an object that is there). For everything that segments
+    /// or stores a file as a session.
     pub fn ensure_grasp_session(&self, name: &str) -> Result<()> {
         if !self.is_replay() {
+            if self
+                .metadata
+                .get("object")
+                .is_none_or(|o| o.trim().is_empty())
+            {
+                let record = if self.metadata.is_empty() {
+                    format!("has no `{SESSION_METADATA}` metadata record")
+                } else {
+                    format!("has no `object` in its `{SESSION_METADATA}` metadata record")
+                };
+                return Err(RecordingError::InvalidInput {
+                    location: name.to_owned(),
+                    detail: format!(
+                        "{record}: a grasp session names the object grasped (shape, sizes, \
+                         mass, mu, as a scenario file's `object`), which its skills carry into \
+                         the data base and onto robot hands"
+                    ),
+                });
+            }
             return Ok(());
         }
         let get = |key: &str| {

@@ -229,7 +229,8 @@ pub(crate) fn decode_cursor(tag: &str, real: bool, cursor: &str) -> Result<After
     Ok(after)
 }
 
-/// The object shape of a skill from a session file without the object's metadata.
+/// The object shape of a skill from a session file without the object's metadata (stored
+/// before sessions had to name their object; such files are now refused).
 pub const UNKNOWN_SHAPE: &str = "unknown";
 /// Object shapes a skill can have.
 pub const SHAPES: [&str; 4] = ["sphere", "box", "cylinder", UNKNOWN_SHAPE];
