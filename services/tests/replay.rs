@@ -172,6 +172,20 @@ fn a_sphere_heavier_than_the_torque_limits_allow_fails_with_torque_limit() {
 }
 
 #[test]
+fn the_peak_torque_ratio_is_of_the_torque_applied() {
+    // Allegro carrying the 0.5 kg cylinder asks more than its 0.7 N·m at a joint: the report
+    // said 1.21 "of the limit", a torque no joint applied. The demand is clamped at the limit.
+    let skill = recorded_skill("cylinder-power-grasp");
+    let r = replay(&load_builtin_hand("allegro").unwrap(), &skill);
+    assert!(r.ticks > 0, "{}", r.detail);
+    assert!(
+        r.peak_torque_ratio > 0.5 && r.peak_torque_ratio <= 1.0,
+        "{}",
+        r.peak_torque_ratio
+    );
+}
+
+#[test]
 fn bad_hand_specs_are_refused_naming_the_problem() {
     let urdf = dfs_core::hand::builtin::GRIPPER_URDF;
     let err = load_hand_from_texts("{\"name\": 3}", urdf, "spec.json").unwrap_err();

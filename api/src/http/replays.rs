@@ -93,7 +93,9 @@ pub struct ReplayReportDoc {
     pub slip_ticks: u64,
     /// Smallest `1 − |c_t| / (μ c_n)` of a transmitting contact while held.
     pub min_friction_margin: f64,
-    /// Largest |τ| / τ_max over the replay.
+    /// Largest |τ| / τ_max of the torques the joints applied over the replay (clamped at the
+    /// limit: at most 1, and 1 means a joint reached its limit).
+    #[schema(minimum = 0.0, maximum = 1.0)]
     pub peak_torque_ratio: f64,
     /// The DOF where that happened.
     pub peak_torque_joint: String,

@@ -204,7 +204,8 @@ pub struct ReplayReport {
     /// Smallest `1 − |c_t| / (μ c_n)` of a transmitting contact while held (1 = pure normal
     /// force, 0 = on the cone).
     pub min_friction_margin: Real,
-    /// Largest |τ| / τ_max over the replay.
+    /// Largest |τ| / τ_max of the torques the joints applied over the replay (clamped at the
+    /// limit, so at most 1; 1 means a joint reached its limit).
     pub peak_torque_ratio: Real,
     /// The DOF where that happened.
     pub peak_torque_joint: String,

@@ -323,15 +323,17 @@ impl Replay {
         let mut saturated = false;
         for d in 0..n {
             let lim = hand.torque_limit[d];
-            let ratio = tau[d].abs() / lim;
+            // Saturated: the controller asked for the limit or more.
+            if tau[d].abs() >= 0.999 * lim && self.grasp_dof[d] {
+                saturated = true;
+            }
+            self.tau[d] = tau[d].clamp(-lim, lim);
+            // The peak of what the joint applied, at most its limit.
+            let ratio = self.tau[d].abs() / lim;
             if ratio > self.stats.peak_ratio {
                 self.stats.peak_ratio = ratio;
                 self.stats.peak_dof = d;
             }
-            if ratio >= 0.999 && self.grasp_dof[d] {
-                saturated = true;
-            }
-            self.tau[d] = tau[d].clamp(-lim, lim);
         }
         if held && saturated {
             self.stats.saturated_ticks += 1;
