@@ -106,3 +106,57 @@ fn a_skill_file_replays_without_touching_a_data_base_and_bad_hands_are_named() {
     assert!(e.contains("nobody"), "{e}");
     assert!(!d.join("icms-data").exists(), "nothing created a data base");
 }
+
+#[test]
+fn replay_never_records_over_its_inputs_and_a_session_file_is_not_a_skill() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    simulate_in(d, "box-pinch-lift", &[], "a.mcap");
+    let (c, out, e) = icms(d, &["segment", "a.mcap", "--json"]);
+    assert_eq!(c, 0, "{e}");
+    let skill = json(&out)["skills"][0].to_string();
+    std::fs::write(d.join("skill.json"), &skill).unwrap();
+    let spec = write_gripper(d, "jaw", "0.055", "left_finger");
+    let before = std::fs::read(d.join(&spec)).unwrap();
+    // `--out` the skill file (also by another path) or the hand's spec: the recording
+    // overwrote it.
+    for (out, flag) in [
+        ("skill.json", "--skill"),
+        ("./skill.json", "--skill"),
+        (spec.as_str(), "--hand"),
+    ] {
+        let (c, _, e) = icms(
+            d,
+            &[
+                "replay",
+                "--skill",
+                "skill.json",
+                "--hand",
+                &spec,
+                "--out",
+                out,
+            ],
+        );
+        assert_ne!(c, 0);
+        assert!(e.contains(&format!("is the {flag} file")), "{out}: {e}");
+    }
+    assert_eq!(
+        std::fs::read_to_string(d.join("skill.json")).unwrap(),
+        skill
+    );
+    assert_eq!(std::fs::read(d.join(&spec)).unwrap(), before);
+    // A session file given as the skill: "stream did not contain valid UTF-8".
+    let (c, _, e) = icms(d, &["replay", "--skill", "a.mcap", "--hand", "gripper"]);
+    assert_ne!(c, 0);
+    assert!(
+        e.contains("not a skill JSON file") && e.contains("icms segment"),
+        "{e}"
+    );
+    // A spec file is shown as one, not as an uploaded hand.
+    let (c, out, e) = icms(d, &["hands", &spec]);
+    assert_eq!(c, 0, "{e}");
+    assert!(
+        out.contains("(spec file)") && !out.contains("uploaded"),
+        "{out}"
+    );
+}

@@ -53,10 +53,12 @@ fn has_store(data: &Path) -> bool {
 
 /// Lists the built-in hands (and with --data the uploaded ones), or shows one.
 pub fn run_hands(a: HandsArgs) -> Result<(), CliError> {
+    let mut from_file = false;
     let hands: Vec<HandSummary> = match (&a.hand, &a.data) {
         (Some(h), data) => {
-            let (hand, builtin) = resolve_hand(h, data.as_deref())?;
-            vec![HandSummary::of(&hand, builtin, None)]
+            let (hand, origin) = resolve_hand(h, data.as_deref(), "hand")?;
+            from_file = origin == Origin::File;
+            vec![HandSummary::of(&hand, origin == Origin::Builtin, None)]
         }
         (None, Some(data)) => with_store(data, async |s| s.list_hands().await)?,
         (None, None) => BUILTIN_HANDS
@@ -79,20 +81,36 @@ pub fn run_hands(a: HandsArgs) -> Result<(), CliError> {
             } else {
                 format!("{}-{}", h.torque_limit[0], h.torque_limit[1])
             },
-            if h.builtin { "" } else { " (uploaded)" }
+            match (h.builtin, from_file) {
+                (true, _) => "",
+                (false, true) => " (spec file)",
+                (false, false) => " (uploaded)",
+            }
         );
     }
     Ok(())
 }
 
-/// A hand: built-in name, spec file, or (with a data base in `data`) an uploaded hand's name.
-/// Also says whether it is built in.
-fn resolve_hand(name_or_path: &str, data: Option<&Path>) -> Result<(LoadedHand, bool), CliError> {
-    if BUILTIN_HANDS.contains(&name_or_path) || Path::new(name_or_path).is_file() {
-        return Ok((
-            load_hand(name_or_path)?,
-            BUILTIN_HANDS.contains(&name_or_path),
-        ));
+/// Where a hand came from.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Origin {
+    Builtin,
+    File,
+    Uploaded,
+}
+
+/// A hand: built-in name, spec file, or (with a data base in `data`) an uploaded hand's name,
+/// and where it came from. `what` names the argument in errors (`--hand`, `hand`).
+fn resolve_hand(
+    name_or_path: &str,
+    data: Option<&Path>,
+    what: &str,
+) -> Result<(LoadedHand, Origin), CliError> {
+    if BUILTIN_HANDS.contains(&name_or_path) {
+        return Ok((load_hand(name_or_path)?, Origin::Builtin));
+    }
+    if Path::new(name_or_path).is_file() {
+        return Ok((load_hand(name_or_path)?, Origin::File));
     }
     match data {
         Some(d) if has_store(d) => {
@@ -100,22 +118,22 @@ fn resolve_hand(name_or_path: &str, data: Option<&Path>) -> Result<(LoadedHand, 
             let hand = with_store(d, async move |s| s.get_hand(&name).await?.load()).map_err(
                 |CliError(e)| {
                     CliError(format!(
-                        "--hand {name_or_path:?} is neither a built-in hand ({}), a spec file, \
+                        "{what} {name_or_path:?} is neither a built-in hand ({}), a spec file, \
                          nor a hand in {}: {e}",
                         BUILTIN_HANDS.join(", "),
                         d.display()
                     ))
                 },
             )?;
-            Ok((hand, false))
+            Ok((hand, Origin::Uploaded))
         }
         Some(d) => Err(CliError(format!(
-            "--hand {name_or_path:?} is neither a built-in hand ({}) nor a spec file, and \
+            "{what} {name_or_path:?} is neither a built-in hand ({}) nor a spec file, and \
              there is no uploaded hand to look it up in: {}",
             BUILTIN_HANDS.join(", "),
             no_data_base(d)
         ))),
-        None => Ok((load_hand(name_or_path)?, false)),
+        None => Ok((load_hand(name_or_path)?, Origin::File)),
     }
 }
 
@@ -146,10 +164,23 @@ pub struct ReplayArgs {
 fn read_skill(a: &ReplayArgs) -> Result<(serde_json::Value, ReplaySource), CliError> {
     let path = PathBuf::from(&a.skill);
     if path.is_file() {
-        let text = std::fs::read_to_string(&path)
-            .map_err(|e| CliError(format!("{}: {e}", path.display())))?;
-        let value = serde_json::from_str(&text)
-            .map_err(|e| CliError(format!("{}: not JSON: {e}", path.display())))?;
+        let bytes =
+            std::fs::read(&path).map_err(|e| CliError(format!("{}: {e}", path.display())))?;
+        let not_a_skill = |why: String| {
+            let hint = if bytes.starts_with(b"\x89MCAP") {
+                " (it is an MCAP file: a session's skills come from `icms segment --json`, or \
+                 `icms ingest` stores them and `--skill ID` replays one)"
+            } else {
+                ""
+            };
+            CliError(format!(
+                "{}: not a skill JSON file: {why}{hint}",
+                path.display()
+            ))
+        };
+        let text =
+            std::str::from_utf8(&bytes).map_err(|_| not_a_skill("it is not UTF-8 text".into()))?;
+        let value = serde_json::from_str(text).map_err(|e| not_a_skill(e.to_string()))?;
         let source = ReplaySource {
             skill_id: None,
             skill_name: path.display().to_string(),
@@ -214,9 +245,23 @@ async fn ensure_hand_stored(store: &Store, hand: &LoadedHand) -> Result<(), CliE
 /// Replays a skill on a hand and prints the report. A failed replay is a report (exit 0).
 /// A stored skill's replay is stored too.
 pub fn run_replay(a: ReplayArgs) -> Result<(), CliError> {
+    if let Some(out) = &a.out {
+        // Recording over an input would destroy it before it is read whole.
+        let same = |input: &Path| matches!((out.canonicalize(), input.canonicalize()), (Ok(x), Ok(y)) if x == y);
+        for (flag, input) in [("--skill", &a.skill), ("--hand", &a.hand)] {
+            if same(Path::new(input)) {
+                return Err(CliError(format!(
+                    "--out {} is the {flag} file: the recording would overwrite it; choose \
+                     another file",
+                    out.display()
+                )));
+            }
+        }
+    }
     let (value, source) = read_skill(&a)?;
     let skill = skill_spec_from_json(&value, &source.skill_name)?;
-    let (hand, builtin) = resolve_hand(&a.hand, Some(&a.data))?;
+    let (hand, origin) = resolve_hand(&a.hand, Some(&a.data), "--hand")?;
+    let builtin = origin == Origin::Builtin;
     let Some(skill_id) = source.skill_id else {
         let report = replay_skill(
             &hand,
