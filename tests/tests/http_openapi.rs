@@ -132,6 +132,21 @@ async fn the_openapi_document_is_valid_and_lists_every_endpoint() {
             .collect::<Vec<_>>(),
         ["application/x-mcap"]
     );
+    // The schemas' bounds are the code's: a hand spec takes up to MAX_TIPS fingertips (the
+    // document said 5 while uploads of 6 were accepted), a replay's peak torque ratio is of
+    // the clamped torque.
+    let schemas = &doc["components"]["schemas"];
+    assert_eq!(
+        schemas["HandSpec"]["properties"]["fingertips"]["maxItems"],
+        dfs_core::hand::MAX_TIPS,
+        "{}",
+        schemas["HandSpec"]
+    );
+    assert_eq!(
+        schemas["ReplayReport"]["properties"]["peak_torque_ratio"]["maximum"], 1.0,
+        "{}",
+        schemas["ReplayReport"]
+    );
     app.stop().await;
 }
 

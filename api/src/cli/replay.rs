@@ -227,6 +227,11 @@ async fn ensure_hand_stored(store: &Store, hand: &LoadedHand) -> Result<(), CliE
                 });
             if same {
                 Ok(())
+            } else if stored.summary.builtin {
+                Err(CliError(format!(
+                    "the hand spec is named {name:?}, a built-in hand it differs from, which \
+                     cannot be replaced; rename the hand in its spec to store this replay"
+                )))
             } else {
                 Err(CliError(format!(
                     "a different hand named {name:?} is already stored in the data base; \

@@ -56,8 +56,8 @@ pub struct HandSpecDoc {
     /// spec); stored as `NAME.urdf` then.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub urdf: Option<String>,
-    /// The fingertips, 1 to 5.
-    #[schema(min_items = 1, max_items = 5)]
+    /// The fingertips, 1 to 6 (`dfs_core::hand::MAX_TIPS`).
+    #[schema(min_items = 1, max_items = 6)]
     pub fingertips: Vec<FingertipSpecDoc>,
     /// Torque limit of every DOF without its own entry, N·m (N for a prismatic DOF), > 0.
     #[schema(exclusive_minimum = 0.0)]

@@ -200,10 +200,12 @@ fn pose(p: &urdf_rs::Pose) -> Isometry {
 fn inertial(link: &urdf_rs::Link) -> Result<Inertial> {
     let field = || format!("urdf link {:?} inertial", link.name);
     let m = link.inertial.mass.value;
-    if !(m.is_finite() && m >= 0.0) {
+    // A hand's link, not a building: the grasp file's object bound (10⁴ kg) is far above any.
+    let max = crate::statics::MASS_RANGE.1;
+    if !(m.is_finite() && (0.0..=max).contains(&m)) {
         return Err(DfsError::invalid(
             field(),
-            format!("mass {m} must be finite and ≥ 0"),
+            format!("mass {m} kg must be finite, ≥ 0 and at most {max} kg"),
         ));
     }
     let i = &link.inertial.inertia;
@@ -468,6 +470,13 @@ impl HandModel {
         if dof_names.len() > MAX_DOF {
             let reason = format!("{} DOFs > {MAX_DOF}", dof_names.len());
             return Err(DfsError::invalid("urdf", reason));
+        }
+        if dof_names.is_empty() {
+            return Err(DfsError::invalid(
+                "urdf",
+                "the hand has no actuated joint (every joint of the hand's tree is fixed or \
+                 mimics another): it cannot close on an object",
+            ));
         }
         let mut hand_joints = Vec::with_capacity(order_joints.len());
         for &j in &order_joints {
@@ -785,6 +794,25 @@ mod tests {
                 },
                 "fingertips[0].link",
                 "no link named \"nail\"",
+            ),
+            (
+                // Every joint fixed: a hand that cannot move a finger was accepted.
+                GRIPPER_URDF
+                    .replace("type=\"revolute\"", "type=\"fixed\"")
+                    .replace("type=\"prismatic\"", "type=\"fixed\"")
+                    .replace(
+                        "<mimic joint=\"right_finger_joint\" multiplier=\"1\" offset=\"0\"/>",
+                        "",
+                    ),
+                spec.clone(),
+                "urdf",
+                "the hand has no actuated joint",
+            ),
+            (
+                edited("<mass value=\"0.05\"/>", "<mass value=\"1e30\"/>"),
+                spec.clone(),
+                "urdf link \"right_finger\" inertial",
+                "at most 10000 kg",
             ),
             (
                 edited("<mass value=\"0.05\"/>", "<mass value=\"-0.05\"/>"),

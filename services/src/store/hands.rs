@@ -154,15 +154,23 @@ impl Store {
     /// is the spec's). Refused, storing nothing: an invalid URDF or spec
     /// ([`StoreError::InvalidHand`], naming the problem: a URDF that does not parse, a kinematic
     /// loop, several roots, an unknown fingertip link, a negative mass or radius, ...), a name
-    /// that is not URL-safe ([`StoreError::InvalidHand`]), a name of a built-in or stored hand
-    /// ([`StoreError::Conflict`]).
+    /// that is not URL-safe ([`StoreError::InvalidHand`]), a name of a built-in hand (in any
+    /// case) or of a stored hand ([`StoreError::Conflict`]).
     pub async fn put_hand(&self, spec: HandSpec, urdf: String) -> Result<Hand, StoreError> {
         let name = spec.name.clone();
         check_hand_name(&name)?;
-        if BUILTIN_HANDS.contains(&name.as_str()) {
-            return Err(StoreError::Conflict(format!(
-                "{name:?} is a built-in hand; choose another name"
-            )));
+        if let Some(builtin) = BUILTIN_HANDS.iter().find(|b| b.eq_ignore_ascii_case(&name)) {
+            // "Allegro" beside "allegro" reads as the same hand in every listing and replay.
+            return Err(StoreError::Conflict(if *builtin == name {
+                format!(
+                    "{name:?} is a built-in hand, which cannot be replaced; choose another name"
+                )
+            } else {
+                format!(
+                    "{name:?} differs from the built-in hand {builtin:?} only in case; choose \
+                     another name"
+                )
+            }));
         }
         // Building a model parses the URDF and factorises inertias: CPU work, off the workers.
         let hand = tokio::task::spawn_blocking(move || build(spec, urdf))
