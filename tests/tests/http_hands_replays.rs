@@ -115,7 +115,10 @@ async fn built_in_hands_are_listed_and_an_uploaded_hand_joins_them_once() {
         .post_json("/api/v1/hands", &clash, None)
         .await
         .problem(409);
-    assert!(d.contains("built-in") && d.contains("cannot be replaced"), "{d}");
+    assert!(
+        d.contains("built-in") && d.contains("cannot be replaced"),
+        "{d}"
+    );
     // A built-in's name in another case was stored beside it: "Allegro" and "allegro".
     for name in ["Allegro", "GLOVE10"] {
         let clash = json!({"spec": gripper_spec(name), "urdf": gripper_urdf()});
