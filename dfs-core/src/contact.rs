@@ -101,7 +101,8 @@ pub struct ContactFrame {
 impl ContactFrame {
     /// A contact at `p_b` with inward normal `z_b` (unit), tangents by the module's rule.
     pub fn from_normal(p_b: Vector, z_b: Vector) -> Self {
-        let z = z_b.normalize();
+        // One division per normalisation, not one per component.
+        let z = z_b * (1.0 / z_b.norm());
         let mut k = 0;
         for i in 1..3 {
             if z[i].abs() < z[k].abs() - 1e-12 {
@@ -110,7 +111,8 @@ impl ContactFrame {
         }
         let mut e = Vector::zeros();
         e[k] = 1.0;
-        let x = (e - z * z.dot(&e)).normalize();
+        let x = e - z * z[k];
+        let x = x * (1.0 / x.norm());
         let y = z.cross(&x);
         let m = Matrix3::from_columns(&[x, y, z]);
         // m is orthonormal by construction: convert it directly. (An iterative fit such as
@@ -191,9 +193,11 @@ pub fn apply_friction(model: ContactModel, friction: &Friction, c: &Intensity) -
         };
     }
     let n = masked[2];
-    let tan = (masked[0] * masked[0] + masked[1] * masked[1]).sqrt();
+    let tan2 = masked[0] * masked[0] + masked[1] * masked[1];
     let limit = friction.mu.max(0.0) * n;
-    if tan > limit {
+    // Compared squared (both sides are ≥ 0): the square root only for a contact that slips.
+    if tan2 > limit * limit {
+        let tan = tan2.sqrt();
         let s = if tan > 0.0 { limit / tan } else { 0.0 };
         t[0] *= s;
         t[1] *= s;

@@ -62,13 +62,65 @@ pub fn all_finite<I: IntoIterator<Item = Real>>(values: I) -> bool {
     values.into_iter().all(Real::is_finite)
 }
 
+/// `(sin x, cos x)` to within an ulp or two, inlined: forward kinematics needs a dozen per tick
+/// (the half angles of the rotating joints), and the C library's `sincos` is a call that
+/// returns through memory. The argument is reduced by multiples of π/2 (Cody and Waite, with
+/// π/2 split in two so `n · PIO2_HI` is exact for |x| ≤ 10⁵) and the remainder, |r| ≤ π/4,
+/// goes through the minimax polynomials of fdlibm's `__kernel_sin` and `__kernel_cos` (Sun
+/// Microsystems, 1993, the coefficients every libm since uses). Larger, infinite or NaN
+/// arguments take the standard library's path.
+#[inline]
+pub fn sin_cos(x: Real) -> (Real, Real) {
+    const PIO2_HI: Real = 1.570_796_326_734_125_6; // the first 33 bits of π/2
+    const PIO2_LO: Real = 6.077_100_506_506_192e-11; // π/2 − PIO2_HI
+    const S: [Real; 6] = [
+        -1.666_666_666_666_663_2e-1,
+        8.333_333_333_322_49e-3,
+        -1.984_126_982_985_795e-4,
+        2.755_731_370_707_006_8e-6,
+        -2.505_076_025_340_686_3e-8,
+        1.589_690_995_211_55e-10,
+    ];
+    const C: [Real; 6] = [
+        4.166_666_666_666_66e-2,
+        -1.388_888_888_887_411e-3,
+        2.480_158_728_947_673e-5,
+        -2.755_731_435_139_066_3e-7,
+        2.087_572_321_298_175e-9,
+        -1.135_964_755_778_819_5e-11,
+    ];
+    if !x.is_finite() || x.abs() > 1e5 {
+        return x.sin_cos();
+    }
+    // Round to the nearest whole number by adding and taking away 1.5 · 2⁵² (exact for
+    // |x · 2/π| < 2⁵¹; `round` is a library call on x86-64 without SSE4.1).
+    const SHIFT: Real = 6_755_399_441_055_744.0;
+    let n = (x * std::f64::consts::FRAC_2_PI + SHIFT) - SHIFT;
+    let r = (x - n * PIO2_HI) - n * PIO2_LO;
+    let z = r * r;
+    let w = z * z;
+    let sp = S[1] + z * (S[2] + z * S[3]) + z * w * (S[4] + z * S[5]);
+    let sin = r + r * z * (S[0] + z * sp);
+    let cp = z * (C[0] + z * (C[1] + z * C[2])) + w * w * (C[3] + z * (C[4] + z * C[5]));
+    let hz = 0.5 * z;
+    let one_minus = 1.0 - hz;
+    let cos = one_minus + (((1.0 - one_minus) - hz) + z * cp);
+    // `n` is a whole number of at most 10⁵ in magnitude: its quadrant is exact.
+    match (n as i64).rem_euclid(4) {
+        0 => (sin, cos),
+        1 => (cos, -sin),
+        2 => (-sin, -cos),
+        _ => (-cos, sin),
+    }
+}
+
 /// Pseudo-inverse and rank of a symmetric positive semi-definite 6x6 matrix. Eigenvalues
 /// below `rel_tol` times the largest count as zero, so the result stays finite for
 /// rank-deficient input (collinear contacts, a stretched finger). A well-conditioned matrix
 /// takes the fast Cholesky path; otherwise a symmetric eigen-decomposition. Allocation-free.
 pub fn sym_pinv6(a: &Mat6, rel_tol: Real) -> (Mat6, usize) {
-    match well_conditioned_cholesky(a, rel_tol) {
-        Some(ch) => (ch.inverse(), 6),
+    match Ldlt6::well_conditioned(a, rel_tol) {
+        Some(f) => (Mat6::from_fn(|r, c| f.solve(&Wrench::ith(c, 1.0))[r]), 6),
         None => eigen_pinv6(a, rel_tol),
     }
 }
@@ -78,8 +130,8 @@ pub fn sym_pinv6(a: &Mat6, rel_tol: Real) -> (Mat6, usize) {
 /// it is then two triangular solves instead of forming the inverse).
 #[derive(Debug, Clone, Copy)]
 pub enum SymPinv6 {
-    /// Well conditioned: the Cholesky factorisation of the matrix itself.
-    Cholesky(nalgebra::Cholesky<Real, nalgebra::U6>),
+    /// Well conditioned: the factorisation `L D Lᵀ` of the matrix itself.
+    Factor(Ldlt6),
     /// Rank-deficient or ill-conditioned: the pseudo-inverse from the eigen-decomposition.
     Explicit(Mat6),
 }
@@ -87,8 +139,8 @@ pub enum SymPinv6 {
 impl SymPinv6 {
     /// The pseudo-inverse of `a` and its rank, by the rule of [`sym_pinv6`].
     pub fn new(a: &Mat6, rel_tol: Real) -> (SymPinv6, usize) {
-        if let Some(ch) = well_conditioned_cholesky(a, rel_tol) {
-            return (SymPinv6::Cholesky(ch), 6);
+        if let Some(f) = Ldlt6::well_conditioned(a, rel_tol) {
+            return (SymPinv6::Factor(f), 6);
         }
         let (inv, rank) = eigen_pinv6(a, rel_tol);
         (SymPinv6::Explicit(inv), rank)
@@ -98,27 +150,77 @@ impl SymPinv6 {
     #[inline]
     pub fn apply(&self, v: &Wrench) -> Wrench {
         match self {
-            SymPinv6::Cholesky(ch) => ch.solve(v),
+            SymPinv6::Factor(f) => f.solve(v),
             SymPinv6::Explicit(inv) => inv * v,
         }
     }
 }
 
-/// The Cholesky factorisation of `a` when it exists and its squared pivots are within a wide
-/// safety factor of `rel_tol` (they bracket the eigenvalues loosely).
-fn well_conditioned_cholesky(
-    a: &Mat6,
-    rel_tol: Real,
-) -> Option<nalgebra::Cholesky<Real, nalgebra::U6>> {
-    let ch = nalgebra::Cholesky::new(*a)?;
-    let l = ch.l_dirty();
-    let (mut lo, mut hi) = (Real::INFINITY, 0.0_f64);
-    for i in 0..6 {
-        let d = l[(i, i)] * l[(i, i)];
-        lo = lo.min(d);
-        hi = hi.max(d);
+/// The square-root-free Cholesky factorisation `A = L D Lᵀ` of a symmetric positive definite
+/// 6x6 matrix (unit lower-triangular `L`, diagonal `D`): the DFS factors `W Wᵀ` every tick,
+/// and without a square root per pivot its chain of dependent long-latency operations is
+/// half as long as `L Lᵀ`'s.
+#[derive(Debug, Clone, Copy)]
+pub struct Ldlt6 {
+    /// `L` below the diagonal (the diagonal and above are not read).
+    l: Mat6,
+    /// `1 / D`.
+    inv_d: [Real; 6],
+}
+
+impl Ldlt6 {
+    /// The factorisation of `a` (its lower triangle is read) when `a` is positive definite
+    /// and its pivots `D` are within a wide safety factor of `rel_tol` of each other (they
+    /// bracket the eigenvalues loosely, as the squared pivots of `L Lᵀ` do); `None` otherwise.
+    pub fn well_conditioned(a: &Mat6, rel_tol: Real) -> Option<Ldlt6> {
+        let mut l = Mat6::zeros();
+        let mut inv_d = [0.0; 6];
+        let (mut lo, mut hi) = (Real::INFINITY, 0.0_f64);
+        for j in 0..6 {
+            // v[k] = L[j][k] D[k] while row j is formed.
+            let mut v = [0.0; 6];
+            for i in 0..j {
+                let mut s = a[(j, i)];
+                for k in 0..i {
+                    s -= l[(i, k)] * v[k];
+                }
+                v[i] = s;
+                l[(j, i)] = s * inv_d[i];
+            }
+            let mut d = a[(j, j)];
+            for k in 0..j {
+                d -= l[(j, k)] * v[k];
+            }
+            if !(d > 0.0 && d.is_finite()) {
+                return None;
+            }
+            inv_d[j] = 1.0 / d;
+            lo = lo.min(d);
+            hi = hi.max(d);
+        }
+        (lo > hi * rel_tol * 1e3).then_some(Ldlt6 { l, inv_d })
     }
-    (hi.is_finite() && lo > hi * rel_tol * 1e3).then_some(ch)
+
+    /// `A⁻¹ b`.
+    #[inline]
+    pub fn solve(&self, b: &Wrench) -> Wrench {
+        let l = &self.l;
+        let mut x = *b;
+        for i in 0..6 {
+            for k in 0..i {
+                x[i] -= l[(i, k)] * x[k];
+            }
+        }
+        for i in 0..6 {
+            x[i] *= self.inv_d[i];
+        }
+        for i in (0..6).rev() {
+            for k in i + 1..6 {
+                x[i] -= l[(k, i)] * x[k];
+            }
+        }
+        x
+    }
 }
 
 /// Pseudo-inverse and rank of a symmetric 6x6 matrix from its eigen-decomposition.
@@ -143,11 +245,13 @@ fn eigen_pinv6(a: &Mat6, rel_tol: Real) -> (Mat6, usize) {
 }
 
 /// Solves `A x = b` in place for the symmetric positive definite top-left `n × n` block of a
-/// fixed-capacity square matrix by Cholesky factorisation `A = Uᵀ U` (only the upper triangle
-/// of the block is read; it is overwritten by `U`, `b` by `x`). Returns `false`, leaving `b`
-/// unspecified, when the block is not positive definite. Allocation-free; the hot-path solver
-/// for joint-space systems. Works column by column on the column-major storage, so every inner
-/// loop runs over contiguous memory.
+/// fixed-capacity square matrix by the square-root-free Cholesky factorisation `A = L D Lᵀ`
+/// (only the upper triangle of the block is read; it is overwritten by `Lᵀ` above the
+/// diagonal and `1 / D` on it, `b` by `x`). Returns `false`, leaving `b` unspecified, when the
+/// block is not positive definite (or not finite). Allocation-free; the hot-path solver for
+/// small joint-space systems: one division per column and no square root, so the chain of
+/// dependent long-latency operations is half as long as with `L Lᵀ`. Works column by column
+/// on the column-major storage, so every inner loop runs over contiguous memory.
 pub fn cholesky_solve_in_place<const N: usize>(
     a: &mut nalgebra::SMatrix<Real, N, N>,
     n: usize,
@@ -157,34 +261,35 @@ pub fn cholesky_solve_in_place<const N: usize>(
     let n = n.min(N).min(b.len());
     let u = a.as_mut_slice();
     let dot = |x: &[Real], y: &[Real]| x.iter().zip(y).map(|(p, q)| p * q).sum::<Real>();
+    // Column j holds row j of L (left of the diagonal) and 1 / D[j] (on it). `v` is row j
+    // of L D while it is being formed.
+    let mut v = [0.0; N];
     for j in 0..n {
-        // Column j of U above the diagonal is final once the columns before it are; then
-        // U[j][i] for i > j uses columns j and i.
-        let (head, tail) = u.split_at_mut((j + 1) * N);
-        let col_j = &mut head[j * N..j * N + j + 1];
-        let d = col_j[j] - dot(&col_j[..j], &col_j[..j]);
+        let (head, tail) = u.split_at_mut(j * N);
+        let col_j = &mut tail[..j + 1];
+        for i in 0..j {
+            let col_i = &head[i * N..i * N + i + 1];
+            v[i] = col_j[i] - dot(&col_i[..i], &v[..i]);
+            col_j[i] = v[i] * col_i[i];
+        }
+        let d = col_j[j] - dot(&col_j[..j], &v[..j]);
         if d <= 0.0 || !d.is_finite() {
             return false;
         }
-        let d = d.sqrt();
-        col_j[j] = d;
-        let col_j = &col_j[..j];
-        for i in (j + 1)..n {
-            let col_i = &mut tail[(i - j - 1) * N..(i - j - 1) * N + j + 1];
-            col_i[j] = (col_i[j] - dot(col_j, &col_i[..j])) / d;
-        }
+        col_j[j] = 1.0 / d;
     }
-    // Uᵀ y = b.
+    // L y = b, then D⁻¹ y.
     for i in 0..n {
         let col_i = &u[i * N..i * N + i + 1];
-        b[i] = (b[i] - dot(&col_i[..i], &b[..i])) / col_i[i];
+        b[i] -= dot(&col_i[..i], &b[..i]);
     }
-    // U x = y, column by column.
+    for i in 0..n {
+        b[i] *= u[i * N + i];
+    }
+    // Lᵀ x = D⁻¹ y, column by column.
     for i in (0..n).rev() {
-        let col_i = &u[i * N..i * N + i + 1];
-        let x = b[i] / col_i[i];
-        b[i] = x;
-        for (bk, uk) in b[..i].iter_mut().zip(&col_i[..i]) {
+        let x = b[i];
+        for (bk, uk) in b[..i].iter_mut().zip(&u[i * N..i * N + i]) {
             *bk -= uk * x;
         }
     }
@@ -337,6 +442,35 @@ mod tests {
     }
 
     #[test]
+    fn sin_cos_agrees_with_the_standard_library_to_an_ulp_or_two() {
+        let mut worst: Real = 0.0;
+        let mut check = |x: Real| {
+            let (s, c) = sin_cos(x);
+            let (s0, c0) = x.sin_cos();
+            let err = (s - s0).abs().max((c - c0).abs());
+            assert!(err <= 4.5e-16, "x = {x}: ({s}, {c}) vs ({s0}, {c0})");
+            worst = worst.max(err);
+        };
+        // Every quadrant boundary and joint-range angle, finely, then far out.
+        for i in -200_000..=200_000 {
+            check(i as Real * 1e-4);
+        }
+        for i in 0..2000 {
+            let x = (i as Real * 0.618_033_988_75).sin() * 1e5;
+            check(x);
+            check(x * 1e-3);
+        }
+        for x in [0.0, -0.0, 1e-300, -1e-300, 1e5, -1e5, 1e6, 3.5e9] {
+            check(x);
+        }
+        assert!(worst > 0.0, "a different path was taken");
+        let (s, c) = sin_cos(Real::NAN);
+        assert!(s.is_nan() && c.is_nan());
+        let (s, c) = sin_cos(Real::INFINITY);
+        assert!(s.is_nan() && c.is_nan());
+    }
+
+    #[test]
     fn skew_matrix_is_the_cross_product() {
         let a = Vector::new(1.0, -2.0, 0.5);
         let b = Vector::new(0.3, 4.0, -1.0);
@@ -356,5 +490,18 @@ mod tests {
         let (p, rank) = sym_pinv6(&full, 1e-9);
         assert_eq!(rank, 6);
         assert!((p * full - Mat6::identity()).norm() < 1e-12);
+        // A full, well-conditioned matrix with off-diagonal terms takes the factorisation.
+        let g = Mat6::from_fn(|r, c| {
+            ((r * 7 + c * 3) % 5) as Real - 2.0 + if r == c { 6.0 } else { 0.0 }
+        });
+        let spd = g * g.transpose();
+        let (p, rank) = sym_pinv6(&spd, 1e-9);
+        assert_eq!(rank, 6);
+        assert!((p * spd - Mat6::identity()).norm() < 1e-10);
+        assert!(Ldlt6::well_conditioned(&spd, 1e-9).is_some());
+        assert!(
+            Ldlt6::well_conditioned(&a, 1e-9).is_none(),
+            "rank 2 is not factored"
+        );
     }
 }

@@ -99,7 +99,11 @@ impl Shape {
         match *self {
             Shape::Sphere { radius } => {
                 let n = p_b.norm();
-                let dir = if n > 1e-12 { p_b / n } else { Vector::z() };
+                let dir = if n > 1e-12 {
+                    p_b * (1.0 / n)
+                } else {
+                    Vector::z()
+                };
                 (n - radius, dir * radius, dir)
             }
             Shape::Box { half_extents } => closest_on_box(p_b, &Vector::from(half_extents)),

@@ -37,9 +37,27 @@ pub struct GraspMatrix {
 impl GraspMatrix {
     /// Builds `ᴮW` for the contacts (at most [`MAX_CONTACTS`]; extra contacts are ignored).
     pub fn new(contacts: &[ContactFrame], model: ContactModel) -> Self {
-        let mut w = SMatrix::<Real, 6, MAX_COLUMNS>::zeros();
+        let mut g = GraspMatrix {
+            w: SMatrix::zeros(),
+            n: 0,
+            wwt_pinv: SymPinv6::Explicit(Mat6::zeros()),
+            rank: 0,
+        };
+        g.rebuild(contacts, model);
+        g
+    }
+
+    /// [`new`](Self::new) in place: the DFS rebuilds its grasp matrix every tick, and moving
+    /// a new one (1.5 kB) into place cost more than some of its arithmetic.
+    pub fn rebuild(&mut self, contacts: &[ContactFrame], model: ContactModel) {
         let n = contacts.len().min(MAX_CONTACTS);
+        let w = &mut self.w;
+        // Only the columns of the contacts are used (`wrench`, `distribute`).
+        w.as_mut_slice()[..6 * 4 * n].fill(0.0);
         let mask = model.mask();
+        // With all three force columns transmitted (point with friction, soft finger) their
+        // share of W Wᵀ has a closed form (below); otherwise it is summed column by column.
+        let all_forces = mask[0] != 0.0 && mask[1] != 0.0 && mask[2] != 0.0;
         // W Wᵀ = Σ over the transmitted columns of col colᵀ (the zero columns add nothing).
         let mut wwt = Mat6::zeros();
         for (i, c) in contacts.iter().take(n).enumerate() {
@@ -57,11 +75,34 @@ impl GraspMatrix {
                     wrench(&Vector::zeros(), &r.column(2).into_owned())
                 };
                 w.set_column(4 * i + k, &col);
+                if k < 3 && all_forces {
+                    continue;
+                }
                 for a in 0..6 {
                     for b in a..6 {
                         wwt[(a, b)] += col[a] * col[b];
                     }
                 }
+            }
+            if all_forces {
+                // The columns (f, p × f) for the orthonormal columns f of R: Σ f fᵀ = R Rᵀ = 1,
+                // so they add [[1, −[p]×], [[p]×, |p|² 1 − p pᵀ]] (upper triangle here).
+                let p = c.p_b;
+                let p2 = p.norm_squared();
+                for a in 0..3 {
+                    wwt[(a, a)] += 1.0;
+                    for b in a..3 {
+                        let shift = if a == b { p2 } else { 0.0 };
+                        wwt[(3 + a, 3 + b)] += shift - p[a] * p[b];
+                    }
+                }
+                // −[p]×, row by row.
+                wwt[(0, 4)] += p.z;
+                wwt[(0, 5)] -= p.y;
+                wwt[(1, 3)] -= p.z;
+                wwt[(1, 5)] += p.x;
+                wwt[(2, 3)] += p.y;
+                wwt[(2, 4)] -= p.x;
             }
         }
         for a in 0..6 {
@@ -70,12 +111,9 @@ impl GraspMatrix {
             }
         }
         let (wwt_pinv, rank) = SymPinv6::new(&wwt, PINV_TOLERANCE);
-        GraspMatrix {
-            w,
-            n,
-            wwt_pinv,
-            rank,
-        }
+        self.n = n;
+        self.wwt_pinv = wwt_pinv;
+        self.rank = rank;
     }
 
     /// `ᴮf̃ = ᴮW c̃` (eq. 23) for per-contact intensities.
@@ -131,6 +169,22 @@ mod tests {
         }
         let f = g.wrench(&c);
         assert!((f - Wrench::new(0.0, 0.0, 9.81, 0.0, 0.0, 0.0)).norm() < 1e-9);
+    }
+
+    #[test]
+    fn the_closed_form_of_w_wt_equals_the_sum_over_the_columns() {
+        let contacts = paper_contacts();
+        for model in [ContactModel::PointWithFriction, ContactModel::SoftFinger] {
+            let g = GraspMatrix::new(&contacts, model);
+            let wwt = g.w * g.w.transpose();
+            // (W Wᵀ)⁺ W Wᵀ = 1 for the paper's full-rank grasp: the factor is of W Wᵀ itself.
+            let back = Mat6::from_columns(
+                &(0..6)
+                    .map(|k| g.wwt_pinv.apply(&wwt.column(k).into_owned()))
+                    .collect::<Vec<_>>(),
+            );
+            assert!((back - Mat6::identity()).norm() < 1e-9, "{model:?}: {back}");
+        }
     }
 
     #[test]
