@@ -38,7 +38,7 @@
 use crate::contact::{apply_friction, detect, ContactFrame, ContactModel, Friction, Intensity};
 use crate::error::{DfsError, Result};
 use crate::grasp::{GraspMatrix, MAX_CONTACTS};
-use crate::hand::{DofMatrix, HandModel, Kinematics, MassPlan, MAX_DOF, MAX_TIPS};
+use crate::hand::{DofMatrix, FkPlan, HandModel, Kinematics, MassPlan, MAX_DOF, MAX_TIPS};
 use crate::math::{
     cholesky_solve_in_place, envelope_cholesky_solve, force_of, moment_of, wrench, Isometry, Point,
     Real, Vector, Wrench,
@@ -294,7 +294,10 @@ pub struct Dfs {
     frames: [ContactFrame; MAX_CONTACTS],
     transmitted: [Intensity; MAX_CONTACTS],
     contact_tip: [usize; MAX_CONTACTS],
-    grasp: Option<GraspMatrix>,
+    /// The grasp matrix of the transmitting contacts, rebuilt in place each tick; valid when
+    /// `grasp_active` (one contact or more).
+    grasp: GraspMatrix,
+    grasp_active: bool,
     /// Per tip: the DOFs that move it (the wrist's and its finger's), ascending. Every other
     /// column of its Jacobian is zero, so the per-tip joint-space sums skip them.
     tip_dofs: [TipDofs; MAX_TIPS],
@@ -303,8 +306,12 @@ pub struct Dfs {
     /// rows' nonzeros start at `solve_first`: no fill-in, a fraction of a dense Cholesky.
     solve_order: [usize; MAX_DOF],
     solve_first: [usize; MAX_DOF],
+    /// Per tip: `tip_dofs` sorted by their position in `solve_order`.
+    tip_dofs_solve: [TipDofs; MAX_TIPS],
     /// The hand's structure for M(θ), made once.
     mass_plan: MassPlan,
+    /// The hand's per-joint constants for forward kinematics, made once.
+    fk_plan: FkPlan,
     factor: DofMatrix,
     out: TickOutput,
 }
@@ -448,7 +455,17 @@ impl Dfs {
             *t = TipDofs::of(&hand, k);
         }
         let (solve_order, solve_first) = finger_step_envelope(&hand, &tip_dofs);
+        let mut solve_position = [0; MAX_DOF];
+        for (i, &d) in solve_order.iter().enumerate().take(hand.dof().min(MAX_DOF)) {
+            solve_position[d] = i;
+        }
+        let mut tip_dofs_solve = tip_dofs;
+        for t in tip_dofs_solve.iter_mut() {
+            let len = t.len;
+            t.dofs[..len].sort_by_key(|&d| solve_position[d]);
+        }
         let mass_plan = hand.mass_plan();
+        let fk_plan = hand.fk_plan();
         let object_inv_inertia_max = object.inertia_inv.symmetric_eigenvalues().max();
         Ok(Dfs {
             hand,
@@ -474,11 +491,14 @@ impl Dfs {
             frames: [ContactFrame::from_normal(Vector::zeros(), Vector::z()); MAX_CONTACTS],
             transmitted: [Intensity::zeros(); MAX_CONTACTS],
             contact_tip: [0; MAX_CONTACTS],
-            grasp: None,
+            grasp: GraspMatrix::new(&[], params.contact_model),
+            grasp_active: false,
             tip_dofs,
             solve_order,
             solve_first,
+            tip_dofs_solve,
             mass_plan,
+            fk_plan,
             factor: DofMatrix::zeros(),
             out,
         })
@@ -580,7 +600,8 @@ impl Dfs {
             self.q[..n].copy_from_slice(s.q);
             self.initialised = true;
         }
-        self.hand.forward_kinematics(&s.base, s.q, &mut self.kin);
+        self.hand
+            .forward_kinematics_planned(&self.fk_plan, &s.base, s.q, &mut self.kin);
         self.hand.tip_jacobians(&mut self.kin);
         self.hand
             .mass_matrix_planned(&self.mass_plan, &mut self.kin, &mut self.mass);
@@ -734,8 +755,10 @@ impl Dfs {
             t.in_contact = !split.separating;
             // The pad sticks unless it slides: a pad that only spins on the surface (torsional
             // slip of the soft finger) keeps its tangential anchor.
-            let slides = with_passive[0].hypot(with_passive[1])
-                > self.params.friction.mu.max(0.0) * with_passive[2];
+            let limit = self.params.friction.mu.max(0.0) * with_passive[2];
+            let slides = limit < 0.0
+                || with_passive[0] * with_passive[0] + with_passive[1] * with_passive[1]
+                    > limit * limit;
             let stick = t.in_contact && !slides;
             self.stick[k] = stick;
             // Beyond the torsional cone the pad turns on the surface and keeps only the twist
@@ -771,14 +794,12 @@ impl Dfs {
     /// Stage 4: object wrench (eq. 22-23), table support, Newton-Euler (eq. 24-26), integration.
     pub fn stage_object(&mut self) {
         let n = self.out.n_contacts;
+        self.grasp_active = n > 0;
         let (f_hand, rank) = if n > 0 {
-            let g = GraspMatrix::new(&self.frames[..n], self.params.contact_model);
-            let f = g.wrench(&self.transmitted[..n]);
-            let r = g.rank;
-            self.grasp = Some(g);
-            (f, r)
+            let g = &mut self.grasp;
+            g.rebuild(&self.frames[..n], self.params.contact_model);
+            (g.wrench(&self.transmitted[..n]), g.rank)
         } else {
-            self.grasp = None;
             (Wrench::zeros(), 0)
         };
         self.out.grasp_rank = rank;
@@ -798,7 +819,8 @@ impl Dfs {
     pub fn stage_feedback(&mut self, tau: &[Real]) {
         let n = self.out.n_contacts;
         let rot = self.state.pose.rotation.to_rotation_matrix();
-        if let Some(g) = &self.grasp {
+        if self.grasp_active {
+            let g = &self.grasp;
             // The reaction is distributed over the transmitting contacts only; the table's
             // share of f_ext is not the fingers' to carry.
             let f_fingers = self.out.f_ext_b - self.out.table_force_b;
@@ -825,16 +847,24 @@ impl Dfs {
         let p = &self.params;
         let dt = p.dt;
         let a = &mut self.scratch;
-        a.view_mut((0, 0), (ndof, ndof))
-            .copy_from(&self.mass.view((0, 0), (ndof, ndof)));
         let mut rhs = [0.0; MAX_DOF];
-        for i in 0..ndof {
-            a[(i, i)] += dt * p.joint_damping;
-            let mut s = 0.0;
-            for j in 0..ndof {
-                s += self.mass[(i, j)] * self.qd[j];
+        // Column by column (the storage is column-major and M symmetric): A's column i is M's
+        // plus the damping on the diagonal, rhs[i] = (M q̇)[i] + dt τ[i].
+        {
+            let (a, m) = (a.as_mut_slice(), self.mass.as_slice());
+            let qd = &self.qd[..ndof];
+            for i in 0..ndof {
+                let col = &m[i * MAX_DOF..i * MAX_DOF + ndof];
+                let to = &mut a[i * MAX_DOF..i * MAX_DOF + ndof];
+                // One pass copies the column and forms the product (no memcpy call per column).
+                let mut s = 0.0;
+                for ((t, &mv), &v) in to.iter_mut().zip(col).zip(qd) {
+                    *t = mv;
+                    s += mv * v;
+                }
+                a[i * MAX_DOF + i] += dt * p.joint_damping;
+                rhs[i] = s + dt * tau[i];
             }
-            rhs[i] = s + dt * tau[i];
         }
         let mut fb_torque = [0.0; MAX_DOF];
         for k in 0..self.hand.fingertips.len() {
@@ -871,12 +901,15 @@ impl Dfs {
                 };
             let c = dt * p.surface_damping + dt * dt * p.surface_stiffness;
             let c_stick = dt * damping + dt * dt * p.surface_stiffness;
-            let mut cols = [Vector::zeros(); MAX_DOF];
-            for (col, &d) in cols.iter_mut().zip(dofs) {
-                *col = Vector::new(j[(0, d)], j[(1, d)], j[(2, d)]);
-            }
-            let cols = &cols[..dofs.len()];
-            for (&col1, &d1) in cols.iter().zip(dofs) {
+            // The tip's linear Jacobian column of DOF d (column-major storage).
+            let js = j.as_slice();
+            let col = |d: usize| Vector::new(js[6 * d], js[6 * d + 1], js[6 * d + 2]);
+            // The block is symmetric and the solve reads one triangle of it (row `d1`, column
+            // `d2` no later than `d1` in the solve order): with the tip's DOFs in solve order,
+            // only that triangle is written.
+            let dofs = self.tip_dofs_solve[k].as_slice();
+            for (p1, &d1) in dofs.iter().enumerate() {
+                let col1 = col(d1);
                 if col1 == Vector::zeros() {
                     continue;
                 }
@@ -888,8 +921,8 @@ impl Dfs {
                         col1 * c_stick + z_world * (z_world.dot(&col1) * (dt * extra_normal))
                     }
                 };
-                for (col2, &d2) in cols.iter().zip(dofs) {
-                    a[(d1, d2)] += pc1.dot(col2);
+                for &d2 in &dofs[..=p1] {
+                    a[(d1, d2)] += pc1.dot(&col(d2));
                 }
             }
         }

@@ -270,6 +270,64 @@ impl SpatialInertia {
         }
     }
 
+    /// [`of_link`](Self::of_link) for a link of mass `m` whose inertia about its centre of
+    /// mass is `transverse` about every axis but link axis `k`, `transverse + excess` about
+    /// that one, with the centre of mass on axis `k` at `along` ([`LinkAxes::Axial`]). With
+    /// `a` that axis in the world, `R I_c Rᵀ = transverse 1 + excess a aᵀ`: one column of the
+    /// rotation instead of the whole product.
+    #[inline(always)]
+    fn of_axial_link(
+        pose: &Isometry,
+        m: f64,
+        k: usize,
+        transverse: f64,
+        excess: f64,
+        along: f64,
+    ) -> SpatialInertia {
+        let q = pose.rotation.quaternion();
+        let (w, x, y, z) = (q.w, q.i, q.j, q.k);
+        // Column k of the rotation matrix of the unit quaternion.
+        let a = match k {
+            0 => Vector::new(
+                1.0 - 2.0 * (y * y + z * z),
+                2.0 * (x * y + w * z),
+                2.0 * (x * z - w * y),
+            ),
+            1 => Vector::new(
+                2.0 * (x * y - w * z),
+                1.0 - 2.0 * (x * x + z * z),
+                2.0 * (y * z + w * x),
+            ),
+            _ => Vector::new(
+                2.0 * (x * z + w * y),
+                2.0 * (y * z - w * x),
+                1.0 - 2.0 * (x * x + y * y),
+            ),
+        };
+        let c = a * along + pose.translation.vector;
+        let h = c * m;
+        // I_o = transverse 1 + excess a aᵀ + m (|c|² 1 − c cᵀ), symmetric.
+        let diag = transverse + h.dot(&c);
+        let ea = a * excess;
+        let (xy, xz, yz) = (
+            ea.x * a.y - h.x * c.y,
+            ea.x * a.z - h.x * c.z,
+            ea.y * a.z - h.y * c.z,
+        );
+        let i_o = Mat3::new(
+            diag + ea.x * a.x - h.x * c.x,
+            xy,
+            xz,
+            xy,
+            diag + ea.y * a.y - h.y * c.y,
+            yz,
+            xz,
+            yz,
+            diag + ea.z * a.z - h.z * c.z,
+        );
+        SpatialInertia { mass: m, h, i_o }
+    }
+
     /// The spatial force `I (v, ω)` = (m v − h × ω, h × v + I_o ω) for the twist `(v, ω)`.
     #[inline]
     pub fn apply(&self, v: &Vector, w: &Vector) -> (Vector, Vector) {
@@ -959,6 +1017,95 @@ impl HandModel {
         }
     }
 
+    /// The per-joint constants [`forward_kinematics_planned`](Self::forward_kinematics_planned)
+    /// uses; they depend on the hand only, so a caller running forward kinematics every tick
+    /// makes them once. Allocation-free.
+    pub fn fk_plan(&self) -> FkPlan {
+        let mut plan = FkPlan {
+            joints: [FkJoint {
+                rotating: false,
+                q0: nalgebra::Quaternion::identity(),
+                p: nalgebra::Quaternion::identity(),
+                axis_parent: Vector::zeros(),
+            }; MAX_LINKS],
+        };
+        for (fj, joint) in plan.joints.iter_mut().zip(&self.joints) {
+            let q0 = *joint.origin.rotation.quaternion();
+            let axis = joint.axis.into_inner();
+            *fj = FkJoint {
+                rotating: matches!(joint.kind, JointKind::Revolute | JointKind::Continuous),
+                q0,
+                p: q0 * nalgebra::Quaternion::from_parts(0.0, axis),
+                axis_parent: joint.origin.rotation * axis,
+            };
+        }
+        plan
+    }
+
+    /// [`forward_kinematics`](Self::forward_kinematics) with the hand's [`FkPlan`] made
+    /// beforehand: a rotating joint's frame in its parent is `cos(θ/2) q₀ + sin(θ/2) q₀ (0, a)`
+    /// (`q₀` the origin's rotation, `a` the axis), four products and sums instead of a
+    /// quaternion product, and its world axis is its parent's rotation of `q₀ a`, which the
+    /// joint's own rotation leaves alone. The same poses to round-off.
+    pub fn forward_kinematics_planned(
+        &self,
+        plan: &FkPlan,
+        base: &Isometry,
+        q: &[f64],
+        kin: &mut Kinematics,
+    ) {
+        kin.link_poses[self.root] = *base;
+        kin.parent_joint[self.root] = NO_JOINT;
+        // The half-angle sines of the last few joint values, as in `forward_kinematics`.
+        // Kept as separate arrays: a 16-byte read of a (sin, cos) pair that `sin_cos` has
+        // just stored as two 8-byte writes stalls until they retire.
+        let (mut bits_of, mut sin_of, mut cos_of) = ([0_u64; 4], [0.0; 4], [1.0; 4]);
+        let (mut next, mut filled) = (0, 0);
+        // The last frame computed, kept at hand: along a finger each joint's parent is the
+        // previous joint's child, and reading that pose back from memory right after writing
+        // it stalls on the store.
+        let (mut last_link, mut last_frame) = (self.root, *base);
+        for (j, (joint, fj)) in self.joints.iter().zip(&plan.joints).enumerate() {
+            let value = joint.drive.value(q);
+            let parent = if joint.parent == last_link {
+                last_frame
+            } else {
+                kin.link_poses[joint.parent]
+            };
+            let frame = if fj.rotating {
+                let bits = value.to_bits();
+                let (s, c) = match bits_of[..filled].iter().position(|&b| b == bits) {
+                    Some(r) => (sin_of[r], cos_of[r]),
+                    None => {
+                        let (s, c) = crate::math::sin_cos(value / 2.0);
+                        (bits_of[next], sin_of[next], cos_of[next]) = (bits, s, c);
+                        next = (next + 1) % bits_of.len();
+                        filled = (filled + 1).min(bits_of.len());
+                        (s, c)
+                    }
+                };
+                let local = Rotation::new_unchecked(nalgebra::Quaternion::from(
+                    fj.q0.coords * c + fj.p.coords * s,
+                ));
+                Isometry::from_parts(
+                    (parent.translation.vector + parent.rotation * joint.origin.translation.vector)
+                        .into(),
+                    parent.rotation * local,
+                )
+            } else {
+                parent * joint.placed(value)
+            };
+            kin.joint_frames[j] = frame;
+            kin.joint_axes[j] = parent.rotation * fj.axis_parent;
+            kin.link_poses[joint.child] = frame;
+            kin.parent_joint[joint.child] = j;
+            (last_link, last_frame) = (joint.child, frame);
+        }
+        for (k, tip) in self.fingertips.iter().enumerate().take(MAX_TIPS) {
+            kin.tip_centres[k] = kin.link_poses[tip.link] * Point::from(tip.offset);
+        }
+    }
+
     /// Pose of fingertip `k` in the world frame: the orientation of its link, the position of
     /// the sphere centre (the fingertip frame T_k of the paper). Needs forward kinematics and
     /// `k < fingertips.len()`.
@@ -1018,9 +1165,12 @@ impl HandModel {
                         a,
                     ),
                 };
-                let mut col = jac.column_mut(d);
-                col.fixed_rows_mut::<3>(0).axpy(gain, &linear, 1.0);
-                col.fixed_rows_mut::<3>(3).axpy(gain, &angular, 1.0);
+                // Column d of the column-major 6 x MAX_DOF storage.
+                let col = &mut jac.as_mut_slice()[6 * d..6 * d + 6];
+                for r in 0..3 {
+                    col[r] += gain * linear[r];
+                    col[3 + r] += gain * angular[r];
+                }
             }
             current = joint.parent;
         }
@@ -1072,7 +1222,9 @@ impl HandModel {
         let mut plan = MassPlan {
             driven: [DrivenJoint {
                 joint: 0,
+                child: 0,
                 dof: 0,
+                col: 0,
                 gain: 0.0,
                 prismatic: false,
                 up: NO_JOINT,
@@ -1082,11 +1234,7 @@ impl HandModel {
         };
         for (l, link) in self.links.iter().enumerate().take(MAX_LINKS) {
             if l != self.root && link.inertial.mass > 0.0 {
-                plan.link_axes[l] = if link.inertial.principal_in_link_frame() {
-                    LinkAxes::Principal
-                } else {
-                    LinkAxes::General
-                };
+                plan.link_axes[l] = LinkAxes::of(&link.inertial);
             }
         }
         // The driven-list index of the nearest driven joint at or above every link.
@@ -1099,7 +1247,9 @@ impl HandModel {
             if let Some((dof, gain)) = joint.drive.dof_and_gain() {
                 plan.driven[plan.len] = DrivenJoint {
                     joint: j,
+                    child: joint.child,
                     dof,
+                    col: dof * MAX_DOF,
                     gain,
                     prismatic: joint.kind == JointKind::Prismatic,
                     up: above,
@@ -1136,18 +1286,43 @@ impl HandModel {
             ..
         } = kin;
         for (l, link) in self.links.iter().enumerate().take(MAX_LINKS) {
-            let axes = plan.link_axes.get(l).copied().unwrap_or(LinkAxes::Massless);
-            composite[l] = if axes == LinkAxes::Massless {
-                SpatialInertia::ZERO
-            } else {
-                let principal = axes == LinkAxes::Principal;
-                SpatialInertia::of_link_with_axes(&link_poses[l], &link.inertial, principal)
+            let pose = &link_poses[l];
+            composite[l] = match plan.link_axes.get(l).copied() {
+                None | Some(LinkAxes::Massless) => SpatialInertia::ZERO,
+                Some(LinkAxes::Axial {
+                    k,
+                    transverse,
+                    excess,
+                    along,
+                }) => SpatialInertia::of_axial_link(
+                    pose,
+                    link.inertial.mass,
+                    k,
+                    transverse,
+                    excess,
+                    along,
+                ),
+                Some(LinkAxes::Principal) => {
+                    SpatialInertia::of_link_with_axes(pose, &link.inertial, true)
+                }
+                Some(LinkAxes::General) => {
+                    SpatialInertia::of_link_with_axes(pose, &link.inertial, false)
+                }
             };
         }
-        let joints = &self.joints[..self.joints.len().min(MAX_LINKS)];
-        for joint in joints.iter().rev() {
-            let child = composite[joint.child];
-            composite[joint.parent] += child;
+        // Children before parents; along a chain the subtree just summed is the next one's
+        // child, kept at hand instead of read back from the store just made.
+        let (mut last_link, mut last) = (usize::MAX, SpatialInertia::ZERO);
+        for joint in self.joints[..self.joints.len().min(MAX_LINKS)].iter().rev() {
+            let child = if joint.child == last_link {
+                last
+            } else {
+                composite[joint.child]
+            };
+            let mut sum = composite[joint.parent];
+            sum += child;
+            composite[joint.parent] = sum;
+            (last_link, last) = (joint.parent, sum);
         }
         let driven = &plan.driven[..plan.len.min(MAX_LINKS)];
         // Every driven joint's motion subspace once, times its gain: (velocity of the body
@@ -1160,23 +1335,44 @@ impl HandModel {
                 (joint_frames[d.joint].translation.vector.cross(&a), a)
             };
         }
+        // Column-major storage: entry (r, c) at `c * MAX_DOF + r`, each driven joint's column
+        // offset made once in the plan.
+        let m = m.as_mut_slice();
         for (i, di) in driven.iter().enumerate() {
             let (v, w) = &motion[i];
-            let (f, t) = composite[joints[di.joint].child].apply(v, w);
-            let mut j = i;
+            let (f, t) = composite[di.child].apply(v, w);
+            m[di.col + di.dof] += v.dot(&f) + w.dot(&t);
+            let mut j = di.up;
             while let (Some(dj), Some((vj, wj))) = (driven.get(j), motion.get(j)) {
                 let h = vj.dot(&f) + wj.dot(&t);
-                m[(di.dof, dj.dof)] += h;
-                if j != i {
-                    m[(dj.dof, di.dof)] += h;
-                }
+                m[dj.col + di.dof] += h;
+                m[di.col + dj.dof] += h;
                 j = dj.up;
             }
         }
         for (i, a) in self.armature.iter().enumerate().take(n) {
-            m[(i, i)] += a;
+            m[i * MAX_DOF + i] += a;
         }
     }
+}
+
+/// The per-joint constants of [`HandModel::forward_kinematics_planned`], made once per hand
+/// by [`HandModel::fk_plan`].
+#[derive(Debug, Clone, Copy)]
+pub struct FkPlan {
+    joints: [FkJoint; MAX_LINKS],
+}
+
+#[derive(Debug, Clone, Copy)]
+struct FkJoint {
+    /// Revolute or continuous.
+    rotating: bool,
+    /// The origin's rotation.
+    q0: nalgebra::Quaternion<f64>,
+    /// `q0 (0, axis)`: the joint's rotation in its parent is `cos(θ/2) q0 + sin(θ/2) p`.
+    p: nalgebra::Quaternion<f64>,
+    /// The axis in the parent link's frame.
+    axis_parent: Vector,
 }
 
 /// A driven (non-fixed) joint as the composite rigid-body algorithm walks it.
@@ -1184,8 +1380,12 @@ impl HandModel {
 struct DrivenJoint {
     /// Index into `HandModel::joints`.
     joint: usize,
+    /// Its child link.
+    child: usize,
     /// The DOF driving it.
     dof: usize,
+    /// Offset of that DOF's column in the column-major [`DofMatrix`]: `dof * MAX_DOF`.
+    col: usize,
     /// `∂(joint value)/∂θ[dof]`: 1, or a mimic joint's multiplier.
     gain: f64,
     prismatic: bool,
@@ -1207,9 +1407,41 @@ pub struct MassPlan {
 #[derive(Debug, Clone, Copy, PartialEq)]
 enum LinkAxes {
     Massless,
+    /// Inertia tensor diagonal in the link frame with two equal moments (`transverse`), the
+    /// third, about link axis `k`, `transverse + excess`; the centre of mass on that axis at
+    /// `along` (a cylinder or a rod along its axis, as glove10's phalanges): only axis `k`'s
+    /// world direction is needed.
+    Axial {
+        k: usize,
+        transverse: f64,
+        excess: f64,
+        along: f64,
+    },
     /// Inertia tensor diagonal in the link frame.
     Principal,
     General,
+}
+
+impl LinkAxes {
+    /// The form of a massive link's inertia.
+    fn of(inertial: &Inertial) -> LinkAxes {
+        if !inertial.principal_in_link_frame() {
+            return LinkAxes::General;
+        }
+        let (i, c) = (&inertial.inertia, &inertial.com);
+        for k in 0..3 {
+            let (a, b) = ((k + 1) % 3, (k + 2) % 3);
+            if i[(a, a)] == i[(b, b)] && c[a] == 0.0 && c[b] == 0.0 {
+                return LinkAxes::Axial {
+                    k,
+                    transverse: i[(a, a)],
+                    excess: i[(k, k)] - i[(a, a)],
+                    along: c[k],
+                };
+            }
+        }
+        LinkAxes::Principal
+    }
 }
 
 #[cfg(test)]
@@ -1653,6 +1885,54 @@ pub(crate) mod tests {
             assert_jacobians_match_finite_differences(&hand, &angles_from_unit(&hand, &u));
             let glove = HandModel::glove10();
             assert_jacobians_match_finite_differences(&glove, &angles_from_unit(&glove, &u));
+        }
+
+        #[test]
+        fn the_planned_kinematics_and_inertia_equal_the_general_forms(
+            u in prop::collection::vec(0.0..1.0f64, MAX_DOF),
+            rpy in prop::array::uniform3(-3.0..3.0f64),
+        ) {
+            let base = Isometry::from_parts(
+                Vector::new(0.1, -0.2, 0.3).into(),
+                Rotation::from_euler_angles(rpy[0], rpy[1], rpy[2]),
+            );
+            for name in crate::hand::BUILTIN_HANDS {
+                let hand = crate::hand::builtin_hand(name).unwrap();
+                let q = angles_from_unit(&hand, &u[..hand.dof()]);
+                let (mut general, mut planned) = (Kinematics::default(), Kinematics::default());
+                hand.forward_kinematics(&base, &q, &mut general);
+                hand.forward_kinematics_planned(&hand.fk_plan(), &base, &q, &mut planned);
+                for l in 0..hand.links.len() {
+                    let (a, b) = (&general.link_poses[l], &planned.link_poses[l]);
+                    prop_assert!((a.translation.vector - b.translation.vector).norm() < 1e-12);
+                    prop_assert!(a.rotation.angle_to(&b.rotation) < 1e-12, "{name} link {l}");
+                }
+                for j in 0..hand.joints.len() {
+                    prop_assert!((general.joint_axes[j] - planned.joint_axes[j]).norm() < 1e-12);
+                    prop_assert_eq!(general.parent_joint[hand.joints[j].child], j);
+                    prop_assert_eq!(planned.parent_joint[hand.joints[j].child], j);
+                }
+                for k in 0..hand.fingertips.len() {
+                    prop_assert!((general.tip_centres[k] - planned.tip_centres[k]).norm() < 1e-12);
+                }
+                // The axial form of a link's inertia against the principal-axes sums.
+                let plan = hand.mass_plan();
+                let mut principal = plan;
+                for a in principal.link_axes.iter_mut() {
+                    if matches!(a, LinkAxes::Axial { .. }) {
+                        *a = LinkAxes::Principal;
+                    }
+                }
+                let (mut m1, mut m2) = (DofMatrix::zeros(), DofMatrix::zeros());
+                hand.mass_matrix_planned(&plan, &mut planned, &mut m1);
+                hand.mass_matrix_planned(&principal, &mut planned, &mut m2);
+                let scale = m2.amax().max(1e-12);
+                prop_assert!((m1 - m2).amax() <= 1e-12 * scale, "{name}: {}", (m1 - m2).amax());
+            }
+            // glove10's phalanges take the axial form.
+            let glove = HandModel::glove10();
+            let axial = glove.mass_plan().link_axes.iter().filter(|a| matches!(a, LinkAxes::Axial { .. })).count();
+            prop_assert!(axial >= 12, "{axial}");
         }
 
         #[test]
