@@ -118,12 +118,14 @@ fn replay_never_records_over_its_inputs_and_a_session_file_is_not_a_skill() {
     std::fs::write(d.join("skill.json"), &skill).unwrap();
     let spec = write_gripper(d, "jaw", "0.055", "left_finger");
     let before = std::fs::read(d.join(&spec)).unwrap();
-    // `--out` the skill file (also by another path) or the hand's spec: the recording
-    // overwrote it.
+    let urdf_before = std::fs::read(d.join("jaw.urdf")).unwrap();
+    // `--out` the skill file (also by another path), the hand's spec or the spec's URDF: the
+    // recording overwrote it.
     for (out, flag) in [
-        ("skill.json", "--skill"),
-        ("./skill.json", "--skill"),
-        (spec.as_str(), "--hand"),
+        ("skill.json", "the --skill file"),
+        ("./skill.json", "the --skill file"),
+        (spec.as_str(), "the --hand file"),
+        ("jaw.urdf", "the URDF of the --hand spec"),
     ] {
         let (c, _, e) = icms(
             d,
@@ -138,13 +140,30 @@ fn replay_never_records_over_its_inputs_and_a_session_file_is_not_a_skill() {
             ],
         );
         assert_ne!(c, 0);
-        assert!(e.contains(&format!("is the {flag} file")), "{out}: {e}");
+        assert!(e.contains(&format!("is {flag}:")), "{out}: {e}");
     }
     assert_eq!(
         std::fs::read_to_string(d.join("skill.json")).unwrap(),
         skill
     );
     assert_eq!(std::fs::read(d.join(&spec)).unwrap(), before);
+    assert_eq!(std::fs::read(d.join("jaw.urdf")).unwrap(), urdf_before);
+    // A built-in hand reads no file: a file that shares its name may be recorded to.
+    std::fs::write(d.join("gripper"), "not a hand").unwrap();
+    let (c, _, e) = icms(
+        d,
+        &[
+            "replay",
+            "--skill",
+            "skill.json",
+            "--hand",
+            "gripper",
+            "--out",
+            "gripper",
+        ],
+    );
+    assert_eq!(c, 0, "{e}");
+    assert!(std::fs::metadata(d.join("gripper")).unwrap().len() > 100);
     // A session file given as the skill: "stream did not contain valid UTF-8".
     let (c, _, e) = icms(d, &["replay", "--skill", "a.mcap", "--hand", "gripper"]);
     assert_ne!(c, 0);

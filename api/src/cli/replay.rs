@@ -247,25 +247,43 @@ async fn ensure_hand_stored(store: &Store, hand: &LoadedHand) -> Result<(), CliE
     }
 }
 
+/// Refuses a `--out` that is one of the files the replay read: the skill file, and for a hand
+/// from a spec file the spec and its URDF (the recording would overwrite them). A built-in or
+/// uploaded hand read no file, whatever files share its name.
+fn refuse_out_over_inputs(
+    out: &Path,
+    a: &ReplayArgs,
+    hand: &LoadedHand,
+    origin: Origin,
+) -> Result<(), CliError> {
+    let same = |input: &Path| matches!((out.canonicalize(), input.canonicalize()), (Ok(x), Ok(y)) if x == y);
+    let mut inputs = vec![("the --skill file", PathBuf::from(&a.skill))];
+    if origin == Origin::File {
+        let spec = Path::new(&a.hand);
+        inputs.push(("the --hand file", spec.to_path_buf()));
+        if let Some(urdf) = hand.spec.as_ref().map(|s| &s.urdf) {
+            let dir = spec.parent().unwrap_or(Path::new("."));
+            inputs.push(("the URDF of the --hand spec", dir.join(urdf)));
+        }
+    }
+    match inputs.iter().find(|(_, input)| same(input)) {
+        Some((what, _)) => Err(CliError(format!(
+            "--out {} is {what}: the recording would overwrite it; choose another file",
+            out.display()
+        ))),
+        None => Ok(()),
+    }
+}
+
 /// Replays a skill on a hand and prints the report. A failed replay is a report (exit 0).
 /// A stored skill's replay is stored too.
 pub fn run_replay(a: ReplayArgs) -> Result<(), CliError> {
-    if let Some(out) = &a.out {
-        // Recording over an input would destroy it before it is read whole.
-        let same = |input: &Path| matches!((out.canonicalize(), input.canonicalize()), (Ok(x), Ok(y)) if x == y);
-        for (flag, input) in [("--skill", &a.skill), ("--hand", &a.hand)] {
-            if same(Path::new(input)) {
-                return Err(CliError(format!(
-                    "--out {} is the {flag} file: the recording would overwrite it; choose \
-                     another file",
-                    out.display()
-                )));
-            }
-        }
-    }
     let (value, source) = read_skill(&a)?;
     let skill = skill_spec_from_json(&value, &source.skill_name)?;
     let (hand, origin) = resolve_hand(&a.hand, Some(&a.data), "--hand")?;
+    if let Some(out) = &a.out {
+        refuse_out_over_inputs(out, &a, &hand, origin)?;
+    }
     let builtin = origin == Origin::Builtin;
     let Some(skill_id) = source.skill_id else {
         let report = replay_skill(
