@@ -160,19 +160,25 @@ impl ScenarioObject {
 
     /// The rigid object, validated with its friction: shape, sizes and mass as
     /// [`ObjectSpec::to_object`] checks them and within a grasp file's ranges
-    /// ([`ObjectSpec::check_ranges`]), `mu` and `mu_torsion` finite and ≥ 0.
+    /// ([`ObjectSpec::check_ranges`]), `mu` and `mu_torsion` within a grasp file's ranges
+    /// ([`MU_RANGE`](crate::statics::MU_RANGE), [`MU_TORSION_RANGE`](crate::statics::MU_TORSION_RANGE)).
     pub fn to_object(&self) -> Result<RigidObject> {
         let spec = self.spec();
         let object = spec.to_object()?;
         spec.check_ranges()?;
-        for (field, v) in [
-            ("object.mu", self.mu),
-            ("object.mu_torsion", self.mu_torsion),
+        for (field, v, (lo, hi), unit) in [
+            ("object.mu", self.mu, crate::statics::MU_RANGE, ""),
+            (
+                "object.mu_torsion",
+                self.mu_torsion,
+                crate::statics::MU_TORSION_RANGE,
+                " m",
+            ),
         ] {
             check(
                 field.into(),
-                v.is_finite() && v >= 0.0,
-                format!("must be a finite number ≥ 0, got {v}"),
+                v.is_finite() && (lo..=hi).contains(&v),
+                format!("must be a number in [{lo:?}, {hi:?}]{unit}, got {v}"),
             )?;
         }
         Ok(object)
@@ -544,6 +550,18 @@ mod tests {
         let mut s = Scenario::builtin("sphere-lift", 0).unwrap();
         s.object.mu = -0.2;
         assert!(s.resolve().unwrap_err().to_string().contains("object.mu"));
+        // And for friction: a grasp file refuses μ above 10 and μ_t above 1 m.
+        let mut s = Scenario::builtin("sphere-lift", 0).unwrap();
+        s.object.mu = 1e6;
+        let e = s.resolve().unwrap_err().to_string();
+        assert!(e.contains("object.mu") && e.contains("[0.0, 10.0]"), "{e}");
+        let mut s = Scenario::builtin("sphere-lift", 0).unwrap();
+        s.object.mu_torsion = 50.0;
+        let e = s.resolve().unwrap_err().to_string();
+        assert!(
+            e.contains("object.mu_torsion") && e.contains("[0.0, 1.0] m"),
+            "{e}"
+        );
         let mut s = Scenario::builtin("sphere-lift", 0).unwrap();
         s.tasks[2].phase = "juggle".into();
         assert!(s

@@ -108,9 +108,11 @@ pub struct ScenarioObjectDoc {
     pub half_height: Option<f64>,
     /// Mass, kg, > 0.
     pub mass: f64,
-    /// Coulomb friction coefficient, ≥ 0.
+    /// Coulomb friction coefficient, 0 to 10.
+    #[schema(minimum = 0.0, maximum = 10.0)]
     pub mu: f64,
-    /// Torsional friction, m, ≥ 0. Default 0.005.
+    /// Torsional friction, m, 0 to 1. Default 0.005.
+    #[schema(minimum = 0.0, maximum = 1.0)]
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub mu_torsion: Option<f64>,
     /// Start position of the object's centre in the world, m. Default: on the table at the
