@@ -163,6 +163,19 @@ async fn replays_are_stored_with_their_blob_and_go_with_their_skill_or_session()
         store.insert_replay(999, "gripper", &report, bytes).await,
         Err(StoreError::SkillNotFound(999))
     ));
+    // A replay stored before the report took the applied (clamped) torque held the peak of the
+    // torque asked for, above 1: it reads back as the applied torque's peak, 1.
+    let mut old = report.clone();
+    old.peak_torque_ratio = 1.21;
+    let c = store
+        .insert_replay(s2, "gripper", &old, fake_mcap(102, 5000))
+        .await
+        .unwrap();
+    assert_eq!(c.report["peak_torque_ratio"], 1.0);
+    assert_eq!(
+        store.get_replay(c.id).await.unwrap().report["peak_torque_ratio"],
+        1.0
+    );
     // A replay whose skill is gone (deleted while it ran) leaves no blob of its own behind.
     let before = blob_count(tmp.path());
     assert!(matches!(

@@ -135,13 +135,22 @@ fn row_to_summary(row: &SqliteRow) -> Result<HandSummary, StoreError> {
 
 fn row_to_replay(row: &SqliteRow) -> Result<Replay, StoreError> {
     let report: String = row.try_get("report")?;
+    let mut report: serde_json::Value = serde_json::from_str(&report)?;
+    // Replays stored before the report took the torque the joints applied (clamped at the
+    // limit) hold the peak of the torque asked for, which could exceed it. The applied torque's
+    // peak is that, at most 1: the same number the report gives today.
+    if let Some(ratio) = report.get_mut("peak_torque_ratio") {
+        if ratio.as_f64().is_some_and(|r| r > 1.0) {
+            *ratio = 1.0.into();
+        }
+    }
     Ok(Replay {
         id: row.try_get("id")?,
         skill_id: row.try_get("skill_id")?,
         hand: row.try_get("hand")?,
         success: row.try_get("success")?,
         failure_reason: row.try_get("failure_reason")?,
-        report: serde_json::from_str(&report)?,
+        report,
         sha256: row.try_get("sha256")?,
         size_bytes: row.try_get("size_bytes")?,
         blob_path: row.try_get("blob_path")?,
