@@ -62,7 +62,9 @@ pub fn all_finite<I: IntoIterator<Item = Real>>(values: I) -> bool {
     values.into_iter().all(Real::is_finite)
 }
 
-/// `(sin x, cos x)` to within an ulp or two, inlined: forward kinematics needs a dozen per tick
+/// `(sin x, cos x)` within 4.5e-16 of the standard library's (absolute error: near a multiple
+/// of π the sine is tiny and its relative error larger, as π/2 is split in two parts only),
+/// inlined: forward kinematics needs a dozen per tick
 /// (the half angles of the rotating joints), and the C library's `sincos` is a call that
 /// returns through memory. The argument is reduced by multiples of π/2 (Cody and Waite, with
 /// π/2 split in two so `n · PIO2_HI` is exact for |x| ≤ 10⁵) and the remainder, |r| ≤ π/4,

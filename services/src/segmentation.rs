@@ -114,8 +114,8 @@ pub struct PhaseSpan {
     /// Phase name (`approach`, `preshape`, `grasp`, `lift`, `hold`, `transport`, `place`,
     /// `release`, `retreat`).
     pub name: String,
-    /// Start, ns since the session start: the log time of its first `/object/state` sample
-    /// (0 in the files `icms simulate` records; recorders that log epoch times start later).
+    /// Start, ns since the session's start (the log time of its first `/object/state` sample:
+    /// 0 in the files `icms simulate` records, later for recorders that log epoch times).
     pub start_ns: u64,
     /// End (exclusive), ns since the session start.
     pub end_ns: u64,

@@ -52,8 +52,9 @@ impl GraspMatrix {
     pub fn rebuild(&mut self, contacts: &[ContactFrame], model: ContactModel) {
         let n = contacts.len().min(MAX_CONTACTS);
         let w = &mut self.w;
-        // Only the columns of the contacts are used (`wrench`, `distribute`).
-        w.as_mut_slice()[..6 * 4 * n].fill(0.0);
+        // The columns of the contacts, and any a larger grasp left before: the rest are zero.
+        let used = n.max(self.n).min(MAX_CONTACTS);
+        w.as_mut_slice()[..6 * 4 * used].fill(0.0);
         let mask = model.mask();
         // With all three force columns transmitted (point with friction, soft finger) their
         // share of W Wᵀ has a closed form (below); otherwise it is summed column by column.
