@@ -84,6 +84,24 @@ fn simulate_records_a_session_that_reads_back_and_salvage_recovers_a_truncated_c
         session.joint_states[..salvaged.ticks()]
     );
     assert_eq!(salvaged.metadata["scenario"], "box-pinch-lift");
+    // A salvage that fails leaves a file already at --out as it was: it was truncated to an
+    // empty MCAP (not an MCAP input) or deleted (nothing recoverable).
+    let json_file = dir.path().join("j.mcap");
+    std::fs::write(&json_file, "{\"not\": \"mcap\"}").unwrap();
+    let magic = dir.path().join("magic.mcap");
+    std::fs::write(&magic, &bytes[..8]).unwrap();
+    for bad in [&json_file, &magic] {
+        let (code, _, err) = icms(&["salvage", p(bad), "--out", p(&fixed)]);
+        assert_ne!(code, 0, "{}", bad.display());
+        assert!(!err.is_empty());
+        assert_eq!(read_session(&fixed).unwrap().ticks(), salvaged.ticks());
+    }
+    let leftovers: Vec<_> = std::fs::read_dir(dir.path())
+        .unwrap()
+        .filter_map(|e| e.ok())
+        .filter(|e| e.file_name().to_string_lossy().ends_with(".part"))
+        .collect();
+    assert!(leftovers.is_empty(), "{leftovers:?}");
 
     // The simulated session's /joint_states (foxglove.JointStates, 50 Hz) is a glove recording.
     let imported = dir.path().join("imported.mcap");
@@ -100,6 +118,19 @@ fn simulate_records_a_session_that_reads_back_and_salvage_recovers_a_truncated_c
     assert_eq!(code, 0, "{err}");
     let report: Value = serde_json::from_str(&stdout).unwrap();
     assert_eq!(report["input_samples"], 125);
+    // --out the input: the recording replaced the glove recording it was reading.
+    let (code, _, err) = icms(&[
+        "import-glove",
+        "--input",
+        p(&out),
+        "--object",
+        "box-pinch-lift",
+        "--out",
+        p(&out),
+    ]);
+    assert_ne!(code, 0);
+    assert!(err.contains("is the --input file"), "{err}");
+    assert_eq!(read_session(&out).unwrap().ticks(), 2500);
     let back = read_session(&imported).unwrap();
     assert_eq!(back.ticks(), 2481); // 0 … 2480 ms
     assert!(back.phases.is_empty());
@@ -210,6 +241,11 @@ fn simulate_rejects_bad_scenario_files_naming_the_field() {
             Box::new(|v| v["tasks"][0]["duration"] = 0.0.into()),
             "tasks[0].duration",
         ),
+        (
+            "a lift height on another phase",
+            Box::new(|v| v["tasks"][0]["height"] = 0.3.into()),
+            "tasks[0].height",
+        ),
     ];
     for (what, edit, field) in cases {
         let mut v = base.clone();
@@ -222,6 +258,19 @@ fn simulate_rejects_bad_scenario_files_naming_the_field() {
         assert!(err.contains(field), "{what}: {err}");
         assert!(!out.exists(), "{what}: no file is written");
     }
+    // Content after the scenario, and --out the scenario file itself.
+    let file = dir.path().join("trailing.json");
+    std::fs::write(&file, format!("{base} {{\"x\": 1}}")).unwrap();
+    let out = dir.path().join("never.mcap");
+    let (code, _, err) = icms(&["simulate", "--scenario", p(&file), "--out", p(&out)]);
+    assert_ne!(code, 0);
+    assert!(err.contains("trailing characters"), "{err}");
+    let file = dir.path().join("self.json");
+    std::fs::write(&file, base.to_string()).unwrap();
+    let (code, _, err) = icms(&["simulate", "--scenario", p(&file), "--out", p(&file)]);
+    assert_ne!(code, 0);
+    assert!(err.contains("is the --scenario file"), "{err}");
+    assert_eq!(std::fs::read_to_string(&file).unwrap(), base.to_string());
     // The unedited file is fine.
     let file = dir.path().join("ok.json");
     std::fs::write(&file, base.to_string()).unwrap();

@@ -10,6 +10,7 @@ mod simulate;
 mod skills;
 
 use clap::{Parser, Subcommand};
+use std::path::Path;
 use std::process::ExitCode;
 
 /// ICMS: the Dynamic Force Simulator and its skill service.
@@ -120,14 +121,35 @@ pub(crate) fn no_data_base(data: &std::path::Path) -> String {
 /// (`contacts[0].position: invalid length 2, ...`).
 pub fn parse_json<T: serde::de::DeserializeOwned>(text: &str) -> Result<T, String> {
     let de = &mut serde_json::Deserializer::from_str(text);
-    serde_path_to_error::deserialize(de).map_err(|e| {
+    let value = serde_path_to_error::deserialize(&mut *de).map_err(|e| {
         let path = e.path().to_string();
         if path == "." {
             e.inner().to_string()
         } else {
             format!("{path}: {}", e.inner())
         }
-    })
+    })?;
+    // Anything after the value (a second object, stray text) is refused, as over HTTP.
+    de.end().map_err(|e| e.to_string())?;
+    Ok(value)
+}
+
+/// Refuses an output path that is one of the files a command reads (`(what, path)`, paths
+/// that do not exist are skipped): writing it would destroy the input.
+pub fn refuse_out_over_inputs(out: &Path, inputs: &[(&str, &Path)]) -> Result<(), CliError> {
+    let Ok(out_real) = out.canonicalize() else {
+        return Ok(());
+    };
+    match inputs
+        .iter()
+        .find(|(_, input)| input.canonicalize().is_ok_and(|i| i == out_real))
+    {
+        Some((what, _)) => Err(CliError(format!(
+            "--out {} is {what}: the recording would overwrite it; choose another file",
+            out.display()
+        ))),
+        None => Ok(()),
+    }
 }
 
 /// Prints a value as pretty JSON on stdout. A closed pipe (`icms ... | head`) ends quietly.

@@ -256,7 +256,6 @@ fn refuse_out_over_inputs(
     hand: &LoadedHand,
     origin: Origin,
 ) -> Result<(), CliError> {
-    let same = |input: &Path| matches!((out.canonicalize(), input.canonicalize()), (Ok(x), Ok(y)) if x == y);
     let mut inputs = vec![("the --skill file", PathBuf::from(&a.skill))];
     if origin == Origin::File {
         let spec = Path::new(&a.hand);
@@ -266,13 +265,8 @@ fn refuse_out_over_inputs(
             inputs.push(("the URDF of the --hand spec", dir.join(urdf)));
         }
     }
-    match inputs.iter().find(|(_, input)| same(input)) {
-        Some((what, _)) => Err(CliError(format!(
-            "--out {} is {what}: the recording would overwrite it; choose another file",
-            out.display()
-        ))),
-        None => Ok(()),
-    }
+    let inputs: Vec<(&str, &Path)> = inputs.iter().map(|(w, p)| (*w, p.as_path())).collect();
+    super::refuse_out_over_inputs(out, &inputs)
 }
 
 /// Replays a skill on a hand and prints the report. A failed replay is a report (exit 0).

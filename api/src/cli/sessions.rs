@@ -154,6 +154,11 @@ pub fn run_import(a: ImportArgs) -> Result<(), CliError> {
             .unwrap_or_else(|| "glove".into());
         a.input.with_file_name(format!("{stem}.session.mcap"))
     });
+    let mut inputs = vec![("the --input file", a.input.as_path())];
+    if Scenario::builtin(&a.object, 0).is_none() && !a.object.trim_start().starts_with('{') {
+        inputs.push(("the --object file", Path::new(&a.object)));
+    }
+    super::refuse_out_over_inputs(&out, &inputs)?;
     let hand = dfs_core::hand::HandModel::glove10();
     let recording = read_glove_file(&a.input, &hand).map_err(|e| {
         // Errors about the file's content name it already; the MCAP reader's do not.

@@ -224,6 +224,10 @@ impl Progress {
 /// Runs and records a scenario.
 pub fn run_simulate(a: SimulateArgs) -> Result<(), CliError> {
     let scenario = load_scenario(&a.scenario, a.seed)?;
+    if Scenario::builtin(&a.scenario, 0).is_none() {
+        let inputs = [("the --scenario file", Path::new(&a.scenario))];
+        super::refuse_out_over_inputs(&a.out, &inputs)?;
+    }
     let mut progress = Progress::new("simulating");
     let start = Instant::now();
     let result = record_simulation(&scenario, a.duration, &a.out, |d, t| progress.update(d, t));

@@ -41,17 +41,12 @@ pub struct SalvageReport {
 /// file at `output` (zstd chunks, indexes, summary). A chunk is recovered whole or not at all:
 /// its CRC must match.
 ///
-/// Fails if `input` is not an MCAP file, if not one message could be recovered from it (the
-/// output is then removed: an empty file would read as a recovered one), or if a file cannot
-/// be opened or written.
+/// Fails if `input` is not an MCAP file, if not one message could be recovered from it (an
+/// empty file would read as a recovered one), or if a file cannot be opened or written. The
+/// output is written as `OUTPUT.part` and renamed into place when complete: a salvage that
+/// fails writes nothing at `output` and leaves a file already there as it was.
 pub fn salvage(input: impl AsRef<Path>, output: impl AsRef<Path>) -> Result<SalvageReport> {
     let (input, output) = (input.as_ref(), output.as_ref());
-    let file = File::open(input)
-        .map_err(|e| RecordingError::io(format!("opening {}", input.display()), e))?;
-    let total_len = file
-        .metadata()
-        .map_err(|e| RecordingError::io(format!("reading {}", input.display()), e))?
-        .len();
     if let (Ok(a), Ok(b)) = (input.canonicalize(), output.canonicalize()) {
         if a == b {
             return Err(RecordingError::io(
@@ -63,6 +58,37 @@ pub fn salvage(input: impl AsRef<Path>, output: impl AsRef<Path>) -> Result<Salv
             ));
         }
     }
+    // Written under a temporary name beside the output and renamed over it only when whole:
+    // a salvage that fails leaves a file already at `output` as it was.
+    let mut part_name = output.file_name().unwrap_or_default().to_os_string();
+    part_name.push(".part");
+    let part = output.with_file_name(part_name);
+    match salvage_into(input, &part) {
+        Ok(report) => {
+            std::fs::rename(&part, output).map_err(|e| {
+                let _ = std::fs::remove_file(&part);
+                RecordingError::io(
+                    format!("renaming {} to {}", part.display(), output.display()),
+                    e,
+                )
+            })?;
+            Ok(report)
+        }
+        Err(e) => {
+            let _ = std::fs::remove_file(&part);
+            Err(e)
+        }
+    }
+}
+
+/// [`salvage`] into `output` directly.
+fn salvage_into(input: &Path, output: &Path) -> Result<SalvageReport> {
+    let file = File::open(input)
+        .map_err(|e| RecordingError::io(format!("opening {}", input.display()), e))?;
+    let total_len = file
+        .metadata()
+        .map_err(|e| RecordingError::io(format!("reading {}", input.display()), e))?
+        .len();
     let out_file = File::create(output)
         .map_err(|e| RecordingError::io(format!("creating {}", output.display()), e))?;
     let mut writer = WriterOptions::default()
