@@ -324,6 +324,27 @@ impl Scenario {
                     ),
                 )
             })?;
+            // A field of another phase's task is a mistake, not a default to ignore.
+            let takes: &[&str] = match phase {
+                Phase::Lift => &["height"],
+                Phase::Transport => &["offset", "turn"],
+                _ => &[],
+            };
+            for (field, given) in [
+                ("height", t.height.is_some()),
+                ("offset", t.offset.is_some()),
+                ("turn", t.turn.is_some()),
+            ] {
+                check(
+                    format!("tasks[{i}].{field}"),
+                    !given || takes.contains(&field),
+                    format!(
+                        "a {} task takes no {field} (lift takes height; transport takes \
+                         offset and turn)",
+                        phase.name()
+                    ),
+                )?;
+            }
             check(
                 format!("tasks[{i}].duration"),
                 t.duration.is_finite() && t.duration > 0.0 && t.duration <= 600.0,
@@ -562,6 +583,20 @@ mod tests {
             e.contains("object.mu_torsion") && e.contains("[0.0, 1.0] m"),
             "{e}"
         );
+        // A lift height on a hold task was ignored.
+        let mut s = Scenario::builtin("sphere-lift", 0).unwrap();
+        let hold = s.tasks.iter().position(|t| t.phase == "hold").unwrap();
+        s.tasks[hold].height = Some(0.3);
+        let e = s.resolve().unwrap_err().to_string();
+        assert!(
+            e.contains(&format!("tasks[{hold}].height"))
+                && e.contains("a hold task takes no height"),
+            "{e}"
+        );
+        let mut s = Scenario::builtin("sphere-lift", 0).unwrap();
+        s.tasks[hold].offset = Some([0.1, 0.0, 0.0]);
+        let e = s.resolve().unwrap_err().to_string();
+        assert!(e.contains(&format!("tasks[{hold}].offset")), "{e}");
         let mut s = Scenario::builtin("sphere-lift", 0).unwrap();
         s.tasks[2].phase = "juggle".into();
         assert!(s
