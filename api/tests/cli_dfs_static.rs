@@ -150,6 +150,11 @@ fn malformed_grasp_files_fail_with_a_message_naming_the_field() {
             "sticky",
         ),
         (r#"{"object": "#, "EOF"),
+        // Content after the grasp was ignored (exit 0); over HTTP it is refused.
+        (
+            r#"{"object": {"shape": "sphere", "radius": 0.1, "mass": 1}, "mu": 1, "contacts": [{"position": [0,0,-0.1]}]} trailing"#,
+            "trailing characters",
+        ),
     ];
     for (i, (text, field)) in cases.iter().enumerate() {
         let file = dir.join(format!("bad{i}.json"));
