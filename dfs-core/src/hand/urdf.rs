@@ -472,6 +472,13 @@ impl HandModel {
             return Err(DfsError::invalid("urdf", reason));
         }
         if dof_names.is_empty() {
+            // Joints that mimic each other leave no DOF: name that cycle first.
+            for &j in &order_joints {
+                let joint = &robot.joints[j];
+                if joint.mimic.is_some() && !matches!(joint.joint_type, urdf_rs::JointType::Fixed) {
+                    resolve_mimic(&by_name, joint)?;
+                }
+            }
             return Err(DfsError::invalid(
                 "urdf",
                 "the hand has no actuated joint (every joint of the hand's tree is fixed or \
@@ -807,6 +814,19 @@ mod tests {
                 spec.clone(),
                 "urdf",
                 "the hand has no actuated joint",
+            ),
+            (
+                // Two joints mimicking each other were reported as a hand with no actuated
+                // joint, not as the cycle they are.
+                GRIPPER_URDF
+                    .replace("type=\"revolute\"", "type=\"fixed\"")
+                    .replace(
+                        "<child link=\"right_finger\"/>",
+                        "<child link=\"right_finger\"/><mimic joint=\"left_finger_joint\"/>",
+                    ),
+                spec.clone(),
+                "urdf joint \"right_finger_joint\" mimic",
+                "mimic joints form a cycle",
             ),
             (
                 edited("<mass value=\"0.05\"/>", "<mass value=\"1e30\"/>"),
