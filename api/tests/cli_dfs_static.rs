@@ -150,6 +150,11 @@ fn malformed_grasp_files_fail_with_a_message_naming_the_field() {
             "sticky",
         ),
         (r#"{"object": "#, "EOF"),
+        // A normal pointing out of the object was taken and the contact said to pull.
+        (
+            r#"{"object": {"shape": "sphere", "radius": 0.1, "mass": 1}, "mu": 1, "contacts": [{"position": [0,0,-0.1], "normal": [0,0,-1]}]}"#,
+            "contacts[0].normal",
+        ),
         // Content after the grasp was ignored (exit 0); over HTTP it is refused.
         (
             r#"{"object": {"shape": "sphere", "radius": 0.1, "mass": 1}, "mu": 1, "contacts": [{"position": [0,0,-0.1]}]} trailing"#,

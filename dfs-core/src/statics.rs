@@ -419,7 +419,22 @@ impl GraspSpec {
                             "must not be the zero vector",
                         ));
                     }
-                    (n / big).normalize()
+                    let z = (n / big).normalize();
+                    // The normal is the inward one (the contact frame's z): one pointing out
+                    // of the object is a sign mistake, which would only show as a contact
+                    // that "would have to pull".
+                    let inward = z.dot(&-n_out);
+                    if inward.is_nan() || inward <= 0.0 {
+                        return Err(DfsError::invalid(
+                            format!("contacts[{i}].normal"),
+                            format!(
+                                "must point into the object, but it is {:.0}° from the inward \
+                                 surface normal there (is its sign flipped?)",
+                                inward.clamp(-1.0, 1.0).acos().to_degrees()
+                            ),
+                        ));
+                    }
+                    z
                 }
                 None => -n_out,
             };
