@@ -104,30 +104,25 @@ fn simulate_records_a_session_that_reads_back_and_salvage_recovers_a_truncated_c
     assert!(leftovers.is_empty(), "{leftovers:?}");
 
     // The simulated session's /joint_states (foxglove.JointStates, 50 Hz) is a glove recording.
+    let import_to = |to: &Path| {
+        icms(&[
+            "import-glove",
+            "--input",
+            p(&out),
+            "--object",
+            "box-pinch-lift",
+            "--out",
+            p(to),
+            "--json",
+        ])
+    };
     let imported = dir.path().join("imported.mcap");
-    let (code, stdout, err) = icms(&[
-        "import-glove",
-        "--input",
-        p(&out),
-        "--object",
-        "box-pinch-lift",
-        "--out",
-        p(&imported),
-        "--json",
-    ]);
+    let (code, stdout, err) = import_to(&imported);
     assert_eq!(code, 0, "{err}");
     let report: Value = serde_json::from_str(&stdout).unwrap();
     assert_eq!(report["input_samples"], 125);
     // --out the input: the recording replaced the glove recording it was reading.
-    let (code, _, err) = icms(&[
-        "import-glove",
-        "--input",
-        p(&out),
-        "--object",
-        "box-pinch-lift",
-        "--out",
-        p(&out),
-    ]);
+    let (code, _, err) = import_to(&out);
     assert_ne!(code, 0);
     assert!(err.contains("is the --input file"), "{err}");
     assert_eq!(read_session(&out).unwrap().ticks(), 2500);
