@@ -981,27 +981,12 @@ impl HandModel {
     pub fn forward_kinematics(&self, base: &Isometry, q: &[f64], kin: &mut Kinematics) {
         kin.link_poses[self.root] = *base;
         kin.parent_joint[self.root] = NO_JOINT;
-        // The half-angle sines of the last few joint values: a mimic joint copying a DOF
-        // (glove10's ring and little fingers, a thumb IP following its MCP) reuses them
-        // instead of another `sin_cos` (a fifth of forward kinematics). Keyed by the exact
-        // bits, so the poses are bit-identical.
-        let mut recent = [(0_u64, (0.0, 1.0)); 4];
-        let (mut next, mut filled) = (0, 0);
+        let mut half_angles = HalfAngles::default();
         for (j, joint) in self.joints.iter().enumerate().take(MAX_LINKS) {
             let value = joint.drive.value(q);
             let placed = match joint.kind {
                 JointKind::Revolute | JointKind::Continuous => {
-                    let bits = value.to_bits();
-                    let sc = match recent[..filled].iter().find(|r| r.0 == bits) {
-                        Some(r) => r.1,
-                        None => {
-                            let sc = (value / 2.0).sin_cos();
-                            recent[next] = (bits, sc);
-                            next = (next + 1) % recent.len();
-                            filled = (filled + 1).min(recent.len());
-                            sc
-                        }
-                    };
+                    let sc = half_angles.sin_cos(value, f64::sin_cos);
                     joint.placed_rotated(value, sc)
                 }
                 _ => joint.placed(value),
@@ -1056,11 +1041,7 @@ impl HandModel {
     ) {
         kin.link_poses[self.root] = *base;
         kin.parent_joint[self.root] = NO_JOINT;
-        // The half-angle sines of the last few joint values, as in `forward_kinematics`.
-        // Kept as separate arrays: a 16-byte read of a (sin, cos) pair that `sin_cos` has
-        // just stored as two 8-byte writes stalls until they retire.
-        let (mut bits_of, mut sin_of, mut cos_of) = ([0_u64; 4], [0.0; 4], [1.0; 4]);
-        let (mut next, mut filled) = (0, 0);
+        let mut half_angles = HalfAngles::default();
         // The last frame computed, kept at hand: along a finger each joint's parent is the
         // previous joint's child, and reading that pose back from memory right after writing
         // it stalls on the store.
@@ -1073,17 +1054,7 @@ impl HandModel {
                 kin.link_poses[joint.parent]
             };
             let frame = if fj.rotating {
-                let bits = value.to_bits();
-                let (s, c) = match bits_of[..filled].iter().position(|&b| b == bits) {
-                    Some(r) => (sin_of[r], cos_of[r]),
-                    None => {
-                        let (s, c) = crate::math::sin_cos(value / 2.0);
-                        (bits_of[next], sin_of[next], cos_of[next]) = (bits, s, c);
-                        next = (next + 1) % bits_of.len();
-                        filled = (filled + 1).min(bits_of.len());
-                        (s, c)
-                    }
-                };
+                let (s, c) = half_angles.sin_cos(value, crate::math::sin_cos);
                 let local = Rotation::new_unchecked(nalgebra::Quaternion::from(
                     fj.q0.coords * c + fj.p.coords * s,
                 ));
@@ -1353,6 +1324,37 @@ impl HandModel {
         for (i, a) in self.armature.iter().enumerate().take(n) {
             m[i * MAX_DOF + i] += a;
         }
+    }
+}
+
+/// The half-angle `(sin, cos)` of the last few joint values forward kinematics met: a mimic
+/// joint copying a DOF (glove10's ring and little fingers, a thumb IP following its MCP)
+/// reuses them instead of another `sin_cos` (a fifth of forward kinematics). Keyed by the
+/// exact bits, so the poses are bit-identical. Separate arrays, not (sin, cos) pairs: a
+/// 16-byte read of a pair just stored as two 8-byte writes stalls until they retire.
+#[derive(Default)]
+struct HalfAngles {
+    bits: [u64; 4],
+    sin: [f64; 4],
+    cos: [f64; 4],
+    next: usize,
+    filled: usize,
+}
+
+impl HalfAngles {
+    /// `f(value / 2)`, from the cache when `value` was met lately.
+    #[inline(always)]
+    fn sin_cos(&mut self, value: f64, f: impl Fn(f64) -> (f64, f64)) -> (f64, f64) {
+        let bits = value.to_bits();
+        if let Some(r) = self.bits[..self.filled].iter().position(|&b| b == bits) {
+            return (self.sin[r], self.cos[r]);
+        }
+        let (s, c) = f(value / 2.0);
+        let k = self.next;
+        (self.bits[k], self.sin[k], self.cos[k]) = (bits, s, c);
+        self.next = (k + 1) % self.bits.len();
+        self.filled = (self.filled + 1).min(self.bits.len());
+        (s, c)
     }
 }
 
