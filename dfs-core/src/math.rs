@@ -122,7 +122,7 @@ pub fn sin_cos(x: Real) -> (Real, Real) {
 /// takes the fast Cholesky path; otherwise a symmetric eigen-decomposition. Allocation-free.
 pub fn sym_pinv6(a: &Mat6, rel_tol: Real) -> (Mat6, usize) {
     match Ldlt6::well_conditioned(a, rel_tol) {
-        Some(f) => (Mat6::from_fn(|r, c| f.solve(&Wrench::ith(c, 1.0))[r]), 6),
+        Some(f) => (f.inverse(), 6),
         None => eigen_pinv6(a, rel_tol),
     }
 }
@@ -159,69 +159,49 @@ impl SymPinv6 {
 }
 
 /// The square-root-free Cholesky factorisation `A = L D Lᵀ` of a symmetric positive definite
-/// 6x6 matrix (unit lower-triangular `L`, diagonal `D`): the DFS factors `W Wᵀ` every tick,
-/// and without a square root per pivot its chain of dependent long-latency operations is
-/// half as long as `L Lᵀ`'s.
+/// 6x6 matrix ([`ldlt_factor_in_place`]): the DFS factors `W Wᵀ` every tick, and without a
+/// square root per pivot its chain of dependent long-latency operations is half as long as
+/// `L Lᵀ`'s.
 #[derive(Debug, Clone, Copy)]
 pub struct Ldlt6 {
-    /// `L` below the diagonal (the diagonal and above are not read).
-    l: Mat6,
-    /// `1 / D`.
-    inv_d: [Real; 6],
+    /// The factor as [`ldlt_factor_in_place`] leaves it.
+    factor: Mat6,
 }
 
 impl Ldlt6 {
-    /// The factorisation of `a` (its lower triangle is read) when `a` is positive definite
+    /// The factorisation of `a` (its upper triangle is read) when `a` is positive definite
     /// and its pivots `D` are within a wide safety factor of `rel_tol` of each other (they
     /// bracket the eigenvalues loosely, as the squared pivots of `L Lᵀ` do); `None` otherwise.
     pub fn well_conditioned(a: &Mat6, rel_tol: Real) -> Option<Ldlt6> {
-        let mut l = Mat6::zeros();
-        let mut inv_d = [0.0; 6];
+        let mut factor = *a;
+        if !ldlt_factor_in_place(&mut factor, 6) {
+            return None;
+        }
+        // The diagonal holds 1 / D.
         let (mut lo, mut hi) = (Real::INFINITY, 0.0_f64);
-        for j in 0..6 {
-            // v[k] = L[j][k] D[k] while row j is formed.
-            let mut v = [0.0; 6];
-            for i in 0..j {
-                let mut s = a[(j, i)];
-                for k in 0..i {
-                    s -= l[(i, k)] * v[k];
-                }
-                v[i] = s;
-                l[(j, i)] = s * inv_d[i];
-            }
-            let mut d = a[(j, j)];
-            for k in 0..j {
-                d -= l[(j, k)] * v[k];
-            }
-            if !(d > 0.0 && d.is_finite()) {
-                return None;
-            }
-            inv_d[j] = 1.0 / d;
+        for i in 0..6 {
+            let d = 1.0 / factor[(i, i)];
             lo = lo.min(d);
             hi = hi.max(d);
         }
-        (lo > hi * rel_tol * 1e3).then_some(Ldlt6 { l, inv_d })
+        (hi.is_finite() && lo > hi * rel_tol * 1e3).then_some(Ldlt6 { factor })
     }
 
     /// `A⁻¹ b`.
     #[inline]
     pub fn solve(&self, b: &Wrench) -> Wrench {
-        let l = &self.l;
         let mut x = *b;
-        for i in 0..6 {
-            for k in 0..i {
-                x[i] -= l[(i, k)] * x[k];
-            }
-        }
-        for i in 0..6 {
-            x[i] *= self.inv_d[i];
-        }
-        for i in (0..6).rev() {
-            for k in i + 1..6 {
-                x[i] -= l[(k, i)] * x[k];
-            }
-        }
+        ldlt_solve(&self.factor, 6, x.as_mut_slice());
         x
+    }
+
+    /// `A⁻¹`, column by column.
+    pub fn inverse(&self) -> Mat6 {
+        let mut inv = Mat6::identity();
+        for mut col in inv.column_iter_mut() {
+            ldlt_solve(&self.factor, 6, col.as_mut_slice());
+        }
+        inv
     }
 }
 
@@ -246,23 +226,21 @@ fn eigen_pinv6(a: &Mat6, rel_tol: Real) -> (Mat6, usize) {
     (inv, rank)
 }
 
-/// Solves `A x = b` in place for the symmetric positive definite top-left `n × n` block of a
-/// fixed-capacity square matrix by the square-root-free Cholesky factorisation `A = L D Lᵀ`
-/// (only the upper triangle of the block is read; it is overwritten by `Lᵀ` above the
-/// diagonal and `1 / D` on it, `b` by `x`). Returns `false`, leaving `b` unspecified, when the
-/// block is not positive definite (or not finite). Allocation-free; the hot-path solver for
-/// small joint-space systems: one division per column and no square root, so the chain of
-/// dependent long-latency operations is half as long as with `L Lᵀ`. Works column by column
-/// on the column-major storage, so every inner loop runs over contiguous memory.
-pub fn cholesky_solve_in_place<const N: usize>(
+/// Factors the symmetric positive definite top-left `n × n` block of a fixed-capacity square
+/// matrix in place by the square-root-free Cholesky factorisation `A = L D Lᵀ`: only the upper
+/// triangle of the block is read, and it is overwritten by `Lᵀ` above the diagonal and `1 / D`
+/// on it, the form [`ldlt_solve`] takes. Returns `false` when the block is not positive
+/// definite (or not finite) or `n > N`. One division per column and no square root, so the
+/// chain of dependent long-latency operations is half as long as with `L Lᵀ`. Works column by
+/// column on the column-major storage, so every inner loop runs over contiguous memory.
+pub fn ldlt_factor_in_place<const N: usize>(
     a: &mut nalgebra::SMatrix<Real, N, N>,
     n: usize,
-    b: &mut [Real],
 ) -> bool {
-    debug_assert!(n <= N && b.len() >= n);
-    let n = n.min(N).min(b.len());
+    if n > N {
+        return false;
+    }
     let u = a.as_mut_slice();
-    let dot = |x: &[Real], y: &[Real]| x.iter().zip(y).map(|(p, q)| p * q).sum::<Real>();
     // Column j holds row j of L (left of the diagonal) and 1 / D[j] (on it). `v` is row j
     // of L D while it is being formed.
     let mut v = [0.0; N];
@@ -280,6 +258,14 @@ pub fn cholesky_solve_in_place<const N: usize>(
         }
         col_j[j] = 1.0 / d;
     }
+    true
+}
+
+/// Solves `A x = b` in place (`b` becomes `x`, its first `n` entries) with the factor that
+/// [`ldlt_factor_in_place`] left in `u`.
+pub fn ldlt_solve<const N: usize>(u: &nalgebra::SMatrix<Real, N, N>, n: usize, b: &mut [Real]) {
+    let n = n.min(N).min(b.len());
+    let u = u.as_slice();
     // L y = b, then D⁻¹ y.
     for i in 0..n {
         let col_i = &u[i * N..i * N + i + 1];
@@ -295,6 +281,30 @@ pub fn cholesky_solve_in_place<const N: usize>(
             *bk -= uk * x;
         }
     }
+}
+
+/// `Σ x_k y_k`.
+#[inline(always)]
+fn dot(x: &[Real], y: &[Real]) -> Real {
+    x.iter().zip(y).map(|(p, q)| p * q).sum()
+}
+
+/// Solves `A x = b` in place for the symmetric positive definite top-left `n × n` block of a
+/// fixed-capacity square matrix: [`ldlt_factor_in_place`] (the block's upper triangle is
+/// overwritten by the factor), then [`ldlt_solve`]. Returns `false`, leaving `b` unchanged,
+/// when the block is not positive definite (or not finite). Allocation-free; the hot-path
+/// solver for small joint-space systems.
+pub fn cholesky_solve_in_place<const N: usize>(
+    a: &mut nalgebra::SMatrix<Real, N, N>,
+    n: usize,
+    b: &mut [Real],
+) -> bool {
+    debug_assert!(n <= N && b.len() >= n);
+    let n = n.min(N).min(b.len());
+    if !ldlt_factor_in_place(a, n) {
+        return false;
+    }
+    ldlt_solve(a, n, b);
     true
 }
 
