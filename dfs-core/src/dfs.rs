@@ -873,8 +873,9 @@ impl Dfs {
             // The feedback, less the passive friction part: the contact spring below carries
             // that on the finger side, implicitly.
             let f = t.feedback_force_world + self.passive_world[k];
-            // Only the DOFs moving the tip: its other Jacobian columns are zero.
-            let dofs = self.tip_dofs[k].as_slice();
+            // Only the DOFs moving the tip, in solve order (the spring block below is written
+            // in that order): its other Jacobian columns are zero.
+            let dofs = self.tip_dofs_solve[k].as_slice();
             for &d in dofs {
                 fb_torque[d] += j[(0, d)] * f.x + j[(1, d)] * f.y + j[(2, d)] * f.z;
             }
@@ -907,7 +908,6 @@ impl Dfs {
             // The block is symmetric and the solve reads one triangle of it (row `d1`, column
             // `d2` no later than `d1` in the solve order): with the tip's DOFs in solve order,
             // only that triangle is written.
-            let dofs = self.tip_dofs_solve[k].as_slice();
             for (p1, &d1) in dofs.iter().enumerate() {
                 let col1 = col(d1);
                 if col1 == Vector::zeros() {
