@@ -136,13 +136,16 @@ pub fn parse_json<T: serde::de::DeserializeOwned>(text: &str) -> Result<T, Strin
 
 /// Refuses an output path that is one of the files a command reads (`(what, path)`, paths
 /// that do not exist are skipped): writing it would destroy the input.
-pub fn refuse_out_over_inputs(out: &Path, inputs: &[(&str, &Path)]) -> Result<(), CliError> {
+pub fn refuse_out_over_inputs<P: AsRef<Path>>(
+    out: &Path,
+    inputs: &[(&str, P)],
+) -> Result<(), CliError> {
     let Ok(out_real) = out.canonicalize() else {
         return Ok(());
     };
     match inputs
         .iter()
-        .find(|(_, input)| input.canonicalize().is_ok_and(|i| i == out_real))
+        .find(|(_, input)| input.as_ref().canonicalize().is_ok_and(|i| i == out_real))
     {
         Some((what, _)) => Err(CliError(format!(
             "--out {} is {what}: the recording would overwrite it; choose another file",

@@ -265,7 +265,6 @@ fn refuse_out_over_inputs(
             inputs.push(("the URDF of the --hand spec", dir.join(urdf)));
         }
     }
-    let inputs: Vec<(&str, &Path)> = inputs.iter().map(|(w, p)| (*w, p.as_path())).collect();
     super::refuse_out_over_inputs(out, &inputs)
 }
 
