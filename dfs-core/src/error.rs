@@ -58,6 +58,12 @@ pub enum DfsError {
         /// The output that overflowed (for example "contacts[2].feedback").
         what: String,
     },
+    /// The work was stopped before it finished (see [`crate::Stop`]).
+    #[error(
+        "the work was cancelled before it finished (its deadline passed, its request went \
+         away, or the server is shutting down)"
+    )]
+    Cancelled,
     /// A model or parameter is invalid; the message names the field.
     #[error("invalid {field}: {reason}")]
     Invalid {

@@ -21,5 +21,7 @@ pub mod operator;
 pub mod replay;
 pub mod scenario;
 pub mod statics;
+pub mod stop;
 
 pub use error::{DfsError, Result};
+pub use stop::Stop;
