@@ -14,6 +14,7 @@ use dfs_core::replay::{
     run_with, ReplayParams, ReplayReport, SkillContact, SkillKeyPose, SkillSpec,
 };
 use dfs_core::scenario::Phase;
+use dfs_core::{DfsError, Stop};
 use serde::Deserialize;
 
 use crate::error::{RecordingError, Result};
@@ -295,10 +296,35 @@ pub fn replay_skill(
     source: &ReplaySource,
     out: Option<&Path>,
 ) -> Result<ReplayReport> {
+    replay_skill_until(hand, skill, params, source, out, Stop::never())
+}
+
+/// A replay's error: a stop stays a cancellation, anything else is the input's fault.
+fn run_error(location: String, e: DfsError) -> RecordingError {
+    match e {
+        DfsError::Cancelled => RecordingError::Simulation {
+            time_ns: 0,
+            source: e,
+        },
+        e => invalid(location, e.to_string()),
+    }
+}
+
+/// [`replay_skill`] that ends early when `stop` is set, planning included, with
+/// [`RecordingError::Simulation`] of [`dfs_core::DfsError::Cancelled`]; a recording is
+/// finished with what was recorded.
+pub fn replay_skill_until(
+    hand: &LoadedHand,
+    skill: &SkillSpec,
+    params: &ReplayParams,
+    source: &ReplaySource,
+    out: Option<&Path>,
+    stop: &Stop,
+) -> Result<ReplayReport> {
     let location = format!("hand {:?}", hand.model.name);
     let Some(out) = out else {
         return dfs_core::replay::run(&hand.model, hand.thumb, skill, params)
-            .map_err(|e| invalid(location, e.to_string()));
+            .map_err(|e| run_error(location, e));
     };
     let object = dfs_core::object::RigidObject::new(skill.shape, skill.mass)
         .map_err(|e| invalid("skill.object", e.to_string()))?;
@@ -328,7 +354,7 @@ pub fn replay_skill(
             failed = Some(e);
         }
     })
-    .map_err(|e| invalid(location, e.to_string()))?;
+    .map_err(|e| run_error(location, e))?;
     if let Some(e) = failed {
         let _ = recorder.finish();
         return Err(e);

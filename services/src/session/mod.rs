@@ -44,8 +44,8 @@ pub use read::{
     read_session_with_limits, DecodeTopics, Session,
 };
 pub use recorder::{
-    record_simulation, record_ticks, RecordSummary, SessionInfo, SessionRecorder, TickData,
-    FORCE_STEPS_PER_UNIT, GEOMETRY_STEPS_PER_UNIT,
+    record_simulation, record_simulation_until, record_ticks, record_ticks_until, RecordSummary,
+    SessionInfo, SessionRecorder, TickData, FORCE_STEPS_PER_UNIT, GEOMETRY_STEPS_PER_UNIT,
 };
 pub use time::rfc3339_utc;
 

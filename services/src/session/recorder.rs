@@ -12,6 +12,7 @@ use dfs_core::math::{Isometry, Point, Rotation, Vector};
 use dfs_core::object::{RigidObject, Shape};
 use dfs_core::operator::Simulation;
 use dfs_core::scenario::Scenario;
+use dfs_core::Stop;
 
 use super::messages::*;
 use super::*;
@@ -836,6 +837,20 @@ pub fn record_simulation(
     out: &Path,
     progress: impl FnMut(u64, u64),
 ) -> Result<RecordSummary> {
+    record_simulation_until(scenario, duration, out, progress, Stop::never())
+}
+
+/// [`record_simulation`] that ends early when `stop` is set: the file is finished with the
+/// ticks recorded so far and the error is [`RecordingError::Simulation`] with
+/// [`dfs_core::DfsError::Cancelled`]. `stop` is looked at every 100 simulated milliseconds
+/// (well under a millisecond of CPU).
+pub fn record_simulation_until(
+    scenario: &Scenario,
+    duration: Option<f64>,
+    out: &Path,
+    progress: impl FnMut(u64, u64),
+    stop: &Stop,
+) -> Result<RecordSummary> {
     // Set-up errors (a bad field, an unreachable object, a bad duration) come before any file.
     let mut sim = Simulation::new(scenario, HandModel::glove10(), duration).map_err(|e| {
         RecordingError::InvalidInput {
@@ -870,7 +885,7 @@ pub fn record_simulation(
     };
     let dfs = sim.dfs();
     let recorder = SessionRecorder::create(out, dfs.hand(), dfs.object(), &info)?;
-    record_ticks(&mut sim, recorder, progress)
+    record_ticks_until(&mut sim, recorder, progress, stop)
 }
 
 /// Steps `sim` to its end, recording every tick with `recorder`, then finishes the file.
@@ -878,13 +893,30 @@ pub fn record_simulation(
 /// write fails midway, the file is still finished with every tick recorded before it.
 pub fn record_ticks(
     sim: &mut Simulation,
+    recorder: SessionRecorder,
+    progress: impl FnMut(u64, u64),
+) -> Result<RecordSummary> {
+    record_ticks_until(sim, recorder, progress, Stop::never())
+}
+
+/// [`record_ticks`] that ends early when `stop` is set (looked at every 100 ticks): the file is
+/// finished with the ticks recorded so far and the error is [`RecordingError::Simulation`]
+/// with [`dfs_core::DfsError::Cancelled`].
+pub fn record_ticks_until(
+    sim: &mut Simulation,
     mut recorder: SessionRecorder,
     mut progress: impl FnMut(u64, u64),
+    stop: &Stop,
 ) -> Result<RecordSummary> {
     let total = sim.total_ticks();
     loop {
         let next_time = sim.ticks() * dfs_core::operator::TICK_NS;
-        match sim.step() {
+        let step = if sim.ticks() % 100 == 0 && stop.is_stopped() {
+            Err(dfs_core::DfsError::Cancelled)
+        } else {
+            sim.step()
+        };
+        match step {
             Ok(true) => {}
             Ok(false) => break,
             Err(source) => {
