@@ -87,6 +87,9 @@ pub struct IngestBench {
     pub store_ms: f64,
     /// Median size of one session file (bytes).
     pub file_bytes: u64,
+    /// Median store time with `synchronous=NORMAL` instead of the store's `FULL` (the cost of
+    /// durable commits: `store_ms` against this), ms.
+    pub store_ms_synchronous_normal: f64,
     /// Sessions ingested.
     pub sessions: u64,
     /// Simulated seconds per session.
@@ -157,9 +160,9 @@ pub fn run(c: BenchCommand) -> Result<(), CliError> {
                 print_json(&r)
             } else {
                 println!(
-                    "ingest of {} {} s {} sessions ({} bytes each): {:.1} sessions/s; per session: read + segment {:.1} ms, store {:.1} ms (medians)",
+                    "ingest of {} {} s {} sessions ({} bytes each): {:.1} sessions/s; per session: read + segment {:.1} ms, store {:.1} ms (synchronous=FULL; NORMAL: {:.1} ms) (medians)",
                     r.sessions, r.duration, r.scenario, r.file_bytes, r.sessions_per_second,
-                    r.analyse_ms, r.store_ms
+                    r.analyse_ms, r.store_ms, r.store_ms_synchronous_normal
                 );
                 Ok(())
             }
@@ -249,9 +252,15 @@ fn bench_ingest(name: &str, sessions: u64, duration: f64) -> Result<IngestBench,
         .build()
         .map_err(|e| CliError(format!("starting the async runtime: {e}")))?;
     let data = dir.path().join("data");
-    let (mut analyse, mut store_t, total) = rt.block_on(async {
+    let normal_data = dir.path().join("data-normal");
+    let (mut analyse, mut store_t, total, mut store_normal) = rt.block_on(async {
         let store = services::store::Store::open(&data).await?;
-        let (mut a, mut s) = (Vec::new(), Vec::new());
+        let normal = services::store::Store::open_with_durability(
+            &normal_data,
+            services::store::Durability::Normal,
+        )
+        .await?;
+        let (mut a, mut s, mut n) = (Vec::new(), Vec::new(), Vec::new());
         let t_all = Instant::now();
         for (i, bytes) in files.iter().enumerate() {
             let t0 = Instant::now();
@@ -262,8 +271,17 @@ fn bench_ingest(name: &str, sessions: u64, duration: f64) -> Result<IngestBench,
             s.push(t0.elapsed().as_secs_f64() * 1e3);
         }
         let total = t_all.elapsed().as_secs_f64();
+        // The same files stored again into a synchronous=NORMAL data base, right after, for
+        // the cost of durable commits measured in one run.
+        for (i, bytes) in files.iter().enumerate() {
+            let (meta, skills) = services::ingest::analyse(bytes, &format!("session {i}"))?;
+            let t0 = Instant::now();
+            normal.ingest(bytes, meta, skills).await?;
+            n.push(t0.elapsed().as_secs_f64() * 1e3);
+        }
         store.close().await;
-        Ok::<_, CliError>((a, s, total))
+        normal.close().await;
+        Ok::<_, CliError>((a, s, total, n))
     })?;
     let mut sizes: Vec<u64> = files.iter().map(|f| f.len() as u64).collect();
     sizes.sort_unstable();
@@ -271,6 +289,7 @@ fn bench_ingest(name: &str, sessions: u64, duration: f64) -> Result<IngestBench,
         sessions_per_second: sessions as f64 / total,
         analyse_ms: services::segmentation::median(&mut analyse),
         store_ms: services::segmentation::median(&mut store_t),
+        store_ms_synchronous_normal: services::segmentation::median(&mut store_normal),
         file_bytes: sizes[sizes.len() / 2],
         sessions,
         duration,

@@ -112,3 +112,45 @@ pub(crate) fn sweep_temp_files(data_dir: &Path) -> usize {
     }
     removed
 }
+
+/// A blob file found on disk: its path relative to the data directory (as stored in rows) and
+/// its size.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub(crate) struct BlobFile {
+    pub rel: String,
+    pub bytes: u64,
+}
+
+/// The blob files (`blobs/sha256/xx/*.mcap`) last modified at least `min_age` ago; best
+/// effort (unreadable entries are skipped). Blocking.
+pub(crate) fn blobs_older_than(data_dir: &Path, min_age: std::time::Duration) -> Vec<BlobFile> {
+    let Ok(shards) = fs::read_dir(data_dir.join("blobs/sha256")) else {
+        return Vec::new();
+    };
+    let mut out = Vec::new();
+    for shard in shards.flatten() {
+        let shard_name = shard.file_name().to_string_lossy().into_owned();
+        let Ok(files) = fs::read_dir(shard.path()) else {
+            continue;
+        };
+        for f in files.flatten() {
+            let name = f.file_name().to_string_lossy().into_owned();
+            if name.starts_with('.') || !name.ends_with(".mcap") {
+                continue;
+            }
+            let Ok(md) = f.metadata() else { continue };
+            let old = md
+                .modified()
+                .ok()
+                .and_then(|t| t.elapsed().ok())
+                .is_some_and(|age| age >= min_age);
+            if md.is_file() && old {
+                out.push(BlobFile {
+                    rel: format!("blobs/sha256/{shard_name}/{name}"),
+                    bytes: md.len(),
+                });
+            }
+        }
+    }
+    out
+}

@@ -80,6 +80,22 @@ pub enum StoreError {
 }
 
 impl StoreError {
+    /// Whether the data base was too busy to answer in time: another connection held the
+    /// write lock past the busy timeout (`SQLITE_BUSY`, `SQLITE_LOCKED` and their extended
+    /// codes), or no pooled connection came free in time. Nothing was written; the same call
+    /// may succeed later.
+    pub fn is_busy(&self) -> bool {
+        match self {
+            StoreError::Db(sqlx::Error::PoolTimedOut) => true,
+            StoreError::Db(sqlx::Error::Database(d)) => d
+                .code()
+                .and_then(|c| c.parse::<i32>().ok())
+                // The primary result code is the low byte of an extended one.
+                .is_some_and(|c| matches!(c & 0xff, 5 | 6)),
+            _ => false,
+        }
+    }
+
     /// Wraps an I/O error with the path it happened on.
     pub(crate) fn io(path: impl Into<PathBuf>, source: std::io::Error) -> Self {
         StoreError::Io {

@@ -29,6 +29,33 @@ use sqlx::sqlite::{
 use sqlx::{Connection as _, QueryBuilder, Row as _, Sqlite, SqliteConnection};
 
 pub use error::StoreError;
+
+/// Youngest unreferenced blob the server's sweep removes (see [`Store::sweep_orphan_blobs`]):
+/// ten minutes, far longer than any ingest takes from its blob write to its commit.
+pub const ORPHAN_BLOB_MIN_AGE: Duration = Duration::from_secs(600);
+
+/// When a commit counts as done (SQLite's `synchronous` in WAL mode).
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub enum Durability {
+    /// `synchronous=FULL`: the WAL is fsynced at every commit, so an acknowledged write
+    /// survives a power cut. The default of every store the server and the CLI open.
+    #[default]
+    Full,
+    /// `synchronous=NORMAL`: fsync only at checkpoints; a power cut may roll back the last
+    /// commits (never corrupts). For benchmarks and throwaway data bases.
+    Normal,
+}
+
+/// What [`Store::sweep_orphan_blobs`] did.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, serde::Serialize)]
+pub struct SweepReport {
+    /// Blob files old enough to be looked at.
+    pub examined: usize,
+    /// Unreferenced ones removed.
+    pub removed: usize,
+    /// Their bytes.
+    pub removed_bytes: u64,
+}
 pub use hands::MAX_HAND_NAME;
 pub use query::{
     SkillQuery, SortField, SortKey, SortOrder, CONTACT_MODELS, DEFAULT_LIMIT, MAX_LIMIT, SHAPES,
@@ -305,9 +332,20 @@ impl Store {
     ///
     /// Refuses a database that is not ours ([`StoreError::NotOurs`]) or that a newer binary
     /// migrated ([`StoreError::SchemaTooNew`]) before touching it. Settings: WAL journal,
-    /// `foreign_keys=ON`, busy timeout 5 s, `synchronous=NORMAL`. Loads the feature index.
+    /// `foreign_keys=ON`, busy timeout 5 s, `synchronous=FULL` (a commit is on disk before it returns: an
+    /// acknowledged write survives a power cut; the cost is in BENCHMARKS.md). Loads the feature
+    /// index.
     pub async fn open(data_dir: &Path) -> Result<Store, StoreError> {
-        Self::open_with(data_dir, true).await
+        Self::open_with(data_dir, true, Durability::Full).await
+    }
+
+    /// [`Store::open`] with another [`Durability`]: `icms bench ingest` measures what
+    /// `synchronous=FULL` costs against `NORMAL` with it.
+    pub async fn open_with_durability(
+        data_dir: &Path,
+        durability: Durability,
+    ) -> Result<Store, StoreError> {
+        Self::open_with(data_dir, true, durability).await
     }
 
     /// Opens the store in `data_dir` like [`Store::open`], but only if a data base is already
@@ -317,10 +355,14 @@ impl Store {
     /// not leave an empty data base behind and answer as if it held no skills. An existing data
     /// base of an older schema is still migrated.
     pub async fn open_existing(data_dir: &Path) -> Result<Store, StoreError> {
-        Self::open_with(data_dir, false).await
+        Self::open_with(data_dir, false, Durability::Full).await
     }
 
-    async fn open_with(data_dir: &Path, create: bool) -> Result<Store, StoreError> {
+    async fn open_with(
+        data_dir: &Path,
+        create: bool,
+        durability: Durability,
+    ) -> Result<Store, StoreError> {
         if create {
             // create_dir_all on a file says only "File exists".
             if tokio::fs::metadata(data_dir)
@@ -359,7 +401,10 @@ impl Store {
             .journal_mode(SqliteJournalMode::Wal)
             .foreign_keys(true)
             .busy_timeout(Duration::from_secs(5))
-            .synchronous(SqliteSynchronous::Normal)
+            .synchronous(match durability {
+                Durability::Full => SqliteSynchronous::Full,
+                Durability::Normal => SqliteSynchronous::Normal,
+            })
             .pragma("cache_size", "-32768");
         let pool = SqlitePoolOptions::new()
             .max_connections(8)
@@ -658,6 +703,55 @@ impl Store {
             .await?
             .ok_or(StoreError::SessionNotFound(id))?;
         Ok(self.inner.dir.join(rel))
+    }
+
+    /// Removes blob files that no session or replay references (a blob written by an ingest
+    /// whose transaction then failed, a kill between a delete's commit and its file removal)
+    /// and that were last modified at least `min_age` ago.
+    ///
+    /// Safe beside ingests in this process: the files are listed first, then, holding the
+    /// blob lock every ingest holds from its blob write to its commit, the referenced paths are
+    /// read and only listed files that no row names are removed; a blob an ingest is about to
+    /// reference is either not listed yet or already committed. `min_age` guards ingests of
+    /// another process on the same directory (`icms ingest --data` beside a server), which
+    /// commit within seconds of their blob write: the server sweeps with
+    /// [`ORPHAN_BLOB_MIN_AGE`].
+    pub async fn sweep_orphan_blobs(&self, min_age: Duration) -> Result<SweepReport, StoreError> {
+        let dir = self.inner.dir.clone();
+        let listed = tokio::task::spawn_blocking(move || blob::blobs_older_than(&dir, min_age))
+            .await
+            .map_err(|e| StoreError::Corrupt(format!("blob listing task failed: {e}")))?;
+        let mut report = SweepReport {
+            examined: listed.len(),
+            ..SweepReport::default()
+        };
+        if listed.is_empty() {
+            return Ok(report);
+        }
+        let _guard = self.inner.blob_lock.write().await;
+        let referenced: std::collections::HashSet<String> = sqlx::query_scalar(
+            "SELECT blob_path FROM sessions UNION SELECT blob_path FROM replays",
+        )
+        .fetch_all(&self.inner.pool)
+        .await?
+        .into_iter()
+        .collect();
+        let orphans: Vec<blob::BlobFile> = listed
+            .into_iter()
+            .filter(|b| !referenced.contains(&b.rel))
+            .collect();
+        let dir = self.inner.dir.clone();
+        let removed = tokio::task::spawn_blocking(move || {
+            orphans
+                .into_iter()
+                .filter(|b| blob::remove(&dir, &b.rel).is_ok())
+                .collect::<Vec<_>>()
+        })
+        .await
+        .map_err(|e| StoreError::Corrupt(format!("blob sweeping task failed: {e}")))?;
+        report.removed = removed.len();
+        report.removed_bytes = removed.iter().map(|b| b.bytes).sum();
+        Ok(report)
     }
 
     /// Deletes a session, its skills, their phase rows and replays (one transaction), then its
