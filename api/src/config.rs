@@ -7,6 +7,7 @@ use std::time::Duration;
 
 use axum::http::HeaderValue;
 
+use crate::http::server::{default_max_connections, ConnectionLimits};
 use crate::http::{LayerConfig, StateConfig};
 
 /// Default largest request body: 256 MiB.
@@ -44,6 +45,60 @@ pub struct ServeArgs {
     /// Skills whose JSON the server keeps in memory for `GET /api/v1/skills/{id}`.
     #[arg(long, default_value_t = 100_000)]
     pub cache_skills: usize,
+    /// Session uploads read and segmented at once (each holds up to a bounded multiple of its
+    /// size in memory, see the README); further uploads wait up to `--queue-wait` seconds for
+    /// a turn, then get 503 with `Retry-After`.
+    #[arg(long, default_value_t = 2)]
+    pub max_ingests: usize,
+    /// Longest wait of an upload, simulation or replay for a free turn before 503, seconds.
+    #[arg(long, default_value_t = 10.0)]
+    pub queue_wait: f64,
+    /// Seconds a client may take from a request's first byte to the end of its headers.
+    #[arg(long, default_value_t = 10.0)]
+    pub header_timeout: f64,
+    /// Seconds a connection may sit idle (after connecting, or between requests) before it is
+    /// closed.
+    #[arg(long, default_value_t = 30.0)]
+    pub keep_alive_timeout: f64,
+    /// Most connections open at once; more wait in the kernel's backlog. Default 1024, or the
+    /// descriptor limit less 64 when that is lower.
+    #[arg(long)]
+    pub max_connections: Option<usize>,
+}
+
+/// Largest accepted `--max-body`: 64 GiB.
+pub const MAX_MAX_BODY: usize = 64 << 30;
+/// Longest accepted `--request-timeout`, `--queue-wait`, `--header-timeout` and
+/// `--keep-alive-timeout`: one day.
+pub const MAX_TIMEOUT_S: f64 = 86_400.0;
+/// Largest accepted `--max-simulations` and `--max-ingests`.
+pub const MAX_WORKERS: usize = 256;
+/// Largest accepted `--cache-skills`.
+pub const MAX_CACHE_SKILLS: usize = 10_000_000;
+/// Largest accepted `--max-connections`.
+pub const MAX_CONNECTIONS: usize = 1 << 20;
+
+/// `value` seconds as a duration, if it is in (0, [`MAX_TIMEOUT_S`]]; else the error names
+/// `option`.
+fn seconds(option: &str, value: f64) -> Result<Duration, ConfigError> {
+    if value.is_finite() && value > 0.0 && value <= MAX_TIMEOUT_S {
+        Ok(Duration::from_secs_f64(value))
+    } else {
+        Err(ConfigError::OutOfRange(format!(
+            "{option} must be a number of seconds in (0, {MAX_TIMEOUT_S}], got {value}"
+        )))
+    }
+}
+
+/// `value` if it is in `lo..=hi`; else the error names `option`.
+fn count(option: &str, value: usize, lo: usize, hi: usize) -> Result<usize, ConfigError> {
+    if (lo..=hi).contains(&value) {
+        Ok(value)
+    } else {
+        Err(ConfigError::OutOfRange(format!(
+            "{option} must be in {lo}..={hi}, got {value}"
+        )))
+    }
 }
 
 /// `--addr`: an IP address and port, or a host name and port resolved to its first address
@@ -73,6 +128,11 @@ impl Default for ServeArgs {
             request_timeout: 120.0,
             max_simulations: 2,
             cache_skills: 100_000,
+            max_ingests: 2,
+            queue_wait: 10.0,
+            header_timeout: 10.0,
+            keep_alive_timeout: 30.0,
+            max_connections: None,
         }
     }
 }
@@ -90,6 +150,8 @@ pub struct ServeConfig {
     pub state: StateConfig,
     /// Layer settings (time limit, CORS).
     pub layers: LayerConfig,
+    /// Connection settings (timeouts, connection limit).
+    pub connections: ConnectionLimits,
 }
 
 /// Why a configuration is refused.
@@ -126,22 +188,18 @@ impl ServeArgs {
         if token.is_none() && !self.addr.ip().is_loopback() {
             return Err(ConfigError::OpenNonLoopback(self.addr));
         }
-        if !(self.request_timeout.is_finite() && self.request_timeout > 0.0) {
-            return Err(ConfigError::OutOfRange(format!(
-                "--request-timeout must be a positive number of seconds, got {}",
-                self.request_timeout
-            )));
-        }
-        if self.max_body == 0 {
-            return Err(ConfigError::OutOfRange(
-                "--max-body must be at least 1".into(),
-            ));
-        }
-        if self.max_simulations == 0 {
-            return Err(ConfigError::OutOfRange(
-                "--max-simulations must be at least 1".into(),
-            ));
-        }
+        let request_timeout = seconds("--request-timeout", self.request_timeout)?;
+        let queue_wait = seconds("--queue-wait", self.queue_wait)?;
+        let header_timeout = seconds("--header-timeout", self.header_timeout)?;
+        let keep_alive_timeout = seconds("--keep-alive-timeout", self.keep_alive_timeout)?;
+        let max_body = count("--max-body", self.max_body, 1, MAX_MAX_BODY)?;
+        let max_simulations = count("--max-simulations", self.max_simulations, 1, MAX_WORKERS)?;
+        let max_ingests = count("--max-ingests", self.max_ingests, 1, MAX_WORKERS)?;
+        let cache_capacity = count("--cache-skills", self.cache_skills, 0, MAX_CACHE_SKILLS)?;
+        let max_connections = match self.max_connections {
+            Some(n) => count("--max-connections", n, 1, MAX_CONNECTIONS)?,
+            None => default_max_connections(),
+        };
         let cors_origins = self
             .cors_origins
             .iter()
@@ -158,13 +216,21 @@ impl ServeArgs {
             demo: !self.no_demo,
             state: StateConfig {
                 token,
-                max_body: self.max_body,
-                max_simulations: self.max_simulations,
-                cache_capacity: self.cache_skills,
+                max_body,
+                max_simulations,
+                max_ingests,
+                queue_wait,
+                cache_capacity,
             },
             layers: LayerConfig {
-                request_timeout: Duration::from_secs_f64(self.request_timeout),
+                request_timeout,
                 cors_origins,
+            },
+            connections: ConnectionLimits {
+                header_timeout,
+                keep_alive_timeout,
+                max_connections,
+                ..ConnectionLimits::default()
             },
         })
     }
@@ -246,6 +312,44 @@ mod tests {
         };
         let e = a.into_config().unwrap_err().to_string();
         assert!(e.contains("--max-simulations"), "{e}");
+    }
+
+    #[test]
+    fn every_numeric_option_is_range_checked_without_panicking() {
+        let bad_seconds = [0.0, -1.0, 1e30, f64::INFINITY, f64::NAN, 86_401.0];
+        type Set = fn(&mut ServeArgs, f64);
+        let timeouts: [(&str, Set); 4] = [
+            ("--request-timeout", |a, v| a.request_timeout = v),
+            ("--queue-wait", |a, v| a.queue_wait = v),
+            ("--header-timeout", |a, v| a.header_timeout = v),
+            ("--keep-alive-timeout", |a, v| a.keep_alive_timeout = v),
+        ];
+        for (name, set) in timeouts {
+            for v in bad_seconds {
+                let mut a = ServeArgs::default();
+                set(&mut a, v);
+                let e = a.into_config().unwrap_err().to_string();
+                assert!(e.contains(name) && e.contains("seconds"), "{name} {v}: {e}");
+            }
+            let mut a = ServeArgs::default();
+            set(&mut a, 86_400.0);
+            assert!(a.into_config().is_ok(), "{name} of a day");
+        }
+        type SetN = fn(&mut ServeArgs, usize);
+        let counts: [(&str, SetN, usize); 6] = [
+            ("--max-body", |a, v| a.max_body = v, 0),
+            ("--max-body", |a, v| a.max_body = v, usize::MAX),
+            ("--max-simulations", |a, v| a.max_simulations = v, 100_000),
+            ("--max-ingests", |a, v| a.max_ingests = v, 0),
+            ("--cache-skills", |a, v| a.cache_skills = v, usize::MAX),
+            ("--max-connections", |a, v| a.max_connections = Some(v), 0),
+        ];
+        for (name, set, v) in counts {
+            let mut a = ServeArgs::default();
+            set(&mut a, v);
+            let e = a.into_config().unwrap_err().to_string();
+            assert!(e.contains(name), "{name} {v}: {e}");
+        }
     }
 
     #[test]

@@ -12,6 +12,7 @@ use tokio::net::TcpListener;
 use tokio_util::sync::CancellationToken;
 
 use crate::config::ServeConfig;
+use crate::http::server::ConnectionLimits;
 use crate::http::{self, AppState};
 
 /// Why the server could not start or stopped with an error.
@@ -44,7 +45,11 @@ pub struct Application {
     router: Router,
     state: AppState,
     demo: bool,
+    connections: ConnectionLimits,
 }
+
+/// How often the server sweeps unreferenced blobs (besides once at start-up).
+pub const SWEEP_INTERVAL: std::time::Duration = std::time::Duration::from_secs(3600);
 
 impl std::fmt::Debug for Application {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
@@ -84,6 +89,7 @@ impl Application {
             router,
             state,
             demo: config.demo,
+            connections: config.connections,
         })
     }
 
@@ -97,13 +103,14 @@ impl Application {
         &self.state
     }
 
-    /// Serves until `shutdown` completes, then stops accepting, lets in-flight requests and
-    /// the seeding finish the session they are on, and closes the database.
+    /// Serves until `shutdown` completes, then stops accepting, tells running simulations and
+    /// replays to stop (they end within a fraction of a second and answer 503), waits at most
+    /// the shutdown grace for open connections, and closes the database.
     pub async fn run_until(
         self,
         shutdown: impl Future<Output = ()> + Send + 'static,
     ) -> Result<(), StartupError> {
-        let stopping = CancellationToken::new();
+        let stopping = self.state.shutdown_token().clone();
         let seeding = if self.demo {
             let state = self.state.clone();
             let stop = stopping.clone();
@@ -113,22 +120,30 @@ impl Application {
         } else {
             None
         };
+        let sweeping = {
+            let state = self.state.clone();
+            let stop = stopping.clone();
+            tokio::spawn(async move { sweep_blobs(&state, &stop).await })
+        };
         tracing::info!(addr = %self.addr, data = %self.state.store().data_dir().display(),
-            writes_need_token = self.state.token().is_some(), "serving the ICMS API");
-        let stop = stopping.clone();
-        // hyper's own answers to requests it cannot parse get problem bodies too.
-        let listener = http::hyper_errors::ProblemListener(self.listener);
-        let served = axum::serve(listener, self.router)
-            .with_graceful_shutdown(async move {
+            writes_need_token = self.state.token().is_some(),
+            max_connections = self.connections.max_connections,
+            header_timeout_s = self.connections.header_timeout.as_secs_f64(),
+            keep_alive_timeout_s = self.connections.keep_alive_timeout.as_secs_f64(),
+            "serving the ICMS API");
+        let state = self.state.clone();
+        let served =
+            http::server::serve(self.listener, self.router, self.connections, async move {
                 shutdown.await;
-                tracing::info!("shutting down: finishing in-flight requests");
-                stop.cancel();
+                tracing::info!("shutting down: stopping work in flight, finishing open requests");
+                state.stop_work();
             })
             .await;
-        stopping.cancel();
+        self.state.stop_work();
         if let Some(task) = seeding {
             let _ = task.await;
         }
+        let _ = sweeping.await;
         self.state.store().close().await;
         tracing::info!("database closed; stopped");
         served.map_err(|source| StartupError::Io {
@@ -170,6 +185,31 @@ async fn clear_scratch(dir: &std::path::Path) {
     };
     while let Ok(Some(e)) = entries.next_entry().await {
         let _ = tokio::fs::remove_file(e.path()).await;
+    }
+}
+
+/// Sweeps unreferenced blobs now and every [`SWEEP_INTERVAL`] until `stop`, logging what
+/// went.
+async fn sweep_blobs(state: &AppState, stop: &CancellationToken) {
+    loop {
+        match state
+            .store()
+            .sweep_orphan_blobs(services::store::ORPHAN_BLOB_MIN_AGE)
+            .await
+        {
+            Ok(r) if r.removed > 0 => tracing::info!(
+                examined = r.examined,
+                removed = r.removed,
+                removed_bytes = r.removed_bytes,
+                "removed blobs that no session or replay references"
+            ),
+            Ok(r) => tracing::debug!(examined = r.examined, "no unreferenced blobs"),
+            Err(e) => tracing::warn!(error = %e, "sweeping unreferenced blobs failed"),
+        }
+        tokio::select! {
+            () = tokio::time::sleep(SWEEP_INTERVAL) => {}
+            () = stop.cancelled() => return,
+        }
     }
 }
 

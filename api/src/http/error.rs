@@ -14,6 +14,9 @@ use utoipa::ToSchema;
 /// Media type of a problem body.
 pub const PROBLEM_JSON: &str = "application/problem+json";
 
+/// `Retry-After` of a 503 for a data base locked by another writer, seconds.
+pub const BUSY_RETRY_AFTER_S: u32 = 2;
+
 /// A problem details body (RFC 9457).
 #[derive(Debug, Clone, PartialEq, Serialize, serde::Deserialize, ToSchema)]
 #[schema(example = json!({"type": "about:blank", "title": "Not Found", "status": 404,
@@ -37,6 +40,8 @@ pub struct Problem {
     pub status: StatusCode,
     /// What was wrong.
     pub detail: String,
+    /// Seconds after which a retry may succeed (`Retry-After`), for a busy server.
+    pub retry_after_s: Option<u32>,
 }
 
 impl Problem {
@@ -45,6 +50,7 @@ impl Problem {
         Problem {
             status,
             detail: detail.into(),
+            retry_after_s: None,
         }
     }
     /// 400: malformed input (a filter, a cursor, a parameter, a JSON body).
@@ -83,6 +89,14 @@ impl Problem {
     pub fn unavailable(detail: impl Into<String>) -> Self {
         Self::new(StatusCode::SERVICE_UNAVAILABLE, detail)
     }
+    /// 503 with `Retry-After`: the server is busy (every turn for this work is taken, the data
+    /// base is locked by another writer); the same request may succeed after `retry_after_s`.
+    pub fn busy(detail: impl Into<String>, retry_after_s: u32) -> Self {
+        Problem {
+            retry_after_s: Some(retry_after_s),
+            ..Self::new(StatusCode::SERVICE_UNAVAILABLE, detail)
+        }
+    }
     /// 500: a fault of the server; `error` is logged, the client sees no internals.
     pub fn internal(error: &dyn std::fmt::Display) -> Self {
         tracing::error!(%error, "internal error");
@@ -120,6 +134,9 @@ impl IntoResponse for Problem {
         *r.status_mut() = self.status;
         let h = r.headers_mut();
         h.insert(header::CONTENT_TYPE, HeaderValue::from_static(PROBLEM_JSON));
+        if let Some(s) = self.retry_after_s {
+            h.insert(header::RETRY_AFTER, HeaderValue::from(s));
+        }
         if self.status == StatusCode::UNAUTHORIZED {
             h.insert(
                 header::WWW_AUTHENTICATE,
@@ -147,6 +164,10 @@ impl From<StoreError> for Problem {
             StoreError::Db(sqlx::Error::PoolClosed) => {
                 Problem::unavailable("the server is shutting down")
             }
+            ref busy if busy.is_busy() => Problem::busy(
+                "the data base is busy with other writes; nothing was stored, try again",
+                BUSY_RETRY_AFTER_S,
+            ),
             other => Problem::internal(&other),
         }
     }

@@ -5,7 +5,7 @@
 //! headers, `414` for a URI too long) with an empty body and closes the connection, and hyper
 //! has no hook to change that answer.
 //!
-//! [`ProblemListener`] accepts connections as [`ProblemIo`], which recognises that answer as
+//! The server wraps every connection in a [`ProblemIo`] (see [`super::server`]), which recognises that answer as
 //! hyper writes it and writes the same status and headers with a problem+json body instead
 //! (plus `Connection: close`, which is what hyper does next). It is recognised by its shape:
 //! a 4xx head with `content-length: 0` and no `content-type`, written on its own. Every error
@@ -20,27 +20,8 @@ use std::task::{ready, Context, Poll};
 
 use axum::http::StatusCode;
 use tokio::io::{AsyncRead, AsyncWrite, ReadBuf};
-use tokio::net::{TcpListener, TcpStream};
 
 use super::error::{Problem, PROBLEM_JSON};
-
-/// A TCP listener whose connections answer hyper's own parse errors with problems.
-#[derive(Debug)]
-pub struct ProblemListener(pub TcpListener);
-
-impl axum::serve::Listener for ProblemListener {
-    type Io = ProblemIo<TcpStream>;
-    type Addr = std::net::SocketAddr;
-
-    async fn accept(&mut self) -> (Self::Io, Self::Addr) {
-        let (io, addr) = axum::serve::Listener::accept(&mut self.0).await;
-        (ProblemIo::new(io), addr)
-    }
-
-    fn local_addr(&self) -> io::Result<Self::Addr> {
-        self.0.local_addr()
-    }
-}
 
 /// A connection that passes everything through, except that hyper's bare answer to a request
 /// it could not parse is written as a problem (see the module's documentation).

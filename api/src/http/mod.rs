@@ -25,6 +25,7 @@ pub mod hyper_errors;
 mod linger;
 pub mod meta;
 pub mod replays;
+pub mod server;
 pub mod sessions;
 pub mod simulations;
 pub mod skills;

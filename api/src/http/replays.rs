@@ -9,7 +9,7 @@ use axum::extract::State;
 use axum::response::Response;
 use dfs_core::replay::{ReplayParams, ReplayReport, SkillSpec};
 use serde::{Deserialize, Serialize};
-use services::replay::{replay_skill, skill_spec_from_json, ReplaySource};
+use services::replay::{replay_skill_until, skill_spec_from_json, ReplaySource};
 use services::store::{Hand, Replay, StoreError};
 use utoipa::ToSchema;
 use utoipa_axum::router::OpenApiRouter;
@@ -178,6 +178,7 @@ fn replay_blocking(
     skill: &SkillSpec,
     source: &ReplaySource,
     scratch: &std::path::Path,
+    stop: &dfs_core::Stop,
 ) -> Result<(ReplayReport, Vec<u8>), Problem> {
     let loaded = hand.load()?;
     std::fs::create_dir_all(scratch).map_err(|e| Problem::internal(&e))?;
@@ -186,12 +187,13 @@ fn replay_blocking(
         .suffix(".mcap")
         .tempfile_in(scratch)
         .map_err(|e| Problem::internal(&e))?;
-    let report = replay_skill(
+    let report = replay_skill_until(
         &loaded,
         skill,
         &ReplayParams::default(),
         source,
         Some(file.path()),
+        stop,
     )
     .map_err(|e| match e {
         services::RecordingError::InvalidInput { .. } => {
@@ -221,7 +223,7 @@ fn replay_blocking(
         (status = 413, description = "The body is over the server's limit", body = ProblemBody, content_type = "application/problem+json"),
         (status = 415, description = "Content-Type is not application/json", body = ProblemBody, content_type = "application/problem+json"),
         (status = 422, description = "No hand with this name (named), a bad field, or a skill that does not describe a replayable grasp", body = ProblemBody, content_type = "application/problem+json"),
-        (status = 503, description = "Over the server's time limit (the replay may still finish, but is not stored)", body = ProblemBody, content_type = "application/problem+json"),
+        (status = 503, description = "Over the server's time limit (the replay is stopped and not stored), every simulation turn is taken (with `Retry-After`), or the server is stopping", body = ProblemBody, content_type = "application/problem+json"),
     ))]
 async fn create_replay(
     _: WriteAccess,
@@ -248,7 +250,7 @@ async fn create_replay(
     let scratch = st.scratch_dir().to_path_buf();
     let hand_name = hand.summary.name.clone();
     let (report, bytes) = st
-        .run_limited(move || replay_blocking(&hand, &spec, &source, &scratch))
+        .run_limited(move |stop| replay_blocking(&hand, &spec, &source, &scratch, stop))
         .await?;
     let replay = st
         .store()

@@ -198,7 +198,7 @@ fn is_mcap(headers: &HeaderMap) -> bool {
         (status = 413, description = "The body is over the server's limit", body = ProblemBody, content_type = "application/problem+json"),
         (status = 415, description = "Content-Type is not application/x-mcap", body = ProblemBody, content_type = "application/problem+json"),
         (status = 422, description = "Not a valid session file, with the reason (a replay recording, as `icms replay --out` or a replay's MCAP download writes, is not a session); nothing was stored", body = ProblemBody, content_type = "application/problem+json"),
-        (status = 503, description = "Over the server's time limit", body = ProblemBody, content_type = "application/problem+json"),
+        (status = 503, description = "Over the server's time limit, the data base is busy, or every upload turn is taken (with `Retry-After`)", body = ProblemBody, content_type = "application/problem+json"),
     ))]
 async fn upload_session(
     _: WriteAccess,
@@ -221,6 +221,8 @@ async fn upload_session(
     }
     let bytes = read_body(body, limit).await?;
     let size = bytes.len();
+    // Reading a session holds a bounded multiple of its size in memory: so many at once.
+    let _turn = st.ingest_turn().await?;
     let out = ingest_bytes(st.store(), Vec::from(bytes), "upload".into()).await?;
     tracing::info!(
         session_id = out.session_id,

@@ -192,6 +192,7 @@ fn simulate_blocking(
     scenario: &Scenario,
     duration: Option<f64>,
     scratch: &Path,
+    stop: &dfs_core::Stop,
 ) -> Result<
     (
         Vec<u8>,
@@ -206,15 +207,14 @@ fn simulate_blocking(
         .suffix(".mcap")
         .tempfile_in(scratch)
         .map_err(|e| Problem::internal(&e))?;
-    services::session::record_simulation(scenario, duration, file.path(), |_, _| {}).map_err(
-        |e| match e {
+    services::session::record_simulation_until(scenario, duration, file.path(), |_, _| {}, stop)
+        .map_err(|e| match e {
             services::RecordingError::InvalidInput { .. }
             | services::RecordingError::Simulation { .. } => {
                 Problem::unprocessable(format!("the simulation failed: {e}"))
             }
             other => Problem::internal(&other),
-        },
-    )?;
+        })?;
     let bytes = std::fs::read(file.path()).map_err(|e| Problem::internal(&e))?;
     let (meta, skills) = services::ingest::analyse(&bytes, &scenario.name)
         .map_err(|e| Problem::internal(&format!("a simulated session did not read back: {e}")))?;
@@ -229,7 +229,7 @@ pub async fn simulate_and_store(
 ) -> Result<IngestOutcome, Problem> {
     let scratch = st.scratch_dir().to_path_buf();
     let (bytes, meta, skills) = st
-        .run_limited(move || simulate_blocking(&scenario, duration, &scratch))
+        .run_limited(move |stop| simulate_blocking(&scenario, duration, &scratch, stop))
         .await?;
     Ok(st.store().ingest(&bytes, meta, skills).await?)
 }
@@ -249,7 +249,7 @@ pub async fn simulate_and_store(
         (status = 413, description = "The body is over the server's limit", body = ProblemBody, content_type = "application/problem+json"),
         (status = 415, description = "Content-Type is not application/json", body = ProblemBody, content_type = "application/problem+json"),
         (status = 422, description = "An unknown scenario, an invalid field (named) or duration, or the simulation failed", body = ProblemBody, content_type = "application/problem+json"),
-        (status = 503, description = "Over the server's time limit (the server may still finish the simulation, but does not store it)", body = ProblemBody, content_type = "application/problem+json"),
+        (status = 503, description = "Over the server's time limit (the simulation is stopped and not stored), every simulation turn is taken (with `Retry-After`), or the server is stopping", body = ProblemBody, content_type = "application/problem+json"),
     ))]
 async fn run_simulation(
     _: WriteAccess,

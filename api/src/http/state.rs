@@ -3,11 +3,14 @@
 
 use std::path::PathBuf;
 use std::sync::{Arc, OnceLock};
+use std::time::Duration;
 
 use bytes::Bytes;
 
+use dfs_core::Stop;
 use services::store::Store;
-use tokio::sync::Semaphore;
+use tokio::sync::{OwnedSemaphorePermit, Semaphore};
+use tokio_util::sync::CancellationToken;
 
 use super::cache::SkillCache;
 use super::error::Problem;
@@ -23,6 +26,9 @@ struct Inner {
     token: Option<String>,
     max_body: usize,
     simulations: Arc<Semaphore>,
+    ingests: Arc<Semaphore>,
+    queue_wait: Duration,
+    shutdown: CancellationToken,
     cache: SkillCache,
     scratch: PathBuf,
     openapi: OnceLock<Bytes>,
@@ -45,8 +51,12 @@ pub struct StateConfig {
     pub token: Option<String>,
     /// Largest request body, bytes.
     pub max_body: usize,
-    /// Simulations that may run at once; more wait for a turn.
+    /// Simulations and replays that may run at once; more wait for a turn.
     pub max_simulations: usize,
+    /// Session uploads that may be read and segmented at once; more wait for a turn.
+    pub max_ingests: usize,
+    /// Longest wait for a turn (simulation, replay or ingest) before 503 with `Retry-After`.
+    pub queue_wait: Duration,
     /// Skills whose JSON is kept in memory.
     pub cache_capacity: usize,
 }
@@ -61,6 +71,9 @@ impl AppState {
                 token: config.token.clone(),
                 max_body: config.max_body,
                 simulations: Arc::new(Semaphore::new(config.max_simulations.max(1))),
+                ingests: Arc::new(Semaphore::new(config.max_ingests.max(1))),
+                queue_wait: config.queue_wait,
+                shutdown: CancellationToken::new(),
                 cache: SkillCache::new(config.cache_capacity),
                 scratch,
                 openapi: OnceLock::new(),
@@ -84,22 +97,87 @@ impl AppState {
     }
 
     /// Runs `work` (a simulation or a replay) on the blocking pool once one of the
-    /// simulation permits is free; the work holds its permit until it ends, even if the
-    /// request is dropped meanwhile.
+    /// simulation permits is free (waiting at most the queue wait, then 503 with
+    /// `Retry-After`). `work` gets a [`Stop`] that is set when the request goes away (its
+    /// time limit passed or the client left: this future is dropped) and when the server
+    /// shuts down; work that honours it ends within a fraction of a second, freeing its
+    /// permit, and its answer is 503.
     pub async fn run_limited<T: Send + 'static>(
         &self,
-        work: impl FnOnce() -> Result<T, Problem> + Send + 'static,
+        work: impl FnOnce(&Stop) -> Result<T, Problem> + Send + 'static,
     ) -> Result<T, Problem> {
-        let permit = Arc::clone(&self.inner.simulations)
-            .acquire_owned()
-            .await
-            .map_err(|_| Problem::unavailable("the server is shutting down"))?;
-        tokio::task::spawn_blocking(move || {
+        let permit = self
+            .turn(&self.inner.simulations, "simulations and replays")
+            .await?;
+        let stop = Arc::new(Stop::new());
+        // Dropped with this future (the request's time limit, a client that left): stop.
+        let _on_drop = StopOnDrop(Arc::clone(&stop));
+        let worker_stop = Arc::clone(&stop);
+        let handle = tokio::task::spawn_blocking(move || {
             let _permit = permit;
-            work()
-        })
-        .await
-        .map_err(|e| Problem::internal(&e))?
+            let out = work(&worker_stop);
+            if out.is_err() && worker_stop.is_stopped() {
+                tracing::info!("work stopped before it finished; its turn is free");
+            }
+            out
+        });
+        tokio::pin!(handle);
+        let joined = tokio::select! {
+            j = &mut handle => j,
+            () = self.inner.shutdown.cancelled() => {
+                stop.stop();
+                handle.await
+            }
+        };
+        let out = joined.map_err(|e| Problem::internal(&e))?;
+        match out {
+            // Only shutdown is left to see here: a dropped request has no one to answer.
+            Err(_) if stop.is_stopped() => Err(Problem::unavailable(
+                "the server is shutting down; the work was stopped before it finished",
+            )),
+            out => out,
+        }
+    }
+
+    /// A turn to read and segment an uploaded session: waits at most the queue wait for one of
+    /// the ingest permits, then 503 with `Retry-After`.
+    pub async fn ingest_turn(&self) -> Result<OwnedSemaphorePermit, Problem> {
+        self.turn(&self.inner.ingests, "session uploads").await
+    }
+
+    async fn turn(
+        &self,
+        slots: &Arc<Semaphore>,
+        what: &str,
+    ) -> Result<OwnedSemaphorePermit, Problem> {
+        let wait = self.inner.queue_wait;
+        tokio::select! {
+            p = tokio::time::timeout(wait, Arc::clone(slots).acquire_owned()) => match p {
+                Ok(Ok(p)) => Ok(p),
+                Ok(Err(_)) => Err(Problem::unavailable("the server is shutting down")),
+                Err(_) => Err(Problem::busy(
+                    format!(
+                        "the server is busy: every turn for {what} is taken and none came free \
+                         within {} s; try again",
+                        wait.as_secs_f64()
+                    ),
+                    wait.as_secs().clamp(1, 60) as u32,
+                )),
+            },
+            () = self.inner.shutdown.cancelled() => {
+                Err(Problem::unavailable("the server is shutting down"))
+            }
+        }
+    }
+
+    /// Tells the work in flight to stop (shutdown): see [`AppState::run_limited`].
+    pub fn stop_work(&self) {
+        self.inner.shutdown.cancel();
+    }
+
+    /// Whether the server is shutting down.
+    pub fn shutdown_token(&self) -> &CancellationToken {
+        &self.inner.shutdown
     }
 
     /// The hot-skill cache.
@@ -120,5 +198,14 @@ impl AppState {
     /// Sets the OpenAPI document, once, when the router is built.
     pub fn set_openapi_json(&self, json: Bytes) {
         let _ = self.inner.openapi.set(json);
+    }
+}
+
+/// Sets its stop when dropped.
+struct StopOnDrop(Arc<Stop>);
+
+impl Drop for StopOnDrop {
+    fn drop(&mut self) {
+        self.0.stop();
     }
 }
