@@ -3,6 +3,8 @@
 //! front to back, with the counts, schemas and metadata we wrote.
 
 mod common;
+#[path = "../../tests/python/interpreter.rs"]
+mod interpreter;
 
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
@@ -16,16 +18,19 @@ fn script() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("../tests/python/read_mcap.py")
 }
 
-/// Runs the checker; `None` (with a note) only if there is no python3 at all.
+/// The interpreter with the reference MCAP reader (see `interpreter::python_with`).
+fn python() -> Option<PathBuf> {
+    interpreter::python_with(&["mcap", "zstandard", "lz4"])
+}
+
+/// Runs the checker; `None` (with a note) when the tests run without their set-up.
 fn python_read(file: &Path) -> Option<serde_json::Value> {
-    let output = match Command::new("python3").arg(script()).arg(file).output() {
-        Ok(o) => o,
-        Err(e) if e.kind() == std::io::ErrorKind::NotFound => {
-            eprintln!("NOTE: python3 not found; skipping the Python MCAP reader check");
-            return None;
-        }
-        Err(e) => panic!("running python3: {e}"),
-    };
+    let python = python()?;
+    let output = Command::new(python)
+        .arg(script())
+        .arg(file)
+        .output()
+        .expect("running the Python MCAP reader");
     assert!(
         output.status.success(),
         "read_mcap.py failed ({}): {}{}",
@@ -116,10 +121,12 @@ fn python_checker_fails_on_a_truncated_file() {
     let bytes = std::fs::read(&path).unwrap();
     let cut = dir.path().join("cut.mcap");
     std::fs::write(&cut, &bytes[..bytes.len() / 2]).unwrap();
-    let Ok(output) = Command::new("python3").arg(script()).arg(&cut).output() else {
-        eprintln!("NOTE: python3 not found; skipping");
-        return;
-    };
+    let Some(python) = python() else { return };
+    let output = Command::new(python)
+        .arg(script())
+        .arg(&cut)
+        .output()
+        .expect("running the Python MCAP reader");
     assert!(!output.status.success(), "a truncated file must fail");
 }
 
@@ -142,15 +149,13 @@ with open(sys.argv[1], "wb") as f:
     w.add_metadata("session", {"k": "v"})
     w.finish()
 "#;
-    let Ok(output) = Command::new("python3")
+    let Some(python) = python() else { return };
+    let output = Command::new(python)
         .arg("-c")
         .arg(program)
         .arg(&path)
         .output()
-    else {
-        eprintln!("NOTE: python3 not found; skipping");
-        return;
-    };
+        .expect("running the Python MCAP writer");
     assert!(
         output.status.success(),
         "{}",

@@ -1,6 +1,9 @@
 //! The OpenAPI document: valid OpenAPI 3.1 (checked by Python's openapi-spec-validator, which
 //! `.ci/run` installs), and its (method, path) pairs are exactly the routes the server answers.
 
+#[path = "../python/interpreter.rs"]
+mod interpreter;
+
 use std::collections::BTreeSet;
 use std::io::Write;
 use std::process::{Command, Stdio};
@@ -53,13 +56,16 @@ fn validate_with_python(doc: &Value) {
                   from openapi_spec_validator import validate\n\
                   validate(json.load(sys.stdin))\n\
                   print('valid')\n";
-    let mut child = Command::new("python3")
+    let Some(python) = interpreter::python_with(&["openapi_spec_validator"]) else {
+        return;
+    };
+    let mut child = Command::new(python)
         .args(["-c", script])
         .stdin(Stdio::piped())
         .stdout(Stdio::piped())
         .stderr(Stdio::piped())
         .spawn()
-        .expect("python3 (with `pip install openapi-spec-validator`, as .ci/run does)");
+        .expect("running the OpenAPI validator");
     child
         .stdin
         .take()
