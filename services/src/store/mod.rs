@@ -705,6 +705,14 @@ impl Store {
         Ok(self.inner.dir.join(rel))
     }
 
+    /// SQLite's `synchronous` setting on the store's connections (2 = `FULL`, 1 = `NORMAL`),
+    /// as the data base reports it: what [`Durability`] became.
+    pub async fn synchronous_setting(&self) -> Result<i64, StoreError> {
+        Ok(sqlx::query_scalar("PRAGMA synchronous")
+            .fetch_one(&self.inner.pool)
+            .await?)
+    }
+
     /// Removes blob files that no session or replay references (a blob written by an ingest
     /// whose transaction then failed, a kill between a delete's commit and its file removal)
     /// and that were last modified at least `min_age` ago.
