@@ -341,6 +341,41 @@ impl ServerProcess {
         assert!(ok, "kill -TERM failed");
     }
 
+    /// Its process id.
+    pub fn pid(&self) -> u32 {
+        self.child.id()
+    }
+
+    /// Its peak resident memory so far (`VmHWM` of `/proc/PID/status`), bytes.
+    pub fn peak_rss_bytes(&self) -> u64 {
+        let status = std::fs::read_to_string(format!("/proc/{}/status", self.pid()))
+            .expect("/proc/PID/status of the server");
+        let kb: u64 = status
+            .lines()
+            .find_map(|l| l.strip_prefix("VmHWM:"))
+            .and_then(|v| v.trim().trim_end_matches("kB").trim().parse().ok())
+            .expect("VmHWM in /proc/PID/status");
+        kb * 1024
+    }
+
+    /// Everything it logged so far.
+    pub fn log(&self) -> String {
+        self.stderr.lock().unwrap().clone()
+    }
+
+    /// Waits at most `limit` for the process to exit: its exit code and log, or `None` (and
+    /// the process is killed) if it was still running.
+    pub fn wait_within(mut self, limit: Duration) -> Option<(Option<i32>, String)> {
+        let start = std::time::Instant::now();
+        while start.elapsed() < limit {
+            if let Ok(Some(_)) = self.child.try_wait() {
+                return Some(self.wait());
+            }
+            std::thread::sleep(Duration::from_millis(20));
+        }
+        None
+    }
+
     /// Waits for the process to exit; returns its exit code and everything it logged.
     pub fn wait(mut self) -> (Option<i32>, String) {
         let status = self.child.wait().expect("wait for icms serve");
