@@ -38,7 +38,7 @@
 use crate::contact::{apply_friction, detect, ContactFrame, ContactModel, Friction, Intensity};
 use crate::error::{DfsError, Result};
 use crate::grasp::{GraspMatrix, MAX_CONTACTS};
-use crate::hand::{DofMatrix, FkPlan, HandModel, Kinematics, MassPlan, MAX_DOF, MAX_TIPS};
+use crate::hand::{DofMatrix, DofSet, FkPlan, HandModel, Kinematics, MassPlan, MAX_DOF, MAX_TIPS};
 use crate::math::{
     cholesky_solve_in_place, envelope_cholesky_solve, force_of, moment_of, wrench, Isometry, Point,
     Real, Vector, Wrench,
@@ -328,7 +328,7 @@ fn finger_step_envelope(
     let n = hand.dof().min(MAX_DOF);
     let mut pattern = hand.inertia_coupling();
     for t in tip_dofs.iter().take(hand.fingertips.len()) {
-        let set = t.as_slice().iter().fold(0_u32, |s, &d| s | 1 << d);
+        let set = t.as_slice().iter().fold(0 as DofSet, |s, &d| s | 1 << d);
         for &d in t.as_slice() {
             pattern[d] |= set;
         }

@@ -186,6 +186,8 @@ pub fn plan_grasp(
     pose: &Isometry,
     style: GraspStyle,
 ) -> Result<GraspPlan> {
+    // Within capacity, with room for the free base the search adds.
+    hand.validate()?;
     let style = match style {
         GraspStyle::Auto => {
             if object.shape.width_x() < 0.06 {
@@ -229,7 +231,8 @@ pub fn plan_grasp(
     for d in 0..n_hand {
         if !wrist.contains(&d) {
             // Start from bent fingers: a stretched finger cannot push along its length.
-            q_hand0[d] = hand.dof_lower[d] + 0.6 * (hand.dof_upper[d] - hand.dof_lower[d]);
+            let (lo, hi) = hand.sweep_range(d);
+            q_hand0[d] = lo + 0.6 * (hi - lo);
         }
     }
     if style == GraspStyle::Pinch {

@@ -220,7 +220,8 @@ pub struct Task {
     /// Which phase (`approach`, `preshape`, `grasp`, `lift`, `hold`, `transport`, `place`,
     /// `release`, `retreat`).
     pub phase: String,
-    /// Duration (s), > 0 and ≤ 600; the whole script ≤ [`MAX_SCRIPT_S`].
+    /// Duration (s), at least [`MIN_TASK_S`] and at most [`MAX_TASK_S`]; the whole script
+    /// at most [`MAX_SCRIPT_S`].
     pub duration: Real,
     /// `lift`: height (m) to raise the object. Default 0.10.
     #[serde(default, skip_serializing_if = "Option::is_none")]
@@ -262,6 +263,21 @@ pub struct Scenario {
 /// Longest script (s): the sum of a scenario's task durations, like `icms simulate --duration`.
 /// A minute of session is about 30 MB of MCAP.
 pub const MAX_SCRIPT_S: Real = 3600.0;
+
+/// Most tasks in a script: 256. The built-in scenarios have 7-14; a task is a phase of a grasp
+/// (a person's pick-and-place has about eight), so 256 are some 30 grasps. Each `approach`
+/// plans a grasp by inverse kinematics (15-30 ms of CPU with glove10), so the count bounds the
+/// set-up work a script can ask for (100 000 one-millisecond tasks were 45 minutes of CPU).
+pub const MAX_TASKS: usize = 256;
+
+/// Shortest task (s): 0.05 s, 50 ticks of the 1 kHz loop. The phases are minimum-jerk
+/// motions of a hand and grip ramps; a person's shortest take a few tenths of a second (the
+/// built-in scenarios' shortest is 0.5 s), and a phase of a few ticks is no motion the
+/// segmentation could find, only work.
+pub const MIN_TASK_S: Real = 0.05;
+
+/// Longest task (s): 600 s, ten minutes of one phase.
+pub const MAX_TASK_S: Real = 600.0;
 
 /// A task with its phase resolved and defaults filled in.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -311,6 +327,14 @@ impl Scenario {
             !self.tasks.is_empty(),
             "needs at least one task",
         )?;
+        check(
+            "tasks".into(),
+            self.tasks.len() <= MAX_TASKS,
+            format!(
+                "{} tasks; at most {MAX_TASKS} are accepted",
+                self.tasks.len()
+            ),
+        )?;
         let mut out = Vec::with_capacity(self.tasks.len());
         for (i, t) in self.tasks.iter().enumerate() {
             let phase = Phase::from_name(&t.phase).ok_or_else(|| {
@@ -347,9 +371,17 @@ impl Scenario {
             }
             check(
                 format!("tasks[{i}].duration"),
-                t.duration.is_finite() && t.duration > 0.0 && t.duration <= 600.0,
+                t.duration.is_finite() && t.duration > 0.0 && t.duration <= MAX_TASK_S,
                 format!(
-                    "must be a number of seconds in (0, 600], got {}",
+                    "must be a number of seconds in (0, {MAX_TASK_S}], got {}",
+                    t.duration
+                ),
+            )?;
+            check(
+                format!("tasks[{i}].duration"),
+                t.duration >= MIN_TASK_S,
+                format!(
+                    "{} s is shorter than the shortest phase, {MIN_TASK_S} s",
                     t.duration
                 ),
             )?;
@@ -637,5 +669,57 @@ mod tests {
         assert!(e.contains("invalid tasks: the script lasts 4200 s"), "{e}");
         s.tasks.pop();
         s.resolve().unwrap();
+    }
+
+    fn hold(duration: Real) -> Task {
+        Task {
+            phase: "hold".into(),
+            duration,
+            height: None,
+            offset: None,
+            turn: None,
+        }
+    }
+
+    #[test]
+    fn a_script_of_more_than_256_tasks_is_refused_naming_the_tasks() {
+        let mut s = Scenario::builtin("sphere-lift", 0).unwrap();
+        s.tasks = vec![hold(0.001); 100_000];
+        let e = s.resolve().unwrap_err().to_string();
+        assert_eq!(e, "invalid tasks: 100000 tasks; at most 256 are accepted");
+        s.tasks = vec![hold(0.1); MAX_TASKS + 1];
+        assert!(s.resolve().is_err());
+        s.tasks.pop();
+        s.resolve().unwrap();
+    }
+
+    #[test]
+    fn a_task_shorter_than_the_shortest_phase_is_refused_naming_it() {
+        let mut s = Scenario::builtin("sphere-lift", 0).unwrap();
+        s.tasks[3].duration = 0.001;
+        let e = s.resolve().unwrap_err().to_string();
+        assert_eq!(
+            e,
+            "invalid tasks[3].duration: 0.001 s is shorter than the shortest phase, 0.05 s"
+        );
+        s.tasks[3].duration = MIN_TASK_S;
+        s.resolve().unwrap();
+        s.tasks[3].duration = 601.0;
+        let e = s.resolve().unwrap_err().to_string();
+        assert!(
+            e.contains("tasks[3].duration") && e.contains("(0, 600]"),
+            "{e}"
+        );
+    }
+
+    #[test]
+    fn every_builtin_task_is_within_the_task_limits() {
+        for name in Scenario::BUILTINS {
+            let s = Scenario::builtin(name, 0).unwrap();
+            assert!(s.tasks.len() <= MAX_TASKS, "{name}");
+            for t in &s.tasks {
+                assert!((MIN_TASK_S..=MAX_TASK_S).contains(&t.duration), "{name}");
+            }
+        }
     }
 }

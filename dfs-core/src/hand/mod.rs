@@ -18,4 +18,7 @@ pub mod urdf;
 
 pub use builtin::{builtin_hand, builtin_spec, thumb_of, BUILTIN_HANDS};
 pub use model::*;
-pub use urdf::{FingertipSpec, HandSpec, DEFAULT_ARMATURE, MAX_HAND_EXTENT};
+pub use urdf::{
+    check_urdf_text, FingertipSpec, HandSpec, DEFAULT_ARMATURE, MAX_HAND_EXTENT, MAX_URDF_BYTES,
+    MAX_URDF_DEPTH,
+};

@@ -4,10 +4,26 @@ use crate::error::{DfsError, Result};
 use crate::math::{skew, Isometry, Mat3, Mat6, Point, Rotation, UnitVector, Vector};
 use nalgebra::SMatrix;
 
-/// Largest number of generalised coordinates (DOFs) a hand may have.
-pub const MAX_DOF: usize = 24;
-/// Largest number of links a hand may have.
+/// Capacity of the fixed-size joint-space storage ([`DofMatrix`], [`DofVector`],
+/// [`TipJacobian`], the planners' angle arrays): a hand's DOFs plus the
+/// [`FREE_BASE_DOF`] coordinates the planners add for its base position. A hand itself may
+/// have at most [`MAX_HAND_DOF`].
+pub const MAX_DOF: usize = MAX_HAND_DOF + FREE_BASE_DOF;
+/// Largest number of generalised coordinates (DOFs) a hand may have: 32. The largest common
+/// dexterous hands have up to 30 with their wrist (the Shadow hand 24, 22 of them in its
+/// fingers); a hand with more is refused when it is built. Each DOF widens the
+/// planners' Cholesky solves (n³) but not the DFS tick of a smaller hand.
+pub const MAX_HAND_DOF: usize = 32;
+/// Coordinates (and links) the planners add to a hand to move its base freely: its position
+/// along world x, y and z (see [`crate::operator::with_free_base`]).
+pub const FREE_BASE_DOF: usize = 3;
+/// Capacity of the per-link storage ([`Kinematics`]): a hand's links plus the
+/// [`FREE_BASE_DOF`] links the planners add. A hand itself may have at most
+/// [`MAX_HAND_LINKS`].
 pub const MAX_LINKS: usize = 64;
+/// Largest number of links a hand may have: 61 ([`MAX_LINKS`] less the planners' free-base
+/// links); a five-finger hand with a wrist and fixed fingertip frames has about 35.
+pub const MAX_HAND_LINKS: usize = MAX_LINKS - FREE_BASE_DOF;
 /// Largest number of fingertips a hand may have.
 pub const MAX_TIPS: usize = 6;
 
@@ -498,8 +514,25 @@ pub fn solve_dof_spd(a: &DofMatrix, b: &DofVector, n: usize) -> Option<DofVector
     x.iter().all(|v| v.is_finite()).then_some(x)
 }
 
-/// Bit set of DOFs (`MAX_DOF` ≤ 32).
-type DofSet = u32;
+/// Bit set of DOFs (`MAX_DOF` ≤ 64).
+pub type DofSet = u64;
+
+/// The bit of DOF `d` in a [`DofSet`] (none beyond its 64 bits).
+fn dof_bit(d: usize) -> DofSet {
+    DofSet::from(d < DofSet::BITS as usize)
+        .checked_shl(d as u32)
+        .unwrap_or(0)
+}
+
+const _: () = assert!(MAX_DOF <= DofSet::BITS as usize);
+
+/// Why a hand of `n` DOFs is refused: more than [`MAX_HAND_DOF`].
+pub(crate) fn too_many_dofs(n: usize) -> String {
+    format!(
+        "the hand has {n} DOFs (independent moving joints); at most {MAX_HAND_DOF} are \
+         accepted (the largest dexterous hands have about 30 with their wrist)"
+    )
+}
 
 /// True when every entry of a 3-vector is finite.
 fn finite3(v: &Vector) -> bool {
@@ -555,8 +588,11 @@ impl HandModel {
     /// Capacities and the lengths of the per-DOF vectors.
     fn validate_sizes(&self) -> Result<()> {
         let n = self.dof();
-        if self.links.is_empty() || self.links.len() > MAX_LINKS {
-            let reason = format!("{} links, expected 1..={MAX_LINKS}", self.links.len());
+        if self.links.is_empty() || self.links.len() > MAX_HAND_LINKS {
+            let reason = format!(
+                "{} links, expected 1..={MAX_HAND_LINKS} (the largest hand accepted)",
+                self.links.len()
+            );
             return Err(DfsError::invalid("links", reason));
         }
         if self.joints.len() >= self.links.len() {
@@ -567,11 +603,8 @@ impl HandModel {
             );
             return Err(DfsError::invalid("joints", reason));
         }
-        if n > MAX_DOF {
-            return Err(DfsError::invalid(
-                "dof_names",
-                format!("{n} DOFs > {MAX_DOF}"),
-            ));
+        if n > MAX_HAND_DOF {
+            return Err(DfsError::invalid("dof_names", too_many_dofs(n)));
         }
         if self.fingertips.len() > MAX_TIPS {
             let reason = format!("{} tips > {MAX_TIPS}", self.fingertips.len());
@@ -751,10 +784,10 @@ impl HandModel {
                         format!("DOF {d} does not exist ({n})"),
                     ));
                 }
-                driven |= 1 << d;
+                driven |= dof_bit(d);
             }
         }
-        if let Some(d) = (0..n).find(|&d| driven & (1 << d) == 0) {
+        if let Some(d) = (0..n).find(|&d| driven & dof_bit(d) == 0) {
             return Err(DfsError::invalid(
                 format!("dof_names[{d}]"),
                 "drives no joint",
@@ -814,7 +847,7 @@ impl HandModel {
     /// For every DOF, the set of DOFs it shares inertia with: those driving a joint on the
     /// path from one of its joints to the root, or one below it. `M(θ)[a][b]` can be nonzero
     /// only for such pairs (and `a == b`); DOFs of different fingers never couple.
-    pub fn inertia_coupling(&self) -> [u32; MAX_DOF] {
+    pub fn inertia_coupling(&self) -> [DofSet; MAX_DOF] {
         let mut c = [0 as DofSet; MAX_DOF];
         for joint in &self.joints {
             let Some((b, _)) = joint.drive.dof_and_gain() else {
@@ -826,8 +859,8 @@ impl HandModel {
             let above = self.dofs_moving_link(joint.child);
             c[b] |= above;
             for (a, row) in c.iter_mut().enumerate() {
-                if above & (1 << a) != 0 {
-                    *row |= 1 << b;
+                if above & dof_bit(a) != 0 {
+                    *row |= dof_bit(b);
                 }
             }
         }
@@ -837,7 +870,7 @@ impl HandModel {
     /// The DOFs that move `link`, as a bit set (bit d set when DOF d moves it): those of every
     /// joint on the path from the root to it (a mimic joint counts for its source DOF). Needs
     /// a valid tree.
-    pub fn dofs_moving_link(&self, link: usize) -> u32 {
+    pub fn dofs_moving_link(&self, link: usize) -> DofSet {
         let mut set: DofSet = 0;
         let mut current = link;
         // A valid tree has at most `joints.len()` joints on any path.
@@ -846,7 +879,7 @@ impl HandModel {
                 break;
             };
             if let Some((d, _)) = joint.drive.dof_and_gain() {
-                set |= 1 << d;
+                set |= dof_bit(d);
             }
             current = joint.parent;
         }
@@ -924,7 +957,7 @@ impl HandModel {
                 let tips: Vec<usize> = (0..nt).filter(|&k| label[k] == first).collect();
                 let set = tips.iter().fold(0, |acc, &k| acc | sets[k]);
                 let dofs = (0..self.dof().min(MAX_DOF))
-                    .filter(|&d| set & (1 << d) != 0)
+                    .filter(|&d| set & dof_bit(d) != 0)
                     .collect();
                 FingerGroup { tips, dofs }
             })
@@ -962,6 +995,20 @@ impl HandModel {
             }
         }
         Ok(())
+    }
+
+    /// The range DOF `d` is swept over when a planner moves it from one end to the other: its
+    /// limits, with an unlimited side (a continuous joint) read as 2 rad from the other side,
+    /// or as ±1 rad when both are unlimited. Always finite, `lower ≤ upper`.
+    pub fn sweep_range(&self, d: usize) -> (f64, f64) {
+        let (lower, upper) = (self.dof_lower[d], self.dof_upper[d]);
+        let lo = match (lower.is_finite(), upper.is_finite()) {
+            (true, _) => lower,
+            (false, true) => upper - 2.0,
+            (false, false) => -1.0,
+        };
+        let hi = if upper.is_finite() { upper } else { lo + 2.0 };
+        (lo, hi.max(lo))
     }
 
     /// Clamps `q` (the first `dof` entries) into the DOF limits; a NaN entry becomes the
@@ -1710,6 +1757,17 @@ pub(crate) mod tests {
         let mut hand = test_hand();
         hand.dof_names = (0..=MAX_DOF).map(|i| format!("d{i}")).collect();
         assert_eq!(invalid_field(hand.validate()), "dof_names");
+        // The hand's own capacity leaves room for the planners' free base.
+        hand.dof_names.truncate(MAX_HAND_DOF + 1);
+        let e = hand.validate().unwrap_err().to_string();
+        assert!(
+            e.contains("the hand has 33 DOFs") && e.contains("at most 32 are accepted"),
+            "{e}"
+        );
+        let mut hand = test_hand();
+        let link = hand.links[0].clone();
+        hand.links.resize(MAX_HAND_LINKS + 1, link);
+        assert_eq!(invalid_field(hand.validate()), "links");
     }
 
     #[test]
@@ -2087,6 +2145,21 @@ pub(crate) mod tests {
         assert!(solve_dof_spd(&a, &DofVector::zeros(), 3).is_none());
         assert!(solve_dof_spd(&a, &DofVector::zeros(), 1).is_some());
         assert!(solve_dof_spd(&a, &DofVector::zeros(), MAX_DOF + 1).is_none());
+    }
+
+    #[test]
+    fn a_sweep_range_is_finite_with_an_unlimited_side_read_as_two_radians() {
+        let mut hand = test_hand();
+        hand.dof_lower[0] = f64::NEG_INFINITY;
+        hand.dof_upper[0] = f64::INFINITY;
+        assert_eq!(hand.sweep_range(0), (-1.0, 1.0));
+        hand.dof_upper[0] = 0.5;
+        assert_eq!(hand.sweep_range(0), (-1.5, 0.5));
+        hand.dof_lower[0] = 0.25;
+        hand.dof_upper[0] = f64::INFINITY;
+        assert_eq!(hand.sweep_range(0), (0.25, 2.25));
+        hand.dof_upper[0] = 0.75;
+        assert_eq!(hand.sweep_range(0), (0.25, 0.75));
     }
 
     #[test]

@@ -27,8 +27,8 @@
 
 use std::collections::BTreeMap;
 
-use super::{Fingertip, HandModel, Inertial, Joint, JointDrive, JointKind, Link, MAX_DOF};
-use super::{MAX_LINKS, MAX_TIPS};
+use super::{Fingertip, HandModel, Inertial, Joint, JointDrive, JointKind, Link};
+use super::{MAX_HAND_DOF, MAX_HAND_LINKS, MAX_TIPS};
 use crate::error::{DfsError, Result};
 use crate::math::{Isometry, Mat3, Rotation, UnitVector, Vector};
 
@@ -41,6 +41,136 @@ pub const DEFAULT_ARMATURE: f64 = 1e-4;
 /// offset and radius. Far beyond any hand, and room for a URDF that mounts its hand on an arm
 /// or a stand; larger values (1e300) overflowed the kinematics into NaN.
 pub const MAX_HAND_EXTENT: f64 = 10.0;
+
+/// Largest URDF text accepted (bytes): 4 MiB. The URDFs of real hands are 10-60 kB (meshes are
+/// separate files); the parser holds the text several times over, so the bound keeps a hand
+/// upload's memory and parse time small.
+pub const MAX_URDF_BYTES: usize = 4 << 20;
+
+/// Deepest element nesting accepted in a URDF: 64. A real URDF nests about 5 deep
+/// (`robot` > `link` > `visual` > `geometry` > `mesh`); the XML parser behind `urdf-rs` recurses
+/// once per level, and a few thousand levels overflow a thread's stack (a process abort, not
+/// an error), so the depth is checked before the text reaches it.
+pub const MAX_URDF_DEPTH: usize = 64;
+
+/// Checks a URDF text's size ([`MAX_URDF_BYTES`]) and element nesting ([`MAX_URDF_DEPTH`])
+/// before it is parsed, in one pass over the bytes with no recursion. The scan follows the
+/// XML tokenizer of `urdf-rs` (RustyXML): comments end at the first `-->`, CDATA at the first
+/// `]]>`, processing instructions at the first `>` after a `?`, a `<!DOCTYPE` and an end tag at
+/// their first `>`, and a start tag at its first `>` outside an attribute value (a value is
+/// quoted after `=`); a start tag ending `/>` is empty. Where it may end a construct earlier
+/// than that parser, it only counts more depth. A malformed text within the bounds is left
+/// to the parser to report.
+pub fn check_urdf_text(urdf: &str) -> Result<()> {
+    if urdf.len() > MAX_URDF_BYTES {
+        return Err(DfsError::invalid(
+            "urdf",
+            format!(
+                "the URDF is {} bytes; at most {MAX_URDF_BYTES} ({} MiB) are accepted",
+                urdf.len(),
+                MAX_URDF_BYTES >> 20
+            ),
+        ));
+    }
+    let deepest = nesting_depth(urdf.as_bytes());
+    if deepest > MAX_URDF_DEPTH {
+        return Err(DfsError::invalid(
+            "urdf",
+            format!(
+                "the URDF nests elements {deepest} deep; at most {MAX_URDF_DEPTH} are accepted"
+            ),
+        ));
+    }
+    Ok(())
+}
+
+/// The deepest element nesting of an XML text, scanned as [`check_urdf_text`] describes.
+fn nesting_depth(b: &[u8]) -> usize {
+    // Index of the first occurrence of `pat` at or after `from` (the end when there is none).
+    let find = |from: usize, pat: &[u8]| -> usize {
+        b.get(from..)
+            .and_then(|rest| rest.windows(pat.len()).position(|w| w == pat))
+            .map_or(b.len(), |p| from + p)
+    };
+    let mut depth = 0usize;
+    // The deepest nesting, reported whole when it is over the limit.
+    let mut deepest = 0usize;
+    let mut i = 0;
+    while i < b.len() {
+        if b[i] != b'<' {
+            i += 1;
+            continue;
+        }
+        let rest = &b[i..];
+        if rest.starts_with(b"<!--") {
+            i = find(i + 4, b"-->") + 3;
+        } else if rest.starts_with(b"<![CDATA[") {
+            i = find(i + 9, b"]]>") + 3;
+        } else if rest.starts_with(b"<?") {
+            let q = find(i + 2, b"?");
+            i = find(q, b">") + 1;
+        } else if rest.starts_with(b"<!") || rest.starts_with(b"</") {
+            if rest.starts_with(b"</") {
+                depth = depth.saturating_sub(1);
+            }
+            i = find(i + 2, b">") + 1;
+        } else {
+            // A start tag: its name, then attributes `name = "value"`, until `>` or `/>`.
+            depth += 1;
+            deepest = deepest.max(depth);
+            let (end, empty) = start_tag_end(b, i + 1);
+            if empty {
+                depth -= 1;
+            }
+            i = end + 1;
+        }
+    }
+    deepest
+}
+
+/// Where the start tag whose name begins at `from` ends (the index of its `>`, or the text's
+/// end) and whether it is empty (`/>`): the states of RustyXML's tokenizer, in which a quote
+/// opens an attribute value only after an attribute name and `=`.
+fn start_tag_end(b: &[u8], from: usize) -> (usize, bool) {
+    #[derive(PartialEq)]
+    enum State {
+        Name,
+        InTag,
+        AttrName,
+        ExpectValue,
+    }
+    let mut state = State::Name;
+    let mut j = from;
+    while j < b.len() {
+        let c = b[j];
+        match (&state, c) {
+            (State::Name | State::InTag, b'>') => return (j, false),
+            (State::Name | State::InTag, b'/') if b.get(j + 1) == Some(&b'>') => {
+                return (j + 1, true)
+            }
+            (State::Name, c) if c.is_ascii_whitespace() => state = State::InTag,
+            (State::InTag, c) if !c.is_ascii_whitespace() && c != b'/' => state = State::AttrName,
+            (State::AttrName, b'=') => state = State::ExpectValue,
+            (State::ExpectValue, b'"' | b'\'') => {
+                // The value runs to the same quote.
+                j = b[j + 1..]
+                    .iter()
+                    .position(|&q| q == c)
+                    .map_or(b.len(), |p| j + 1 + p);
+                state = State::InTag;
+            }
+            (State::ExpectValue, c) if !c.is_ascii_whitespace() => {
+                // Malformed (the parser refuses it): read on as a tag.
+                state = State::InTag;
+                continue;
+            }
+            (State::AttrName, b'>') => return (j, false),
+            _ => {}
+        }
+        j += 1;
+    }
+    (b.len(), false)
+}
 
 /// One fingertip of a hand spec.
 #[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
@@ -281,9 +411,11 @@ impl HandModel {
     ///
     /// Errors ([`DfsError::Invalid`]) name the problem: a URDF that does not parse, a
     /// kinematic loop, several roots, an unknown link or joint, an unsupported joint type,
-    /// a negative mass or radius, more than [`MAX_DOF`] DOFs or [`MAX_LINKS`] links.
+    /// a negative mass or radius, more than [`MAX_HAND_DOF`] DOFs or [`MAX_HAND_LINKS`] links,
+    /// a text over [`MAX_URDF_BYTES`] or nesting elements deeper than [`MAX_URDF_DEPTH`].
     pub fn from_urdf(urdf: &str, spec: &HandSpec) -> Result<HandModel> {
         spec.validate()?;
+        check_urdf_text(urdf)?;
         let robot = urdf_rs::read_from_string(urdf).map_err(|e| {
             let e = e.to_string();
             let e = e.strip_prefix("custom: ").unwrap_or(&e);
@@ -417,8 +549,11 @@ impl HandModel {
                 order_links.push(link_index[robot.joints[j].child.link.as_str()]);
             }
         }
-        if order_links.len() > MAX_LINKS {
-            let reason = format!("{} links > {MAX_LINKS}", order_links.len());
+        if order_links.len() > MAX_HAND_LINKS {
+            let reason = format!(
+                "the hand has {} links; at most {MAX_HAND_LINKS} are accepted",
+                order_links.len()
+            );
             return Err(DfsError::invalid("urdf", reason));
         }
         let new_index: BTreeMap<usize, usize> = order_links
@@ -467,8 +602,8 @@ impl HandModel {
                 dof_upper.push(hi);
             }
         }
-        if dof_names.len() > MAX_DOF {
-            let reason = format!("{} DOFs > {MAX_DOF}", dof_names.len());
+        if dof_names.len() > MAX_HAND_DOF {
+            let reason = super::model::too_many_dofs(dof_names.len());
             return Err(DfsError::invalid("urdf", reason));
         }
         if dof_names.is_empty() {
@@ -961,10 +1096,10 @@ mod tests {
     }
 
     #[test]
-    fn too_many_dofs_are_refused() {
-        // 25 revolute joints in a chain.
+    fn too_many_dofs_are_refused_naming_the_limit() {
+        // 33 revolute joints in a chain.
         let mut urdf = String::from("<robot name=\"snake\"><link name=\"l0\"/>");
-        for i in 1..=25 {
+        for i in 1..=33 {
             urdf.push_str(&format!(
                 "<link name=\"l{i}\"/><joint name=\"j{i}\" type=\"revolute\">\
                  <parent link=\"l{}\"/><child link=\"l{i}\"/><axis xyz=\"0 0 1\"/>\
@@ -976,7 +1111,7 @@ mod tests {
         let spec = HandSpec {
             fingertips: vec![FingertipSpec {
                 name: None,
-                link: "l25".into(),
+                link: "l33".into(),
                 offset: [0.0; 3],
                 radius: 0.01,
             }],
@@ -986,7 +1121,21 @@ mod tests {
         };
         let (field, reason) = error_of(HandModel::from_urdf(&urdf, &spec));
         assert_eq!(field, "urdf");
-        assert!(reason.contains("25 DOFs > 24"), "{reason}");
+        assert!(
+            reason.starts_with(
+                "the hand has 33 DOFs (independent moving joints); at most 32 are accepted"
+            ),
+            "{reason}"
+        );
+        // One fewer is a hand.
+        let urdf = urdf.replace(
+            "type=\"revolute\"><parent link=\"l32\"",
+            "type=\"fixed\"><parent link=\"l32\"",
+        );
+        assert_eq!(
+            HandModel::from_urdf(&urdf, &spec).unwrap().dof(),
+            MAX_HAND_DOF
+        );
     }
 
     #[test]
@@ -1023,5 +1172,95 @@ mod tests {
         assert_eq!(full.dof_upper[0], f64::INFINITY);
         // A massless link reads as massless; the armature keeps M positive definite.
         assert!(full.armature.iter().all(|&a| a == DEFAULT_ARMATURE));
+    }
+
+    /// The gripper's URDF with `inner` inserted just inside `<robot>`.
+    fn gripper_with(inner: &str) -> String {
+        let at = GRIPPER_URDF.find("<link").unwrap();
+        format!("{}{inner}{}", &GRIPPER_URDF[..at], &GRIPPER_URDF[at..])
+    }
+
+    /// `depth` unknown elements, each inside the last.
+    fn nest(depth: usize) -> String {
+        format!("{}{}", "<junk>".repeat(depth), "</junk>".repeat(depth))
+    }
+
+    /// Loads `urdf` on a thread with a 2 MiB stack (a tokio worker's and Rust's default):
+    /// before the depth check, 3000 levels overflowed it inside the XML parser.
+    fn load_on_small_stack(urdf: String) -> Result<HandModel> {
+        std::thread::Builder::new()
+            .stack_size(2 << 20)
+            .spawn(move || HandModel::from_urdf(&urdf, &gripper_spec()))
+            .unwrap()
+            .join()
+            .unwrap()
+    }
+
+    #[test]
+    fn a_urdf_nesting_elements_thousands_deep_is_refused_naming_the_limit() {
+        for depth in [3000, 100_000] {
+            // `<robot>` is the first level.
+            let (field, reason) = error_of(load_on_small_stack(gripper_with(&nest(depth - 1))));
+            assert_eq!(field, "urdf");
+            assert_eq!(
+                reason,
+                format!("the URDF nests elements {depth} deep; at most 64 are accepted")
+            );
+        }
+        // At the limit an unknown element is ignored as before; one more is refused.
+        load_on_small_stack(gripper_with(&nest(MAX_URDF_DEPTH - 1))).unwrap();
+        let (_, reason) = error_of(load_on_small_stack(gripper_with(&nest(MAX_URDF_DEPTH))));
+        assert!(reason.contains("65 deep; at most 64"), "{reason}");
+    }
+
+    #[test]
+    fn a_urdf_over_4_mib_is_refused_naming_the_limit() {
+        let padding = " ".repeat(MAX_URDF_BYTES);
+        let (field, reason) = error_of(HandModel::from_urdf(
+            &gripper_with(&padding),
+            &gripper_spec(),
+        ));
+        assert_eq!(field, "urdf");
+        assert!(
+            reason.starts_with("the URDF is 41")
+                && reason.ends_with("bytes; at most 4194304 (4 MiB) are accepted"),
+            "{reason}"
+        );
+    }
+
+    #[test]
+    fn comments_cdata_instructions_and_attribute_values_do_not_count_as_nesting() {
+        let depth = |s: &str| nesting_depth(s.as_bytes());
+        assert_eq!(depth("<a><b/><c x=\"1\"></c></a>"), 2);
+        assert_eq!(depth("<a><!-- <b><b><b> --></a>"), 1);
+        assert_eq!(depth("<a><![CDATA[<b><b><b>]]></a>"), 1);
+        assert_eq!(depth("<?xml version=\"1.0\"?><!DOCTYPE robot><a/>"), 1);
+        assert_eq!(depth("<a x=\"<b><b>\" y='/>' z = \"<c>\"><d/></a>"), 2);
+        // A quote opens a value only after `=`, as in the parser: here the tag ends at `>`
+        // and the elements after it count.
+        assert_eq!(depth("<a\"><b><c>"), 3);
+        assert_eq!(depth("<a b\"><b><c>"), 3);
+        // Unclosed constructs end the scan (the parser refuses them).
+        assert_eq!(depth("<a><!-- <b><b>"), 1);
+        assert_eq!(depth("<a x=\"<b><b>"), 1);
+        // A processing instruction ends at the first `>` after a `?`, as the parser's does.
+        assert_eq!(depth("<?p ? ><a><b>"), 2);
+        // A comment full of elements in a real URDF loads.
+        let hand = HandModel::from_urdf(
+            &gripper_with(&format!("<!-- {} -->", nest(5000))),
+            &gripper_spec(),
+        )
+        .unwrap();
+        assert_eq!(hand.dof(), 2);
+    }
+
+    #[test]
+    fn every_built_in_urdf_nests_less_than_ten_deep() {
+        for name in BUILTIN_HANDS.iter().filter(|&&n| n != "glove10") {
+            let (_, urdf) = builtin_spec(name).unwrap();
+            check_urdf_text(urdf).unwrap();
+            let depth = nesting_depth(urdf.as_bytes());
+            assert!((3..10).contains(&depth), "{name}: {depth}");
+        }
     }
 }

@@ -51,11 +51,13 @@ use super::plan::{
 };
 use super::{ReplayParams, SkillSpec};
 use crate::contact::ContactFrame;
+use crate::error::Result;
 use crate::grasp::quality::{grasp_quality, QualityParams};
 use crate::hand::{HandModel, Kinematics, MAX_DOF, MAX_TIPS};
 use crate::math::{Isometry, Point, Real, Rotation, Vector};
 use crate::object::Shape;
 use crate::operator::{push_alignment, push_basis, with_free_base};
+use crate::stop::Stop;
 
 /// Samples along one closing path.
 const SAMPLES: usize = 48;
@@ -67,6 +69,13 @@ const KEEP: usize = 3;
 const CLEARANCE: Real = 0.003;
 /// How far the preshaped hand moves in along the approach direction (m); see `run`.
 const APPROACH: Real = 0.08;
+/// Object centres probed between two looks at the [`Stop`]: a probe closes every path (up to
+/// 42 on a hand of six multi-joint fingers, 48 samples each), so 64 probes are a few ms
+/// (at most 30 ms on a loaded machine for a 30-DOF hand).
+const PROBES_PER_CHECK: usize = 64;
+/// Most improving moves of the pattern search ([`Probe::refine`]) per step size: each moves
+/// the centre by the step, so 64 of the smallest (0.5 mm) are 3 cm, beyond any refinement.
+const REFINE_MOVES: usize = 64;
 
 /// One closing path of a finger, sampled in the hand frame.
 struct Path {
@@ -92,7 +101,8 @@ impl Path {
             q[d + shift] = v;
         }
         for &d in &self.swept {
-            q[d + shift] = hand.dof_lower[d] + (hand.dof_upper[d] - hand.dof_lower[d]) * s;
+            let (lo, hi) = hand.sweep_range(d);
+            q[d + shift] = lo + (hi - lo) * s;
         }
     }
 }
@@ -261,10 +271,11 @@ impl Probe<'_> {
         })
     }
 
-    /// Pattern search on the centre from `g` (steps of 4, 2, 1 and 0.5 mm).
+    /// Pattern search on the centre from `g` (steps of 4, 2, 1 and 0.5 mm, at most
+    /// [`REFINE_MOVES`] moves each).
     fn refine(&self, mut g: HandGrasp) -> HandGrasp {
         for step in [0.004, 0.002, 0.001, 0.0005] {
-            loop {
+            for _ in 0..REFINE_MOVES {
                 let mut improved = false;
                 for axis in 0..3 {
                     for sign in [1.0, -1.0] {
@@ -322,9 +333,8 @@ fn closing_paths(hand: &HandModel, q_rest: &[Real]) -> Vec<Path> {
             let d = g.dofs[0];
             (0..PRESETS)
                 .map(|i| {
-                    let v = hand.dof_lower[d]
-                        + (hand.dof_upper[d] - hand.dof_lower[d]) * i as Real
-                            / (PRESETS - 1) as Real;
+                    let (lo, hi) = hand.sweep_range(d);
+                    let v = lo + (hi - lo) * i as Real / (PRESETS - 1) as Real;
                     Some((d, v))
                 })
                 .collect()
@@ -360,8 +370,14 @@ fn closing_paths(hand: &HandModel, q_rest: &[Real]) -> Vec<Path> {
 /// The hand-frame grasps of the object as `probe` holds it: object centres on the fingers'
 /// motion lines, the object's depth ahead of the tip, and midway between two fingers' such
 /// centres; the best few distinct ones refined, those whose normals can balance inside the
-/// planned cones kept (at most [`KEEP`]).
-fn hand_grasps(probe: &Probe<'_>, paths: &[Path], radius: &[Real]) -> Vec<HandGrasp> {
+/// planned cones kept (at most [`KEEP`]). [`crate::DfsError::Cancelled`] when `stop` is set
+/// (looked at every [`PROBES_PER_CHECK`] centres).
+fn hand_grasps(
+    probe: &Probe<'_>,
+    paths: &[Path],
+    radius: &[Real],
+    stop: &Stop,
+) -> Result<Vec<HandGrasp>> {
     let mut heads: Vec<Vec<Vector>> = Vec::new();
     for path in paths.iter().filter(|p| p.tip != probe.thumb) {
         let mut h = Vec::with_capacity(2 * SAMPLES);
@@ -385,7 +401,11 @@ fn hand_grasps(probe: &Probe<'_>, paths: &[Path], radius: &[Real]) -> Vec<HandGr
             }
         }
     }
-    let mut found: Vec<HandGrasp> = centres.iter().filter_map(|c| probe.grasp(c)).collect();
+    let mut found: Vec<HandGrasp> = Vec::new();
+    for chunk in centres.chunks(PROBES_PER_CHECK) {
+        stop.check()?;
+        found.extend(chunk.iter().filter_map(|c| probe.grasp(c)));
+    }
     found.sort_by(|a, b| b.score.total_cmp(&a.score));
     // Refine the best few distinct ones; keep those that are a force closure.
     let mut kept: Vec<HandGrasp> = Vec::new();
@@ -393,6 +413,7 @@ fn hand_grasps(probe: &Probe<'_>, paths: &[Path], radius: &[Real]) -> Vec<HandGr
         if kept.len() >= KEEP {
             break;
         }
+        stop.check()?;
         if kept.iter().any(|k| (k.centre - g.centre).norm() < 0.004) {
             continue;
         }
@@ -403,7 +424,7 @@ fn hand_grasps(probe: &Probe<'_>, paths: &[Path], radius: &[Real]) -> Vec<HandGr
         }
         kept.push(g);
     }
-    kept
+    Ok(kept)
 }
 
 /// Candidate base poses for a grasp planned from the hand's closing motion (module
@@ -413,7 +434,9 @@ pub(super) fn closing_candidates(
     thumb: usize,
     skill: &SkillSpec,
     params: &ReplayParams,
-) -> Vec<Candidate> {
+    stop: &Stop,
+) -> Result<Vec<Candidate>> {
+    stop.check()?;
     let nt = hand.fingertips.len();
     let n_hand = hand.dof();
     let q_rest = mid_angles(hand);
@@ -422,7 +445,7 @@ pub(super) fn closing_candidates(
         .filter(|&k| paths.iter().any(|p| p.tip == k))
         .collect();
     if !tips.contains(&thumb) {
-        return Vec::new();
+        return Ok(Vec::new());
     }
     let radius: Vec<Real> = hand.fingertips.iter().map(|t| t.radius).collect();
     let mu = skill.friction.mu * (1.0 - params.friction_margin);
@@ -460,7 +483,7 @@ pub(super) fn closing_candidates(
     // of the hand's rotation.
     let mut trials: Vec<(HandGrasp, Rotation, Vector)> = Vec::new();
     if matches!(skill.shape, Shape::Sphere { .. }) {
-        for g in hand_grasps(&probe_in(Rotation::identity()), &paths, &radius) {
+        for g in hand_grasps(&probe_in(Rotation::identity()), &paths, &radius, stop)? {
             let Some(t_thumb) = g.touches[thumb] else {
                 continue;
             };
@@ -497,7 +520,7 @@ pub(super) fn closing_candidates(
                 continue;
             };
             let orient = rot.inverse() * start.rotation;
-            for g in hand_grasps(&probe_in(orient), &paths, &radius) {
+            for g in hand_grasps(&probe_in(orient), &paths, &radius, stop)? {
                 trials.push((g, rot, d_w));
             }
         }
@@ -506,6 +529,7 @@ pub(super) fn closing_candidates(
     let mut out = Vec::new();
     let mut frames: Vec<Vec<ContactFrame>> = Vec::new();
     for &(ref g, rot, d_w) in &trials {
+        stop.check()?;
         let used: Vec<usize> = (0..nt).filter(|&k| g.touches[k].is_some()).collect();
         let free = with_free_base(hand, rot);
         let n = free.dof();
@@ -584,6 +608,7 @@ pub(super) fn closing_candidates(
     let mut order: Vec<usize> = (0..out.len()).filter(|&i| out[i].ok).collect();
     order.sort_by(|&a, &b| out[b].score.total_cmp(&out[a].score));
     for i in order {
+        stop.check()?;
         let closure = grasp_quality(
             &frames[i],
             skill.contact_model,
@@ -597,7 +622,7 @@ pub(super) fn closing_candidates(
         out[i].ok = false;
         out[i].score -= 10.0;
     }
-    out
+    Ok(out)
 }
 
 #[cfg(test)]

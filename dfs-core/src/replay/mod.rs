@@ -78,8 +78,8 @@ mod closing;
 mod plan;
 mod run;
 
-pub use plan::{plan, Plan, RetargetStep};
-pub use run::{run, run_with, Replay, ReplayTick};
+pub use plan::{plan, plan_with_stop, Plan, RetargetStep};
+pub use run::{run, run_with, run_with_stop, Replay, ReplayTick};
 
 use crate::contact::{ContactModel, Friction};
 use crate::math::{Isometry, Real, Rotation, Vector};
@@ -660,7 +660,9 @@ mod tests {
         let thumb = thumb_of(&hand);
         let skill = glove10_cylinder_skill();
         let params = ReplayParams::default();
-        let best = plan::plan_candidates(&hand, thumb, &skill, &params, plan::Keys::Named)
+        let stop = crate::Stop::never();
+        let best = plan::plan_candidates(&hand, thumb, &skill, &params, plan::Keys::Named, stop)
+            .unwrap()
             .into_iter()
             .max_by(|a, b| a.score.total_cmp(&b.score))
             .unwrap();

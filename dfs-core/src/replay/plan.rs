@@ -14,6 +14,7 @@ use crate::hand::{HandModel, Kinematics, MAX_DOF, MAX_TIPS};
 use crate::math::{Isometry, Point, Real, Rotation, Vector, Wrench};
 use crate::operator::{push_alignment, with_free_base};
 use crate::scenario::MAX_SCRIPT_S;
+use crate::stop::Stop;
 use nalgebra::{DMatrix, Matrix3};
 
 /// Rolls of the hand about the grasp axis tried when choosing the base pose.
@@ -140,22 +141,46 @@ pub(super) fn on_surface(skill: &SkillSpec, p_b: &Vector) -> (Vector, Vector) {
     (point, -outward)
 }
 
-/// Rotation taking the orthonormal pair (a, d) of one frame onto (a', d') of another.
+/// Rotation taking the orthonormal pair (a, d) of one frame onto (a', d') of another; the
+/// identity when the pairs are not orthonormal (or not finite).
+///
+/// nalgebra's `from_matrix` iterates until it converges, without bound: on a matrix that is
+/// not a rotation (NaN from a degenerate pair) it never returns. Here the matrix is checked
+/// first and the iterations bounded ([`ALIGN_ITERATIONS`]; a rotation converges in a few).
 pub(super) fn align(a_from: &Vector, d_from: &Vector, a_to: &Vector, d_to: &Vector) -> Rotation {
     let from = Matrix3::from_columns(&[*a_from, *d_from, a_from.cross(d_from)]);
     let to = Matrix3::from_columns(&[*a_to, *d_to, a_to.cross(d_to)]);
-    Rotation::from_matrix(&(to * from.transpose()))
+    let m = to * from.transpose();
+    let rotation = m.iter().all(|v| v.is_finite())
+        && (m.transpose() * m - Matrix3::identity()).amax() < 1e-6
+        && m.determinant() > 0.0;
+    if !rotation {
+        return Rotation::identity();
+    }
+    Rotation::from_matrix_eps(&m, Real::EPSILON, ALIGN_ITERATIONS, Rotation::identity())
 }
 
-/// Unit vector of `v` with its component along unit `a` removed; `fallback` if that is ~0.
+/// Most iterations of the rotation extraction in [`align`] (its input is a rotation matrix up
+/// to rounding, which takes a handful).
+const ALIGN_ITERATIONS: usize = 1000;
+
+/// Unit vector of `v` with its component along unit `a` removed; `fallback`'s if that is ~0,
+/// and if that is ~0 too (both along `a`), the coordinate axis most nearly square to `a`'s.
 pub(super) fn perpendicular(v: &Vector, a: &Vector, fallback: &Vector) -> Vector {
-    let p = v - a * a.dot(v);
+    let off = |u: &Vector| u - a * a.dot(u);
+    let p = off(v);
     if p.norm() > 1e-9 {
-        p.normalize()
-    } else {
-        let f = fallback - a * a.dot(fallback);
-        f.normalize()
+        return p.normalize();
     }
+    let f = off(fallback);
+    if f.norm() > 1e-15 {
+        return f.normalize();
+    }
+    let axis = [Vector::x(), Vector::y(), Vector::z()]
+        .into_iter()
+        .min_by(|x, y| a.dot(x).abs().total_cmp(&a.dot(y).abs()))
+        .unwrap_or_else(Vector::x);
+    off(&axis).try_normalize(1e-12).unwrap_or_else(Vector::x)
 }
 
 /// Where the ray from the centre along unit `dir` leaves the surface (B), with the outward
@@ -304,29 +329,52 @@ fn validate(skill: &SkillSpec, thumb: usize, hand: &HandModel) -> Result<()> {
 
 /// Retargets `skill` onto `hand` (whose fingertip `thumb` opposes the others). Planning
 /// failures (unreachable contacts, loads the cones or the torques cannot carry) are in
-/// [`Plan::failure`]; errors are for invalid input only.
+/// [`Plan::failure`]; errors are for invalid input only. Runs to its end: see
+/// [`plan_with_stop`].
 pub fn plan(
     hand: &HandModel,
     thumb: usize,
     skill: &SkillSpec,
     params: &ReplayParams,
 ) -> Result<Plan> {
+    plan_with_stop(hand, thumb, skill, params, Stop::never())
+}
+
+/// [`plan`], ending early with [`DfsError::Cancelled`] once `stop` is set: it is looked at
+/// before every candidate base pose and inverse-kinematics solve, every few hundred probes of
+/// the closing-motion search and every force sample, so a stop is honoured within about
+/// 0.1 s of CPU even on a hand of [`crate::hand::MAX_HAND_DOF`] DOFs.
+///
+/// The work is bounded without it too: 12 rolls of the base pose per kind of grasp (every tip
+/// placed; the thumb and two, then one, fingers placed with the others curled; the hand's own
+/// closing motion, at most 3 hand-frame grasps per roll; the fingers named like the skill's
+/// contacts), inverse kinematics of at most 150 iterations, the force distribution at most
+/// [`MAX_SCRIPT_S`] / [`ReplayParams::force_sample_s`] samples (each a capped Newton solve,
+/// or Clarabel's of at most 200 iterations).
+pub fn plan_with_stop(
+    hand: &HandModel,
+    thumb: usize,
+    skill: &SkillSpec,
+    params: &ReplayParams,
+    stop: &Stop,
+) -> Result<Plan> {
     validate(skill, thumb, hand)?;
+    stop.check()?;
     let nt = hand.fingertips.len();
-    let best_of = |keys: Keys| {
-        plan_candidates(hand, thumb, skill, params, keys)
+    let best_of = |keys: Keys| -> Result<Option<Candidate>> {
+        Ok(plan_candidates(hand, thumb, skill, params, keys, stop)?
             .into_iter()
-            .max_by(|a, b| a.score.total_cmp(&b.score))
+            .max_by(|a, b| a.score.total_cmp(&b.score)))
     };
     // Every fingertip on its contact; failing that (an underactuated hand cannot put every
     // tip on an arbitrary point), the thumb and two, then one, opposing fingers placed and the
     // other fingers curled onto the surface.
-    let mut best = best_of(Keys::All);
+    let mut best = best_of(Keys::All)?;
     // Why the curled grasps were refused, when every one was.
     let mut curled_refused = None;
     if !best.as_ref().is_some_and(|c| c.ok) && nt >= 3 {
         for n in [2, 1] {
-            match best_of(Keys::Nearest(n)) {
+            match best_of(Keys::Nearest(n))? {
                 Some(c) if c.ok => {
                     best = Some(c);
                     curled_refused = None;
@@ -345,7 +393,7 @@ pub fn plan(
     // object lets the thumb and another finger close onto it within the cones.
     let mut closing_refused: Option<Option<Real>> = None;
     if !best.as_ref().is_some_and(|c| c.ok) && nt >= 3 {
-        let closing = closing_candidates(hand, thumb, skill, params)
+        let closing = closing_candidates(hand, thumb, skill, params, stop)?
             .into_iter()
             .max_by(|a, b| a.score.total_cmp(&b.score));
         match closing {
@@ -370,7 +418,7 @@ pub fn plan(
         && named_count >= 2
         && named_count < nt
     {
-        match best_of(Keys::Named) {
+        match best_of(Keys::Named)? {
             Some(c) if c.ok => {
                 best = Some(c);
                 curled_refused = None;
@@ -421,6 +469,7 @@ pub fn plan(
             (k, start * Point::from(p))
         })
         .collect();
+    stop.check()?;
     let pre_params = IkParams {
         max_iterations: 150,
         tolerance: 5e-4,
@@ -549,7 +598,7 @@ pub fn plan(
         plan.failure = Some((FailureReason::Unreachable, why));
         return Ok(plan);
     }
-    plan_forces(&mut plan, skill, params);
+    plan_forces(&mut plan, skill, params, stop)?;
     Ok(plan)
 }
 
@@ -606,8 +655,14 @@ pub(crate) fn actuation_map(
     Some(p + pn * (normal.transpose() * (Matrix3::identity() - p)) / k)
 }
 
-/// Fills the force schedule, and the failure when the cones or the torques cannot carry it.
-fn plan_forces(plan: &mut Plan, skill: &SkillSpec, params: &ReplayParams) {
+/// Fills the force schedule, and the failure when the cones or the torques cannot carry it;
+/// [`DfsError::Cancelled`] when `stop` is set (looked at every sample).
+fn plan_forces(
+    plan: &mut Plan,
+    skill: &SkillSpec,
+    params: &ReplayParams,
+    stop: &Stop,
+) -> Result<()> {
     let tl = skill.timeline();
     let g = Vector::new(0.0, 0.0, -crate::math::STANDARD_GRAVITY);
     let opt = OptimiseParams {
@@ -642,7 +697,7 @@ fn plan_forces(plan: &mut Plan, skill: &SkillSpec, params: &ReplayParams) {
                     e.reason
                 ),
             ));
-            return;
+            return Ok(());
         }
     };
     let mut dist = vec![Intensity::zeros(); contacts.len()];
@@ -668,6 +723,7 @@ fn plan_forces(plan: &mut Plan, skill: &SkillSpec, params: &ReplayParams) {
     let mut t = tl.grasp_start;
     let step = params.force_sample_s.max(0.01);
     while t <= tl.release_start + 1e-9 {
+        stop.check()?;
         let load = load_at(skill, t, &g);
         let solved = match with_limits.solve_into(&load, &mut dist) {
             Ok(_) => true,
@@ -701,6 +757,7 @@ fn plan_forces(plan: &mut Plan, skill: &SkillSpec, params: &ReplayParams) {
         plan.forces.push(row);
         t += step;
     }
+    Ok(())
 }
 
 /// Scored candidate base poses (rolls about the grasp axis), each with the joint angles from
@@ -735,7 +792,8 @@ pub(super) fn plan_candidates(
     skill: &SkillSpec,
     params: &ReplayParams,
     keys: Keys,
-) -> Vec<Candidate> {
+    stop: &Stop,
+) -> Result<Vec<Candidate>> {
     let nt = hand.fingertips.len();
     let n_hand = hand.dof();
     let start = skill.start_pose();
@@ -804,6 +862,7 @@ pub(super) fn plan_candidates(
     let side = a_s.cross(&up_perp);
     let inv_start = start.inverse();
     for r in 0..ROLLS {
+        stop.check()?;
         let psi = r as Real * std::f64::consts::TAU / ROLLS as Real;
         let d_w = up_perp * psi.cos() + side * psi.sin();
         let rot = align(&a_h, &d_h, &a_s, &d_w);
@@ -880,6 +939,7 @@ pub(super) fn plan_candidates(
                 if res.max_error <= ik.tolerance {
                     break;
                 }
+                stop.check()?;
                 for (k, target) in targets.iter_mut().skip(1) {
                     let c_b = (inv_start * kin.tip_centres[*k]).coords;
                     let (p, n_in) = on_surface(skill, &c_b);
@@ -984,7 +1044,7 @@ pub(super) fn plan_candidates(
             active,
         });
     }
-    out
+    Ok(out)
 }
 
 /// Curls the finger of fingertip `tip` (its DOFs `dofs`, all moved together from the end of
@@ -1005,7 +1065,7 @@ pub(super) fn curl_onto(
     let radius = hand.fingertips[tip].radius;
     let mut gap = |q: &mut [Real], s: Real| -> Real {
         for &d in dofs {
-            let (lo, hi) = (hand.dof_lower[d], hand.dof_upper[d]);
+            let (lo, hi) = hand.sweep_range(d);
             q[d] = lo + (hi - lo) * s;
         }
         hand.forward_kinematics(&Isometry::identity(), q, kin);
@@ -1189,6 +1249,32 @@ impl Plan {
 mod tests {
     use super::*;
     use crate::object::Shape;
+
+    /// A serial chain's fingertips all lie on its axis at mid-range angles: the grasp axis and
+    /// the fallback direction coincided, the rotation's matrix was NaN, and nalgebra's
+    /// unbounded rotation extraction never returned.
+    #[test]
+    fn a_degenerate_grasp_axis_gives_a_rotation_at_once() {
+        let z = Vector::z();
+        let d = perpendicular(&(z * 0.1), &z, &Vector::z());
+        assert!(
+            (d.norm() - 1.0).abs() < 1e-12 && d.dot(&z).abs() < 1e-12,
+            "{d}"
+        );
+        let nan = Vector::new(Real::NAN, 0.0, 0.0);
+        assert_eq!(
+            align(&z, &nan, &Vector::x(), &Vector::y()),
+            Rotation::identity()
+        );
+        assert_eq!(
+            align(&z, &Vector::zeros(), &Vector::x(), &Vector::y()),
+            Rotation::identity()
+        );
+        // Orthonormal pairs: the rotation between them.
+        let r = align(&Vector::x(), &Vector::y(), &Vector::y(), &-Vector::x());
+        assert!((r * Vector::x() - Vector::y()).norm() < 1e-12);
+        assert!((r * Vector::y() + Vector::x()).norm() < 1e-12);
+    }
 
     #[test]
     fn a_pinch_of_a_sphere_is_antipodal_through_its_centre_at_its_height() {

@@ -1,13 +1,14 @@
 //! The simulated replay: the hand's controller drives its joints by torques in the DFS at
 //! 1 kHz (contacts, friction, object dynamics) through the skill's phases, and the report.
 
-use super::plan::{actuation_map, plan, Plan};
+use super::plan::{actuation_map, plan_with_stop, Plan};
 use super::{FailureReason, ReplayParams, ReplayQuality, ReplayReport, SkillSpec, Timeline};
 use crate::dfs::{Dfs, DfsParams, GloveSample, TickOutput};
 use crate::error::Result;
 use crate::hand::{DofMatrix, HandModel, JointKind, Kinematics, MAX_DOF, MAX_TIPS};
 use crate::math::{Isometry, Point, Real, Vector};
 use crate::object::{ObjectState, RigidObject};
+use crate::stop::Stop;
 
 /// Tick length (s): 1 kHz.
 const DT: Real = 1e-3;
@@ -92,7 +93,20 @@ impl Replay {
         skill: &SkillSpec,
         params: &ReplayParams,
     ) -> Result<Replay> {
-        let plan = plan(hand, thumb, skill, params)?;
+        Replay::new_with_stop(hand, thumb, skill, params, Stop::never())
+    }
+
+    /// [`Replay::new`], its planning ended early with [`crate::DfsError::Cancelled`] once
+    /// `stop` is set ([`super::plan_with_stop`]). A caller stepping the replay looks at `stop`
+    /// between [`Replay::step`]s itself, as [`run_with_stop`] does.
+    pub fn new_with_stop(
+        hand: &HandModel,
+        thumb: usize,
+        skill: &SkillSpec,
+        params: &ReplayParams,
+        stop: &Stop,
+    ) -> Result<Replay> {
+        let plan = plan_with_stop(hand, thumb, skill, params, stop)?;
         Replay::from_plan(plan, skill, params)
     }
 
@@ -560,25 +574,44 @@ pub fn run(
     skill: &SkillSpec,
     params: &ReplayParams,
 ) -> Result<ReplayReport> {
-    run_with(hand, thumb, skill, params, |_| {})
+    run_with_stop(hand, thumb, skill, params, Stop::never(), |_| {})
 }
 
 /// Retargets `skill` onto `hand` (fingertip `thumb` opposing the others), simulates it at
 /// 1 kHz and reports; `on_tick` sees every tick (for recording). Failures are reports; errors
-/// are for invalid input (a bad hand or skill).
+/// are for invalid input (a bad hand or skill). Runs to its end: see [`run_with_stop`].
 pub fn run_with(
     hand: &HandModel,
     thumb: usize,
     skill: &SkillSpec,
     params: &ReplayParams,
+    on_tick: impl FnMut(&ReplayTick<'_>),
+) -> Result<ReplayReport> {
+    run_with_stop(hand, thumb, skill, params, Stop::never(), on_tick)
+}
+
+/// [`run_with`], ending early with [`crate::DfsError::Cancelled`] once `stop` is set: planning
+/// looks at it as [`super::plan_with_stop`] does, the simulation before every tick (a tick of
+/// the largest hand is some 10 µs). A replay lasts at most [`crate::scenario::MAX_SCRIPT_S`] of
+/// simulated time plus its fixed approach and retreat.
+pub fn run_with_stop(
+    hand: &HandModel,
+    thumb: usize,
+    skill: &SkillSpec,
+    params: &ReplayParams,
+    stop: &Stop,
     mut on_tick: impl FnMut(&ReplayTick<'_>),
 ) -> Result<ReplayReport> {
-    let plan = plan(hand, thumb, skill, params)?;
+    let plan = plan_with_stop(hand, thumb, skill, params, stop)?;
     if plan.fails_at_rest || matches!(plan.failure, Some((FailureReason::Unreachable, _))) {
         return Ok(refused_report(&plan));
     }
     let mut replay = Replay::from_plan(plan, skill, params)?;
-    while replay.step()? {
+    loop {
+        stop.check()?;
+        if !replay.step()? {
+            break;
+        }
         on_tick(&replay.tick());
     }
     Ok(replay.report())
