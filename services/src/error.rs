@@ -65,10 +65,38 @@ pub enum RecordingError {
         detail: String,
     },
 
-    /// The whole file holds more message bytes than allowed.
-    #[error("MCAP file holds more than {limit} bytes of messages")]
+    /// The whole file decompresses to more bytes than any file may.
+    #[error(
+        "MCAP file decompresses to more than {limit} bytes, the most one file may hold (its \
+         chunks and messages are held in memory while it is read)"
+    )]
     TooMuchData {
         /// The limit in force ([`crate::mcap_io::ReadLimits::max_total_message_bytes`]).
+        limit: u64,
+    },
+
+    /// The file decompresses to more than [`crate::mcap_io::ReadLimits::max_expansion`] times
+    /// its size (plus a small allowance): a decompression bomb, or a chunk header that lies
+    /// about its size. Refused before the chunk that crosses the limit is decompressed (the
+    /// index of the messages, 40 bytes each, counts too: a file of tiny messages is refused
+    /// when it is built).
+    #[error(
+        "MCAP file decompresses to more than {ratio}x its size ({input_len} bytes may take at \
+         most {limit} bytes decompressed and indexed; up to the record at byte {offset} it \
+         takes {total})"
+    )]
+    DecompressesTooMuch {
+        /// Byte offset of the record (a chunk, usually) that crosses the limit.
+        offset: u64,
+        /// Length of the file, bytes.
+        input_len: u64,
+        /// Bytes taken up to that record: the chunks' declared sizes, messages outside chunks
+        /// and the index of the messages.
+        total: u64,
+        /// The expansion ratio in force ([`crate::mcap_io::ReadLimits::max_expansion`]).
+        ratio: u64,
+        /// The decompressed bytes allowed for this file
+        /// ([`crate::mcap_io::ReadLimits::decompressed_limit`]).
         limit: u64,
     },
 
@@ -105,12 +133,21 @@ pub enum RecordingError {
     },
 
     /// A message on a JSON topic is not valid JSON, or does not decode into the requested type.
-    #[error("message on topic {topic:?} at log time {log_time_ns} ns is not valid JSON for its type: {source}")]
+    #[error(
+        "message {index} on topic {topic:?} (log time {log_time_ns} ns) is not valid JSON for \
+         its type{}: {source}",
+        if .path.is_empty() { String::new() } else { format!(" at {}", .path) }
+    )]
     InvalidJson {
         /// The topic.
         topic: String,
+        /// Number of the message in its topic, from 0, in file order.
+        index: usize,
         /// Log time of the message.
         log_time_ns: u64,
+        /// Path of the field at fault, e.g. `positions[3]` (empty when the text is not JSON at
+        /// all, or the fault is the message as a whole).
+        path: String,
         /// The parse or decode error.
         #[source]
         source: serde_json::Error,

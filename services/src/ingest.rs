@@ -1,6 +1,12 @@
 //! Ingest: a session file becomes a stored session with its skills, in one step — read and
-//! validated (CRC prevalidation, record limits), segmented into hand-independent skills, and
-//! stored atomically and idempotently by [`Store::ingest`].
+//! validated (CRC prevalidation, record limits, decompression bounded by the upload's length,
+//! contents checked), segmented into hand-independent skills, and stored atomically and
+//! idempotently by [`Store::ingest`].
+//!
+//! Memory: reading an upload of `N` bytes holds at most
+//! [`ReadLimits::decompressed_limit`]`(N)` (`128 N + 1 MiB`, at most 4 GiB) of decompressed
+//! and indexed data besides the upload itself and the contact and object samples decoded (see
+//! [`ReadLimits`]).
 
 use crate::error::RecordingError;
 use crate::mcap_io::ReadLimits;

@@ -3,6 +3,8 @@
 //! deterministic; imports of glove recordings; failures leave readable files.
 
 mod common;
+#[path = "../../tests/python/interpreter.rs"]
+mod interpreter;
 
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
@@ -207,18 +209,16 @@ fn the_icms_schemas_reject_a_message_missing_a_field() {
 fn the_python_reader_reads_every_message_of_a_simulated_session() {
     let (_, path, summary) = sphere_session();
     let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("../tests/python/read_mcap.py");
-    let output = match std::process::Command::new("python3")
+    // The interpreter with the reference reader (`scripts/test` sets it up; a plain
+    // `cargo test` without it skips this check, saying so).
+    let Some(python) = interpreter::python_with(&["mcap", "zstandard", "lz4"]) else {
+        return;
+    };
+    let output = std::process::Command::new(python)
         .arg(script)
         .arg(path)
         .output()
-    {
-        Ok(o) => o,
-        Err(e) if e.kind() == std::io::ErrorKind::NotFound => {
-            eprintln!("NOTE: python3 not found; skipping");
-            return;
-        }
-        Err(e) => panic!("{e}"),
-    };
+        .expect("running the Python MCAP reader");
     assert!(
         output.status.success(),
         "{}",
@@ -585,25 +585,28 @@ fn a_topic_left_undecoded_is_still_checked_for_valid_json() {
     for (topic, schema) in RAW_TOPICS.iter().zip(ICMS_SCHEMAS.iter()) {
         w.register_channel(topic, schema).unwrap();
     }
-    w.write(TOPIC_CONTACTS, 0, &Contacts::default()).unwrap();
-    w.write(TOPIC_OBJECT_STATE, 0, &ObjectState::default())
-        .unwrap();
-    w.write(TOPIC_GLOVE_JOINT_STATES, 0, &GloveJointStates::default())
-        .unwrap();
-    w.write_raw_json(TOPIC_GLOVE_FEEDBACK, 3, b"{\"names\": [")
+    for t in [0, MS] {
+        w.write(TOPIC_CONTACTS, t, &contacts()).unwrap();
+        w.write(TOPIC_OBJECT_STATE, t, &ObjectState::default())
+            .unwrap();
+        w.write(TOPIC_GLOVE_JOINT_STATES, t, &joint_states())
+            .unwrap();
+    }
+    w.write(TOPIC_GLOVE_FEEDBACK, 0, &feedback()).unwrap();
+    w.write_raw_json(TOPIC_GLOVE_FEEDBACK, MS, b"{\"names\": [")
         .unwrap();
     w.finish().unwrap();
     let bytes = std::fs::read(&path).unwrap();
     for topics in [DecodeTopics::ALL, DecodeTopics::SEGMENTATION] {
         let e = read_session_bytes_with(&bytes, "bad", &Default::default(), topics).unwrap_err();
         assert!(
-            matches!(&e, RecordingError::InvalidJson { topic, log_time_ns: 3, .. }
+            matches!(&e, RecordingError::InvalidJson { topic, log_time_ns: MS, .. }
                 if topic == TOPIC_GLOVE_FEEDBACK),
             "{topics:?}: {e}"
         );
     }
     // Decoding only what segmentation needs leaves the other raw topics empty.
-    let bytes = raw_topics_file(&one_message_each(), None);
+    let bytes = raw_topics_file(&two_ticks_each(), None);
     let s = read_session_bytes_with(
         &bytes,
         "good",
@@ -611,21 +614,73 @@ fn a_topic_left_undecoded_is_still_checked_for_valid_json() {
         DecodeTopics::SEGMENTATION,
     )
     .unwrap();
-    assert_eq!((s.contacts.len(), s.object.len()), (1, 1));
+    assert_eq!((s.contacts.len(), s.object.len()), (2, 2));
     assert_eq!((s.joint_states.len(), s.feedback.len()), (0, 0));
-    assert_eq!(s.message_counts[TOPIC_GLOVE_FEEDBACK], 1);
+    assert_eq!(s.message_counts[TOPIC_GLOVE_FEEDBACK], 2);
 }
 
-/// One message per raw topic, all at log time 0.
-fn one_message_each() -> Vec<(&'static str, u64)> {
-    RAW_TOPICS.iter().map(|t| (*t, 0)).collect()
+/// One millisecond (ns).
+const MS: u64 = 1_000_000;
+
+/// The DOFs of the small hand of the hand-made files below.
+const DOFS: [&str; 2] = ["j0", "j1"];
+/// Its fingertips.
+const TIPS: [&str; 2] = ["thumb", "index"];
+
+/// A `/glove/joint_states` message of the small hand.
+fn joint_states() -> GloveJointStates {
+    GloveJointStates {
+        names: DOFS.map(String::from).to_vec(),
+        positions: vec![0.1, 0.2],
+        velocities: vec![0.0; 2],
+        efforts: vec![0.0; 2],
+    }
 }
 
-/// A file with the four raw topics (one default message each) and a `session` metadata record
-/// whose `object` is `object`.
+/// A `/glove/feedback` message of the small hand.
+fn feedback() -> GloveFeedback {
+    GloveFeedback {
+        names: DOFS.map(String::from).to_vec(),
+        motor_positions: vec![0.1, 0.2],
+        motor_velocities: vec![0.0; 2],
+        feedback_torques: vec![0.0; 2],
+        fingers: TIPS
+            .iter()
+            .map(|name| FingerFeedback {
+                name: name.to_string(),
+                ..FingerFeedback::default()
+            })
+            .collect(),
+    }
+}
+
+/// A `/dfs/contacts` message of the small hand: no contact.
+fn contacts() -> Contacts {
+    Contacts {
+        n_contacts: 0,
+        fingers: TIPS
+            .iter()
+            .map(|name| FingerContact {
+                name: name.to_string(),
+                ..FingerContact::default()
+            })
+            .collect(),
+    }
+}
+
+/// Two ticks (0 and 1 ms) on every raw topic: the shortest session read.
+fn two_ticks_each() -> Vec<(&'static str, u64)> {
+    RAW_TOPICS
+        .iter()
+        .flat_map(|t| [(*t, 0), (*t, MS)])
+        .collect()
+}
+
+/// A file with the four raw topics (two ticks of the small hand) and a `session` metadata
+/// record whose `object` is `object`.
 fn file_with_session_object(object: &str) -> Vec<u8> {
     let meta = BTreeMap::from([("object".to_owned(), object.to_owned())]);
-    raw_topics_file(&one_message_each(), Some(meta))
+    raw_topics_file(&two_ticks_each(), Some(meta))
 }
 
 #[test]
@@ -660,8 +715,8 @@ fn a_session_whose_object_is_impossible_is_refused_naming_the_field() {
     }
 }
 
-/// A file with the four raw topics, one message each per `(topic, log time)` of `times`, and
-/// `session` metadata when given.
+/// A file with the four raw topics, one message of the small hand each per `(topic, log time)`
+/// of `times`, and `session` metadata when given.
 fn raw_topics_file(times: &[(&str, u64)], session: Option<BTreeMap<String, String>>) -> Vec<u8> {
     let dir = tempfile::tempdir().unwrap();
     let path = dir.path().join("times.mcap");
@@ -671,10 +726,10 @@ fn raw_topics_file(times: &[(&str, u64)], session: Option<BTreeMap<String, Strin
     }
     for &(topic, t) in times {
         match topic {
-            TOPIC_CONTACTS => w.write(topic, t, &Contacts::default()),
+            TOPIC_CONTACTS => w.write(topic, t, &contacts()),
             TOPIC_OBJECT_STATE => w.write(topic, t, &ObjectState::default()),
-            TOPIC_GLOVE_JOINT_STATES => w.write(topic, t, &GloveJointStates::default()),
-            _ => w.write(topic, t, &GloveFeedback::default()),
+            TOPIC_GLOVE_JOINT_STATES => w.write(topic, t, &joint_states()),
+            _ => w.write(topic, t, &feedback()),
         }
         .unwrap();
     }

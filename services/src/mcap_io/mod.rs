@@ -13,6 +13,7 @@
 mod bounded_zstd;
 mod finite;
 mod json_check;
+mod lengths;
 mod par;
 mod reader;
 mod salvage;
@@ -24,6 +25,7 @@ pub(crate) use reader::{read_raw_bytes, read_raw_file, MessageRef, RawSession, R
 pub use reader::{
     read_session_bytes, read_session_bytes_decoding, read_session_file, read_session_file_decoding,
     MetadataRecord, ReadLimits, RecordedMessage, RecordedSession, SchemaInfo, TopicRecording,
+    DEFAULT_MAX_EXPANSION,
 };
 pub use salvage::{salvage, SalvageReport};
 pub use schemas::JsonSchema;

@@ -4,6 +4,8 @@
 //! `{x, y, z, w}` (the Foxglove types are reused for them). The schemas are hand-written in
 //! `services/schemas/icms.*.json` and embedded.
 
+use std::borrow::Cow;
+
 use serde::{Deserialize, Serialize};
 
 use crate::foxglove::{Pose, Vector3};
@@ -188,4 +190,353 @@ pub struct GroundTruthPhase {
     pub start_ns: u64,
     /// End (exclusive), ns since the session start.
     pub end_ns: u64,
+}
+
+// ---------------------------------------------------------------------------------------------
+// Content checks: what a session read back must hold beyond valid JSON of the right shape.
+// ---------------------------------------------------------------------------------------------
+
+/// Most DOFs a session's messages may name (`names` of `/glove/joint_states` and
+/// `/glove/feedback`): as many as a hand may have links ([`dfs_core::hand::MAX_LINKS`], one
+/// joint each), well over the hands icms simulates (glove10, robot hands up to 30 DOFs).
+pub const MAX_SESSION_DOFS: usize = 64;
+
+/// Most fingertips a session's messages may list (`fingers` of `/dfs/contacts` and
+/// `/glove/feedback`): a hand has 1 to [`dfs_core::hand::MAX_TIPS`] of them; this leaves room
+/// for hands beyond that.
+pub const MAX_SESSION_FINGERS: usize = 16;
+
+/// How far from 1 the norm of a unit quantity may be: the orientation quaternions of
+/// `/object/state`, the contact normals of `/dfs/contacts` (of fingers touching). Ours are unit
+/// to 1e-6 or better; a quaternion printed to 2 decimals or through `f32` is within 1e-2, and
+/// readers normalise what they read. A zero quaternion or normal, or one scaled by a factor,
+/// is no rotation or direction at all and is refused (segmentation would average it into a
+/// NaN normal).
+pub const UNIT_NORM_TOLERANCE: f64 = 1e-2;
+
+// Every hand icms simulates or replays onto writes sessions it can read back.
+const _: () = assert!(
+    MAX_SESSION_DOFS >= dfs_core::hand::MAX_DOF && MAX_SESSION_FINGERS >= dfs_core::hand::MAX_TIPS
+);
+
+/// Shortest span of each raw topic (ns): two ticks at 1 kHz. A file of one message per topic
+/// lasts 0 ns: no phase, no skill, a session of nothing. Segmentation finds skills only in far
+/// longer sessions (a grasp holds for tenths of a second), but a short session is a session.
+pub const MIN_SESSION_NS: u64 = 1_000_000;
+
+/// Most metadata records in a session file (ours has 2, a replay's 3).
+pub const MAX_METADATA_RECORDS: usize = 64;
+/// Most entries in one metadata record (our `session` record has about 15).
+pub const MAX_METADATA_ENTRIES: usize = 256;
+/// Longest metadata key, bytes.
+pub const MAX_METADATA_KEY_BYTES: usize = 256;
+/// Longest metadata value, bytes: 64 KiB. The longest ones we write grow with the scenario's
+/// script: a script of 256 tasks (the most a scenario may have) with every number written to
+/// full precision makes `session.scenario_json` 35 kB and `ground_truth.phases` 16 kB; a
+/// built-in scenario's are under 2 kB.
+pub const MAX_METADATA_VALUE_BYTES: usize = 64 * 1024;
+/// Most bytes of record names, keys and values in all the metadata records of a file:
+/// 256 KiB (the store keeps the `session` record and lists it with every page of sessions).
+pub const MAX_METADATA_BYTES: usize = 256 * 1024;
+
+/// The session's DOF and fingertip names, as its first messages give them: every message must
+/// name the same ones, in the same order (a session records one hand).
+#[derive(Debug, Clone, Default, PartialEq, Eq)]
+pub(crate) struct TickReference {
+    /// `names` of `/glove/joint_states` message 0.
+    pub dof_names: Option<Vec<String>>,
+    /// Finger names of `/dfs/contacts` message 0.
+    pub finger_names: Option<Vec<String>>,
+}
+
+/// A raw message whose content can be checked beyond its JSON shape. The error is the detail,
+/// naming the field; the caller names the topic and the message.
+pub(crate) trait TickContent {
+    /// `Ok` if the message is consistent in itself and with the session's `reference`.
+    fn check(&self, reference: &TickReference) -> Result<(), String>;
+}
+
+/// `names` has 1 to [`MAX_SESSION_DOFS`] entries, each array of `arrays` one per name, and the
+/// names are the session's (from `/glove/joint_states` message 0).
+fn check_dofs<'n>(
+    names: impl ExactSizeIterator<Item = &'n str> + Clone,
+    arrays: [(&str, usize); 3],
+    reference: &TickReference,
+) -> Result<(), String> {
+    let n = names.len();
+    if n == 0 || n > MAX_SESSION_DOFS {
+        return Err(format!(
+            "names has {n} entries; a hand has 1 to {MAX_SESSION_DOFS} DOFs"
+        ));
+    }
+    for (field, len) in arrays {
+        if len != n {
+            return Err(format!("{field} has {len} elements for {n} names"));
+        }
+    }
+    if let Some(expected) = &reference.dof_names {
+        same_names(
+            "names",
+            names,
+            expected,
+            "the DOF names of /glove/joint_states message 0",
+        )?;
+    }
+    Ok(())
+}
+
+/// `fingers` has 1 to [`MAX_SESSION_FINGERS`] entries, named as the session's (from
+/// `/dfs/contacts` message 0).
+fn check_fingers<'n>(
+    names: impl ExactSizeIterator<Item = &'n str> + Clone,
+    reference: &TickReference,
+) -> Result<(), String> {
+    let n = names.len();
+    if n == 0 || n > MAX_SESSION_FINGERS {
+        return Err(format!(
+            "fingers has {n} entries; a hand has 1 to {MAX_SESSION_FINGERS} fingertips"
+        ));
+    }
+    if let Some(expected) = &reference.finger_names {
+        same_names(
+            "fingers",
+            names,
+            expected,
+            "the fingertips of /dfs/contacts message 0",
+        )?;
+    }
+    Ok(())
+}
+
+/// `names` (the entries of `field`) are `expected`, in order.
+fn same_names<'n>(
+    field: &str,
+    names: impl ExactSizeIterator<Item = &'n str>,
+    expected: &[String],
+    what: &str,
+) -> Result<(), String> {
+    if names.len() != expected.len() {
+        return Err(format!(
+            "{field} has {} entries, {what} are {}: a session records one hand",
+            names.len(),
+            expected.len()
+        ));
+    }
+    for (i, (name, want)) in names.zip(expected).enumerate() {
+        if name != want {
+            let entry = if field == "fingers" {
+                format!("fingers[{i}].name")
+            } else {
+                format!("{field}[{i}]")
+            };
+            return Err(format!(
+                "{entry} is {name:?}, not {want:?} as in {what}: a session records one hand"
+            ));
+        }
+    }
+    Ok(())
+}
+
+/// The quaternion at `field` is a rotation: its norm is within [`UNIT_NORM_TOLERANCE`]
+/// of 1.
+fn check_unit(q: &crate::foxglove::Quaternion, field: &str) -> Result<(), String> {
+    let norm = (q.x * q.x + q.y * q.y + q.z * q.z + q.w * q.w).sqrt();
+    if (norm - 1.0).abs() > UNIT_NORM_TOLERANCE {
+        return Err(format!(
+            "{field} has norm {norm:.4}; an orientation is a unit quaternion (norm within \
+             {UNIT_NORM_TOLERANCE} of 1)"
+        ));
+    }
+    Ok(())
+}
+
+/// The contact normal of finger `i`, touching, is a direction: its norm is within
+/// [`UNIT_NORM_TOLERANCE`] of 1.
+fn check_normal(v: &Vector3, i: usize) -> Result<(), String> {
+    let norm = (v.x * v.x + v.y * v.y + v.z * v.z).sqrt();
+    if (norm - 1.0).abs() > UNIT_NORM_TOLERANCE {
+        return Err(format!(
+            "fingers[{i}].normal_b has norm {norm:.4} while the finger touches; a contact \
+             normal is a unit vector (norm within {UNIT_NORM_TOLERANCE} of 1)"
+        ));
+    }
+    Ok(())
+}
+
+impl TickContent for GloveJointStates {
+    fn check(&self, reference: &TickReference) -> Result<(), String> {
+        check_dofs(
+            self.names.iter().map(String::as_str),
+            [
+                ("positions", self.positions.len()),
+                ("velocities", self.velocities.len()),
+                ("efforts", self.efforts.len()),
+            ],
+            reference,
+        )
+    }
+}
+
+impl TickContent for GloveFeedback {
+    fn check(&self, reference: &TickReference) -> Result<(), String> {
+        check_dofs(
+            self.names.iter().map(String::as_str),
+            [
+                ("motor_positions", self.motor_positions.len()),
+                ("motor_velocities", self.motor_velocities.len()),
+                ("feedback_torques", self.feedback_torques.len()),
+            ],
+            reference,
+        )?;
+        check_fingers(self.fingers.iter().map(|f| f.name.as_str()), reference)
+    }
+}
+
+impl TickContent for Contacts {
+    fn check(&self, reference: &TickReference) -> Result<(), String> {
+        check_fingers(self.fingers.iter().map(|f| f.name.as_str()), reference)?;
+        for (i, f) in self.fingers.iter().enumerate() {
+            if f.touching {
+                check_normal(&f.normal_b, i)?;
+            }
+        }
+        Ok(())
+    }
+}
+
+impl TickContent for ObjectState {
+    fn check(&self, _: &TickReference) -> Result<(), String> {
+        check_unit(&self.pose.orientation, "pose.orientation")?;
+        check_unit(&self.pose_in_hand.orientation, "pose_in_hand.orientation")
+    }
+}
+
+/// A name as read: borrowed from the message where the JSON has no escapes.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub(crate) struct Name<'a>(pub Cow<'a, str>);
+
+impl<'de: 'a, 'a> Deserialize<'de> for Name<'a> {
+    fn deserialize<D: serde::Deserializer<'de>>(d: D) -> Result<Self, D::Error> {
+        struct V;
+        impl<'de> serde::de::Visitor<'de> for V {
+            type Value = Name<'de>;
+            fn expecting(&self, f: &mut std::fmt::Formatter) -> std::fmt::Result {
+                f.write_str("a string")
+            }
+            fn visit_borrowed_str<E: serde::de::Error>(
+                self,
+                v: &'de str,
+            ) -> Result<Self::Value, E> {
+                Ok(Name(Cow::Borrowed(v)))
+            }
+            fn visit_str<E: serde::de::Error>(self, v: &str) -> Result<Self::Value, E> {
+                Ok(Name(Cow::Owned(v.to_owned())))
+            }
+            fn visit_string<E: serde::de::Error>(self, v: String) -> Result<Self::Value, E> {
+                Ok(Name(Cow::Owned(v)))
+            }
+        }
+        d.deserialize_str(V)
+    }
+}
+
+/// An array of numbers, each parsed as a (necessarily finite) `f64` and counted, not kept.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(crate) struct Numbers(pub usize);
+
+impl<'de> Deserialize<'de> for Numbers {
+    fn deserialize<D: serde::Deserializer<'de>>(d: D) -> Result<Self, D::Error> {
+        struct V;
+        impl<'de> serde::de::Visitor<'de> for V {
+            type Value = Numbers;
+            fn expecting(&self, f: &mut std::fmt::Formatter) -> std::fmt::Result {
+                f.write_str("a sequence")
+            }
+            fn visit_seq<A: serde::de::SeqAccess<'de>>(
+                self,
+                mut seq: A,
+            ) -> Result<Numbers, A::Error> {
+                let mut n = 0;
+                while seq.next_element::<f64>()?.is_some() {
+                    n += 1;
+                }
+                Ok(Numbers(n))
+            }
+        }
+        d.deserialize_seq(V)
+    }
+}
+
+/// [`GloveJointStates`] as checked when it is not decoded: the same JSON accepted, the names
+/// borrowed and the arrays counted (a third of the cost of decoding it).
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub(crate) struct GloveJointStatesShape<'a> {
+    #[serde(borrow)]
+    names: Vec<Name<'a>>,
+    positions: Numbers,
+    velocities: Numbers,
+    efforts: Numbers,
+}
+
+/// [`FingerFeedback`] as checked when it is not decoded.
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct FingerFeedbackShape<'a> {
+    #[serde(borrow)]
+    name: Name<'a>,
+    // Parsed for their numbers, not kept.
+    #[serde(default, rename = "feedback_force_world")]
+    _feedback_force_world: Vector3,
+    #[serde(rename = "tip_force_world")]
+    _tip_force_world: Vector3,
+}
+
+/// [`GloveFeedback`] as checked when it is not decoded.
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub(crate) struct GloveFeedbackShape<'a> {
+    #[serde(borrow)]
+    names: Vec<Name<'a>>,
+    motor_positions: Numbers,
+    motor_velocities: Numbers,
+    feedback_torques: Numbers,
+    #[serde(borrow)]
+    fingers: Vec<FingerFeedbackShape<'a>>,
+}
+
+impl GloveJointStatesShape<'_> {
+    /// The DOF names.
+    pub(crate) fn names(&self) -> Vec<String> {
+        self.names.iter().map(|n| n.0.to_string()).collect()
+    }
+}
+
+impl TickContent for GloveJointStatesShape<'_> {
+    fn check(&self, reference: &TickReference) -> Result<(), String> {
+        check_dofs(
+            self.names.iter().map(|n| &*n.0),
+            [
+                ("positions", self.positions.0),
+                ("velocities", self.velocities.0),
+                ("efforts", self.efforts.0),
+            ],
+            reference,
+        )
+    }
+}
+
+impl TickContent for GloveFeedbackShape<'_> {
+    fn check(&self, reference: &TickReference) -> Result<(), String> {
+        check_dofs(
+            self.names.iter().map(|n| &*n.0),
+            [
+                ("motor_positions", self.motor_positions.0),
+                ("motor_velocities", self.motor_velocities.0),
+                ("feedback_torques", self.feedback_torques.0),
+            ],
+            reference,
+        )?;
+        check_fingers(self.fingers.iter().map(|f| &*f.name.0), reference)
+    }
 }

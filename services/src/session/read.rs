@@ -3,6 +3,8 @@
 use std::collections::BTreeMap;
 use std::path::Path;
 
+use serde::Deserialize;
+
 use super::messages::*;
 use super::*;
 use crate::error::{RecordingError, Result};
@@ -108,10 +110,10 @@ impl Session {
     }
 }
 
-/// Which raw topics a read decodes into the [`Session`]. A topic left out is still checked
-/// (present, with its schema, every message valid JSON) but its list stays empty: segmentation
-/// needs only contacts and object state, and decoding all four topics is most of the cost of
-/// reading a session.
+/// Which raw topics a read decodes into the [`Session`]. A topic left out is checked as one
+/// kept (present, with its schema, every message of its type, its content consistent: the same
+/// files are refused either way) but its list stays empty: segmentation needs only contacts and
+/// object state, and keeping all four topics is most of the cost of reading a session.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct DecodeTopics {
     /// `/glove/joint_states`.
@@ -152,10 +154,32 @@ pub fn read_session(path: impl AsRef<Path>) -> Result<Session> {
     read_session_with_limits(path, &ReadLimits::default())
 }
 
-/// Reads a session file safely (CRC prevalidation, record length limit). The four raw topics
-/// must be present with their `icms.*` schemas ([`RecordingError::MissingTopic`],
+/// Reads a session file safely (CRC prevalidation, record length limit, decompression bounded
+/// by the file's length: [`ReadLimits::decompressed_limit`]). The four raw topics must be
+/// present with their `icms.*` schemas ([`RecordingError::MissingTopic`],
 /// [`RecordingError::UnknownSchema`] otherwise); Foxglove topics, if present, must carry their
 /// official schema names. A malformed `ground_truth` record is [`RecordingError::InvalidInput`].
+///
+/// The content is checked too, each error naming the topic, the message's number and log time
+/// and the field ([`RecordingError::InvalidInput`], or [`RecordingError::InvalidJson`] for a
+/// message not of its type, a number beyond a finite `f64` included):
+///
+/// - every raw topic spans at least [`MIN_SESSION_NS`] (two ticks);
+/// - `/glove/joint_states` and `/glove/feedback`: 1 to [`MAX_SESSION_DOFS`] `names`, each
+///   array one element per name, the names those of `/glove/joint_states` message 0;
+/// - `/dfs/contacts` and `/glove/feedback`: 1 to [`MAX_SESSION_FINGERS`] `fingers`, named as in
+///   `/dfs/contacts` message 0;
+/// - `/dfs/contacts`: the normal of every finger touching a unit vector, and `/object/state`:
+///   `pose.orientation` and `pose_in_hand.orientation` unit quaternions (within
+///   [`UNIT_NORM_TOLERANCE`]);
+/// - metadata: at most one `session`, `ground_truth` and `replay` record, at most
+///   [`MAX_METADATA_RECORDS`] records, [`MAX_METADATA_ENTRIES`] entries per record, keys of
+///   [`MAX_METADATA_KEY_BYTES`], values of [`MAX_METADATA_VALUE_BYTES`],
+///   [`MAX_METADATA_BYTES`] in all.
+///
+/// Not checked, being harmless: the Foxglove topics' content (for viewers only; never decoded
+/// here), `n_contacts` (segmentation counts the fingers in contact itself), the normal of a
+/// finger not touching (segmentation ignores it).
 pub fn read_session_with_limits(path: impl AsRef<Path>, limits: &ReadLimits) -> Result<Session> {
     read_session_file_with(path, limits, DecodeTopics::ALL)
 }
@@ -217,14 +241,147 @@ fn check_session_object(metadata: &BTreeMap<String, String>, name: &str) -> Resu
     Ok(())
 }
 
-/// What a job does with its block.
+/// What a job does with its block: checks a topic's JSON, or decodes a raw topic's messages
+/// and checks their content, keeping the samples (`true`) or not.
 #[derive(Clone, Copy)]
 enum Job {
     Check,
-    JointStates,
-    Feedback,
-    Contacts,
-    Object,
+    JointStates(bool),
+    Feedback(bool),
+    Contacts(bool),
+    Object(bool),
+}
+
+/// The metadata records are few and small, and name the session once: at most
+/// [`MAX_METADATA_RECORDS`] records of at most [`MAX_METADATA_ENTRIES`] entries, keys of at
+/// most [`MAX_METADATA_KEY_BYTES`], values of at most [`MAX_METADATA_VALUE_BYTES`], at most
+/// [`MAX_METADATA_BYTES`] in all, and one record at most named `session`, `ground_truth` or
+/// `replay` (a second one would be ignored: which one describes the session?). The store keeps
+/// the `session` record with the session and lists it with every page of sessions.
+fn check_metadata(raw: &RawSession, name: &str) -> Result<()> {
+    let invalid = |location: String, detail: String| RecordingError::InvalidInput {
+        location: format!("{name}: metadata {location}"),
+        detail,
+    };
+    let records = &raw.metadata;
+    if records.len() > MAX_METADATA_RECORDS {
+        return Err(invalid(
+            "records".into(),
+            format!(
+                "the file has {} metadata records; a session has at most {MAX_METADATA_RECORDS}",
+                records.len()
+            ),
+        ));
+    }
+    for unique in [SESSION_METADATA, GROUND_TRUTH_METADATA, REPLAY_METADATA] {
+        let n = records.iter().filter(|r| r.name == unique).count();
+        if n > 1 {
+            return Err(invalid(
+                unique.to_owned(),
+                format!(
+                    "the file has {n} `{unique}` metadata records; a session has one at most \
+                     (which would describe it?)"
+                ),
+            ));
+        }
+    }
+    let mut total = 0usize;
+    for record in records {
+        let r = &record.name;
+        if record.entries.len() > MAX_METADATA_ENTRIES {
+            return Err(invalid(
+                r.clone(),
+                format!(
+                    "has {} entries; a metadata record has at most {MAX_METADATA_ENTRIES}",
+                    record.entries.len()
+                ),
+            ));
+        }
+        total += r.len();
+        for (key, value) in &record.entries {
+            if key.len() > MAX_METADATA_KEY_BYTES {
+                let shown: String = key.chars().take(40).collect();
+                return Err(invalid(
+                    format!("{r}.{shown}…"),
+                    format!(
+                        "the key is {} bytes long; a key has at most {MAX_METADATA_KEY_BYTES}",
+                        key.len()
+                    ),
+                ));
+            }
+            if value.len() > MAX_METADATA_VALUE_BYTES {
+                return Err(invalid(
+                    format!("{r}.{key}"),
+                    format!(
+                        "the value is {} bytes long; a metadata value has at most {} bytes",
+                        value.len(),
+                        MAX_METADATA_VALUE_BYTES
+                    ),
+                ));
+            }
+            total += key.len() + value.len();
+        }
+        if total > MAX_METADATA_BYTES {
+            return Err(invalid(
+                r.clone(),
+                format!(
+                    "the metadata records hold more than {MAX_METADATA_BYTES} bytes of names, \
+                     keys and values; a session's metadata holds at most that"
+                ),
+            ));
+        }
+    }
+    Ok(())
+}
+
+/// The session's DOF and fingertip names, from the first message of `/glove/joint_states` and
+/// of `/dfs/contacts` (`None` where that message does not decode: its own check reports it).
+fn tick_reference(raw: &RawSession) -> TickReference {
+    let first = |topic: &str| {
+        raw.topics
+            .get(topic)
+            .and_then(|t| t.messages.first())
+            .map(|m| raw.data(m))
+    };
+    // Only a list that passes its own check is a reference (an empty one would make every
+    // other message's list look wrong, before the culprit's own error).
+    TickReference {
+        dof_names: first(TOPIC_GLOVE_JOINT_STATES)
+            .and_then(|d| serde_json::from_slice::<GloveJointStatesShape>(d).ok())
+            .map(|m| m.names())
+            .filter(|n| (1..=MAX_SESSION_DOFS).contains(&n.len())),
+        finger_names: first(TOPIC_CONTACTS)
+            .and_then(|d| serde_json::from_slice::<Contacts>(d).ok())
+            .map(|m| m.fingers.into_iter().map(|f| f.name).collect::<Vec<_>>())
+            .filter(|n| (1..=MAX_SESSION_FINGERS).contains(&n.len())),
+    }
+}
+
+/// Decodes a block of a raw topic's messages (`first`: the index of its first message in the
+/// topic) and checks each one's content against `reference`, keeping the samples if `keep`.
+/// The error names the topic, the message's index and log time, and the field.
+fn raw_block<'s, T: Deserialize<'s> + TickContent>(
+    raw: &'s RawSession,
+    t: &RawTopic,
+    first: usize,
+    messages: &[MessageRef],
+    reference: &TickReference,
+    keep: bool,
+) -> Result<Vec<(u64, T)>> {
+    let mut out = Vec::with_capacity(if keep { messages.len() } else { 0 });
+    raw.decode_each(t, first, messages, |i, time, message: T| {
+        message
+            .check(reference)
+            .map_err(|detail| RecordingError::InvalidInput {
+                location: format!("topic {} message {i} (log time {time} ns)", t.topic),
+                detail,
+            })?;
+        if keep {
+            out.push((time, message));
+        }
+        Ok(())
+    })?;
+    Ok(out)
 }
 
 fn from_raw(raw: &RawSession, name: &str, topics: DecodeTopics) -> Result<Session> {
@@ -238,6 +395,7 @@ fn from_raw(raw: &RawSession, name: &str, topics: DecodeTopics) -> Result<Sessio
             raw.require_topic(topic, &schema.name)?;
         }
     }
+    check_metadata(raw, name)?;
     let metadata = raw.metadata(SESSION_METADATA).cloned().unwrap_or_default();
     if raw.metadata(REPLAY_METADATA).is_none()
         && metadata.get("source").is_none_or(|s| s != "replay")
@@ -254,33 +412,33 @@ fn from_raw(raw: &RawSession, name: &str, topics: DecodeTopics) -> Result<Sessio
             detail: e.to_string(),
         })?,
     };
-    // The raw topics must be there with their schemas, decoded or not.
     let t = topics;
+    // The raw topics must be there with their schemas; their messages are decoded and their
+    // content checked whether they are kept or not (a topic not kept is read into borrowed
+    // shapes, at a fraction of the cost).
     let raw_topics = [
         (
             TOPIC_GLOVE_JOINT_STATES,
             &GLOVE_JOINT_STATES_SCHEMA,
-            t.joint_states,
-            Job::JointStates,
+            Job::JointStates(t.joint_states),
         ),
         (
             TOPIC_GLOVE_FEEDBACK,
             &GLOVE_FEEDBACK_SCHEMA,
-            t.feedback,
-            Job::Feedback,
+            Job::Feedback(t.feedback),
         ),
-        (TOPIC_CONTACTS, &CONTACTS_SCHEMA, t.contacts, Job::Contacts),
+        (TOPIC_CONTACTS, &CONTACTS_SCHEMA, Job::Contacts(t.contacts)),
         (
             TOPIC_OBJECT_STATE,
             &OBJECT_STATE_SCHEMA,
-            t.object,
-            Job::Object,
+            Job::Object(t.object),
         ),
     ];
-    for (topic, schema, _, _) in &raw_topics {
+    for (topic, schema, _) in &raw_topics {
         raw.require_topic(topic, &schema.name)?;
     }
     check_raw_log_times(raw)?;
+    let reference = tick_reference(raw);
     // Every JSON message is checked or decoded, in blocks spread over the cores: the other
     // topics first (their errors come first, as in file order they would), then the raw ones.
     let mut plan: Vec<(&RawTopic, Job)> = raw
@@ -289,28 +447,52 @@ fn from_raw(raw: &RawSession, name: &str, topics: DecodeTopics) -> Result<Sessio
         .filter(|t| t.is_json() && !RAW_TOPICS.contains(&t.topic.as_str()))
         .map(|t| (t, Job::Check))
         .collect();
-    for (topic, _, decode, job) in raw_topics {
-        plan.push((&raw.topics[topic], if decode { job } else { Job::Check }));
+    for (topic, _, job) in raw_topics {
+        plan.push((&raw.topics[topic], job));
     }
-    let jobs: Vec<(&RawTopic, &[MessageRef], Job)> = plan
+    let jobs: Vec<(&RawTopic, usize, &[MessageRef], Job)> = plan
         .iter()
         .flat_map(|&(t, job)| {
             t.messages
                 .chunks(MESSAGES_PER_JOB)
-                .map(move |m| (t, m, job))
+                .enumerate()
+                .map(move |(k, m)| (t, k * MESSAGES_PER_JOB, m, job))
         })
         .collect();
+    let r = &reference;
     let done = par_map(jobs.len(), |i| -> Result<Decoded> {
-        let (t, m, job) = jobs[i];
+        let (t, first, m, job) = jobs[i];
         Ok(match job {
             Job::Check => {
-                raw.check_json_of(t, m)?;
+                raw.check_json_of(t, first, m)?;
                 Decoded::Checked
             }
-            Job::JointStates => Decoded::JointStates(raw.decode_of(t, m)?),
-            Job::Feedback => Decoded::Feedback(raw.decode_of(t, m)?),
-            Job::Contacts => Decoded::Contacts(raw.decode_of(t, m)?),
-            Job::Object => Decoded::Object(raw.decode_of(t, m)?),
+            Job::JointStates(true) => Decoded::JointStates(raw_block(raw, t, first, m, r, true)?),
+            Job::JointStates(false) => {
+                raw_block::<GloveJointStatesShape>(raw, t, first, m, r, false)?;
+                Decoded::Checked
+            }
+            Job::Feedback(true) => Decoded::Feedback(raw_block(raw, t, first, m, r, true)?),
+            Job::Feedback(false) => {
+                raw_block::<GloveFeedbackShape>(raw, t, first, m, r, false)?;
+                Decoded::Checked
+            }
+            Job::Contacts(keep) => {
+                let v: Vec<(u64, Contacts)> = raw_block(raw, t, first, m, r, keep)?;
+                if keep {
+                    Decoded::Contacts(v)
+                } else {
+                    Decoded::Checked
+                }
+            }
+            Job::Object(keep) => {
+                let v: Vec<(u64, messages::ObjectState)> = raw_block(raw, t, first, m, r, keep)?;
+                if keep {
+                    Decoded::Object(v)
+                } else {
+                    Decoded::Checked
+                }
+            }
         })
     });
     let mut session = Session {
@@ -342,7 +524,8 @@ fn from_raw(raw: &RawSession, name: &str, topics: DecodeTopics) -> Result<Sessio
 pub const RAW_TOPIC_SKEW_NS: u64 = 100_000_000;
 
 /// The raw topics are tick streams recorded together: each has messages, is in time order,
-/// advances (more than one message do not share one log time), starts and ends within
+/// advances (more than one message do not share one log time), spans at least
+/// [`MIN_SESSION_NS`] (two ticks), starts and ends within
 /// [`RAW_TOPIC_SKEW_NS`] of the others, and lies within [`MAX_SESSION_NS`] of the session's
 /// first raw message; every log time fits the store's signed 64-bit columns. The error names
 /// the topic, the message and its log time (callers add the file's name).
@@ -397,10 +580,23 @@ fn check_raw_log_times(raw: &RawSession) -> Result<()> {
     for topic in RAW_TOPICS {
         let (first, last) = span(topic);
         let n = raw.topics[topic].messages.len();
-        let detail = if n > 1 && first == last {
+        let detail = if n == 1 {
+            format!(
+                "has one message: a session lasts at least {} ms (two ticks at 1 kHz) on every \
+                 raw topic",
+                MIN_SESSION_NS / 1_000_000
+            )
+        } else if first == last {
             format!(
                 "all {n} messages have the same log time ({first} ns): a raw topic is a tick \
                  stream, one message per 1 ms tick"
+            )
+        } else if last - first < MIN_SESSION_NS {
+            format!(
+                "spans {} ns: a session lasts at least {} ms (two ticks at 1 kHz) on every raw \
+                 topic",
+                last - first,
+                MIN_SESSION_NS / 1_000_000
             )
         } else if first - t0 > RAW_TOPIC_SKEW_NS {
             format!(
