@@ -11,7 +11,7 @@ use dfs_core::hand::{builtin_hand, builtin_spec, thumb_of, HandModel, HandSpec};
 use dfs_core::math::Vector;
 use dfs_core::object::Shape;
 use dfs_core::replay::{
-    run_with, ReplayParams, ReplayReport, SkillContact, SkillKeyPose, SkillSpec,
+    run_with_stop, ReplayParams, ReplayReport, SkillContact, SkillKeyPose, SkillSpec,
 };
 use dfs_core::scenario::Phase;
 use dfs_core::{DfsError, Stop};
@@ -323,8 +323,15 @@ pub fn replay_skill_until(
 ) -> Result<ReplayReport> {
     let location = format!("hand {:?}", hand.model.name);
     let Some(out) = out else {
-        return dfs_core::replay::run(&hand.model, hand.thumb, skill, params)
-            .map_err(|e| run_error(location, e));
+        return dfs_core::replay::run_with_stop(
+            &hand.model,
+            hand.thumb,
+            skill,
+            params,
+            stop,
+            |_| {},
+        )
+        .map_err(|e| run_error(location, e));
     };
     let object = dfs_core::object::RigidObject::new(skill.shape, skill.mass)
         .map_err(|e| invalid("skill.object", e.to_string()))?;
@@ -338,7 +345,7 @@ pub fn replay_skill_until(
     };
     let mut recorder = SessionRecorder::create(out, &hand.model, &object, &info)?;
     let mut failed: Option<RecordingError> = None;
-    let report = run_with(&hand.model, hand.thumb, skill, params, |tick| {
+    let report = run_with_stop(&hand.model, hand.thumb, skill, params, stop, |tick| {
         if failed.is_some() {
             return;
         }

@@ -24,6 +24,11 @@ use super::state::AppState;
 /// is about 50 MB of MCAP).
 pub const MAX_SIMULATED_S: f64 = 120.0;
 
+/// Shortest session a simulation request may ask for, simulated seconds: the shortest task of
+/// a scenario ([`dfs_core::scenario::MIN_TASK_S`]). A session of a tick or two does not read
+/// back as a session (fuzzing found `duration: 1e-8` answered 500).
+pub const MIN_SIMULATED_S: f64 = dfs_core::scenario::MIN_TASK_S;
+
 /// A simulation to run.
 #[derive(Debug, Clone, Deserialize, ToSchema)]
 #[serde(
@@ -39,9 +44,9 @@ pub struct SimulationRequest {
     /// Seed of the operator's tremor and sensor noise. Default: the scenario object's seed, or
     /// 0 for a built-in scenario.
     pub seed: Option<u64>,
-    /// Simulated seconds: cuts the script short or extends its last phase, at most 120.
+    /// Simulated seconds: cuts the script short or extends its last phase, 0.05 to 120.
     /// Default: the script's length.
-    #[schema(exclusive_minimum = 0.0, maximum = 120.0)]
+    #[schema(minimum = 0.05, maximum = 120.0)]
     pub duration: Option<f64>,
 }
 
@@ -177,10 +182,10 @@ fn scenario_of(req: &SimulationRequest) -> Result<Scenario, Problem> {
         .resolve()
         .map_err(|e| Problem::unprocessable(format!("scenario: {e}")))?;
     let length = req.duration.unwrap_or_else(|| scenario.duration());
-    if !(length.is_finite() && length > 0.0 && length <= MAX_SIMULATED_S) {
+    if !(length.is_finite() && (MIN_SIMULATED_S..=MAX_SIMULATED_S).contains(&length)) {
         return Err(Problem::unprocessable(format!(
             "duration: the session would be {length} s long; the server simulates sessions of \
-             (0, {MAX_SIMULATED_S}] s"
+             {MIN_SIMULATED_S} to {MAX_SIMULATED_S} s"
         )));
     }
     Ok(scenario)
@@ -281,6 +286,19 @@ mod tests {
             let back: Scenario = serde_json::from_value(serde_json::to_value(doc).unwrap())
                 .unwrap_or_else(|e| panic!("{name}: {e}"));
             assert_eq!(serde_json::to_value(back).unwrap(), s);
+        }
+    }
+
+    #[test]
+    fn a_duration_of_a_few_ticks_is_refused_not_simulated() {
+        for d in [1e-8, 0.001, 0.049] {
+            let req: SimulationRequest = serde_json::from_value(
+                serde_json::json!({"scenario": "two-grasps", "duration": d}),
+            )
+            .unwrap();
+            let p = scenario_of(&req).unwrap_err();
+            assert_eq!(p.status.as_u16(), 422);
+            assert!(p.detail.contains("0.05 to 120"), "{}", p.detail);
         }
     }
 

@@ -151,7 +151,10 @@ impl AppState {
         what: &str,
     ) -> Result<OwnedSemaphorePermit, Problem> {
         let wait = self.inner.queue_wait;
+        // Biased: a free turn is taken even once shutdown began (a request already in flight
+        // finishes, as graceful shutdown promises); only waiting ends at shutdown.
         tokio::select! {
+            biased;
             p = tokio::time::timeout(wait, Arc::clone(slots).acquire_owned()) => match p {
                 Ok(Ok(p)) => Ok(p),
                 Ok(Err(_)) => Err(Problem::unavailable("the server is shutting down")),
