@@ -929,6 +929,11 @@ impl Simulation {
     }
 
     /// Runs one tick. Returns `Ok(false)` when the script is over.
+    ///
+    /// A tick is a few µs of CPU, but the one that begins an `approach` task plans the grasp
+    /// ([`plan_grasp`]: 15-30 ms with glove10); a script has at most
+    /// [`MAX_TASKS`](crate::scenario::MAX_TASKS) tasks. Whoever drives the loop looks at its
+    /// [`Stop`](crate::Stop) between steps.
     pub fn step(&mut self) -> Result<bool> {
         if self.step >= self.n_steps {
             return Ok(false);
