@@ -276,6 +276,40 @@ fn simulate_rejects_bad_scenario_files_naming_the_field() {
 }
 
 #[test]
+fn simulate_refuses_a_duration_shorter_than_the_shortest_phase() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("short.mcap");
+    for d in ["0.001", "0.049", "0", "-1", "3601"] {
+        let (code, _, err) = icms(&[
+            "simulate",
+            "--scenario",
+            "sphere-lift",
+            "--duration",
+            d,
+            "--out",
+            p(&out),
+        ]);
+        assert_ne!(code, 0, "--duration {d}");
+        assert!(
+            err.contains("duration") && err.contains("0.05 to 3600 s"),
+            "{d}: {err}"
+        );
+        assert!(!out.exists(), "--duration {d} left a file");
+    }
+    let (code, _, err) = icms(&[
+        "simulate",
+        "--scenario",
+        "sphere-lift",
+        "--duration",
+        "0.05",
+        "--out",
+        p(&out),
+    ]);
+    assert_eq!(code, 0, "{err}");
+    assert_eq!(read_session(&out).unwrap().ticks(), 50);
+}
+
+#[test]
 fn simulate_names_the_unknown_scenario() {
     let (code, _, err) = icms(&[
         "simulate",

@@ -27,7 +27,7 @@ use crate::hand::ik::{solve_tips, IkParams};
 use crate::hand::{HandModel, Joint, JointDrive, JointKind, Kinematics, Link, MAX_DOF, MAX_TIPS};
 use crate::math::{Isometry, Point, Real, Rotation, Vector};
 use crate::object::{ObjectState, RigidObject, Shape};
-use crate::scenario::{GraspStyle, Phase, ResolvedTask, Scenario};
+use crate::scenario::{GraspStyle, Phase, ResolvedTask, Scenario, MAX_SCRIPT_S, MIN_TASK_S};
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use rand_distr::{Distribution, Normal};
@@ -782,10 +782,12 @@ impl Simulation {
         }
         let mut n_steps = t / TICK_NS;
         if let Some(d) = duration_s {
-            if !(d.is_finite() && d > 0.0 && d <= 3600.0) {
+            // A session shorter than the shortest phase holds no motion to segment (and one of
+            // a tick or two would not read back as a session).
+            if !(d.is_finite() && (MIN_TASK_S..=MAX_SCRIPT_S).contains(&d)) {
                 return Err(DfsError::invalid(
                     "duration",
-                    format!("must be in (0, 3600] s, got {d}"),
+                    format!("must be {MIN_TASK_S} to {MAX_SCRIPT_S} s, got {d}"),
                 ));
             }
             n_steps = ((d * 1e9).round() as u64 / TICK_NS).max(1);

@@ -8,7 +8,8 @@
 //! choose the skill id of a replay (flags 0: the stored skill, for 1 input in 32: a replay is
 //! long work)
 //! and, rarely, a wrong content type. Simulation bodies that parse get a short `duration`
-//! (at most 30 ms of simulated time) so that an input stays short; the validation of
+//! (at most 60 ms of simulated time, the shortest accepted being 50 ms, or a refused one
+//! just under it) so that an input stays short; the validation of
 //! durations is fuzzed by the bodies that do not parse as an object, and the scenario
 //! target covers scenario validation.
 
@@ -136,11 +137,11 @@ impl HttpTarget {
 
         let hands = seeds::hands(&setup.hands_dir)?;
         let mut sims = vec![
-            json!({"scenario": "sphere-lift", "seed": 7, "duration": 0.02}),
-            json!({"scenario": "two-grasps", "duration": 0.01}),
+            json!({"scenario": "sphere-lift", "seed": 7, "duration": 0.05}),
+            json!({"scenario": "two-grasps", "duration": 0.06}),
         ];
         if let Some(s) = seeds::scenarios().into_iter().nth(1) {
-            sims.push(json!({"scenario": s, "seed": 3, "duration": 0.02}));
+            sims.push(json!({"scenario": s, "seed": 3, "duration": 0.05}));
         }
         let uploads: Vec<Value> = hands
             .iter()
@@ -236,10 +237,10 @@ impl HttpTarget {
         };
         let long = match m.get("duration") {
             None | Some(Value::Null) => true,
-            Some(v) => v.as_f64().is_some_and(|d| d > 0.03 && d <= 120.0),
+            Some(v) => v.as_f64().is_some_and(|d| d > 0.06 && d <= 120.0),
         };
         if long {
-            let d = *rng.pick(&[0.001, 0.005, 0.01, 0.03]);
+            let d = *rng.pick(&[0.05, 0.05, 0.055, 0.06, 0.049, 0.001]);
             m.insert("duration".into(), json!(d));
         }
         serde_json::to_vec(&Value::Object(m)).unwrap_or(body)

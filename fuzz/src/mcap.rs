@@ -750,7 +750,7 @@ mod tests {
         let dir = tempfile::tempdir().unwrap();
         // `record` rewrites the recording (a fixed `started_at`): the CRCs this module
         // recomputes must satisfy the reader.
-        let a = crate::seeds::record("sphere-lift", 1, Some(0.02), dir.path()).unwrap();
+        let a = crate::seeds::record("sphere-lift", 1, Some(0.05), dir.path()).unwrap();
         let limits = services::mcap_io::ReadLimits::default();
         services::session::read_session_bytes(&a, "a", &limits).unwrap();
         let f = McapFile::parse(&a).unwrap();

@@ -480,3 +480,45 @@ fn reading_a_bomb_holds_no_more_memory_than_the_limit_of_its_size() {
         eprintln!("{what}: {n} bytes, peak +{peak_kb} kB: {outcome}");
     }
 }
+
+#[test]
+fn a_record_inside_a_chunk_whose_string_claims_gigabytes_is_refused_by_the_reader_and_salvage() {
+    // A channel record in a chunk whose topic declares 3 GiB: the mcap crate would allocate
+    // the declared length before reading it (found by `icms-fuzz session` in salvage,
+    // `fuzz/findings/session-salvage-chunked-channel-3gib.bin`).
+    let mut channel = Vec::new();
+    channel.extend_from_slice(&2u16.to_le_bytes());
+    channel.extend_from_slice(&0u16.to_le_bytes());
+    channel.extend_from_slice(&(3u32 << 30).to_le_bytes());
+    channel.extend_from_slice(b"/topic");
+    let content = record(0x04, &channel);
+    let bytes = mcap_file([chunk(
+        &Compression::Zstd.compress(&content),
+        content.len() as u64,
+        Compression::Zstd,
+    )]);
+    let e = read_session_bytes(&bytes, &ReadLimits::default()).unwrap_err();
+    assert!(
+        e.to_string()
+            .contains("channel topic declares 3221225472 bytes"),
+        "{e}"
+    );
+    let dir = tempfile::tempdir().unwrap();
+    let input = dir.path().join("in.mcap");
+    std::fs::write(&input, &bytes).unwrap();
+    // Salvage recovers nothing from it (an error) or stops at it (a report), naming the field.
+    let why = |input: &Path, out: &str| match salvage(input, dir.path().join(out)) {
+        Ok(report) => report.stop_reason.unwrap_or_default(),
+        Err(e) => e.to_string(),
+    };
+    let w = why(&input, "out.mcap");
+    assert!(w.contains("channel topic declares 3221225472 bytes"), "{w}");
+    // The saved finding itself is refused the same way.
+    let finding = Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../fuzz/findings/session-salvage-chunked-channel-3gib.bin");
+    let w = why(&finding, "finding.mcap");
+    assert!(
+        w.contains("declares") && w.contains("bytes but the record holds"),
+        "{w}"
+    );
+}

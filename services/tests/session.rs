@@ -469,6 +469,43 @@ fn bad_glove_csv_input_is_rejected_naming_the_line_and_column() {
 }
 
 #[test]
+fn a_glove_recording_shorter_than_the_shortest_phase_is_refused() {
+    let hand = HandModel::glove10();
+    let header = glove_csv_header(&hand).join(",");
+    let row = |t: f64| {
+        let mut r = vec![t.to_string()];
+        r.extend(std::iter::repeat_n(
+            "0".to_owned(),
+            2 * hand.dof_names.len(),
+        ));
+        r.join(",")
+    };
+    let dir = tempfile::tempdir().unwrap();
+    let import = |rows: &[f64]| {
+        let input = dir.path().join("g.csv");
+        let text: Vec<String> = rows.iter().map(|&t| row(t)).collect();
+        std::fs::write(&input, format!("{header}\n{}\n", text.join("\n"))).unwrap();
+        import_glove(
+            &input,
+            &scenario_object("sphere-lift"),
+            Isometry::identity(),
+            &dir.path().join("out.mcap"),
+        )
+    };
+    for rows in [&[0.0][..], &[0.0, 0.001], &[0.0, 0.049]] {
+        let e = import(rows).unwrap_err().to_string();
+        assert!(
+            e.contains("g.csv") && e.contains("shortest session, 0.05 s"),
+            "{e}"
+        );
+    }
+    let summary = import(&[0.0, 0.05]).unwrap();
+    assert_eq!(summary.ticks, 51);
+    let back = read_session(&dir.path().join("out.mcap")).unwrap();
+    assert_eq!(back.ticks(), 51);
+}
+
+#[test]
 fn glove_mcap_input_with_an_unknown_joint_is_rejected_naming_the_message() {
     let dir = tempfile::tempdir().unwrap();
     let input = dir.path().join("glove.mcap");

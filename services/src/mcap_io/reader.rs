@@ -1222,6 +1222,11 @@ pub(crate) fn scan<R: Read>(
             match event {
                 Ok(LinearReadEvent::ReadRequest(_)) => break,
                 Ok(LinearReadEvent::Record { data, opcode }) => {
+                    // A record from inside a chunk: its fields too must fit in it.
+                    if let Err(detail) = super::lengths::check(opcode, data) {
+                        failure = Some(RecordingError::Corrupt { offset, detail });
+                        break;
+                    }
                     match mcap::parse_record(opcode, data) {
                         Ok(Record::Unknown { opcode, .. }) if !known_or_private(opcode) => {
                             failure = Some(RecordingError::Corrupt {

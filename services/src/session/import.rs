@@ -360,7 +360,8 @@ pub fn read_glove_file(path: &Path, hand: &HandModel) -> Result<GloveRecording> 
 
 /// Replays `recording` (glove10 DOFs) through the DFS against `object` with the hand base fixed
 /// at `base`, at 1 kHz, into the session file `out`. `name` goes into the `session` metadata
-/// as the scenario name. A DFS error at some tick (e.g. an angle outside the joint limits)
+/// as the scenario name. A recording shorter than the shortest phase,
+/// [`MIN_TASK_S`](dfs_core::scenario::MIN_TASK_S), is refused: it holds no motion to segment. A DFS error at some tick (e.g. an angle outside the joint limits)
 /// finishes the file with the ticks before it and returns [`RecordingError::Simulation`] with
 /// the tick's time.
 pub fn replay_glove(
@@ -375,6 +376,17 @@ pub fn replay_glove(
         return Err(invalid(
             name,
             "the recording's joints are not glove10's DOFs in order",
+        ));
+    }
+    let shortest_ns = (dfs_core::scenario::MIN_TASK_S * 1e9) as u64;
+    if recording.duration_ns() < shortest_ns {
+        return Err(invalid(
+            name,
+            format!(
+                "the recording spans {} s, shorter than the shortest session, {} s",
+                recording.duration_ns() as f64 * 1e-9,
+                dfs_core::scenario::MIN_TASK_S
+            ),
         ));
     }
     let at_object = |source: dfs_core::DfsError| invalid("object", source.to_string());
