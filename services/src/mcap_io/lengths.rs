@@ -54,18 +54,17 @@ impl Fields<'_> {
         Ok(())
     }
 
-    /// A map of strings to strings: a u32 byte length, then pairs of strings inside it.
+    /// A map of strings to strings: a u32 byte length, then pairs of strings. The parser reads
+    /// pairs until it has consumed that many bytes, each string's length prefix from the record
+    /// rather than from what is left of the map (a prefix may straddle the map's end, found by
+    /// `icms-fuzz http`), so every string is checked against the record.
     fn string_map(&mut self, what: &str) -> Result<(), String> {
         let n = self.prefix(4, what)?;
-        let mut inner = Fields {
-            body: &self.body[self.pos..self.pos + n],
-            pos: 0,
-        };
-        while inner.left() > 0 {
-            inner.bytes32(what)?;
-            inner.bytes32(what)?;
+        let end = self.pos + n;
+        while self.pos < end && self.left() > 0 {
+            self.bytes32(what)?;
+            self.bytes32(what)?;
         }
-        self.fixed(n);
         Ok(())
     }
 }
@@ -172,5 +171,18 @@ mod tests {
         bad.extend((pairs.len() as u32).to_le_bytes());
         bad.extend(pairs);
         assert!(check(op::METADATA, &bad).is_err());
+        // A map of 3 bytes whose first key's length prefix runs past the map's end into the
+        // rest of the record, declaring 3.6 GB: the parser reads that prefix.
+        let mut channel = vec![0u8; 4];
+        channel.extend(s("/tf"));
+        channel.extend(s("json"));
+        channel.extend(3u32.to_le_bytes());
+        channel.extend(3_631_182_895u32.to_le_bytes());
+        channel.extend([0u8; 12]);
+        let e = check(op::CHANNEL, &channel).unwrap_err();
+        assert!(
+            e.contains("channel metadata declares 3631182895 bytes"),
+            "{e}"
+        );
     }
 }
