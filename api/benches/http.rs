@@ -185,14 +185,14 @@ fn start_bare(db: &Path) -> (SocketAddr, tokio::sync::oneshot::Sender<()>) {
 }
 
 /// Starts the ICMS server (the same `Application` as `icms serve`).
-fn start_icms(data: &Path, cache_skills: usize) -> (SocketAddr, tokio::sync::oneshot::Sender<()>) {
+fn start_icms(data: &Path, cache_mib: usize) -> (SocketAddr, tokio::sync::oneshot::Sender<()>) {
     let data = data.to_path_buf();
     on_own_runtime(move |addr_tx, stop_rx| async move {
         let config = ServeArgs {
             addr: SocketAddr::from(([127, 0, 0, 1], 0)),
             data,
             no_demo: true,
-            cache_skills,
+            cache_mib,
             ..ServeArgs::default()
         }
         .into_config()
@@ -379,7 +379,8 @@ fn main() {
     )
     .unwrap();
 
-    let (icms, stop_icms) = start_icms(&data, a.skills);
+    // Room for every skill: the figure is of answers from the cache.
+    let (icms, stop_icms) = start_icms(&data, 4096);
     let (nocache, stop_nocache) = start_icms(&data, 0);
     let (bare, stop_bare) = start_bare(&data.join(services::store::DB_FILE));
     let servers = [

@@ -42,9 +42,9 @@ pub struct ServeArgs {
     /// Simulations that may run at once; further requests wait for a turn.
     #[arg(long, default_value_t = 2)]
     pub max_simulations: usize,
-    /// Skills whose JSON the server keeps in memory for `GET /api/v1/skills/{id}`.
-    #[arg(long, default_value_t = 100_000)]
-    pub cache_skills: usize,
+    /// MiB of skill JSON the server keeps in memory for `GET /api/v1/skills/{id}` (0: none).
+    #[arg(long, default_value_t = 64)]
+    pub cache_mib: usize,
     /// Session uploads read and segmented at once (each holds up to a bounded multiple of its
     /// size in memory, see the README); further uploads wait up to `--queue-wait` seconds for
     /// a turn, then get 503 with `Retry-After`.
@@ -73,8 +73,8 @@ pub const MAX_MAX_BODY: usize = 64 << 30;
 pub const MAX_TIMEOUT_S: f64 = 86_400.0;
 /// Largest accepted `--max-simulations` and `--max-ingests`.
 pub const MAX_WORKERS: usize = 256;
-/// Largest accepted `--cache-skills`.
-pub const MAX_CACHE_SKILLS: usize = 10_000_000;
+/// Largest accepted `--cache-mib` (64 GiB).
+pub const MAX_CACHE_MIB: usize = 1 << 16;
 /// Largest accepted `--max-connections`.
 pub const MAX_CONNECTIONS: usize = 1 << 20;
 
@@ -127,7 +127,7 @@ impl Default for ServeArgs {
             cors_origins: Vec::new(),
             request_timeout: 120.0,
             max_simulations: 2,
-            cache_skills: 100_000,
+            cache_mib: 64,
             max_ingests: 2,
             queue_wait: 10.0,
             header_timeout: 10.0,
@@ -195,7 +195,7 @@ impl ServeArgs {
         let max_body = count("--max-body", self.max_body, 1, MAX_MAX_BODY)?;
         let max_simulations = count("--max-simulations", self.max_simulations, 1, MAX_WORKERS)?;
         let max_ingests = count("--max-ingests", self.max_ingests, 1, MAX_WORKERS)?;
-        let cache_capacity = count("--cache-skills", self.cache_skills, 0, MAX_CACHE_SKILLS)?;
+        let cache_bytes = count("--cache-mib", self.cache_mib, 0, MAX_CACHE_MIB)? << 20;
         let max_connections = match self.max_connections {
             Some(n) => count("--max-connections", n, 1, MAX_CONNECTIONS)?,
             None => default_max_connections(),
@@ -220,7 +220,7 @@ impl ServeArgs {
                 max_simulations,
                 max_ingests,
                 queue_wait,
-                cache_capacity,
+                cache_bytes,
             },
             layers: LayerConfig {
                 request_timeout,
@@ -341,7 +341,7 @@ mod tests {
             ("--max-body", |a, v| a.max_body = v, usize::MAX),
             ("--max-simulations", |a, v| a.max_simulations = v, 100_000),
             ("--max-ingests", |a, v| a.max_ingests = v, 0),
-            ("--cache-skills", |a, v| a.cache_skills = v, usize::MAX),
+            ("--cache-mib", |a, v| a.cache_mib = v, usize::MAX),
             ("--max-connections", |a, v| a.max_connections = Some(v), 0),
         ];
         for (name, set, v) in counts {

@@ -8,5 +8,6 @@ pub mod cli;
 pub mod config;
 pub mod filters;
 pub mod http;
+pub mod memory;
 pub mod startup;
 pub mod telemetry;

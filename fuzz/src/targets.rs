@@ -135,7 +135,7 @@ impl Target for SessionTarget {
         let _ = services::ingest::analyse(input, "fuzz.mcap");
         // Salvage reads a file the writer left behind (`icms salvage`): every fourth input
         // (by length), as it goes through the file system.
-        if input.len() % 4 != 0 {
+        if !input.len().is_multiple_of(4) {
             return Ok(());
         }
         let inp = self.scratch.join("salvage-in.mcap");
@@ -299,7 +299,7 @@ fn run_scenario(input: &[u8]) -> Result<(), String> {
         // Setting up searches for a reachable grasp (IK): once per input, with or without a
         // duration by the input's length.
         let hand = dfs_core::hand::HandModel::glove10();
-        let duration = (input.len() % 2 == 0).then_some(0.5);
+        let duration = input.len().is_multiple_of(2).then_some(0.5);
         let _ = dfs_core::operator::Simulation::new(&s, hand, duration);
     }
     Ok(())

@@ -6,6 +6,7 @@
 //! - [`store`]: the skill data base (SQLite via sqlx, content-addressed MCAP blobs).
 //! - [`segmentation`]: sessions into skills (one per grasp) and their parameters.
 //! - [`ingest`]: a session file read, segmented and stored in one step.
+//! - [`reprocess`]: stored sessions segmented again when the segmentation changed.
 //! - [`error`]: the crate's error type.
 
 pub mod error;
@@ -13,6 +14,7 @@ pub mod foxglove;
 pub mod ingest;
 pub mod mcap_io;
 pub mod replay;
+pub mod reprocess;
 pub mod segmentation;
 pub mod session;
 pub mod store;

@@ -51,6 +51,26 @@ use serde::Serialize;
 use crate::foxglove::Pose;
 use crate::session::{GroundTruthPhase, Session};
 
+/// Version of the segmentation: what the store records beside every session's skills, so
+/// that `icms reprocess` can find the sessions whose skills an older segmentation made and
+/// segment them again ([`crate::reprocess`]).
+///
+/// Bump it with any change that alters the skills stored for a session file already in a data
+/// base: what [`segment`] finds (the method, [`SegmentParams`]' defaults, what counts as a
+/// grasp, the phases), any parameter it computes or the physics behind one (grasp quality,
+/// friction margins, slip, the feature vector and its [`FEATURE_DIMENSIONS`]), the JSON of
+/// [`Skill`], how `crate::ingest` maps a skill to the store's columns (grasp type labels, ...),
+/// or how a stored file is read into what segmentation sees (decoding, units). Do not bump it
+/// for changes that leave every stored skill byte for byte the same (refactors, speed): a
+/// bump makes `icms reprocess` read and segment every stored session again; skills that come
+/// out the same are kept (ids and replays too), so a needless bump costs time, not data.
+///
+/// Version 0 stands for "not recorded": the sessions stored before versions were (migration
+/// `0003`), which reprocessing checks against the current segmentation.
+///
+/// History: 1, the segmentation of issue 18 when versions began to be recorded.
+pub const SEGMENTATION_VERSION: u32 = 1;
+
 /// Tuning of [`segment`]. The defaults suit human-speed grasping at any sample rate ≥ 100 Hz.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct SegmentParams {

@@ -127,7 +127,7 @@ fn build(plan: &Plan) -> Session {
     let mut i = 0usize;
     while t <= end_ns {
         i += 1;
-        if plan.drop_every == 0 || i % plan.drop_every != 0 {
+        if plan.drop_every == 0 || !i.is_multiple_of(plan.drop_every) {
             let (p, yaw) = base_at(t);
             object.push((
                 t,

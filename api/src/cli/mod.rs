@@ -3,6 +3,7 @@
 mod bench;
 mod dfs_static;
 mod replay;
+mod reprocess;
 mod segment;
 mod serve;
 mod sessions;
@@ -44,6 +45,18 @@ enum Command {
     Demo(skills::DemoArgs),
     /// Stores session files and their skills in the skill data base (idempotent).
     Ingest(skills::IngestArgs),
+    /// Segments again, from their stored files, the sessions whose skills an older
+    /// segmentation version made, and replaces their skills.
+    ///
+    /// One transaction per session: interrupted at any moment (a kill, or SIGINT/SIGTERM,
+    /// which stop after the session in hand), each session is as it was or done, and the next
+    /// run takes up the rest. Skills that come out the same are kept with their ids and
+    /// replays; the others are removed with their replays, and the new ones added. Idempotent:
+    /// a second run does nothing. A session that fails (its file missing, changed on disk, no
+    /// longer read as a session) is reported on stderr and keeps its skills and version; the
+    /// exit code is then 1. Stop `icms serve` on the directory first: a running server keeps
+    /// its in-memory skill index and cache until restarted.
+    Reprocess(reprocess::ReprocessArgs),
     /// The HTTP API: record sessions, simulate, query and browse skills. Creates and migrates
     /// the data directory; seeds an empty data base with simulated sessions (--no-demo skips).
     Serve(Box<crate::config::ServeArgs>),
@@ -81,6 +94,7 @@ pub fn run() -> ExitCode {
         Command::Segment(a) => segment::run_segment(a),
         Command::Demo(a) => skills::run_demo(a),
         Command::Ingest(a) => skills::run_ingest(a),
+        Command::Reprocess(a) => reprocess::run_reprocess(a),
         Command::Skills(a) => skills::run_skills(*a),
         Command::Hands(a) => replay::run_hands(a),
         Command::Replay(a) => replay::run_replay(a),

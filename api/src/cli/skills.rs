@@ -41,7 +41,8 @@ pub struct SkillsArgs {
     json: bool,
 }
 
-fn runtime() -> Result<tokio::runtime::Runtime, CliError> {
+/// The multi-threaded runtime of the data base commands.
+pub(super) fn runtime() -> Result<tokio::runtime::Runtime, CliError> {
     tokio::runtime::Builder::new_multi_thread()
         .enable_all()
         .build()
@@ -163,7 +164,7 @@ pub fn run_skills(a: SkillsArgs) -> Result<(), CliError> {
         }
         for s in &page.items {
             println!(
-                "skill {:>6}  session {:>5}  {:<8} {:>6.3} kg  μ {:.2}  {} contacts  {:<9} ε {:.4}",
+                "skill {:>6}  session {:>5}  {:<8} {:>6.3} kg  μ {:.2}  {} contacts  {:<9} ε {:.4}  segmentation v{}",
                 s.id,
                 s.session_id,
                 s.object_shape,
@@ -171,7 +172,8 @@ pub fn run_skills(a: SkillsArgs) -> Result<(), CliError> {
                 s.mu,
                 s.contact_count,
                 s.grasp_type,
-                s.quality
+                s.quality,
+                s.segmentation_version
             );
         }
         if let Some(c) = &page.next_cursor {

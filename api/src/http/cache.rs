@@ -8,25 +8,30 @@ use std::sync::RwLock;
 
 use bytes::Bytes;
 
-/// Skill id → its JSON, at most `capacity` entries (an arbitrary entry makes room when full).
+/// Skill id → its JSON, at most `max_bytes` of JSON in all (arbitrary entries make room when
+/// full). Bounded in bytes rather than entries: a skill's JSON is 2-40 kB by its hand and
+/// phases, so a count would bound memory only loosely (the soak of issue 17 saw a count-bound
+/// cache grow the server's memory for as long as new skills were read).
 #[derive(Debug)]
 pub struct SkillCache {
-    capacity: usize,
+    max_bytes: usize,
     inner: RwLock<Inner>,
 }
 
 #[derive(Debug, Default)]
 struct Inner {
     map: HashMap<i64, Bytes>,
+    /// Sum of the cached JSON's lengths.
+    bytes: usize,
     /// Bumped by every removal.
     epoch: u64,
 }
 
 impl SkillCache {
-    /// An empty cache holding at most `capacity` skills (0 disables it).
-    pub fn new(capacity: usize) -> Self {
+    /// An empty cache holding at most `max_bytes` of JSON (0 disables it).
+    pub fn new(max_bytes: usize) -> Self {
         SkillCache {
-            capacity,
+            max_bytes,
             inner: RwLock::new(Inner::default()),
         }
     }
@@ -41,18 +46,25 @@ impl SkillCache {
     /// Caches the JSON of skill `id`, read from the store after [`SkillCache::get`] returned
     /// `epoch`; skipped if anything was removed since (the skill may be the removed one).
     pub fn insert(&self, id: i64, json: Bytes, epoch: u64) {
-        if self.capacity == 0 {
+        if json.len() > self.max_bytes {
             return;
         }
         let mut inner = self.inner.write().unwrap_or_else(|e| e.into_inner());
         if inner.epoch != epoch {
             return;
         }
-        if inner.map.len() >= self.capacity && !inner.map.contains_key(&id) {
-            if let Some(victim) = inner.map.keys().next().copied() {
-                inner.map.remove(&victim);
+        if let Some(old) = inner.map.remove(&id) {
+            inner.bytes -= old.len();
+        }
+        while inner.bytes + json.len() > self.max_bytes {
+            let Some(victim) = inner.map.keys().next().copied() else {
+                break;
+            };
+            if let Some(old) = inner.map.remove(&victim) {
+                inner.bytes -= old.len();
             }
         }
+        inner.bytes += json.len();
         inner.map.insert(id, json);
     }
 
@@ -61,8 +73,15 @@ impl SkillCache {
         let mut inner = self.inner.write().unwrap_or_else(|e| e.into_inner());
         inner.epoch += 1;
         for id in ids {
-            inner.map.remove(id);
+            if let Some(old) = inner.map.remove(id) {
+                inner.bytes -= old.len();
+            }
         }
+    }
+
+    /// Bytes of JSON cached.
+    pub fn bytes(&self) -> usize {
+        self.inner.read().unwrap_or_else(|e| e.into_inner()).bytes
     }
 
     /// Number of cached skills.
@@ -86,7 +105,7 @@ mod tests {
 
     #[test]
     fn a_read_that_raced_a_delete_is_not_cached() {
-        let c = SkillCache::new(10);
+        let c = SkillCache::new(1000);
         let epoch = c.get(1).unwrap_err();
         c.remove(&[1]);
         c.insert(1, Bytes::from_static(b"{}"), epoch);
@@ -99,13 +118,30 @@ mod tests {
     }
 
     #[test]
-    fn the_cache_never_grows_past_its_capacity() {
-        let c = SkillCache::new(3);
-        for id in 0..10 {
+    fn the_cache_never_holds_more_bytes_than_its_bound() {
+        let c = SkillCache::new(100);
+        for id in 0..50 {
             let e = c.get(id).unwrap_err();
-            c.insert(id, Bytes::from_static(b"{}"), e);
+            c.insert(id, Bytes::from(vec![b' '; 10 + id as usize % 7]), e);
+            assert!(c.bytes() <= 100, "{} bytes after {id}", c.bytes());
         }
-        assert_eq!(c.len(), 3);
-        assert!(c.get(9).is_ok(), "the newest entry is kept");
+        assert!(c.get(49).is_ok(), "the newest entry is kept");
+        assert!(c.len() >= 6, "{} entries", c.len());
+        // Re-inserting an entry replaces it without counting it twice.
+        let e = c.get(1000).unwrap_err();
+        c.insert(49, Bytes::from(vec![b' '; 40]), e);
+        let sum: usize = (0..50)
+            .filter_map(|id| c.get(id).ok())
+            .map(|b| b.len())
+            .sum();
+        assert_eq!(c.bytes(), sum);
+        // An entry larger than the whole cache is not cached; nothing is evicted for it.
+        let before = c.len();
+        c.insert(2000, Bytes::from(vec![b' '; 101]), e);
+        assert!(c.get(2000).is_err());
+        assert_eq!(c.len(), before);
+        let off = SkillCache::new(0);
+        off.insert(1, Bytes::from_static(b"{}"), off.get(1).unwrap_err());
+        assert!(off.is_empty(), "0 disables the cache");
     }
 }

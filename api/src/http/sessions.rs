@@ -91,6 +91,9 @@ pub struct SessionBody {
     pub meta: SessionMetaBody,
     /// Ids of the session's skills, ascending.
     pub skill_ids: Vec<i64>,
+    /// Version of the segmentation that made its skills: `icms reprocess` segments sessions of
+    /// older versions again. 0: stored before versions were recorded.
+    pub segmentation_version: u32,
     /// When the session was stored (UTC, RFC 3339).
     pub created_at: String,
     /// Where to download the MCAP file.
@@ -106,6 +109,7 @@ impl From<Session> for SessionBody {
             size_bytes: s.size_bytes,
             meta: s.meta.into(),
             skill_ids: s.skill_ids,
+            segmentation_version: s.segmentation_version,
             created_at: s.created_at,
         }
     }

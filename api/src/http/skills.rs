@@ -57,6 +57,9 @@ pub struct SkillBody {
     /// The full hand-independent parameters, as `icms segment --json` prints them.
     #[schema(value_type = Object)]
     pub params: serde_json::Value,
+    /// Version of the segmentation that made the skill (its session's): `icms reprocess`
+    /// segments sessions of older versions again. 0: stored before versions were recorded.
+    pub segmentation_version: u32,
     /// When the skill was stored (UTC, RFC 3339).
     pub created_at: String,
 }
@@ -81,6 +84,7 @@ impl From<Skill> for SkillBody {
             phase_durations: s.phase_durations,
             feature: s.feature,
             params: s.params,
+            segmentation_version: s.segmentation_version,
             created_at: s.created_at,
         }
     }

@@ -57,8 +57,8 @@ pub struct StateConfig {
     pub max_ingests: usize,
     /// Longest wait for a turn (simulation, replay or ingest) before 503 with `Retry-After`.
     pub queue_wait: Duration,
-    /// Skills whose JSON is kept in memory.
-    pub cache_capacity: usize,
+    /// Bytes of skill JSON kept in memory.
+    pub cache_bytes: usize,
 }
 
 impl AppState {
@@ -74,7 +74,7 @@ impl AppState {
                 ingests: Arc::new(Semaphore::new(config.max_ingests.max(1))),
                 queue_wait: config.queue_wait,
                 shutdown: CancellationToken::new(),
-                cache: SkillCache::new(config.cache_capacity),
+                cache: SkillCache::new(config.cache_bytes),
                 scratch,
                 openapi: OnceLock::new(),
             }),

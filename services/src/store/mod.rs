@@ -8,6 +8,10 @@
 //! same file reuses). Replays of skills on robot hands are stored the same way (see `hands`),
 //! and go with their skill. One process per data directory: deletes and ingests are ordered by an
 //! in-process lock so that a delete never unlinks a blob that a concurrent ingest has just reused.
+//!
+//! Every session records the version of the segmentation that made its skills
+//! ([`crate::segmentation::SEGMENTATION_VERSION`] at ingest); `reprocess` replaces the skills
+//! of a session segmented again ([`Store::replace_session_skills`], one transaction).
 
 pub mod bench;
 mod blob;
@@ -15,6 +19,7 @@ mod error;
 mod hands;
 mod knn;
 mod query;
+mod reprocess;
 mod types;
 
 use std::path::{Path, PathBuf};
@@ -29,6 +34,8 @@ use sqlx::sqlite::{
 use sqlx::{Connection as _, QueryBuilder, Row as _, Sqlite, SqliteConnection};
 
 pub use error::StoreError;
+
+use crate::segmentation::SEGMENTATION_VERSION;
 
 /// Youngest unreferenced blob the server's sweep removes (see [`Store::sweep_orphan_blobs`]):
 /// ten minutes, far longer than any ingest takes from its blob write to its commit.
@@ -62,11 +69,20 @@ pub use query::{
     UNKNOWN_SHAPE,
 };
 pub use types::{
-    Hand, HandSummary, IngestOutcome, NewSkill, Page, Replay, Session, SessionMeta, Skill,
-    FEATURE_DIM,
+    Hand, HandSummary, IngestOutcome, NewSkill, Page, ReplacedSkills, Replay, Session, SessionMeta,
+    Skill, StaleSession, FEATURE_DIM,
 };
 
 use knn::FeatureIndex;
+
+/// Connections the store's pool opens at most.
+pub const MAX_CONNECTIONS: u32 = 8;
+
+/// Page cache of one connection, KiB: 8 MiB, so [`MAX_CONNECTIONS`] hold at most 64 MiB. The
+/// caches fill as the data base is read, so their bound is the server's memory growth as the
+/// data base grows (the soak of issue 17 saw 32 MiB each keep the resident set rising for its
+/// ten minutes).
+pub const PAGE_CACHE_KIB: u32 = 8192;
 
 /// `PRAGMA application_id` of an ICMS database: ASCII `ICMS`.
 pub const APPLICATION_ID: i32 = 0x4943_4D53;
@@ -76,7 +92,8 @@ pub const DB_FILE: &str = "icms.sqlite3";
 pub const MAX_SESSION_LIMIT: u32 = 1000;
 
 /// Columns of a session row (`FROM sessions s`), its skill ids as a JSON array.
-const SESSION_COLUMNS: &str = "id, sha256, size_bytes, blob_path, meta, created_at, \
+const SESSION_COLUMNS: &str = "id, sha256, size_bytes, blob_path, meta, segmentation_version, \
+     created_at, \
      (SELECT json_group_array(id) FROM (SELECT id FROM skills WHERE session_id = s.id \
      ORDER BY id)) AS skill_ids";
 
@@ -211,8 +228,16 @@ fn row_to_skill(row: &SqliteRow) -> Result<Skill, StoreError> {
         phase_durations: serde_json::from_str(&phases)?,
         feature: feature_from_blob(id, &feature)?.to_vec(),
         params: serde_json::from_str(&params)?,
+        segmentation_version: segmentation_version(row)?,
         created_at: row.try_get("created_at")?,
     })
+}
+
+/// The `segmentation_version` column of a row (a session's, or a skill's from its session).
+fn segmentation_version(row: &SqliteRow) -> Result<u32, StoreError> {
+    let v: i64 = row.try_get("segmentation_version")?;
+    u32::try_from(v)
+        .map_err(|_| StoreError::Corrupt(format!("segmentation version {v} is out of range")))
 }
 
 fn finite(what: &str, v: f64) -> Result<(), StoreError> {
@@ -405,9 +430,9 @@ impl Store {
                 Durability::Full => SqliteSynchronous::Full,
                 Durability::Normal => SqliteSynchronous::Normal,
             })
-            .pragma("cache_size", "-32768");
+            .pragma("cache_size", format!("-{PAGE_CACHE_KIB}"));
         let pool = SqlitePoolOptions::new()
-            .max_connections(8)
+            .max_connections(MAX_CONNECTIONS)
             .connect_with(opts)
             .await?;
         MIGRATOR.run(&pool).await?;
@@ -524,7 +549,7 @@ impl Store {
         let mut tx = self.inner.pool.begin().await?;
         let session_id: Option<i64> = sqlx::query_scalar(
             "INSERT INTO sessions (sha256, size_bytes, blob_path, scenario, hand, object_shape, \
-             duration_ns, meta) VALUES (?, ?, ?, ?, ?, ?, ?, ?) \
+             duration_ns, meta, segmentation_version) VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?) \
              ON CONFLICT (sha256) DO NOTHING RETURNING id",
         )
         .bind(&sha256)
@@ -535,6 +560,7 @@ impl Store {
         .bind(&meta.object_shape)
         .bind(duration_ns)
         .bind(&meta_json)
+        .bind(i64::from(SEGMENTATION_VERSION))
         .fetch_optional(&mut *tx)
         .await?;
         let Some(session_id) = session_id else {
@@ -596,7 +622,8 @@ impl Store {
             for (sha256, size, rel, meta, checked) in &prepared {
                 let session_id: Option<i64> = sqlx::query_scalar(
                     "INSERT INTO sessions (sha256, size_bytes, blob_path, scenario, hand, \
-                     object_shape, duration_ns, meta) VALUES (?, ?, ?, ?, ?, ?, ?, ?) \
+                     object_shape, duration_ns, meta, segmentation_version) \
+                     VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?) \
                      ON CONFLICT (sha256) DO NOTHING RETURNING id",
                 )
                 .bind(sha256)
@@ -607,6 +634,7 @@ impl Store {
                 .bind(&meta.object_shape)
                 .bind(i64::try_from(meta.duration_ns).unwrap_or(i64::MAX))
                 .bind(serde_json::to_string(meta)?)
+                .bind(i64::from(SEGMENTATION_VERSION))
                 .fetch_optional(&mut *tx)
                 .await?;
                 if let Some(session_id) = session_id {
@@ -618,7 +646,7 @@ impl Store {
             Ok::<_, StoreError>(inserted)
         }
         .await;
-        sqlx::query("PRAGMA cache_size = -32768")
+        sqlx::query(&format!("PRAGMA cache_size = -{PAGE_CACHE_KIB}"))
             .execute(&mut *conn)
             .await?;
         let inserted = result?;
@@ -639,6 +667,7 @@ impl Store {
             blob_path: row.try_get("blob_path")?,
             meta: serde_json::from_str(&meta)?,
             skill_ids: serde_json::from_str(&skill_ids)?,
+            segmentation_version: segmentation_version(row)?,
             created_at: row.try_get("created_at")?,
         })
     }

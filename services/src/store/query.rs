@@ -306,10 +306,13 @@ fn check_range(name: &str, min: Option<f64>, max: Option<f64>) -> Result<(), Sto
     Ok(())
 }
 
-/// Columns of a skill row, in the order `row_to_skill` reads them.
+/// Columns of a skill row (`FROM skills`, not aliased), in the order `row_to_skill` reads
+/// them. The segmentation version is the session's (a primary-key lookup per row returned).
 pub(crate) const SKILL_COLUMNS: &str = "id, session_id, object_shape, object_mass, mu, \
      contact_count, contact_model, grasp_type, quality, volume, duration_s, start_ns, end_ns, \
-     phase_durations, feature, params, created_at";
+     phase_durations, feature, params, created_at, \
+     (SELECT segmentation_version FROM sessions WHERE sessions.id = skills.session_id) \
+     AS segmentation_version";
 
 /// Validates `q` and builds its SQL (fetching `limit + 1` rows to see whether more follow).
 pub(crate) fn build(q: &SkillQuery) -> Result<QueryBuilder<'_, Sqlite>, StoreError> {

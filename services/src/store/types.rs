@@ -98,6 +98,9 @@ pub struct Skill {
     pub feature: Vec<f32>,
     /// Full hand-independent parameters.
     pub params: serde_json::Value,
+    /// Version of the segmentation that made the skill (its session's, see
+    /// [`crate::segmentation::SEGMENTATION_VERSION`]; 0: stored before versions were recorded).
+    pub segmentation_version: u32,
     /// When the row was inserted (UTC, `YYYY-MM-DDTHH:MM:SS.sssZ`).
     pub created_at: String,
 }
@@ -117,6 +120,10 @@ pub struct Session {
     pub meta: SessionMeta,
     /// Ids of the session's skills, ascending.
     pub skill_ids: Vec<i64>,
+    /// Version of the segmentation that made the session's skills
+    /// ([`crate::segmentation::SEGMENTATION_VERSION`] when they were stored or last
+    /// reprocessed; 0: stored before versions were recorded).
+    pub segmentation_version: u32,
     /// When the row was inserted (UTC, `YYYY-MM-DDTHH:MM:SS.sssZ`).
     pub created_at: String,
 }
@@ -194,4 +201,41 @@ pub struct Replay {
     pub blob_path: String,
     /// When the row was inserted (UTC, `YYYY-MM-DDTHH:MM:SS.sssZ`).
     pub created_at: String,
+}
+
+/// A session whose skills a segmentation older than the one asked about made (see
+/// [`crate::store::Store::sessions_segmented_before`]).
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+pub struct StaleSession {
+    /// Session id.
+    pub id: i64,
+    /// Version of the segmentation that made its skills (0: not recorded).
+    pub segmentation_version: u32,
+    /// Number of its skills.
+    pub skill_count: usize,
+}
+
+/// What [`crate::store::Store::replace_session_skills`] did to one session's skills.
+///
+/// A stored skill identical to one of the new skills (every column the store keeps: the
+/// indexed values, phase durations, feature and full parameters) is kept with its id, its
+/// creation time and its replays; the others are removed with their replays, and the new
+/// skills without an identical stored one are added.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+pub struct ReplacedSkills {
+    /// Session id.
+    pub session_id: i64,
+    /// The segmentation version its skills had.
+    pub from_version: u32,
+    /// The version they have now.
+    pub to_version: u32,
+    /// Skills that came out the same: kept, ascending.
+    pub kept_skill_ids: Vec<i64>,
+    /// Skills that did not: removed with their phase rows and replays, ascending.
+    pub removed_skill_ids: Vec<i64>,
+    /// New skills, in the segmentation's (time) order.
+    pub added_skill_ids: Vec<i64>,
+    /// Replays removed with the removed skills (their MCAP files are deleted unless another
+    /// row names the same bytes).
+    pub replays_removed: usize,
 }

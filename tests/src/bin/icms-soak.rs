@@ -1318,7 +1318,7 @@ fn summarise(
             }
             let timeline: Vec<Value> = samples
                 .iter()
-                .filter(|s| s.t.round() as u64 % 10 == 0)
+                .filter(|s| (s.t.round() as u64).is_multiple_of(10))
                 .map(|s| json!([s.t.round(), round1(mib(s.rss))]))
                 .collect();
             json!({

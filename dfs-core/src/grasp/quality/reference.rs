@@ -259,7 +259,7 @@ pub(crate) fn build(pts: &[P], tol: f64) -> Result<Hull, HullError> {
         // The new facets pair up across the ridges through the new vertex: each such ridge
         // is shared by exactly two of them.
         ridges.sort_unstable();
-        if new_ids.is_empty() || ridges.len() % 2 != 0 {
+        if new_ids.is_empty() || !ridges.len().is_multiple_of(2) {
             return Err(HullError::Numerical("horizon is not closed"));
         }
         for pair in ridges.chunks_exact(2) {
