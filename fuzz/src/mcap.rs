@@ -763,13 +763,16 @@ mod tests {
         let site = g.sites_with(op::MESSAGE)[0];
         let r = g.record_mut(site).unwrap();
         r.body.truncate(MESSAGE_HEADER);
-        r.body.extend_from_slice(b"{not json");
+        r.body.extend_from_slice(b"{not json nor protobuf");
         g.items.iter_mut().for_each(|i| {
             if let Item::Chunk(c) = i {
                 c.crc = CrcMode::Fix;
             }
         });
-        let e = services::mcap_io::read_session_bytes(&g.write(), &limits).unwrap_err();
-        assert!(!e.to_string().contains("CRC"), "{e}");
+        let e = services::session::read_session_bytes(&g.write(), "g", &limits).unwrap_err();
+        assert!(
+            !e.to_string().contains("CRC") && e.to_string().contains("message 0"),
+            "{e}"
+        );
     }
 }

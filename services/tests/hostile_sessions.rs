@@ -99,7 +99,7 @@ fn session_file(
         for topic in RAW_TOPICS {
             let mut text = message(topic, k);
             edit(topic, k, &mut text);
-            w.write_raw_json(topic, k * MS, text.as_bytes()).unwrap();
+            w.write_raw(topic, k * MS, text.as_bytes()).unwrap();
         }
     }
     w.finish().unwrap();
@@ -477,8 +477,7 @@ fn a_session_shorter_than_two_ticks_is_refused() {
     w.add_metadata(SESSION_METADATA, session_record()).unwrap();
     for t in [0, MS / 2] {
         for topic in RAW_TOPICS {
-            w.write_raw_json(topic, t, message(topic, 0).as_bytes())
-                .unwrap();
+            w.write_raw(topic, t, message(topic, 0).as_bytes()).unwrap();
         }
     }
     w.finish().unwrap();

@@ -460,7 +460,7 @@ fn invalid_json_and_non_json_encodings_are_reported() {
     writer
         .register_channel(TF, &FRAME_TRANSFORMS_SCHEMA)
         .unwrap();
-    writer.write_raw_json(TF, 5, b"{\"transforms\": [").unwrap();
+    writer.write_raw(TF, 5, b"{\"transforms\": [").unwrap();
     writer.finish().unwrap();
     let err = read_session_file(&path, &ReadLimits::default()).unwrap_err();
     assert!(
@@ -468,7 +468,8 @@ fn invalid_json_and_non_json_encodings_are_reported() {
         "{err:?}"
     );
 
-    // A file from another tool with a protobuf topic: readable, but not as a JSON topic.
+    // A file from another tool with a protobuf topic: readable, the topic found by its schema
+    // (session format 2 is protobuf), but not as a JSON topic.
     let path = dir.path().join("protobuf.mcap");
     {
         let file = std::io::BufWriter::new(std::fs::File::create(&path).unwrap());
@@ -493,9 +494,10 @@ fn invalid_json_and_non_json_encodings_are_reported() {
     }
     let session = read_session_file(&path, &ReadLimits::default()).unwrap();
     assert_eq!(session.topics[TF].messages[0].data, b"\x01\x02\x03");
-    let err = session
+    let t = session
         .require_topic(TF, "foxglove.FrameTransforms")
-        .unwrap_err();
+        .unwrap();
+    let err = t.json_values().unwrap_err();
     assert!(
         matches!(&err, RecordingError::NonJsonEncoding { encoding, .. } if encoding == "protobuf"),
         "{err:?}"

@@ -15,8 +15,8 @@ use dfs_core::hand::HandModel;
 use dfs_core::math::Isometry;
 use dfs_core::operator::Simulation;
 use dfs_core::scenario::Scenario;
-use services::foxglove::{FRAME_TRANSFORMS_SCHEMA, JOINT_STATES_SCHEMA, SCENE_UPDATE_SCHEMA};
-use services::mcap_io::{read_session_file, JsonSchema, SessionWriter};
+use services::foxglove::JOINT_STATES_SCHEMA;
+use services::mcap_io::{read_session_file, SessionWriter};
 use services::session::import::{import_glove, parse_glove_csv, read_glove_mcap};
 use services::session::*;
 use services::RecordingError;
@@ -72,9 +72,14 @@ fn a_simulated_session_reads_back_with_the_samples_written() {
     assert_eq!(session.phases[0].start_ns, 0);
 
     // The same samples as the simulation produced, value for value, to the recorded
-    // resolution (1 nm / 1 nrad for geometry, 1 µN / 1 µN·m for forces): within half a step.
-    let geometry = 0.5 / GEOMETRY_STEPS_PER_UNIT + 1e-15;
-    let force = 0.5 / FORCE_STEPS_PER_UNIT + 1e-12;
+    // resolution (each field's step, `services::session::proto`): within half a step.
+    let half = |step: f64| 0.5 * step * (1.0 + 1e-9);
+    let (angle, torque, position, force) = (
+        half(proto::JOINT_ANGLE),
+        half(proto::JOINT_TORQUE),
+        half(proto::POSITION),
+        half(proto::FORCE),
+    );
     let close = |read: &[f64], sim: &[f64], tol: f64, what: &str| {
         assert_eq!(read.len(), sim.len(), "{what}");
         for (r, s) in read.iter().zip(sim) {
@@ -88,14 +93,14 @@ fn a_simulated_session_reads_back_with_the_samples_written() {
         let (q, tau, base) = sim.sample();
         let (t, js) = &session.joint_states[i];
         assert_eq!(*t, sim.time_ns());
-        close(&js.positions, q, geometry, "positions");
-        close(&js.efforts, tau, force, "efforts");
+        close(&js.positions, q, angle, "positions");
+        close(&js.efforts, tau, torque, "efforts");
         let out = sim.output();
         let (_, fb) = &session.feedback[i];
         close(
             &fb.feedback_torques,
             &out.feedback_torque[..q.len()],
-            force,
+            torque,
             "feedback torques",
         );
         let (_, obj) = &session.object[i];
@@ -107,14 +112,14 @@ fn a_simulated_session_reads_back_with_the_samples_written() {
                 obj.pose.position.z,
             ],
             &[p.x, p.y, p.z],
-            geometry,
+            position,
             "object position",
         );
         let in_hand = base.inverse() * out.object.pose;
         close(
             &[obj.pose_in_hand.position.z],
             &[in_hand.translation.z],
-            geometry,
+            position,
             "object in hand",
         );
         let (_, c) = &session.contacts[i];
@@ -142,55 +147,96 @@ fn a_simulated_session_reads_back_with_the_samples_written() {
     assert_eq!(i, ticks);
 }
 
-fn check_topic(
+/// Every message of `topic` decodes as `M`; their number and the decoded messages.
+fn decode_all<M: prost::Message + Default>(
     recorded: &services::mcap_io::RecordedSession,
     topic: &str,
-    schema: &JsonSchema,
-) -> usize {
-    let t = recorded.require_topic(topic, &schema.name).unwrap();
-    for (log_time, value) in t.json_values().unwrap() {
-        if let Err(errors) = validate_against(schema, &value) {
-            panic!(
-                "{topic} at {log_time} ns does not validate against {}:\n{}",
-                schema.name,
-                errors.join("\n")
-            );
-        }
-    }
-    t.messages.len()
+    schema_name: &str,
+) -> Vec<M> {
+    let t = &recorded.topics[topic];
+    assert_eq!(t.message_encoding, "protobuf", "{topic}");
+    let schema = t.schema.as_ref().unwrap();
+    assert_eq!(
+        (schema.name.as_str(), schema.encoding.as_str()),
+        (schema_name, "protobuf")
+    );
+    t.messages
+        .iter()
+        .map(|m| M::decode(&m.data[..]).unwrap_or_else(|e| panic!("{topic}: {e}")))
+        .collect()
 }
 
 #[test]
-fn every_foxglove_topic_message_validates_against_its_official_schema() {
+fn every_foxglove_topic_carries_the_sdk_schema_and_decodes_as_it() {
+    use foxglove::messages as fg;
+    use foxglove::Encode;
     let (_, path, _) = sphere_session();
     let recorded = read_session_file(path, &Default::default()).unwrap();
     for (topic, schema) in [
-        (TOPIC_TF, &FRAME_TRANSFORMS_SCHEMA),
-        (TOPIC_SCENE, &SCENE_UPDATE_SCHEMA),
-        (TOPIC_JOINT_STATES, &JOINT_STATES_SCHEMA),
+        (TOPIC_TF, fg::FrameTransforms::get_schema().unwrap()),
+        (TOPIC_SCENE, fg::SceneUpdate::get_schema().unwrap()),
+        (TOPIC_JOINT_STATES, fg::JointStates::get_schema().unwrap()),
     ] {
-        assert!(check_topic(&recorded, topic, schema) > 0);
+        let s = recorded.topics[topic].schema.as_ref().unwrap();
+        assert_eq!(s.name, schema.name, "{topic}");
+        assert_eq!(
+            s.data[..],
+            schema.data[..],
+            "{topic}: the SDK's descriptor set"
+        );
     }
     // The scene shows the sphere, and force arrows once fingers push.
-    let scenes = recorded.topics[TOPIC_SCENE].json_values().unwrap();
-    assert!(scenes
-        .iter()
-        .all(|(_, v)| v["entities"][0]["spheres"].as_array().unwrap().len() == 1));
+    let scenes: Vec<fg::SceneUpdate> = decode_all(&recorded, TOPIC_SCENE, "foxglove.SceneUpdate");
+    assert!(scenes.iter().all(|s| s.entities[0].spheres.len() == 1));
+    assert!(scenes.iter().any(|s| !s.entities[0].arrows.is_empty()));
     // /tf: world → base, one transform per joint, world → object.
-    let tf = &recorded.topics[TOPIC_TF].json_values().unwrap()[0].1;
-    let transforms = tf["transforms"].as_array().unwrap();
+    let tf: Vec<fg::FrameTransforms> = decode_all(&recorded, TOPIC_TF, "foxglove.FrameTransforms");
+    let transforms = &tf[0].transforms;
     assert_eq!(transforms.len(), HandModel::glove10().joints.len() + 2);
-    assert_eq!(transforms[0]["parent_frame_id"], "world");
-    assert_eq!(transforms.last().unwrap()["child_frame_id"], "object");
+    assert_eq!(transforms[0].parent_frame_id, "world");
+    assert_eq!(transforms.last().unwrap().child_frame_id, "object");
+    let joints: Vec<fg::JointStates> =
+        decode_all(&recorded, TOPIC_JOINT_STATES, "foxglove.JointStates");
+    assert_eq!(joints[0].joints.len(), HandModel::glove10().dof());
 }
 
 #[test]
-fn every_raw_topic_message_validates_against_its_icms_schema() {
+fn every_raw_topic_is_protobuf_of_our_schema_and_every_message_decodes() {
     let (_, path, _) = sphere_session();
     let recorded = read_session_file(path, &Default::default()).unwrap();
-    for (topic, schema) in RAW_TOPICS.iter().zip(ICMS_SCHEMAS.iter()) {
-        assert!(check_topic(&recorded, topic, schema) > 0);
+    let ours = services::session::proto::FILE_DESCRIPTOR_SET;
+    for topic in RAW_TOPICS {
+        assert_eq!(
+            recorded.topics[topic].schema.as_ref().unwrap().data[..],
+            ours[..]
+        );
     }
+    let n = decode_all::<proto::GloveJointStatesProto>(
+        &recorded,
+        TOPIC_GLOVE_JOINT_STATES,
+        RAW_SCHEMA_NAMES[0],
+    )
+    .len();
+    assert_eq!(
+        decode_all::<proto::GloveFeedbackProto>(
+            &recorded,
+            TOPIC_GLOVE_FEEDBACK,
+            RAW_SCHEMA_NAMES[1]
+        )
+        .len(),
+        n
+    );
+    assert_eq!(
+        decode_all::<proto::ContactsProto>(&recorded, TOPIC_CONTACTS, RAW_SCHEMA_NAMES[2]).len(),
+        n
+    );
+    assert_eq!(
+        decode_all::<proto::ObjectStateProto>(&recorded, TOPIC_OBJECT_STATE, RAW_SCHEMA_NAMES[3])
+            .len(),
+        n
+    );
+    let session = read_session(path).unwrap();
+    assert_eq!(session.metadata["format_version"], "2");
 }
 
 #[test]
@@ -211,7 +257,8 @@ fn the_python_reader_reads_every_message_of_a_simulated_session() {
     let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("../tests/python/read_mcap.py");
     // The interpreter with the reference reader (`scripts/test` sets it up; a plain
     // `cargo test` without it skips this check, saying so).
-    let Some(python) = interpreter::python_with(&["mcap", "zstandard", "lz4"]) else {
+    let Some(python) = interpreter::python_with(&["mcap", "zstandard", "lz4", "mcap_protobuf"])
+    else {
         return;
     };
     let output = std::process::Command::new(python)
@@ -227,7 +274,13 @@ fn the_python_reader_reads_every_message_of_a_simulated_session() {
     let report: serde_json::Value = serde_json::from_slice(&output.stdout).unwrap();
     for (topic, n) in &summary.write.messages_per_topic {
         assert_eq!(report["topics"][topic], serde_json::json!(n), "{topic}");
+        // Every topic is protobuf, decoded from the schemas inside the file alone.
+        assert_eq!(report["decoded"][topic], serde_json::json!(n), "{topic}");
     }
+    assert_eq!(
+        report["first"][TOPIC_OBJECT_STATE]["pose"]["orientation"]["w_e6"], 1_000_000,
+        "the sphere rests upright at the start"
+    );
     assert_eq!(
         report["messages"],
         serde_json::json!(summary.write.messages)
@@ -501,7 +554,7 @@ fn a_glove_recording_shorter_than_the_shortest_phase_is_refused() {
     }
     let summary = import(&[0.0, 0.05]).unwrap();
     assert_eq!(summary.ticks, 51);
-    let back = read_session(&dir.path().join("out.mcap")).unwrap();
+    let back = read_session(dir.path().join("out.mcap")).unwrap();
     assert_eq!(back.ticks(), 51);
 }
 
@@ -630,7 +683,7 @@ fn a_topic_left_undecoded_is_still_checked_for_valid_json() {
             .unwrap();
     }
     w.write(TOPIC_GLOVE_FEEDBACK, 0, &feedback()).unwrap();
-    w.write_raw_json(TOPIC_GLOVE_FEEDBACK, MS, b"{\"names\": [")
+    w.write_raw(TOPIC_GLOVE_FEEDBACK, MS, b"{\"names\": [")
         .unwrap();
     w.finish().unwrap();
     let bytes = std::fs::read(&path).unwrap();

@@ -3,12 +3,15 @@
 zstd chunks) and prints what it found as JSON:
 
     {"topics": {topic: count}, "schemas": {topic: schema name},
-     "metadata": {name: {key: value}}, "messages": total, "indexed": true}
+     "metadata": {name: {key: value}}, "messages": total, "indexed": true,
+     "decoded": {topic: count}, "first": {topic: {field: value}}}
 
 Every message is read twice: through the summary and indexes (the seeking reader, as Foxglove
 does) and front to back (the streaming reader); the counts must agree. Every message on a `json`
-channel must parse as strict JSON (no NaN/Infinity). Exits non-zero, with the reason on stderr,
-if anything fails.
+channel must parse as strict JSON (no NaN/Infinity); every message on a `protobuf` channel must
+decode (PyPI `mcap-protobuf-support`) with nothing but the schema inside the file, and
+`"decoded"` counts those per topic, with the first message of each as a dict in `"first"`.
+Exits non-zero, with the reason on stderr, if anything fails.
 
 Usage: read_mcap.py FILE.mcap
 """
@@ -32,6 +35,11 @@ def main(argv):
         print(f"read_mcap.py: the mcap package is missing ({e}); pip install mcap zstandard",
               file=sys.stderr)
         return 3
+    try:
+        from google.protobuf.json_format import MessageToDict
+        from mcap_protobuf.decoder import DecoderFactory
+    except ImportError:
+        DecoderFactory = None
     path = argv[1]
     try:
         with open(path, "rb") as f:
@@ -40,13 +48,27 @@ def main(argv):
             if summary is None:
                 raise ValueError("no summary section (file not finished?)")
             topics = Counter()
+            decoded = Counter()
+            first = {}
             schemas = {}
+            protobuf = DecoderFactory() if DecoderFactory is not None else None
             for schema, channel, message in reader.iter_messages():
                 topics[channel.topic] += 1
                 if schema is not None:
                     schemas[channel.topic] = schema.name
                 if channel.message_encoding == "json":
                     json.loads(message.data, parse_constant=_reject_constant)
+                elif channel.message_encoding == "protobuf":
+                    if protobuf is None:
+                        raise ValueError("protobuf channels need mcap-protobuf-support")
+                    decode = protobuf.decoder_for("protobuf", schema)
+                    if decode is None:
+                        raise ValueError(f"no protobuf decoder for {channel.topic}")
+                    value = decode(message.data)
+                    decoded[channel.topic] += 1
+                    if channel.topic not in first:
+                        first[channel.topic] = MessageToDict(
+                            value, preserving_proto_field_name=True)
             metadata = {m.name: dict(m.metadata) for m in reader.iter_metadata()}
             if summary.statistics is not None:
                 if summary.statistics.message_count != sum(topics.values()):
@@ -66,6 +88,8 @@ def main(argv):
         "metadata": metadata,
         "messages": sum(topics.values()),
         "indexed": True,
+        "decoded": dict(sorted(decoded.items())),
+        "first": first,
     }, sort_keys=True))
     return 0
 

@@ -360,6 +360,11 @@ impl RawTopic {
     pub(crate) fn is_json(&self) -> bool {
         self.message_encoding == MESSAGE_ENCODING
     }
+
+    /// Whether the topic carries protobuf messages.
+    pub(crate) fn is_protobuf(&self) -> bool {
+        self.message_encoding == PROTOBUF
+    }
 }
 
 /// A session read and checked structurally (CRCs, limits, links between records) but with
@@ -452,6 +457,35 @@ impl RawSession {
             let data = self.data(m);
             let value = serde_json::from_slice(data).map_err(|source| {
                 json_error::<T>(&t.topic, first + i, m.log_time_ns, data, source)
+            })?;
+            f(first + i, m.log_time_ns, value)?;
+        }
+        Ok(())
+    }
+
+    /// Each of `messages` (of protobuf topic `t`, the first of them its message number
+    /// `first`) decoded as `M` and handed to `f` with its number and log time; a message that
+    /// does not decode is [`RecordingError::InvalidInput`] naming the topic, the message and
+    /// the schema. The first error (of decoding or of `f`) stops.
+    pub(crate) fn decode_each_protobuf<M: prost::Message + Default>(
+        &self,
+        t: &RawTopic,
+        first: usize,
+        messages: &[MessageRef],
+        mut f: impl FnMut(usize, u64, M) -> Result<()>,
+    ) -> Result<()> {
+        for (i, m) in messages.iter().enumerate() {
+            let value = M::decode(self.data(m)).map_err(|e| RecordingError::InvalidInput {
+                location: format!(
+                    "topic {} message {} (log time {} ns)",
+                    t.topic,
+                    first + i,
+                    m.log_time_ns
+                ),
+                detail: format!(
+                    "does not decode as {}: {e}",
+                    t.schema.as_ref().map_or("its schema", |s| s.name.as_str())
+                ),
             })?;
             f(first + i, m.log_time_ns, value)?;
         }
@@ -551,13 +585,36 @@ fn json_error<'de, T: Deserialize<'de>>(
     }
 }
 
-/// A topic's messages are JSON and its schema is the `jsonschema` named `schema_name`.
+/// Message and schema encoding of session format 2.
+const PROTOBUF: &str = "protobuf";
+
+/// A topic's schema is the one named `schema_name`, and its messages are JSON with a
+/// `jsonschema` schema (session format 1) or protobuf with a `protobuf` schema (format 2).
 fn check_topic(
     topic: &str,
     message_encoding: &str,
     schema: Option<&SchemaInfo>,
     schema_name: &str,
 ) -> Result<()> {
+    if message_encoding == PROTOBUF {
+        return match schema {
+            Some(s) if s.name == schema_name => {
+                if s.encoding != PROTOBUF {
+                    return Err(RecordingError::NonJsonEncoding {
+                        topic: topic.to_owned(),
+                        encoding: s.encoding.clone(),
+                        expected: PROTOBUF,
+                    });
+                }
+                Ok(())
+            }
+            other => Err(RecordingError::UnknownSchema {
+                topic: topic.to_owned(),
+                expected: schema_name.to_owned(),
+                found: other.map(|s| s.name.clone()),
+            }),
+        };
+    }
     check_json_encoding(topic, message_encoding)?;
     match schema {
         Some(s) if s.name == schema_name => {

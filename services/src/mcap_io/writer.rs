@@ -34,6 +34,11 @@ pub struct WriterOptions {
     /// zstd level (1 = fastest; 0 = zstd's default, 3). Default 0. The recorder uses 1: at
     /// 1 kHz, compression is most of the writer thread's work.
     pub compression_level: u32,
+    /// Write a message index after each chunk (16 bytes per message, uncompressed). Default
+    /// `true`. Readers (ours, Foxglove, the Python `mcap` reader) find chunks by the chunk
+    /// index and read a chunk whole; the per-message index only helps reading one topic of a
+    /// chunk, and at 1 kHz it is a fifth of a session file, so the recorder leaves it out.
+    pub message_indexes: bool,
 }
 
 impl Default for WriterOptions {
@@ -44,6 +49,7 @@ impl Default for WriterOptions {
             flush_interval_ns: 1_000_000_000,
             profile: String::new(),
             compression_level: 0,
+            message_indexes: true,
         }
     }
 }
@@ -63,7 +69,7 @@ impl WriterOptions {
             .compression_threads(0)
             .chunk_size(Some(self.chunk_size))
             .use_chunks(true)
-            .emit_message_indexes(true)
+            .emit_message_indexes(self.message_indexes)
             .emit_chunk_indexes(true)
             .emit_metadata_indexes(true)
             .emit_statistics(true)
@@ -202,6 +208,40 @@ impl SessionWriter {
         Ok(())
     }
 
+    /// Registers `topic` with a protobuf schema: `name` is the message's full name (e.g.
+    /// `icms.Contacts`), `descriptor_set` a serialised `FileDescriptorSet` that defines it. The
+    /// channel's messages are then protobuf ([`SessionWriter::write_raw`]). Registering the same
+    /// topic again with the same schema name is a no-op; with another one it is an error.
+    pub fn register_protobuf_channel(
+        &mut self,
+        topic: &str,
+        name: &str,
+        descriptor_set: &[u8],
+    ) -> Result<()> {
+        if let Some(existing) = self.channels.get(topic) {
+            if existing.schema_name == name {
+                return Ok(());
+            }
+            return Err(RecordingError::TopicConflict {
+                topic: topic.to_owned(),
+                existing: existing.schema_name.clone(),
+            });
+        }
+        let w = self.writer()?;
+        let schema_id = w.add_schema(name, "protobuf", descriptor_set)?;
+        let id = w.add_channel(schema_id, topic, "protobuf", &BTreeMap::new())?;
+        self.channels.insert(
+            topic.to_owned(),
+            ChannelState {
+                id,
+                schema_name: name.to_owned(),
+                sequence: 0,
+                count: 0,
+            },
+        );
+        Ok(())
+    }
+
     /// Whether `topic` has been registered.
     pub fn has_topic(&self, topic: &str) -> bool {
         self.channels.contains_key(topic)
@@ -243,7 +283,7 @@ impl SessionWriter {
         buf.clear();
         let serialised = serde_json::to_writer(&mut buf, msg);
         let result = match serialised {
-            Ok(()) => self.write_raw_json(topic, log_time_ns, &buf),
+            Ok(()) => self.write_raw(topic, log_time_ns, &buf),
             Err(e) => Err(RecordingError::Serialize {
                 topic: topic.to_owned(),
                 detail: e.to_string(),
@@ -253,9 +293,9 @@ impl SessionWriter {
         result
     }
 
-    /// Writes an already-serialised JSON message. The caller vouches that `json` is valid JSON
-    /// matching the topic's schema (no check is made).
-    pub fn write_raw_json(&mut self, topic: &str, log_time_ns: u64, json: &[u8]) -> Result<()> {
+    /// Writes an already-serialised message (JSON or protobuf, as the topic's channel says).
+    /// The caller vouches that it matches the topic's schema (no check is made).
+    pub fn write_raw(&mut self, topic: &str, log_time_ns: u64, data: &[u8]) -> Result<()> {
         let Some(channel) = self.channels.get_mut(topic) else {
             return Err(RecordingError::UnregisteredTopic {
                 topic: topic.to_owned(),
@@ -269,7 +309,7 @@ impl SessionWriter {
         };
         channel.sequence = channel.sequence.wrapping_add(1);
         channel.count += 1;
-        self.writer()?.write_to_known_channel(&header, json)?;
+        self.writer()?.write_to_known_channel(&header, data)?;
         self.unflushed = true;
         self.log_time_range_ns = Some(match self.log_time_range_ns {
             None => (log_time_ns, log_time_ns),

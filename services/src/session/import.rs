@@ -43,7 +43,7 @@ use dfs_core::scenario::ScenarioObject;
 
 use super::recorder::{RecordSummary, SessionInfo, SessionRecorder, TickData};
 use crate::error::{RecordingError, Result};
-use crate::foxglove::{JointStates, JOINT_STATES_SCHEMA};
+use crate::foxglove::{JointState, JointStates, Timestamp, JOINT_STATES_SCHEMA};
 use crate::mcap_io::{read_session_file, ReadLimits};
 
 /// A glove recording: samples of joint angles and torques in the hand's DOF order.
@@ -272,8 +272,46 @@ pub fn read_glove_mcap(path: &Path, hand: &HandModel) -> Result<GloveRecording> 
             ))
         }
     };
-    let messages: Vec<(u64, JointStates)> =
-        recorded.decode_topic(topic, &JOINT_STATES_SCHEMA.name)?;
+    let t = &recorded.topics[topic];
+    let messages: Vec<(u64, JointStates)> = if t.message_encoding == "protobuf" {
+        // As the Foxglove SDK and session format 2 write it.
+        t.messages
+            .iter()
+            .enumerate()
+            .map(|(i, m)| {
+                let pb = <foxglove::messages::JointStates as prost::Message>::decode(&m.data[..])
+                    .map_err(|e| {
+                    invalid(
+                        format!(
+                            "{name}: {topic} message {i} (log time {} ns)",
+                            m.log_time_ns
+                        ),
+                        format!("does not decode as foxglove.JointStates: {e}"),
+                    )
+                })?;
+                let joints = pb
+                    .joints
+                    .into_iter()
+                    .map(|j| JointState {
+                        name: j.name,
+                        position: j.position,
+                        velocity: j.velocity,
+                        acceleration: j.acceleration,
+                        effort: j.effort,
+                    })
+                    .collect();
+                Ok((
+                    m.log_time_ns,
+                    JointStates {
+                        timestamp: Timestamp::default(),
+                        joints,
+                    },
+                ))
+            })
+            .collect::<Result<_>>()?
+    } else {
+        recorded.decode_topic(topic, &JOINT_STATES_SCHEMA.name)?
+    };
     let n = hand.dof();
     let dof_index: HashMap<&str, usize> = hand
         .dof_names
@@ -312,6 +350,15 @@ pub fn read_glove_mcap(path: &Path, hand: &HandModel) -> Result<GloveRecording> 
                     format!("joint {:?} needs both position and effort", joint.name),
                 ));
             };
+            if !(p.is_finite() && e.is_finite()) {
+                return Err(invalid(
+                    at(format!("joints[{j}]")),
+                    format!(
+                        "joint {:?}: position and effort must be finite numbers",
+                        joint.name
+                    ),
+                ));
+            }
             q[d] = p;
             tau[d] = e;
         }

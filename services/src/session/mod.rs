@@ -34,6 +34,7 @@
 
 pub mod import;
 pub mod messages;
+pub mod proto;
 mod read;
 mod recorder;
 mod time;
@@ -45,7 +46,7 @@ pub use read::{
 };
 pub use recorder::{
     record_simulation, record_simulation_until, record_ticks, record_ticks_until, RecordSummary,
-    SessionInfo, SessionRecorder, TickData, FORCE_STEPS_PER_UNIT, GEOMETRY_STEPS_PER_UNIT,
+    SessionInfo, SessionRecorder, TickData,
 };
 pub use time::rfc3339_utc;
 
@@ -70,6 +71,13 @@ pub const RAW_TOPICS: [&str; 4] = [
     TOPIC_GLOVE_FEEDBACK,
     TOPIC_CONTACTS,
     TOPIC_OBJECT_STATE,
+];
+/// Schema names of the raw topics, in [`RAW_TOPICS`] order (the same in both formats).
+pub const RAW_SCHEMA_NAMES: [&str; 4] = [
+    "icms.GloveJointStates",
+    "icms.GloveFeedback",
+    "icms.Contacts",
+    "icms.ObjectState",
 ];
 /// The Foxglove topics, written every [`FOXGLOVE_DECIMATION`]th tick.
 pub const FOXGLOVE_TOPICS: [&str; 3] = [TOPIC_TF, TOPIC_SCENE, TOPIC_JOINT_STATES];

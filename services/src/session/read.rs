@@ -6,6 +6,7 @@ use std::path::Path;
 use serde::Deserialize;
 
 use super::messages::*;
+use super::proto::{self, schema_difference};
 use super::*;
 use crate::error::{RecordingError, Result};
 use crate::foxglove::{FRAME_TRANSFORMS_SCHEMA, JOINT_STATES_SCHEMA, SCENE_UPDATE_SCHEMA};
@@ -345,15 +346,28 @@ fn tick_reference(raw: &RawSession) -> TickReference {
     };
     // Only a list that passes its own check is a reference (an empty one would make every
     // other message's list look wrong, before the culprit's own error).
-    TickReference {
-        dof_names: first(TOPIC_GLOVE_JOINT_STATES)
+    let protobuf = |topic: &str| raw.topics.get(topic).is_some_and(|t| t.is_protobuf());
+    let dof_names = if protobuf(TOPIC_GLOVE_JOINT_STATES) {
+        first(TOPIC_GLOVE_JOINT_STATES)
+            .and_then(|d| <proto::GloveJointStatesProto as prost::Message>::decode(d).ok())
+            .map(|m| m.names)
+    } else {
+        first(TOPIC_GLOVE_JOINT_STATES)
             .and_then(|d| serde_json::from_slice::<GloveJointStatesShape>(d).ok())
             .map(|m| m.names())
-            .filter(|n| (1..=MAX_SESSION_DOFS).contains(&n.len())),
-        finger_names: first(TOPIC_CONTACTS)
+    };
+    let finger_names = if protobuf(TOPIC_CONTACTS) {
+        first(TOPIC_CONTACTS)
+            .and_then(|d| <proto::ContactsProto as prost::Message>::decode(d).ok())
+            .map(|m| m.fingers.into_iter().map(|f| f.name).collect::<Vec<_>>())
+    } else {
+        first(TOPIC_CONTACTS)
             .and_then(|d| serde_json::from_slice::<Contacts>(d).ok())
             .map(|m| m.fingers.into_iter().map(|f| f.name).collect::<Vec<_>>())
-            .filter(|n| (1..=MAX_SESSION_FINGERS).contains(&n.len())),
+    };
+    TickReference {
+        dof_names: dof_names.filter(|n| (1..=MAX_SESSION_DOFS).contains(&n.len())),
+        finger_names: finger_names.filter(|n| (1..=MAX_SESSION_FINGERS).contains(&n.len())),
     }
 }
 
@@ -382,6 +396,60 @@ fn raw_block<'s, T: Deserialize<'s> + TickContent>(
         Ok(())
     })?;
     Ok(out)
+}
+
+/// [`raw_block`] for a protobuf (format 2) raw topic: each message decoded as `P`, converted
+/// to its SI form by `convert`, checked, and kept if `keep`.
+fn raw_block_protobuf<P: prost::Message + Default, T: TickContent>(
+    raw: &RawSession,
+    t: &RawTopic,
+    first: usize,
+    messages: &[MessageRef],
+    reference: &TickReference,
+    keep: bool,
+    convert: fn(P) -> T,
+) -> Result<Vec<(u64, T)>> {
+    let mut out = Vec::with_capacity(if keep { messages.len() } else { 0 });
+    raw.decode_each_protobuf(t, first, messages, |i, time, message: P| {
+        let message = convert(message);
+        message
+            .check(reference)
+            .map_err(|detail| RecordingError::InvalidInput {
+                location: format!("topic {} message {i} (log time {time} ns)", t.topic),
+                detail,
+            })?;
+        if keep {
+            out.push((time, message));
+        }
+        Ok(())
+    })?;
+    Ok(out)
+}
+
+/// Checks that every message of a protobuf Foxglove topic decodes as its official schema (the
+/// SDK's types); other protobuf topics are not ours to check.
+fn check_foxglove_protobuf(
+    raw: &RawSession,
+    t: &RawTopic,
+    first: usize,
+    messages: &[MessageRef],
+) -> Result<()> {
+    use foxglove::messages as fg;
+    let ok = |_: usize, _: u64, _: ()| Ok(());
+    match t.schema.as_ref().map(|s| s.name.as_str()) {
+        Some("foxglove.FrameTransforms") => {
+            raw.decode_each_protobuf(t, first, messages, |i, l, _: fg::FrameTransforms| {
+                ok(i, l, ())
+            })
+        }
+        Some("foxglove.SceneUpdate") => {
+            raw.decode_each_protobuf(t, first, messages, |i, l, _: fg::SceneUpdate| ok(i, l, ()))
+        }
+        Some("foxglove.JointStates") => {
+            raw.decode_each_protobuf(t, first, messages, |i, l, _: fg::JointStates| ok(i, l, ()))
+        }
+        _ => Ok(()),
+    }
 }
 
 fn from_raw(raw: &RawSession, name: &str, topics: DecodeTopics) -> Result<Session> {
@@ -435,7 +503,18 @@ fn from_raw(raw: &RawSession, name: &str, topics: DecodeTopics) -> Result<Sessio
         ),
     ];
     for (topic, schema, _) in &raw_topics {
-        raw.require_topic(topic, &schema.name)?;
+        let t = raw.require_topic(topic, &schema.name)?;
+        // A protobuf raw topic must be laid out as ours: another layout would decode into
+        // wrong numbers rather than fail.
+        if t.is_protobuf() {
+            let data = t.schema.as_ref().map_or(&[][..], |s| &s.data[..]);
+            if let Some(detail) = schema_difference(data, &schema.name) {
+                return Err(RecordingError::InvalidInput {
+                    location: format!("{name}: topic {topic} schema {}", schema.name),
+                    detail: format!("differs from ours: {detail}"),
+                });
+            }
+        }
     }
     check_raw_log_times(raw)?;
     let reference = tick_reference(raw);
@@ -444,7 +523,7 @@ fn from_raw(raw: &RawSession, name: &str, topics: DecodeTopics) -> Result<Sessio
     let mut plan: Vec<(&RawTopic, Job)> = raw
         .topics
         .values()
-        .filter(|t| t.is_json() && !RAW_TOPICS.contains(&t.topic.as_str()))
+        .filter(|t| (t.is_json() || t.is_protobuf()) && !RAW_TOPICS.contains(&t.topic.as_str()))
         .map(|t| (t, Job::Check))
         .collect();
     for (topic, _, job) in raw_topics {
@@ -462,6 +541,57 @@ fn from_raw(raw: &RawSession, name: &str, topics: DecodeTopics) -> Result<Sessio
     let r = &reference;
     let done = par_map(jobs.len(), |i| -> Result<Decoded> {
         let (t, first, m, job) = jobs[i];
+        if t.is_protobuf() {
+            return Ok(match job {
+                Job::Check => {
+                    check_foxglove_protobuf(raw, t, first, m)?;
+                    Decoded::Checked
+                }
+                Job::JointStates(keep) => {
+                    let v = raw_block_protobuf(
+                        raw,
+                        t,
+                        first,
+                        m,
+                        r,
+                        keep,
+                        proto::joint_states_from_proto,
+                    )?;
+                    if keep {
+                        Decoded::JointStates(v)
+                    } else {
+                        Decoded::Checked
+                    }
+                }
+                Job::Feedback(keep) => {
+                    let v =
+                        raw_block_protobuf(raw, t, first, m, r, keep, proto::feedback_from_proto)?;
+                    if keep {
+                        Decoded::Feedback(v)
+                    } else {
+                        Decoded::Checked
+                    }
+                }
+                Job::Contacts(keep) => {
+                    let v =
+                        raw_block_protobuf(raw, t, first, m, r, keep, proto::contacts_from_proto)?;
+                    if keep {
+                        Decoded::Contacts(v)
+                    } else {
+                        Decoded::Checked
+                    }
+                }
+                Job::Object(keep) => {
+                    let v =
+                        raw_block_protobuf(raw, t, first, m, r, keep, proto::object_from_proto)?;
+                    if keep {
+                        Decoded::Object(v)
+                    } else {
+                        Decoded::Checked
+                    }
+                }
+            });
+        }
         Ok(match job {
             Job::Check => {
                 raw.check_json_of(t, first, m)?;

@@ -14,10 +14,17 @@ use dfs_core::operator::Simulation;
 use dfs_core::scenario::Scenario;
 use dfs_core::Stop;
 
+use foxglove::messages as fg;
+use foxglove::Encode;
+
 use super::messages::*;
+use super::proto::{
+    ContactsProto, GloveFeedbackProto, GloveJointStatesProto, Quantiser, FILE_DESCRIPTOR_SET,
+    FORMAT_VERSION,
+};
 use super::*;
 use crate::error::{RecordingError, Result};
-use crate::foxglove::*;
+use crate::foxglove::{Pose, Quaternion, Vector3};
 use crate::mcap_io::{SessionWriter, WriteSummary, WriterOptions};
 
 /// Ticks per batch handed to the writer thread (also the Foxglove period, so each batch holds
@@ -26,7 +33,7 @@ const BATCH_TICKS: u64 = FOXGLOVE_DECIMATION;
 /// zstd level of session files: 1, the fastest. At 1 kHz compression is most of the writer
 /// thread's work; on a 60 s `sphere-lift` session level 3 (zstd's default) took longer and
 /// even gave a 9 % larger file (53.3 MB against 48.8 MB).
-const ZSTD_LEVEL: u32 = 1;
+const ZSTD_LEVEL: u32 = 3;
 /// Batches in flight between the simulation and the writer thread.
 const CHANNEL_BOUND: usize = 8;
 
@@ -41,8 +48,8 @@ const ALL_TOPICS: [&str; 7] = [
     TOPIC_JOINT_STATES,
 ];
 
-/// Serialised messages of several ticks: JSON bytes back to back, and per message its topic
-/// index, log time and byte range.
+/// Serialised messages of several ticks: protobuf bytes back to back, and per message its
+/// topic index, log time and byte range.
 #[derive(Default)]
 struct Batch {
     data: Vec<u8>,
@@ -105,15 +112,20 @@ struct HandFrames {
     joints: Vec<(usize, usize)>,
 }
 
-/// Reused message instances: filled in place every tick, so that serialising allocates nothing.
+/// Reused message instances: filled in place every tick, so that serialising the raw topics
+/// allocates nothing once warm. The raw topics are filled in SI units, then quantised into
+/// their protobuf form ([`super::proto`]); the Foxglove topics are the SDK's own types.
 struct Messages {
     joints: GloveJointStates,
     feedback: GloveFeedback,
     contacts: Contacts,
     object: messages::ObjectState,
-    tf: FrameTransforms,
-    scene: SceneUpdate,
-    fox_joints: JointStates,
+    joints_pb: GloveJointStatesProto,
+    feedback_pb: GloveFeedbackProto,
+    contacts_pb: ContactsProto,
+    tf: fg::FrameTransforms,
+    scene: fg::SceneUpdate,
+    fox_joints: fg::JointStates,
     prev_q: Vec<f64>,
     prev_time_ns: Option<u64>,
 }
@@ -143,49 +155,17 @@ impl std::fmt::Debug for SessionRecorder {
     }
 }
 
-/// Steps per unit of the geometry and motion a session records (m, rad, m/s, rad/s, unit
-/// vectors and quaternions): 1 nm, 1 nrad. Values are rounded to this before they are written,
-/// so the file holds short decimals (about half the text of a shortest-round-trip double,
-/// which makes sessions smaller and faster to read) and reading back gives exactly what was
-/// recorded. Far finer than any glove's sensors and than the 1 µm/s drift a hold is judged by.
-pub const GEOMETRY_STEPS_PER_UNIT: f64 = 1e9;
-/// Steps per unit of the forces and torques a session records (N, N·m): 1 µN, 1 µN·m.
-pub const FORCE_STEPS_PER_UNIT: f64 = 1e6;
-
-/// `x` rounded to `1 / steps`; `-0` becomes `0`; a non-finite `x` is returned unchanged (the
-/// recorder refuses it later, naming the field).
-fn round_to(x: f64, steps: f64) -> f64 {
-    let r = (x * steps).round() / steps;
-    if r.is_finite() {
-        r + 0.0
-    } else {
-        x
-    }
-}
-
-fn g(x: f64) -> f64 {
-    round_to(x, GEOMETRY_STEPS_PER_UNIT)
-}
-
-fn f(x: f64) -> f64 {
-    round_to(x, FORCE_STEPS_PER_UNIT)
-}
-
 fn v3(v: &Vector) -> Vector3 {
-    Vector3::new(g(v.x), g(v.y), g(v.z))
-}
-
-fn force3(v: &Vector) -> Vector3 {
-    Vector3::new(f(v.x), f(v.y), f(v.z))
+    Vector3::new(v.x, v.y, v.z)
 }
 
 fn quat(r: &Rotation) -> Quaternion {
     let q = r.quaternion();
     Quaternion {
-        x: g(q.i),
-        y: g(q.j),
-        z: g(q.k),
-        w: g(q.w),
+        x: q.i,
+        y: q.j,
+        z: q.k,
+        w: q.w,
     }
 }
 
@@ -198,15 +178,15 @@ fn pose(iso: &Isometry) -> Pose {
 
 fn intensity(c: &dfs_core::contact::Intensity) -> Intensity4 {
     Intensity4 {
-        x: f(c[0]),
-        y: f(c[1]),
-        z: f(c[2]),
-        torsion: f(c[3]),
+        x: c[0],
+        y: c[1],
+        z: c[2],
+        torsion: c[3],
     }
 }
 
 fn wrench6(w: &dfs_core::math::Wrench) -> [f64; 6] {
-    [f(w[0]), f(w[1]), f(w[2]), f(w[3]), f(w[4]), f(w[5])]
+    [w[0], w[1], w[2], w[3], w[4], w[5]]
 }
 
 impl SessionRecorder {
@@ -221,6 +201,7 @@ impl SessionRecorder {
         let path = out.as_ref().to_path_buf();
         let options = WriterOptions {
             compression_level: ZSTD_LEVEL,
+            message_indexes: false,
             ..WriterOptions::default()
         };
         let mut writer = SessionWriter::create_with_options(&path, options)?;
@@ -242,6 +223,7 @@ impl SessionRecorder {
             rfc3339_utc(std::time::SystemTime::now()),
         );
         meta.insert("source".to_owned(), info.source.clone());
+        meta.insert("format_version".to_owned(), FORMAT_VERSION.to_string());
         meta.insert(
             "foxglove_rate_hz".to_owned(),
             (u64::from(RATE_HZ) / FOXGLOVE_DECIMATION).to_string(),
@@ -259,12 +241,12 @@ impl SessionRecorder {
             GROUND_TRUTH_METADATA,
             BTreeMap::from([("phases".to_owned(), phases)]),
         )?;
-        for (topic, schema) in RAW_TOPICS.iter().zip(ICMS_SCHEMAS.iter()) {
-            writer.register_channel(topic, schema)?;
+        for (topic, schema) in RAW_TOPICS.iter().zip(RAW_SCHEMA_NAMES) {
+            writer.register_protobuf_channel(topic, schema, FILE_DESCRIPTOR_SET)?;
         }
-        writer.register_channel(TOPIC_TF, &FRAME_TRANSFORMS_SCHEMA)?;
-        writer.register_channel(TOPIC_SCENE, &SCENE_UPDATE_SCHEMA)?;
-        writer.register_channel(TOPIC_JOINT_STATES, &JOINT_STATES_SCHEMA)?;
+        register_foxglove::<fg::FrameTransforms>(&mut writer, TOPIC_TF)?;
+        register_foxglove::<fg::SceneUpdate>(&mut writer, TOPIC_SCENE)?;
+        register_foxglove::<fg::JointStates>(&mut writer, TOPIC_JOINT_STATES)?;
 
         let (tx, rx) = sync_channel::<Batch>(CHANNEL_BOUND);
         let (recycle_tx, recycled) = channel::<Batch>();
@@ -331,16 +313,26 @@ impl SessionRecorder {
 
     fn serialise_tick(&mut self, tick: &TickData<'_>) -> Result<()> {
         let t = tick.time_ns;
-        self.msgs.fill_raw(&self.hand, tick);
-        push(&mut self.batch, 0, t, &self.msgs.joints)?;
-        push(&mut self.batch, 1, t, &self.msgs.feedback)?;
-        push(&mut self.batch, 2, t, &self.msgs.contacts)?;
-        push(&mut self.batch, 3, t, &self.msgs.object)?;
-        if self.ticks % FOXGLOVE_DECIMATION == 0 {
-            self.msgs.fill_foxglove(&self.hand, &self.shape, tick);
-            push(&mut self.batch, 4, t, &self.msgs.tf)?;
-            push(&mut self.batch, 5, t, &self.msgs.scene)?;
-            push(&mut self.batch, 6, t, &self.msgs.fox_joints)?;
+        let m = &mut self.msgs;
+        m.fill_raw(&self.hand, tick);
+        let mut q = Quantiser::default();
+        q.joint_states(&m.joints, &mut m.joints_pb);
+        refused(&q, 0)?;
+        push(&mut self.batch, 0, t, &m.joints_pb);
+        q.feedback(&m.feedback, &mut m.feedback_pb);
+        refused(&q, 1)?;
+        push(&mut self.batch, 1, t, &m.feedback_pb);
+        q.contacts(&m.contacts, &mut m.contacts_pb);
+        refused(&q, 2)?;
+        push(&mut self.batch, 2, t, &m.contacts_pb);
+        let object = q.object(&m.object);
+        refused(&q, 3)?;
+        push(&mut self.batch, 3, t, &object);
+        if self.ticks.is_multiple_of(FOXGLOVE_DECIMATION) {
+            m.fill_foxglove(&self.hand, &self.shape, tick)?;
+            push(&mut self.batch, 4, t, &m.tf);
+            push(&mut self.batch, 5, t, &m.scene);
+            push(&mut self.batch, 6, t, &m.fox_joints);
         }
         Ok(())
     }
@@ -413,164 +405,38 @@ impl Drop for SessionRecorder {
     }
 }
 
-/// Serialises `msg` at the end of the batch. serde_json writes NaN and infinities as `null`
-/// (through [`ShortDecimals`]), and no field of ours is ever null, so a `null`
-/// means a non-finite number.
-fn push<T: serde::Serialize>(batch: &mut Batch, topic: u8, t: u64, msg: &T) -> Result<()> {
+/// Encodes `msg` (protobuf) at the end of the batch.
+fn push<M: prost::Message>(batch: &mut Batch, topic: u8, t: u64, msg: &M) {
     let start = batch.data.len();
-    let topic_name = ALL_TOPICS[topic as usize];
-    let mut wrote_null = false;
-    let formatter = ShortDecimals {
-        wrote_null: &mut wrote_null,
-    };
-    let mut ser = serde_json::Serializer::with_formatter(&mut batch.data, formatter);
-    serde::Serialize::serialize(msg, &mut ser).map_err(|e| RecordingError::Serialize {
-        topic: topic_name.to_owned(),
-        detail: e.to_string(),
-    })?;
-    let end = batch.data.len();
-    if wrote_null {
-        let path = serde_json::from_slice::<serde_json::Value>(&batch.data[start..end])
-            .ok()
-            .and_then(|v| find_null(&v, String::new()))
-            .unwrap_or_else(|| "(unknown)".to_owned());
-        return Err(RecordingError::NonFiniteNumber {
-            topic: topic_name.to_owned(),
-            path,
-            value: "NaN or infinity".to_owned(),
-        });
-    }
-    batch.items.push((topic, t, start, end));
-    Ok(())
+    msg.encode_raw(&mut batch.data);
+    batch.items.push((topic, t, start, batch.data.len()));
 }
 
-/// serde_json's compact output, with numbers that are whole multiples of 1e-9 (every number
-/// the recorder rounds, see [`GEOMETRY_STEPS_PER_UNIT`]) written as scaled integers: the same
-/// decimal a shortest-round-trip formatter finds for them, or one with more digits where it
-/// would switch to exponent form (below 1e-5), at a fraction of the cost. Anything else goes
-/// to serde_json's own formatter. Notes whether a `null` was written.
-struct ShortDecimals<'a> {
-    wrote_null: &'a mut bool,
-}
-
-/// Largest magnitude written as a scaled integer: 16 significant digits, so the 1e-9 grid is
-/// finer than the doubles' spacing and the decimal names exactly one double.
-const SHORT_DECIMAL_LIMIT: f64 = 1e6;
-
-impl serde_json::ser::Formatter for ShortDecimals<'_> {
-    fn write_null<W: ?Sized + std::io::Write>(&mut self, writer: &mut W) -> std::io::Result<()> {
-        *self.wrote_null = true;
-        writer.write_all(b"null")
-    }
-
-    fn write_f64<W: ?Sized + std::io::Write>(
-        &mut self,
-        writer: &mut W,
-        value: f64,
-    ) -> std::io::Result<()> {
-        match short_decimal(value) {
-            Some((buf, len)) => writer.write_all(&buf[..len]),
-            None => serde_json::ser::Formatter::write_f64(
-                &mut serde_json::ser::CompactFormatter,
-                writer,
-                value,
-            ),
-        }
-    }
-}
-
-/// `value` as a decimal with at most nine fractional digits (at least one, like `1.0`), when
-/// `value` is the double nearest to such a decimal and below [`SHORT_DECIMAL_LIMIT`]; the
-/// text parses back to exactly `value`.
-fn short_decimal(value: f64) -> Option<([u8; 24], usize)> {
-    let scaled = value * 1e9;
-    // Also refuses NaN (never passed here: serde_json writes it as null).
-    if scaled.is_nan() || scaled.abs() >= SHORT_DECIMAL_LIMIT * 1e9 {
-        return None;
-    }
-    // Round half away from zero (the cast truncates; |scaled| < 1e15 < 2^53). `f64::round`
-    // is a libm call on the baseline x86-64 target.
-    let k = (scaled + 0.5f64.copysign(scaled)) as i64;
-    if k as f64 / 1e9 != value {
-        return None;
-    }
-    let mut out = [0u8; 24];
-    let mut len = 0;
-    if k < 0 {
-        out[0] = b'-';
-        len = 1;
-    }
-    let k = k.unsigned_abs();
-    let (whole, frac) = (k / 1_000_000_000, (k % 1_000_000_000) as u32);
-    // Integer part, at most 6 digits.
-    if whole < 10 {
-        out[len] = b'0' + whole as u8;
-        len += 1;
-    } else {
-        let mut digits = [0u8; 8];
-        let mut n = 0;
-        let mut w = whole;
-        while w > 0 {
-            digits[n] = b'0' + (w % 10) as u8;
-            n += 1;
-            w /= 10;
-        }
-        for i in (0..n).rev() {
-            out[len] = digits[i];
-            len += 1;
-        }
-    }
-    out[len] = b'.';
-    len += 1;
-    if frac == 0 {
-        out[len] = b'0';
-        return Some((out, len + 1));
-    }
-    // Nine fractional digits, two at a time, then the trailing zeros dropped.
-    out[len] = b'0' + (frac / 100_000_000) as u8;
-    let mut rest = frac % 100_000_000;
-    for pair in (0..4).rev() {
-        let two = (rest % 100) as usize * 2;
-        rest /= 100;
-        let at = len + 1 + pair * 2;
-        out[at..at + 2].copy_from_slice(&DIGIT_PAIRS[two..two + 2]);
-    }
-    len += 9;
-    while out[len - 1] == b'0' {
-        len -= 1;
-    }
-    Some((out, len))
-}
-
-/// "00", "01", … "99".
-const DIGIT_PAIRS: [u8; 200] = {
-    let mut t = [0u8; 200];
-    let mut i = 0;
-    while i < 100 {
-        t[2 * i] = b'0' + (i / 10) as u8;
-        t[2 * i + 1] = b'0' + (i % 10) as u8;
-        i += 1;
-    }
-    t
-};
-
-fn find_null(v: &serde_json::Value, path: String) -> Option<String> {
-    match v {
-        serde_json::Value::Null => Some(path),
-        serde_json::Value::Array(a) => a
-            .iter()
-            .enumerate()
-            .find_map(|(i, x)| find_null(x, format!("{path}[{i}]"))),
-        serde_json::Value::Object(o) => o.iter().find_map(|(k, x)| {
-            let p = if path.is_empty() {
-                k.clone()
+/// The quantiser's refusal as the recorder's error: a value of raw topic `topic` that is not
+/// finite or too large for its field (nothing of the tick is written then).
+fn refused(q: &Quantiser, topic: u8) -> Result<()> {
+    match &q.refused {
+        None => Ok(()),
+        Some((field, value)) => Err(RecordingError::NonFiniteNumber {
+            topic: ALL_TOPICS[topic as usize].to_owned(),
+            path: field.clone(),
+            value: if value.is_finite() {
+                format!("{value} (beyond the field's range)")
             } else {
-                format!("{path}.{k}")
-            };
-            find_null(x, p)
+                value.to_string()
+            },
         }),
-        _ => None,
     }
+}
+
+/// Registers a Foxglove topic with the SDK's schema of `T` (a `FileDescriptorSet` of the
+/// official `.proto`).
+fn register_foxglove<T: Encode>(writer: &mut SessionWriter, topic: &str) -> Result<()> {
+    let schema = T::get_schema().ok_or_else(|| RecordingError::Serialize {
+        topic: topic.to_owned(),
+        detail: "the Foxglove SDK has no schema for it".to_owned(),
+    })?;
+    writer.register_protobuf_channel(topic, &schema.name, &schema.data)
 }
 
 fn writer_thread(
@@ -580,7 +446,7 @@ fn writer_thread(
 ) -> Result<WriteSummary> {
     for mut batch in rx {
         for &(topic, t, start, end) in &batch.items {
-            writer.write_raw_json(ALL_TOPICS[topic as usize], t, &batch.data[start..end])?;
+            writer.write_raw(ALL_TOPICS[topic as usize], t, &batch.data[start..end])?;
         }
         for (name, metadata) in batch.metadata.drain(..) {
             writer.add_metadata(&name, metadata)?;
@@ -627,28 +493,29 @@ impl Messages {
                 .collect(),
         };
         let root_name = hand.links[hand.root].name.clone();
-        let mut transforms = vec![FrameTransform {
-            parent_frame_id: WORLD_FRAME.to_owned(),
-            child_frame_id: root_name,
-            ..FrameTransform::default()
-        }];
-        transforms.extend(hand.joints.iter().map(|j| FrameTransform {
-            parent_frame_id: hand.links[j.parent].name.clone(),
-            child_frame_id: hand.links[j.child].name.clone(),
-            ..FrameTransform::default()
-        }));
-        transforms.push(FrameTransform {
-            parent_frame_id: WORLD_FRAME.to_owned(),
-            child_frame_id: OBJECT_FRAME.to_owned(),
-            ..FrameTransform::default()
-        });
-        let mut entity = SceneEntity::new(Timestamp::default(), WORLD_FRAME, OBJECT_FRAME);
-        entity.frame_locked = false;
-        let fox_joints = JointStates {
-            timestamp: Timestamp::default(),
+        let transform = |parent: &str, child: &str| fg::FrameTransform {
+            parent_frame_id: parent.to_owned(),
+            child_frame_id: child.to_owned(),
+            ..fg::FrameTransform::default()
+        };
+        let mut transforms = vec![transform(WORLD_FRAME, &root_name)];
+        transforms.extend(
+            hand.joints
+                .iter()
+                .map(|j| transform(&hand.links[j.parent].name, &hand.links[j.child].name)),
+        );
+        transforms.push(transform(WORLD_FRAME, OBJECT_FRAME));
+        let entity = fg::SceneEntity {
+            frame_id: WORLD_FRAME.to_owned(),
+            id: OBJECT_FRAME.to_owned(),
+            frame_locked: false,
+            ..fg::SceneEntity::default()
+        };
+        let fox_joints = fg::JointStates {
+            timestamp: None,
             joints: names
                 .iter()
-                .map(|name| JointState {
+                .map(|name| fg::JointState {
                     name: name.clone(),
                     position: Some(0.0),
                     velocity: Some(0.0),
@@ -658,12 +525,15 @@ impl Messages {
                 .collect(),
         };
         Self {
+            joints_pb: GloveJointStatesProto::default(),
+            feedback_pb: GloveFeedbackProto::default(),
+            contacts_pb: ContactsProto::default(),
             joints,
             feedback,
             contacts,
             object: messages::ObjectState::default(),
-            tf: FrameTransforms { transforms },
-            scene: SceneUpdate {
+            tf: fg::FrameTransforms { transforms },
+            scene: fg::SceneUpdate {
                 deletions: Vec::new(),
                 entities: vec![entity],
             },
@@ -682,25 +552,25 @@ impl Messages {
         };
         for i in 0..n {
             let q = tick.q.get(i).copied().unwrap_or(0.0);
-            self.joints.positions[i] = g(q);
+            self.joints.positions[i] = q;
             self.joints.velocities[i] = if dt > 0.0 {
-                g((q - self.prev_q[i]) / dt)
+                (q - self.prev_q[i]) / dt
             } else {
                 0.0
             };
-            self.joints.efforts[i] = f(tick.tau.get(i).copied().unwrap_or(0.0));
+            self.joints.efforts[i] = tick.tau.get(i).copied().unwrap_or(0.0);
             self.prev_q[i] = q;
-            self.feedback.motor_positions[i] = g(out.motor_q[i]);
-            self.feedback.motor_velocities[i] = g(out.motor_qd[i]);
-            self.feedback.feedback_torques[i] = f(out.feedback_torque[i]);
+            self.feedback.motor_positions[i] = out.motor_q[i];
+            self.feedback.motor_velocities[i] = out.motor_qd[i];
+            self.feedback.feedback_torques[i] = out.feedback_torque[i];
         }
         self.prev_time_ns = Some(tick.time_ns);
         self.contacts.n_contacts = out.n_contacts as u32;
         for k in 0..hand.n_tips {
             let tip = &out.tips[k];
             let fb = &mut self.feedback.fingers[k];
-            fb.feedback_force_world = force3(&tip.feedback_force_world);
-            fb.tip_force_world = force3(&tip.tip_force_world);
+            fb.feedback_force_world = v3(&tip.feedback_force_world);
+            fb.tip_force_world = v3(&tip.tip_force_world);
             let c = &mut self.contacts.fingers[k];
             c.touching = tip.touching;
             c.in_contact = tip.in_contact;
@@ -708,7 +578,7 @@ impl Messages {
                 (Some(frame), true) => {
                     c.point_b = v3(&frame.p_b);
                     c.normal_b = v3(&frame.normal_b());
-                    c.penetration = g(tip.penetration);
+                    c.penetration = tip.penetration;
                 }
                 _ => {
                     c.point_b = Vector3::default();
@@ -732,15 +602,20 @@ impl Messages {
         o.pose_in_hand = pose(&(tick.base.inverse() * out.object.pose));
     }
 
-    fn fill_foxglove(&mut self, hand: &HandFrames, shape: &Shape, tick: &TickData<'_>) {
-        let stamp = Timestamp::from_nanos(tick.time_ns);
+    fn fill_foxglove(
+        &mut self,
+        hand: &HandFrames,
+        shape: &Shape,
+        tick: &TickData<'_>,
+    ) -> Result<()> {
+        let stamp = Some(timestamp(tick.time_ns)?);
         let kin = tick.kinematics;
         let out = tick.output;
         let tfs = &mut self.tf.transforms;
-        let set = |tf: &mut FrameTransform, iso: &Isometry| {
+        let set = |tf: &mut fg::FrameTransform, iso: &Isometry| {
             tf.timestamp = stamp;
-            tf.translation = v3(&iso.translation.vector);
-            tf.rotation = quat(&iso.rotation);
+            tf.translation = Some(fg_vector(&iso.translation.vector));
+            tf.rotation = Some(fg_quaternion(&iso.rotation));
         };
         set(&mut tfs[0], &kin.link_poses[hand.root]);
         for (j, &(parent, child)) in hand.joints.iter().enumerate() {
@@ -757,25 +632,26 @@ impl Messages {
         entity.cubes.clear();
         entity.cylinders.clear();
         entity.arrows.clear();
-        let p = pose(object_pose);
-        let colour = Color::rgba(0.25, 0.5, 0.85, 0.8);
+        let p = Some(fg_pose(object_pose));
+        let colour = Some(rgba(0.25, 0.5, 0.85, 0.8));
+        let size = |x: f64, y: f64, z: f64| Some(fg::Vector3 { x, y, z });
         match *shape {
-            Shape::Sphere { radius } => entity.spheres.push(SpherePrimitive {
+            Shape::Sphere { radius } => entity.spheres.push(fg::SpherePrimitive {
                 pose: p,
-                size: Vector3::new(2.0 * radius, 2.0 * radius, 2.0 * radius),
+                size: size(2.0 * radius, 2.0 * radius, 2.0 * radius),
                 color: colour,
             }),
-            Shape::Box { half_extents: h } => entity.cubes.push(CubePrimitive {
+            Shape::Box { half_extents: h } => entity.cubes.push(fg::CubePrimitive {
                 pose: p,
-                size: Vector3::new(2.0 * h[0], 2.0 * h[1], 2.0 * h[2]),
+                size: size(2.0 * h[0], 2.0 * h[1], 2.0 * h[2]),
                 color: colour,
             }),
             Shape::Cylinder {
                 radius,
                 half_height,
-            } => entity.cylinders.push(CylinderPrimitive {
+            } => entity.cylinders.push(fg::CylinderPrimitive {
                 pose: p,
-                size: Vector3::new(2.0 * radius, 2.0 * radius, 2.0 * half_height),
+                size: size(2.0 * radius, 2.0 * radius, 2.0 * half_height),
                 bottom_scale: 1.0,
                 top_scale: 1.0,
                 color: colour,
@@ -799,20 +675,20 @@ impl Messages {
                 });
             let length = ARROW_M_PER_N * magnitude;
             let head = (0.25 * length).min(0.01);
-            entity.arrows.push(ArrowPrimitive {
-                pose: Pose {
-                    position: v3(&point_world.coords),
-                    orientation: quat(&rotation),
-                },
-                shaft_length: g(length - head),
+            entity.arrows.push(fg::ArrowPrimitive {
+                pose: Some(fg::Pose {
+                    position: Some(fg_vector(&point_world.coords)),
+                    orientation: Some(fg_quaternion(&rotation)),
+                }),
+                shaft_length: length - head,
                 shaft_diameter: 0.003,
-                head_length: g(head),
+                head_length: head,
                 head_diameter: 0.007,
-                color: if tip.slip {
-                    Color::rgba(1.0, 0.6, 0.0, 1.0)
+                color: Some(if tip.slip {
+                    rgba(1.0, 0.6, 0.0, 1.0)
                 } else {
-                    Color::rgba(0.9, 0.1, 0.1, 1.0)
-                },
+                    rgba(0.9, 0.1, 0.1, 1.0)
+                }),
             });
         }
 
@@ -822,7 +698,46 @@ impl Messages {
             j.velocity = Some(self.joints.velocities[i]);
             j.effort = Some(self.joints.efforts[i]);
         }
+        Ok(())
     }
+}
+
+/// A Foxglove timestamp of `ns` since the session's start.
+fn timestamp(ns: u64) -> Result<fg::Timestamp> {
+    let sec = u32::try_from(ns / 1_000_000_000).map_err(|_| RecordingError::Serialize {
+        topic: TOPIC_TF.to_owned(),
+        detail: format!("log time {ns} ns is past what a Foxglove timestamp holds"),
+    })?;
+    Ok(fg::Timestamp::new(sec, (ns % 1_000_000_000) as u32))
+}
+
+fn fg_vector(v: &Vector) -> fg::Vector3 {
+    fg::Vector3 {
+        x: v.x,
+        y: v.y,
+        z: v.z,
+    }
+}
+
+fn fg_quaternion(r: &Rotation) -> fg::Quaternion {
+    let q = r.quaternion();
+    fg::Quaternion {
+        x: q.i,
+        y: q.j,
+        z: q.k,
+        w: q.w,
+    }
+}
+
+fn fg_pose(iso: &Isometry) -> fg::Pose {
+    fg::Pose {
+        position: Some(fg_vector(&iso.translation.vector)),
+        orientation: Some(fg_quaternion(&iso.rotation)),
+    }
+}
+
+fn rgba(r: f64, g: f64, b: f64, a: f64) -> fg::Color {
+    fg::Color { r, g, b, a }
 }
 
 /// Runs `scenario` (glove10, 1 kHz) for its script's length or `duration` seconds and records
@@ -911,7 +826,7 @@ pub fn record_ticks_until(
     let total = sim.total_ticks();
     loop {
         let next_time = sim.ticks() * dfs_core::operator::TICK_NS;
-        let step = if sim.ticks() % 100 == 0 && stop.is_stopped() {
+        let step = if sim.ticks().is_multiple_of(100) && stop.is_stopped() {
             Err(dfs_core::DfsError::Cancelled)
         } else {
             sim.step()
@@ -942,72 +857,9 @@ pub fn record_ticks_until(
             return Err(e);
         }
         let done = sim.ticks();
-        if done % 100 == 0 || done == total {
+        if done.is_multiple_of(100) || done == total {
             progress(done, total);
         }
     }
     recorder.finish()
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    fn written(value: f64) -> String {
-        let mut out = Vec::new();
-        let mut wrote_null = false;
-        let mut ser = serde_json::Serializer::with_formatter(
-            &mut out,
-            ShortDecimals {
-                wrote_null: &mut wrote_null,
-            },
-        );
-        serde::Serialize::serialize(&value, &mut ser).unwrap();
-        assert_eq!(wrote_null, !value.is_finite());
-        String::from_utf8(out).unwrap()
-    }
-
-    /// A small deterministic generator (xorshift) so the test needs no RNG crate.
-    fn values(seed: u64, n: usize) -> impl Iterator<Item = f64> {
-        let mut s = seed;
-        (0..n).map(move |i| {
-            s ^= s << 13;
-            s ^= s >> 7;
-            s ^= s << 17;
-            let unit = (s >> 11) as f64 / (1u64 << 53) as f64;
-            let scale = 10f64.powi((i % 14) as i32 - 8);
-            (unit - 0.5) * 2.0 * scale
-        })
-    }
-
-    #[test]
-    fn recorded_numbers_read_back_exactly_and_match_the_shortest_decimal() {
-        for x in values(0x9e37_79b9_7f4a_7c15, 200_000) {
-            for v in [g(x), f(x), x] {
-                let text = written(v);
-                let back: f64 = serde_json::from_str(&text).unwrap();
-                assert_eq!(back.to_bits(), v.to_bits(), "{v:e} written as {text}");
-                // Where the shortest-round-trip formatter does not use an exponent, the
-                // text is the same as serde_json's own.
-                let plain = serde_json::to_string(&v).unwrap();
-                if !plain.contains('e') {
-                    assert_eq!(text, plain, "{v:e}");
-                }
-            }
-        }
-    }
-
-    #[test]
-    fn whole_numbers_zero_and_small_values_are_written_as_json_numbers() {
-        assert_eq!(written(0.0), "0.0");
-        assert_eq!(written(-0.0), "0.0");
-        assert_eq!(written(1.0), "1.0");
-        assert_eq!(written(-12.5), "-12.5");
-        assert_eq!(written(g(1.1e-8)), "0.000000011");
-        assert_eq!(written(999_999.999_999_999), "999999.999999999");
-        assert_eq!(written(1e6), "1000000.0");
-        assert_eq!(written(1e-10), "1e-10");
-        assert_eq!(written(f64::NAN), "null");
-        assert_eq!(written(f64::INFINITY), "null");
-    }
 }
