@@ -1,8 +1,10 @@
-//! The raw 1 kHz message types of a session and their JSON Schemas (`icms.*`).
+//! The raw 1 kHz message types of a session, in SI units, as the rest of the code reads them,
+//! and the JSON Schemas (`icms.*`) of session format 1, in which they were written as JSON.
 //!
 //! SI units throughout (m, rad, s, N, N·m). Vectors are `{x, y, z}`, quaternions
-//! `{x, y, z, w}` (the Foxglove types are reused for them). The schemas are hand-written in
-//! `services/schemas/icms.*.json` and embedded.
+//! `{x, y, z, w}` (the Foxglove types are reused for them). The format 1 schemas are in
+//! `services/schemas/icms.*.json`; format 2 writes these messages as protobuf
+//! ([`super::proto`], from `services/proto/icms/session.proto`).
 
 use std::borrow::Cow;
 

@@ -13,15 +13,17 @@
 //! | `/dfs/contacts`       | `icms.Contacts`         | per finger: contact, point/normal in B, intensities, slip |
 //! | `/object/state`       | `icms.ObjectState`      | pose, twist, wrenches, pose in the hand  |
 //!
-//! Foxglove topics every [`FOXGLOVE_DECIMATION`]th tick (50 Hz), valid against the official
-//! schemas: `/tf` (`foxglove.FrameTransforms`: world → hand base link, parent link → every link,
+//! Every topic is protobuf (session format 2; [`proto`] for the raw topics; format 1, JSON,
+//! is still read). Foxglove topics every [`FOXGLOVE_DECIMATION`]th tick (50 Hz), in the
+//! official schemas of the Foxglove SDK: `/tf` (`foxglove.FrameTransforms`: world → hand base link, parent link → every link,
 //! world → `object`), `/scene` (`foxglove.SceneUpdate`: one entity `object` in `world` with the
 //! object's shape and one arrow per transmitting contact, from the contact point along the
 //! force on the object, [`ARROW_M_PER_N`] m per N), `/joint_states` (`foxglove.JointStates`).
 //!
 //! Metadata records: `session` (keys `scenario`, `seed`, `hand`, `object` (JSON), `rate_hz`,
-//! `software_version`, `started_at` (RFC 3339, UTC), `source`, and more) and `ground_truth`
-//! (key `phases`: a JSON list of `{"name", "start_ns", "end_ns"}`; empty for imports).
+//! `software_version`, `format_version`, `started_at` (RFC 3339, UTC), `source`, and more)
+//! and `ground_truth` (key `phases`: a JSON list of `{"name", "start_ns", "end_ns"}`; empty
+//! for imports).
 //!
 //! # Writing
 //!

@@ -4,8 +4,8 @@
 //! works with.
 //!
 //! Each conversion pair sits together: [`Quantiser`] rounds SI values to the steps the
-//! `.proto` names (`_eN`: steps of 10^-N SI units), and the `from_proto` functions multiply back. A value
-//! read back is the recorded one to within half a step.
+//! `.proto` names (`_eN`: steps of 10^-N SI units), and the `from_proto` functions multiply
+//! back. A value read back is the recorded one to within half a step.
 
 use super::messages::{self, *};
 use crate::foxglove::{Pose, Quaternion, Vector3};
