@@ -342,6 +342,7 @@ pub fn replay_skill_until(
         source: "replay".to_owned(),
         extra: BTreeMap::from([("replay_hand".to_owned(), hand.model.name.clone())]),
         phases: Vec::new(),
+        started_at: None,
     };
     let mut recorder = SessionRecorder::create(out, &hand.model, &object, &info)?;
     let mut failed: Option<RecordingError> = None;

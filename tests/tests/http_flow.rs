@@ -26,6 +26,18 @@ async fn a_session_goes_from_simulation_and_upload_to_query_download_and_delete(
         format!("/api/v1/sessions/{sim_id}")
     );
     assert_eq!(sim["skills"].as_array().unwrap().len(), 2, "{sim}");
+    // A recording is a function of its scenario, seed and simulator version: the same request
+    // again finds the same session stored (200, as a repeated upload), another seed does not.
+    let r = c
+        .post_json(
+            "/api/v1/simulations",
+            &json!({"scenario": "two-grasps", "seed": 3}),
+            None,
+        )
+        .await;
+    assert_eq!(r.status, 200, "{}", String::from_utf8_lossy(&r.body));
+    assert_eq!(r.json()["created"], false);
+    assert_eq!(r.json()["session_id"], sim_id);
 
     // A scenario object, as a scenario file holds it.
     let mut scenario =

@@ -479,6 +479,7 @@ pub fn replay_glove(
             ("input_samples".to_owned(), recording.len().to_string()),
         ]),
         phases: Vec::new(),
+        started_at: None,
     };
     let mut recorder = SessionRecorder::create(out, dfs.hand(), dfs.object(), &info)?;
     let n = recording.names.len();

@@ -73,6 +73,11 @@ pub struct SessionInfo {
     pub extra: BTreeMap<String, String>,
     /// Ground-truth phases (empty when unknown).
     pub phases: Vec<GroundTruthPhase>,
+    /// Wall-clock start written as `started_at`. `None` (the default): the Unix epoch, so that
+    /// a simulation, a replay or an import is a pure function of its inputs and the simulator
+    /// version, byte for byte (a repeated request finds the session already stored); a live
+    /// recording passes the time it started.
+    pub started_at: Option<std::time::SystemTime>,
 }
 
 /// One tick of the closed loop, as the recorder needs it.
@@ -220,7 +225,7 @@ impl SessionRecorder {
         );
         meta.insert(
             "started_at".to_owned(),
-            rfc3339_utc(std::time::SystemTime::now()),
+            rfc3339_utc(info.started_at.unwrap_or(std::time::UNIX_EPOCH)),
         );
         meta.insert("source".to_owned(), info.source.clone());
         meta.insert("format_version".to_owned(), FORMAT_VERSION.to_string());
@@ -797,6 +802,7 @@ pub fn record_simulation_until(
                 end_ns: s.end_ns,
             })
             .collect(),
+        started_at: None,
     };
     let dfs = sim.dfs();
     let recorder = SessionRecorder::create(out, dfs.hand(), dfs.object(), &info)?;
