@@ -64,14 +64,23 @@ pub struct Quantiser {
     pub refused: Option<(String, f64)>,
 }
 
-/// `x / step` rounded, if that is a finite `i32`.
+/// `x / step` rounded (half away from zero), if that is a finite `i32`. Written for speed, as
+/// the recorder calls it about 130 times a tick: a multiplication by the inverse (folded at
+/// compile time for the constant steps) instead of a division, and the rounding by hand (the
+/// baseline x86-64 target has no rounding instruction, and `f64::round` is a libm call).
+#[inline]
 fn steps(x: f64, step: f64) -> Option<i32> {
-    let v = (x / step).round();
-    (v.is_finite() && v.abs() <= f64::from(i32::MAX)).then_some(v as i32)
+    let v = x * (1.0 / step);
+    // `!(a <= b)` is also true for NaN.
+    if !(v.abs() <= f64::from(i32::MAX) - 0.5) {
+        return None;
+    }
+    Some((v + 0.5f64.copysign(v)) as i32)
 }
 
 impl Quantiser {
     /// `x / step` rounded; 0 (and the field noted) if that is not a finite `i32`.
+    #[inline]
     pub fn q(&mut self, field: &'static str, x: f64, step: f64) -> i32 {
         steps(x, step).unwrap_or_else(|| {
             self.refused.get_or_insert_with(|| (field.to_owned(), x));
