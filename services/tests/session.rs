@@ -1088,3 +1088,128 @@ fn a_session_that_does_not_name_its_object_is_not_segmented_or_stored() {
         assert!(session.ensure_grasp_session("odd.mcap").is_err());
     }
 }
+
+/// The sphere session rewritten message by message through `SessionWriter`: `schema` may
+/// replace a topic's schema data, `message` a message's bytes (topic, index, bytes).
+fn rewritten(
+    schema: impl Fn(&str, &[u8]) -> Vec<u8>,
+    message: impl Fn(&str, usize, &[u8]) -> Vec<u8>,
+) -> Vec<u8> {
+    let (_, path, _) = sphere_session();
+    let recorded = read_session_file(path, &Default::default()).unwrap();
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("rewritten.mcap");
+    let mut w = SessionWriter::create(&out).unwrap();
+    for m in &recorded.metadata {
+        w.add_metadata(&m.name, m.entries.clone()).unwrap();
+    }
+    for (topic, t) in &recorded.topics {
+        let s = t.schema.as_ref().unwrap();
+        w.register_protobuf_channel(topic, &s.name, &schema(topic, &s.data))
+            .unwrap();
+    }
+    // In tick order, as the recorder writes them.
+    let mut all: Vec<(u64, &str, usize, &[u8])> = recorded
+        .topics
+        .iter()
+        .flat_map(|(topic, t)| {
+            t.messages
+                .iter()
+                .enumerate()
+                .map(move |(i, m)| (m.log_time_ns, topic.as_str(), i, &m.data[..]))
+        })
+        .collect();
+    all.sort_by_key(|m| m.0);
+    for (time, topic, i, data) in all {
+        w.write_raw(topic, time, &message(topic, i, data)).unwrap();
+    }
+    w.finish().unwrap();
+    std::fs::read(out).unwrap()
+}
+
+#[test]
+fn a_format_2_file_whose_raw_schema_differs_from_ours_is_refused_naming_the_field() {
+    use prost::Message;
+    let limits = Default::default();
+    // Unchanged, the rewritten file reads.
+    let same = rewritten(|_, d| d.to_vec(), |_, _, d| d.to_vec());
+    read_session_bytes(&same, "same.mcap", &limits).unwrap();
+    // The penetration's type changed in the schema of /dfs/contacts: decoding with it would
+    // give other numbers, so the file is refused before any message is decoded.
+    let bytes = rewritten(
+        |topic, d| {
+            if topic != TOPIC_CONTACTS {
+                return d.to_vec();
+            }
+            let mut fds = prost_types::FileDescriptorSet::decode(d).unwrap();
+            let m = fds.file[0]
+                .message_type
+                .iter_mut()
+                .find(|m| m.name() == "FingerContact")
+                .unwrap();
+            let f = m
+                .field
+                .iter_mut()
+                .find(|f| f.name() == "penetration_e9")
+                .unwrap();
+            f.set_type(prost_types::field_descriptor_proto::Type::Int64);
+            fds.encode_to_vec()
+        },
+        |_, _, d| d.to_vec(),
+    );
+    let e = read_session_bytes(&bytes, "other.mcap", &limits).unwrap_err();
+    let text = e.to_string();
+    assert!(
+        text.contains("topic /dfs/contacts schema icms.Contacts")
+            && text.contains("icms.Contacts.fingers.penetration_e9")
+            && text.contains("int64"),
+        "{text}"
+    );
+    // A schema that is not a descriptor set at all.
+    let bytes = rewritten(
+        |topic, d| {
+            if topic == TOPIC_OBJECT_STATE {
+                b"not protobuf".to_vec()
+            } else {
+                d.to_vec()
+            }
+        },
+        |_, _, d| d.to_vec(),
+    );
+    let e = read_session_bytes(&bytes, "bad.mcap", &limits).unwrap_err();
+    assert!(e.to_string().contains("icms.ObjectState"), "{e}");
+}
+
+#[test]
+fn a_format_2_message_that_does_not_decode_is_refused_naming_topic_and_index() {
+    let limits = Default::default();
+    for (topic, index) in [
+        (TOPIC_OBJECT_STATE, 17),
+        (TOPIC_GLOVE_JOINT_STATES, 0),
+        (TOPIC_TF, 3),
+        (TOPIC_SCENE, 1),
+    ] {
+        // A length-delimited field that claims more bytes than the message has.
+        let bytes = rewritten(
+            |_, d| d.to_vec(),
+            |t, i, d| {
+                if t == topic && i == index {
+                    let mut m = d.to_vec();
+                    m.extend_from_slice(&[0x0a, 0xff, 0x01]);
+                    m
+                } else {
+                    d.to_vec()
+                }
+            },
+        );
+        let e = read_session_bytes(&bytes, "x.mcap", &limits).unwrap_err();
+        let text = e.to_string();
+        assert!(
+            text.contains(&format!("topic {topic} message {index} "))
+                && text.contains("does not decode"),
+            "{topic}: {text}"
+        );
+        // Nothing is stored from it: ingest refuses it as a whole.
+        assert!(services::ingest::analyse(&bytes, "x.mcap").is_err());
+    }
+}
