@@ -343,6 +343,8 @@ pub fn replay_skill_until(
         extra: BTreeMap::from([("replay_hand".to_owned(), hand.model.name.clone())]),
         phases: Vec::new(),
         started_at: None,
+        // The replay's DFS puts the table top at z = 0 (dfs_core::replay).
+        table_height: Some(0.0),
     };
     let mut recorder = SessionRecorder::create(out, &hand.model, &object, &info)?;
     let mut failed: Option<RecordingError> = None;

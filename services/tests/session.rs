@@ -188,6 +188,18 @@ fn every_foxglove_topic_carries_the_sdk_schema_and_decodes_as_it() {
     // The scene shows the sphere, and force arrows once fingers push.
     let scenes: Vec<fg::SceneUpdate> = decode_all(&recorded, TOPIC_SCENE, "foxglove.SceneUpdate");
     assert!(scenes.iter().all(|s| s.entities[0].spheres.len() == 1));
+    // ... and the table, its top at the simulation's table height (0 for a built-in scenario).
+    let table = &scenes[0].entities[1];
+    assert_eq!(table.id, services::session::TABLE_ENTITY);
+    let cube = &table.cubes[0];
+    let top = cube.pose.unwrap().position.unwrap().z + 0.5 * cube.size.unwrap().z;
+    let sim = Simulation::new(
+        &Scenario::builtin("sphere-lift", 7).unwrap(),
+        HandModel::glove10(),
+        Some(SECONDS),
+    )
+    .unwrap();
+    assert!((top - sim.table_height()).abs() < 1e-12, "table top {top}");
     assert!(scenes.iter().any(|s| !s.entities[0].arrows.is_empty()));
     // /tf: world → base, one transform per joint, world → object.
     let tf: Vec<fg::FrameTransforms> = decode_all(&recorded, TOPIC_TF, "foxglove.FrameTransforms");

@@ -18,7 +18,8 @@
 //! official schemas of the Foxglove SDK: `/tf` (`foxglove.FrameTransforms`: world → hand base link, parent link → every link,
 //! world → `object`), `/scene` (`foxglove.SceneUpdate`: one entity `object` in `world` with the
 //! object's shape and one arrow per transmitting contact, from the contact point along the
-//! force on the object, [`ARROW_M_PER_N`] m per N), `/joint_states` (`foxglove.JointStates`).
+//! force on the object, [`ARROW_M_PER_N`] m per N; and the entity [`TABLE_ENTITY`], a slab
+//! whose top is the table), `/joint_states` (`foxglove.JointStates`).
 //!
 //! Metadata records: `session` (keys `scenario`, `seed`, `hand`, `object` (JSON), `rate_hz`,
 //! `software_version`, `format_version`, `started_at` (RFC 3339, UTC), `source`, and more)
@@ -48,7 +49,7 @@ pub use read::{
 };
 pub use recorder::{
     record_simulation, record_simulation_until, record_ticks, record_ticks_until, RecordSummary,
-    SessionInfo, SessionRecorder, TickData,
+    SessionInfo, SessionRecorder, TickData, TABLE_ENTITY,
 };
 pub use time::rfc3339_utc;
 

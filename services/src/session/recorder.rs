@@ -59,7 +59,7 @@ struct Batch {
 }
 
 /// Descriptive parameters of a session, written to the `session` metadata record.
-#[derive(Debug, Clone, Default, PartialEq, Eq)]
+#[derive(Debug, Clone, Default, PartialEq)]
 pub struct SessionInfo {
     /// Scenario name (or the imported file's name).
     pub scenario: String,
@@ -78,6 +78,8 @@ pub struct SessionInfo {
     /// version, byte for byte (a repeated request finds the session already stored); a live
     /// recording passes the time it started.
     pub started_at: Option<std::time::SystemTime>,
+    /// Height of the table's top in the world (m), shown in `/scene`; `None`: no table.
+    pub table_height: Option<f64>,
 }
 
 /// One tick of the closed loop, as the recorder needs it.
@@ -147,6 +149,7 @@ pub struct SessionRecorder {
     path: PathBuf,
     hand: HandFrames,
     shape: Shape,
+    table_height: Option<f64>,
     msgs: Messages,
     ticks: u64,
 }
@@ -280,6 +283,7 @@ impl SessionRecorder {
             path,
             hand: frames,
             shape: object.shape,
+            table_height: info.table_height,
             msgs,
             ticks: 0,
         })
@@ -334,7 +338,7 @@ impl SessionRecorder {
         refused(&q, 3)?;
         push(&mut self.batch, 3, t, &object);
         if self.ticks.is_multiple_of(FOXGLOVE_DECIMATION) {
-            m.fill_foxglove(&self.hand, &self.shape, tick)?;
+            m.fill_foxglove(&self.hand, &self.shape, self.table_height, tick)?;
             push(&mut self.batch, 4, t, &m.tf);
             push(&mut self.batch, 5, t, &m.scene);
             push(&mut self.batch, 6, t, &m.fox_joints);
@@ -611,6 +615,7 @@ impl Messages {
         &mut self,
         hand: &HandFrames,
         shape: &Shape,
+        table_height: Option<f64>,
         tick: &TickData<'_>,
     ) -> Result<()> {
         let stamp = Some(timestamp(tick.time_ns)?);
@@ -697,6 +702,30 @@ impl Messages {
             });
         }
 
+        // The table: a slab of TABLE_SIZE_M square under the world origin, its top at the
+        // table's height (in every update, so that a viewer opening the file mid-way sees it).
+        if let Some(h) = table_height {
+            if self.scene.entities.len() < 2 {
+                self.scene.entities.push(fg::SceneEntity {
+                    frame_id: WORLD_FRAME.to_owned(),
+                    id: TABLE_ENTITY.to_owned(),
+                    ..fg::SceneEntity::default()
+                });
+            }
+            let table = &mut self.scene.entities[1];
+            table.timestamp = stamp;
+            table.cubes.clear();
+            table.cubes.push(fg::CubePrimitive {
+                pose: Some(fg_pose(&Isometry::translation(
+                    0.0,
+                    0.0,
+                    h - 0.5 * TABLE_THICKNESS_M,
+                ))),
+                size: size(TABLE_SIZE_M, TABLE_SIZE_M, TABLE_THICKNESS_M),
+                color: Some(rgba(0.55, 0.45, 0.35, 1.0)),
+            });
+        }
+
         self.fox_joints.timestamp = stamp;
         for (i, j) in self.fox_joints.joints.iter_mut().enumerate() {
             j.position = Some(self.joints.positions[i]);
@@ -706,6 +735,13 @@ impl Messages {
         Ok(())
     }
 }
+
+/// Id of the table's entity in `/scene`.
+pub const TABLE_ENTITY: &str = "table";
+/// Side of the table shown in `/scene` (m).
+const TABLE_SIZE_M: f64 = 1.0;
+/// Thickness of the table shown in `/scene` (m).
+const TABLE_THICKNESS_M: f64 = 0.02;
 
 /// A Foxglove timestamp of `ns` since the session's start.
 fn timestamp(ns: u64) -> Result<fg::Timestamp> {
@@ -803,6 +839,7 @@ pub fn record_simulation_until(
             })
             .collect(),
         started_at: None,
+        table_height: Some(sim.table_height()),
     };
     let dfs = sim.dfs();
     let recorder = SessionRecorder::create(out, dfs.hand(), dfs.object(), &info)?;
