@@ -1225,3 +1225,67 @@ fn a_format_2_message_that_does_not_decode_is_refused_naming_topic_and_index() {
         assert!(services::ingest::analyse(&bytes, "x.mcap").is_err());
     }
 }
+
+/// Every message path of the Foxglove layout we ship names a topic of a session and fields
+/// its schema has (walked through the file's own descriptor sets).
+#[test]
+fn the_foxglove_layout_plots_fields_a_session_has() {
+    use prost::Message;
+    let layout: serde_json::Value =
+        serde_json::from_str(include_str!("../../docs/foxglove/icms-session.layout.json")).unwrap();
+    let (_, path, _) = sphere_session();
+    let recorded = read_session_file(path, &Default::default()).unwrap();
+    let mut paths = Vec::new();
+    for panel in layout["configById"].as_object().unwrap().values() {
+        for p in panel["paths"].as_array().into_iter().flatten() {
+            paths.push(p["value"].as_str().unwrap().to_owned());
+        }
+        if let Some(t) = panel["topicPath"].as_str() {
+            paths.push(t.to_owned());
+        }
+        for t in panel["topics"]
+            .as_object()
+            .into_iter()
+            .flat_map(|m| m.keys())
+        {
+            paths.push(t.clone());
+        }
+    }
+    assert!(paths.len() >= 8, "{paths:?}");
+    for p in &paths {
+        let topic = recorded
+            .topics
+            .keys()
+            .filter(|t| p == *t || p.starts_with(&format!("{t}.")))
+            .max_by_key(|t| t.len())
+            .unwrap_or_else(|| panic!("{p}: no such topic in a session"));
+        let schema = recorded.topics[topic].schema.as_ref().unwrap();
+        let fds = prost_types::FileDescriptorSet::decode(&schema.data[..]).unwrap();
+        let find = |full: &str| {
+            fds.file
+                .iter()
+                .flat_map(|f| {
+                    f.message_type
+                        .iter()
+                        .map(move |m| (format!(".{}.{}", f.package(), m.name()), m))
+                })
+                .find(|(n, _)| n == full)
+                .map(|(_, m)| m.clone())
+                .unwrap_or_else(|| panic!("{p}: {full} not in the schema"))
+        };
+        let mut message = find(&format!(".{}", schema.name));
+        let rest = p[topic.len()..].trim_start_matches('.');
+        for name in rest.split('.').filter(|s| !s.is_empty()) {
+            let name = name.split('[').next().unwrap();
+            let field = message
+                .field
+                .iter()
+                .find(|f| f.name() == name)
+                .unwrap_or_else(|| panic!("{p}: {} has no field {name}", message.name()))
+                .clone();
+            if !field.type_name().is_empty() {
+                message = find(field.type_name());
+            }
+        }
+    }
+}
