@@ -30,7 +30,7 @@
 //!
 //! The simulation thread serialises each tick's messages into a reused buffer (no per-message
 //! allocation once warm) and hands batches of [`FOXGLOVE_DECIMATION`] ticks through a bounded
-//! channel to a writer thread that owns the [`SessionWriter`] (zstd compression and file I/O
+//! channel to a writer thread that owns the [`SessionWriter`](crate::mcap_io::SessionWriter) (zstd compression and file I/O
 //! happen there, in parallel with the simulation); emptied batches come back for reuse.
 //! [`SessionRecorder::finish`] closes the channel, joins the thread and finishes the file. If
 //! anything fails midway, the file is still finished with every tick written before the failure.

@@ -178,9 +178,13 @@ pub fn read_session(path: impl AsRef<Path>) -> Result<Session> {
 ///   [`MAX_METADATA_KEY_BYTES`], values of [`MAX_METADATA_VALUE_BYTES`],
 ///   [`MAX_METADATA_BYTES`] in all.
 ///
-/// Not checked, being harmless: the Foxglove topics' content (for viewers only; never decoded
-/// here), `n_contacts` (segmentation counts the fingers in contact itself), the normal of a
-/// finger not touching (segmentation ignores it).
+/// In format 2 (protobuf) a raw topic's schema must define its message field for field as ours
+/// ([`super::proto::schema_difference`]), every message must decode (the error names the
+/// topic and the message's index), and the Foxglove topics must decode as the SDK's types.
+///
+/// Not checked, being harmless: the Foxglove topics' content beyond that (for viewers only),
+/// `n_contacts` (segmentation counts the fingers in contact itself), the normal of a finger
+/// not touching (segmentation ignores it).
 pub fn read_session_with_limits(path: impl AsRef<Path>, limits: &ReadLimits) -> Result<Session> {
     read_session_file_with(path, limits, DecodeTopics::ALL)
 }
