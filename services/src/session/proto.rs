@@ -71,8 +71,7 @@ pub struct Quantiser {
 #[inline]
 fn steps(x: f64, step: f64) -> Option<i32> {
     let v = x * (1.0 / step);
-    // `!(a <= b)` is also true for NaN.
-    if !(v.abs() <= f64::from(i32::MAX) - 0.5) {
+    if v.is_nan() || v.abs() > f64::from(i32::MAX) - 0.5 {
         return None;
     }
     Some((v + 0.5f64.copysign(v)) as i32)
