@@ -30,9 +30,10 @@ use crate::mcap_io::{SessionWriter, WriteSummary, WriterOptions};
 /// Ticks per batch handed to the writer thread (also the Foxglove period, so each batch holds
 /// exactly one set of Foxglove messages).
 const BATCH_TICKS: u64 = FOXGLOVE_DECIMATION;
-/// zstd level of session files: 1, the fastest. At 1 kHz compression is most of the writer
-/// thread's work; on a 60 s `sphere-lift` session level 3 (zstd's default) took longer and
-/// even gave a 9 % larger file (53.3 MB against 48.8 MB).
+/// zstd level of session files: 3, zstd's default. With format 1's JSON, level 1 was both
+/// faster and smaller; with format 2's protobuf, level 3 makes a 60 s `sphere-lift` 5 %
+/// smaller (13.6 against 14.3 MB before the coarser joint steps) on the writer thread, which
+/// runs beside the simulation.
 const ZSTD_LEVEL: u32 = 3;
 /// Batches in flight between the simulation and the writer thread.
 const CHANNEL_BOUND: usize = 8;
