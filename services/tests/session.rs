@@ -1289,3 +1289,58 @@ fn the_foxglove_layout_plots_fields_a_session_has() {
         }
     }
 }
+
+#[test]
+fn an_oversized_format_2_message_is_refused_on_a_raw_topic_and_left_unchecked_on_a_foxglove_one() {
+    let limits = Default::default();
+    // An unknown length-delimited field (number 99) of 300 kB: prost would skip it, but a
+    // message that large is refused before it is decoded.
+    let padding = |d: &[u8]| {
+        let mut m = d.to_vec();
+        m.extend_from_slice(&[0x9a, 0x06]); // field 99, wire type 2
+        let n = 300_000u32;
+        let mut v = n;
+        while v >= 0x80 {
+            m.push((v as u8) | 0x80);
+            v >>= 7;
+        }
+        m.push(v as u8);
+        m.extend(std::iter::repeat_n(0u8, n as usize));
+        m
+    };
+    let bytes = rewritten(
+        |_, d| d.to_vec(),
+        |t, i, d| {
+            if t == TOPIC_CONTACTS && i == 5 {
+                padding(d)
+            } else {
+                d.to_vec()
+            }
+        },
+    );
+    let e = read_session_bytes(&bytes, "big.mcap", &limits).unwrap_err();
+    let text = e.to_string();
+    assert!(
+        text.contains("topic /dfs/contacts message 5")
+            && text.contains(&format!("at most {MAX_RAW_MESSAGE_BYTES}")),
+        "{text}"
+    );
+    // 150 000 empty scene entities (2 bytes each on the wire, hundreds in memory): not decoded,
+    // and the session reads.
+    let bytes = rewritten(
+        |_, d| d.to_vec(),
+        |t, i, d| {
+            if t == TOPIC_SCENE && i == 1 {
+                let mut m = d.to_vec();
+                for _ in 0..150_000 {
+                    m.extend_from_slice(&[0x12, 0x00]);
+                }
+                m
+            } else {
+                d.to_vec()
+            }
+        },
+    );
+    assert!(bytes.len() > MAX_CHECKED_FOXGLOVE_MESSAGE_BYTES);
+    read_session_bytes(&bytes, "scene.mcap", &limits).unwrap();
+}

@@ -467,15 +467,41 @@ impl RawSession {
     /// `first`) decoded as `M` and handed to `f` with its number and log time; a message that
     /// does not decode is [`RecordingError::InvalidInput`] naming the topic, the message and
     /// the schema. The first error (of decoding or of `f`) stops.
+    ///
+    /// A message over `max_bytes` is not decoded: decoding can take far more memory than the
+    /// bytes (an empty nested message is 2 bytes on the wire and a struct of hundreds in
+    /// memory), so it is refused ([`Oversize::Refuse`]) or passed over ([`Oversize::Skip`]).
     pub(crate) fn decode_each_protobuf<M: prost::Message + Default>(
         &self,
         t: &RawTopic,
         first: usize,
         messages: &[MessageRef],
+        (max_bytes, oversize): (usize, Oversize),
         mut f: impl FnMut(usize, u64, M) -> Result<()>,
     ) -> Result<()> {
         for (i, m) in messages.iter().enumerate() {
-            let value = M::decode(self.data(m)).map_err(|e| RecordingError::InvalidInput {
+            let data = self.data(m);
+            if data.len() > max_bytes {
+                match oversize {
+                    Oversize::Skip => continue,
+                    Oversize::Refuse => {
+                        return Err(RecordingError::InvalidInput {
+                            location: format!(
+                                "topic {} message {} (log time {} ns)",
+                                t.topic,
+                                first + i,
+                                m.log_time_ns
+                            ),
+                            detail: format!(
+                                "the message is {} bytes; a message of this topic holds at most \
+                                 {max_bytes}",
+                                data.len()
+                            ),
+                        })
+                    }
+                }
+            }
+            let value = M::decode(data).map_err(|e| RecordingError::InvalidInput {
                 location: format!(
                     "topic {} message {} (log time {} ns)",
                     t.topic,
@@ -587,6 +613,15 @@ fn json_error<'de, T: Deserialize<'de>>(
 
 /// Message and schema encoding of session format 2.
 const PROTOBUF: &str = "protobuf";
+
+/// What [`RawSession::decode_each_protobuf`] does with a message over its size limit.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(crate) enum Oversize {
+    /// Refuse the file, naming the message.
+    Refuse,
+    /// Leave the message unchecked.
+    Skip,
+}
 
 /// A topic's schema is the one named `schema_name`, and its messages are JSON with a
 /// `jsonschema` schema (session format 1) or protobuf with a `protobuf` schema (format 2).

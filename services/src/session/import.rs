@@ -279,6 +279,21 @@ pub fn read_glove_mcap(path: &Path, hand: &HandModel) -> Result<GloveRecording> 
             .iter()
             .enumerate()
             .map(|(i, m)| {
+                // Decoding may take a hundred times a message's bytes: a joint state of a hand
+                // is a few kB at most.
+                if m.data.len() > super::read::MAX_RAW_MESSAGE_BYTES {
+                    return Err(invalid(
+                        format!(
+                            "{name}: {topic} message {i} (log time {} ns)",
+                            m.log_time_ns
+                        ),
+                        format!(
+                            "the message is {} bytes; a joint state holds at most {}",
+                            m.data.len(),
+                            super::read::MAX_RAW_MESSAGE_BYTES
+                        ),
+                    ));
+                }
                 let pb = <foxglove::messages::JointStates as prost::Message>::decode(&m.data[..])
                     .map_err(|e| {
                     invalid(

@@ -11,7 +11,7 @@ use super::*;
 use crate::error::{RecordingError, Result};
 use crate::foxglove::{FRAME_TRANSFORMS_SCHEMA, JOINT_STATES_SCHEMA, SCENE_UPDATE_SCHEMA};
 use crate::mcap_io::{
-    par_map, read_raw_bytes, read_raw_file, JsonSchema, MessageRef, RawSession, RawTopic,
+    par_map, read_raw_bytes, read_raw_file, JsonSchema, MessageRef, Oversize, RawSession, RawTopic,
     ReadLimits, MESSAGES_PER_JOB,
 };
 use crate::replay::REPLAY_METADATA;
@@ -402,6 +402,17 @@ fn raw_block<'s, T: Deserialize<'s> + TickContent>(
     Ok(out)
 }
 
+/// Largest raw message of format 2 (bytes): ours are under 2 kB (a tick of a 30-DOF hand), and
+/// the most a session may hold ([`MAX_SESSION_DOFS`] names and values,
+/// [`MAX_SESSION_FINGERS`] fingertips) is far under this. Bigger messages are refused before
+/// they are decoded: decoding may take a hundred times their size.
+pub const MAX_RAW_MESSAGE_BYTES: usize = 256 * 1024;
+
+/// Largest Foxglove message of format 2 that is decoded to be checked (bytes); bigger ones
+/// (another tool's meshes in `/scene`, say) are for viewers and left unchecked rather than
+/// decoded at a hundred times their size.
+pub const MAX_CHECKED_FOXGLOVE_MESSAGE_BYTES: usize = 256 * 1024;
+
 /// [`raw_block`] for a protobuf (format 2) raw topic: each message decoded as `P`, converted
 /// to its SI form by `convert`, checked, and kept if `keep`.
 fn raw_block_protobuf<P: prost::Message + Default, T: TickContent>(
@@ -414,7 +425,8 @@ fn raw_block_protobuf<P: prost::Message + Default, T: TickContent>(
     convert: fn(P) -> T,
 ) -> Result<Vec<(u64, T)>> {
     let mut out = Vec::with_capacity(if keep { messages.len() } else { 0 });
-    raw.decode_each_protobuf(t, first, messages, |i, time, message: P| {
+    let limit = (MAX_RAW_MESSAGE_BYTES, Oversize::Refuse);
+    raw.decode_each_protobuf(t, first, messages, limit, |i, time, message: P| {
         let message = convert(message);
         message
             .check(reference)
@@ -440,17 +452,22 @@ fn check_foxglove_protobuf(
 ) -> Result<()> {
     use foxglove::messages as fg;
     let ok = |_: usize, _: u64, _: ()| Ok(());
+    let limit = (MAX_CHECKED_FOXGLOVE_MESSAGE_BYTES, Oversize::Skip);
     match t.schema.as_ref().map(|s| s.name.as_str()) {
         Some("foxglove.FrameTransforms") => {
-            raw.decode_each_protobuf(t, first, messages, |i, l, _: fg::FrameTransforms| {
+            raw.decode_each_protobuf(t, first, messages, limit, |i, l, _: fg::FrameTransforms| {
                 ok(i, l, ())
             })
         }
         Some("foxglove.SceneUpdate") => {
-            raw.decode_each_protobuf(t, first, messages, |i, l, _: fg::SceneUpdate| ok(i, l, ()))
+            raw.decode_each_protobuf(t, first, messages, limit, |i, l, _: fg::SceneUpdate| {
+                ok(i, l, ())
+            })
         }
         Some("foxglove.JointStates") => {
-            raw.decode_each_protobuf(t, first, messages, |i, l, _: fg::JointStates| ok(i, l, ()))
+            raw.decode_each_protobuf(t, first, messages, limit, |i, l, _: fg::JointStates| {
+                ok(i, l, ())
+            })
         }
         _ => Ok(()),
     }
