@@ -71,7 +71,8 @@ pub fn sessions(dir: &Path) -> Result<Vec<Vec<u8>>, SeedError> {
     let cut = dir.join("truncated.mcap");
     let salvaged_path = dir.join("salvaged.mcap");
     std::fs::write(&cut, &truncated).map_err(|e| err("writing a seed", e))?;
-    let mut out = vec![a, b, c, lz4, plain, loose, truncated];
+    let v1 = format_1(&a, dir)?;
+    let mut out = vec![a, b, c, lz4, plain, loose, truncated, v1];
     if services::mcap_io::salvage(&cut, &salvaged_path).is_ok() {
         if let Ok(s) = std::fs::read(&salvaged_path) {
             out.push(normalise(&s).unwrap_or(s));
@@ -80,6 +81,49 @@ pub fn sessions(dir: &Path) -> Result<Vec<Vec<u8>>, SeedError> {
     let _ = std::fs::remove_file(&cut);
     let _ = std::fs::remove_file(&salvaged_path);
     Ok(out)
+}
+
+/// `session` (format 2) written again in session format 1, JSON on every raw topic, as files
+/// recorded before 2026-11-25 are: the JSON reader stays fuzzed. Its metadata records are
+/// copied; the Foxglove topics, optional to the reader, are left out.
+fn format_1(session: &[u8], dir: &Path) -> Result<Vec<u8>, SeedError> {
+    use services::session::*;
+    let limits = services::mcap_io::ReadLimits::default();
+    let s = read_session_bytes(session, "seed", &limits).map_err(|e| err("reading a seed", e))?;
+    let raw = services::mcap_io::read_session_bytes(session, &limits)
+        .map_err(|e| err("reading a seed", e))?;
+    let path = dir.join("format-1.mcap");
+    let mut w = services::mcap_io::SessionWriter::create(&path).map_err(|e| err("writing", e))?;
+    let failed = |e: services::RecordingError| err("writing a format 1 seed", e);
+    for m in &raw.metadata {
+        let mut entries = m.entries.clone();
+        entries.remove("format_version");
+        w.add_metadata(&m.name, entries).map_err(failed)?;
+    }
+    for (topic, schema) in RAW_TOPICS.iter().zip(ICMS_SCHEMAS.iter()) {
+        w.register_channel(topic, schema).map_err(failed)?;
+    }
+    for k in 0..s.ticks() {
+        let t = s.joint_states[k].0;
+        w.write(TOPIC_GLOVE_JOINT_STATES, t, &s.joint_states[k].1)
+            .map_err(failed)?;
+        w.write(TOPIC_GLOVE_FEEDBACK, t, &s.feedback[k].1)
+            .map_err(failed)?;
+        w.write(TOPIC_CONTACTS, t, &s.contacts[k].1)
+            .map_err(failed)?;
+        w.write(TOPIC_OBJECT_STATE, t, &s.object[k].1)
+            .map_err(failed)?;
+    }
+    w.finish().map_err(failed)?;
+    let bytes = std::fs::read(&path).map_err(|e| err("reading a seed", e))?;
+    let _ = std::fs::remove_file(&path);
+    // It reads as a session, in format 1.
+    let back = read_session_bytes(&bytes, "format 1 seed", &limits)
+        .map_err(|e| err("reading the format 1 seed", e))?;
+    if back.metadata.contains_key("format_version") || back.ticks() != s.ticks() {
+        return Err(err("the format 1 seed", "does not read back as format 1"));
+    }
+    Ok(bytes)
 }
 
 /// A whole simulated session with grasps (for skills and for the HTTP target's store).

@@ -1308,39 +1308,68 @@ fn an_oversized_format_2_message_is_refused_on_a_raw_topic_and_left_unchecked_on
         m.extend(std::iter::repeat_n(0u8, n as usize));
         m
     };
+    // Message 0 too, which is read first as the session's reference for names.
+    for index in [5, 0] {
+        let bytes = rewritten(
+            |_, d| d.to_vec(),
+            |t, i, d| {
+                if t == TOPIC_CONTACTS && i == index {
+                    padding(d)
+                } else {
+                    d.to_vec()
+                }
+            },
+        );
+        let e = read_session_bytes(&bytes, "big.mcap", &limits).unwrap_err();
+        let text = e.to_string();
+        assert!(
+            text.contains(&format!("topic /dfs/contacts message {index} "))
+                && text.contains(&format!("at most {MAX_RAW_MESSAGE_BYTES}")),
+            "{text}"
+        );
+    }
+    // A raw topic's schema padded with 100 000 empty file descriptors (2 bytes each on the wire,
+    // hundreds in memory) is refused before it is decoded.
     let bytes = rewritten(
-        |_, d| d.to_vec(),
-        |t, i, d| {
-            if t == TOPIC_CONTACTS && i == 5 {
-                padding(d)
-            } else {
-                d.to_vec()
+        |topic, d| {
+            let mut d = d.to_vec();
+            if topic == TOPIC_GLOVE_JOINT_STATES {
+                for _ in 0..100_000 {
+                    d.extend_from_slice(&[0x0a, 0x00]);
+                }
             }
+            d
         },
+        |_, _, d| d.to_vec(),
     );
-    let e = read_session_bytes(&bytes, "big.mcap", &limits).unwrap_err();
+    let e = read_session_bytes(&bytes, "schema.mcap", &limits).unwrap_err();
     let text = e.to_string();
     assert!(
-        text.contains("topic /dfs/contacts message 5")
-            && text.contains(&format!("at most {MAX_RAW_MESSAGE_BYTES}")),
+        text.contains("topic /glove/joint_states schema icms.GloveJointStates")
+            && text.contains(&format!("at most {MAX_RAW_SCHEMA_BYTES}")),
         "{text}"
     );
-    // 150 000 empty scene entities (2 bytes each on the wire, hundreds in memory): not decoded,
-    // and the session reads.
-    let bytes = rewritten(
-        |_, d| d.to_vec(),
-        |t, i, d| {
-            if t == TOPIC_SCENE && i == 1 {
-                let mut m = d.to_vec();
-                for _ in 0..150_000 {
-                    m.extend_from_slice(&[0x12, 0x00]);
+    // 150 000 empty scene entities (2 bytes each on the wire, hundreds in memory) and a
+    // malformed tail: the message is not decoded (it would not decode), and the session reads.
+    let scene = |n: usize| {
+        rewritten(
+            |_, d| d.to_vec(),
+            move |t, i, d| {
+                if t == TOPIC_SCENE && i == 1 {
+                    let mut m = d.to_vec();
+                    for _ in 0..n {
+                        m.extend_from_slice(&[0x12, 0x00]);
+                    }
+                    m.extend_from_slice(&[0x0a, 0xff, 0x01]);
+                    m
+                } else {
+                    d.to_vec()
                 }
-                m
-            } else {
-                d.to_vec()
-            }
-        },
-    );
-    assert!(bytes.len() > MAX_CHECKED_FOXGLOVE_MESSAGE_BYTES);
-    read_session_bytes(&bytes, "scene.mcap", &limits).unwrap();
+            },
+        )
+    };
+    read_session_bytes(&scene(150_000), "scene.mcap", &limits).unwrap();
+    // Under the limit, the same tail is decoded and refused.
+    let e = read_session_bytes(&scene(10), "scene.mcap", &limits).unwrap_err();
+    assert!(e.to_string().contains("topic /scene message 1 "), "{e}");
 }

@@ -2,13 +2,15 @@
 //! ([`read_session_file`], [`read_session_bytes`]) and recovering files whose writer died
 //! ([`salvage`]).
 //!
-//! Layout of the files we write (see `DESIGN.md`, "MCAP sessions"): JSON message encoding, one
-//! channel per topic with a `jsonschema` schema, zstd chunks of about 1 MiB closed at least
-//! every second of log time, message and chunk indexes, a summary, metadata records for session
-//! parameters. No NaN or infinity is ever written.
+//! Layout of the files we write: one channel per topic, protobuf messages with a `protobuf`
+//! schema (session format 2; [`SessionWriter::register_protobuf_channel`]) or JSON messages
+//! with a `jsonschema` schema (format 1, still read and still writable for tests and tools),
+//! zstd chunks of about 1 MiB closed at least every second of log time, chunk indexes (message
+//! indexes unless [`WriterOptions::message_indexes`] is off, as the recorder has it), a
+//! summary, metadata records for session parameters. No NaN or infinity is ever written.
 //!
-//! The session-specific message types live elsewhere; this module is generic over
-//! `serde::Serialize` messages.
+//! The session-specific message types live elsewhere; this module takes serialised messages,
+//! or `serde::Serialize` ones for JSON channels.
 
 mod bounded_zstd;
 mod finite;

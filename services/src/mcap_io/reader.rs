@@ -149,7 +149,8 @@ pub struct RecordedMessage {
     pub publish_time_ns: u64,
     /// Channel sequence number.
     pub sequence: u32,
-    /// Message payload (JSON text on `json` topics, checked at read time).
+    /// Message payload (JSON text on `json` topics, checked at read time; protobuf bytes on
+    /// `protobuf` topics, decoded by the session reader).
     pub data: Vec<u8>,
 }
 
@@ -158,7 +159,8 @@ pub struct RecordedMessage {
 pub struct TopicRecording {
     /// Topic name.
     pub topic: String,
-    /// Message encoding of the topic's channel (`json` for ours).
+    /// Message encoding of the topic's channel (`protobuf` for ours since format 2, `json`
+    /// before).
     pub message_encoding: String,
     /// The channel's schema, `None` for a schemaless channel.
     pub schema: Option<SchemaInfo>,
@@ -224,8 +226,8 @@ pub struct RecordedSession {
 }
 
 impl RecordedSession {
-    /// The topic, which must exist, carry JSON messages, and have a `jsonschema` schema named
-    /// `schema_name`.
+    /// The topic, which must exist and have the schema named `schema_name`: JSON messages with
+    /// a `jsonschema` schema, or protobuf messages with a `protobuf` schema.
     pub fn require_topic(&self, topic: &str, schema_name: &str) -> Result<&TopicRecording> {
         let t = self
             .topics
@@ -386,8 +388,8 @@ impl RawSession {
         &self.buffers[m.buffer as usize][m.start..m.end]
     }
 
-    /// The topic, which must exist, carry JSON messages, and have a `jsonschema` schema named
-    /// `schema_name`.
+    /// The topic, which must exist and have the schema named `schema_name`: JSON messages with
+    /// a `jsonschema` schema, or protobuf messages with a `protobuf` schema.
     pub(crate) fn require_topic(&self, topic: &str, schema_name: &str) -> Result<&RawTopic> {
         let t = self
             .topics

@@ -1,4 +1,5 @@
-//! [`SessionWriter`]: JSON messages on jsonschema channels into a zstd-chunked, indexed MCAP file.
+//! [`SessionWriter`]: messages into a zstd-chunked, indexed MCAP file, on protobuf channels
+//! (session format 2) or on JSON channels with a JSON Schema (format 1).
 
 use std::collections::{BTreeMap, HashMap};
 use std::fs::File;

@@ -46,7 +46,7 @@ pub use messages::*;
 pub use read::{
     read_session, read_session_bytes, read_session_bytes_with, read_session_file_with,
     read_session_with_limits, DecodeTopics, Session, MAX_CHECKED_FOXGLOVE_MESSAGE_BYTES,
-    MAX_RAW_MESSAGE_BYTES,
+    MAX_RAW_MESSAGE_BYTES, MAX_RAW_SCHEMA_BYTES,
 };
 pub use recorder::{
     record_simulation, record_simulation_until, record_ticks, record_ticks_until, RecordSummary,

@@ -179,8 +179,10 @@ pub fn read_session(path: impl AsRef<Path>) -> Result<Session> {
 ///   [`MAX_METADATA_BYTES`] in all.
 ///
 /// In format 2 (protobuf) a raw topic's schema must define its message field for field as ours
-/// ([`super::proto::schema_difference`]), every message must decode (the error names the
-/// topic and the message's index), and the Foxglove topics must decode as the SDK's types.
+/// ([`super::proto::schema_difference`]; at most [`MAX_RAW_SCHEMA_BYTES`]), every message must
+/// decode (the error names the topic and the message's index), and the Foxglove topics'
+/// messages of up to [`MAX_CHECKED_FOXGLOVE_MESSAGE_BYTES`] must decode as the SDK's types. In
+/// both formats a raw message holds at most [`MAX_RAW_MESSAGE_BYTES`].
 ///
 /// Not checked, being harmless: the Foxglove topics' content beyond that (for viewers only),
 /// `n_contacts` (segmentation counts the fingers in contact itself), the normal of a finger
@@ -342,11 +344,13 @@ fn check_metadata(raw: &RawSession, name: &str) -> Result<()> {
 /// The session's DOF and fingertip names, from the first message of `/glove/joint_states` and
 /// of `/dfs/contacts` (`None` where that message does not decode: its own check reports it).
 fn tick_reference(raw: &RawSession) -> TickReference {
+    // (Not decoded when over the size limit: its own check refuses it.)
     let first = |topic: &str| {
         raw.topics
             .get(topic)
             .and_then(|t| t.messages.first())
             .map(|m| raw.data(m))
+            .filter(|d| d.len() <= MAX_RAW_MESSAGE_BYTES)
     };
     // Only a list that passes its own check is a reference (an empty one would make every
     // other message's list look wrong, before the culprit's own error).
@@ -386,6 +390,7 @@ fn raw_block<'s, T: Deserialize<'s> + TickContent>(
     reference: &TickReference,
     keep: bool,
 ) -> Result<Vec<(u64, T)>> {
+    refuse_oversized(raw, t, first, messages)?;
     let mut out = Vec::with_capacity(if keep { messages.len() } else { 0 });
     raw.decode_each(t, first, messages, |i, time, message: T| {
         message
@@ -402,11 +407,46 @@ fn raw_block<'s, T: Deserialize<'s> + TickContent>(
     Ok(out)
 }
 
-/// Largest raw message of format 2 (bytes): ours are under 2 kB (a tick of a 30-DOF hand), and
-/// the most a session may hold ([`MAX_SESSION_DOFS`] names and values,
+/// Largest raw message (bytes), in either format: ours are under 2 kB (a tick of a 30-DOF
+/// hand), and the most a session may hold ([`MAX_SESSION_DOFS`] names and values,
 /// [`MAX_SESSION_FINGERS`] fingertips) is far under this. Bigger messages are refused before
-/// they are decoded: decoding may take a hundred times their size.
+/// they are decoded: decoding may take a hundred times their size (an empty nested protobuf
+/// message, or an empty JSON string, is 2 bytes of input and a struct or `String` in memory).
 pub const MAX_RAW_MESSAGE_BYTES: usize = 256 * 1024;
+
+/// Largest protobuf schema of a raw topic (bytes): ours is a few kB. A bigger one is refused
+/// before it is decoded to be compared with ours (an empty file descriptor is 2 bytes of
+/// input and hundreds in memory).
+pub const MAX_RAW_SCHEMA_BYTES: usize = 64 * 1024;
+
+/// A raw message over [`MAX_RAW_MESSAGE_BYTES`] is [`RecordingError::InvalidInput`] naming it.
+fn refuse_oversized(
+    raw: &RawSession,
+    t: &RawTopic,
+    first: usize,
+    messages: &[MessageRef],
+) -> Result<()> {
+    match messages
+        .iter()
+        .enumerate()
+        .find(|(_, m)| raw.data(m).len() > MAX_RAW_MESSAGE_BYTES)
+    {
+        None => Ok(()),
+        Some((i, m)) => Err(RecordingError::InvalidInput {
+            location: format!(
+                "topic {} message {} (log time {} ns)",
+                t.topic,
+                first + i,
+                m.log_time_ns
+            ),
+            detail: format!(
+                "the message is {} bytes; a message of this topic holds at most \
+                 {MAX_RAW_MESSAGE_BYTES}",
+                raw.data(m).len()
+            ),
+        }),
+    }
+}
 
 /// Largest Foxglove message of format 2 that is decoded to be checked (bytes); bigger ones
 /// (another tool's meshes in `/scene`, say) are for viewers and left unchecked rather than
@@ -529,6 +569,16 @@ fn from_raw(raw: &RawSession, name: &str, topics: DecodeTopics) -> Result<Sessio
         // wrong numbers rather than fail.
         if t.is_protobuf() {
             let data = t.schema.as_ref().map_or(&[][..], |s| &s.data[..]);
+            if data.len() > MAX_RAW_SCHEMA_BYTES {
+                return Err(RecordingError::InvalidInput {
+                    location: format!("{name}: topic {topic} schema {}", schema.name),
+                    detail: format!(
+                        "the schema is {} bytes; a raw topic's schema holds at most \
+                         {MAX_RAW_SCHEMA_BYTES} (ours is a few kB)",
+                        data.len()
+                    ),
+                });
+            }
             if let Some(detail) = schema_difference(data, &schema.name) {
                 return Err(RecordingError::InvalidInput {
                     location: format!("{name}: topic {topic} schema {}", schema.name),
