@@ -461,3 +461,35 @@ async fn a_session_without_object_metadata_is_refused_and_unknown_is_still_a_sha
     c.get("/api/v1/skills?shape=cone").await.problem(400);
     app.stop().await;
 }
+
+/// A session of format 1 (JSON topics, `services/tests/fixtures/session-v1.mcap`) is
+/// uploaded, stored, listed, downloaded unchanged and its skill replayed, as a format 2 one.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_format_1_session_uploads_and_its_skill_replays() {
+    let app = TestApp::spawn().await;
+    let c = &app.client;
+    let v1 = std::fs::read(
+        std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+            .join("../services/tests/fixtures/session-v1.mcap"),
+    )
+    .unwrap();
+    let r = c.upload(&v1, None).await;
+    assert_eq!(r.status, 201, "{}", String::from_utf8_lossy(&r.body));
+    let up = r.json();
+    let session_id = up["session_id"].as_i64().unwrap();
+    let skill_id = up["skills"][0]["id"].as_i64().unwrap();
+    assert_eq!(up["skills"].as_array().unwrap().len(), 1);
+    assert_eq!(up["skills"][0]["object_shape"], "sphere");
+    let back = c.get(&format!("/api/v1/sessions/{session_id}/mcap")).await;
+    assert_eq!(back.status, 200);
+    assert_eq!(back.body[..], v1[..], "the stored blob is the upload");
+    let r = c
+        .post_json(
+            &format!("/api/v1/skills/{skill_id}/replays"),
+            &json!({"hand": "gripper"}),
+            None,
+        )
+        .await;
+    assert_eq!(r.status, 201, "{}", String::from_utf8_lossy(&r.body));
+    assert_eq!(r.json()["skill_id"], skill_id);
+}
