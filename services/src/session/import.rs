@@ -275,6 +275,13 @@ pub fn read_glove_mcap(path: &Path, hand: &HandModel) -> Result<GloveRecording> 
     let t = &recorded.topics[topic];
     let messages: Vec<(u64, JointStates)> = if t.message_encoding == "protobuf" {
         // As the Foxglove SDK and session format 2 write it.
+        let encoding = t.schema.as_ref().map_or("", |s| s.encoding.as_str());
+        if encoding != "protobuf" {
+            return Err(invalid(
+                format!("{name}: {topic}"),
+                format!("protobuf messages need a protobuf schema, not {encoding:?}"),
+            ));
+        }
         t.messages
             .iter()
             .enumerate()
