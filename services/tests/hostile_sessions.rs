@@ -1,7 +1,10 @@
 //! Session files whose framing is sound but whose content is not: arrays that disagree with
 //! their names, no fingers, orientations that are no rotation, numbers JSON cannot hold as
 //! finite, sessions of one tick, metadata repeated or huge. Each is refused by every read (a
-//! full read, segmentation's, an upload's), naming the topic, the message and the field.
+//! full read, segmentation's, an upload's), naming the topic, the message and the field. The
+//! files are written in session format 1 (JSON), where every fault can be written; each is
+//! also written again in format 2 (protobuf) where it can be (30 of the 41 cases), and must
+//! be refused there with the same words.
 
 use std::collections::BTreeMap;
 
@@ -156,7 +159,78 @@ fn assert_refused(bytes: &[u8], want: &[&str]) -> RecordingError {
         }
         assert_eq!(text, first, "the reads disagree");
     }
+    // The same content in session format 2 (protobuf) is refused alike, where the edit can be
+    // written there at all (a JSON-only fault such as a wrong type or 1e400 cannot).
+    if let Some(v2) = in_format_2(bytes) {
+        for topics in [DecodeTopics::ALL, DecodeTopics::SEGMENTATION] {
+            let text = read_session_bytes_with(&v2, "hostile.mcap", &limits, topics)
+                .expect_err("format 2 accepted what format 1 refuses")
+                .to_string();
+            for w in want {
+                assert!(text.contains(w), "format 2: {w:?} not in {text:?}");
+            }
+        }
+        services::ingest::analyse(&v2, "hostile.mcap").expect_err("format 2 ingest");
+    }
     errors.swap_remove(0)
+}
+
+/// `bytes` (a format 1 file of `session_file`) written again in format 2: each raw message
+/// parsed into its SI type, quantised and encoded as the recorder does, the metadata copied.
+/// `None` where a message is not of its type or not finite (format 2 cannot hold it).
+fn in_format_2(bytes: &[u8]) -> Option<Vec<u8>> {
+    use prost::Message;
+    use services::session::proto::{self, Quantiser};
+    let raw = services::mcap_io::read_session_bytes(bytes, &ReadLimits::default()).ok()?;
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("v2.mcap");
+    let mut w = SessionWriter::create(&path).unwrap();
+    for (topic, name) in RAW_TOPICS.iter().zip(RAW_SCHEMA_NAMES) {
+        w.register_protobuf_channel(topic, name, proto::FILE_DESCRIPTOR_SET)
+            .unwrap();
+    }
+    for m in &raw.metadata {
+        w.add_metadata(&m.name, m.entries.clone()).unwrap();
+    }
+    let mut all: Vec<(u64, &str, &[u8])> = RAW_TOPICS
+        .iter()
+        .filter_map(|t| raw.topics.get(*t))
+        .flat_map(|t| {
+            t.messages
+                .iter()
+                .map(move |m| (m.log_time_ns, t.topic.as_str(), &m.data[..]))
+        })
+        .collect();
+    all.sort_by_key(|m| m.0);
+    for (time, topic, data) in all {
+        let mut q = Quantiser::default();
+        let encoded = match topic {
+            TOPIC_GLOVE_JOINT_STATES => {
+                let mut p = Default::default();
+                q.joint_states(&serde_json::from_slice(data).ok()?, &mut p);
+                proto::GloveJointStatesProto::encode_to_vec(&p)
+            }
+            TOPIC_GLOVE_FEEDBACK => {
+                let mut p = Default::default();
+                q.feedback(&serde_json::from_slice(data).ok()?, &mut p);
+                proto::GloveFeedbackProto::encode_to_vec(&p)
+            }
+            TOPIC_CONTACTS => {
+                let mut p = Default::default();
+                q.contacts(&serde_json::from_slice(data).ok()?, &mut p);
+                proto::ContactsProto::encode_to_vec(&p)
+            }
+            _ => q
+                .object(&serde_json::from_slice(data).ok()?)
+                .encode_to_vec(),
+        };
+        if q.refused.is_some() {
+            return None;
+        }
+        w.write_raw(topic, time, &encoded).unwrap();
+    }
+    w.finish().unwrap();
+    Some(std::fs::read(&path).unwrap())
 }
 
 #[test]
