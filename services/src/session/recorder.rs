@@ -344,6 +344,7 @@ impl SessionRecorder {
             push(&mut self.batch, 5, t, &m.scene);
             push(&mut self.batch, 6, t, &m.fox_joints);
         }
+        m.advance(tick);
         Ok(())
     }
 
@@ -569,12 +570,10 @@ impl Messages {
                 0.0
             };
             self.joints.efforts[i] = tick.tau.get(i).copied().unwrap_or(0.0);
-            self.prev_q[i] = q;
             self.feedback.motor_positions[i] = out.motor_q[i];
             self.feedback.motor_velocities[i] = out.motor_qd[i];
             self.feedback.feedback_torques[i] = out.feedback_torque[i];
         }
-        self.prev_time_ns = Some(tick.time_ns);
         self.contacts.n_contacts = out.n_contacts as u32;
         for k in 0..hand.n_tips {
             let tip = &out.tips[k];
@@ -610,6 +609,15 @@ impl Messages {
         o.object_force_b = wrench6(&out.object_force_b);
         o.table_force_b = wrench6(&out.table_force_b);
         o.pose_in_hand = pose(&(tick.base.inverse() * out.object.pose));
+    }
+
+    /// The tick just recorded becomes the one the next velocities are taken from (not called
+    /// for a refused tick, which records nothing).
+    fn advance(&mut self, tick: &TickData<'_>) {
+        for (prev, &q) in self.prev_q.iter_mut().zip(tick.q) {
+            *prev = q;
+        }
+        self.prev_time_ns = Some(tick.time_ns);
     }
 
     fn fill_foxglove(
