@@ -24,7 +24,7 @@ mod writer;
 
 pub(crate) use par::{par_map, MESSAGES_PER_JOB};
 pub(crate) use reader::{
-    read_raw_bytes, read_raw_file, MessageRef, Oversize, RawSession, RawTopic,
+    message_location, read_raw_bytes, read_raw_file, MessageRef, RawSession, RawTopic,
 };
 pub use reader::{
     read_session_bytes, read_session_bytes_decoding, read_session_file, read_session_file_decoding,

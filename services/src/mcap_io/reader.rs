@@ -470,46 +470,25 @@ impl RawSession {
     /// does not decode is [`RecordingError::InvalidInput`] naming the topic, the message and
     /// the schema. The first error (of decoding or of `f`) stops.
     ///
-    /// A message over `max_bytes` is not decoded: decoding can take far more memory than the
-    /// bytes (an empty nested message is 2 bytes on the wire and a struct of hundreds in
-    /// memory), so it is refused ([`Oversize::Refuse`]) or passed over ([`Oversize::Skip`]).
+    /// A message over `skip_over` bytes is passed over, not decoded: decoding can take far more
+    /// memory than the bytes (an empty nested message is 2 bytes on the wire and a struct of
+    /// hundreds in memory). Callers that must not pass over anything refuse such messages
+    /// first.
     pub(crate) fn decode_each_protobuf<M: prost::Message + Default>(
         &self,
         t: &RawTopic,
         first: usize,
         messages: &[MessageRef],
-        (max_bytes, oversize): (usize, Oversize),
+        skip_over: usize,
         mut f: impl FnMut(usize, u64, M) -> Result<()>,
     ) -> Result<()> {
         for (i, m) in messages.iter().enumerate() {
             let data = self.data(m);
-            if data.len() > max_bytes {
-                match oversize {
-                    Oversize::Skip => continue,
-                    Oversize::Refuse => {
-                        return Err(RecordingError::InvalidInput {
-                            location: format!(
-                                "topic {} message {} (log time {} ns)",
-                                t.topic,
-                                first + i,
-                                m.log_time_ns
-                            ),
-                            detail: format!(
-                                "the message is {} bytes; a message of this topic holds at most \
-                                 {max_bytes}",
-                                data.len()
-                            ),
-                        })
-                    }
-                }
+            if data.len() > skip_over {
+                continue;
             }
             let value = M::decode(data).map_err(|e| RecordingError::InvalidInput {
-                location: format!(
-                    "topic {} message {} (log time {} ns)",
-                    t.topic,
-                    first + i,
-                    m.log_time_ns
-                ),
+                location: message_location(&t.topic, first + i, m.log_time_ns),
                 detail: format!(
                     "does not decode as {}: {e}",
                     t.schema.as_ref().map_or("its schema", |s| s.name.as_str())
@@ -616,13 +595,9 @@ fn json_error<'de, T: Deserialize<'de>>(
 /// Message and schema encoding of session format 2.
 const PROTOBUF: &str = "protobuf";
 
-/// What [`RawSession::decode_each_protobuf`] does with a message over its size limit.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub(crate) enum Oversize {
-    /// Refuse the file, naming the message.
-    Refuse,
-    /// Leave the message unchecked.
-    Skip,
+/// How errors name a message: `topic T message I (log time N ns)`.
+pub(crate) fn message_location(topic: &str, index: usize, log_time_ns: u64) -> String {
+    format!("topic {topic} message {index} (log time {log_time_ns} ns)")
 }
 
 /// A topic's schema is the one named `schema_name`, and its messages are JSON with a
@@ -633,33 +608,19 @@ fn check_topic(
     schema: Option<&SchemaInfo>,
     schema_name: &str,
 ) -> Result<()> {
-    if message_encoding == PROTOBUF {
-        return match schema {
-            Some(s) if s.name == schema_name => {
-                if s.encoding != PROTOBUF {
-                    return Err(RecordingError::NonJsonEncoding {
-                        topic: topic.to_owned(),
-                        encoding: s.encoding.clone(),
-                        expected: PROTOBUF,
-                    });
-                }
-                Ok(())
-            }
-            other => Err(RecordingError::UnknownSchema {
-                topic: topic.to_owned(),
-                expected: schema_name.to_owned(),
-                found: other.map(|s| s.name.clone()),
-            }),
-        };
-    }
-    check_json_encoding(topic, message_encoding)?;
+    let schema_encoding = if message_encoding == PROTOBUF {
+        PROTOBUF
+    } else {
+        check_json_encoding(topic, message_encoding)?;
+        SCHEMA_ENCODING
+    };
     match schema {
         Some(s) if s.name == schema_name => {
-            if s.encoding != SCHEMA_ENCODING {
+            if s.encoding != schema_encoding {
                 return Err(RecordingError::NonJsonEncoding {
                     topic: topic.to_owned(),
                     encoding: s.encoding.clone(),
-                    expected: SCHEMA_ENCODING,
+                    expected: schema_encoding,
                 });
             }
             Ok(())

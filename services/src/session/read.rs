@@ -11,8 +11,8 @@ use super::*;
 use crate::error::{RecordingError, Result};
 use crate::foxglove::{FRAME_TRANSFORMS_SCHEMA, JOINT_STATES_SCHEMA, SCENE_UPDATE_SCHEMA};
 use crate::mcap_io::{
-    par_map, read_raw_bytes, read_raw_file, JsonSchema, MessageRef, Oversize, RawSession, RawTopic,
-    ReadLimits, MESSAGES_PER_JOB,
+    message_location, par_map, read_raw_bytes, read_raw_file, JsonSchema, MessageRef, RawSession,
+    RawTopic, ReadLimits, MESSAGES_PER_JOB,
 };
 use crate::replay::REPLAY_METADATA;
 
@@ -396,7 +396,7 @@ fn raw_block<'s, T: Deserialize<'s> + TickContent>(
         message
             .check(reference)
             .map_err(|detail| RecordingError::InvalidInput {
-                location: format!("topic {} message {i} (log time {time} ns)", t.topic),
+                location: message_location(&t.topic, i, time),
                 detail,
             })?;
         if keep {
@@ -433,12 +433,7 @@ fn refuse_oversized(
     {
         None => Ok(()),
         Some((i, m)) => Err(RecordingError::InvalidInput {
-            location: format!(
-                "topic {} message {} (log time {} ns)",
-                t.topic,
-                first + i,
-                m.log_time_ns
-            ),
+            location: message_location(&t.topic, first + i, m.log_time_ns),
             detail: format!(
                 "the message is {} bytes; a message of this topic holds at most \
                  {MAX_RAW_MESSAGE_BYTES}",
@@ -465,13 +460,13 @@ fn raw_block_protobuf<P: prost::Message + Default, T: TickContent>(
     convert: fn(P) -> T,
 ) -> Result<Vec<(u64, T)>> {
     let mut out = Vec::with_capacity(if keep { messages.len() } else { 0 });
-    let limit = (MAX_RAW_MESSAGE_BYTES, Oversize::Refuse);
-    raw.decode_each_protobuf(t, first, messages, limit, |i, time, message: P| {
+    refuse_oversized(raw, t, first, messages)?;
+    raw.decode_each_protobuf(t, first, messages, usize::MAX, |i, time, message: P| {
         let message = convert(message);
         message
             .check(reference)
             .map_err(|detail| RecordingError::InvalidInput {
-                location: format!("topic {} message {i} (log time {time} ns)", t.topic),
+                location: message_location(&t.topic, i, time),
                 detail,
             })?;
         if keep {
@@ -492,7 +487,7 @@ fn check_foxglove_protobuf(
 ) -> Result<()> {
     use foxglove::messages as fg;
     let ok = |_: usize, _: u64, _: ()| Ok(());
-    let limit = (MAX_CHECKED_FOXGLOVE_MESSAGE_BYTES, Oversize::Skip);
+    let limit = MAX_CHECKED_FOXGLOVE_MESSAGE_BYTES;
     match t.schema.as_ref().map(|s| s.name.as_str()) {
         Some("foxglove.FrameTransforms") => {
             raw.decode_each_protobuf(t, first, messages, limit, |i, l, _: fg::FrameTransforms| {
@@ -618,49 +613,26 @@ fn from_raw(raw: &RawSession, name: &str, topics: DecodeTopics) -> Result<Sessio
                     check_foxglove_protobuf(raw, t, first, m)?;
                     Decoded::Checked
                 }
-                Job::JointStates(keep) => {
-                    let v = raw_block_protobuf(
-                        raw,
-                        t,
-                        first,
-                        m,
-                        r,
-                        keep,
-                        proto::joint_states_from_proto,
-                    )?;
-                    if keep {
-                        Decoded::JointStates(v)
-                    } else {
-                        Decoded::Checked
-                    }
-                }
-                Job::Feedback(keep) => {
-                    let v =
-                        raw_block_protobuf(raw, t, first, m, r, keep, proto::feedback_from_proto)?;
-                    if keep {
-                        Decoded::Feedback(v)
-                    } else {
-                        Decoded::Checked
-                    }
-                }
-                Job::Contacts(keep) => {
-                    let v =
-                        raw_block_protobuf(raw, t, first, m, r, keep, proto::contacts_from_proto)?;
-                    if keep {
-                        Decoded::Contacts(v)
-                    } else {
-                        Decoded::Checked
-                    }
-                }
-                Job::Object(keep) => {
-                    let v =
-                        raw_block_protobuf(raw, t, first, m, r, keep, proto::object_from_proto)?;
-                    if keep {
-                        Decoded::Object(v)
-                    } else {
-                        Decoded::Checked
-                    }
-                }
+                Job::JointStates(keep) => kept(
+                    keep,
+                    raw_block_protobuf(raw, t, first, m, r, keep, proto::joint_states_from_proto)?,
+                    Decoded::JointStates,
+                ),
+                Job::Feedback(keep) => kept(
+                    keep,
+                    raw_block_protobuf(raw, t, first, m, r, keep, proto::feedback_from_proto)?,
+                    Decoded::Feedback,
+                ),
+                Job::Contacts(keep) => kept(
+                    keep,
+                    raw_block_protobuf(raw, t, first, m, r, keep, proto::contacts_from_proto)?,
+                    Decoded::Contacts,
+                ),
+                Job::Object(keep) => kept(
+                    keep,
+                    raw_block_protobuf(raw, t, first, m, r, keep, proto::object_from_proto)?,
+                    Decoded::Object,
+                ),
             });
         }
         Ok(match job {
@@ -678,22 +650,12 @@ fn from_raw(raw: &RawSession, name: &str, topics: DecodeTopics) -> Result<Sessio
                 raw_block::<GloveFeedbackShape>(raw, t, first, m, r, false)?;
                 Decoded::Checked
             }
-            Job::Contacts(keep) => {
-                let v: Vec<(u64, Contacts)> = raw_block(raw, t, first, m, r, keep)?;
-                if keep {
-                    Decoded::Contacts(v)
-                } else {
-                    Decoded::Checked
-                }
-            }
-            Job::Object(keep) => {
-                let v: Vec<(u64, messages::ObjectState)> = raw_block(raw, t, first, m, r, keep)?;
-                if keep {
-                    Decoded::Object(v)
-                } else {
-                    Decoded::Checked
-                }
-            }
+            Job::Contacts(keep) => kept(
+                keep,
+                raw_block(raw, t, first, m, r, keep)?,
+                Decoded::Contacts,
+            ),
+            Job::Object(keep) => kept(keep, raw_block(raw, t, first, m, r, keep)?, Decoded::Object),
         })
     });
     let mut session = Session {
@@ -818,6 +780,15 @@ fn check_raw_log_times(raw: &RawSession) -> Result<()> {
         return Err(invalid(format!("topic {topic}"), detail));
     }
     Ok(())
+}
+
+/// The decoded samples if they are kept, else only [`Decoded::Checked`].
+fn kept<T>(keep: bool, v: Vec<(u64, T)>, decoded: fn(Vec<(u64, T)>) -> Decoded) -> Decoded {
+    if keep {
+        decoded(v)
+    } else {
+        Decoded::Checked
+    }
 }
 
 /// `out.extend(v)`, taking `v` itself when `out` is empty.
