@@ -10,7 +10,7 @@ use super::{blob, feature_to_blob, insert_skills, validate_skill, Store, StoreEr
 /// A stored skill in the form its row holds it, or a new skill in the form it would be stored:
 /// two skills are the same when these are equal (the numbers as numbers, stored exactly as
 /// SQLite REALs and always finite; the JSON columns as the text stored).
-#[derive(Debug, PartialEq)]
+#[derive(Debug, PartialEq, sqlx::FromRow)]
 struct StoredForm {
     object_shape: String,
     object_mass: f64,
@@ -48,29 +48,9 @@ impl StoredForm {
             params: serde_json::to_string(&s.params)?,
         })
     }
-
-    /// A row of [`STORED_FORM_COLUMNS`].
-    fn of_row(row: &sqlx::sqlite::SqliteRow) -> Result<Self, StoreError> {
-        Ok(StoredForm {
-            object_shape: row.try_get("object_shape")?,
-            object_mass: row.try_get("object_mass")?,
-            mu: row.try_get("mu")?,
-            contact_count: row.try_get("contact_count")?,
-            contact_model: row.try_get("contact_model")?,
-            grasp_type: row.try_get("grasp_type")?,
-            quality: row.try_get("quality")?,
-            volume: row.try_get("volume")?,
-            duration_s: row.try_get("duration_s")?,
-            start_ns: row.try_get("start_ns")?,
-            end_ns: row.try_get("end_ns")?,
-            phase_durations: row.try_get("phase_durations")?,
-            feature: row.try_get("feature")?,
-            params: row.try_get("params")?,
-        })
-    }
 }
 
-/// The columns [`StoredForm::of_row`] reads, after `id`.
+/// The columns a [`StoredForm`] is read from (`sqlx::FromRow`, by name), after `id`.
 const STORED_FORM_COLUMNS: &str = "id, object_shape, object_mass, mu, contact_count, \
      contact_model, grasp_type, quality, volume, duration_s, start_ns, end_ns, phase_durations, \
      feature, params";
@@ -206,7 +186,7 @@ impl Store {
         let mut old = Vec::with_capacity(rows.len());
         for row in &rows {
             let id: i64 = row.try_get("id")?;
-            old.push((id, StoredForm::of_row(row)?));
+            old.push((id, <StoredForm as sqlx::FromRow<_>>::from_row(row)?));
         }
         drop(rows);
 
