@@ -9,15 +9,13 @@ mod store_common;
 use std::path::Path;
 use std::sync::atomic::{AtomicBool, Ordering};
 
-use dfs_core::replay::{ReplayParams, ReplayReport};
 use dfs_core::scenario::Scenario;
 use services::ingest::{analyse, ingest_bytes};
-use services::replay::{load_builtin_hand, replay_skill, skill_spec_from_json, ReplaySource};
 use services::reprocess::{reprocess, ReprocessEvent, ReprocessReport};
 use services::segmentation::SEGMENTATION_VERSION;
 use services::store::{Skill, Store, StoreError, DB_FILE};
 use sqlx::{Connection, SqliteConnection};
-use store_common::{blob_count, fake_mcap, meta, skills};
+use store_common::{blob_count, fake_mcap, meta, skills, unreachable_report};
 
 /// The bytes of a built-in scenario recorded with `seed` (whole, or cut to `duration` s).
 fn simulate(dir: &Path, name: &str, seed: u64, duration: Option<f64>) -> Vec<u8> {
@@ -104,34 +102,6 @@ async fn versions(store: &Store, ids: &[i64]) -> Vec<u32> {
         v.push(store.get_session(*id).await.unwrap().segmentation_version);
     }
     v
-}
-
-/// A replay report that fails at once (a 0.4 m sphere does not fit in the gripper).
-fn unreachable_report() -> ReplayReport {
-    let skill = serde_json::json!({
-        "phases": [
-            {"name": "approach", "start_ns": 0, "end_ns": 500_000_000u64},
-            {"name": "grasp", "start_ns": 500_000_000u64, "end_ns": 1_000_000_000u64},
-            {"name": "lift", "start_ns": 1_000_000_000u64, "end_ns": 1_500_000_000u64},
-            {"name": "release", "start_ns": 1_500_000_000u64, "end_ns": 2_000_000_000u64}
-        ],
-        "object": {"shape": "sphere", "size": [0.2], "mass": 0.3, "mu": 0.8},
-        "contact_model": "soft_finger",
-        "contacts": [
-            {"finger": "thumb", "position_b": [0.2, 0.0, 0.0], "normal_b": [-1.0, 0.0, 0.0]},
-            {"finger": "index", "position_b": [-0.2, 0.0, 0.0], "normal_b": [1.0, 0.0, 0.0]}
-        ]
-    });
-    let spec = skill_spec_from_json(&skill, "big sphere").unwrap();
-    let hand = load_builtin_hand("gripper").unwrap();
-    replay_skill(
-        &hand,
-        &spec,
-        &ReplayParams::default(),
-        &ReplaySource::default(),
-        None,
-    )
-    .unwrap()
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]

@@ -5,43 +5,13 @@ mod store_common;
 
 use dfs_core::hand::builtin::GRIPPER_URDF;
 use dfs_core::hand::{builtin_spec, HandSpec};
-use dfs_core::replay::{ReplayParams, ReplayReport};
-use services::replay::{load_builtin_hand, replay_skill, skill_spec_from_json, ReplaySource};
 use services::store::{Store, StoreError};
-use store_common::{blob_count, fake_mcap, meta, skills};
+use store_common::{blob_count, fake_mcap, meta, skills, unreachable_report};
 
 fn gripper_spec(name: &str) -> HandSpec {
     let mut spec = builtin_spec("gripper").unwrap().0;
     spec.name = name.into();
     spec
-}
-
-/// A report of a replay that fails at once: a 0.4 m sphere does not fit in the gripper.
-fn unreachable_report() -> ReplayReport {
-    let skill = serde_json::json!({
-        "phases": [
-            {"name": "approach", "start_ns": 0, "end_ns": 500_000_000u64},
-            {"name": "grasp", "start_ns": 500_000_000u64, "end_ns": 1_000_000_000u64},
-            {"name": "lift", "start_ns": 1_000_000_000u64, "end_ns": 1_500_000_000u64},
-            {"name": "release", "start_ns": 1_500_000_000u64, "end_ns": 2_000_000_000u64}
-        ],
-        "object": {"shape": "sphere", "size": [0.2], "mass": 0.3, "mu": 0.8},
-        "contact_model": "soft_finger",
-        "contacts": [
-            {"finger": "thumb", "position_b": [0.2, 0.0, 0.0], "normal_b": [-1.0, 0.0, 0.0]},
-            {"finger": "index", "position_b": [-0.2, 0.0, 0.0], "normal_b": [1.0, 0.0, 0.0]}
-        ]
-    });
-    let spec = skill_spec_from_json(&skill, "big sphere").unwrap();
-    let hand = load_builtin_hand("gripper").unwrap();
-    replay_skill(
-        &hand,
-        &spec,
-        &ReplayParams::default(),
-        &ReplaySource::default(),
-        None,
-    )
-    .unwrap()
 }
 
 #[tokio::test]
