@@ -13,6 +13,10 @@ use crate::http::{LayerConfig, StateConfig};
 /// Default largest request body: 256 MiB.
 pub const DEFAULT_MAX_BODY: usize = 256 * 1024 * 1024;
 
+/// Default largest session upload: 2 GiB, three hours of session at the 11.4 MB a minute of
+/// format 2 (uploads are streamed to disk, not held in memory).
+pub const DEFAULT_MAX_UPLOAD: usize = 2 << 30;
+
 /// Arguments of `icms serve`.
 #[derive(Debug, Clone, clap::Args)]
 pub struct ServeArgs {
@@ -30,9 +34,13 @@ pub struct ServeArgs {
     /// Do not seed an empty data base with simulated sessions of the built-in scenarios.
     #[arg(long)]
     pub no_demo: bool,
-    /// Largest request body, bytes (an upload over it is refused with 413).
+    /// Largest request body, bytes, but for session uploads (over it: 413).
     #[arg(long, default_value_t = DEFAULT_MAX_BODY)]
     pub max_body: usize,
+    /// Largest session upload (`POST /api/v1/sessions`), bytes (over it: 413). Uploads are
+    /// streamed to disk: the default, 2 GiB, is three hours of session.
+    #[arg(long, default_value_t = DEFAULT_MAX_UPLOAD)]
+    pub max_upload: usize,
     /// Origin allowed to call the API from a browser (repeatable). Default: none, no CORS.
     #[arg(long = "cors-origin")]
     pub cors_origins: Vec<String>,
@@ -66,7 +74,7 @@ pub struct ServeArgs {
     pub max_connections: Option<usize>,
 }
 
-/// Largest accepted `--max-body`: 64 GiB.
+/// Largest accepted `--max-body` and `--max-upload`: 64 GiB.
 pub const MAX_MAX_BODY: usize = 64 << 30;
 /// Longest accepted `--request-timeout`, `--queue-wait`, `--header-timeout` and
 /// `--keep-alive-timeout`: one day.
@@ -124,6 +132,7 @@ impl Default for ServeArgs {
             token: None,
             no_demo: false,
             max_body: DEFAULT_MAX_BODY,
+            max_upload: DEFAULT_MAX_UPLOAD,
             cors_origins: Vec::new(),
             request_timeout: 120.0,
             max_simulations: 2,
@@ -193,6 +202,7 @@ impl ServeArgs {
         let header_timeout = seconds("--header-timeout", self.header_timeout)?;
         let keep_alive_timeout = seconds("--keep-alive-timeout", self.keep_alive_timeout)?;
         let max_body = count("--max-body", self.max_body, 1, MAX_MAX_BODY)?;
+        let max_upload = count("--max-upload", self.max_upload, 1, MAX_MAX_BODY)?;
         let max_simulations = count("--max-simulations", self.max_simulations, 1, MAX_WORKERS)?;
         let max_ingests = count("--max-ingests", self.max_ingests, 1, MAX_WORKERS)?;
         let cache_bytes = count("--cache-mib", self.cache_mib, 0, MAX_CACHE_MIB)? << 20;
@@ -217,6 +227,7 @@ impl ServeArgs {
             state: StateConfig {
                 token,
                 max_body,
+                max_upload,
                 max_simulations,
                 max_ingests,
                 queue_wait,
@@ -336,8 +347,10 @@ mod tests {
             assert!(a.into_config().is_ok(), "{name} of a day");
         }
         type SetN = fn(&mut ServeArgs, usize);
-        let counts: [(&str, SetN, usize); 6] = [
+        let counts: [(&str, SetN, usize); 8] = [
             ("--max-body", |a, v| a.max_body = v, 0),
+            ("--max-upload", |a, v| a.max_upload = v, 0),
+            ("--max-upload", |a, v| a.max_upload = v, usize::MAX),
             ("--max-body", |a, v| a.max_body = v, usize::MAX),
             ("--max-simulations", |a, v| a.max_simulations = v, 100_000),
             ("--max-ingests", |a, v| a.max_ingests = v, 0),

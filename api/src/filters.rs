@@ -1,10 +1,14 @@
 //! The skill filters, sort and page of a skill query, as one set of named parameters shared by
 //! the command line (`icms skills --shape box ...`) and the HTTP API
 //! (`GET /api/v1/skills?shape=box&...`), and their translation into the store's
-//! [`SkillQuery`]. Names and meanings are the same in both places.
+//! [`SkillQuery`]. Names and meanings are the same in both places, and so is the parsing of a
+//! shape, contact model or phase (their types' own: `FromStr` for a flag, `Deserialize` for a
+//! query string), which refuses a name they do not know, naming the parameter.
 
+use dfs_core::contact::ContactModel;
+use dfs_core::scenario::Phase;
 use serde::Deserialize;
-use services::store::{SkillQuery, SortKey, StoreError, DEFAULT_LIMIT};
+use services::store::{ObjectShape, SkillQuery, SortKey, StoreError, DEFAULT_LIMIT};
 
 /// Filters, sort and page of a skill query. Every filter is optional; ranges are inclusive.
 #[derive(Debug, Clone, Default, PartialEq, Deserialize, clap::Args, utoipa::IntoParams)]
@@ -14,7 +18,8 @@ pub struct SkillFilters {
     /// Object shape: sphere, box, cylinder, or unknown (a session stored before sessions had
     /// to name their object).
     #[arg(long)]
-    pub shape: Option<String>,
+    #[param(value_type = Option<String>)]
+    pub shape: Option<ObjectShape>,
     /// Least object mass, kg.
     #[arg(long, allow_negative_numbers = true)]
     pub mass_min: Option<f64>,
@@ -33,7 +38,8 @@ pub struct SkillFilters {
     pub contacts: Option<i64>,
     /// Contact model: frictionless, point_with_friction or soft_finger.
     #[arg(long)]
-    pub contact_model: Option<String>,
+    #[param(value_type = Option<String>)]
+    pub contact_model: Option<ContactModel>,
     /// Grasp type: precision or power (or a whole label such as precision-2vf).
     #[arg(long)]
     pub grasp_type: Option<String>,
@@ -42,7 +48,8 @@ pub struct SkillFilters {
     pub min_quality: Option<f64>,
     /// The skill has a phase of this name (with phase_min_s / phase_max_s: of that duration).
     #[arg(long)]
-    pub phase: Option<String>,
+    #[param(value_type = Option<String>)]
+    pub phase: Option<Phase>,
     /// Least duration of `phase`, s (needs `phase`).
     #[arg(long, allow_negative_numbers = true)]
     pub phase_min_s: Option<f64>,
@@ -71,16 +78,16 @@ impl SkillFilters {
             None => SortKey::default(),
         };
         Ok(SkillQuery {
-            object_shape: self.shape.clone(),
+            object_shape: self.shape,
             mass_min: self.mass_min,
             mass_max: self.mass_max,
             mu_min: self.mu_min,
             mu_max: self.mu_max,
             contact_count: self.contacts,
-            contact_model: self.contact_model.clone(),
+            contact_model: self.contact_model,
             grasp_type: self.grasp_type.clone(),
             min_quality: self.min_quality,
-            phase: self.phase.clone(),
+            phase: self.phase,
             phase_min_s: self.phase_min_s,
             phase_max_s: self.phase_max_s,
             sort,
@@ -129,7 +136,11 @@ mod tests {
         .unwrap();
         assert_eq!(cli, http);
         let q = cli.to_query().unwrap();
-        assert_eq!(q.object_shape.as_deref(), Some("box"));
+        assert_eq!(
+            q.object_shape,
+            Some(ObjectShape::Known(dfs_core::object::ShapeKind::Box))
+        );
+        assert_eq!(q.phase, Some(Phase::Hold));
         assert_eq!(q.contact_count, Some(2));
         assert_eq!(q.sort, SortKey::new(SortField::Quality, SortOrder::Desc));
         assert_eq!(q.limit, 7);
@@ -139,6 +150,47 @@ mod tests {
     fn defaults_are_id_order_and_fifty_per_page() {
         let q = SkillFilters::default().to_query().unwrap();
         assert_eq!(q, SkillQuery::default());
+    }
+
+    #[test]
+    fn an_unknown_shape_contact_model_or_phase_is_refused_on_the_command_line_and_in_a_query() {
+        use clap::Parser;
+        #[derive(Parser, Debug)]
+        struct Cli {
+            #[command(flatten)]
+            f: SkillFilters,
+        }
+        for (flag, value, message) in [
+            (
+                "--shape",
+                "torus",
+                "unknown shape \"torus\"; expected one of sphere, box, cylinder, unknown",
+            ),
+            (
+                "--contact-model",
+                "magic",
+                "unknown contact model \"magic\"",
+            ),
+            ("--phase", "juggle", "unknown phase \"juggle\""),
+        ] {
+            let e = Cli::try_parse_from(["x", flag, value])
+                .unwrap_err()
+                .to_string();
+            assert!(e.contains(flag) && e.contains(message), "{e}");
+        }
+        for (name, value, message) in [
+            ("shape", "Sphere", "unknown shape \"Sphere\""),
+            ("contact_model", "magic", "unknown contact model \"magic\""),
+            ("phase", "juggle", "unknown phase \"juggle\""),
+        ] {
+            let e = serde_json::from_value::<SkillFilters>(serde_json::json!({ name: value }))
+                .unwrap_err()
+                .to_string();
+            assert!(e.contains(message), "{e}");
+        }
+        let q: SkillFilters =
+            serde_json::from_value(serde_json::json!({"shape": "unknown"})).unwrap();
+        assert_eq!(q.shape, Some(ObjectShape::Unknown));
     }
 
     #[test]

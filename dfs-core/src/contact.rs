@@ -19,8 +19,10 @@ use serde::{Deserialize, Serialize};
 /// Contact wrench intensities `(c_x, c_y, c_z, c_τ)` in the contact frame (N, N, N, N·m).
 pub type Intensity = Vector4<Real>;
 
-/// The contact models of Table 1 (MuJoCo's condim 1 / 3 / 4).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize, Default)]
+/// The contact models of Table 1 (MuJoCo's condim 1 / 3 / 4): `frictionless`,
+/// `point_with_friction` or `soft_finger` in files, the API and the data base.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord, Serialize, Default)]
+#[cfg_attr(feature = "utoipa", derive(utoipa::ToSchema))]
 #[serde(rename_all = "snake_case")]
 pub enum ContactModel {
     /// One unit wrench: the normal force.
@@ -31,6 +33,21 @@ pub enum ContactModel {
     /// Four: point with friction plus the torsional moment about the normal.
     SoftFinger,
 }
+
+impl crate::names::Named for ContactModel {
+    const WHAT: &'static str = "contact model";
+    const ALL: &'static [Self] = &[
+        ContactModel::Frictionless,
+        ContactModel::PointWithFriction,
+        ContactModel::SoftFinger,
+    ];
+
+    fn name(self) -> &'static str {
+        ContactModel::name(self)
+    }
+}
+
+crate::named_enum!(ContactModel);
 
 impl ContactModel {
     /// Number of unit wrenches `k_i` the model transmits.
@@ -262,6 +279,23 @@ mod tests {
     use super::*;
     use crate::object::Shape;
     use proptest::prelude::*;
+
+    #[test]
+    fn contact_models_are_named_as_in_files_and_unknown_ones_are_refused() {
+        crate::names::assert_serde_agrees::<ContactModel>();
+        let e = serde_json::from_str::<ContactModel>("\"sticky\"").unwrap_err();
+        assert!(
+            e.to_string().contains(
+                "unknown contact model \"sticky\"; expected one of frictionless, \
+                 point_with_friction, soft_finger"
+            ),
+            "{e}"
+        );
+        assert_eq!(
+            "soft_finger".parse::<ContactModel>(),
+            Ok(ContactModel::SoftFinger)
+        );
+    }
 
     fn f() -> Friction {
         Friction {

@@ -16,6 +16,8 @@ pub mod grasp;
 pub mod hand;
 pub mod json_object;
 pub mod math;
+pub mod min_jerk;
+pub mod names;
 pub mod object;
 pub mod operator;
 pub mod replay;

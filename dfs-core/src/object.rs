@@ -7,7 +7,53 @@
 
 use crate::error::{DfsError, Result};
 use crate::math::{force_of, moment_of, wrench, Isometry, Mat3, Real, Rotation, Vector, Wrench};
+use crate::names::Named;
 use serde::{Deserialize, Serialize};
+
+/// The kind of an object's shape, without its sizes: `sphere`, `box` or `cylinder` in files,
+/// the API and the data base.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord, Serialize)]
+#[cfg_attr(feature = "utoipa", derive(utoipa::ToSchema))]
+#[serde(rename_all = "snake_case")]
+pub enum ShapeKind {
+    /// A sphere ([`Shape::Sphere`]).
+    Sphere,
+    /// A box ([`Shape::Box`]).
+    Box,
+    /// A cylinder ([`Shape::Cylinder`]).
+    Cylinder,
+}
+
+impl Named for ShapeKind {
+    const WHAT: &'static str = "shape";
+    const ALL: &'static [Self] = &[ShapeKind::Sphere, ShapeKind::Box, ShapeKind::Cylinder];
+
+    fn name(self) -> &'static str {
+        ShapeKind::name(self)
+    }
+}
+
+crate::named_enum!(ShapeKind);
+
+impl ShapeKind {
+    /// Name as in files, the API and the data base.
+    pub fn name(self) -> &'static str {
+        match self {
+            ShapeKind::Sphere => "sphere",
+            ShapeKind::Box => "box",
+            ShapeKind::Cylinder => "cylinder",
+        }
+    }
+
+    /// What the list of sizes of a shape of this kind holds (see [`Shape::sizes`]).
+    pub fn sizes_meaning(self) -> &'static str {
+        match self {
+            ShapeKind::Sphere => "[radius]",
+            ShapeKind::Box => "[half extent x, y, z]",
+            ShapeKind::Cylinder => "[radius, half height]",
+        }
+    }
+}
 
 /// Geometric shape of an object, centred at the object frame B.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
@@ -33,13 +79,60 @@ pub enum Shape {
 }
 
 impl Shape {
+    /// The kind of the shape.
+    pub fn kind(&self) -> ShapeKind {
+        match self {
+            Shape::Sphere { .. } => ShapeKind::Sphere,
+            Shape::Box { .. } => ShapeKind::Box,
+            Shape::Cylinder { .. } => ShapeKind::Cylinder,
+        }
+    }
+
     /// Name of the shape ("sphere", "box", "cylinder").
     pub fn name(&self) -> &'static str {
-        match self {
-            Shape::Sphere { .. } => "sphere",
-            Shape::Box { .. } => "box",
-            Shape::Cylinder { .. } => "cylinder",
+        self.kind().name()
+    }
+
+    /// The shape's sizes as one list (m), the form a skill's object takes (`"size"`):
+    /// `[radius]` (sphere), the half extents (box), `[radius, half_height]` (cylinder).
+    pub fn sizes(&self) -> Vec<Real> {
+        match *self {
+            Shape::Sphere { radius } => vec![radius],
+            Shape::Box { half_extents } => half_extents.to_vec(),
+            Shape::Cylinder {
+                radius,
+                half_height,
+            } => vec![radius, half_height],
         }
+    }
+
+    /// The shape of `kind` with the sizes of [`sizes`](Self::sizes), validated
+    /// ([`validate`](Self::validate)); an error names `field` (the list's field, e.g.
+    /// `object.size`) when the list is not as long as the kind needs.
+    pub fn from_sizes(kind: ShapeKind, sizes: &[Real], field: &str) -> Result<Shape> {
+        let wrong = || {
+            DfsError::invalid(
+                field,
+                format!(
+                    "a {kind} takes {} (m), got {} values",
+                    kind.sizes_meaning(),
+                    sizes.len()
+                ),
+            )
+        };
+        let shape = match (kind, sizes) {
+            (ShapeKind::Sphere, &[radius]) => Shape::Sphere { radius },
+            (ShapeKind::Box, &[x, y, z]) => Shape::Box {
+                half_extents: [x, y, z],
+            },
+            (ShapeKind::Cylinder, &[radius, half_height]) => Shape::Cylinder {
+                radius,
+                half_height,
+            },
+            _ => return Err(wrong()),
+        };
+        shape.validate()?;
+        Ok(shape)
     }
 
     /// Checks that every dimension is finite and positive; the error names the field.
@@ -72,25 +165,36 @@ impl Shape {
         }
     }
 
-    /// Rotational inertia about the centre for a uniform solid of mass `mass` (kg·m²).
-    pub fn inertia(&self, mass: Real) -> Mat3 {
+    /// Principal moments of inertia about B's axes (kg·m²) of a uniform solid of mass `mass`:
+    /// the one formula of the mass properties, for the simulation and the skills alike.
+    pub fn principal_inertia(&self, mass: Real) -> [Real; 3] {
         match *self {
-            Shape::Sphere { radius } => Mat3::identity() * (0.4 * mass * radius * radius),
+            Shape::Sphere { radius } => [0.4 * mass * radius * radius; 3],
             Shape::Box {
                 half_extents: [a, b, c],
             } => {
-                let (x, y, z) = ((2.0 * a).powi(2), (2.0 * b).powi(2), (2.0 * c).powi(2));
-                Mat3::from_diagonal(&Vector::new(y + z, x + z, x + y)) * (mass / 12.0)
+                // Full edge lengths squared.
+                let (x, y, z) = (4.0 * a * a, 4.0 * b * b, 4.0 * c * c);
+                [
+                    mass * (y + z) / 12.0,
+                    mass * (x + z) / 12.0,
+                    mass * (x + y) / 12.0,
+                ]
             }
             Shape::Cylinder {
                 radius,
                 half_height,
             } => {
-                let h2 = (2.0 * half_height).powi(2);
-                let ixx = mass * (3.0 * radius * radius + h2) / 12.0;
-                Mat3::from_diagonal(&Vector::new(ixx, ixx, 0.5 * mass * radius * radius))
+                let ixx = mass * (3.0 * radius * radius + 4.0 * half_height * half_height) / 12.0;
+                [ixx, ixx, 0.5 * mass * radius * radius]
             }
         }
+    }
+
+    /// Rotational inertia about the centre for a uniform solid of mass `mass` (kg·m²): the
+    /// [`principal_inertia`](Self::principal_inertia) on the diagonal.
+    pub fn inertia(&self, mass: Real) -> Mat3 {
+        Mat3::from_diagonal(&Vector::from(self.principal_inertia(mass)))
     }
 
     /// Signed distance from a point in B to the surface (negative inside), the closest surface
@@ -471,6 +575,63 @@ mod tests {
                 }
             }
         }
+    }
+
+    #[test]
+    fn shape_kinds_are_named_as_in_files_and_unknown_ones_are_refused() {
+        crate::names::assert_serde_agrees::<ShapeKind>();
+        assert_eq!("box".parse::<ShapeKind>(), Ok(ShapeKind::Box));
+        assert_eq!(format!("[{:<8}]", ShapeKind::Box), "[box     ]");
+        let e = serde_json::from_str::<ShapeKind>("\"torus\"").unwrap_err();
+        assert!(
+            e.to_string()
+                .contains("unknown shape \"torus\"; expected one of sphere, box, cylinder"),
+            "{e}"
+        );
+        assert!(
+            "Sphere".parse::<ShapeKind>().is_err(),
+            "names are lower case"
+        );
+        let e = serde_json::from_str::<ShapeKind>("3").unwrap_err();
+        assert!(e.to_string().contains("expected a shape name"), "{e}");
+    }
+
+    #[test]
+    fn a_shape_goes_to_its_list_of_sizes_and_back() {
+        let shapes = [
+            Shape::Sphere { radius: 0.1 },
+            Shape::Box {
+                half_extents: [0.05, 0.03, 0.08],
+            },
+            Shape::Cylinder {
+                radius: 0.04,
+                half_height: 0.1,
+            },
+        ];
+        for s in shapes {
+            assert_eq!(Shape::from_sizes(s.kind(), &s.sizes(), "size"), Ok(s));
+        }
+        let e = Shape::from_sizes(ShapeKind::Box, &[0.1], "skill.object.size").unwrap_err();
+        assert_eq!(
+            e.to_string(),
+            "invalid skill.object.size: a box takes [half extent x, y, z] (m), got 1 values"
+        );
+        let e = Shape::from_sizes(ShapeKind::Sphere, &[-0.1], "size").unwrap_err();
+        assert!(e.to_string().contains("object.radius"), "{e}");
+    }
+
+    #[test]
+    fn the_principal_inertia_is_the_diagonal_of_the_inertia() {
+        let b = Shape::Box {
+            half_extents: [0.025, 0.025, 0.04],
+        };
+        let i = b.principal_inertia(0.2);
+        // m (b² + c²) / 12 with full edges 0.05 and 0.08.
+        assert!((i[0] - 0.2 * (0.0025 + 0.0064) / 12.0).abs() < 1e-15);
+        assert!((i[2] - 0.2 * 0.005 / 12.0).abs() < 1e-15);
+        let m = b.inertia(0.2);
+        assert_eq!([m[(0, 0)], m[(1, 1)], m[(2, 2)]], i);
+        assert_eq!(m[(0, 1)], 0.0);
     }
 
     #[test]

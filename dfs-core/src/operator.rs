@@ -602,14 +602,11 @@ fn mount_link(hand: &HandModel, tip: usize) -> usize {
     link
 }
 
-/// Minimum-jerk profile s(τ) = 10τ³ − 15τ⁴ + 6τ⁵ on [0, 1] (Flash & Hogan 1985), and its
-/// second derivative.
+/// The minimum-jerk profile at `t` ([`crate::min_jerk::progress`]) and its second derivative.
 fn min_jerk(t: Real) -> (Real, Real) {
-    let t = t.clamp(0.0, 1.0);
-    let (t2, t3) = (t * t, t * t * t);
     (
-        10.0 * t3 - 15.0 * t3 * t + 6.0 * t3 * t2,
-        60.0 * t - 180.0 * t2 + 120.0 * t3,
+        crate::min_jerk::progress(t),
+        crate::min_jerk::acceleration(t),
     )
 }
 
@@ -1604,7 +1601,7 @@ mod tests {
     /// during `hold` and the object's lowest height above its start then.
     fn hold_drift(name: &str, seed: u64, hold_s: Option<Real>) -> (Real, usize, Real) {
         let mut s = Scenario::builtin(name, seed).unwrap();
-        for t in s.tasks.iter_mut().filter(|t| t.phase == "hold") {
+        for t in s.tasks.iter_mut().filter(|t| t.phase == Phase::Hold) {
             t.duration = hold_s.unwrap_or(t.duration);
         }
         let mut sim = Simulation::new(&s, HandModel::glove10(), None).unwrap();

@@ -16,12 +16,15 @@
 
 use crate::error::{DfsError, Result};
 use crate::math::Real;
-use crate::object::{RigidObject, Shape};
+use crate::names::Named;
+use crate::object::{RigidObject, Shape, ShapeKind};
 use crate::statics::ObjectSpec;
 use serde::{Deserialize, Serialize};
 
-/// The phases of a grasp task, in the order they usually come.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]
+/// The phases of a grasp task, in the order they usually come (`Phase::ALL`), named as in
+/// files, the API and the data base. (They compare by name, see `impl Ord for Phase`.)
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize)]
+#[cfg_attr(feature = "utoipa", derive(utoipa::ToSchema))]
 #[serde(rename_all = "snake_case")]
 pub enum Phase {
     /// The hand moves towards the object, fingers open.
@@ -58,7 +61,7 @@ impl Phase {
         Phase::Retreat,
     ];
 
-    /// Lower-case name, as in files.
+    /// Lower-case name, as in files, the API and the data base.
     pub fn name(self) -> &'static str {
         match self {
             Phase::Approach => "approach",
@@ -72,15 +75,39 @@ impl Phase {
             Phase::Retreat => "retreat",
         }
     }
+}
 
-    /// The phase of a name.
-    pub fn from_name(s: &str) -> Option<Phase> {
-        Phase::ALL.iter().copied().find(|p| p.name() == s)
+impl Named for Phase {
+    const WHAT: &'static str = "phase";
+    const ALL: &'static [Self] = &Phase::ALL;
+
+    fn name(self) -> &'static str {
+        Phase::name(self)
     }
 }
 
-/// How the operator grasps the object.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, Default)]
+crate::named_enum!(Phase);
+
+impl PartialOrd for Phase {
+    fn partial_cmp(&self, other: &Self) -> Option<std::cmp::Ordering> {
+        Some(self.cmp(other))
+    }
+}
+
+/// Phases *compare* by name, alphabetically (`approach < grasp < hold < lift < ...`), not in
+/// task order ([`Phase::ALL`]): maps keyed by phase (a skill's `phase_durations`) list them in
+/// the order they had when they were keyed by name, so stored skills stay byte for byte the
+/// same.
+impl Ord for Phase {
+    /// By name.
+    fn cmp(&self, other: &Self) -> std::cmp::Ordering {
+        self.name().cmp(other.name())
+    }
+}
+
+/// How the operator grasps the object: `auto`, `pinch` or `power`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Default)]
+#[cfg_attr(feature = "utoipa", derive(utoipa::ToSchema))]
 #[serde(rename_all = "snake_case")]
 pub enum GraspStyle {
     /// Chosen from the object's size: pinch for small, power for larger objects.
@@ -92,38 +119,64 @@ pub enum GraspStyle {
     Power,
 }
 
+impl Named for GraspStyle {
+    const WHAT: &'static str = "grasp style";
+    const ALL: &'static [Self] = &[GraspStyle::Auto, GraspStyle::Pinch, GraspStyle::Power];
+
+    fn name(self) -> &'static str {
+        match self {
+            GraspStyle::Auto => "auto",
+            GraspStyle::Pinch => "pinch",
+            GraspStyle::Power => "power",
+        }
+    }
+}
+
+crate::named_enum!(GraspStyle);
+
 /// The object of a scenario: shape, mass, friction and start pose.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[cfg_attr(feature = "utoipa", derive(utoipa::ToSchema))]
 #[serde(
     deny_unknown_fields,
     remote = "Self",
     expecting = "an object {\"shape\": ..., \"mass\": ..., \"mu\": ...}"
 )]
 pub struct ScenarioObject {
-    /// "sphere", "box" or "cylinder".
-    pub shape: String,
+    /// The shape: `sphere`, `box` or `cylinder`.
+    pub shape: ShapeKind,
     /// Radius (m), sphere or cylinder.
     #[serde(default, skip_serializing_if = "Option::is_none")]
+    #[cfg_attr(feature = "utoipa", schema(value_type = Option<f64>))]
     pub radius: Option<Real>,
     /// Half extents (m), box.
     #[serde(default, skip_serializing_if = "Option::is_none")]
+    #[cfg_attr(feature = "utoipa", schema(value_type = Option<[f64; 3]>))]
     pub half_extents: Option<[Real; 3]>,
     /// Half height (m), cylinder (axis vertical at the start pose).
     #[serde(default, skip_serializing_if = "Option::is_none")]
+    #[cfg_attr(feature = "utoipa", schema(value_type = Option<f64>))]
     pub half_height: Option<Real>,
     /// Mass (kg), > 0.
+    #[cfg_attr(feature = "utoipa", schema(value_type = f64))]
     pub mass: Real,
-    /// Coulomb friction coefficient between fingertips and object, ≥ 0.
+    /// Coulomb friction coefficient between fingertips and object, 0 to 10 (a grasp file's
+    /// `MU_RANGE`).
+    #[cfg_attr(feature = "utoipa", schema(value_type = f64, minimum = 0.0, maximum = 10.0))]
     pub mu: Real,
-    /// Torsional friction coefficient (m), ≥ 0. Default 0.005.
+    /// Torsional friction coefficient (m), 0 to 1 (a grasp file's `MU_TORSION_RANGE`).
+    /// Default 0.005.
     #[serde(default = "default_mu_torsion")]
+    #[cfg_attr(feature = "utoipa", schema(value_type = f64, minimum = 0.0, maximum = 1.0))]
     pub mu_torsion: Real,
     /// Start position of the object's centre in the world (m). Default: resting on a table
     /// whose top is at z = 0, at the origin.
     #[serde(default, skip_serializing_if = "Option::is_none")]
+    #[cfg_attr(feature = "utoipa", schema(value_type = Option<[f64; 3]>))]
     pub position: Option<[Real; 3]>,
     /// Start rotation about the world z axis (rad). Default 0.
     #[serde(default)]
+    #[cfg_attr(feature = "utoipa", schema(value_type = f64))]
     pub yaw: Real,
 }
 
@@ -150,12 +203,18 @@ fn default_mu_torsion() -> Real {
 impl ScenarioObject {
     fn spec(&self) -> ObjectSpec {
         ObjectSpec {
-            shape: self.shape.clone(),
+            shape: self.shape,
             radius: self.radius,
             half_extents: self.half_extents,
             half_height: self.half_height,
             mass: self.mass,
         }
+    }
+
+    /// The shape with its sizes, as [`ObjectSpec::to_shape`] builds it (each size the kind
+    /// needs given, none it does not take; errors name the field).
+    pub fn to_shape(&self) -> Result<Shape> {
+        self.spec().to_shape()
     }
 
     /// The rigid object, validated with its friction: shape, sizes and mass as
@@ -211,6 +270,7 @@ pub const MIN_SIMULATED_MASS: Real = 0.005;
 
 /// One task of the script.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[cfg_attr(feature = "utoipa", derive(utoipa::ToSchema))]
 #[serde(
     deny_unknown_fields,
     remote = "Self",
@@ -219,23 +279,28 @@ pub const MIN_SIMULATED_MASS: Real = 0.005;
 pub struct Task {
     /// Which phase (`approach`, `preshape`, `grasp`, `lift`, `hold`, `transport`, `place`,
     /// `release`, `retreat`).
-    pub phase: String,
-    /// Duration (s), at least [`MIN_TASK_S`] and at most [`MAX_TASK_S`]; the whole script
-    /// at most [`MAX_SCRIPT_S`].
+    pub phase: Phase,
+    /// Duration (s), 0.05 to 600 (`MIN_TASK_S`, `MAX_TASK_S`); the whole script at most
+    /// 3600 s (`MAX_SCRIPT_S`).
+    #[cfg_attr(feature = "utoipa", schema(value_type = f64, minimum = 0.05, maximum = 600.0))]
     pub duration: Real,
     /// `lift`: height (m) to raise the object. Default 0.10.
     #[serde(default, skip_serializing_if = "Option::is_none")]
+    #[cfg_attr(feature = "utoipa", schema(value_type = Option<f64>))]
     pub height: Option<Real>,
     /// `transport`: displacement of the object (m, world). Default (0, 0.15, 0).
     #[serde(default, skip_serializing_if = "Option::is_none")]
+    #[cfg_attr(feature = "utoipa", schema(value_type = Option<[f64; 3]>))]
     pub offset: Option<[Real; 3]>,
     /// `transport`: rotation of the object about the world z axis (rad). Default 0.
     #[serde(default, skip_serializing_if = "Option::is_none")]
+    #[cfg_attr(feature = "utoipa", schema(value_type = Option<f64>))]
     pub turn: Option<Real>,
 }
 
-/// A scenario file.
+/// A scenario file: the object, the grasp style and the operator's task script.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[cfg_attr(feature = "utoipa", derive(utoipa::ToSchema))]
 #[serde(
     deny_unknown_fields,
     remote = "Self",
@@ -254,9 +319,10 @@ pub struct Scenario {
     /// Seed of the operator's tremor and the sensor noise. Default 0.
     #[serde(default)]
     pub seed: u64,
-    /// The friction coefficient the operator expects and grips for. Default: the object's μ
-    /// (a person adapts the grip to the surface after the first touch).
+    /// The friction coefficient the operator expects and grips for, > 0. Default: the
+    /// object's μ (a person adapts the grip to the surface after the first touch).
     #[serde(default, skip_serializing_if = "Option::is_none")]
+    #[cfg_attr(feature = "utoipa", schema(value_type = Option<f64>))]
     pub operator_mu: Option<Real>,
 }
 
@@ -337,17 +403,7 @@ impl Scenario {
         )?;
         let mut out = Vec::with_capacity(self.tasks.len());
         for (i, t) in self.tasks.iter().enumerate() {
-            let phase = Phase::from_name(&t.phase).ok_or_else(|| {
-                let names: Vec<_> = Phase::ALL.iter().map(|p| p.name()).collect();
-                DfsError::invalid(
-                    format!("tasks[{i}].phase"),
-                    format!(
-                        "unknown phase {:?}; expected one of {}",
-                        t.phase,
-                        names.join(", ")
-                    ),
-                )
-            })?;
+            let phase = t.phase;
             // A field of another phase's task is a mistake, not a default to ignore.
             let takes: &[&str] = match phase {
                 Phase::Lift => &["height"],
@@ -442,7 +498,7 @@ impl Scenario {
         // two-finger pinch cannot carry the paper's 1 kg (dfs-static and the tick benchmark use
         // the paper's full-size, 1 kg sphere).
         let sphere = |mu: Real| ScenarioObject {
-            shape: "sphere".into(),
+            shape: ShapeKind::Sphere,
             radius: Some(0.04),
             half_extents: None,
             half_height: None,
@@ -453,7 +509,7 @@ impl Scenario {
             yaw: 0.0,
         };
         let small_box = |mu: Real| ScenarioObject {
-            shape: "box".into(),
+            shape: ShapeKind::Box,
             radius: None,
             half_extents: Some([0.025, 0.025, 0.04]),
             half_height: None,
@@ -463,8 +519,8 @@ impl Scenario {
             position: None,
             yaw: 0.0,
         };
-        let t = |phase: &str, duration: Real| Task {
-            phase: phase.into(),
+        let t = |phase: Phase, duration: Real| Task {
+            phase,
             duration,
             height: None,
             offset: None,
@@ -472,29 +528,35 @@ impl Scenario {
         };
         let pick = || {
             vec![
-                t("approach", 0.8),
-                t("preshape", 0.5),
-                t("grasp", 0.8),
-                t("lift", 1.0),
+                t(Phase::Approach, 0.8),
+                t(Phase::Preshape, 0.5),
+                t(Phase::Grasp, 0.8),
+                t(Phase::Lift, 1.0),
             ]
         };
-        let put = || vec![t("place", 1.0), t("release", 0.6), t("retreat", 0.6)];
+        let put = || {
+            vec![
+                t(Phase::Place, 1.0),
+                t(Phase::Release, 0.6),
+                t(Phase::Retreat, 0.6),
+            ]
+        };
         let (object, grasp, tasks, operator_mu) = match name {
             "sphere-lift" => {
                 let mut v = pick();
-                v.push(t("hold", 2.0));
+                v.push(t(Phase::Hold, 2.0));
                 v.extend(put());
                 (sphere(0.8), GraspStyle::Pinch, v, None)
             }
             "box-pinch-lift" => {
                 let mut v = pick();
-                v.push(t("hold", 1.0));
+                v.push(t(Phase::Hold, 1.0));
                 v.extend(put());
                 (small_box(0.8), GraspStyle::Pinch, v, None)
             }
             "cylinder-power-grasp" => {
                 let cyl = ScenarioObject {
-                    shape: "cylinder".into(),
+                    shape: ShapeKind::Cylinder,
                     radius: Some(0.035),
                     half_extents: None,
                     half_height: Some(0.09),
@@ -505,29 +567,29 @@ impl Scenario {
                     yaw: 0.0,
                 };
                 let mut v = pick();
-                v.push(t("hold", 1.0));
-                v.push(t("transport", 1.5));
+                v.push(t(Phase::Hold, 1.0));
+                v.push(t(Phase::Transport, 1.5));
                 v.extend(put());
                 (cyl, GraspStyle::Power, v, None)
             }
             "sphere-rotate" => {
                 let mut v = pick();
-                v.push(t("hold", 0.5));
+                v.push(t(Phase::Hold, 0.5));
                 v.push(Task {
-                    phase: "transport".into(),
+                    phase: Phase::Transport,
                     duration: 2.0,
                     height: None,
                     offset: Some([0.0, 0.0, 0.0]),
                     turn: Some(0.8),
                 });
-                v.push(t("hold", 0.5));
+                v.push(t(Phase::Hold, 0.5));
                 v.extend(put());
                 (sphere(0.8), GraspStyle::Pinch, v, None)
             }
             "box-slip" => {
                 let mut v = pick();
-                v.push(t("hold", 1.0));
-                v.push(t("retreat", 0.6));
+                v.push(t(Phase::Hold, 1.0));
+                v.push(t(Phase::Retreat, 0.6));
                 // The operator grips for μ = 0.8 but the surface is slippery (μ = 0.3): the
                 // grip's peak at lift-off carries the box up, and as the grip relaxes to the
                 // level the operator believes enough the box slides out of the grasp and falls
@@ -536,10 +598,10 @@ impl Scenario {
             }
             "two-grasps" => {
                 let mut v = pick();
-                v.push(t("transport", 1.0));
+                v.push(t(Phase::Transport, 1.0));
                 v.extend(put());
                 v.extend(pick());
-                v.push(t("hold", 0.5));
+                v.push(t(Phase::Hold, 0.5));
                 v.extend(put());
                 (small_box(0.8), GraspStyle::Pinch, v, None)
             }
@@ -617,7 +679,7 @@ mod tests {
         );
         // A lift height on a hold task was ignored.
         let mut s = Scenario::builtin("sphere-lift", 0).unwrap();
-        let hold = s.tasks.iter().position(|t| t.phase == "hold").unwrap();
+        let hold = s.tasks.iter().position(|t| t.phase == Phase::Hold).unwrap();
         s.tasks[hold].height = Some(0.3);
         let e = s.resolve().unwrap_err().to_string();
         assert!(
@@ -629,20 +691,6 @@ mod tests {
         s.tasks[hold].offset = Some([0.1, 0.0, 0.0]);
         let e = s.resolve().unwrap_err().to_string();
         assert!(e.contains(&format!("tasks[{hold}].offset")), "{e}");
-        let mut s = Scenario::builtin("sphere-lift", 0).unwrap();
-        s.tasks[2].phase = "juggle".into();
-        assert!(s
-            .resolve()
-            .unwrap_err()
-            .to_string()
-            .contains("tasks[2].phase"));
-        let mut s = Scenario::builtin("sphere-lift", 0).unwrap();
-        s.object.shape = "torus".into();
-        assert!(s
-            .resolve()
-            .unwrap_err()
-            .to_string()
-            .contains("object.shape"));
         let mut s = Scenario::builtin("sphere-lift", 0).unwrap();
         s.tasks[0].duration = 0.0;
         assert!(s
@@ -657,7 +705,7 @@ mod tests {
         let mut s = Scenario::builtin("sphere-lift", 0).unwrap();
         s.tasks = vec![
             Task {
-                phase: "hold".into(),
+                phase: Phase::Hold,
                 duration: 600.0,
                 height: None,
                 offset: None,
@@ -673,7 +721,7 @@ mod tests {
 
     fn hold(duration: Real) -> Task {
         Task {
-            phase: "hold".into(),
+            phase: Phase::Hold,
             duration,
             height: None,
             offset: None,
@@ -709,6 +757,66 @@ mod tests {
         assert!(
             e.contains("tasks[3].duration") && e.contains("(0, 600]"),
             "{e}"
+        );
+    }
+
+    /// A scenario from JSON, or serde's message (the callers add the field's path).
+    fn parse(json: &serde_json::Value) -> std::result::Result<Scenario, String> {
+        serde_json::from_value(json.clone()).map_err(|e| e.to_string())
+    }
+
+    #[test]
+    fn an_unknown_shape_or_phase_is_refused_when_the_file_is_read_naming_it() {
+        let good = serde_json::json!({
+            "name": "x",
+            "object": {"shape": "sphere", "radius": 0.04, "mass": 0.3, "mu": 0.8},
+            "tasks": [{"phase": "approach", "duration": 0.5}],
+        });
+        let s = parse(&good).unwrap();
+        assert_eq!(s.object.shape, ShapeKind::Sphere);
+        assert_eq!(s.tasks[0].phase, Phase::Approach);
+        // Written back as it was read.
+        let back = serde_json::to_value(&s).unwrap();
+        assert_eq!(back["object"]["shape"], "sphere");
+        assert_eq!(back["tasks"][0]["phase"], "approach");
+        let mut bad = good.clone();
+        bad["object"]["shape"] = "torus".into();
+        let e = parse(&bad).unwrap_err();
+        assert!(
+            e.contains("unknown shape \"torus\"; expected one of sphere, box, cylinder"),
+            "{e}"
+        );
+        let mut bad = good.clone();
+        bad["tasks"][0]["phase"] = "juggle".into();
+        let e = parse(&bad).unwrap_err();
+        assert!(
+            e.contains("unknown phase \"juggle\"; expected one of approach, preshape"),
+            "{e}"
+        );
+        let mut bad = good;
+        bad["grasp"] = "claw".into();
+        let e = parse(&bad).unwrap_err();
+        assert!(e.contains("unknown grasp style \"claw\""), "{e}");
+    }
+
+    #[test]
+    fn phases_and_grasp_styles_are_named_as_in_files_and_phases_order_by_name() {
+        crate::names::assert_serde_agrees::<Phase>();
+        crate::names::assert_serde_agrees::<GraspStyle>();
+        let mut sorted = Phase::ALL;
+        sorted.sort();
+        let names: Vec<&str> = sorted.iter().map(|p| p.name()).collect();
+        let mut alphabetical = names.clone();
+        alphabetical.sort_unstable();
+        assert_eq!(names, alphabetical);
+        // A map keyed by phase writes its keys as a map keyed by name did.
+        let by_phase: std::collections::BTreeMap<Phase, u8> =
+            Phase::ALL.iter().map(|p| (*p, 0)).collect();
+        let by_name: std::collections::BTreeMap<&str, u8> =
+            Phase::ALL.iter().map(|p| (p.name(), 0)).collect();
+        assert_eq!(
+            serde_json::to_string(&by_phase).unwrap(),
+            serde_json::to_string(&by_name).unwrap()
         );
     }
 

@@ -33,7 +33,7 @@ use crate::grasp::optimise::CHECK_TOLERANCE;
 use crate::grasp::optimise::{optimise, OptimiseParams};
 use crate::grasp::{GraspMatrix, MAX_CONTACTS};
 use crate::math::{force_of, moment_of, wrench, Real, Rotation, Vector, Wrench};
-use crate::object::{gravity_wrench_b, RigidObject, Shape};
+use crate::object::{gravity_wrench_b, RigidObject, Shape, ShapeKind};
 use serde::{Deserialize, Serialize};
 
 /// Allowed object mass (kg) in a grasp file: 1 mg to 10 t.
@@ -102,8 +102,8 @@ fn check_norm(field: &str, values: &[Real], max: Real, unit: &str) -> Result<()>
     expecting = "an object {\"shape\": ..., \"mass\": ...}"
 )]
 pub struct ObjectSpec {
-    /// "sphere", "box" or "cylinder".
-    pub shape: String,
+    /// The shape: `sphere`, `box` or `cylinder`.
+    pub shape: ShapeKind,
     /// Radius (m) of a sphere or cylinder.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub radius: Option<Real>,
@@ -120,6 +120,14 @@ pub struct ObjectSpec {
 impl ObjectSpec {
     /// The object, validated; errors name the field (`object.radius`, ...).
     pub fn to_object(&self) -> Result<RigidObject> {
+        RigidObject::new(self.to_shape()?, self.mass)
+    }
+
+    /// The shape with its sizes: each size the kind needs is given and none it does not
+    /// take; errors name the field. The sizes themselves are checked by
+    /// [`to_object`](Self::to_object) ([`Shape::validate`]) and
+    /// [`check_ranges`](Self::check_ranges).
+    pub fn to_shape(&self) -> Result<Shape> {
         let need = |v: Option<Real>, field: &str| {
             v.ok_or_else(|| {
                 DfsError::invalid(
@@ -138,15 +146,15 @@ impl ObjectSpec {
                 Ok(())
             }
         };
-        let shape = match self.shape.as_str() {
-            "sphere" => {
+        let shape = match self.shape {
+            ShapeKind::Sphere => {
                 unexpected(self.half_extents.is_some(), "half_extents")?;
                 unexpected(self.half_height.is_some(), "half_height")?;
                 Shape::Sphere {
                     radius: need(self.radius, "radius")?,
                 }
             }
-            "box" => {
+            ShapeKind::Box => {
                 unexpected(self.radius.is_some(), "radius")?;
                 unexpected(self.half_height.is_some(), "half_height")?;
                 Shape::Box {
@@ -155,23 +163,15 @@ impl ObjectSpec {
                     })?,
                 }
             }
-            "cylinder" => {
+            ShapeKind::Cylinder => {
                 unexpected(self.half_extents.is_some(), "half_extents")?;
                 Shape::Cylinder {
                     radius: need(self.radius, "radius")?,
                     half_height: need(self.half_height, "half_height")?,
                 }
             }
-            other => {
-                return Err(DfsError::invalid(
-                    "object.shape",
-                    format!(
-                        "unknown shape {other:?}; expected \"sphere\", \"box\" or \"cylinder\""
-                    ),
-                ))
-            }
         };
-        RigidObject::new(shape, self.mass)
+        Ok(shape)
     }
 
     /// Checks that the mass and every size given lie in [`MASS_RANGE`] and [`SIZE_RANGE`]
@@ -195,7 +195,7 @@ impl ObjectSpec {
     /// The spec of an object.
     pub fn from_shape(shape: &Shape, mass: Real) -> Self {
         let mut s = ObjectSpec {
-            shape: shape.name().into(),
+            shape: shape.kind(),
             radius: None,
             half_extents: None,
             half_height: None,
@@ -339,13 +339,9 @@ impl GraspSpec {
             (Some(mu), _) => mu,
             (None, ContactModel::Frictionless) => 0.0,
             (None, model) => {
-                let name = match model {
-                    ContactModel::SoftFinger => "soft_finger",
-                    _ => "point_with_friction",
-                };
                 return Err(DfsError::invalid(
                     "mu",
-                    format!("missing (required for the {name} contact model; only a frictionless grasp may omit it)"),
+                    format!("missing (required for the {} contact model; only a frictionless grasp may omit it)", model.name()),
                 ));
             }
         };
@@ -820,12 +816,21 @@ mod tests {
         let mut spec = GraspSpec::paper_sphere();
         spec.mu = Some(-0.1);
         assert!(analyse(&spec, 1.0).unwrap_err().to_string().contains("mu"));
-        let mut spec = GraspSpec::paper_sphere();
-        spec.object.shape = "torus".into();
-        assert!(analyse(&spec, 1.0)
-            .unwrap_err()
-            .to_string()
-            .contains("object.shape"));
+        // An unknown shape or contact model is refused as the file is read.
+        let file = |shape: &str, model: &str| {
+            format!(
+                r#"{{"object": {{"shape": "{shape}", "radius": 0.1, "mass": 1}}, "mu": 1,
+                    "contact_model": "{model}", "contacts": [{{"position": [0, 0, -0.1]}}]}}"#
+            )
+        };
+        serde_json::from_str::<GraspSpec>(&file("sphere", "soft_finger")).unwrap();
+        let e = serde_json::from_str::<GraspSpec>(&file("torus", "soft_finger")).unwrap_err();
+        assert!(e.to_string().contains("unknown shape \"torus\""), "{e}");
+        let e = serde_json::from_str::<GraspSpec>(&file("sphere", "sticky")).unwrap_err();
+        assert!(
+            e.to_string().contains("unknown contact model \"sticky\""),
+            "{e}"
+        );
         let mut spec = GraspSpec::paper_sphere();
         spec.contacts[2].position[1] = Real::NAN;
         assert!(analyse(&spec, 1.0)

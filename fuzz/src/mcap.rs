@@ -414,7 +414,7 @@ pub fn write_metadata(name: &str, entries: &[(String, String)]) -> Vec<u8> {
 /// Length of a message record's header (channel, sequence, log time, publish time).
 const MESSAGE_HEADER: usize = 22;
 
-const TOPICS: [&str; 9] = [
+const TOPICS: [&str; 10] = [
     "/glove/joint_states",
     "/glove/feedback",
     "/dfs/contacts",
@@ -422,6 +422,7 @@ const TOPICS: [&str; 9] = [
     "/tf",
     "/scene",
     "/joint_states",
+    "/hand",
     "",
     "/other",
 ];

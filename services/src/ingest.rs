@@ -3,16 +3,17 @@
 //! contents checked), segmented into hand-independent skills, and stored atomically and
 //! idempotently by [`Store::ingest`].
 //!
-//! Memory: reading an upload of `N` bytes holds at most
-//! [`ReadLimits::decompressed_limit`]`(N)` (`128 N + 1 MiB`, at most 4 GiB) of decompressed
-//! and indexed data besides the upload itself and the contact and object samples decoded (see
-//! [`ReadLimits`]).
+//! Memory: a session is read in two streamed passes ([`segment_source`]), holding a chunk at
+//! a time, the hand's base resampled onto a 1 ms grid (41 bytes per millisecond of session)
+//! and each grasp's accumulators: about 150 MB for an hour, whatever the file's size.
 
 use crate::error::RecordingError;
 use crate::mcap_io::ReadLimits;
-use crate::segmentation::{segment, SegmentParams, Skill};
-use crate::session::{read_session_bytes_with, DecodeTopics};
-use crate::store::{IngestOutcome, NewSkill, SessionMeta, Store, StoreError, UNKNOWN_SHAPE};
+use crate::segmentation::{segment_source, SegmentParams, Skill};
+use crate::session::SessionSource;
+use crate::store::{
+    IngestOutcome, NewSkill, ObjectShape, SessionMeta, StagedBlob, Store, StoreError,
+};
 
 /// Why an ingest failed. Nothing is stored in either case.
 #[derive(Debug, thiserror::Error)]
@@ -29,25 +30,23 @@ pub enum IngestError {
 /// store and one [`NewSkill`] per grasp (with the full parameters as JSON). A replay recording
 /// is refused ([`RecordingError::ReplayRecording`]).
 pub fn analyse(bytes: &[u8], name: &str) -> Result<(SessionMeta, Vec<NewSkill>), RecordingError> {
-    let session = read_session_bytes_with(
-        bytes,
-        name,
-        &ReadLimits::default(),
-        DecodeTopics::SEGMENTATION,
-    )?;
+    analyse_source(&SessionSource::Bytes { bytes, name })
+}
+
+/// [`analyse`] of a session file or bytes, streamed ([`segment_source`]): memory bounded by
+/// the session's grid and a chunk, not the file.
+pub fn analyse_source(
+    source: &SessionSource<'_>,
+) -> Result<(SessionMeta, Vec<NewSkill>), RecordingError> {
     // A replay's MCAP reads like a session but is a robot replaying a skill: its "skill" would
-    // be shape `unknown` with no parameters.
-    session.ensure_grasp_session(name)?;
-    let seg = segment(&session, &SegmentParams::default());
-    let m = &session.metadata;
+    // be shape `unknown` with no parameters (refused by `segment_source`).
+    let (head, seg) = segment_source(source, &ReadLimits::streaming(), &SegmentParams::default())?;
+    let m = &head.metadata;
     let object: serde_json::Value = m
         .get("object")
         .and_then(|s| serde_json::from_str(s).ok())
         .unwrap_or(serde_json::Value::Null);
-    let duration_ns = match (session.object.first(), session.object.last()) {
-        (Some(a), Some(b)) => b.0.saturating_sub(a.0),
-        _ => 0,
-    };
+    let (first, last) = head.object_span_ns;
     let meta = SessionMeta {
         scenario: m.get("scenario").cloned(),
         seed: m.get("seed").and_then(|s| s.parse().ok()),
@@ -55,11 +54,11 @@ pub fn analyse(bytes: &[u8], name: &str) -> Result<(SessionMeta, Vec<NewSkill>),
         object_shape: object
             .get("shape")
             .and_then(|v| v.as_str())
-            .unwrap_or("unknown")
-            .to_string(),
+            .and_then(|name| name.parse().ok())
+            .unwrap_or(ObjectShape::Unknown),
         object_mass: object.get("mass").and_then(|v| v.as_f64()).unwrap_or(0.0),
         mu: object.get("mu").and_then(|v| v.as_f64()).unwrap_or(0.0),
-        duration_ns,
+        duration_ns: last.saturating_sub(first),
         started_at: m.get("started_at").cloned(),
         extra: serde_json::to_value(m).unwrap_or(serde_json::Value::Null),
     };
@@ -71,8 +70,8 @@ pub fn analyse(bytes: &[u8], name: &str) -> Result<(SessionMeta, Vec<NewSkill>),
 fn to_new_skill(s: &Skill) -> NewSkill {
     let p = &s.parameters;
     let (shape, mass, mu) = match &p.object {
-        Some(o) => (o.shape.clone(), o.mass, o.mu),
-        None => (UNKNOWN_SHAPE.to_owned(), 0.0, 0.0),
+        Some(o) => (o.shape.into(), o.mass, o.mu),
+        None => (ObjectShape::Unknown, 0.0, 0.0),
     };
     let start = s
         .phases
@@ -85,7 +84,7 @@ fn to_new_skill(s: &Skill) -> NewSkill {
         object_mass: mass,
         mu,
         contact_count: p.contact_count as i64,
-        contact_model: p.contact_model.clone(),
+        contact_model: p.contact_model,
         // The label the store's `grasp_type` filter documents: the family and the number of
         // opposing virtual fingers, e.g. `precision-2vf` (the family alone filters all of them).
         grasp_type: format!(
@@ -97,13 +96,81 @@ fn to_new_skill(s: &Skill) -> NewSkill {
         duration_s: end.saturating_sub(start) as f64 * 1e-9,
         start_ns: start as i64,
         end_ns: end as i64,
-        phase_durations: p
-            .phase_durations
-            .iter()
-            .map(|(k, v)| (k.clone(), *v))
-            .collect(),
+        phase_durations: p.phase_durations.iter().map(|(k, v)| (*k, *v)).collect(),
         feature: p.feature.to_vec(),
         params: serde_json::to_value(s).unwrap_or(serde_json::Value::Null),
+    }
+}
+
+/// Ingests an upload streamed to disk ([`StagedBlob`], finished): analysed from the file in
+/// two streamed passes on a blocking thread, then moved to its content address in the store
+/// with its rows. Memory does not grow with the file. Nothing is stored if it is refused.
+pub async fn ingest_staged(
+    store: &Store,
+    mut staged: StagedBlob,
+    name: String,
+) -> Result<IngestOutcome, IngestError> {
+    let (staged, analysed) = tokio::task::spawn_blocking(move || {
+        let r = staged.finish().map_err(IngestError::from).and_then(|()| {
+            // The file is ours, not the client's: errors name what they sent it as.
+            analyse_source(&SessionSource::File(staged.path()))
+                .map_err(|e| IngestError::from(rename(e, staged.path(), &name)))
+        });
+        (staged, r)
+    })
+    .await
+    .map_err(|e| task_failed("analysis", e))?;
+    let (meta, skills) = analysed?;
+    Ok(store.ingest_staged(staged, meta, skills).await?)
+}
+
+/// Ingests a session file: copied into the store's staging area a megabyte at a time while
+/// hashed, then as [`ingest_staged`]. Memory does not grow with the file.
+pub async fn ingest_file(
+    store: &Store,
+    path: std::path::PathBuf,
+    name: String,
+) -> Result<IngestOutcome, IngestError> {
+    let staging = store.clone();
+    let staged = tokio::task::spawn_blocking(move || -> Result<StagedBlob, IngestError> {
+        use std::io::Read;
+        let io = |e: std::io::Error| {
+            IngestError::from(RecordingError::io(format!("reading {}", path.display()), e))
+        };
+        let mut file = std::fs::File::open(&path).map_err(io)?;
+        let mut staged = staging.stage_upload()?;
+        let mut buffer = vec![0u8; 1 << 20];
+        loop {
+            let n = file.read(&mut buffer).map_err(io)?;
+            if n == 0 {
+                return Ok(staged);
+            }
+            staged.write(&buffer[..n])?;
+        }
+    })
+    .await
+    .map_err(|e| task_failed("staging", e))??;
+    ingest_staged(store, staged, name).await
+}
+
+/// The error of a blocking task (`what`) that panicked or was cancelled.
+fn task_failed(what: &str, e: tokio::task::JoinError) -> IngestError {
+    IngestError::Store(StoreError::InvalidInput(format!("{what} task failed: {e}")))
+}
+
+/// `e` with the staged file's path replaced by `name` in its message.
+fn rename(e: RecordingError, path: &std::path::Path, name: &str) -> RecordingError {
+    let shown = path.display().to_string();
+    match e {
+        RecordingError::InvalidInput { location, detail } => RecordingError::InvalidInput {
+            location: location.replace(&shown, name),
+            detail,
+        },
+        RecordingError::ReplayRecording { what, .. } => RecordingError::ReplayRecording {
+            name: name.to_owned(),
+            what,
+        },
+        other => other,
     }
 }
 
@@ -119,11 +186,7 @@ pub async fn ingest_bytes(
         (bytes, r)
     })
     .await
-    .map_err(|e| {
-        IngestError::Store(StoreError::InvalidInput(format!(
-            "analysis task failed: {e}"
-        )))
-    })?;
+    .map_err(|e| task_failed("analysis", e))?;
     let (meta, skills) = analysed?;
     Ok(store.ingest(&bytes, meta, skills).await?)
 }

@@ -6,18 +6,17 @@
 use std::collections::BTreeMap;
 use std::path::Path;
 
-use dfs_core::contact::{ContactModel, Friction};
+use dfs_core::contact::Friction;
 use dfs_core::hand::{builtin_hand, builtin_spec, thumb_of, HandModel, HandSpec};
 use dfs_core::math::Vector;
-use dfs_core::object::Shape;
 use dfs_core::replay::{
     run_with_stop, ReplayParams, ReplayReport, SkillContact, SkillKeyPose, SkillSpec,
 };
 use dfs_core::scenario::Phase;
 use dfs_core::{DfsError, Stop};
-use serde::Deserialize;
 
 use crate::error::{RecordingError, Result};
+use crate::segmentation::Skill;
 use crate::session::{SessionInfo, SessionRecorder, TickData};
 
 /// Name of the replay's metadata record.
@@ -109,126 +108,52 @@ pub fn load_hand(name_or_path: &str) -> Result<LoadedHand> {
     }
 }
 
-#[derive(Deserialize)]
-struct PhaseJson {
-    name: String,
-    start_ns: u64,
-    end_ns: u64,
-}
-
-#[derive(Deserialize)]
-struct ObjectJson {
-    shape: String,
-    size: Vec<f64>,
-    mass: f64,
-    mu: f64,
-    #[serde(default)]
-    mu_torsion: f64,
-}
-
-#[derive(Deserialize)]
-struct ContactJson {
-    #[serde(default)]
-    finger: String,
-    position_b: [f64; 3],
-    normal_b: [f64; 3],
-    #[serde(default)]
-    grip_profile: Vec<f64>,
-}
-
-#[derive(Deserialize)]
-struct KeyPoseJson {
-    time_s: f64,
-    position: [f64; 3],
-    rotation: [f64; 3],
-}
-
-#[derive(Deserialize)]
-struct SkillJson {
-    phases: Vec<PhaseJson>,
-    object: Option<ObjectJson>,
-    contact_model: String,
-    contacts: Vec<ContactJson>,
-    #[serde(default)]
-    motion: Vec<KeyPoseJson>,
-}
-
 /// A skill's JSON (as `icms segment --json` prints each of its `skills`, or a stored skill's
-/// parameters) as a [`SkillSpec`]. Errors name the field.
+/// parameters) as a [`SkillSpec`], read through segmentation's own [`Skill`] type. Errors name
+/// the field (`skill.object.shape: unknown shape "torus"; expected one of ...`).
 ///
 /// When the contacts' grip profiles show that the recording lost the object before `release`
 /// (fewer than two contacts pushing with more than 0.05 N after the grip was established),
 /// [`SkillSpec::held_until_s`] says when.
 pub fn skill_spec_from_json(value: &serde_json::Value, location: &str) -> Result<SkillSpec> {
-    let skill: SkillJson = serde_path_to_error::deserialize(value)
-        .map_err(|e| invalid(location, format!("skill: {e}")))?;
-    let object = skill.object.ok_or_else(|| {
+    let skill = Skill::from_json(value).map_err(|e| {
+        let path = e.path().to_string();
+        if path == "." {
+            invalid(location, format!("skill: {}", e.inner()))
+        } else {
+            invalid(location, format!("skill.{path}: {}", e.inner()))
+        }
+    })?;
+    let Skill { phases, parameters } = skill;
+    let object = parameters.object.ok_or_else(|| {
         invalid(
             location,
             "skill.object: the skill does not describe its object",
         )
     })?;
-    let size = |i: usize| object.size.get(i).copied().unwrap_or(f64::NAN);
-    let shape = match object.shape.as_str() {
-        "sphere" => Shape::Sphere { radius: size(0) },
-        "box" => Shape::Box {
-            half_extents: [size(0), size(1), size(2)],
-        },
-        "cylinder" => Shape::Cylinder {
-            radius: size(0),
-            half_height: size(1),
-        },
-        other => {
-            return Err(invalid(
-                location,
-                format!("skill.object.shape: unknown shape {other:?}"),
-            ))
-        }
-    };
-    shape
-        .validate()
+    let shape = object
+        .to_shape()
         .map_err(|e| invalid(location, format!("skill.object: {e}")))?;
-    let contact_model = match skill.contact_model.as_str() {
-        "frictionless" => ContactModel::Frictionless,
-        "point_with_friction" => ContactModel::PointWithFriction,
-        "soft_finger" => ContactModel::SoftFinger,
-        other => {
-            return Err(invalid(
-                location,
-                format!("skill.contact_model: unknown model {other:?}"),
-            ))
-        }
-    };
-    let mut phases = Vec::with_capacity(skill.phases.len());
-    for (i, p) in skill.phases.iter().enumerate() {
-        let phase = Phase::from_name(&p.name).ok_or_else(|| {
-            invalid(
-                location,
-                format!("skill.phases[{i}].name: unknown phase {:?}", p.name),
-            )
-        })?;
-        phases.push((phase, p.end_ns.saturating_sub(p.start_ns) as f64 * 1e-9));
-    }
+    let contacts = parameters.contacts;
     // When the recording lost the object: the grip profiles span grasp start → release end.
-    let find = |name: &str| skill.phases.iter().find(|p| p.name == name);
-    let held_until_s = match (find("grasp"), skill.phases.last()) {
-        (Some(g), Some(last)) if !skill.contacts.is_empty() => {
-            let end = find("release").map_or(last.end_ns, |r| r.end_ns);
+    let find = |phase: Phase| phases.iter().find(|p| p.name == phase);
+    let held_until_s = match (find(Phase::Grasp), phases.last()) {
+        (Some(g), Some(last)) if !contacts.is_empty() => {
+            let release = find(Phase::Release);
+            let end = release.map_or(last.end_ns, |r| r.end_ns);
             let span = end.saturating_sub(g.start_ns) as f64 * 1e-9;
-            let release_s = find("release").map_or(f64::INFINITY, |r| {
+            let release_s = release.map_or(f64::INFINITY, |r| {
                 r.start_ns.saturating_sub(g.start_ns) as f64 * 1e-9
             });
-            let npts = skill
-                .contacts
+            let npts = contacts
                 .iter()
                 .map(|c| c.grip_profile.len())
                 .min()
                 .unwrap_or(0);
             let pushing = |k: usize| {
-                skill
-                    .contacts
+                contacts
                     .iter()
-                    .filter(|c| c.grip_profile[k] > 0.05)
+                    .filter(|c| c.grip_profile.get(k).is_some_and(|f| *f > 0.05))
                     .count()
                     >= 2
             };
@@ -254,17 +179,16 @@ pub fn skill_spec_from_json(value: &serde_json::Value, location: &str) -> Result
             mu: object.mu,
             mu_torsion: object.mu_torsion,
         },
-        contact_model,
-        contacts: skill
-            .contacts
-            .iter()
+        contact_model: parameters.contact_model,
+        contacts: contacts
+            .into_iter()
             .map(|c| SkillContact {
-                finger: c.finger.clone(),
+                finger: c.finger,
                 position_b: Vector::from(c.position_b),
                 normal_b: Vector::from(c.normal_b),
             })
             .collect(),
-        motion: skill
+        motion: parameters
             .motion
             .iter()
             .map(|k| SkillKeyPose {
@@ -273,7 +197,10 @@ pub fn skill_spec_from_json(value: &serde_json::Value, location: &str) -> Result
                 rotation: Vector::from(k.rotation),
             })
             .collect(),
-        phases,
+        phases: phases
+            .iter()
+            .map(|p| (p.name, p.end_ns.saturating_sub(p.start_ns) as f64 * 1e-9))
+            .collect(),
         held_until_s,
     })
 }
@@ -345,6 +272,7 @@ pub fn replay_skill_until(
         started_at: None,
         // The replay's DFS puts the table top at z = 0 (dfs_core::replay).
         table_height: Some(0.0),
+        hand_urdf: hand.urdf.clone(),
     };
     let mut recorder = SessionRecorder::create(out, &hand.model, &object, &info)?;
     let mut failed: Option<RecordingError> = None;

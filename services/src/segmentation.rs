@@ -45,11 +45,18 @@ use std::collections::BTreeMap;
 use dfs_core::contact::{ContactFrame, ContactModel, Friction};
 use dfs_core::grasp::quality::{grasp_quality, QualityParams};
 use dfs_core::math::{Isometry, Rotation, Vector};
-use dfs_core::scenario::ScenarioObject;
-use serde::Serialize;
+use dfs_core::object::{Shape, ShapeKind};
+use dfs_core::scenario::{Phase, ScenarioObject};
+use dfs_core::DfsError;
+use serde::{Deserialize, Serialize};
 
+use crate::error::RecordingError;
 use crate::foxglove::Pose;
-use crate::session::{GroundTruthPhase, Session};
+use crate::mcap_io::ReadLimits;
+use crate::session::{
+    Contacts, DecodeTopics, GroundTruthPhase, ObjectState, Session, SessionHead, SessionSource,
+    SessionVisitor,
+};
 
 /// Version of the segmentation: what the store records beside every session's skills, so
 /// that `icms reprocess` can find the sessions whose skills an older segmentation made and
@@ -129,11 +136,11 @@ impl Default for SegmentParams {
 }
 
 /// A phase found by [`segment`].
-#[derive(Debug, Clone, PartialEq, Eq, Serialize)]
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
 pub struct PhaseSpan {
-    /// Phase name (`approach`, `preshape`, `grasp`, `lift`, `hold`, `transport`, `place`,
+    /// The phase (`approach`, `preshape`, `grasp`, `lift`, `hold`, `transport`, `place`,
     /// `release`, `retreat`).
-    pub name: String,
+    pub name: Phase,
     /// Start, ns since the session's start (the log time of its first `/object/state` sample:
     /// 0 in the files `icms simulate` records, later for recorders that log epoch times).
     pub start_ns: u64,
@@ -142,14 +149,21 @@ pub struct PhaseSpan {
 }
 
 /// The result of [`segment`]: one skill per grasp, in time order.
-#[derive(Debug, Clone, PartialEq, Serialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct Segmentation {
     /// The skills.
     pub skills: Vec<Skill>,
 }
 
 /// One grasp of a session: its phases and its hand-independent parameters.
-#[derive(Debug, Clone, PartialEq, Serialize)]
+///
+/// Its JSON is what `icms segment --json` prints in `skills`, what the store keeps as a skill's
+/// `params` and what `icms replay --skill FILE` reads. Read back ([`Skill::from_json`]), a skill
+/// may leave out what replay does not use (a skill file written by hand): every parameter but
+/// `phases`, `contact_model` and `contacts` has a default (empty, zero, or absent), and so
+/// have a contact's `finger`, `mean_intensity` and `grip_profile` and the object's `inertia`
+/// and `mu_torsion`.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct Skill {
     /// Phases, in time order, never overlapping (nor the phases of other skills), inside the
     /// session; contiguous except where odd data leaves a gap.
@@ -159,41 +173,75 @@ pub struct Skill {
     pub parameters: SkillParameters,
 }
 
+impl Skill {
+    /// A skill from its JSON (see [`Skill`]); an error names the path of the field that is
+    /// wrong (`object.shape`, `phases[2].name`: serde's flattening loses the path of the
+    /// parameters' fields, so they are read on their own).
+    pub fn from_json(
+        value: &serde_json::Value,
+    ) -> Result<Skill, serde_path_to_error::Error<serde_json::Error>> {
+        /// The one field of a skill that is not a parameter.
+        #[derive(Deserialize)]
+        struct Phases {
+            phases: Vec<PhaseSpan>,
+        }
+        let Phases { phases } = serde_path_to_error::deserialize(value)?;
+        let parameters = serde_path_to_error::deserialize(value)?;
+        Ok(Skill { phases, parameters })
+    }
+}
+
 /// The object as the session's metadata describes it.
-#[derive(Debug, Clone, PartialEq, Serialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct ObjectParams {
     /// `sphere`, `box` or `cylinder`.
-    pub shape: String,
-    /// Size (m): `[radius]` (sphere), half extents (box), `[radius, half_height]` (cylinder).
+    pub shape: ShapeKind,
+    /// Size (m): `[radius]` (sphere), half extents (box), `[radius, half_height]` (cylinder),
+    /// as [`Shape::sizes`] lists them.
     pub size: Vec<f64>,
     /// Mass (kg).
     pub mass: f64,
-    /// Principal moments of inertia about B's axes (kg·m²), solid body of uniform density.
+    /// Principal moments of inertia about B's axes (kg·m²), solid body of uniform density
+    /// ([`Shape::principal_inertia`]). Zero when a skill file leaves it out (replay takes the
+    /// inertia from the shape and mass).
+    #[serde(default)]
     pub inertia: [f64; 3],
     /// Coulomb friction coefficient.
     pub mu: f64,
-    /// Torsional friction coefficient (m).
+    /// Torsional friction coefficient (m). Default 0.
+    #[serde(default)]
     pub mu_torsion: f64,
 }
 
+impl ObjectParams {
+    /// The shape with its sizes, validated; an error names `object.size` when the list does
+    /// not fit the shape, the size (`object.radius`, ...) when one is not a length > 0.
+    pub fn to_shape(&self) -> Result<Shape, DfsError> {
+        Shape::from_sizes(self.shape, &self.size, "object.size")
+    }
+}
+
 /// One contact of a skill, in the object frame B.
-#[derive(Debug, Clone, PartialEq, Serialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct ContactParams {
     /// Fingertip of the recording hand (provenance only; the skill does not depend on it).
+    #[serde(default)]
     pub finger: String,
     /// Mean contact point in B over the held part of the grasp (m).
     pub position_b: [f64; 3],
     /// Mean unit normal in B, pointing into the object.
     pub normal_b: [f64; 3],
-    /// Mean intensities `[x, y, normal, torsion]` (N, N·m) per phase name, while touching.
-    pub mean_intensity: BTreeMap<String, [f64; 4]>,
+    /// Mean intensities `[x, y, normal, torsion]` (N, N·m) per phase, while touching.
+    #[serde(default)]
+    pub mean_intensity: BTreeMap<Phase, [f64; 4]>,
     /// Normal force (N) resampled to [`SegmentParams::profile_points`] points over the span from
     /// the start of `grasp` to the end of `release` (or of the last phase in contact).
+    #[serde(default)]
     pub grip_profile: Vec<f64>,
 }
 
 /// A slip of one contact.
-#[derive(Debug, Clone, PartialEq, Serialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct SlipEvent {
     /// Start, s since the start of `grasp`.
     pub time_s: f64,
@@ -204,7 +252,7 @@ pub struct SlipEvent {
 }
 
 /// A key pose of the object relative to its pose at the start of the grasp (frame B₀).
-#[derive(Debug, Clone, PartialEq, Serialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct KeyPose {
     /// Time since the start of `grasp` (s).
     pub time_s: f64,
@@ -218,7 +266,7 @@ pub struct KeyPose {
 /// 8-edge linearised friction cones, on the mean contacts with the object's μ and μ_t and the
 /// recording's contact model (soft finger: with point contacts with friction a two-finger pinch
 /// is never force closure), torques divided by the object's half diagonal.
-#[derive(Debug, Clone, PartialEq, Serialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct QualityParamsOut {
     /// Ferrari-Canny ε (0 when not force closure).
     pub epsilon: f64,
@@ -229,7 +277,7 @@ pub struct QualityParamsOut {
 }
 
 /// Grasp type label.
-#[derive(Debug, Clone, PartialEq, Serialize)]
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
 pub struct GraspType {
     /// `precision` (≤ 3 contacts) or `power`.
     pub label: String,
@@ -239,7 +287,7 @@ pub struct GraspType {
 }
 
 /// Where a skill comes from.
-#[derive(Debug, Clone, PartialEq, Serialize)]
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
 pub struct SkillSource {
     /// Scenario (or imported file) name.
     pub scenario: String,
@@ -253,40 +301,53 @@ pub struct SkillSource {
     pub end_ns: u64,
 }
 
-/// The parameters of a skill, in the object frame B and independent of the hand.
-#[derive(Debug, Clone, PartialEq, Serialize)]
+/// The parameters of a skill, in the object frame B and independent of the hand. Read back,
+/// every field but `contact_model` and `contacts` may be left out (see [`Skill`]).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct SkillParameters {
     /// The object (absent when the metadata does not describe it).
+    #[serde(default)]
     pub object: Option<ObjectParams>,
     /// Contact model of the recording (`soft_finger`: point contact with friction and torsion).
-    pub contact_model: String,
+    pub contact_model: ContactModel,
     /// Number of contacts.
+    #[serde(default)]
     pub contact_count: usize,
     /// The contacts.
     pub contacts: Vec<ContactParams>,
     /// Mean sum of the normal forces while the object is held (N).
+    #[serde(default)]
     pub internal_force_n: f64,
     /// Smallest `μ c_n − |c_t|` over the held part of the grasp (`lift` to `place`, or the
     /// whole grasp if the object was never lifted), on contacts pushing with more than 0.05 N
     /// (N); negative when a contact left its cone.
+    #[serde(default)]
     pub friction_margin_n: f64,
     /// The same as a ratio `(μ c_n − |c_t|) / (μ c_n)` (1 = pure normal force, ≤ 0 = slip).
+    #[serde(default)]
     pub friction_margin_ratio: f64,
     /// The object's motion relative to its pose at the start of `grasp`: key poses at every
     /// phase boundary and every [`SegmentParams::keyframe_s`] in between.
+    #[serde(default)]
     pub motion: Vec<KeyPose>,
-    /// Duration of each phase (s; summed when a phase repeats).
-    pub phase_durations: BTreeMap<String, f64>,
+    /// Duration of each phase (s; summed when a phase repeats), by phase name.
+    #[serde(default)]
+    pub phase_durations: BTreeMap<Phase, f64>,
     /// Slip events: runs of ≥ 2 ms in which a touching contact's requested intensities were
     /// outside its friction cone, merged per finger when less than 20 ms apart.
+    #[serde(default)]
     pub slip_events: Vec<SlipEvent>,
     /// Grasp quality on the mean contacts (absent without contacts or μ).
+    #[serde(default)]
     pub quality: Option<QualityParamsOut>,
     /// Grasp type.
+    #[serde(default)]
     pub grasp_type: GraspType,
     /// Source session and span.
+    #[serde(default)]
     pub source: SkillSource,
     /// Feature vector for similarity search, see [`FEATURE_DIMENSIONS`].
+    #[serde(default)]
     pub feature: [f32; 16],
 }
 
@@ -330,9 +391,10 @@ pub fn score(found: &[PhaseSpan], truth: &[GroundTruthPhase]) -> Score {
     let mut n_found = 0;
     for t in truth {
         let len = t.end_ns.saturating_sub(t.start_ns).max(1);
+        let name = t.name.parse::<Phase>().ok();
         let best = found
             .iter()
-            .filter(|f| f.name == t.name)
+            .filter(|f| Some(f.name) == name)
             .map(|f| {
                 let ov = f
                     .end_ns
@@ -397,12 +459,14 @@ fn iso(p: &Pose) -> Isometry {
     )
 }
 
-/// Signals resampled onto the uniform grid.
+/// Signals resampled onto the uniform grid: for an hour at 1 ms, 3.6 million points of 41
+/// bytes (the orientation in `f32`: 16 bytes rather than 32, its angles still good to 1e-7
+/// rad, see [`Grid::angle`]).
 struct Grid {
     t0: u64,
     dt_ns: u64,
     base_p: Vec<Vector>,
-    base_r: Vec<Rotation>,
+    base_r: Vec<[f32; 4]>,
     touching: Vec<bool>,
 }
 
@@ -410,70 +474,148 @@ impl Grid {
     fn len(&self) -> usize {
         self.base_p.len()
     }
+
+    /// The hand base's orientation at grid point `i`.
+    fn rot(&self, i: usize) -> Rotation {
+        let [x, y, z, w] = self.base_r[i].map(f64::from);
+        Rotation::new_normalize(nalgebra::Quaternion::new(w, x, y, z))
+    }
+
+    /// The angle (rad) between the orientations at grid points `a` and `b`, from the
+    /// relative rotation's vector part and scalar (atan2: no loss near 0, unlike the acos of
+    /// a dot product, which turns the `f32` storage's 1e-7 into 1e-3 rad).
+    fn angle(&self, a: usize, b: usize) -> f64 {
+        (self.rot(a).inverse() * self.rot(b)).angle()
+    }
 }
 
-fn build_grid(session: &Session, params: &SegmentParams) -> Option<Grid> {
-    let mut obj: Vec<(u64, Isometry)> = session
-        .object
-        .iter()
-        .map(|(t, o)| (*t, iso(&o.pose) * iso(&o.pose_in_hand).inverse()))
-        .filter(|(_, b)| b.translation.vector.iter().all(|v| v.is_finite()))
-        .collect();
-    // Files are in log-time order; be safe against reordered samples anyway.
-    obj.sort_by_key(|(t, _)| *t);
-    if obj.len() < 2 {
-        return None;
-    }
-    let t0 = obj[0].0;
-    let t1 = obj[obj.len() - 1].0;
-    let dt_ns = ((params.grid_s * 1e9) as u64).max(1);
-    let n = ((t1 - t0) / dt_ns + 1) as usize;
-    let mut base_p = Vec::with_capacity(n);
-    let mut base_r = Vec::with_capacity(n);
-    let mut k = 0;
-    for i in 0..n {
-        let t = t0 + i as u64 * dt_ns;
-        while k + 2 < obj.len() && obj[k + 1].0 <= t {
-            k += 1;
+/// Time after the latest contact sample during which its state holds (ns): over a longer hole
+/// in the data the hand is taken as not touching.
+const CONTACT_HOLD_NS: u64 = 50_000_000;
+
+/// A run of contact samples with the same "two fingers or more in contact" state and no hole
+/// of [`CONTACT_HOLD_NS`] between them: from its first sample's log time to its last's.
+#[derive(Debug, Clone, Copy)]
+struct ContactRun {
+    start: u64,
+    end: u64,
+    on: bool,
+}
+
+/// Pass one of segmentation: the hand base's pose resampled onto the grid as object samples
+/// come (in time order), and the contact state as runs. Holds the grid and the last two
+/// samples, whatever the session's length.
+struct GridBuilder {
+    dt_ns: u64,
+    /// The last two finite samples: (log time, base pose).
+    last: [Option<(u64, Isometry)>; 2],
+    /// Log time of the next grid point to fill.
+    next: u64,
+    t0: Option<u64>,
+    base_p: Vec<Vector>,
+    base_r: Vec<[f32; 4]>,
+    runs: Vec<ContactRun>,
+}
+
+impl GridBuilder {
+    fn new(params: &SegmentParams) -> Self {
+        GridBuilder {
+            dt_ns: ((params.grid_s * 1e9) as u64).max(1),
+            last: [None, None],
+            next: 0,
+            t0: None,
+            base_p: Vec::new(),
+            base_r: Vec::new(),
+            runs: Vec::new(),
         }
-        let (ta, a) = &obj[k];
-        let (tb, b) = &obj[(k + 1).min(obj.len() - 1)];
-        let s = if tb > ta {
-            // In offsets: epoch-based log times (1.7e18 ns) lose 256 ns as f64.
-            (t.saturating_sub(*ta) as f64 / (tb - ta) as f64).clamp(0.0, 1.0)
-        } else {
-            0.0
+    }
+
+    /// Fills the grid points before `until` (or up to it, with `inclusive`) from the segment
+    /// between the last two samples.
+    fn fill(&mut self, until: u64, inclusive: bool) {
+        let (Some((ta, a)), Some((tb, b))) = (self.last[0], self.last[1]) else {
+            return;
         };
-        base_p.push(a.translation.vector.lerp(&b.translation.vector, s));
-        base_r.push(a.rotation.nlerp(&b.rotation, s));
-    }
-    let mut touching = vec![false; n];
-    let mut c: Vec<(u64, bool)> = session
-        .contacts
-        .iter()
-        .map(|(t, m)| (*t, m.fingers.iter().filter(|f| f.in_contact).count() >= 2))
-        .collect();
-    c.sort_by_key(|(t, _)| *t);
-    let mut j = 0;
-    for (i, tv) in touching.iter_mut().enumerate() {
-        let t = t0 + i as u64 * dt_ns;
-        while j + 1 < c.len() && c[j + 1].0 <= t {
-            j += 1;
+        while self.next < until || (inclusive && self.next == until) {
+            let t = self.next;
+            let s = if tb > ta {
+                // In offsets: epoch-based log times (1.7e18 ns) lose 256 ns as f64.
+                (t.saturating_sub(ta) as f64 / (tb - ta) as f64).clamp(0.0, 1.0)
+            } else {
+                0.0
+            };
+            self.base_p
+                .push(a.translation.vector.lerp(&b.translation.vector, s));
+            let q = a.rotation.nlerp(&b.rotation, s);
+            self.base_r
+                .push([q.i as f32, q.j as f32, q.k as f32, q.w as f32]);
+            self.next += self.dt_ns;
         }
-        if let Some((tc, on)) = c.get(j) {
-            // Zero-order hold, but not across a long hole in the data.
-            if *tc <= t + dt_ns && t - (*tc).min(t) < 50_000_000 {
-                *tv = *on;
+    }
+
+    /// An `/object/state` sample: the base pose is `pose ∘ pose_in_hand⁻¹`.
+    fn object(&mut self, t: u64, o: &ObjectState) {
+        let base = iso(&o.pose) * iso(&o.pose_in_hand).inverse();
+        if !base.translation.vector.iter().all(|v| v.is_finite()) {
+            return;
+        }
+        if self.t0.is_none() {
+            self.t0 = Some(t);
+            self.next = t;
+        }
+        // The grid points before this sample lie between the last one and it.
+        self.last = [self.last[1], Some((t, base))];
+        if self.last[0].is_some() {
+            self.fill(t, false);
+        }
+    }
+
+    /// A `/dfs/contacts` sample: two fingers or more in contact, or not.
+    fn contacts(&mut self, t: u64, c: &Contacts) {
+        let on = c.fingers.iter().filter(|f| f.in_contact).count() >= 2;
+        match self.runs.last_mut() {
+            Some(r) if r.on == on && t.saturating_sub(r.end) < CONTACT_HOLD_NS => r.end = t,
+            _ => self.runs.push(ContactRun {
+                start: t,
+                end: t,
+                on,
+            }),
+        }
+    }
+
+    /// The grid, `None` with fewer than two object samples. Each grid point touches if the
+    /// latest contact sample at or before it (or the first one, if it comes within a grid
+    /// step) says so and is less than [`CONTACT_HOLD_NS`] old.
+    fn finish(mut self) -> Option<Grid> {
+        let t0 = self.t0?;
+        let (t1, _) = self.last[1]?;
+        self.last[0]?;
+        self.fill(t1, true);
+        let n = self.base_p.len();
+        let mut touching = vec![false; n];
+        let mut r = 0usize;
+        for (i, tv) in touching.iter_mut().enumerate() {
+            let t = t0 + i as u64 * self.dt_ns;
+            while r + 1 < self.runs.len() && self.runs[r + 1].start <= t {
+                r += 1;
             }
+            let Some(run) = self.runs.get(r) else {
+                break;
+            };
+            *tv = if run.start > t {
+                run.start <= t + self.dt_ns && run.on
+            } else {
+                run.on && (t <= run.end || t - run.end < CONTACT_HOLD_NS)
+            };
         }
+        Some(Grid {
+            t0,
+            dt_ns: self.dt_ns,
+            base_p: self.base_p,
+            base_r: self.base_r,
+            touching,
+        })
     }
-    Some(Grid {
-        t0,
-        dt_ns,
-        base_p,
-        base_r,
-        touching,
-    })
 }
 
 /// A move of the hand's base: grid indices of its refined start and end, and its displacement.
@@ -483,21 +625,6 @@ struct Move {
     end: f64,
     dp: Vector,
     angle: f64,
-}
-
-/// τ at which a minimum-jerk profile has covered `s` of its displacement.
-fn min_jerk_tau(s: f64) -> f64 {
-    let (mut lo, mut hi) = (0.0f64, 0.5f64);
-    for _ in 0..60 {
-        let t = 0.5 * (lo + hi);
-        let v = t * t * t * (10.0 - 15.0 * t + 6.0 * t * t);
-        if v < s {
-            lo = t;
-        } else {
-            hi = t;
-        }
-    }
-    0.5 * (lo + hi)
 }
 
 fn speed_profile(g: &Grid, params: &SegmentParams, window_s: f64) -> Vec<f64> {
@@ -513,8 +640,7 @@ fn speed_profile(g: &Grid, params: &SegmentParams, window_s: f64) -> Vec<f64> {
             }
             let span = (b - a) as f64 * dt;
             let lin = (g.base_p[b] - g.base_p[a]).norm();
-            let d = g.base_r[a].coords.dot(&g.base_r[b].coords).abs().min(1.0);
-            let ang = 2.0 * d.acos();
+            let ang = g.angle(a, b);
             (lin + params.rotation_radius * ang) / span
         })
         .collect()
@@ -560,8 +686,8 @@ struct Fit {
 
 fn fit_min_jerk(g: &Grid, params: &SegmentParams, a: usize, b: usize, tau10: f64) -> Fit {
     let dp = g.base_p[b] - g.base_p[a];
-    let ra = g.base_r[a].inverse();
-    let rv = (ra * g.base_r[b]).scaled_axis();
+    let ra = g.rot(a).inverse();
+    let rv = (ra * g.rot(b)).scaled_axis();
     let d2 = (dp.norm_squared() + (params.rotation_radius * rv.norm()).powi(2)).max(1e-30);
     // Progress along the window's displacement (translation and rotation together). A
     // rotation under 1 % of the displacement is left out: it changes the progress by less than
@@ -570,7 +696,7 @@ fn fit_min_jerk(g: &Grid, params: &SegmentParams, a: usize, b: usize, tau10: f64
     let progress = |i: usize| -> f64 {
         let p = g.base_p[i] - g.base_p[a];
         let r = if turns {
-            params.rotation_radius.powi(2) * (ra * g.base_r[i]).scaled_axis().dot(&rv)
+            params.rotation_radius.powi(2) * (ra * g.rot(i)).scaled_axis().dot(&rv)
         } else {
             0.0
         };
@@ -674,7 +800,7 @@ fn find_moves(g: &Grid, params: &SegmentParams) -> Vec<Move> {
         raw.extend(slow_moves);
         raw.sort_unstable();
     }
-    let tau10 = min_jerk_tau(0.1);
+    let tau10 = dfs_core::min_jerk::time_at_progress(0.1);
     let mut moves = Vec::new();
     for (i, &(a, b)) in raw.iter().enumerate() {
         if (b - a) as f64 * dt < params.min_move_s {
@@ -754,23 +880,20 @@ fn find_episodes(g: &Grid, params: &SegmentParams) -> Vec<(usize, usize)> {
     merged
 }
 
-/// Segments a session into skills, one per grasp (see the module's "What counts as a grasp";
-/// a session without one has no skill). Pure: no I/O.
-pub fn segment(session: &Session, params: &SegmentParams) -> Segmentation {
-    let Some(g) = build_grid(session, params) else {
-        return Segmentation { skills: Vec::new() };
-    };
-    let moves = find_moves(&g, params);
-    let episodes = find_episodes(&g, params);
+/// The candidate skills of a session whose grid is `g`: each one's phases (log times), well
+/// formed ([`well_formed`]), before the checks that need the samples again (carried, a grasp).
+fn plan(g: &Grid, params: &SegmentParams) -> Vec<Vec<PhaseSpan>> {
+    let moves = find_moves(g, params);
+    let episodes = find_episodes(g, params);
     let n = g.len();
     let last = (n - 1) as f64;
     let tol = 0.05 / params.grid_s;
-    let mut skills_spans: Vec<Vec<(String, f64, f64)>> = Vec::new();
+    let mut skills_spans: Vec<Vec<(Phase, f64, f64)>> = Vec::new();
     let mut prev_end = 0.0f64;
     let mut mi = 0usize; // first move not yet used
     for (k, &(c0, c1)) in episodes.iter().enumerate() {
         let (c0, c1) = (c0 as f64, c1 as f64);
-        let mut spans: Vec<(String, f64, f64)> = Vec::new();
+        let mut spans: Vec<(Phase, f64, f64)> = Vec::new();
         // Moves before the first touch.
         let pre: Vec<Move> = moves[mi..]
             .iter()
@@ -781,17 +904,17 @@ pub fn segment(session: &Session, params: &SegmentParams) -> Segmentation {
         let grasp_start = pre.last().map_or(c0, |m| m.end.min(c0));
         if pre.len() >= 2 {
             let p = pre[pre.len() - 1];
-            spans.push(("approach".into(), prev_end, p.start));
-            spans.push(("preshape".into(), p.start, p.end.min(grasp_start)));
+            spans.push((Phase::Approach, prev_end, p.start));
+            spans.push((Phase::Preshape, p.start, p.end.min(grasp_start)));
         } else {
-            spans.push(("approach".into(), prev_end, grasp_start));
+            spans.push((Phase::Approach, prev_end, grasp_start));
         }
         // Moves after the grasp: in contact, or after a lost contact until the retreat (the
         // first upward move after the contact ended or after a place).
         let next_c0 = episodes.get(k + 1).map(|e| e.0 as f64);
         let mut cursor = grasp_start;
-        let mut name_rest = "grasp";
-        let mut last_label = "";
+        let mut name_rest = Phase::Grasp;
+        let mut last_label = None;
         let mut retreat = None;
         while let Some(m) = moves.get(mi).copied() {
             if next_c0.is_some_and(|c| m.end > c + tol) {
@@ -799,129 +922,342 @@ pub fn segment(session: &Session, params: &SegmentParams) -> Segmentation {
             }
             let h = m.dp.norm();
             let label = if h < params.rotation_radius * m.angle * 0.5 {
-                "transport"
+                Phase::Transport
             } else if m.dp.z > params.vertical_fraction * h {
-                "lift"
+                Phase::Lift
             } else if m.dp.z < -params.vertical_fraction * h {
-                "place"
+                Phase::Place
             } else {
-                "transport"
+                Phase::Transport
             };
             mi += 1;
-            if label == "lift" && (m.start > c1 + tol || last_label == "place") {
+            if label == Phase::Lift && (m.start > c1 + tol || last_label == Some(Phase::Place)) {
                 retreat = Some(m);
                 break;
             }
-            if m.start - cursor > 0.15 / params.grid_s || name_rest == "grasp" {
-                spans.push((name_rest.into(), cursor, m.start));
+            if m.start - cursor > 0.15 / params.grid_s || name_rest == Phase::Grasp {
+                spans.push((name_rest, cursor, m.start));
             } else if let Some(prev) = spans.last_mut() {
                 prev.2 = m.start;
             }
-            spans.push((label.into(), m.start, m.end));
+            spans.push((label, m.start, m.end));
             cursor = m.end;
-            last_label = label;
-            name_rest = "hold";
+            last_label = Some(label);
+            name_rest = Phase::Hold;
         }
-        if last_label == "place" {
-            name_rest = "release";
+        if last_label == Some(Phase::Place) {
+            name_rest = Phase::Release;
         }
         match retreat {
             Some(r) => {
-                spans.push((name_rest.into(), cursor, r.start));
+                spans.push((name_rest, cursor, r.start));
                 let end = if next_c0.is_some() { r.end } else { last };
-                spans.push(("retreat".into(), r.start, end));
+                spans.push((Phase::Retreat, r.start, end));
                 prev_end = end;
             }
             None => {
                 let end = next_c0.map_or(last, |c| c1.max(cursor).min(c));
-                spans.push((name_rest.into(), cursor, end.max(cursor)));
+                spans.push((name_rest, cursor, end.max(cursor)));
                 prev_end = end;
             }
         }
         skills_spans.push(spans);
     }
-    let carry = CarryTrack::new(session);
-    let skills = well_formed(skills_spans, &g, last)
-        .into_iter()
-        .filter(|phases| carry.carried(session, phases, params))
-        .map(|phases| {
-            let parameters = skill_parameters(session, &phases, params);
-            Skill { phases, parameters }
-        })
-        .filter(|s| is_grasp(&s.parameters))
-        .map(|mut s| {
-            // Log times to session time: recorders need not start their clocks at 0 (ROS
-            // bags and most MCAP writers log epoch times).
-            for p in &mut s.phases {
-                p.start_ns -= g.t0;
-                p.end_ns -= g.t0;
+    well_formed(skills_spans, g, last)
+}
+
+/// Segments a session held in memory into skills, one per grasp (see the module's "What
+/// counts as a grasp"; a session without one has no skill). Pure: no I/O. The same as
+/// [`segment_source`] on the file the session came from.
+pub fn segment(session: &Session, params: &SegmentParams) -> Segmentation {
+    // Each topic in time order, as a file read gives them.
+    let mut object: Vec<&(u64, ObjectState)> = session.object.iter().collect();
+    object.sort_by_key(|(t, _)| *t);
+    let mut contacts: Vec<&(u64, Contacts)> = session.contacts.iter().collect();
+    contacts.sort_by_key(|(t, _)| *t);
+    // Interleaved by time, contacts first at a tick, as the recorder writes them.
+    let feed = |v: &mut dyn SessionVisitor| -> Result<(), RecordingError> {
+        let (mut i, mut j) = (0, 0);
+        loop {
+            match (object.get(i), contacts.get(j)) {
+                (Some((to, o)), Some((tc, _))) if to < tc => {
+                    v.object(*to, o)?;
+                    i += 1;
+                }
+                (_, Some((tc, c))) => {
+                    v.contacts(*tc, c)?;
+                    j += 1;
+                }
+                (Some((to, o)), None) => {
+                    v.object(*to, o)?;
+                    i += 1;
+                }
+                (None, None) => return Ok(()),
             }
-            s.parameters.source.start_ns -= g.t0;
-            s.parameters.source.end_ns -= g.t0;
-            s
-        })
-        .collect();
-    Segmentation { skills }
+        }
+    };
+    let mut one = PassOne::new(params);
+    // Neither pass fails: they only collect.
+    let _ = feed(&mut one);
+    let mut two = one.finish(&session.metadata, params);
+    let _ = feed(&mut two);
+    two.finish()
 }
 
-/// The object's position in the world and relative to the hand's base, by time.
-struct CarryTrack {
-    samples: Vec<(u64, Vector, Vector)>,
+/// Segments the session `source` in two streamed passes ([`crate::session::stream_session_file`]):
+/// the first checks the file and resamples the hand's base onto the grid (about 41 bytes per
+/// millisecond of session), the second computes the parameters of each grasp found, keeping
+/// per grasp only its accumulators. Memory is bounded by the grid and a few chunks, not the
+/// file: an hour of session in 210 MB (peak resident of `icms segment`). A replay recording is refused
+/// ([`crate::session::SessionHead::ensure_grasp_session`]) after the first pass.
+pub fn segment_source(
+    source: &SessionSource<'_>,
+    limits: &ReadLimits,
+    params: &SegmentParams,
+) -> Result<(SessionHead, Segmentation), RecordingError> {
+    let mut one = PassOne::new(params);
+    let head = source.stream(limits, &mut one)?;
+    head.ensure_grasp_session(&source.name())?;
+    let mut two = one.finish(&head.metadata, params);
+    source.stream_again(limits, &mut two)?;
+    Ok((head, two.finish()))
 }
 
-impl CarryTrack {
-    fn new(session: &Session) -> CarryTrack {
-        let mut samples: Vec<(u64, Vector, Vector)> = session
-            .object
-            .iter()
-            .map(|(t, o)| (*t, v3(&o.pose.position), v3(&o.pose_in_hand.position)))
-            .filter(|(_, p, h)| p.iter().chain(h.iter()).all(|v| v.is_finite()))
-            .collect();
-        samples.sort_by_key(|(t, _, _)| *t);
-        CarryTrack { samples }
+/// Pass one: the grid, then the candidate skills.
+struct PassOne {
+    grid: GridBuilder,
+}
+
+impl PassOne {
+    fn new(params: &SegmentParams) -> Self {
+        PassOne {
+            grid: GridBuilder::new(params),
+        }
     }
 
-    /// The sample at or just before `t` (the first one if none is).
-    fn at(&self, t: u64) -> Option<&(u64, Vector, Vector)> {
-        let i = self.samples.partition_point(|(ts, _, _)| *ts <= t);
-        self.samples.get(i.saturating_sub(1))
-    }
-
-    /// Whether the hand carried the object during a skill's `phases` (from the start of
-    /// `grasp`): at some contact sample with at least two fingertips transmitting force, the
-    /// object is [`SegmentParams::min_carry_m`] or more from where it was when two fingertips
-    /// first transmitted force, and it moved with the hand: its displacement relative to the
-    /// hand's base is less than half its displacement in the world. An object the fingers
-    /// squeeze but cannot lift (too heavy, too small to hold, frictionless), one pushed or
-    /// knocked away, or one that only rocks in the fingers is not carried.
-    fn carried(&self, session: &Session, phases: &[PhaseSpan], params: &SegmentParams) -> bool {
-        let (Some(first), Some(last)) = (phases.first(), phases.last()) else {
-            return false;
+    /// The second pass, for the candidate skills the grid holds.
+    fn finish(self, metadata: &BTreeMap<String, String>, params: &SegmentParams) -> PassTwo {
+        let (t0, skills) = match self.grid.finish() {
+            None => (0, Vec::new()),
+            Some(g) => {
+                let object = object_params(metadata);
+                let skills = plan(&g, params)
+                    .into_iter()
+                    .map(|phases| SkillAcc::new(phases, object.clone(), metadata, params))
+                    .collect();
+                (g.t0, skills)
+            }
         };
-        let from = phases
-            .iter()
-            .find(|p| p.name == "grasp")
-            .map_or(first.start_ns, |p| p.start_ns);
-        let to = last.end_ns;
-        let mut reference: Option<(Vector, Vector)> = None;
-        for (t, c) in &session.contacts {
-            if *t < from || *t >= to || c.fingers.iter().filter(|f| f.in_contact).count() < 2 {
-                continue;
+        PassTwo {
+            t0,
+            skills,
+            first_open: 0,
+            last_contact: 0,
+            last_object: 0,
+        }
+    }
+}
+
+impl SessionVisitor for PassOne {
+    fn wants(&self) -> DecodeTopics {
+        DecodeTopics::SEGMENTATION
+    }
+    fn contacts(&mut self, t: u64, m: &Contacts) -> Result<(), RecordingError> {
+        self.grid.contacts(t, m);
+        Ok(())
+    }
+    fn object(&mut self, t: u64, m: &ObjectState) -> Result<(), RecordingError> {
+        self.grid.object(t, m);
+        Ok(())
+    }
+}
+
+/// Pass two: each candidate skill's accumulators, fed the samples of its time span.
+struct PassTwo {
+    /// Log time of the grid's first point: session time 0.
+    t0: u64,
+    skills: Vec<SkillAcc>,
+    /// Skills before this one have seen every sample they need.
+    first_open: usize,
+    /// Log times of the latest contact and object samples.
+    last_contact: u64,
+    last_object: u64,
+}
+
+impl PassTwo {
+    fn finish(self) -> Segmentation {
+        let t0 = self.t0;
+        let skills = self
+            .skills
+            .into_iter()
+            .filter_map(SkillAcc::finish)
+            .filter(|s| is_grasp(&s.parameters))
+            .map(|mut s| {
+                // Log times to session time: recorders need not start their clocks at 0 (ROS
+                // bags and most MCAP writers log epoch times).
+                for p in &mut s.phases {
+                    p.start_ns -= t0;
+                    p.end_ns -= t0;
+                }
+                s.parameters.source.start_ns -= t0;
+                s.parameters.source.end_ns -= t0;
+                s
+            })
+            .collect();
+        Segmentation { skills }
+    }
+}
+
+impl PassTwo {
+    /// Skips the skills that samples from here on cannot change.
+    fn close(&mut self) {
+        let t = self.last_contact.min(self.last_object);
+        while self.skills.get(self.first_open).is_some_and(|s| s.done(t)) {
+            self.first_open += 1;
+        }
+    }
+}
+
+impl SessionVisitor for PassTwo {
+    fn contacts(&mut self, t: u64, m: &Contacts) -> Result<(), RecordingError> {
+        self.last_contact = t;
+        for s in &mut self.skills[self.first_open..] {
+            s.contacts(t, m);
+        }
+        self.close();
+        Ok(())
+    }
+    fn object(&mut self, t: u64, m: &ObjectState) -> Result<(), RecordingError> {
+        self.last_object = t;
+        for s in &mut self.skills[self.first_open..] {
+            s.object(t, m);
+        }
+        self.close();
+        Ok(())
+    }
+    fn wants(&self) -> DecodeTopics {
+        DecodeTopics::SEGMENTATION
+    }
+    fn done(&self) -> bool {
+        self.first_open == self.skills.len()
+    }
+}
+
+/// Whether the hand carried the object during a skill, decided as the samples come: at some
+/// contact sample from the start of `grasp` to the skill's end with at least two fingertips
+/// transmitting force, the object (its last sample at or before that time) is
+/// [`SegmentParams::min_carry_m`] or more from where it was when two fingertips first
+/// transmitted force, and it moved with the hand: its displacement relative to the hand's base
+/// is less than half its displacement in the world. An object the fingers squeeze but cannot
+/// lift (too heavy, too small to hold, frictionless), one pushed or knocked away, or one that
+/// only rocks in the fingers is not carried.
+///
+/// Contacts and object samples come interleaved tick by tick in our files (a handful wait
+/// here); a file that writes one topic well ahead of the other makes the one ahead wait, up to
+/// the skill's length.
+struct CarryState {
+    from: u64,
+    to: u64,
+    min_carry_m: f64,
+    /// Contact samples (log times) waiting for the object's sample at or before them.
+    pending: std::collections::VecDeque<u64>,
+    /// Object samples that a contact sample to come may need: (log time, position in the
+    /// world, position in the hand), from the latest one at or before the later of `from` and
+    /// the last contact sample.
+    track: std::collections::VecDeque<(u64, Vector, Vector)>,
+    /// Log time of the latest contact sample.
+    last_contact: u64,
+    reference: Option<(Vector, Vector)>,
+    carried: bool,
+}
+
+impl CarryState {
+    fn new(phases: &[PhaseSpan], params: &SegmentParams) -> Self {
+        let first = phases.first().map_or(0, |p| p.start_ns);
+        CarryState {
+            from: phases
+                .iter()
+                .find(|p| p.name == Phase::Grasp)
+                .map_or(first, |p| p.start_ns),
+            to: phases.last().map_or(0, |p| p.end_ns),
+            min_carry_m: params.min_carry_m,
+            pending: std::collections::VecDeque::new(),
+            track: std::collections::VecDeque::new(),
+            last_contact: 0,
+            reference: None,
+            carried: false,
+        }
+    }
+
+    fn contacts(&mut self, t: u64, c: &Contacts) {
+        self.last_contact = t;
+        if !self.carried
+            && t >= self.from
+            && t < self.to
+            && c.fingers.iter().filter(|f| f.in_contact).count() >= 2
+        {
+            self.pending.push_back(t);
+        }
+        self.resolve(false);
+    }
+
+    fn object(&mut self, t: u64, o: &ObjectState) {
+        let (p, h) = (v3(&o.pose.position), v3(&o.pose_in_hand.position));
+        if self.carried || !p.iter().chain(h.iter()).all(|v| v.is_finite()) {
+            return;
+        }
+        self.track.push_back((t, p, h));
+        self.resolve(false);
+    }
+
+    /// Decides the waiting contact samples that an object sample after them (or, at the
+    /// `end`, the last one) has made decidable, then forgets the object samples no contact
+    /// sample to come can need.
+    fn resolve(&mut self, end: bool) {
+        while let Some(&tc) = self.pending.front() {
+            if self.carried {
+                self.pending.clear();
+                break;
             }
-            let Some((_, p, h)) = self.at(*t) else {
-                return false;
+            if !end && self.track.back().is_none_or(|s| s.0 <= tc) {
+                break;
+            }
+            while self.track.len() >= 2 && self.track[1].0 <= tc {
+                self.track.pop_front();
+            }
+            let Some(&(_, p, h)) = self.track.front() else {
+                break;
             };
-            match reference {
-                None => reference = Some((*p, *h)),
+            self.pending.pop_front();
+            match self.reference {
+                None => self.reference = Some((p, h)),
                 Some((p0, h0)) => {
                     let moved = (p - p0).norm();
-                    if moved >= params.min_carry_m && (h - h0).norm() < 0.5 * moved {
-                        return true;
+                    if moved >= self.min_carry_m && (h - h0).norm() < 0.5 * moved {
+                        self.carried = true;
                     }
                 }
             }
         }
-        false
+        if self.pending.is_empty() {
+            let keep_from = self.last_contact.max(self.from);
+            while self.track.len() >= 2 && self.track[1].0 <= keep_from {
+                self.track.pop_front();
+            }
+        }
+        if self.carried {
+            self.track.clear();
+        }
+    }
+
+    /// Whether nothing more can change the verdict once both topics reached `t`.
+    fn done(&self, t: u64) -> bool {
+        self.carried || (t >= self.to && self.pending.is_empty())
+    }
+
+    fn finish(mut self) -> bool {
+        self.resolve(true);
+        self.carried
     }
 }
 
@@ -947,7 +1283,7 @@ fn is_grasp(p: &SkillParameters) -> bool {
 /// runs past the next grasp's start. Each span is clipped to start where the previous phase
 /// ended; one left empty goes.
 fn well_formed(
-    skills_spans: Vec<Vec<(String, f64, f64)>>,
+    skills_spans: Vec<Vec<(Phase, f64, f64)>>,
     g: &Grid,
     last: f64,
 ) -> Vec<Vec<PhaseSpan>> {
@@ -985,35 +1321,14 @@ fn well_formed(
     skills
 }
 
-fn object_params(session: &Session) -> Option<ObjectParams> {
-    let o: ScenarioObject = serde_json::from_str(session.metadata.get("object")?).ok()?;
-    let m = o.mass;
-    let (size, inertia) = match o.shape.as_str() {
-        "sphere" => {
-            let r = o.radius?;
-            let i = 0.4 * m * r * r;
-            (vec![r], [i, i, i])
-        }
-        "box" => {
-            let h = o.half_extents?;
-            let [a, b, c] = h.map(|v| 4.0 * v * v);
-            (
-                h.to_vec(),
-                [m * (b + c) / 12.0, m * (a + c) / 12.0, m * (a + b) / 12.0],
-            )
-        }
-        "cylinder" => {
-            let (r, h) = (o.radius?, o.half_height?);
-            let ix = m * (3.0 * r * r + 4.0 * h * h) / 12.0;
-            (vec![r, h], [ix, ix, 0.5 * m * r * r])
-        }
-        _ => return None,
-    };
+fn object_params(metadata: &BTreeMap<String, String>) -> Option<ObjectParams> {
+    let o: ScenarioObject = serde_json::from_str(metadata.get("object")?).ok()?;
+    let shape = o.to_shape().ok()?;
     Some(ObjectParams {
         shape: o.shape,
-        size,
-        mass: m,
-        inertia,
+        size: shape.sizes(),
+        mass: o.mass,
+        inertia: shape.principal_inertia(o.mass),
         mu: o.mu,
         mu_torsion: o.mu_torsion,
     })
@@ -1027,100 +1342,221 @@ fn arr(v: &Vector) -> [f64; 3] {
     [v.x, v.y, v.z]
 }
 
-const HELD: [&str; 4] = ["lift", "hold", "transport", "place"];
+const HELD: [Phase; 4] = [Phase::Lift, Phase::Hold, Phase::Transport, Phase::Place];
 
-fn skill_parameters(
-    session: &Session,
-    phases: &[PhaseSpan],
-    params: &SegmentParams,
-) -> SkillParameters {
-    let object = object_params(session);
-    let mu = object.as_ref().map(|o| o.mu);
-    let start_ns = phases.first().map_or(0, |p| p.start_ns);
-    let end_ns = phases.last().map_or(0, |p| p.end_ns);
-    let grasp_start = phases
-        .iter()
-        .find(|p| p.name == "grasp")
-        .map_or(start_ns, |p| p.start_ns);
-    let grasp_end = phases
-        .iter()
-        .rev()
-        .find(|p| p.name == "release" || HELD.contains(&p.name.as_str()) || p.name == "grasp")
-        .map_or(end_ns, |p| p.end_ns);
-    let held_span = {
-        let h: Vec<&PhaseSpan> = phases
+/// A finger's accumulators over a skill.
+struct FingerAcc {
+    name: String,
+    steady_n: usize,
+    pos: Vector,
+    nrm: Vector,
+    /// Per phase index of the skill's phases: sums of the intensities and samples.
+    per_phase: Vec<([f64; 4], usize)>,
+    /// The grip profile at [`SegmentParams::profile_points`] evenly spaced times of the
+    /// grasp: each the normal force of the last sample at or before it (the first sample's
+    /// for times before it), filled as samples pass those times.
+    profile: Vec<f64>,
+    /// Profile points filled so far.
+    profile_next: usize,
+    /// The normal force of the latest sample.
+    latest_normal: Option<f64>,
+    slip: Option<u64>,
+}
+
+/// Pass two for one candidate skill: its parameters accumulated sample by sample, holding
+/// per finger its sums and grip profile, whatever the skill's length.
+struct SkillAcc {
+    phases: Vec<PhaseSpan>,
+    /// Log time of the skill's last phase's end.
+    end_ns: u64,
+    grasp_start: u64,
+    grasp_end: u64,
+    held_span: (u64, u64),
+    object: Option<ObjectParams>,
+    mu: Option<f64>,
+    source: SkillSource,
+    profile_times: Vec<f64>,
+    fingers: Vec<FingerAcc>,
+    steady_samples: usize,
+    internal: (f64, usize),
+    margin_n: f64,
+    margin_ratio: f64,
+    slips: Vec<SlipEvent>,
+    last_t: u64,
+    /// Index of the current phase.
+    pi: usize,
+    carry: CarryState,
+    /// The times of the object's key poses (sorted), and for each the first object sample at
+    /// or after it, filled as samples pass them; a time after the last sample takes the last.
+    key_times: Vec<u64>,
+    key_poses: Vec<Option<Isometry>>,
+    key_next: usize,
+    /// The first object sample at or after the grasp's start: the reference of the motion.
+    start_pose: Option<Isometry>,
+    last_object: Option<Isometry>,
+}
+
+impl SkillAcc {
+    fn new(
+        phases: Vec<PhaseSpan>,
+        object: Option<ObjectParams>,
+        metadata: &BTreeMap<String, String>,
+        params: &SegmentParams,
+    ) -> Self {
+        let mu = object.as_ref().map(|o| o.mu);
+        let start_ns = phases.first().map_or(0, |p| p.start_ns);
+        let end_ns = phases.last().map_or(0, |p| p.end_ns);
+        let grasp_start = phases
             .iter()
-            .filter(|p| HELD.contains(&p.name.as_str()))
+            .find(|p| p.name == Phase::Grasp)
+            .map_or(start_ns, |p| p.start_ns);
+        let grasp_end = phases
+            .iter()
+            .rev()
+            .find(|p| matches!(p.name, Phase::Release | Phase::Grasp) || HELD.contains(&p.name))
+            .map_or(end_ns, |p| p.end_ns);
+        let held_span = {
+            let h: Vec<&PhaseSpan> = phases.iter().filter(|p| HELD.contains(&p.name)).collect();
+            match (h.first(), h.last()) {
+                (Some(a), Some(b)) => (a.start_ns, b.end_ns),
+                _ => (grasp_start, grasp_end),
+            }
+        };
+        // Offsets of the grip profile's points from the grasp's start.
+        let span = (grasp_end.saturating_sub(grasp_start)).max(1) as f64;
+        let npts = params.profile_points.max(2);
+        let profile_times = (0..npts)
+            .map(|k| span * k as f64 / (npts - 1) as f64)
             .collect();
-        match (h.first(), h.last()) {
-            (Some(a), Some(b)) => (a.start_ns, b.end_ns),
-            _ => (grasp_start, grasp_end),
+        // The object's key poses: phase boundaries and every `keyframe_s` of the grasp.
+        let mut key_times: Vec<u64> = phases
+            .iter()
+            .flat_map(|p| [p.start_ns, p.end_ns])
+            .filter(|t| *t >= grasp_start && *t <= grasp_end)
+            .collect();
+        let step = (params.keyframe_s * 1e9).max(1e6) as u64;
+        let mut t = grasp_start;
+        while t < grasp_end {
+            key_times.push(t);
+            t += step;
         }
-    };
-    // Per finger accumulators.
-    struct Acc {
-        name: String,
-        steady_n: usize,
-        pos: Vector,
-        nrm: Vector,
-        /// Per phase index of `phases`: sums of the intensities and samples.
-        per_phase: Vec<([f64; 4], usize)>,
-        profile_t: Vec<(u64, f64)>,
-        slip: Option<u64>,
+        key_times.sort_unstable();
+        key_times.dedup();
+        let source = SkillSource {
+            scenario: metadata.get("scenario").cloned().unwrap_or_default(),
+            seed: metadata.get("seed").and_then(|s| s.parse().ok()),
+            metadata: metadata
+                .iter()
+                .filter(|(k, _)| matches!(k.as_str(), "hand" | "source" | "started_at"))
+                .map(|(k, v)| (k.clone(), v.clone()))
+                .collect(),
+            start_ns,
+            end_ns,
+        };
+        SkillAcc {
+            end_ns,
+            grasp_start,
+            grasp_end,
+            held_span,
+            mu,
+            object,
+            source,
+            profile_times,
+            fingers: Vec::new(),
+            steady_samples: 0,
+            internal: (0.0, 0),
+            margin_n: f64::INFINITY,
+            margin_ratio: f64::INFINITY,
+            slips: Vec::new(),
+            last_t: grasp_start,
+            pi: 0,
+            carry: CarryState::new(&phases, params),
+            key_poses: vec![None; key_times.len()],
+            key_times,
+            key_next: 0,
+            start_pose: None,
+            last_object: None,
+            phases,
+        }
     }
-    let mut accs: Vec<Acc> = Vec::new();
-    let mut steady_samples = 0usize;
-    let mut internal = (0.0, 0usize);
-    let mut margin_n = f64::INFINITY;
-    let mut margin_ratio = f64::INFINITY;
-    let mut slips = Vec::new();
-    let mut last_t = grasp_start;
-    let mut pi = 0usize;
-    for (t, c) in &session.contacts {
-        if *t < grasp_start || *t >= grasp_end {
-            continue;
+
+    /// Whether samples from `t` on can change nothing.
+    fn done(&self, t: u64) -> bool {
+        t > self.end_ns
+            && self.carry.done(t)
+            && self.key_next == self.key_times.len()
+            && self.start_pose.is_some()
+    }
+
+    fn object(&mut self, t: u64, o: &ObjectState) {
+        self.carry.object(t, o);
+        let b = iso(&o.pose);
+        if self.start_pose.is_none() && t >= self.grasp_start {
+            self.start_pose = Some(b);
         }
-        last_t = *t;
-        let steady = *t >= held_span.0 && *t < held_span.1;
+        while self.key_next < self.key_times.len() && self.key_times[self.key_next] <= t {
+            self.key_poses[self.key_next] = Some(b);
+            self.key_next += 1;
+        }
+        self.last_object = Some(b);
+    }
+
+    fn contacts(&mut self, t: u64, c: &Contacts) {
+        self.carry.contacts(t, c);
+        if t < self.grasp_start || t >= self.grasp_end {
+            return;
+        }
+        self.last_t = t;
+        let steady = t >= self.held_span.0 && t < self.held_span.1;
         if steady {
-            steady_samples += 1;
+            self.steady_samples += 1;
         }
         // Phases are in time order: advance the current one.
-        while pi + 1 < phases.len() && *t >= phases[pi].end_ns {
-            pi += 1;
+        while self.pi + 1 < self.phases.len() && t >= self.phases[self.pi].end_ns {
+            self.pi += 1;
         }
-        let phase = phases.get(pi).map_or("", |p| p.name.as_str());
+        let pi = self.pi;
+        let phase = self.phases.get(pi).map(|p| p.name);
+        let offset = t.saturating_sub(self.grasp_start) as f64;
         let mut sum_n = 0.0;
         for (fi, f) in c.fingers.iter().enumerate() {
             // Fingers come in the same order every tick; look the name up only if not.
-            let found = match accs.get(fi) {
+            let found = match self.fingers.get(fi) {
                 Some(a) if a.name == f.name => Some(fi),
-                _ => accs.iter().position(|a| a.name == f.name),
+                _ => self.fingers.iter().position(|a| a.name == f.name),
             };
             let a = match found {
-                Some(i) => &mut accs[i],
+                Some(i) => &mut self.fingers[i],
                 None => {
-                    accs.push(Acc {
+                    self.fingers.push(FingerAcc {
                         name: f.name.clone(),
                         steady_n: 0,
                         pos: Vector::zeros(),
                         nrm: Vector::zeros(),
-                        per_phase: vec![([0.0; 4], 0); phases.len()],
-                        profile_t: Vec::new(),
+                        per_phase: vec![([0.0; 4], 0); self.phases.len()],
+                        profile: vec![0.0; self.profile_times.len()],
+                        profile_next: 0,
+                        latest_normal: None,
                         slip: None,
                     });
-                    accs.last_mut().expect("pushed")
+                    self.fingers.last_mut().expect("pushed")
                 }
             };
             let i = &f.intensity;
             let normal = if f.in_contact { i.z.max(0.0) } else { 0.0 };
-            a.profile_t.push((*t, normal));
+            while a.profile_next < self.profile_times.len()
+                && self.profile_times[a.profile_next] < offset
+            {
+                a.profile[a.profile_next] = a.latest_normal.unwrap_or(normal);
+                a.profile_next += 1;
+            }
+            a.latest_normal = Some(normal);
             if f.slip && f.touching {
-                a.slip.get_or_insert(*t);
+                a.slip.get_or_insert(t);
             } else if let Some(s) = a.slip.take() {
                 if t - s >= 2_000_000 {
-                    slips.push(SlipEvent {
-                        time_s: (s - grasp_start) as f64 * 1e-9,
+                    self.slips.push(SlipEvent {
+                        time_s: (s - self.grasp_start) as f64 * 1e-9,
                         finger: f.name.clone(),
                         duration_s: (t - s) as f64 * 1e-9,
                     });
@@ -1144,249 +1580,235 @@ fn skill_parameters(
             }
             // The friction margin over the held part (closing and opening are excluded: there
             // the normal force is near zero by intent).
-            if let (Some(mu), true) = (mu, steady && f.in_contact && i.z > 0.05) {
+            if let (Some(mu), true) = (self.mu, steady && f.in_contact && i.z > 0.05) {
                 let ct = i.x.hypot(i.y);
                 let m = mu * i.z - ct;
-                margin_n = margin_n.min(m);
+                self.margin_n = self.margin_n.min(m);
                 if mu * i.z > 1e-6 {
-                    margin_ratio = margin_ratio.min(m / (mu * i.z));
+                    self.margin_ratio = self.margin_ratio.min(m / (mu * i.z));
                 }
             }
         }
-        if steady && HELD.contains(&phase) {
-            internal.0 += sum_n;
-            internal.1 += 1;
+        if steady && phase.is_some_and(|p| HELD.contains(&p)) {
+            self.internal.0 += sum_n;
+            self.internal.1 += 1;
         }
     }
-    for a in &mut accs {
-        if let Some(s) = a.slip.take() {
-            slips.push(SlipEvent {
-                time_s: (s - grasp_start) as f64 * 1e-9,
-                finger: a.name.clone(),
-                duration_s: (last_t - s) as f64 * 1e-9,
-            });
+
+    /// The skill, if the hand carried the object.
+    fn finish(mut self) -> Option<Skill> {
+        let carried = std::mem::replace(
+            &mut self.carry,
+            CarryState::new(&[], &SegmentParams::default()),
+        )
+        .finish();
+        if !carried {
+            return None;
         }
-    }
-    // One event per finger for slips closer than 20 ms.
-    slips.sort_by(|a, b| a.finger.cmp(&b.finger).then(a.time_s.total_cmp(&b.time_s)));
-    let mut merged: Vec<SlipEvent> = Vec::new();
-    for e in slips {
-        match merged.last_mut() {
-            Some(m) if m.finger == e.finger && e.time_s - (m.time_s + m.duration_s) < 0.02 => {
-                m.duration_s = (e.time_s + e.duration_s - m.time_s).max(m.duration_s);
-            }
-            _ => merged.push(e),
-        }
-    }
-    let mut slips = merged;
-    slips.sort_by(|a, b| a.time_s.total_cmp(&b.time_s));
-    // Contacts: fingers touching for at least 30 % of the steady part.
-    let min_n = (steady_samples as f64 * 0.3).max(1.0) as usize;
-    let span = (grasp_end.saturating_sub(grasp_start)).max(1) as f64;
-    let npts = params.profile_points.max(2);
-    let contacts: Vec<ContactParams> = accs
-        .iter()
-        .filter(|a| a.steady_n >= min_n && a.nrm.norm() > 0.0)
-        .map(|a| {
-            let pos = a.pos / a.steady_n as f64;
-            let nrm = a.nrm.normalize();
-            let mut grip_profile = Vec::with_capacity(npts);
-            let mut j = 0;
-            for k in 0..npts {
-                // Offsets from the grasp's start: log times need not start at 0.
-                let t = span * k as f64 / (npts - 1) as f64;
-                while j + 1 < a.profile_t.len()
-                    && (a.profile_t[j + 1].0.saturating_sub(grasp_start) as f64) <= t
-                {
-                    j += 1;
-                }
-                grip_profile.push(a.profile_t.get(j).map_or(0.0, |p| p.1));
-            }
-            ContactParams {
-                finger: a.name.clone(),
-                position_b: arr(&pos),
-                normal_b: arr(&nrm),
-                mean_intensity: {
-                    let mut m: BTreeMap<String, ([f64; 4], usize)> = BTreeMap::new();
-                    for (p, (s, c)) in phases.iter().zip(&a.per_phase) {
-                        let e = m.entry(p.name.clone()).or_insert(([0.0; 4], 0));
-                        for k in 0..4 {
-                            e.0[k] += s[k];
-                        }
-                        e.1 += c;
-                    }
-                    m.into_iter()
-                        .filter(|(_, (_, c))| *c > 0)
-                        .map(|(k, (s, c))| (k, s.map(|v| v / c as f64)))
-                        .collect()
-                },
-                grip_profile,
-            }
+        let parameters = self.parameters();
+        Some(Skill {
+            phases: self.phases,
+            parameters,
         })
-        .collect();
-    // Quality on the mean contacts.
-    let quality = match (&object, contacts.len()) {
-        (Some(o), n) if n > 0 => {
-            let frames: Vec<ContactFrame> = contacts
-                .iter()
-                .map(|c| ContactFrame::from_normal(c.position_b.into(), c.normal_b.into()))
-                .collect();
-            let qp = QualityParams {
-                torque_scale: Some(o.size.iter().map(|v| v * v).sum::<f64>().sqrt()),
-                ..QualityParams::default()
-            };
-            let fr = Friction {
-                mu: o.mu,
-                mu_torsion: o.mu_torsion,
-            };
-            grasp_quality(&frames, ContactModel::SoftFinger, &fr, &qp)
-                .ok()
-                .map(|q| QualityParamsOut {
-                    epsilon: q.epsilon,
-                    volume: q.volume,
-                    force_closure: q.force_closure,
-                })
-        }
-        _ => None,
-    };
-    // Virtual fingers: greedy groups of normals within 60° of the group's first.
-    let mut groups: Vec<Vector> = Vec::new();
-    for c in &contacts {
-        let nv = Vector::from(c.normal_b);
-        if !groups.iter().any(|g| g.dot(&nv) > 0.5) {
-            groups.push(nv);
-        }
     }
-    let grasp_type = GraspType {
-        label: if contacts.len() <= 3 {
-            "precision"
-        } else {
-            "power"
-        }
-        .into(),
-        opposing_virtual_fingers: groups.len(),
-    };
-    // Object motion relative to B at grasp start.
-    let mut times: Vec<u64> = phases
-        .iter()
-        .flat_map(|p| [p.start_ns, p.end_ns])
-        .filter(|t| *t >= grasp_start && *t <= grasp_end)
-        .collect();
-    let step = (params.keyframe_s * 1e9).max(1e6) as u64;
-    let mut t = grasp_start;
-    while t < grasp_end {
-        times.push(t);
-        t += step;
-    }
-    times.sort_unstable();
-    times.dedup();
-    let obj_at = |t: u64| -> Option<Isometry> {
-        let i = session.object.partition_point(|(ts, _)| *ts < t);
-        let i = i.min(session.object.len().checked_sub(1)?);
-        Some(iso(&session.object[i].1.pose))
-    };
-    let mut motion = Vec::new();
-    let (mut lift_h, mut horiz, mut max_rot) = (0.0f64, 0.0f64, 0.0f64);
-    if let Some(b0) = obj_at(grasp_start) {
-        for &t in &times {
-            if let Some(b) = obj_at(t) {
-                let rel = b0.inverse() * b;
-                let d = b.translation.vector - b0.translation.vector;
-                lift_h = lift_h.max(d.z);
-                horiz = horiz.max(d.x.hypot(d.y));
-                max_rot = max_rot.max(rel.rotation.angle());
-                motion.push(KeyPose {
-                    time_s: (t - grasp_start) as f64 * 1e-9,
-                    position: arr(&rel.translation.vector),
-                    rotation: arr(&rel.rotation.scaled_axis()),
+
+    fn parameters(&mut self) -> SkillParameters {
+        let (phases, object, mu) = (&self.phases, self.object.clone(), self.mu);
+        let grasp_start = self.grasp_start;
+        let last_t = self.last_t;
+        let mut slips = std::mem::take(&mut self.slips);
+        for a in &mut self.fingers {
+            if let Some(s) = a.slip.take() {
+                slips.push(SlipEvent {
+                    time_s: (s - grasp_start) as f64 * 1e-9,
+                    finger: a.name.clone(),
+                    duration_s: (last_t - s) as f64 * 1e-9,
                 });
             }
+            // Profile points after the last sample: its value.
+            for k in a.profile_next..a.profile.len() {
+                a.profile[k] = a.latest_normal.unwrap_or(0.0);
+            }
         }
-    }
-    let mut phase_durations = BTreeMap::new();
-    for p in phases {
-        *phase_durations.entry(p.name.clone()).or_insert(0.0) +=
-            (p.end_ns - p.start_ns) as f64 * 1e-9;
-    }
-    let internal_force_n = if internal.1 > 0 {
-        internal.0 / internal.1 as f64
-    } else {
-        0.0
-    };
-    let fin = |v: f64| if v.is_finite() { v } else { 0.0 };
-    let (friction_margin_n, friction_margin_ratio) = (fin(margin_n), fin(margin_ratio));
-    let mean_abs_n = {
-        let mut s = Vector::zeros();
-        for c in &contacts {
-            s += Vector::from(c.normal_b).abs();
+        let accs = &self.fingers;
+        let steady_samples = self.steady_samples;
+        let internal = self.internal;
+        let (margin_n, margin_ratio) = (self.margin_n, self.margin_ratio);
+        // One event per finger for slips closer than 20 ms.
+        slips.sort_by(|a, b| a.finger.cmp(&b.finger).then(a.time_s.total_cmp(&b.time_s)));
+        let mut merged: Vec<SlipEvent> = Vec::new();
+        for e in slips {
+            match merged.last_mut() {
+                Some(m) if m.finger == e.finger && e.time_s - (m.time_s + m.duration_s) < 0.02 => {
+                    m.duration_s = (e.time_s + e.duration_s - m.time_s).max(m.duration_s);
+                }
+                _ => merged.push(e),
+            }
         }
-        if contacts.is_empty() {
-            s
-        } else {
-            s / contacts.len() as f64
-        }
-    };
-    let shape = object.as_ref().map_or("", |o| o.shape.as_str());
-    let weight = object.as_ref().map_or(1.0, |o| o.mass * 9.81);
-    let q = quality.as_ref();
-    let raw = [
-        object.as_ref().map_or(0.0, |o| o.mass.ln()),
-        mu.unwrap_or(0.0),
-        contacts.len() as f64,
-        q.map_or(0.0, |q| q.epsilon),
-        q.map_or(0.0, |q| q.volume.max(0.0).powf(1.0 / 6.0)),
-        internal_force_n / weight,
-        phase_durations.get("hold").copied().unwrap_or(0.0),
-        lift_h,
-        horiz,
-        max_rot,
-        mean_abs_n.x,
-        mean_abs_n.y,
-        mean_abs_n.z,
-        (shape == "sphere") as u8 as f64,
-        (shape == "box") as u8 as f64,
-        (shape == "cylinder") as u8 as f64,
-    ];
-    let feature = raw.map(|v| fin(v) as f32);
-    let source = SkillSource {
-        scenario: session.scenario().unwrap_or("").to_owned(),
-        seed: session.metadata.get("seed").and_then(|s| s.parse().ok()),
-        metadata: session
-            .metadata
+        let mut slips = merged;
+        slips.sort_by(|a, b| a.time_s.total_cmp(&b.time_s));
+        // Contacts: fingers touching for at least 30 % of the steady part.
+        let min_n = (steady_samples as f64 * 0.3).max(1.0) as usize;
+        let contacts: Vec<ContactParams> = accs
             .iter()
-            .filter(|(k, _)| matches!(k.as_str(), "hand" | "source" | "started_at"))
-            .map(|(k, v)| (k.clone(), v.clone()))
-            .collect(),
-        start_ns,
-        end_ns,
-    };
-    SkillParameters {
-        object,
-        contact_model: "soft_finger".into(),
-        contact_count: contacts.len(),
-        contacts,
-        internal_force_n,
-        friction_margin_n,
-        friction_margin_ratio,
-        motion,
-        phase_durations,
-        slip_events: slips,
-        quality,
-        grasp_type,
-        source,
-        feature,
+            .filter(|a| a.steady_n >= min_n && a.nrm.norm() > 0.0)
+            .map(|a| {
+                let pos = a.pos / a.steady_n as f64;
+                let nrm = a.nrm.normalize();
+                let grip_profile = a.profile.clone();
+                ContactParams {
+                    finger: a.name.clone(),
+                    position_b: arr(&pos),
+                    normal_b: arr(&nrm),
+                    mean_intensity: {
+                        let mut m: BTreeMap<Phase, ([f64; 4], usize)> = BTreeMap::new();
+                        for (p, (s, c)) in phases.iter().zip(&a.per_phase) {
+                            let e = m.entry(p.name).or_insert(([0.0; 4], 0));
+                            for k in 0..4 {
+                                e.0[k] += s[k];
+                            }
+                            e.1 += c;
+                        }
+                        m.into_iter()
+                            .filter(|(_, (_, c))| *c > 0)
+                            .map(|(k, (s, c))| (k, s.map(|v| v / c as f64)))
+                            .collect()
+                    },
+                    grip_profile,
+                }
+            })
+            .collect();
+        // Quality on the mean contacts.
+        let quality = match (&object, contacts.len()) {
+            (Some(o), n) if n > 0 => {
+                let frames: Vec<ContactFrame> = contacts
+                    .iter()
+                    .map(|c| ContactFrame::from_normal(c.position_b.into(), c.normal_b.into()))
+                    .collect();
+                let qp = QualityParams {
+                    torque_scale: Some(o.size.iter().map(|v| v * v).sum::<f64>().sqrt()),
+                    ..QualityParams::default()
+                };
+                let fr = Friction {
+                    mu: o.mu,
+                    mu_torsion: o.mu_torsion,
+                };
+                grasp_quality(&frames, ContactModel::SoftFinger, &fr, &qp)
+                    .ok()
+                    .map(|q| QualityParamsOut {
+                        epsilon: q.epsilon,
+                        volume: q.volume,
+                        force_closure: q.force_closure,
+                    })
+            }
+            _ => None,
+        };
+        // Virtual fingers: greedy groups of normals within 60° of the group's first.
+        let mut groups: Vec<Vector> = Vec::new();
+        for c in &contacts {
+            let nv = Vector::from(c.normal_b);
+            if !groups.iter().any(|g| g.dot(&nv) > 0.5) {
+                groups.push(nv);
+            }
+        }
+        let grasp_type = GraspType {
+            label: if contacts.len() <= 3 {
+                "precision"
+            } else {
+                "power"
+            }
+            .into(),
+            opposing_virtual_fingers: groups.len(),
+        };
+        // Object motion relative to B at grasp start: the first object sample at or after each
+        // key time (the last sample for a key time after it).
+        let last_object = self.last_object;
+        let obj_at = |k: usize| self.key_poses[k].or(last_object);
+        let mut motion = Vec::new();
+        let (mut lift_h, mut horiz, mut max_rot) = (0.0f64, 0.0f64, 0.0f64);
+        if let Some(b0) = self.start_pose.or(last_object) {
+            for (k, &t) in self.key_times.iter().enumerate() {
+                if let Some(b) = obj_at(k) {
+                    let rel = b0.inverse() * b;
+                    let d = b.translation.vector - b0.translation.vector;
+                    lift_h = lift_h.max(d.z);
+                    horiz = horiz.max(d.x.hypot(d.y));
+                    max_rot = max_rot.max(rel.rotation.angle());
+                    motion.push(KeyPose {
+                        time_s: (t - grasp_start) as f64 * 1e-9,
+                        position: arr(&rel.translation.vector),
+                        rotation: arr(&rel.rotation.scaled_axis()),
+                    });
+                }
+            }
+        }
+        let mut phase_durations = BTreeMap::new();
+        for p in phases {
+            *phase_durations.entry(p.name).or_insert(0.0) += (p.end_ns - p.start_ns) as f64 * 1e-9;
+        }
+        let internal_force_n = if internal.1 > 0 {
+            internal.0 / internal.1 as f64
+        } else {
+            0.0
+        };
+        let fin = |v: f64| if v.is_finite() { v } else { 0.0 };
+        let (friction_margin_n, friction_margin_ratio) = (fin(margin_n), fin(margin_ratio));
+        let mean_abs_n = {
+            let mut s = Vector::zeros();
+            for c in &contacts {
+                s += Vector::from(c.normal_b).abs();
+            }
+            if contacts.is_empty() {
+                s
+            } else {
+                s / contacts.len() as f64
+            }
+        };
+        let shape = object.as_ref().map(|o| o.shape);
+        let weight = object.as_ref().map_or(1.0, |o| o.mass * 9.81);
+        let q = quality.as_ref();
+        let raw = [
+            object.as_ref().map_or(0.0, |o| o.mass.ln()),
+            mu.unwrap_or(0.0),
+            contacts.len() as f64,
+            q.map_or(0.0, |q| q.epsilon),
+            q.map_or(0.0, |q| q.volume.max(0.0).powf(1.0 / 6.0)),
+            internal_force_n / weight,
+            phase_durations.get(&Phase::Hold).copied().unwrap_or(0.0),
+            lift_h,
+            horiz,
+            max_rot,
+            mean_abs_n.x,
+            mean_abs_n.y,
+            mean_abs_n.z,
+            (shape == Some(ShapeKind::Sphere)) as u8 as f64,
+            (shape == Some(ShapeKind::Box)) as u8 as f64,
+            (shape == Some(ShapeKind::Cylinder)) as u8 as f64,
+        ];
+        let feature = raw.map(|v| fin(v) as f32);
+        let source = self.source.clone();
+        SkillParameters {
+            object,
+            contact_model: ContactModel::SoftFinger,
+            contact_count: contacts.len(),
+            contacts,
+            internal_force_n,
+            friction_margin_n,
+            friction_margin_ratio,
+            motion,
+            phase_durations,
+            slip_events: slips,
+            quality,
+            grasp_type,
+            source,
+            feature,
+        }
     }
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    #[test]
-    fn ten_to_ninety_percent_of_a_minimum_jerk_move_is_about_half_its_duration() {
-        let t = min_jerk_tau(0.1);
-        assert!((1.0 - 2.0 * t - 0.507).abs() < 0.01, "{t}");
-    }
 
     #[test]
     fn a_phase_found_exactly_scores_zero_error_and_full_recall() {
@@ -1405,7 +1827,7 @@ mod tests {
         let found: Vec<PhaseSpan> = truth
             .iter()
             .map(|p| PhaseSpan {
-                name: p.name.clone(),
+                name: p.name.parse().unwrap(),
                 start_ns: p.start_ns,
                 end_ns: p.end_ns,
             })

@@ -163,10 +163,16 @@ fn a_34_kb_file_of_zstd_zeros_that_claims_a_gib_is_refused_naming_the_ratio() {
         let bytes = bomb(n, 64 * MIB, 64 * MIB as u64, compression);
         let e = read_session_bytes(&bytes, &ReadLimits::default()).unwrap_err();
         assert!(expands_too_much(&e, bytes.len()), "{compression:?}: {e}");
-        // The same through the session reader (uploads, `icms segment`).
+        // The session reader (uploads, `icms segment`) streams: it refuses the first problem
+        // in file order, the ratio or, where the first chunk is within it (lz4's 4 chunks),
+        // that chunk's content, before the chunk that crosses the ratio is decompressed.
         let e = services::session::read_session_bytes(&bytes, "bomb", &ReadLimits::default())
             .unwrap_err();
-        assert!(expands_too_much(&e, bytes.len()), "{compression:?}: {e}");
+        assert!(
+            expands_too_much(&e, bytes.len())
+                || matches!(&e, RecordingError::InvalidJson { index: 0, .. }),
+            "{compression:?}: {e}"
+        );
     }
 }
 

@@ -8,7 +8,7 @@ use services::replay::{
     load_builtin_hand, load_hand_from_texts, replay_skill, skill_spec_from_json, LoadedHand,
     ReplaySource, REPLAY_METADATA,
 };
-use services::segmentation::{segment, SegmentParams};
+use services::segmentation::{segment, SegmentParams, Skill};
 use services::session::{
     read_session, record_simulation, TOPIC_JOINT_STATES, TOPIC_SCENE, TOPIC_TF,
 };
@@ -26,6 +26,12 @@ fn recorded_skill(scenario: &str) -> SkillSpec {
     let session = read_session(&path).unwrap();
     let seg = segment(&session, &SegmentParams::default());
     let json = serde_json::to_value(&seg.skills[0]).unwrap();
+    // The JSON reads back into segmentation's own types, unchanged.
+    assert_eq!(Skill::from_json(&json).unwrap(), seg.skills[0]);
+    assert_eq!(
+        serde_json::from_value::<Skill>(json.clone()).unwrap(),
+        seg.skills[0]
+    );
     skill_spec_from_json(&json, scenario).unwrap()
 }
 
@@ -259,4 +265,73 @@ fn a_skill_file_with_phases_longer_than_an_hour_or_a_far_key_pose_is_refused_nam
     ]);
     let e = run(&far).unwrap_err().to_string();
     assert!(e.contains("skill.motion[1]"), "{e}");
+}
+
+/// A hand-written skill with only what replay needs (the form `icms replay --skill FILE`
+/// takes), with `edit` applied.
+fn hand_written_skill(edit: impl FnOnce(&mut serde_json::Value)) -> serde_json::Value {
+    let mut skill = serde_json::json!({
+        "phases": [
+            {"name": "approach", "start_ns": 0, "end_ns": 500_000_000u64},
+            {"name": "grasp", "start_ns": 500_000_000u64, "end_ns": 1_000_000_000u64},
+            {"name": "lift", "start_ns": 1_000_000_000u64, "end_ns": 1_500_000_000u64}
+        ],
+        "object": {"shape": "box", "size": [0.025, 0.025, 0.04], "mass": 0.2, "mu": 0.8},
+        "contact_model": "soft_finger",
+        "contacts": [
+            {"position_b": [0.025, 0.0, 0.0], "normal_b": [-1.0, 0.0, 0.0]},
+            {"position_b": [-0.025, 0.0, 0.0], "normal_b": [1.0, 0.0, 0.0]}
+        ]
+    });
+    edit(&mut skill);
+    skill
+}
+
+#[test]
+fn a_skill_with_an_unknown_shape_contact_model_or_phase_is_refused_naming_the_field() {
+    let spec = skill_spec_from_json(&hand_written_skill(|_| {}), "skill.json").unwrap();
+    assert_eq!(
+        spec.shape,
+        dfs_core::object::Shape::Box {
+            half_extents: [0.025, 0.025, 0.04]
+        }
+    );
+    assert_eq!(spec.friction.mu_torsion, 0.0, "mu_torsion defaults to 0");
+    type Edit = fn(&mut serde_json::Value);
+    let cases: [(&str, Edit, &str); 5] = [
+        (
+            "shape",
+            |s| s["object"]["shape"] = "torus".into(),
+            "skill.object.shape: unknown shape \"torus\"; expected one of sphere, box, cylinder",
+        ),
+        (
+            "contact model",
+            |s| s["contact_model"] = "sticky".into(),
+            "skill.contact_model: unknown contact model \"sticky\"; expected one of \
+             frictionless, point_with_friction, soft_finger",
+        ),
+        (
+            "phase",
+            |s| s["phases"][1]["name"] = "juggle".into(),
+            "skill.phases[1].name: unknown phase \"juggle\"; expected one of approach, preshape",
+        ),
+        (
+            "sizes of another shape",
+            |s| s["object"]["size"] = serde_json::json!([0.03]),
+            "skill.object: invalid object.size: a box takes [half extent x, y, z] (m), got 1 values",
+        ),
+        (
+            "missing contacts",
+            |s| {
+                s.as_object_mut().unwrap().remove("contacts");
+            },
+            "skill: missing field `contacts`",
+        ),
+    ];
+    for (what, edit, message) in cases {
+        let e = skill_spec_from_json(&hand_written_skill(edit), "skill.json")
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains(message), "{what}: {e}");
+    }
 }

@@ -545,7 +545,7 @@ async fn a_data_base_from_before_versions_is_migrated_to_version_0_and_brought_u
         .bind(&rel)
         .bind(session_meta.scenario.as_deref())
         .bind(&session_meta.hand)
-        .bind(&session_meta.object_shape)
+        .bind(session_meta.object_shape.to_string())
         .bind(session_meta.duration_ns as i64)
         .bind(serde_json::to_string(&session_meta).unwrap())
         .execute(&mut conn)

@@ -77,11 +77,7 @@ fn box_pinch_lift_finds_every_phase_in_order_near_the_ground_truth() {
     let s = session("box-pinch-lift", 1, None);
     let seg = segment(&s, &SegmentParams::default());
     assert_eq!(seg.skills.len(), 1, "{}", describe(&seg, &s));
-    let names: Vec<&str> = seg.skills[0]
-        .phases
-        .iter()
-        .map(|p| p.name.as_str())
-        .collect();
+    let names: Vec<&str> = seg.skills[0].phases.iter().map(|p| p.name.name()).collect();
     let truth: Vec<&str> = s.phases.iter().map(|p| p.name.as_str()).collect();
     assert_eq!(names, truth, "{}", describe(&seg, &s));
     let sc = score(&found(&seg), &s.phases);

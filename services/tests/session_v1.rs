@@ -23,7 +23,7 @@ fn a_v1_session_reads_segments_and_ingests() {
     let seg = segment(&session, &SegmentParams::default());
     assert_eq!(seg.skills.len(), 1);
     let skill = &seg.skills[0];
-    let names: Vec<&str> = skill.phases.iter().map(|p| p.name.as_str()).collect();
+    let names: Vec<&str> = skill.phases.iter().map(|p| p.name.name()).collect();
     assert_eq!(
         names,
         ["approach", "grasp", "lift", "hold", "place", "release", "retreat"]
@@ -39,7 +39,7 @@ fn a_v1_session_reads_segments_and_ingests() {
 
     let bytes = std::fs::read(fixture()).unwrap();
     let (meta, skills) = services::ingest::analyse(&bytes, "session-v1.mcap").unwrap();
-    assert_eq!(meta.object_shape, "sphere");
+    assert_eq!(meta.object_shape.to_string(), "sphere");
     assert_eq!(skills.len(), 1);
     assert_eq!(skills[0].contact_count, 2);
 }

@@ -112,7 +112,10 @@ async fn replays_are_stored_with_their_blob_and_go_with_their_skill_or_session()
         .await
         .unwrap();
     assert!(!a.success);
-    assert_eq!(a.failure_reason.as_deref(), Some("unreachable"));
+    assert_eq!(
+        a.failure_reason,
+        Some(dfs_core::replay::FailureReason::Unreachable)
+    );
     assert_eq!(a.report["hand"], "gripper");
     assert_eq!(a.size_bytes, 5000);
     assert_eq!(store.get_replay(a.id).await.unwrap(), a);

@@ -4,8 +4,12 @@ mod store_common;
 
 use std::collections::HashSet;
 
+use dfs_core::contact::ContactModel;
+use dfs_core::scenario::Phase;
 use services::store::bench::generate_synthetic;
-use services::store::{Skill, SkillQuery, SortField, SortKey, SortOrder, Store, StoreError};
+use services::store::{
+    ObjectShape, Skill, SkillQuery, SortField, SortKey, SortOrder, Store, StoreError,
+};
 
 /// Every skill of the store, read one page at a time.
 async fn walk(store: &Store, q: &SkillQuery) -> Vec<Skill> {
@@ -73,7 +77,7 @@ async fn filters_sorts_and_cursors_walk_every_matching_skill_exactly_once() {
     let filters = vec![
         SkillQuery::default(),
         SkillQuery {
-            object_shape: Some("box".into()),
+            object_shape: Some("box".parse().unwrap()),
             ..SkillQuery::default()
         },
         SkillQuery {
@@ -88,23 +92,23 @@ async fn filters_sorts_and_cursors_walk_every_matching_skill_exactly_once() {
             ..SkillQuery::default()
         },
         SkillQuery {
-            contact_model: Some("soft_finger".into()),
+            contact_model: Some("soft_finger".parse().unwrap()),
             grasp_type: Some("power-3vf".into()),
             ..SkillQuery::default()
         },
         SkillQuery {
             min_quality: Some(0.4),
-            object_shape: Some("sphere".into()),
+            object_shape: Some("sphere".parse().unwrap()),
             ..SkillQuery::default()
         },
         SkillQuery {
-            phase: Some("lift".into()),
+            phase: Some("lift".parse().unwrap()),
             phase_min_s: Some(0.5),
             phase_max_s: Some(0.7),
             ..SkillQuery::default()
         },
         SkillQuery {
-            phase: Some("retreat".into()),
+            phase: Some("retreat".parse().unwrap()),
             ..SkillQuery::default()
         },
         SkillQuery {
@@ -260,28 +264,37 @@ async fn out_of_range_queries_are_invalid() {
             "{q:?}"
         );
     }
-    // A value no skill can have is a typo, not an empty page: the error names the filter.
-    for (field, value) in [
-        ("shape", "torus"),
-        ("shape", "Sphere"),
-        ("contact_model", "magic"),
-        ("phase", "juggle"),
-        ("grasp_type", "pinch"),
-        ("grasp_type", "power-xvf"),
-    ] {
-        let mut q = SkillQuery::default();
-        let v = Some(value.to_owned());
-        match field {
-            "shape" => q.object_shape = v,
-            "contact_model" => q.contact_model = v,
-            "phase" => q.phase = v,
-            _ => q.grasp_type = v,
-        }
+    // A value no skill can have is a typo, not an empty page: the error names the filter. A
+    // shape, contact model or phase is typed, so a bad one is refused where it is parsed.
+    for value in ["pinch", "power-xvf"] {
+        let q = SkillQuery {
+            grasp_type: Some(value.to_owned()),
+            ..SkillQuery::default()
+        };
         match store.query_skills(&q).await {
-            Err(StoreError::InvalidQuery(m)) => assert!(m.starts_with(field), "{m}"),
+            Err(StoreError::InvalidQuery(m)) => assert!(m.starts_with("grasp_type"), "{m}"),
             other => panic!("{q:?} gave {other:?}"),
         }
     }
+    for (value, message) in [
+        (
+            "torus",
+            "unknown shape \"torus\"; expected one of sphere, box, cylinder, unknown",
+        ),
+        ("Sphere", "unknown shape \"Sphere\""),
+    ] {
+        let e = value.parse::<ObjectShape>().unwrap_err().to_string();
+        assert!(e.starts_with(message), "{e}");
+    }
+    let e = "magic".parse::<ContactModel>().unwrap_err().to_string();
+    assert!(e.starts_with("unknown contact model \"magic\""), "{e}");
+    let e = "juggle".parse::<Phase>().unwrap_err().to_string();
+    assert!(e.starts_with("unknown phase \"juggle\""), "{e}");
+    // As a query's JSON, too (the form `SkillQuery` is sent in).
+    let e = serde_json::from_value::<SkillQuery>(serde_json::json!({"object_shape": "torus"}))
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("unknown shape \"torus\""), "{e}");
     assert!(matches!(
         store.list_sessions(0, None).await,
         Err(StoreError::InvalidQuery(_))
@@ -314,4 +327,76 @@ async fn sessions_page_through_in_id_order() {
         }
     }
     assert_eq!(ids, (1..=7).collect::<Vec<i64>>());
+}
+
+#[tokio::test]
+async fn a_stored_row_with_an_unknown_shape_contact_model_or_phase_is_refused_naming_it() {
+    use sqlx::Connection as _;
+    let tmp = tempfile::tempdir().unwrap();
+    let store = Store::open(tmp.path()).await.unwrap();
+    let out = store
+        .ingest(
+            &store_common::fake_mcap(1, 64),
+            store_common::meta(1, 3),
+            store_common::skills(1, 3),
+        )
+        .await
+        .unwrap();
+    let [a, b, c] = out.skill_ids[..] else {
+        panic!("{out:?}")
+    };
+    for id in [a, b, c] {
+        store.get_skill(id).await.unwrap();
+    }
+    store.close().await;
+    // Rows changed behind the store's back: a TEXT column holding a name the types do not know.
+    let opts = sqlx::sqlite::SqliteConnectOptions::new()
+        .filename(tmp.path().join(services::store::DB_FILE));
+    let mut conn = sqlx::SqliteConnection::connect_with(&opts).await.unwrap();
+    for (q, id) in [
+        ("UPDATE skills SET object_shape = 'torus' WHERE id = ?", a),
+        ("UPDATE skills SET contact_model = 'magic' WHERE id = ?", b),
+        (
+            "UPDATE skills SET phase_durations = '[[\"juggle\", 1.0]]' WHERE id = ?",
+            c,
+        ),
+        (
+            "UPDATE sessions SET meta = json_set(meta, '$.object_shape', 'torus') WHERE id = ?",
+            out.session_id,
+        ),
+    ] {
+        sqlx::query(q).bind(id).execute(&mut conn).await.unwrap();
+    }
+    conn.close().await.unwrap();
+    let store = Store::open(tmp.path()).await.unwrap();
+    for (id, message) in [
+        (
+            a,
+            format!("skill {a}: object_shape: unknown shape \"torus\""),
+        ),
+        (
+            b,
+            format!("skill {b}: contact_model: unknown contact model \"magic\""),
+        ),
+        (
+            c,
+            format!("skill {c}: phase_durations: unknown phase \"juggle\""),
+        ),
+    ] {
+        match store.get_skill(id).await {
+            Err(StoreError::Corrupt(m)) => assert!(m.starts_with(&message), "{m}"),
+            other => panic!("skill {id} gave {other:?}"),
+        }
+    }
+    match store.get_session(out.session_id).await {
+        Err(StoreError::Corrupt(m)) => assert!(
+            m.starts_with(&format!(
+                "session {}: meta: unknown shape \"torus\"",
+                out.session_id
+            )),
+            "{m}"
+        ),
+        other => panic!("the session gave {other:?}"),
+    }
+    store.close().await;
 }

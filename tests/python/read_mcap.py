@@ -4,7 +4,8 @@ zstd chunks) and prints what it found as JSON:
 
     {"topics": {topic: count}, "schemas": {topic: schema name},
      "metadata": {name: {key: value}}, "messages": total, "indexed": true,
-     "decoded": {topic: count}, "first": {topic: {field: value}}}
+     "decoded": {topic: count}, "first": {topic: {field: value}},
+     "attachments": {name: {"media_type": type, "bytes": n, "text": utf-8 text or null}}}
 
 Every message is read twice: through the summary and indexes (the seeking reader, as Foxglove
 does) and front to back (the streaming reader); the counts must agree. Every message on a `json`
@@ -70,6 +71,14 @@ def main(argv):
                         first[channel.topic] = MessageToDict(
                             value, preserving_proto_field_name=True)
             metadata = {m.name: dict(m.metadata) for m in reader.iter_metadata()}
+            attachments = {}
+            for a in reader.iter_attachments():
+                try:
+                    text = bytes(a.data).decode("utf-8")
+                except UnicodeDecodeError:
+                    text = None
+                attachments[a.name] = {"media_type": a.media_type, "bytes": len(a.data),
+                                       "text": text}
             if summary.statistics is not None:
                 if summary.statistics.message_count != sum(topics.values()):
                     raise ValueError("statistics message count disagrees with messages read")
@@ -90,6 +99,7 @@ def main(argv):
         "indexed": True,
         "decoded": dict(sorted(decoded.items())),
         "first": first,
+        "attachments": attachments,
     }, sort_keys=True))
     return 0
 

@@ -89,8 +89,30 @@ async fn unknown_ids_and_routes_are_404_and_wrong_methods_405() {
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
-async fn uploads_of_the_wrong_type_or_over_the_limit_are_refused_and_store_nothing() {
+async fn a_session_upload_is_bound_by_max_upload_not_by_the_body_limit_of_other_routes() {
+    // Uploads are streamed to disk: their limit is their own.
     let app = TestApp::spawn_with(|a| a.max_body = 64 * 1024).await;
+    let c = &app.client;
+    let mcap = session_bytes("box-pinch-lift", 1, Some(2.0));
+    assert!(
+        mcap.len() > 64 * 1024,
+        "the test session is over --max-body"
+    );
+    let r = c.upload(&mcap, None).await;
+    assert_eq!(r.status, 201, "{:?}", r.body);
+    // Nothing of the upload is left in the staging area: it became the blob.
+    let left = files_under(&app.data.join("blobs/sha256/staging"));
+    assert!(left.is_empty(), "{left:?}");
+    app.stop().await;
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn uploads_of_the_wrong_type_or_over_the_limit_are_refused_and_store_nothing() {
+    let app = TestApp::spawn_with(|a| {
+        a.max_body = 64 * 1024;
+        a.max_upload = 64 * 1024;
+    })
+    .await;
     let c = &app.client;
     let mcap = session_bytes("box-pinch-lift", 1, Some(2.0));
     assert!(mcap.len() > 64 * 1024, "the test session is over the limit");
@@ -159,12 +181,24 @@ async fn an_invalid_session_is_422_with_its_reason_and_stores_nothing() {
 
     assert_eq!(c.get("/api/v1/sessions").await.json()["items"], json!([]));
     assert_eq!(c.get("/api/v1/skills").await.json()["items"], json!([]));
-    let blobs = app.data.join("blobs");
-    assert!(
-        !blobs.exists() || std::fs::read_dir(&blobs).unwrap().next().is_none(),
-        "no blob was written"
-    );
+    // No blob, and nothing left of the uploads streamed to the staging area.
+    let files = files_under(&app.data.join("blobs"));
+    assert!(files.is_empty(), "no blob was written: {files:?}");
     app.stop().await;
+}
+
+/// The files under `dir`, at any depth (none if it does not exist).
+fn files_under(dir: &std::path::Path) -> Vec<std::path::PathBuf> {
+    let mut out = Vec::new();
+    for entry in std::fs::read_dir(dir).into_iter().flatten().flatten() {
+        let path = entry.path();
+        if path.is_dir() {
+            out.extend(files_under(&path));
+        } else {
+            out.push(path);
+        }
+    }
+    out
 }
 
 #[tokio::test]

@@ -153,6 +153,21 @@ async fn the_openapi_document_is_valid_and_lists_every_endpoint() {
         "{}",
         schemas["ReplayReport"]
     );
+    // The scenario's schemas are dfs-core's own types: the object's shape is dfs-core's shape
+    // kind, with its names, and a task's phase is dfs-core's phase.
+    use dfs_core::names::Named;
+    assert_eq!(
+        schemas["ScenarioObject"]["properties"]["shape"]["$ref"],
+        "#/components/schemas/ShapeKind"
+    );
+    assert_eq!(
+        schemas["ShapeKind"]["enum"],
+        serde_json::json!(dfs_core::object::ShapeKind::names())
+    );
+    assert_eq!(
+        schemas["Phase"]["enum"],
+        serde_json::json!(dfs_core::scenario::Phase::names())
+    );
     app.stop().await;
 }
 

@@ -5,10 +5,8 @@ use super::{print_json, CliError};
 use dfs_core::scenario::Scenario;
 use serde::Serialize;
 use services::mcap_io::ReadLimits;
-use services::segmentation::{median, score, segment, PhaseSpan, SegmentParams};
-use services::session::{
-    read_session, read_session_file_with, record_simulation, DecodeTopics, Session,
-};
+use services::segmentation::{median, score, segment, segment_source, PhaseSpan, SegmentParams};
+use services::session::{read_session, record_simulation, Session, SessionSource};
 use std::collections::BTreeMap;
 use std::path::PathBuf;
 use std::time::Instant;
@@ -25,12 +23,16 @@ pub struct SegmentArgs {
 
 /// Segments a session file and prints its skills; a replay recording is refused.
 pub fn run_segment(a: SegmentArgs) -> Result<(), CliError> {
-    // Segmentation reads contacts and object state only; the other topics are still checked.
-    let session =
-        read_session_file_with(&a.input, &ReadLimits::default(), DecodeTopics::SEGMENTATION)
-            .map_err(|e| CliError(format!("{}: {e}", a.input.display())))?;
-    session.ensure_grasp_session(&a.input.display().to_string())?;
-    let seg = segment(&session, &SegmentParams::default());
+    // Two streamed passes: memory bounded by the session's grid, not the file.
+    let (_, seg) = segment_source(
+        &SessionSource::File(&a.input),
+        &ReadLimits::streaming(),
+        &SegmentParams::default(),
+    )
+    .map_err(|e| match e {
+        e @ services::RecordingError::ReplayRecording { .. } => CliError::from(e),
+        e => CliError(format!("{}: {e}", a.input.display())),
+    })?;
     if a.json {
         return print_json(&seg);
     }

@@ -62,7 +62,7 @@ struct ScenarioEntry {
     description: &'static str,
     duration_s: f64,
     object: dfs_core::scenario::ScenarioObject,
-    phases: Vec<String>,
+    phases: Vec<dfs_core::scenario::Phase>,
 }
 
 /// Lists the built-in scenarios.
@@ -75,7 +75,7 @@ pub fn run_scenarios(a: ScenariosArgs) -> Result<(), CliError> {
                 name,
                 description: description(name),
                 duration_s: s.duration(),
-                phases: s.tasks.iter().map(|t| t.phase.clone()).collect(),
+                phases: s.tasks.iter().map(|t| t.phase).collect(),
                 object: s.object,
             })
         })
@@ -182,20 +182,27 @@ impl SimulateReport {
     }
 }
 
-/// Progress on stderr, only when stderr is a terminal; at most one update per percent.
+/// A progress bar on stderr, only when stderr is a terminal and the output is for people (not
+/// `--json`); at most one update per percent: `simulating [#####·····] 52% 31200/60000 ticks,
+/// 1.9 s left`.
 pub struct Progress {
     enabled: bool,
     label: &'static str,
     last_percent: Option<u64>,
+    start: Instant,
 }
 
+/// Width of the bar, characters.
+const BAR: u64 = 30;
+
 impl Progress {
-    /// A progress line for `label`, shown if stderr is a terminal.
-    pub fn new(label: &'static str) -> Self {
+    /// A progress bar for `label`, shown if `wanted` and stderr is a terminal.
+    pub fn new(label: &'static str, wanted: bool) -> Self {
         Self {
-            enabled: std::io::stderr().is_terminal(),
+            enabled: wanted && std::io::stderr().is_terminal(),
             label,
             last_percent: None,
+            start: Instant::now(),
         }
     }
 
@@ -204,16 +211,36 @@ impl Progress {
         if !self.enabled || total == 0 {
             return;
         }
-        let percent = done * 100 / total;
-        if self.last_percent != Some(percent) {
-            self.last_percent = Some(percent);
-            let mut err = std::io::stderr().lock();
-            let _ = write!(err, "\r{}: {done}/{total} ticks ({percent}%)", self.label);
-            let _ = err.flush();
+        let percent = done.min(total) * 100 / total;
+        if self.last_percent == Some(percent) {
+            return;
         }
+        self.last_percent = Some(percent);
+        let filled = (done.min(total) * BAR / total) as usize;
+        let bar = format!(
+            "{}{}",
+            "#".repeat(filled),
+            "·".repeat(BAR as usize - filled)
+        );
+        let elapsed = self.start.elapsed().as_secs_f64();
+        let left = if done > 0 {
+            format!(
+                ", {:.1} s left",
+                elapsed * (total - done.min(total)) as f64 / done as f64
+            )
+        } else {
+            String::new()
+        };
+        let mut err = std::io::stderr().lock();
+        let _ = write!(
+            err,
+            "\r\x1b[2K{} [{bar}] {percent}% {done}/{total} ticks{left}",
+            self.label
+        );
+        let _ = err.flush();
     }
 
-    /// Clears the progress line.
+    /// Clears the progress bar.
     pub fn done(&self) {
         if self.enabled && self.last_percent.is_some() {
             eprint!("\r\x1b[2K");
@@ -228,7 +255,7 @@ pub fn run_simulate(a: SimulateArgs) -> Result<(), CliError> {
         let inputs = [("the --scenario file", Path::new(&a.scenario))];
         super::refuse_out_over_inputs(&a.out, &inputs)?;
     }
-    let mut progress = Progress::new("simulating");
+    let mut progress = Progress::new("simulating", !a.json);
     let start = Instant::now();
     let result = record_simulation(&scenario, a.duration, &a.out, |d, t| progress.update(d, t));
     progress.done();

@@ -2,7 +2,7 @@
 
 use super::{open_existing_store, print_json, CliError};
 use crate::filters::SkillFilters;
-use services::ingest::ingest_bytes;
+use services::ingest::ingest_file;
 use services::store::{Store, DEFAULT_LIMIT, MAX_LIMIT};
 use std::path::PathBuf;
 
@@ -75,12 +75,10 @@ pub fn run_ingest(a: IngestArgs) -> Result<(), CliError> {
         let mut results = Vec::new();
         let mut failed = Vec::new();
         for f in &a.files {
-            let stored = match std::fs::read(f) {
-                Ok(bytes) => ingest_bytes(&store, bytes, f.display().to_string())
-                    .await
-                    .map_err(|e| e.to_string()),
-                Err(e) => Err(e.to_string()),
-            };
+            // Streamed: copied into the store while hashed, segmented from there.
+            let stored = ingest_file(&store, f.clone(), f.display().to_string())
+                .await
+                .map_err(|e| e.to_string());
             let out = match stored {
                 Ok(out) => out,
                 Err(e) => {

@@ -9,6 +9,7 @@ use axum::http::request::Parts;
 use axum::http::{header, HeaderMap};
 use bytes::Bytes;
 use serde::de::DeserializeOwned;
+use services::store::StagedBlob;
 
 use super::error::Problem;
 use super::state::AppState;
@@ -132,25 +133,71 @@ fn is_json(headers: &HeaderMap) -> bool {
 /// Reads a whole request body of at most `limit` bytes: over it 413, a body that cannot be read
 /// (a connection closed early, a broken chunked encoding) 400, both as problems.
 pub(crate) async fn read_body(body: Body, limit: usize) -> Result<Bytes, Problem> {
-    axum::body::to_bytes(body, limit).await.map_err(|e| {
-        let over = std::error::Error::source(&e)
-            .is_some_and(|s| s.is::<http_body_util::LengthLimitError>());
-        if over {
-            return Problem::too_large(limit);
+    axum::body::to_bytes(body, limit)
+        .await
+        .map_err(|e| body_error(&e, limit))
+}
+
+/// The problem of a body that could not be read: over `limit` (413), or broken (400, naming
+/// the cause: hyper's "invalid chunk size line", ...).
+fn body_error(e: &axum::Error, limit: usize) -> Problem {
+    let over =
+        std::error::Error::source(e).is_some_and(|s| s.is::<http_body_util::LengthLimitError>());
+    if over {
+        return Problem::too_large(limit);
+    }
+    let mut detail = format!("could not read the request body: {e}");
+    let mut source = std::error::Error::source(e);
+    while let Some(s) = source {
+        let text = s.to_string();
+        if !detail.contains(&text) {
+            detail.push_str(": ");
+            detail.push_str(&text);
         }
-        // The chain names the cause (hyper's "invalid chunk size line", ...).
-        let mut detail = format!("could not read the request body: {e}");
-        let mut source = std::error::Error::source(&e);
-        while let Some(s) = source {
-            let text = s.to_string();
-            if !detail.contains(&text) {
-                detail.push_str(": ");
-                detail.push_str(&text);
+        source = s.source();
+    }
+    Problem::bad_request(detail)
+}
+
+/// Bytes gathered from the body before each write to the staged file.
+const STAGE_WRITE_BYTES: usize = 1 << 20;
+
+/// Streams a request body of at most `limit` bytes into `staged` (written and hashed on a
+/// blocking thread a megabyte at a time): memory stays at a megabyte or two whatever the
+/// body's size. Errors as [`read_body`]'s; the staged file is dropped with them.
+pub(crate) async fn stream_body(
+    body: Body,
+    limit: usize,
+    mut staged: StagedBlob,
+) -> Result<StagedBlob, Problem> {
+    use http_body_util::BodyExt;
+    let mut body = body;
+    let mut buffer = Vec::with_capacity(STAGE_WRITE_BYTES);
+    let mut total = 0usize;
+    loop {
+        let frame = body.frame().await;
+        let done = frame.is_none();
+        if let Some(frame) = frame {
+            let frame = frame.map_err(|e| body_error(&e, limit))?;
+            if let Ok(data) = frame.into_data() {
+                total = total.saturating_add(data.len());
+                if total > limit {
+                    return Err(Problem::too_large(limit));
+                }
+                buffer.extend_from_slice(&data);
             }
-            source = s.source();
         }
-        Problem::bad_request(detail)
-    })
+        if buffer.len() >= STAGE_WRITE_BYTES || (done && !buffer.is_empty()) {
+            let full = std::mem::replace(&mut buffer, Vec::with_capacity(STAGE_WRITE_BYTES));
+            staged = tokio::task::spawn_blocking(move || staged.write(&full).map(|()| staged))
+                .await
+                .map_err(|e| Problem::internal(&e))?
+                .map_err(Problem::from)?;
+        }
+        if done {
+            return Ok(staged);
+        }
+    }
 }
 
 /// Parses JSON text into a value, refusing an object that has a key twice: serde_json would

@@ -11,7 +11,9 @@ use axum::response::Response;
 use dfs_core::hand::HandSpec;
 use serde::{Deserialize, Serialize};
 use services::store::{Hand, HandSummary};
-use utoipa::ToSchema;
+use utoipa::openapi::schema::Schema;
+use utoipa::openapi::RefOr;
+use utoipa::{PartialSchema, ToSchema};
 use utoipa_axum::router::OpenApiRouter;
 use utoipa_axum::routes;
 
@@ -25,58 +27,6 @@ pub const MAX_URDF_BYTES: usize = 4 << 20;
 
 /// Media type of a URDF download.
 pub const URDF_MEDIA_TYPE: &str = "application/xml";
-
-/// One fingertip of a hand spec: a contact sphere fixed to a URDF link.
-#[derive(Debug, Clone, Deserialize, Serialize, ToSchema)]
-#[serde(deny_unknown_fields)]
-#[schema(as = FingertipSpec)]
-pub struct FingertipSpecDoc {
-    /// Name of the fingertip (e.g. `thumb`). Default: the link's name.
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub name: Option<String>,
-    /// The URDF link the sphere is fixed to; it must exist in the URDF.
-    pub link: String,
-    /// Centre of the sphere in the link frame, m.
-    pub offset: [f64; 3],
-    /// Radius of the sphere, m, > 0.
-    #[schema(exclusive_minimum = 0.0)]
-    pub radius: f64,
-}
-
-/// A hand spec: what the URDF does not say (fingertips, torque limits, the thumb).
-#[derive(Debug, Clone, Deserialize, Serialize, ToSchema)]
-#[serde(deny_unknown_fields)]
-#[schema(as = HandSpec)]
-pub struct HandSpecDoc {
-    /// Name of the hand: its id, 1 to 64 of `A-Z a-z 0-9 . _ -` starting with a letter or
-    /// digit, not a built-in hand's name or a stored hand's.
-    #[schema(pattern = "^[A-Za-z0-9][A-Za-z0-9._-]{0,63}$")]
-    pub name: String,
-    /// File name of the URDF. May be omitted in an upload (the URDF travels as text beside the
-    /// spec); stored as `NAME.urdf` then.
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub urdf: Option<String>,
-    /// The fingertips, 1 to 6 (`dfs_core::hand::MAX_TIPS`).
-    #[schema(min_items = 1, max_items = 6)]
-    pub fingertips: Vec<FingertipSpecDoc>,
-    /// Torque limit of every DOF without its own entry, N·m (N for a prismatic DOF), > 0.
-    #[schema(exclusive_minimum = 0.0)]
-    pub torque_limit: f64,
-    /// Torque limits by the name of the (independent, moving) joint, N·m or N, > 0.
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub joint_torque_limits: Option<std::collections::BTreeMap<String, f64>>,
-    /// The hand's base link. Default: the URDF's root.
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub base_link: Option<String>,
-    /// Name of the fingertip that opposes the others. Default: the one named `thumb`, else the
-    /// first.
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub thumb: Option<String>,
-    /// Armature added to every DOF, kg·m² (kg for a prismatic DOF), ≥ 0. Default 1e-4.
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    #[schema(minimum = 0.0)]
-    pub armature: Option<f64>,
-}
 
 /// A robot hand as listed.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize, ToSchema)]
@@ -126,7 +76,7 @@ pub struct HandBody {
     #[serde(flatten)]
     pub summary: HandSummaryBody,
     /// The hand spec; `null` for `glove10`, which is built in code without a URDF.
-    #[schema(value_type = Option<HandSpecDoc>)]
+    #[schema(value_type = Option<HandSpec>)]
     pub spec: Option<serde_json::Value>,
     /// Where to download the URDF text; `null` for `glove10`.
     pub urdf_url: Option<String>,
@@ -159,7 +109,7 @@ impl HandBody {
 )]
 pub struct HandUpload {
     /// The hand spec (its `urdf` file name may be omitted).
-    #[schema(value_type = HandSpecDoc)]
+    #[schema(schema_with = upload_spec_schema)]
     pub spec: serde_json::Value,
     /// The URDF text (`<robot …>…</robot>`), at most 4 MiB.
     pub urdf: String,
@@ -170,6 +120,25 @@ dfs_core::object_only!(
     HandUpload,
     "a hand upload: a JSON object {\"spec\": {...}, \"urdf\": \"<robot ...>\"}"
 );
+
+/// The schema of an upload's spec: dfs-core's [`HandSpec`] with the rules of an upload on top.
+/// Its `urdf` file name may be left out (the URDF text travels beside the spec; the file is
+/// stored as `NAME.urdf`), and its name is a hand's id in URLs and a file name, so it must
+/// match the store's rule ([`services::store::MAX_HAND_NAME`] characters at most).
+fn upload_spec_schema() -> impl Into<RefOr<Schema>> {
+    let mut schema = <HandSpec as PartialSchema>::schema();
+    if let RefOr::T(Schema::Object(spec)) = &mut schema {
+        spec.required.retain(|field| field != "urdf");
+        if let Some(RefOr::T(Schema::Object(name))) = spec.properties.get_mut("name") {
+            name.pattern = Some(HAND_NAME_PATTERN.to_owned());
+        }
+    }
+    schema
+}
+
+/// A hand name an upload may take: 1 to [`services::store::MAX_HAND_NAME`] (64) of
+/// `A-Z a-z 0-9 . _ -`, starting with a letter or a digit.
+const HAND_NAME_PATTERN: &str = "^[A-Za-z0-9][A-Za-z0-9._-]{0,63}$";
 
 /// The routes of this resource.
 pub fn router() -> OpenApiRouter<AppState> {
@@ -287,18 +256,41 @@ mod tests {
     use dfs_core::hand::{builtin_spec, BUILTIN_HANDS};
 
     #[test]
-    fn the_documented_hand_spec_schema_accepts_every_built_in_spec() {
+    fn the_documented_hand_spec_is_dfs_cores_and_an_upload_may_leave_out_the_urdf() {
+        let doc = serde_json::to_value(crate::http::openapi(false)).unwrap();
+        let spec = &doc["components"]["schemas"]["HandSpec"];
+        let upload = &doc["components"]["schemas"]["HandUpload"]["properties"]["spec"];
         for name in BUILTIN_HANDS {
-            let Some((spec, _)) = builtin_spec(name) else {
+            let Some((builtin, _)) = builtin_spec(name) else {
                 continue;
             };
-            let v = serde_json::to_value(&spec).unwrap();
-            let doc: HandSpecDoc = serde_json::from_value(v.clone())
-                .unwrap_or_else(|e| panic!("{name}: the documented schema lacks a field: {e}"));
-            let back: HandSpec = serde_json::from_value(serde_json::to_value(doc).unwrap())
-                .unwrap_or_else(|e| panic!("{name}: {e}"));
-            assert_eq!(back, spec);
+            let v = serde_json::to_value(&builtin).unwrap();
+            for key in v.as_object().unwrap().keys() {
+                assert!(
+                    spec["properties"].get(key).is_some()
+                        && upload["properties"].get(key).is_some(),
+                    "{name}: {key} is not documented"
+                );
+            }
         }
+        let required = |s: &serde_json::Value| -> Vec<String> {
+            serde_json::from_value(s["required"].clone()).unwrap()
+        };
+        assert!(required(spec).iter().any(|f| f == "urdf"));
+        assert!(!required(upload).iter().any(|f| f == "urdf"), "{upload}");
+        assert_eq!(upload["properties"]["name"]["pattern"], HAND_NAME_PATTERN);
+        assert_eq!(
+            spec["properties"]["fingertips"]["maxItems"],
+            dfs_core::hand::MAX_TIPS
+        );
+        // The pattern is the store's rule.
+        assert_eq!(
+            HAND_NAME_PATTERN,
+            format!(
+                "^[A-Za-z0-9][A-Za-z0-9._-]{{0,{}}}$",
+                services::store::MAX_HAND_NAME - 1
+            )
+        );
     }
 
     #[test]

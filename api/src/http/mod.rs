@@ -39,8 +39,10 @@ use axum::middleware::{self, Next};
 use axum::response::{IntoResponse, Response};
 use axum::Router;
 use bytes::Bytes;
-use dfs_core::scenario::Phase;
-use services::store::{CONTACT_MODELS, SHAPES};
+use dfs_core::contact::ContactModel;
+use dfs_core::names::Named;
+use dfs_core::scenario::{Phase, Scenario};
+use services::store::ObjectShape;
 use tower_http::cors::{AllowOrigin, CorsLayer};
 use tower_http::trace::TraceLayer;
 use utoipa::openapi::schema::{ObjectBuilder, Type};
@@ -101,13 +103,14 @@ fn finish_openapi(mut api: OpenApi, writes_need_token: bool) -> OpenApi {
         ))
         .build();
     let components = api.components.get_or_insert_with(Default::default);
-    // The scenario object is referenced from a hand-written schema (a name or an object), so
-    // the derive does not collect it: add it and the schemas it refers to.
+    // The scenario object (dfs-core's `Scenario`) is referenced from a hand-written schema (a
+    // name or an object), so the derive does not collect it: add it and the schemas it
+    // refers to.
     let mut scenario = vec![(
-        <simulations::ScenarioDoc as ToSchema>::name().into_owned(),
-        <simulations::ScenarioDoc as PartialSchema>::schema(),
+        <Scenario as ToSchema>::name().into_owned(),
+        <Scenario as PartialSchema>::schema(),
     )];
-    <simulations::ScenarioDoc as ToSchema>::schemas(&mut scenario);
+    <Scenario as ToSchema>::schemas(&mut scenario);
     components.schemas.extend(scenario);
     if writes_need_token {
         components.add_security_scheme(
@@ -164,7 +167,8 @@ fn unavailable_response() -> RefOr<utoipa::openapi::Response> {
         .into()
 }
 
-/// The skill filters that take one of a few names (any other is 400) list those names.
+/// The skill filters that take one of a few names (any other is 400) list those names, the
+/// names of their types, inline (a query parameter's schema is read where it stands).
 fn document_filter_values(api: &mut OpenApi) {
     let Some(op) = api
         .paths
@@ -176,9 +180,9 @@ fn document_filter_values(api: &mut OpenApi) {
     };
     for p in op.parameters.iter_mut().flatten() {
         let values: Vec<&str> = match p.name.as_str() {
-            "shape" => SHAPES.to_vec(),
-            "contact_model" => CONTACT_MODELS.to_vec(),
-            "phase" => Phase::ALL.map(Phase::name).to_vec(),
+            "shape" => ObjectShape::names(),
+            "contact_model" => ContactModel::names(),
+            "phase" => Phase::names(),
             _ => continue,
         };
         p.schema = Some(

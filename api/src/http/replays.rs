@@ -7,10 +7,10 @@
 
 use axum::extract::State;
 use axum::response::Response;
-use dfs_core::replay::{ReplayParams, ReplayReport, SkillSpec};
+use dfs_core::replay::{FailureReason, ReplayParams, ReplayReport, SkillSpec};
 use serde::{Deserialize, Serialize};
 use services::replay::{replay_skill_until, skill_spec_from_json, ReplaySource};
-use services::store::{Hand, Replay, StoreError};
+use services::store::{Hand, Replay, StagedBlob, StoreError};
 use utoipa::ToSchema;
 use utoipa_axum::router::OpenApiRouter;
 use utoipa_axum::routes;
@@ -39,80 +39,6 @@ dfs_core::object_only!(
     "a replay request: a JSON object {\"hand\": ...}"
 );
 
-/// A retargeted contact of a replay.
-#[derive(Debug, Clone, Deserialize, Serialize, ToSchema)]
-#[serde(deny_unknown_fields)]
-#[schema(as = PlannedContact)]
-pub struct PlannedContactDoc {
-    /// The hand's fingertip.
-    pub finger: String,
-    /// Contact point in the object frame B, m.
-    pub position_b: [f64; 3],
-    /// Unit normal in B, into the object.
-    pub normal_b: [f64; 3],
-}
-
-/// Grasp quality of the retargeted contacts (GraspIt!'s metrics, 8-edge cones).
-#[derive(Debug, Clone, Deserialize, Serialize, ToSchema)]
-#[serde(deny_unknown_fields)]
-#[schema(as = ReplayQuality)]
-pub struct ReplayQualityDoc {
-    /// Ferrari-Canny ε (0 without force closure).
-    pub epsilon: f64,
-    /// Volume of the grasp wrench space.
-    pub volume: f64,
-    /// Force closure.
-    pub force_closure: bool,
-}
-
-/// The report of a replay (dfs-core's `ReplayReport`). Failures are reports, never errors.
-#[derive(Debug, Clone, Deserialize, Serialize, ToSchema)]
-#[serde(deny_unknown_fields)]
-#[schema(as = ReplayReport)]
-pub struct ReplayReportDoc {
-    /// The hand.
-    pub hand: String,
-    /// The object followed its reference motion while held and was never dropped.
-    pub success: bool,
-    /// Why not, when `success` is false.
-    #[schema(value_type = Option<String>, pattern = "^(unreachable|torque_limit|slip|no_force_closure)$")]
-    pub failure_reason: Option<String>,
-    /// A sentence on what happened.
-    pub detail: String,
-    /// Largest distance of the object from its reference while held, m.
-    pub position_error_max_m: f64,
-    /// Root mean square of the same, m.
-    pub position_error_rms_m: f64,
-    /// Largest rotation of the object away from its reference while held, rad.
-    pub orientation_error_max_rad: f64,
-    /// Root mean square of the same, rad.
-    pub orientation_error_rms_rad: f64,
-    /// Largest distance a held contact point moved over the object's surface, m.
-    pub max_slip_m: f64,
-    /// Ticks in which a held contact slipped.
-    pub slip_ticks: u64,
-    /// Smallest `1 − |c_t| / (μ c_n)` of a transmitting contact while held.
-    pub min_friction_margin: f64,
-    /// Largest |τ| / τ_max of the torques the joints applied over the replay (clamped at the
-    /// limit: at most 1, and 1 means a joint reached its limit).
-    #[schema(minimum = 0.0, maximum = 1.0)]
-    pub peak_torque_ratio: f64,
-    /// The DOF where that happened.
-    pub peak_torque_joint: String,
-    /// Quality of the retargeted contacts.
-    pub quality: ReplayQualityDoc,
-    /// The retargeted contacts.
-    pub contacts: Vec<PlannedContactDoc>,
-    /// Largest fingertip distance from its contact after inverse kinematics, m.
-    pub ik_error_m: f64,
-    /// Highest rise of the object above its start, m.
-    pub lift_height_m: f64,
-    /// Simulated ticks (1 kHz).
-    pub ticks: u64,
-    /// Simulated time, s.
-    pub duration_s: f64,
-}
-
 /// A stored replay.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize, ToSchema)]
 pub struct ReplayBody {
@@ -125,9 +51,9 @@ pub struct ReplayBody {
     /// Whether the object was held (the report's `success`).
     pub success: bool,
     /// Why not: unreachable, torque_limit, slip or no_force_closure.
-    pub failure_reason: Option<String>,
-    /// The full report.
-    #[schema(value_type = ReplayReportDoc)]
+    pub failure_reason: Option<FailureReason>,
+    /// The full report (dfs-core's `ReplayReport`).
+    #[schema(value_type = ReplayReport)]
     pub report: serde_json::Value,
     /// Hex SHA-256 of the replay's MCAP file.
     pub sha256: String,
@@ -171,28 +97,24 @@ pub fn router() -> OpenApiRouter<AppState> {
         .routes(routes!(download_replay))
 }
 
-/// Replays `skill` on `hand` into a temporary file under `scratch`: blocking work, for the
-/// blocking pool. Returns the report and the MCAP bytes.
+/// Replays `skill` on `hand` straight into a staged blob of the store, then hashes it:
+/// blocking work, for the blocking pool. Returns the report and the staged file, which
+/// storing moves into place (never read into memory).
 fn replay_blocking(
+    store: &services::store::Store,
     hand: &Hand,
     skill: &SkillSpec,
     source: &ReplaySource,
-    scratch: &std::path::Path,
     stop: &dfs_core::Stop,
-) -> Result<(ReplayReport, Vec<u8>), Problem> {
+) -> Result<(ReplayReport, StagedBlob), Problem> {
     let loaded = hand.load()?;
-    std::fs::create_dir_all(scratch).map_err(|e| Problem::internal(&e))?;
-    let file = tempfile::Builder::new()
-        .prefix("replay-")
-        .suffix(".mcap")
-        .tempfile_in(scratch)
-        .map_err(|e| Problem::internal(&e))?;
+    let mut staged = store.stage_upload().map_err(|e| Problem::internal(&e))?;
     let report = replay_skill_until(
         &loaded,
         skill,
         &ReplayParams::default(),
         source,
-        Some(file.path()),
+        Some(staged.path()),
         stop,
     )
     .map_err(|e| match e {
@@ -201,8 +123,8 @@ fn replay_blocking(
         }
         other => Problem::internal(&other),
     })?;
-    let bytes = std::fs::read(file.path()).map_err(|e| Problem::internal(&e))?;
-    Ok((report, bytes))
+    staged.adopt().map_err(|e| Problem::internal(&e))?;
+    Ok((report, staged))
 }
 
 /// Retargets a stored skill onto a hand, simulates it in the DFS at 1 kHz and stores the
@@ -247,21 +169,21 @@ async fn create_replay(
     };
     let spec = skill_spec_from_json(&skill.params, &source.skill_name)
         .map_err(|e| Problem::unprocessable(format!("skill {skill_id} cannot be replayed: {e}")))?;
-    let scratch = st.scratch_dir().to_path_buf();
+    let store = st.store().clone();
     let hand_name = hand.summary.name.clone();
-    let (report, bytes) = st
-        .run_limited(move |stop| replay_blocking(&hand, &spec, &source, &scratch, stop))
+    let (report, staged) = st
+        .run_limited(move |stop| replay_blocking(&store, &hand, &spec, &source, stop))
         .await?;
     let replay = st
         .store()
-        .insert_replay(skill_id, &hand_name, &report, bytes)
+        .insert_replay_staged(skill_id, &hand_name, &report, staged)
         .await?;
     tracing::info!(
         replay_id = replay.id,
         skill_id,
         hand = %hand_name,
         success = replay.success,
-        failure_reason = replay.failure_reason.as_deref().unwrap_or(""),
+        failure_reason = replay.failure_reason.map_or("", |r| r.name()),
         "replay stored"
     );
     let location = format!("/api/v1/replays/{}", replay.id);

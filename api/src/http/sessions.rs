@@ -6,16 +6,16 @@ use axum::extract::State;
 use axum::http::{header, HeaderMap, HeaderValue, StatusCode};
 use axum::response::{IntoResponse, Response};
 use serde::{Deserialize, Serialize};
-use services::ingest::ingest_bytes;
-use services::store::{IngestOutcome, Session, SessionMeta, DEFAULT_LIMIT};
+use services::ingest::ingest_staged;
+use services::store::{IngestOutcome, ObjectShape, Session, SessionMeta, DEFAULT_LIMIT};
 use utoipa::{IntoParams, ToSchema};
 use utoipa_axum::router::OpenApiRouter;
 use utoipa_axum::routes;
 
 use super::created;
 use super::error::{Problem, ProblemBody};
-use super::extract::{read_body, Id, Query, WriteAccess};
-use super::skills::SkillBody;
+use super::extract::{stream_body, Id, Query, WriteAccess};
+use super::skills::{object_shape_schema, SkillBody};
 use super::state::AppState;
 
 /// Media type of a session upload or download.
@@ -39,6 +39,9 @@ impl utoipa::PartialSchema for McapFile {
 impl ToSchema for McapFile {}
 
 /// Metadata of a recorded session.
+///
+/// The store's [`SessionMeta`] with its schema: services' types have none, so the API keeps
+/// this body type beside it (fields typed alike, [`From`] between them).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize, ToSchema)]
 pub struct SessionMetaBody {
     /// Name of the simulated operator scenario, if the session was simulated.
@@ -48,7 +51,8 @@ pub struct SessionMetaBody {
     /// Hand (glove) that performed the session, e.g. glove10.
     pub hand: String,
     /// Object shape: sphere, box, cylinder, or unknown (a session file without the object).
-    pub object_shape: String,
+    #[schema(schema_with = object_shape_schema)]
+    pub object_shape: ObjectShape,
     /// Object mass, kg.
     pub object_mass: f64,
     /// Coulomb friction coefficient.
@@ -215,7 +219,7 @@ async fn upload_session(
             "upload a session as Content-Type: {MCAP}"
         )));
     }
-    let limit = st.max_body();
+    let limit = st.max_upload();
     let declared = headers
         .get(header::CONTENT_LENGTH)
         .and_then(|v| v.to_str().ok())
@@ -223,11 +227,16 @@ async fn upload_session(
     if declared.is_some_and(|n| n > limit as u64) {
         return Err(Problem::too_large(limit));
     }
-    let bytes = read_body(body, limit).await?;
-    let size = bytes.len();
-    // Reading a session holds a bounded multiple of its size in memory: so many at once.
+    // Streamed to a file beside the blobs, hashed on the way: an upload takes no memory.
+    let store = st.store().clone();
+    let staged = tokio::task::spawn_blocking(move || store.stage_upload())
+        .await
+        .map_err(|e| Problem::internal(&e))??;
+    let staged = stream_body(body, limit, staged).await?;
+    let size = staged.len();
+    // Segmenting a session holds its grid (41 bytes per ms): so many at once.
     let _turn = st.ingest_turn().await?;
-    let out = ingest_bytes(st.store(), Vec::from(bytes), "upload".into()).await?;
+    let out = ingest_staged(st.store(), staged, "upload".into()).await?;
     tracing::info!(
         session_id = out.session_id,
         created = out.created,

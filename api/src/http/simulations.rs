@@ -2,13 +2,12 @@
 //! the closed 1 kHz loop and recorded, on the blocking pool and never on the async workers,
 //! then segmented and stored like an upload. A semaphore bounds how many run at once.
 
-use std::path::Path;
-
 use axum::extract::State;
 use axum::response::Response;
 use dfs_core::scenario::Scenario;
-use serde::{Deserialize, Serialize};
-use services::store::IngestOutcome;
+use serde::Deserialize;
+use services::session::SessionSource;
+use services::store::{IngestOutcome, StagedBlob};
 use utoipa::openapi::schema::{ObjectBuilder, OneOfBuilder, Schema, Type};
 use utoipa::openapi::RefOr;
 use utoipa::ToSchema;
@@ -64,89 +63,11 @@ fn scenario_ref_schema() -> impl Into<RefOr<Schema>> {
     OneOfBuilder::new()
         .item(names)
         .item(RefOr::Ref(utoipa::openapi::Ref::from_schema_name(
-            ScenarioDoc::name(),
+            Scenario::name(),
         )))
         .description(Some(
             "A built-in scenario's name or a scenario object (the scenario file format)",
         ))
-}
-
-/// A scenario object: the object, the grasp style and the operator's task script (the
-/// scenario file format of `icms simulate --scenario FILE`).
-#[derive(Debug, Clone, Deserialize, Serialize, ToSchema)]
-#[serde(deny_unknown_fields)]
-#[schema(as = Scenario)]
-pub struct ScenarioDoc {
-    /// Name.
-    pub name: String,
-    /// The object.
-    pub object: ScenarioObjectDoc,
-    /// Grasp style: auto (from the object's size), pinch or power. Default auto.
-    #[schema(value_type = Option<String>, pattern = "^(auto|pinch|power)$")]
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub grasp: Option<String>,
-    /// The task script, in order.
-    pub tasks: Vec<TaskDoc>,
-    /// Seed of the operator's tremor and sensor noise. Default 0.
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub seed: Option<u64>,
-    /// The friction coefficient the operator grips for, > 0. Default: the object's μ.
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub operator_mu: Option<f64>,
-}
-
-/// The object of a scenario.
-#[derive(Debug, Clone, Deserialize, Serialize, ToSchema)]
-#[serde(deny_unknown_fields)]
-#[schema(as = ScenarioObject)]
-pub struct ScenarioObjectDoc {
-    /// sphere, box or cylinder.
-    pub shape: String,
-    /// Radius, m (sphere, cylinder).
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub radius: Option<f64>,
-    /// Half extents, m (box).
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub half_extents: Option<[f64; 3]>,
-    /// Half height, m (cylinder, axis vertical).
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub half_height: Option<f64>,
-    /// Mass, kg, > 0.
-    pub mass: f64,
-    /// Coulomb friction coefficient, 0 to 10.
-    #[schema(minimum = 0.0, maximum = 10.0)]
-    pub mu: f64,
-    /// Torsional friction, m, 0 to 1. Default 0.005.
-    #[schema(minimum = 0.0, maximum = 1.0)]
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub mu_torsion: Option<f64>,
-    /// Start position of the object's centre in the world, m. Default: on the table at the
-    /// origin.
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub position: Option<[f64; 3]>,
-    /// Start rotation about the world z axis, rad. Default 0.
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub yaw: Option<f64>,
-}
-
-/// One task of a scenario's script.
-#[derive(Debug, Clone, Deserialize, Serialize, ToSchema)]
-#[serde(deny_unknown_fields)]
-#[schema(as = Task)]
-pub struct TaskDoc {
-    /// approach, preshape, grasp, lift, hold, transport, place, release or retreat.
-    pub phase: String,
-    /// Duration, s, in (0, 600].
-    pub duration: f64,
-    /// lift: height to raise the object, m. Default 0.10.
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub height: Option<f64>,
-    /// transport: displacement of the object, m (world). Default (0, 0.15, 0).
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub offset: Option<[f64; 3]>,
-    /// transport: turn about the world z axis, rad. Default 0.
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub turn: Option<f64>,
 }
 
 /// The routes of this resource.
@@ -191,28 +112,24 @@ fn scenario_of(req: &SimulationRequest) -> Result<Scenario, Problem> {
     Ok(scenario)
 }
 
-/// Simulates `scenario` into a temporary file under `scratch`, then reads and segments it: all
-/// blocking work, for the blocking pool. Returns the file's bytes, metadata and skills.
+/// Simulates `scenario` straight into a staged blob of the store (`blobs/sha256/staging/`),
+/// hashes it and segments it from the file in two streamed passes: all blocking work, for the
+/// blocking pool. The file is never read into memory; storing it is a rename.
 fn simulate_blocking(
+    store: &services::store::Store,
     scenario: &Scenario,
     duration: Option<f64>,
-    scratch: &Path,
     stop: &dfs_core::Stop,
 ) -> Result<
     (
-        Vec<u8>,
+        StagedBlob,
         services::store::SessionMeta,
         Vec<services::store::NewSkill>,
     ),
     Problem,
 > {
-    std::fs::create_dir_all(scratch).map_err(|e| Problem::internal(&e))?;
-    let file = tempfile::Builder::new()
-        .prefix("simulation-")
-        .suffix(".mcap")
-        .tempfile_in(scratch)
-        .map_err(|e| Problem::internal(&e))?;
-    services::session::record_simulation_until(scenario, duration, file.path(), |_, _| {}, stop)
+    let mut staged = store.stage_upload().map_err(|e| Problem::internal(&e))?;
+    services::session::record_simulation_until(scenario, duration, staged.path(), |_, _| {}, stop)
         .map_err(|e| match e {
             services::RecordingError::InvalidInput { .. }
             | services::RecordingError::Simulation { .. } => {
@@ -220,10 +137,10 @@ fn simulate_blocking(
             }
             other => Problem::internal(&other),
         })?;
-    let bytes = std::fs::read(file.path()).map_err(|e| Problem::internal(&e))?;
-    let (meta, skills) = services::ingest::analyse(&bytes, &scenario.name)
+    staged.adopt().map_err(|e| Problem::internal(&e))?;
+    let (meta, skills) = services::ingest::analyse_source(&SessionSource::File(staged.path()))
         .map_err(|e| Problem::internal(&format!("a simulated session did not read back: {e}")))?;
-    Ok((bytes, meta, skills))
+    Ok((staged, meta, skills))
 }
 
 /// Simulates and stores a scenario (see [`AppState::run_limited`]).
@@ -232,11 +149,11 @@ pub async fn simulate_and_store(
     scenario: Scenario,
     duration: Option<f64>,
 ) -> Result<IngestOutcome, Problem> {
-    let scratch = st.scratch_dir().to_path_buf();
-    let (bytes, meta, skills) = st
-        .run_limited(move |stop| simulate_blocking(&scenario, duration, &scratch, stop))
+    let store = st.store().clone();
+    let (staged, meta, skills) = st
+        .run_limited(move |stop| simulate_blocking(&store, &scenario, duration, stop))
         .await?;
-    Ok(st.store().ingest(&bytes, meta, skills).await?)
+    Ok(st.store().ingest_staged(staged, meta, skills).await?)
 }
 
 /// Runs a scenario server-side through the closed 1 kHz loop, records it as a session and
@@ -276,17 +193,81 @@ async fn run_simulation(
 #[cfg(test)]
 mod tests {
     use super::*;
+    use dfs_core::scenario::Phase;
 
     #[test]
-    fn the_documented_scenario_schema_accepts_every_built_in_scenario() {
+    fn the_documented_scenario_schema_is_dfs_cores_scenario_type() {
+        let doc = serde_json::to_value(crate::http::openapi(false)).unwrap();
+        let schemas = &doc["components"]["schemas"];
+        let object = &schemas["ScenarioObject"];
+        assert_eq!(
+            object["properties"]["shape"]["$ref"], "#/components/schemas/ShapeKind",
+            "{object}"
+        );
+        assert_eq!(
+            schemas["ShapeKind"]["enum"],
+            serde_json::json!(["sphere", "box", "cylinder"])
+        );
+        let task = &schemas["Task"];
+        assert_eq!(
+            task["properties"]["phase"]["$ref"],
+            "#/components/schemas/Phase"
+        );
+        let phases: Vec<&str> = Phase::ALL.iter().map(|p| p.name()).collect();
+        assert_eq!(schemas["Phase"]["enum"], serde_json::json!(phases));
+        assert_eq!(
+            schemas["GraspStyle"]["enum"],
+            serde_json::json!(["auto", "pinch", "power"])
+        );
+        // Every field a scenario file takes is documented, and the schema's bounds are the
+        // code's.
         for name in Scenario::BUILTINS {
             let s = serde_json::to_value(Scenario::builtin(name, 3).unwrap()).unwrap();
-            let doc: ScenarioDoc = serde_json::from_value(s.clone())
-                .unwrap_or_else(|e| panic!("{name}: the documented schema lacks a field: {e}"));
-            let back: Scenario = serde_json::from_value(serde_json::to_value(doc).unwrap())
-                .unwrap_or_else(|e| panic!("{name}: {e}"));
-            assert_eq!(serde_json::to_value(back).unwrap(), s);
+            for (field, schema) in [
+                (&s, &schemas["Scenario"]),
+                (&s["object"], object),
+                (&s["tasks"][0], task),
+            ] {
+                for key in field.as_object().unwrap().keys() {
+                    assert!(
+                        schema["properties"].get(key).is_some(),
+                        "{name}: {key} is not documented: {schema}"
+                    );
+                }
+            }
         }
+        let (lo, hi) = dfs_core::statics::MU_RANGE;
+        assert_eq!(object["properties"]["mu"]["minimum"], lo);
+        assert_eq!(object["properties"]["mu"]["maximum"], hi);
+        let (lo, hi) = dfs_core::statics::MU_TORSION_RANGE;
+        assert_eq!(object["properties"]["mu_torsion"]["minimum"], lo);
+        assert_eq!(object["properties"]["mu_torsion"]["maximum"], hi);
+        let duration = &task["properties"]["duration"];
+        assert_eq!(duration["minimum"], dfs_core::scenario::MIN_TASK_S);
+        assert_eq!(duration["maximum"], dfs_core::scenario::MAX_TASK_S);
+        let required = |schema: &serde_json::Value| -> Vec<String> {
+            serde_json::from_value(schema["required"].clone()).unwrap()
+        };
+        assert_eq!(required(object), ["shape", "mass", "mu"]);
+        assert_eq!(required(task), ["phase", "duration"]);
+        assert_eq!(required(&schemas["Scenario"]), ["name", "object", "tasks"]);
+    }
+
+    #[test]
+    fn an_unknown_shape_in_a_scenario_is_refused_naming_the_field() {
+        let req: SimulationRequest = serde_json::from_value(serde_json::json!({
+            "scenario": {"name": "x", "object": {"shape": "torus", "mass": 1.0, "mu": 0.5,
+                "radius": 0.04}, "tasks": [{"phase": "lift", "duration": 1}]}
+        }))
+        .unwrap();
+        let p = scenario_of(&req).unwrap_err();
+        assert_eq!(p.status.as_u16(), 422);
+        assert!(
+            p.detail.contains("scenario.object.shape")
+                && p.detail.contains("unknown shape \"torus\""),
+            "{}",
+            p.detail
+        );
     }
 
     #[test]

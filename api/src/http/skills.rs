@@ -6,8 +6,13 @@ use axum::extract::State;
 use axum::http::{header, HeaderValue, StatusCode};
 use axum::response::{IntoResponse, Response};
 use bytes::Bytes;
+use dfs_core::contact::ContactModel;
+use dfs_core::names::Named;
+use dfs_core::scenario::Phase;
 use serde::{Deserialize, Serialize};
-use services::store::{Skill, FEATURE_DIM};
+use services::store::{ObjectShape, Skill, FEATURE_DIM};
+use utoipa::openapi::schema::{ObjectBuilder, Schema, Type};
+use utoipa::openapi::RefOr;
 use utoipa::{IntoParams, ToSchema};
 use utoipa_axum::router::OpenApiRouter;
 use utoipa_axum::routes;
@@ -17,7 +22,18 @@ use super::extract::{Id, Query, WriteAccess};
 use super::state::AppState;
 use crate::filters::SkillFilters;
 
+/// The schema of a stored object shape ([`ObjectShape`], a services type without a schema of
+/// its own): its names.
+pub(crate) fn object_shape_schema() -> impl Into<RefOr<Schema>> {
+    ObjectBuilder::new()
+        .schema_type(Type::String)
+        .enum_values(Some(ObjectShape::names()))
+}
+
 /// A stored skill: the hand-independent parameters of one grasp, in the object frame B.
+///
+/// The store's [`Skill`] with its schema: services' types have none, so the API keeps this
+/// body type beside it (fields typed alike, [`From`] between them).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize, ToSchema)]
 pub struct SkillBody {
     /// Skill id.
@@ -26,15 +42,16 @@ pub struct SkillBody {
     pub session_id: i64,
     /// Object shape: sphere, box, cylinder, or unknown (a session stored before sessions had
     /// to name their object).
-    pub object_shape: String,
+    #[schema(schema_with = object_shape_schema)]
+    pub object_shape: ObjectShape,
     /// Object mass, kg.
     pub object_mass: f64,
     /// Coulomb friction coefficient.
     pub mu: f64,
     /// Number of fingertip contacts.
     pub contact_count: i64,
-    /// Contact model: frictionless, point_with_friction or soft_finger.
-    pub contact_model: String,
+    /// Contact model.
+    pub contact_model: ContactModel,
     /// Grasp type label, e.g. precision-2vf.
     pub grasp_type: String,
     /// Ferrari-Canny ε grasp quality.
@@ -50,7 +67,7 @@ pub struct SkillBody {
     /// Time spent in each phase: `[name, seconds]` pairs, one per phase name in alphabetical
     /// order, summed when a phase occurs more than once (the `phase_min_s` / `phase_max_s`
     /// filters compare these sums). The phases in time order are in the full parameters.
-    pub phase_durations: Vec<(String, f64)>,
+    pub phase_durations: Vec<(Phase, f64)>,
     /// Feature vector for similarity search (16 values).
     #[schema(min_items = 16, max_items = 16)]
     pub feature: Vec<f32>,

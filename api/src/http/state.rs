@@ -25,6 +25,7 @@ struct Inner {
     store: Store,
     token: Option<String>,
     max_body: usize,
+    max_upload: usize,
     simulations: Arc<Semaphore>,
     ingests: Arc<Semaphore>,
     queue_wait: Duration,
@@ -49,8 +50,11 @@ impl std::fmt::Debug for AppState {
 pub struct StateConfig {
     /// Bearer token required by write endpoints; `None`: writes are open.
     pub token: Option<String>,
-    /// Largest request body, bytes.
+    /// Largest request body, bytes, but for session uploads.
     pub max_body: usize,
+    /// Largest session upload (`POST /api/v1/sessions`), bytes: streamed to disk, so memory
+    /// does not grow with it.
+    pub max_upload: usize,
     /// Simulations and replays that may run at once; more wait for a turn.
     pub max_simulations: usize,
     /// Session uploads that may be read and segmented at once; more wait for a turn.
@@ -70,6 +74,7 @@ impl AppState {
                 store,
                 token: config.token.clone(),
                 max_body: config.max_body,
+                max_upload: config.max_upload,
                 simulations: Arc::new(Semaphore::new(config.max_simulations.max(1))),
                 ingests: Arc::new(Semaphore::new(config.max_ingests.max(1))),
                 queue_wait: config.queue_wait,
@@ -91,9 +96,14 @@ impl AppState {
         self.inner.token.as_deref()
     }
 
-    /// Largest request body, bytes.
+    /// Largest request body, bytes, but for session uploads.
     pub fn max_body(&self) -> usize {
         self.inner.max_body
+    }
+
+    /// Largest session upload, bytes.
+    pub fn max_upload(&self) -> usize {
+        self.inner.max_upload
     }
 
     /// Runs `work` (a simulation or a replay) on the blocking pool once one of the

@@ -27,6 +27,7 @@
 
 use super::{FingerGroup, Fingertip, HandModel, Inertial, Joint, JointDrive, JointKind, Link};
 use crate::math::{Isometry, Mat3, Rotation, UnitVector, Vector};
+use crate::object::Shape;
 
 /// Adult hand length (m), wrist crease to the tip of the middle finger.
 pub const HAND_LENGTH: f64 = 0.19;
@@ -100,11 +101,15 @@ const FINGER_LIMITS: [(f64, f64); 3] = [(-0.35, 1.57), (0.0, 1.75), (0.0, 1.40)]
 /// DIP/PIP coupling ratio of the coupled fingers (Rijpkema & Girard 1991).
 const DIP_PIP_RATIO: f64 = 2.0 / 3.0;
 
-/// Mass properties of a uniform cylinder of `length` along link +x from the link origin.
+/// Mass properties of a uniform cylinder of `length` along link +x from the link origin
+/// ([`Shape::principal_inertia`], whose cylinder's axis is z).
 fn cylinder(length: f64, radius: f64) -> Inertial {
     let mass = HAND_DENSITY * std::f64::consts::PI * radius * radius * length;
-    let axial = 0.5 * mass * radius * radius;
-    let transverse = mass * (3.0 * radius * radius + length * length) / 12.0;
+    let [transverse, _, axial] = Shape::Cylinder {
+        radius,
+        half_height: 0.5 * length,
+    }
+    .principal_inertia(mass);
     Inertial {
         mass,
         com: Vector::new(0.5 * length, 0.0, 0.0),
@@ -112,11 +117,17 @@ fn cylinder(length: f64, radius: f64) -> Inertial {
     }
 }
 
-/// Mass properties of the palm: a uniform box from the wrist centre along +x.
+/// Mass properties of the palm: a uniform box from the wrist centre along +x
+/// ([`Shape::principal_inertia`]).
 fn palm_inertial() -> Inertial {
     let [a, b, c] = PALM_BOX;
     let mass = HAND_DENSITY * a * b * c;
-    let diag = Vector::new(b * b + c * c, a * a + c * c, a * a + b * b) * (mass / 12.0);
+    let diag = Vector::from(
+        Shape::Box {
+            half_extents: [0.5 * a, 0.5 * b, 0.5 * c],
+        }
+        .principal_inertia(mass),
+    );
     Inertial {
         mass,
         com: Vector::new(0.5 * a, -0.002, 0.0),

@@ -8,17 +8,22 @@
 //!
 //! [`ik`] places chosen fingertips at world targets (damped least squares, joint limits).
 //! [`urdf`] builds hands from a URDF plus a [`HandSpec`]; [`builtin`] holds the built-in hands
-//! (`glove10`, `allegro`, `barrett`, `inspire`, `gripper`).
+//! (`glove10`, `allegro`, `barrett`, `inspire`, `gripper`). [`link_shapes`] gives the simple
+//! solids that draw a hand and [`hand_urdf`] writes a hand back as URDF with them.
 
 pub mod builtin;
 mod glove10;
 pub mod ik;
 mod model;
+pub mod shapes;
 pub mod urdf;
+pub mod urdf_write;
 
 pub use builtin::{builtin_hand, builtin_spec, thumb_of, BUILTIN_HANDS};
 pub use model::*;
+pub use shapes::{link_shapes, LinkShape, Primitive, ShapeSource};
 pub use urdf::{
     check_urdf_text, FingertipSpec, HandSpec, DEFAULT_ARMATURE, MAX_HAND_EXTENT, MAX_URDF_BYTES,
     MAX_URDF_DEPTH,
 };
+pub use urdf_write::hand_urdf;

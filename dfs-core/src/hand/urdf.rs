@@ -172,8 +172,9 @@ fn start_tag_end(b: &[u8], from: usize) -> (usize, bool) {
     (b.len(), false)
 }
 
-/// One fingertip of a hand spec.
+/// One fingertip of a hand spec: a contact sphere fixed to a URDF link.
 #[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+#[cfg_attr(feature = "utoipa", derive(utoipa::ToSchema))]
 #[serde(
     deny_unknown_fields,
     remote = "Self",
@@ -188,6 +189,7 @@ pub struct FingertipSpec {
     /// Centre of the contact sphere in the link frame (m).
     pub offset: [f64; 3],
     /// Radius of the contact sphere (m), > 0.
+    #[cfg_attr(feature = "utoipa", schema(exclusive_minimum = 0.0))]
     pub radius: f64,
 }
 
@@ -212,6 +214,7 @@ crate::object_only!(
 ///   "base_link": "base_link", "armature": 0.0001 }
 /// ```
 #[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+#[cfg_attr(feature = "utoipa", derive(utoipa::ToSchema))]
 #[serde(
     deny_unknown_fields,
     remote = "Self",
@@ -223,9 +226,11 @@ pub struct HandSpec {
     /// The URDF file (a path relative to the spec file; for built-in hands the embedded file's
     /// name). dfs-core never opens it: callers read it and pass the text.
     pub urdf: String,
-    /// The fingertips, 1..=[`MAX_TIPS`].
+    /// The fingertips, 1 to 6 (`MAX_TIPS`).
+    #[cfg_attr(feature = "utoipa", schema(min_items = 1, max_items = 6))]
     pub fingertips: Vec<FingertipSpec>,
     /// Torque (prismatic: force) limit of every DOF without its own entry (N·m or N), > 0.
+    #[cfg_attr(feature = "utoipa", schema(exclusive_minimum = 0.0))]
     pub torque_limit: f64,
     /// Per-joint torque limits (N·m or N) by the name of the joint that is the DOF.
     #[serde(default)]
@@ -237,8 +242,9 @@ pub struct HandSpec {
     /// `thumb`, else the first fingertip.
     #[serde(default)]
     pub thumb: Option<String>,
-    /// Armature added to every DOF (kg·m² or kg), ≥ 0; default [`DEFAULT_ARMATURE`].
+    /// Armature added to every DOF (kg·m² or kg), ≥ 0; default 1e-4 (`DEFAULT_ARMATURE`).
     #[serde(default)]
+    #[cfg_attr(feature = "utoipa", schema(minimum = 0.0))]
     pub armature: Option<f64>,
 }
 
@@ -317,7 +323,7 @@ impl HandSpec {
 }
 
 /// An isometry from a URDF origin (xyz, fixed-axis roll-pitch-yaw).
-fn pose(p: &urdf_rs::Pose) -> Isometry {
+pub(super) fn pose(p: &urdf_rs::Pose) -> Isometry {
     let [x, y, z] = p.xyz.0;
     let [r, pi, ya] = p.rpy.0;
     Isometry::from_parts(

@@ -130,8 +130,9 @@ pub struct SkillSpec {
     pub held_until_s: Option<Real>,
 }
 
-/// Why a replay failed.
+/// Why a replay failed: `unreachable`, `torque_limit`, `slip` or `no_force_closure`.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize)]
+#[cfg_attr(feature = "utoipa", derive(utoipa::ToSchema))]
 #[serde(rename_all = "snake_case")]
 pub enum FailureReason {
     /// No base pose and joint angles put the fingertips on the contacts.
@@ -143,6 +144,22 @@ pub enum FailureReason {
     /// The contacts cannot carry the load inside their friction cones at all.
     NoForceClosure,
 }
+
+impl crate::names::Named for FailureReason {
+    const WHAT: &'static str = "failure reason";
+    const ALL: &'static [Self] = &[
+        FailureReason::Unreachable,
+        FailureReason::TorqueLimit,
+        FailureReason::Slip,
+        FailureReason::NoForceClosure,
+    ];
+
+    fn name(self) -> &'static str {
+        FailureReason::name(self)
+    }
+}
+
+crate::named_enum!(FailureReason);
 
 impl FailureReason {
     /// Name as in reports and the data base.
@@ -158,21 +175,27 @@ impl FailureReason {
 
 /// A contact of the retargeted grasp.
 #[derive(Debug, Clone, PartialEq, serde::Serialize)]
+#[cfg_attr(feature = "utoipa", derive(utoipa::ToSchema))]
 pub struct PlannedContact {
     /// The hand's fingertip.
     pub finger: String,
     /// Contact point in B (m).
+    #[cfg_attr(feature = "utoipa", schema(value_type = [f64; 3]))]
     pub position_b: [Real; 3],
     /// Unit normal in B, into the object.
+    #[cfg_attr(feature = "utoipa", schema(value_type = [f64; 3]))]
     pub normal_b: [Real; 3],
 }
 
 /// Grasp quality of the retargeted contacts (GraspIt!'s metrics, 8-edge cones).
 #[derive(Debug, Clone, Copy, PartialEq, serde::Serialize)]
+#[cfg_attr(feature = "utoipa", derive(utoipa::ToSchema))]
 pub struct ReplayQuality {
     /// Ferrari-Canny ε (0 when not force closure).
+    #[cfg_attr(feature = "utoipa", schema(value_type = f64))]
     pub epsilon: Real,
     /// Volume of the grasp wrench space.
+    #[cfg_attr(feature = "utoipa", schema(value_type = f64))]
     pub volume: Real,
     /// Force closure.
     pub force_closure: bool,
@@ -180,6 +203,7 @@ pub struct ReplayQuality {
 
 /// The outcome of a replay. Failures are reports, never errors.
 #[derive(Debug, Clone, PartialEq, serde::Serialize)]
+#[cfg_attr(feature = "utoipa", derive(utoipa::ToSchema))]
 pub struct ReplayReport {
     /// The hand.
     pub hand: String,
@@ -190,22 +214,29 @@ pub struct ReplayReport {
     /// A sentence on what happened.
     pub detail: String,
     /// Largest distance of the object from its reference while held (m).
+    #[cfg_attr(feature = "utoipa", schema(value_type = f64))]
     pub position_error_max_m: Real,
     /// Root mean square of the same (m).
+    #[cfg_attr(feature = "utoipa", schema(value_type = f64))]
     pub position_error_rms_m: Real,
     /// Largest rotation of the object away from its reference while held (rad).
+    #[cfg_attr(feature = "utoipa", schema(value_type = f64))]
     pub orientation_error_max_rad: Real,
     /// Root mean square of the same (rad).
+    #[cfg_attr(feature = "utoipa", schema(value_type = f64))]
     pub orientation_error_rms_rad: Real,
     /// Largest distance a held contact point moved over the object's surface (m).
+    #[cfg_attr(feature = "utoipa", schema(value_type = f64))]
     pub max_slip_m: Real,
     /// Ticks in which a held contact slipped (outside its friction cone).
     pub slip_ticks: u64,
     /// Smallest `1 − |c_t| / (μ c_n)` of a transmitting contact while held (1 = pure normal
     /// force, 0 = on the cone).
+    #[cfg_attr(feature = "utoipa", schema(value_type = f64))]
     pub min_friction_margin: Real,
     /// Largest |τ| / τ_max of the torques the joints applied over the replay (clamped at the
     /// limit, so at most 1; 1 means a joint reached its limit).
+    #[cfg_attr(feature = "utoipa", schema(value_type = f64, minimum = 0.0, maximum = 1.0))]
     pub peak_torque_ratio: Real,
     /// The DOF where that happened.
     pub peak_torque_joint: String,
@@ -214,12 +245,15 @@ pub struct ReplayReport {
     /// The retargeted contacts.
     pub contacts: Vec<PlannedContact>,
     /// Largest fingertip distance from its contact after inverse kinematics (m).
+    #[cfg_attr(feature = "utoipa", schema(value_type = f64))]
     pub ik_error_m: Real,
     /// Highest rise of the object above its start (m).
+    #[cfg_attr(feature = "utoipa", schema(value_type = f64))]
     pub lift_height_m: Real,
     /// Simulated ticks (1 kHz).
     pub ticks: u64,
     /// Simulated time (s).
+    #[cfg_attr(feature = "utoipa", schema(value_type = f64))]
     pub duration_s: Real,
 }
 
@@ -421,6 +455,13 @@ impl SkillSpec {
 mod tests {
     use super::*;
     use crate::hand::{builtin_hand, thumb_of};
+
+    #[test]
+    fn failure_reasons_are_named_as_in_reports_and_the_data_base() {
+        crate::names::assert_serde_agrees::<FailureReason>();
+        let e = "tired".parse::<FailureReason>().unwrap_err().to_string();
+        assert!(e.starts_with("unknown failure reason \"tired\""), "{e}");
+    }
 
     /// A two-finger pinch of a 0.2 kg box along x, lifted 8 cm over 1 s, held 0.5 s, put back.
     fn box_pinch(mass: Real) -> SkillSpec {

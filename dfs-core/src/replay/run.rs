@@ -7,6 +7,7 @@ use crate::dfs::{Dfs, DfsParams, GloveSample, TickOutput};
 use crate::error::Result;
 use crate::hand::{DofMatrix, HandModel, JointKind, Kinematics, MAX_DOF, MAX_TIPS};
 use crate::math::{Isometry, Point, Real, Vector};
+use crate::min_jerk::progress as min_jerk;
 use crate::object::{ObjectState, RigidObject};
 use crate::stop::Stop;
 
@@ -30,12 +31,6 @@ pub struct ReplayTick<'a> {
     pub kinematics: &'a Kinematics,
     /// The object's reference pose at this tick.
     pub reference: &'a Isometry,
-}
-
-/// Minimum-jerk profile s(τ) = 10τ³ − 15τ⁴ + 6τ⁵ on [0, 1].
-fn min_jerk(t: Real) -> Real {
-    let t = t.clamp(0.0, 1.0);
-    t * t * t * (10.0 - 15.0 * t + 6.0 * t * t)
 }
 
 /// A replay in progress: the plan, the DFS and the controller's state.

@@ -22,14 +22,14 @@ mod salvage;
 pub mod schemas;
 mod writer;
 
-pub(crate) use par::{par_map, MESSAGES_PER_JOB};
 pub(crate) use reader::{
-    message_location, read_raw_bytes, read_raw_file, MessageRef, RawSession, RawTopic,
+    check_message, json_error, message_location, stream_raw_bytes, stream_raw_file, RawTopic,
+    RawVisitor, StreamedRaw,
 };
 pub use reader::{
     read_session_bytes, read_session_bytes_decoding, read_session_file, read_session_file_decoding,
     MetadataRecord, ReadLimits, RecordedMessage, RecordedSession, SchemaInfo, TopicRecording,
-    DEFAULT_MAX_EXPANSION,
+    DEFAULT_MAX_EXPANSION, STREAMING_MAX_TOTAL_MESSAGE_BYTES,
 };
 pub use salvage::{salvage, SalvageReport};
 pub use schemas::JsonSchema;

@@ -88,7 +88,22 @@ impl Default for ReadLimits {
     }
 }
 
+/// [`ReadLimits::max_total_message_bytes`] of [`ReadLimits::streaming`]: 64 GiB, about 40 hours
+/// of a format 2 session (1.6 GB of messages an hour).
+pub const STREAMING_MAX_TOTAL_MESSAGE_BYTES: u64 = 64 << 30;
+
 impl ReadLimits {
+    /// The limits of a streamed read (the session readers of [`crate::session`]): the
+    /// defaults, with [`STREAMING_MAX_TOTAL_MESSAGE_BYTES`] in all. A streamed read holds a
+    /// chunk at a time, so the total bounds work, not memory; a file's own length still
+    /// bounds what it may decompress to ([`Self::max_expansion`]).
+    pub fn streaming() -> Self {
+        Self {
+            max_total_message_bytes: STREAMING_MAX_TOTAL_MESSAGE_BYTES,
+            ..Self::default()
+        }
+    }
+
     /// Most bytes a file of `input_len` bytes may decompress to: `max_expansion × input_len +
     /// expansion_allowance`, and never more than `max_total_message_bytes`. The readers apply
     /// it with the length of what they read (the bytes given, the file's size), whatever
@@ -298,18 +313,19 @@ pub fn read_session_file_decoding(
     decoded_topics: &[&str],
 ) -> Result<RecordedSession> {
     let path = path.as_ref();
+    let (file, len) = open_with_len(path)?;
+    read_session_from(file, Some(len), limits, decoded_topics)
+}
+
+/// The file at `path`, buffered for reading, and its length.
+fn open_with_len(path: &Path) -> Result<(BufReader<File>, u64)> {
     let file = File::open(path)
         .map_err(|e| RecordingError::io(format!("opening {}", path.display()), e))?;
     let len = file
         .metadata()
         .map_err(|e| RecordingError::io(format!("reading {}", path.display()), e))?
         .len();
-    read_session_from(
-        BufReader::with_capacity(1 << 16, file),
-        Some(len),
-        limits,
-        decoded_topics,
-    )
+    Ok((BufReader::with_capacity(1 << 16, file), len))
 }
 
 fn read_session_from<R: Read>(
@@ -388,27 +404,6 @@ impl RawSession {
         &self.buffers[m.buffer as usize][m.start..m.end]
     }
 
-    /// The topic, which must exist and have the schema named `schema_name`: JSON messages with
-    /// a `jsonschema` schema, or protobuf messages with a `protobuf` schema.
-    pub(crate) fn require_topic(&self, topic: &str, schema_name: &str) -> Result<&RawTopic> {
-        let t = self
-            .topics
-            .get(topic)
-            .ok_or_else(|| RecordingError::MissingTopic {
-                topic: topic.to_owned(),
-            })?;
-        t.require(schema_name)?;
-        Ok(t)
-    }
-
-    /// The first metadata record named `name`.
-    pub(crate) fn metadata(&self, name: &str) -> Option<&BTreeMap<String, String>> {
-        self.metadata
-            .iter()
-            .find(|m| m.name == name)
-            .map(|m| &m.entries)
-    }
-
     /// Checks that every message of every `json` topic `check(topic)` selects is valid JSON,
     /// in parallel; the first invalid message in topic and file order is the error.
     pub(crate) fn check_json(&self, check: impl Fn(&str) -> bool) -> Result<()> {
@@ -443,68 +438,6 @@ impl RawSession {
             check_message(&t.topic, first + i, m.log_time_ns, self.data(m))?;
         }
         Ok(())
-    }
-
-    /// Each of `messages` (of topic `t`, the first of them its message number `first`)
-    /// decoded into `T`, which may borrow from the payload, and handed to `f` with its number
-    /// in the topic and its log time; the first error (of decoding or of `f`) stops.
-    pub(crate) fn decode_each<'s, T: Deserialize<'s>>(
-        &'s self,
-        t: &RawTopic,
-        first: usize,
-        messages: &[MessageRef],
-        mut f: impl FnMut(usize, u64, T) -> Result<()>,
-    ) -> Result<()> {
-        for (i, m) in messages.iter().enumerate() {
-            let data = self.data(m);
-            let value = serde_json::from_slice(data).map_err(|source| {
-                json_error::<T>(&t.topic, first + i, m.log_time_ns, data, source)
-            })?;
-            f(first + i, m.log_time_ns, value)?;
-        }
-        Ok(())
-    }
-
-    /// Each of `messages` (of protobuf topic `t`, the first of them its message number
-    /// `first`) decoded as `M` and handed to `f` with its number and log time; a message that
-    /// does not decode is [`RecordingError::InvalidInput`] naming the topic, the message and
-    /// the schema. The first error (of decoding or of `f`) stops.
-    ///
-    /// A message over `skip_over` bytes is passed over, not decoded: decoding can take far more
-    /// memory than the bytes (an empty nested message is 2 bytes on the wire and a struct of
-    /// hundreds in memory). Callers that must not pass over anything refuse such messages
-    /// first.
-    pub(crate) fn decode_each_protobuf<M: prost::Message + Default>(
-        &self,
-        t: &RawTopic,
-        first: usize,
-        messages: &[MessageRef],
-        skip_over: usize,
-        mut f: impl FnMut(usize, u64, M) -> Result<()>,
-    ) -> Result<()> {
-        for (i, m) in messages.iter().enumerate() {
-            let data = self.data(m);
-            if data.len() > skip_over {
-                continue;
-            }
-            let value = M::decode(data).map_err(|e| RecordingError::InvalidInput {
-                location: message_location(&t.topic, first + i, m.log_time_ns),
-                detail: format!(
-                    "does not decode as {}: {e}",
-                    t.schema.as_ref().map_or("its schema", |s| s.name.as_str())
-                ),
-            })?;
-            f(first + i, m.log_time_ns, value)?;
-        }
-        Ok(())
-    }
-
-    /// Messages per topic.
-    pub(crate) fn message_counts(&self) -> BTreeMap<String, usize> {
-        self.topics
-            .iter()
-            .map(|(k, t)| (k.clone(), t.messages.len()))
-            .collect()
     }
 
     /// The owned form: one `Vec` per message.
@@ -545,7 +478,12 @@ impl RawSession {
 
 /// Message `index` of `topic`, checked to be JSON; the error names its topic, number and log
 /// time.
-fn check_message(topic: &str, index: usize, log_time_ns: u64, data: &[u8]) -> Result<()> {
+pub(crate) fn check_message(
+    topic: &str,
+    index: usize,
+    log_time_ns: u64,
+    data: &[u8],
+) -> Result<()> {
     json_check::validate(data).map_err(|source| RecordingError::InvalidJson {
         topic: topic.to_owned(),
         index,
@@ -571,7 +509,7 @@ fn decode_message<T: DeserializeOwned>(
 /// The error of message `index` of `topic`, whose payload `data` does not decode into `T`
 /// (`source`): with the path of the field at fault, found by decoding it again (only on this
 /// error path: tracking the path on every message would slow reading down).
-fn json_error<'de, T: Deserialize<'de>>(
+pub(crate) fn json_error<'de, T: Deserialize<'de>>(
     topic: &str,
     index: usize,
     log_time_ns: u64,
@@ -644,22 +582,6 @@ fn check_json_encoding(topic: &str, encoding: &str) -> Result<()> {
     Ok(())
 }
 
-/// [`read_raw`] of bytes in memory.
-pub(crate) fn read_raw_bytes(bytes: &[u8], limits: &ReadLimits) -> Result<RawSession> {
-    read_raw(bytes, Some(bytes.len() as u64), limits)
-}
-
-/// [`read_raw`] of a file.
-pub(crate) fn read_raw_file(path: &Path, limits: &ReadLimits) -> Result<RawSession> {
-    let file = File::open(path)
-        .map_err(|e| RecordingError::io(format!("opening {}", path.display()), e))?;
-    let len = file
-        .metadata()
-        .map_err(|e| RecordingError::io(format!("reading {}", path.display()), e))?
-        .len();
-    read_raw(BufReader::with_capacity(1 << 16, file), Some(len), limits)
-}
-
 /// Reads a whole MCAP session safely (see [`read_session_file`]) without checking its JSON.
 ///
 /// Three steps. The scanner frames the top-level records and checks the data and summary
@@ -696,31 +618,21 @@ fn read_raw<R: Read>(src: R, total_len: Option<u64>, limits: &ReadLimits) -> Res
         let (offset, header, data) = chunks[i];
         unpack_chunk(offset, header, data, limits)
     });
-    let mut builder = SessionBuilder {
-        session: RawSession::default(),
-        topics: Vec::new(),
-        topic_index: HashMap::new(),
-        schemas: HashMap::new(),
-        channels: HashMap::new(),
-        total_bytes: 0,
-        limits: *limits,
-        input_len: total_len,
-        // The chunks are decompressed (to their declared sizes, checked): what messages outside
-        // chunks and the index of every message add counts against the same budget.
-        held: batches
-            .iter()
-            .flat_map(|b| &b.records)
-            .map(|r| match r {
-                Record::Chunk { header, .. } => header.uncompressed_size,
-                _ => 0,
-            })
-            .fold(0u64, u64::saturating_add),
-        loose: Vec::new(),
-        loose_buffer: u32::try_from(chunks.len()).map_err(|_| RecordingError::Corrupt {
-            offset: 0,
-            detail: "more than 2^32 chunks".into(),
-        })?,
-    };
+    let loose_buffer = u32::try_from(chunks.len()).map_err(|_| RecordingError::Corrupt {
+        offset: 0,
+        detail: "more than 2^32 chunks".into(),
+    })?;
+    let mut builder = SessionBuilder::new(*limits, total_len, loose_buffer);
+    // The chunks are decompressed (to their declared sizes, checked): what messages outside
+    // chunks and the index of every message add counts against the same budget.
+    builder.held = batches
+        .iter()
+        .flat_map(|b| &b.records)
+        .map(|r| match r {
+            Record::Chunk { header, .. } => header.uncompressed_size,
+            _ => 0,
+        })
+        .fold(0u64, u64::saturating_add);
     drop(chunks);
     let mut unpacked = unpacked.into_iter();
     for batch in batches {
@@ -773,6 +685,317 @@ fn read_raw<R: Read>(src: R, total_len: Option<u64>, limits: &ReadLimits) -> Res
         .collect();
     Ok(session)
 }
+
+/// What [`stream_raw`] hands on, record by record in file order.
+pub(crate) trait RawVisitor {
+    /// Message `index` (counted per topic from 0) of `topic`, the `topic_index`th topic
+    /// announced by [`RawVisitor::topic`], its payload borrowed from its chunk. An error stops
+    /// the read and is its result.
+    fn message(
+        &mut self,
+        topic_index: usize,
+        topic: &RawTopic,
+        index: usize,
+        log_time_ns: u64,
+        data: &[u8],
+    ) -> Result<()>;
+
+    /// A topic seen for the first time (its first channel record), before any of its messages.
+    fn topic(&mut self, _topic: &RawTopic) -> Result<()> {
+        Ok(())
+    }
+
+    /// A metadata record, as it comes.
+    fn metadata(&mut self, _record: &MetadataRecord) -> Result<()> {
+        Ok(())
+    }
+
+    /// Asked of [`stream_raw`]'s `early` visitor once a topic was announced: whether it takes
+    /// that topic's messages on the reading thread (the main visitor then never sees them).
+    fn claims(&self, _topic_index: usize) -> bool {
+        false
+    }
+}
+
+/// A visitor that takes nothing.
+impl RawVisitor for () {
+    fn message(&mut self, _: usize, _: &RawTopic, _: usize, _: u64, _: &[u8]) -> Result<()> {
+        Ok(())
+    }
+}
+
+/// What a streamed read leaves once every message went to the visitor: the topics (with no
+/// message list) and how many messages each had, and the metadata records.
+#[derive(Debug, Default)]
+pub(crate) struct StreamedRaw {
+    /// Topics in order of first appearance, each with its message count.
+    pub topics: Vec<(RawTopic, usize)>,
+    pub metadata: Vec<MetadataRecord>,
+}
+
+impl StreamedRaw {
+    /// The topic named `topic` and its message count.
+    pub(crate) fn topic(&self, topic: &str) -> Option<&(RawTopic, usize)> {
+        self.topics.iter().find(|(t, _)| t.topic == topic)
+    }
+}
+
+/// Most metadata records a streamed read keeps before refusing the file (the session reader
+/// allows far fewer and says so at the end; this bounds what a file of nothing but metadata
+/// can make it hold).
+const STREAM_MAX_METADATA_RECORDS: usize = 4096;
+
+/// [`stream_raw`] of bytes in memory.
+pub(crate) fn stream_raw_bytes(
+    bytes: &[u8],
+    limits: &ReadLimits,
+    early: &mut (impl RawVisitor + Send),
+    visitor: &mut impl RawVisitor,
+) -> Result<StreamedRaw> {
+    stream_raw(bytes, Some(bytes.len() as u64), limits, early, visitor)
+}
+
+/// [`stream_raw`] of a file.
+pub(crate) fn stream_raw_file(
+    path: &Path,
+    limits: &ReadLimits,
+    early: &mut (impl RawVisitor + Send),
+    visitor: &mut impl RawVisitor,
+) -> Result<StreamedRaw> {
+    let (file, len) = open_with_len(path)?;
+    stream_raw(file, Some(len), limits, early, visitor)
+}
+
+/// Reads an MCAP file in one pass with the checks of [`read_raw`], handing every message to a
+/// visitor as its chunk is decompressed and checked, in file order, then dropping the chunk:
+/// what it holds is a few chunks (each at most [`ReadLimits::max_record_bytes`]) whatever the
+/// file's length. Decompression is bounded as in [`read_raw`] (the chunks' declared sizes
+/// against [`ReadLimits::decompressed_limit`] of the input's length), which here bounds work,
+/// not memory.
+///
+/// Two threads: the reading thread reads, checks, decompresses and files the records, and
+/// hands the messages of the topics `early` [claims](RawVisitor::claims) to it; the calling
+/// thread hands the others to `visitor`, a few chunks behind. Both see every topic and
+/// metadata record announced, each in file order.
+///
+/// The visitors see messages before the end of the file is checked: a file truncated or
+/// damaged later (a data section CRC, a missing footer) is an error at the end, after the
+/// messages before the damage went by. Callers keep nothing of a read that failed.
+pub(crate) fn stream_raw<R: Read + Send>(
+    src: R,
+    total_len: Option<u64>,
+    limits: &ReadLimits,
+    early: &mut (impl RawVisitor + Send),
+    visitor: &mut impl RawVisitor,
+) -> Result<StreamedRaw> {
+    std::thread::scope(|scope| -> Result<StreamedRaw> {
+        let (tx, rx) = std::sync::mpsc::sync_channel::<Filed>(STREAM_CHUNKS_AHEAD);
+        let reader = scope.spawn(move || -> Result<StreamedRaw> {
+            let mut filer = Filer {
+                builder: SessionBuilder::new(*limits, total_len, 0),
+                counts: Vec::new(),
+                claimed: Vec::new(),
+                limits,
+                early,
+            };
+            let outcome = scan(src, total_len, limits, true, |batch| {
+                let filed = filer.file(batch)?;
+                // The calling thread stopped (an error there): stop reading.
+                tx.send(filed).map_err(|_| RecordingError::WriterClosed {
+                    path: std::path::PathBuf::from("the session stream"),
+                })
+            })?;
+            if let Some(err) = outcome.error {
+                return Err(err);
+            }
+            if !outcome.complete {
+                return Err(RecordingError::Truncated {
+                    offset: outcome.committed_offset,
+                    detail: "no footer".into(),
+                });
+            }
+            Ok(StreamedRaw {
+                topics: filer.builder.topics.into_iter().zip(filer.counts).collect(),
+                metadata: filer.builder.session.metadata,
+            })
+        });
+        let mut topics: Vec<RawTopic> = Vec::new();
+        let mut failed = None;
+        'batches: for filed in rx.iter() {
+            for event in filed.events {
+                let result = match event {
+                    Event::Topic(t) => {
+                        let r = visitor.topic(&t);
+                        topics.push(t);
+                        r
+                    }
+                    Event::Metadata(m) => visitor.metadata(&m),
+                    Event::Message {
+                        topic,
+                        index,
+                        log_time_ns,
+                        buffer,
+                        start,
+                        end,
+                    } => visitor.message(
+                        topic,
+                        &topics[topic],
+                        index,
+                        log_time_ns,
+                        &filed.buffers[buffer][start..end],
+                    ),
+                };
+                if let Err(e) = result {
+                    failed = Some(e);
+                    break 'batches;
+                }
+            }
+        }
+        drop(rx);
+        let read = reader
+            .join()
+            .map_err(|_| RecordingError::WriterThreadPanicked)?;
+        match failed {
+            Some(e) => Err(e),
+            None => read,
+        }
+    })
+}
+
+/// What the reading thread of [`stream_raw`] hands on for one top-level record: the records'
+/// events in file order, and the buffers the messages lie in (a decompressed chunk, or a
+/// message outside chunks).
+struct Filed {
+    buffers: Vec<Vec<u8>>,
+    events: Vec<Event>,
+}
+
+/// One thing the calling thread of [`stream_raw`] hands its visitor.
+enum Event {
+    Topic(RawTopic),
+    Metadata(MetadataRecord),
+    Message {
+        topic: usize,
+        index: usize,
+        log_time_ns: u64,
+        buffer: usize,
+        start: usize,
+        end: usize,
+    },
+}
+
+/// The reading thread's filing of records: schemas, channels and topics, message counts, and
+/// the messages of claimed topics handed to the early visitor.
+struct Filer<'a, E: RawVisitor> {
+    builder: SessionBuilder,
+    counts: Vec<usize>,
+    claimed: Vec<bool>,
+    limits: &'a ReadLimits,
+    early: &'a mut E,
+}
+
+impl<E: RawVisitor> Filer<'_, E> {
+    fn file(&mut self, batch: Batch) -> Result<Filed> {
+        let offset = batch.offset;
+        let mut filed = Filed {
+            buffers: Vec::new(),
+            events: Vec::new(),
+        };
+        for record in batch.records {
+            match record {
+                Record::Chunk { header, data } => {
+                    let content = unpack_chunk(offset, &header, &data, self.limits)?;
+                    let buffer = filed.buffers.len();
+                    let mut others = content.others.into_iter();
+                    let mut pos = 0;
+                    while let Some((opcode, start, end)) =
+                        next_chunk_record(&content.data, pos, offset, self.limits)?
+                    {
+                        if opcode == op::MESSAGE {
+                            let header = message_header(&content.data[start..end]);
+                            let payload = (start + MESSAGE_HEADER_LEN, end);
+                            self.message(
+                                offset,
+                                &header,
+                                &content.data,
+                                buffer,
+                                payload,
+                                &mut filed,
+                            )?;
+                        } else if let Some(r) = others.next() {
+                            self.other(offset, r, &mut filed)?;
+                        }
+                        pos = end;
+                    }
+                    filed.buffers.push(content.data);
+                }
+                Record::Message { header, data } => {
+                    let buffer = filed.buffers.len();
+                    let data = data.into_owned();
+                    self.message(offset, &header, &data, buffer, (0, data.len()), &mut filed)?;
+                    filed.buffers.push(data);
+                }
+                other => self.other(offset, other, &mut filed)?,
+            }
+        }
+        Ok(filed)
+    }
+
+    /// A message whose payload is `data[start..end]` (`data` to be `filed.buffers[buffer]`).
+    fn message(
+        &mut self,
+        offset: u64,
+        header: &MessageHeader,
+        data: &[u8],
+        buffer: usize,
+        (start, end): (usize, usize),
+        filed: &mut Filed,
+    ) -> Result<()> {
+        let topic = self.builder.channel_topic(offset, header.channel_id)?;
+        self.builder.count_message((end - start) as u64)?;
+        let index = self.counts[topic];
+        self.counts[topic] += 1;
+        if self.claimed[topic] {
+            let t = &self.builder.topics[topic];
+            return self
+                .early
+                .message(topic, t, index, header.log_time, &data[start..end]);
+        }
+        filed.events.push(Event::Message {
+            topic,
+            index,
+            log_time_ns: header.log_time,
+            buffer,
+            start,
+            end,
+        });
+        Ok(())
+    }
+
+    /// A record other than a message: filed, new topics and metadata announced to both.
+    fn other(&mut self, offset: u64, record: Record<'static>, filed: &mut Filed) -> Result<()> {
+        let is_metadata = matches!(record, Record::Metadata(_));
+        self.builder.apply(offset, record)?;
+        while self.counts.len() < self.builder.topics.len() {
+            let index = self.counts.len();
+            let t = &self.builder.topics[index];
+            self.early.topic(t)?;
+            self.claimed.push(self.early.claims(index));
+            self.counts.push(0);
+            filed.events.push(Event::Topic(t.clone()));
+        }
+        if is_metadata {
+            self.builder.metadata_added(offset, self.early)?;
+            if let Some(m) = self.builder.session.metadata.last() {
+                filed.events.push(Event::Metadata(m.clone()));
+            }
+        }
+        Ok(())
+    }
+}
+
+/// Chunks read and decompressed ahead of the one being filed by [`stream_raw`].
+const STREAM_CHUNKS_AHEAD: usize = 4;
 
 /// A chunk decompressed, checked and split into records: its content, and its records other
 /// than messages, parsed, in order (messages, most of a chunk, are framed again from `data`
@@ -968,6 +1191,59 @@ struct SessionBuilder {
 }
 
 impl SessionBuilder {
+    fn new(limits: ReadLimits, input_len: Option<u64>, loose_buffer: u32) -> Self {
+        SessionBuilder {
+            session: RawSession::default(),
+            topics: Vec::new(),
+            topic_index: HashMap::new(),
+            schemas: HashMap::new(),
+            channels: HashMap::new(),
+            total_bytes: 0,
+            limits,
+            input_len,
+            held: 0,
+            loose: Vec::new(),
+            loose_buffer,
+        }
+    }
+
+    /// The index in `topics` of the channel `channel_id` of a message at `offset`.
+    fn channel_topic(&self, offset: u64, channel_id: u16) -> Result<usize> {
+        self.channels
+            .get(&channel_id)
+            .map(|(_, topic)| *topic)
+            .ok_or_else(|| RecordingError::Corrupt {
+                offset,
+                detail: format!("message refers to unknown channel id {channel_id}"),
+            })
+    }
+
+    /// Counts a message's payload against [`ReadLimits::max_total_message_bytes`].
+    fn count_message(&mut self, bytes: u64) -> Result<()> {
+        self.total_bytes += bytes;
+        if self.total_bytes > self.limits.max_total_message_bytes {
+            return Err(RecordingError::TooMuchData {
+                limit: self.limits.max_total_message_bytes,
+            });
+        }
+        Ok(())
+    }
+
+    /// The metadata record just applied, handed to `visitor`; too many records are refused.
+    fn metadata_added(&self, offset: u64, visitor: &mut impl RawVisitor) -> Result<()> {
+        let records = &self.session.metadata;
+        if records.len() > STREAM_MAX_METADATA_RECORDS {
+            return Err(RecordingError::Corrupt {
+                offset,
+                detail: format!("more than {STREAM_MAX_METADATA_RECORDS} metadata records"),
+            });
+        }
+        match records.last() {
+            Some(record) => visitor.metadata(record),
+            None => Ok(()),
+        }
+    }
+
     /// Counts `bytes` more against the budget of the input's length.
     fn hold(&mut self, offset: u64, bytes: u64) -> Result<()> {
         self.held = self.held.saturating_add(bytes);
@@ -994,21 +1270,9 @@ impl SessionBuilder {
         start: usize,
         end: usize,
     ) -> Result<()> {
-        let (_, topic) =
-            self.channels
-                .get(&header.channel_id)
-                .ok_or_else(|| RecordingError::Corrupt {
-                    offset,
-                    detail: format!("message refers to unknown channel id {}", header.channel_id),
-                })?;
-        self.total_bytes += (end - start) as u64;
-        if self.total_bytes > self.limits.max_total_message_bytes {
-            return Err(RecordingError::TooMuchData {
-                limit: self.limits.max_total_message_bytes,
-            });
-        }
+        let topic = self.channel_topic(offset, header.channel_id)?;
+        self.count_message((end - start) as u64)?;
         // A message's index entry is held too: for a file of tiny messages it outweighs them.
-        let topic = *topic;
         self.hold(offset, std::mem::size_of::<MessageRef>() as u64)?;
         self.topics[topic].messages.push(MessageRef {
             log_time_ns: header.log_time,

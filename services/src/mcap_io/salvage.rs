@@ -37,9 +37,9 @@ pub struct SalvageReport {
 
 /// Reads `input` (an MCAP file whose writer may have died: no summary, no footer, perhaps a
 /// partial trailing chunk) record by record up to the first incomplete or corrupt record, and
-/// writes every complete message, schema, channel and metadata record to a new, finished MCAP
-/// file at `output` (zstd chunks, indexes, summary). A chunk is recovered whole or not at all:
-/// its CRC must match.
+/// writes every complete message, schema, channel, metadata record and attachment to a new,
+/// finished MCAP file at `output` (zstd chunks, indexes, summary). A chunk is recovered whole
+/// or not at all: its CRC must match.
 ///
 /// Fails if `input` is not an MCAP file, if not one message could be recovered from it (an
 /// empty file would read as a recovered one), or if a file cannot be opened or written. The
@@ -200,6 +200,16 @@ fn salvage_into(input: &Path, output: &Path) -> Result<SalvageReport> {
                         Record::Metadata(m) => {
                             writer.write_metadata(&m)?;
                             report.metadata_records += 1;
+                        }
+                        // A session's `hand.urdf`, say: kept with its times and media type.
+                        Record::Attachment { header, data, .. } => {
+                            writer.attach(&mcap::Attachment {
+                                log_time: header.log_time,
+                                create_time: header.create_time,
+                                name: header.name,
+                                media_type: header.media_type,
+                                data,
+                            })?;
                         }
                         _ => {}
                     }

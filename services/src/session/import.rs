@@ -503,6 +503,7 @@ pub fn replay_glove(
         phases: Vec::new(),
         started_at: None,
         table_height: Some(position.z - depth),
+        hand_urdf: None,
     };
     let mut recorder = SessionRecorder::create(out, dfs.hand(), dfs.object(), &info)?;
     let n = recording.names.len();

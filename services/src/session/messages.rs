@@ -6,8 +6,6 @@
 //! `services/schemas/icms.*.json`; format 2 writes these messages as protobuf
 //! ([`super::proto`], from `services/proto/icms/session.proto`).
 
-use std::borrow::Cow;
-
 use serde::{Deserialize, Serialize};
 
 use crate::foxglove::{Pose, Vector3};
@@ -245,10 +243,38 @@ pub const MAX_METADATA_BYTES: usize = 256 * 1024;
 /// name the same ones, in the same order (a session records one hand).
 #[derive(Debug, Clone, Default, PartialEq, Eq)]
 pub(crate) struct TickReference {
-    /// `names` of `/glove/joint_states` message 0.
+    /// DOF names of the first message that listed a valid number of them.
     pub dof_names: Option<Vec<String>>,
-    /// Finger names of `/dfs/contacts` message 0.
+    /// Which message that was, for errors: "the DOF names of /glove/joint_states message 0".
+    pub dof_source: String,
+    /// Fingertip names of the first message that listed a valid number of them.
     pub finger_names: Option<Vec<String>>,
+    /// Which message that was, for errors: "the fingertips of /dfs/contacts message 0".
+    pub finger_source: String,
+}
+
+impl TickReference {
+    /// Takes `names` (of a message of `topic`) as the session's DOF names if there are none
+    /// yet and their number is valid (an empty list would make every other message look
+    /// wrong, before the culprit's own error).
+    pub(crate) fn learn_dofs(&mut self, topic: &str, names: &[String]) {
+        if self.dof_names.is_none() && (1..=MAX_SESSION_DOFS).contains(&names.len()) {
+            self.dof_names = Some(names.to_vec());
+            self.dof_source = format!("the DOF names of {topic} message 0");
+        }
+    }
+
+    /// [`Self::learn_dofs`] for the fingertip names.
+    pub(crate) fn learn_fingers<'n>(
+        &mut self,
+        topic: &str,
+        names: impl ExactSizeIterator<Item = &'n str>,
+    ) {
+        if self.finger_names.is_none() && (1..=MAX_SESSION_FINGERS).contains(&names.len()) {
+            self.finger_names = Some(names.map(str::to_owned).collect());
+            self.finger_source = format!("the fingertips of {topic} message 0");
+        }
+    }
 }
 
 /// A raw message whose content can be checked beyond its JSON shape. The error is the detail,
@@ -277,12 +303,7 @@ fn check_dofs<'n>(
         }
     }
     if let Some(expected) = &reference.dof_names {
-        same_names(
-            "names",
-            names,
-            expected,
-            "the DOF names of /glove/joint_states message 0",
-        )?;
+        same_names("names", names, expected, &reference.dof_source)?;
     }
     Ok(())
 }
@@ -300,12 +321,7 @@ fn check_fingers<'n>(
         ));
     }
     if let Some(expected) = &reference.finger_names {
-        same_names(
-            "fingers",
-            names,
-            expected,
-            "the fingertips of /dfs/contacts message 0",
-        )?;
+        same_names("fingers", names, expected, &reference.finger_source)?;
     }
     Ok(())
 }
@@ -410,135 +426,5 @@ impl TickContent for ObjectState {
     fn check(&self, _: &TickReference) -> Result<(), String> {
         check_unit(&self.pose.orientation, "pose.orientation")?;
         check_unit(&self.pose_in_hand.orientation, "pose_in_hand.orientation")
-    }
-}
-
-/// A name as read: borrowed from the message where the JSON has no escapes.
-#[derive(Debug, Clone, PartialEq, Eq)]
-pub(crate) struct Name<'a>(pub Cow<'a, str>);
-
-impl<'de: 'a, 'a> Deserialize<'de> for Name<'a> {
-    fn deserialize<D: serde::Deserializer<'de>>(d: D) -> Result<Self, D::Error> {
-        struct V;
-        impl<'de> serde::de::Visitor<'de> for V {
-            type Value = Name<'de>;
-            fn expecting(&self, f: &mut std::fmt::Formatter) -> std::fmt::Result {
-                f.write_str("a string")
-            }
-            fn visit_borrowed_str<E: serde::de::Error>(
-                self,
-                v: &'de str,
-            ) -> Result<Self::Value, E> {
-                Ok(Name(Cow::Borrowed(v)))
-            }
-            fn visit_str<E: serde::de::Error>(self, v: &str) -> Result<Self::Value, E> {
-                Ok(Name(Cow::Owned(v.to_owned())))
-            }
-            fn visit_string<E: serde::de::Error>(self, v: String) -> Result<Self::Value, E> {
-                Ok(Name(Cow::Owned(v)))
-            }
-        }
-        d.deserialize_str(V)
-    }
-}
-
-/// An array of numbers, each parsed as a (necessarily finite) `f64` and counted, not kept.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub(crate) struct Numbers(pub usize);
-
-impl<'de> Deserialize<'de> for Numbers {
-    fn deserialize<D: serde::Deserializer<'de>>(d: D) -> Result<Self, D::Error> {
-        struct V;
-        impl<'de> serde::de::Visitor<'de> for V {
-            type Value = Numbers;
-            fn expecting(&self, f: &mut std::fmt::Formatter) -> std::fmt::Result {
-                f.write_str("a sequence")
-            }
-            fn visit_seq<A: serde::de::SeqAccess<'de>>(
-                self,
-                mut seq: A,
-            ) -> Result<Numbers, A::Error> {
-                let mut n = 0;
-                while seq.next_element::<f64>()?.is_some() {
-                    n += 1;
-                }
-                Ok(Numbers(n))
-            }
-        }
-        d.deserialize_seq(V)
-    }
-}
-
-/// [`GloveJointStates`] as checked when it is not decoded: the same JSON accepted, the names
-/// borrowed and the arrays counted (a third of the cost of decoding it).
-#[derive(Debug, Deserialize)]
-#[serde(deny_unknown_fields)]
-pub(crate) struct GloveJointStatesShape<'a> {
-    #[serde(borrow)]
-    names: Vec<Name<'a>>,
-    positions: Numbers,
-    velocities: Numbers,
-    efforts: Numbers,
-}
-
-/// [`FingerFeedback`] as checked when it is not decoded.
-#[derive(Debug, Deserialize)]
-#[serde(deny_unknown_fields)]
-struct FingerFeedbackShape<'a> {
-    #[serde(borrow)]
-    name: Name<'a>,
-    // Parsed for their numbers, not kept.
-    #[serde(default, rename = "feedback_force_world")]
-    _feedback_force_world: Vector3,
-    #[serde(rename = "tip_force_world")]
-    _tip_force_world: Vector3,
-}
-
-/// [`GloveFeedback`] as checked when it is not decoded.
-#[derive(Debug, Deserialize)]
-#[serde(deny_unknown_fields)]
-pub(crate) struct GloveFeedbackShape<'a> {
-    #[serde(borrow)]
-    names: Vec<Name<'a>>,
-    motor_positions: Numbers,
-    motor_velocities: Numbers,
-    feedback_torques: Numbers,
-    #[serde(borrow)]
-    fingers: Vec<FingerFeedbackShape<'a>>,
-}
-
-impl GloveJointStatesShape<'_> {
-    /// The DOF names.
-    pub(crate) fn names(&self) -> Vec<String> {
-        self.names.iter().map(|n| n.0.to_string()).collect()
-    }
-}
-
-impl TickContent for GloveJointStatesShape<'_> {
-    fn check(&self, reference: &TickReference) -> Result<(), String> {
-        check_dofs(
-            self.names.iter().map(|n| &*n.0),
-            [
-                ("positions", self.positions.0),
-                ("velocities", self.velocities.0),
-                ("efforts", self.efforts.0),
-            ],
-            reference,
-        )
-    }
-}
-
-impl TickContent for GloveFeedbackShape<'_> {
-    fn check(&self, reference: &TickReference) -> Result<(), String> {
-        check_dofs(
-            self.names.iter().map(|n| &*n.0),
-            [
-                ("motor_positions", self.motor_positions.0),
-                ("motor_velocities", self.motor_velocities.0),
-                ("feedback_torques", self.feedback_torques.0),
-            ],
-            reference,
-        )?;
-        check_fingers(self.fingers.iter().map(|f| &*f.name.0), reference)
     }
 }

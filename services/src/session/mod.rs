@@ -19,7 +19,12 @@
 //! world → `object`), `/scene` (`foxglove.SceneUpdate`: one entity `object` in `world` with the
 //! object's shape and one arrow per transmitting contact, from the contact point along the
 //! force on the object, [`ARROW_M_PER_N`] m per N; and the entity [`TABLE_ENTITY`], a slab
-//! whose top is the table), `/joint_states` (`foxglove.JointStates`).
+//! whose top is the table), `/joint_states` (`foxglove.JointStates`). And once a second
+//! ([`HAND_SCENE_PERIOD_TICKS`]) `/hand` (`foxglove.SceneUpdate`: one frame-locked entity per
+//! link, in the link's frame, with its shapes; see [`hand_scene`]).
+//!
+//! Attachment: `hand.urdf` ([`HAND_URDF_ATTACHMENT`], `application/xml`), the hand's URDF with
+//! the same link geometry; its link and joint names are the frame ids of `/tf`.
 //!
 //! Metadata records: `session` (keys `scenario`, `seed`, `hand`, `object` (JSON), `rate_hz`,
 //! `software_version`, `format_version`, `started_at` (RFC 3339, UTC), `source`, and more)
@@ -28,25 +33,49 @@
 //!
 //! # Writing
 //!
-//! The simulation thread serialises each tick's messages into a reused buffer (no per-message
-//! allocation once warm) and hands batches of [`FOXGLOVE_DECIMATION`] ticks through a bounded
-//! channel to a writer thread that owns the [`SessionWriter`](crate::mcap_io::SessionWriter) (zstd compression and file I/O
-//! happen there, in parallel with the simulation); emptied batches come back for reuse.
-//! [`SessionRecorder::finish`] closes the channel, joins the thread and finishes the file. If
-//! anything fails midway, the file is still finished with every tick written before the failure.
+//! Three threads. The simulation thread only checks that a tick's numbers are finite and
+//! copies its inputs (joint values, the DFS output, the base pose, on Foxglove ticks the link
+//! poses) into a reused batch; a serialiser thread quantises them and writes the protobuf
+//! bytes (no per-message allocation once warm); a writer thread owns the
+//! [`SessionWriter`](crate::mcap_io::SessionWriter) (zstd compression and file I/O). Batches
+//! of 100 ticks go through bounded channels and come back emptied for reuse.
+//! [`SessionRecorder::finish`] closes the channels, joins the threads and finishes the file.
+//! If anything fails midway, the file is still finished with every tick written before the
+//! failure.
+//!
+//! # Reading
+//!
+//! [`stream_session_file`] and [`stream_session_bytes`] check a session in one pass and hand
+//! its raw samples to a [`SessionVisitor`] as they come, holding a few decompressed chunks
+//! whatever the file's length. Two threads share the work: the reading thread reads, checks
+//! the CRCs, decompresses and files the records, and checks the topics the visitor does not
+//! take (the Foxglove topics, and for segmentation the glove topics); the calling thread
+//! decodes and checks the ones it takes and hands them on. The raw topics of format 2 are
+//! decoded by a decoder of our own (`session/wire.rs`, held to prost's by property tests) into
+//! reused SI messages: no allocation per message. [`read_session`] collects the samples into
+//! a [`Session`] for callers that want them all; segmentation streams twice instead
+//! ([`crate::segmentation::segment_source`]): an hour of session is checked and segmented in
+//! about 10 s in 210 MB.
 
+pub mod hand_scene;
 pub mod import;
 pub mod messages;
 pub mod proto;
 mod read;
 mod recorder;
 mod time;
+mod wire;
 
+pub use hand_scene::{
+    hand_scene_update, hand_shapes, session_hand_urdf, HAND_SCENE_PERIOD_TICKS,
+    HAND_URDF_ATTACHMENT, HAND_URDF_MEDIA_TYPE, TOPIC_HAND,
+};
 pub use messages::*;
 pub use read::{
     read_session, read_session_bytes, read_session_bytes_with, read_session_file_with,
-    read_session_with_limits, DecodeTopics, Session, MAX_CHECKED_FOXGLOVE_MESSAGE_BYTES,
-    MAX_RAW_MESSAGE_BYTES, MAX_RAW_SCHEMA_BYTES,
+    read_session_with_limits, stream_session_bytes, stream_session_file, DecodeTopics, Session,
+    SessionHead, SessionSource, SessionVisitor, MAX_CHECKED_FOXGLOVE_MESSAGE_BYTES,
+    MAX_RAW_MESSAGE_BYTES, MAX_RAW_SCHEMA_BYTES, RAW_TOPIC_SKEW_NS,
 };
 pub use recorder::{
     record_simulation, record_simulation_until, record_ticks, record_ticks_until, RecordSummary,
@@ -86,11 +115,13 @@ pub const RAW_SCHEMA_NAMES: [&str; 4] = [
 /// The Foxglove topics, written every [`FOXGLOVE_DECIMATION`]th tick.
 pub const FOXGLOVE_TOPICS: [&str; 3] = [TOPIC_TF, TOPIC_SCENE, TOPIC_JOINT_STATES];
 
-/// Longest span of log times a session read back may cover on its raw topics (ns): the longest
-/// session icms writes is an hour (`simulate --duration` and scenario scripts ≤ 3600 s, glove
-/// imports ≤ 1 h), a replay adds a few seconds. Segmentation resamples a session onto a 1 ms
-/// grid, so an unbounded span (one message with a far-future log time) would ask for terabytes.
-pub const MAX_SESSION_NS: u64 = 3_660_000_000_000;
+/// Longest span of log times a session read back may cover on its raw topics (ns): two hours
+/// and a minute. The longest session icms writes is an hour (`simulate --duration` and
+/// scenario scripts ≤ 3600 s, glove imports ≤ 1 h; a replay adds a few seconds); files from
+/// other recorders may run to two hours (the default upload limit holds three). Segmentation
+/// resamples a session onto a 1 ms grid (41 bytes a millisecond: 300 MB for two hours), so an
+/// unbounded span (one message with a far-future log time) would ask for terabytes.
+pub const MAX_SESSION_NS: u64 = 7_260_000_000_000;
 
 /// Foxglove topics are written on ticks whose index is a multiple of this (50 Hz at 1 kHz).
 pub const FOXGLOVE_DECIMATION: u64 = 20;

@@ -56,12 +56,35 @@ pub const LINEAR_VELOCITY: f64 = 1e-6;
 /// Step of an angular velocity, rad/s (`_e6`).
 pub const ANGULAR_VELOCITY: f64 = 1e-6;
 
-/// Rounds SI values to integer steps, remembering the first one that is not finite or does not
-/// fit an `i32` (the recorder refuses the tick then, naming it).
+/// Rounds SI values to integer steps and writes the raw topics' protobuf encoding, remembering
+/// the first value that is not finite or does not fit an `i32` (the recorder refuses the tick
+/// then, naming it).
+///
+/// The `encode_*` methods write a message's bytes straight from the SI message: what prost
+/// writes for the fixed-point message (the same bytes: fields in tag order, zeros and `None`
+/// left out), without building it. The field keys come from the prost-generated types, so
+/// `proto/icms/session.proto` stays the one definition of the fields; the methods that fill the
+/// prost types ([`joint_states`](Self::joint_states), ...) decode those bytes.
 #[derive(Debug, Default)]
 pub struct Quantiser {
     /// The first value refused: its field (`efforts[2]`, `pose`) and value.
     pub refused: Option<(String, f64)>,
+    /// Where messages are written before they are appended to the caller's buffer: kept at
+    /// its longest, so that its room is zeroed once, not for every message.
+    scratch: Vec<u8>,
+}
+
+/// The first value refused, as [`Quantiser::refused`] holds it.
+type Refused = Option<(String, f64)>;
+
+/// `x / step` rounded; 0 (and the field noted in `refused`, if it is the first) if that is not
+/// a finite `i32`.
+#[inline(always)]
+fn quantise(refused: &mut Refused, field: &'static str, x: f64, step: f64) -> i32 {
+    steps(x, step).unwrap_or_else(|| {
+        refused.get_or_insert_with(|| (field.to_owned(), x));
+        0
+    })
 }
 
 /// `x / step` rounded (half away from zero), if that is a finite `i32`. Written for speed, as
@@ -77,160 +100,573 @@ fn steps(x: f64, step: f64) -> Option<i32> {
     Some((v + 0.5f64.copysign(v)) as i32)
 }
 
+/// Protobuf's zigzag encoding of an `sint32`.
+#[inline(always)]
+fn zigzag(v: i32) -> u32 {
+    ((v << 1) ^ (v >> 31)) as u32
+}
+
+/// Bytes of the varint of `v` (1 to 10).
+#[inline(always)]
+fn varint_len(v: u64) -> usize {
+    (64 - (v | 1).leading_zeros() as usize).div_ceil(7)
+}
+
+/// The key (field number and wire type, as a varint) that prost writes first for a message
+/// with only the field that `set` sets.
+fn key_of<M: prost::Message + Default>(set: impl FnOnce(&mut M)) -> u64 {
+    let mut m = M::default();
+    set(&mut m);
+    let bytes = m.encode_to_vec();
+    let mut key = 0;
+    for (i, b) in bytes.iter().take(10).enumerate() {
+        key |= u64::from(b & 0x7f) << (7 * i);
+        if b & 0x80 == 0 {
+            return key;
+        }
+    }
+    panic!("no field key in {bytes:?}")
+}
+
+/// The keys of every field of the raw topics, taken from the prost-generated types (see
+/// [`key_of`]): the field numbers are those of `session.proto`, and a field renamed or removed
+/// there does not compile here.
+struct Keys {
+    vector: [u64; 3],
+    quaternion: [u64; 4],
+    intensity: [u64; 4],
+    position: u64,
+    orientation: u64,
+    force: u64,
+    torque: u64,
+    js_names: u64,
+    js_values: [u64; 3],
+    fb_names: u64,
+    fb_values: [u64; 3],
+    fb_fingers: u64,
+    ff_name: u64,
+    ff_feedback_force: u64,
+    ff_tip_force: u64,
+    c_n_contacts: u64,
+    c_fingers: u64,
+    fc_name: u64,
+    fc_touching: u64,
+    fc_in_contact: u64,
+    fc_point: u64,
+    fc_normal: u64,
+    fc_penetration: u64,
+    fc_intensities: [u64; 3],
+    fc_in_cone: u64,
+    fc_slip: u64,
+    /// Of `ObjectState`: pose, linear and angular velocity, the three wrenches, pose in hand.
+    object: [u64; 7],
+}
+
+impl Keys {
+    fn get() -> &'static Keys {
+        static KEYS: std::sync::OnceLock<Keys> = std::sync::OnceLock::new();
+        KEYS.get_or_init(Keys::new)
+    }
+
+    fn new() -> Self {
+        let v3 = || Some(Vector3i { x: 1, y: 0, z: 0 });
+        let name = || "a".to_owned();
+        let one = || vec![1];
+        let int4 = || {
+            Some(Intensityi {
+                x_e3: 1,
+                ..Intensityi::default()
+            })
+        };
+        Self {
+            vector: [
+                key_of(|m: &mut Vector3i| m.x = 1),
+                key_of(|m: &mut Vector3i| m.y = 1),
+                key_of(|m: &mut Vector3i| m.z = 1),
+            ],
+            quaternion: [
+                key_of(|m: &mut Quaternioni| m.x_e6 = 1),
+                key_of(|m: &mut Quaternioni| m.y_e6 = 1),
+                key_of(|m: &mut Quaternioni| m.z_e6 = 1),
+                key_of(|m: &mut Quaternioni| m.w_e6 = 1),
+            ],
+            intensity: [
+                key_of(|m: &mut Intensityi| m.x_e3 = 1),
+                key_of(|m: &mut Intensityi| m.y_e3 = 1),
+                key_of(|m: &mut Intensityi| m.z_e3 = 1),
+                key_of(|m: &mut Intensityi| m.torsion_e6 = 1),
+            ],
+            position: key_of(|m: &mut Posei| m.position_e6 = v3()),
+            orientation: key_of(|m: &mut Posei| m.orientation = Some(Quaternioni::default())),
+            force: key_of(|m: &mut Wrenchi| m.force_e3 = v3()),
+            torque: key_of(|m: &mut Wrenchi| m.torque_e6 = v3()),
+            js_names: key_of(|m: &mut GloveJointStatesProto| m.names = vec![name()]),
+            js_values: [
+                key_of(|m: &mut GloveJointStatesProto| m.positions_e5 = one()),
+                key_of(|m: &mut GloveJointStatesProto| m.velocities_e2 = one()),
+                key_of(|m: &mut GloveJointStatesProto| m.efforts_e5 = one()),
+            ],
+            fb_names: key_of(|m: &mut GloveFeedbackProto| m.names = vec![name()]),
+            fb_values: [
+                key_of(|m: &mut GloveFeedbackProto| m.motor_positions_e5 = one()),
+                key_of(|m: &mut GloveFeedbackProto| m.motor_velocities_e2 = one()),
+                key_of(|m: &mut GloveFeedbackProto| m.feedback_torques_e5 = one()),
+            ],
+            fb_fingers: key_of(|m: &mut GloveFeedbackProto| {
+                m.fingers = vec![FingerFeedbackProto::default()]
+            }),
+            ff_name: key_of(|m: &mut FingerFeedbackProto| m.name = name()),
+            ff_feedback_force: key_of(|m: &mut FingerFeedbackProto| {
+                m.feedback_force_world_e3 = v3()
+            }),
+            ff_tip_force: key_of(|m: &mut FingerFeedbackProto| m.tip_force_world_e3 = v3()),
+            c_n_contacts: key_of(|m: &mut ContactsProto| m.n_contacts = 1),
+            c_fingers: key_of(|m: &mut ContactsProto| {
+                m.fingers = vec![FingerContactProto::default()]
+            }),
+            fc_name: key_of(|m: &mut FingerContactProto| m.name = name()),
+            fc_touching: key_of(|m: &mut FingerContactProto| m.touching = true),
+            fc_in_contact: key_of(|m: &mut FingerContactProto| m.in_contact = true),
+            fc_point: key_of(|m: &mut FingerContactProto| m.point_b_e6 = v3()),
+            fc_normal: key_of(|m: &mut FingerContactProto| m.normal_b_e6 = v3()),
+            fc_penetration: key_of(|m: &mut FingerContactProto| m.penetration_e9 = 1),
+            fc_intensities: [
+                key_of(|m: &mut FingerContactProto| m.intensity = int4()),
+                key_of(|m: &mut FingerContactProto| m.transmitted = int4()),
+                key_of(|m: &mut FingerContactProto| m.feedback = int4()),
+            ],
+            fc_in_cone: key_of(|m: &mut FingerContactProto| m.in_cone = true),
+            fc_slip: key_of(|m: &mut FingerContactProto| m.slip = true),
+            object: [
+                key_of(|m: &mut ObjectStateProto| m.pose = Some(Posei::default())),
+                key_of(|m: &mut ObjectStateProto| m.linear_velocity_e6 = v3()),
+                key_of(|m: &mut ObjectStateProto| m.angular_velocity_b_e6 = v3()),
+                key_of(|m: &mut ObjectStateProto| m.f_ext_b = Some(Wrenchi::default())),
+                key_of(|m: &mut ObjectStateProto| m.object_force_b = Some(Wrenchi::default())),
+                key_of(|m: &mut ObjectStateProto| m.table_force_b = Some(Wrenchi::default())),
+                key_of(|m: &mut ObjectStateProto| m.pose_in_hand = Some(Posei::default())),
+            ],
+        }
+    }
+}
+
+/// Writes the varint of a value (a zigzagged `sint32`, a `uint32`: at most 5 bytes) at `pos`
+/// without a branch: each 7-bit group shifted to its byte, the continuation bits of all bytes
+/// but the last set, 8 bytes stored and `pos` moved by the varint's length. `buf` must have 8
+/// bytes from `pos`.
+#[inline(always)]
+fn put_value(buf: &mut [u8], pos: &mut usize, v: u32) {
+    /// Per count of leading zero bits of the value: the varint's length and its continuation
+    /// bits.
+    const LENGTHS: [(usize, u64); 33] = {
+        let mut t = [(0, 0); 33];
+        let mut lz = 0;
+        while lz <= 32 {
+            let bits: usize = if lz == 32 { 1 } else { 32 - lz };
+            let n = bits.div_ceil(7);
+            t[lz] = (n, 0x8080_8080_8080_8080 & ((1u64 << (8 * (n - 1))) - 1));
+            lz += 1;
+        }
+        t
+    };
+    let x = u64::from(v);
+    let w = (x & 0x7f)
+        | ((x << 1) & 0x7f00)
+        | ((x << 2) & 0x7f_0000)
+        | ((x << 3) & 0x7f00_0000)
+        | ((x << 4) & 0x7f_0000_0000);
+    let (n, continuation) = LENGTHS[v.leading_zeros() as usize];
+    buf[*pos..*pos + 8].copy_from_slice(&(w | continuation).to_le_bytes());
+    *pos += n;
+}
+
+/// Writes a key (a varint: one byte for field numbers under 16) at `pos` and returns the
+/// position after it. `buf` must have 10 bytes from `pos`.
+#[inline(always)]
+fn put_key(buf: &mut [u8], pos: &mut usize, mut key: u64) -> usize {
+    while key >= 0x80 {
+        buf[*pos] = (key & 0x7f) as u8 | 0x80;
+        *pos += 1;
+        key >>= 7;
+    }
+    buf[*pos] = key as u8;
+    *pos += 1;
+    *pos
+}
+
+/// Protobuf bytes appended to a `Vec<u8>` without a branch on the values where it can be
+/// helped: each write makes room first, a varint is stored as 8 bytes and the cursor moved by
+/// its length, a zero field is written and then taken back, and a length-delimited field gets
+/// one byte for its length, widened (the body moved) in the rare case it needs more.
+struct Wire<'a> {
+    /// The message, from 0 to `pos`; what follows is room for the next writes.
+    buf: &'a mut Vec<u8>,
+    pos: usize,
+    refused: &'a mut Refused,
+    keys: &'static Keys,
+}
+
+impl<'a> Wire<'a> {
+    /// A message written into `q`'s scratch buffer.
+    fn new(q: &'a mut Quantiser) -> Self {
+        Self {
+            buf: &mut q.scratch,
+            pos: 0,
+            refused: &mut q.refused,
+            keys: Keys::get(),
+        }
+    }
+
+    /// Appends the message to `out`.
+    fn finish(self, out: &mut Vec<u8>) {
+        out.extend_from_slice(&self.buf[..self.pos]);
+    }
+
+    #[inline(always)]
+    fn q(&mut self, field: &'static str, x: f64, step: f64) -> i32 {
+        quantise(self.refused, field, x, step)
+    }
+
+    /// Makes sure `n` bytes can be written at the cursor.
+    #[inline(always)]
+    fn room(&mut self, n: usize) {
+        if self.buf.len() < self.pos + n {
+            self.grow(n);
+        }
+    }
+
+    #[cold]
+    #[inline(never)]
+    fn grow(&mut self, n: usize) {
+        let len = (self.pos + n).max(2 * self.buf.len()).max(4096);
+        self.buf.resize(len, 0);
+    }
+
+    /// A key, or a length: one byte almost always (field numbers under 16, short messages),
+    /// a branch the processor gets right.
+    #[inline(always)]
+    fn varint(&mut self, v: u64) {
+        if v < 0x80 {
+            self.buf[self.pos] = v as u8;
+            self.pos += 1;
+        } else {
+            self.long_varint(v);
+        }
+    }
+
+    #[cold]
+    #[inline(never)]
+    fn long_varint(&mut self, mut v: u64) {
+        self.room(10);
+        while v >= 0x80 {
+            self.buf[self.pos] = (v & 0x7f) as u8 | 0x80;
+            self.pos += 1;
+            v >>= 7;
+        }
+        self.buf[self.pos] = v as u8;
+        self.pos += 1;
+    }
+
+    /// A value's varint (see [`put_value`]); needs 8 bytes of room.
+    #[inline(always)]
+    fn value(&mut self, v: u32) {
+        put_value(&mut self.buf[..], &mut self.pos, v);
+    }
+
+    /// An `sint32` field (left out when 0).
+    #[inline(always)]
+    fn sint32(&mut self, key: u64, v: i32) {
+        self.room(16);
+        let start = self.pos;
+        self.varint(key);
+        self.value(zigzag(v));
+        if v == 0 {
+            self.pos = start;
+        }
+    }
+
+    /// A `uint32` field (left out when 0).
+    #[inline(always)]
+    fn uint32(&mut self, key: u64, v: u32) {
+        self.room(16);
+        let start = self.pos;
+        self.varint(key);
+        self.value(v);
+        if v == 0 {
+            self.pos = start;
+        }
+    }
+
+    /// A `bool` field (left out when false).
+    #[inline(always)]
+    fn bool(&mut self, key: u64, v: bool) {
+        self.room(16);
+        let start = self.pos;
+        self.varint(key);
+        self.varint(1);
+        if !v {
+            self.pos = start;
+        }
+    }
+
+    /// A string (one of a `repeated string`, or a `string` field when not empty).
+    fn string(&mut self, key: u64, s: &str) {
+        self.room(24 + s.len());
+        self.varint(key);
+        self.varint(s.len() as u64);
+        self.buf[self.pos..self.pos + s.len()].copy_from_slice(s.as_bytes());
+        self.pos += s.len();
+    }
+
+    /// Starts a length-delimited field: its key and one byte for its length.
+    #[inline(always)]
+    fn begin(&mut self, key: u64) -> usize {
+        self.room(16);
+        self.varint(key);
+        self.pos += 1;
+        self.pos - 1
+    }
+
+    /// Ends the length-delimited field [`begin`](Self::begin) started at `at`.
+    #[inline(always)]
+    fn end(&mut self, at: usize) {
+        let len = self.pos - at - 1;
+        if len < 0x80 {
+            self.buf[at] = len as u8;
+        } else {
+            self.long_length(at, len);
+        }
+    }
+
+    #[cold]
+    #[inline(never)]
+    fn long_length(&mut self, at: usize, len: usize) {
+        let n = varint_len(len as u64);
+        self.room(n);
+        self.buf.copy_within(at + 1..self.pos, at + n);
+        let mut v = len;
+        for i in 0..n {
+            self.buf[at + i] = (v & 0x7f) as u8 | if i + 1 < n { 0x80 } else { 0 };
+            v >>= 7;
+        }
+        self.pos += n - 1;
+    }
+
+    /// A `Vector3i` field (left out when all zero).
+    #[inline(always)]
+    fn vector(&mut self, key: u64, field: &'static str, v: &Vector3, step: f64) {
+        let x = self.q(field, v.x, step);
+        let y = self.q(field, v.y, step);
+        let z = self.q(field, v.z, step);
+        if (x | y | z) == 0 {
+            return;
+        }
+        self.small(key, &self.keys.vector, [x, y, z]);
+    }
+
+    /// A `Posei` field.
+    fn pose(&mut self, key: u64, field: &'static str, p: &Pose) {
+        let at = self.begin(key);
+        self.vector(self.keys.position, field, &p.position, POSITION);
+        let o = &p.orientation;
+        let values = [
+            self.q(field, o.x, UNIT),
+            self.q(field, o.y, UNIT),
+            self.q(field, o.z, UNIT),
+            self.q(field, o.w, UNIT),
+        ];
+        self.small(self.keys.orientation, &self.keys.quaternion, values);
+        self.end(at);
+    }
+
+    /// A `Wrenchi` field.
+    fn wrench(&mut self, key: u64, field: &'static str, w: &[f64; 6]) {
+        let at = self.begin(key);
+        let force = Vector3::new(w[0], w[1], w[2]);
+        self.vector(self.keys.force, field, &force, FORCE);
+        let torque = Vector3::new(w[3], w[4], w[5]);
+        self.vector(self.keys.torque, field, &torque, MOMENT);
+        self.end(at);
+    }
+
+    /// An `Intensityi` field (left out when all zero).
+    #[inline(always)]
+    fn intensity(&mut self, key: u64, field: &'static str, c: &Intensity4) {
+        let values = [
+            self.q(field, c.x, FORCE),
+            self.q(field, c.y, FORCE),
+            self.q(field, c.z, FORCE),
+            self.q(field, c.torsion, MOMENT),
+        ];
+        if values == [0; 4] {
+            return;
+        }
+        self.small(key, &self.keys.intensity, values);
+    }
+
+    /// A message field of `N` `sint32` fields (keys `keys`; zeros left out), written with the
+    /// buffer and cursor held in registers (through `self`, each byte stored would make the
+    /// compiler load them again).
+    #[inline(always)]
+    fn small<const N: usize>(&mut self, key: u64, keys: &[u64; N], values: [i32; N]) {
+        self.room(16 + 16 * N);
+        let (buf, mut pos) = (&mut self.buf[..], self.pos);
+        let at = put_key(buf, &mut pos, key);
+        pos += 1;
+        for (&k, v) in keys.iter().zip(values) {
+            let start = pos;
+            put_key(buf, &mut pos, k);
+            put_value(buf, &mut pos, zigzag(v));
+            if v == 0 {
+                pos = start;
+            }
+        }
+        self.pos = pos;
+        self.end(at);
+    }
+
+    /// A packed `repeated sint32` field (left out when empty); a value refused is named
+    /// `field[i]`.
+    fn packed(&mut self, key: u64, field: &'static str, values: &[f64], step: f64) {
+        if values.is_empty() {
+            return;
+        }
+        self.room(16 + 8 * values.len());
+        let (buf, mut pos) = (&mut self.buf[..], self.pos);
+        let at = put_key(buf, &mut pos, key);
+        pos += 1;
+        for (i, &x) in values.iter().enumerate() {
+            let v = steps(x, step).unwrap_or_else(|| {
+                self.refused
+                    .get_or_insert_with(|| (format!("{field}[{i}]"), x));
+                0
+            });
+            put_value(buf, &mut pos, zigzag(v));
+        }
+        self.pos = pos;
+        self.end(at);
+    }
+}
+
 impl Quantiser {
     /// `x / step` rounded; 0 (and the field noted) if that is not a finite `i32`.
     #[inline]
     pub fn q(&mut self, field: &'static str, x: f64, step: f64) -> i32 {
-        steps(x, step).unwrap_or_else(|| {
-            self.refused.get_or_insert_with(|| (field.to_owned(), x));
-            0
-        })
+        quantise(&mut self.refused, field, x, step)
     }
 
-    fn v3(&mut self, field: &'static str, v: &Vector3, step: f64) -> Option<Vector3i> {
-        let out = Vector3i {
-            x: self.q(field, v.x, step),
-            y: self.q(field, v.y, step),
-            z: self.q(field, v.z, step),
-        };
-        // Leave an all-zero vector out of the message (protobuf's default).
-        (out != Vector3i::default()).then_some(out)
-    }
-
-    fn pose(&mut self, field: &'static str, p: &Pose) -> Posei {
-        Posei {
-            position_e6: self.v3(field, &p.position, POSITION),
-            orientation: Some(Quaternioni {
-                x_e6: self.q(field, p.orientation.x, UNIT),
-                y_e6: self.q(field, p.orientation.y, UNIT),
-                z_e6: self.q(field, p.orientation.z, UNIT),
-                w_e6: self.q(field, p.orientation.w, UNIT),
-            }),
+    /// Appends the protobuf encoding of `/glove/joint_states` to `out`.
+    pub fn encode_joint_states(&mut self, m: &GloveJointStates, out: &mut Vec<u8>) {
+        let mut w = Wire::new(self);
+        let k = w.keys;
+        for name in &m.names {
+            w.string(k.js_names, name);
         }
+        w.packed(k.js_values[0], "positions", &m.positions, JOINT_ANGLE);
+        w.packed(k.js_values[1], "velocities", &m.velocities, JOINT_VELOCITY);
+        w.packed(k.js_values[2], "efforts", &m.efforts, JOINT_TORQUE);
+        w.finish(out);
     }
 
-    fn wrench(&mut self, field: &'static str, w: &[f64; 6]) -> Wrenchi {
-        Wrenchi {
-            force_e3: self.v3(field, &Vector3::new(w[0], w[1], w[2]), FORCE),
-            torque_e6: self.v3(field, &Vector3::new(w[3], w[4], w[5]), MOMENT),
+    /// Appends the protobuf encoding of `/glove/feedback` to `out`.
+    pub fn encode_feedback(&mut self, m: &GloveFeedback, out: &mut Vec<u8>) {
+        let mut w = Wire::new(self);
+        let k = w.keys;
+        for name in &m.names {
+            w.string(k.fb_names, name);
         }
-    }
-
-    fn intensity(&mut self, field: &'static str, c: &Intensity4) -> Option<Intensityi> {
-        let out = Intensityi {
-            x_e3: self.q(field, c.x, FORCE),
-            y_e3: self.q(field, c.y, FORCE),
-            z_e3: self.q(field, c.z, FORCE),
-            torsion_e6: self.q(field, c.torsion, MOMENT),
-        };
-        (out != Intensityi::default()).then_some(out)
-    }
-
-    fn fill(&mut self, field: &'static str, out: &mut Vec<i32>, values: &[f64], step: f64) {
-        out.clear();
-        for (i, &x) in values.iter().enumerate() {
-            out.push(steps(x, step).unwrap_or_else(|| {
-                self.refused
-                    .get_or_insert_with(|| (format!("{field}[{i}]"), x));
-                0
-            }));
+        let (p, v, t) = (&m.motor_positions, &m.motor_velocities, &m.feedback_torques);
+        w.packed(k.fb_values[0], "motor_positions", p, JOINT_ANGLE);
+        w.packed(k.fb_values[1], "motor_velocities", v, JOINT_VELOCITY);
+        w.packed(k.fb_values[2], "feedback_torques", t, JOINT_TORQUE);
+        for f in &m.fingers {
+            let at = w.begin(k.fb_fingers);
+            if !f.name.is_empty() {
+                w.string(k.ff_name, &f.name);
+            }
+            let force = &f.feedback_force_world;
+            w.vector(k.ff_feedback_force, "feedback_force_world", force, FORCE);
+            w.vector(k.ff_tip_force, "tip_force_world", &f.tip_force_world, FORCE);
+            w.end(at);
         }
+        w.finish(out);
     }
 
-    /// `/glove/joint_states` into `out`, reusing its buffers (names are copied only when they
-    /// differ).
+    /// Appends the protobuf encoding of `/dfs/contacts` to `out`.
+    pub fn encode_contacts(&mut self, m: &Contacts, out: &mut Vec<u8>) {
+        let mut w = Wire::new(self);
+        let k = w.keys;
+        w.uint32(k.c_n_contacts, m.n_contacts);
+        for f in &m.fingers {
+            let at = w.begin(k.c_fingers);
+            if !f.name.is_empty() {
+                w.string(k.fc_name, &f.name);
+            }
+            w.bool(k.fc_touching, f.touching);
+            w.bool(k.fc_in_contact, f.in_contact);
+            w.vector(k.fc_point, "point_b", &f.point_b, POSITION);
+            w.vector(k.fc_normal, "normal_b", &f.normal_b, UNIT);
+            let penetration = w.q("penetration", f.penetration, PENETRATION);
+            w.sint32(k.fc_penetration, penetration);
+            let [ki, kt, kf] = k.fc_intensities;
+            w.intensity(ki, "intensity", &f.intensity);
+            w.intensity(kt, "transmitted", &f.transmitted);
+            w.intensity(kf, "feedback", &f.feedback);
+            w.bool(k.fc_in_cone, f.in_cone);
+            w.bool(k.fc_slip, f.slip);
+            w.end(at);
+        }
+        w.finish(out);
+    }
+
+    /// Appends the protobuf encoding of `/object/state` to `out`.
+    pub fn encode_object(&mut self, m: &messages::ObjectState, out: &mut Vec<u8>) {
+        let mut w = Wire::new(self);
+        let k = w.keys.object;
+        w.pose(k[0], "pose", &m.pose);
+        let (v, omega) = (&m.linear_velocity, &m.angular_velocity_b);
+        w.vector(k[1], "linear_velocity", v, LINEAR_VELOCITY);
+        w.vector(k[2], "angular_velocity_b", omega, ANGULAR_VELOCITY);
+        w.wrench(k[3], "f_ext_b", &m.f_ext_b);
+        w.wrench(k[4], "object_force_b", &m.object_force_b);
+        w.wrench(k[5], "table_force_b", &m.table_force_b);
+        w.pose(k[6], "pose_in_hand", &m.pose_in_hand);
+        w.finish(out);
+    }
+
+    /// `/glove/joint_states` into `out` (the decoding of
+    /// [`encode_joint_states`](Self::encode_joint_states)).
     pub fn joint_states(&mut self, m: &GloveJointStates, out: &mut GloveJointStatesProto) {
-        if out.names != m.names {
-            out.names.clone_from(&m.names);
-        }
-        self.fill(
-            "positions",
-            &mut out.positions_e5,
-            &m.positions,
-            JOINT_ANGLE,
-        );
-        self.fill(
-            "velocities",
-            &mut out.velocities_e2,
-            &m.velocities,
-            JOINT_VELOCITY,
-        );
-        self.fill("efforts", &mut out.efforts_e5, &m.efforts, JOINT_TORQUE);
+        let mut bytes = Vec::new();
+        self.encode_joint_states(m, &mut bytes);
+        *out = decode_own(&bytes);
     }
 
-    /// `/glove/feedback` into `out`, reusing its buffers.
+    /// `/glove/feedback` into `out` (the decoding of [`encode_feedback`](Self::encode_feedback)).
     pub fn feedback(&mut self, m: &GloveFeedback, out: &mut GloveFeedbackProto) {
-        if out.names != m.names {
-            out.names.clone_from(&m.names);
-        }
-        self.fill(
-            "motor_positions",
-            &mut out.motor_positions_e5,
-            &m.motor_positions,
-            JOINT_ANGLE,
-        );
-        self.fill(
-            "motor_velocities",
-            &mut out.motor_velocities_e2,
-            &m.motor_velocities,
-            JOINT_VELOCITY,
-        );
-        self.fill(
-            "feedback_torques",
-            &mut out.feedback_torques_e5,
-            &m.feedback_torques,
-            JOINT_TORQUE,
-        );
-        out.fingers
-            .resize_with(m.fingers.len(), FingerFeedbackProto::default);
-        for (f, o) in m.fingers.iter().zip(out.fingers.iter_mut()) {
-            if o.name != f.name {
-                o.name.clone_from(&f.name);
-            }
-            o.feedback_force_world_e3 =
-                self.v3("feedback_force_world", &f.feedback_force_world, FORCE);
-            o.tip_force_world_e3 = self.v3("tip_force_world", &f.tip_force_world, FORCE);
-        }
+        let mut bytes = Vec::new();
+        self.encode_feedback(m, &mut bytes);
+        *out = decode_own(&bytes);
     }
 
-    /// `/dfs/contacts` into `out`, reusing its buffers.
+    /// `/dfs/contacts` into `out` (the decoding of [`encode_contacts`](Self::encode_contacts)).
     pub fn contacts(&mut self, m: &Contacts, out: &mut ContactsProto) {
-        out.n_contacts = m.n_contacts;
-        out.fingers
-            .resize_with(m.fingers.len(), FingerContactProto::default);
-        for (f, o) in m.fingers.iter().zip(out.fingers.iter_mut()) {
-            if o.name != f.name {
-                o.name.clone_from(&f.name);
-            }
-            o.touching = f.touching;
-            o.in_contact = f.in_contact;
-            o.point_b_e6 = self.v3("point_b", &f.point_b, POSITION);
-            o.normal_b_e6 = self.v3("normal_b", &f.normal_b, UNIT);
-            o.penetration_e9 = self.q("penetration", f.penetration, PENETRATION);
-            o.intensity = self.intensity("intensity", &f.intensity);
-            o.transmitted = self.intensity("transmitted", &f.transmitted);
-            o.feedback = self.intensity("feedback", &f.feedback);
-            o.in_cone = f.in_cone;
-            o.slip = f.slip;
-        }
+        let mut bytes = Vec::new();
+        self.encode_contacts(m, &mut bytes);
+        *out = decode_own(&bytes);
     }
 
-    /// `/object/state`.
+    /// `/object/state` (the decoding of [`encode_object`](Self::encode_object)).
     pub fn object(&mut self, m: &messages::ObjectState) -> ObjectStateProto {
-        ObjectStateProto {
-            pose: Some(self.pose("pose", &m.pose)),
-            linear_velocity_e6: self.v3("linear_velocity", &m.linear_velocity, LINEAR_VELOCITY),
-            angular_velocity_b_e6: self.v3(
-                "angular_velocity_b",
-                &m.angular_velocity_b,
-                ANGULAR_VELOCITY,
-            ),
-            f_ext_b: Some(self.wrench("f_ext_b", &m.f_ext_b)),
-            object_force_b: Some(self.wrench("object_force_b", &m.object_force_b)),
-            table_force_b: Some(self.wrench("table_force_b", &m.table_force_b)),
-            pose_in_hand: Some(self.pose("pose_in_hand", &m.pose_in_hand)),
-        }
+        let mut bytes = Vec::new();
+        self.encode_object(m, &mut bytes);
+        decode_own(&bytes)
     }
+}
+
+/// A message the [`Quantiser`] encoded, decoded.
+fn decode_own<M: prost::Message + Default>(bytes: &[u8]) -> M {
+    M::decode(bytes).expect("the quantiser writes valid protobuf")
 }
 
 /// Where the protobuf schema `theirs` (a serialised `FileDescriptorSet`, as a file's schema
@@ -524,6 +960,134 @@ mod tests {
         let d = schema_difference(&bytes, "icms.ObjectState").unwrap();
         assert!(d.contains("does not define message icms.Posei"), "{d}");
         assert!(schema_difference(b"\xff\xff", "icms.Contacts").is_some());
+    }
+
+    /// `bytes` decoded as `M`, checked to be what prost writes for it.
+    fn canonical<M: Message + Default>(bytes: &[u8]) -> M {
+        let m = M::decode(bytes).unwrap();
+        assert_eq!(m.encode_to_vec(), bytes);
+        m
+    }
+
+    #[test]
+    fn the_encoding_is_prosts_with_zero_fields_and_vectors_left_out() {
+        let mut q = Quantiser::default();
+        // Values of every varint length (1 to 5 bytes), both signs, and zeros; a name long
+        // enough that its finger's length takes two bytes.
+        let long = "f".repeat(200);
+        let values = [
+            0.0, 1e-5, -1e-5, 0.00063, -0.02, 0.5, -3.0, 21_474.0, -21_474.83,
+        ];
+        let joints = GloveJointStates {
+            names: vec!["a".into(), String::new(), long.clone()],
+            positions: values.to_vec(),
+            velocities: vec![0.0; values.len()],
+            efforts: values.iter().map(|v| -v).collect(),
+        };
+        let mut out = vec![7];
+        q.encode_joint_states(&joints, &mut out);
+        assert_eq!(out[0], 7, "appended");
+        let back: GloveJointStatesProto = canonical(&out[1..]);
+        assert_eq!(back.names, joints.names);
+        assert_eq!(back.velocities_e2, vec![0; values.len()]);
+        assert_eq!(back.positions_e5[8], -2_147_483_000);
+        assert_eq!(joint_states_from_proto(back).positions.len(), values.len());
+
+        let feedback = GloveFeedback {
+            names: vec!["j".into()],
+            motor_positions: vec![0.1],
+            motor_velocities: vec![],
+            feedback_torques: vec![0.0],
+            fingers: vec![
+                FingerFeedback {
+                    name: long.clone(),
+                    feedback_force_world: Vector3::new(0.0, 0.0, 0.0),
+                    tip_force_world: Vector3::new(0.0, -1.5, 0.0),
+                },
+                FingerFeedback::default(),
+            ],
+        };
+        let mut out = Vec::new();
+        q.encode_feedback(&feedback, &mut out);
+        let back: GloveFeedbackProto = canonical(&out);
+        assert!(back.motor_velocities_e2.is_empty());
+        assert_eq!(back.fingers.len(), 2);
+        assert_eq!(back.fingers[0].feedback_force_world_e3, None);
+        assert_eq!(
+            back.fingers[0].tip_force_world_e3,
+            Some(Vector3i {
+                x: 0,
+                y: -1500,
+                z: 0
+            })
+        );
+        assert_eq!(back.fingers[1], FingerFeedbackProto::default());
+
+        let touching = FingerContact {
+            name: long,
+            touching: true,
+            in_contact: true,
+            point_b: Vector3::new(0.01, -0.02, 0.03),
+            normal_b: Vector3::new(0.0, 0.0, -1.0),
+            penetration: -2e-4,
+            intensity: Intensity4 {
+                x: 0.5,
+                y: 0.0,
+                z: 3.0,
+                torsion: -1e-3,
+            },
+            transmitted: Intensity4::default(),
+            feedback: Intensity4 {
+                torsion: 1e-6,
+                ..Intensity4::default()
+            },
+            in_cone: false,
+            slip: true,
+        };
+        for n_contacts in [0, 1] {
+            let contacts = Contacts {
+                n_contacts,
+                fingers: vec![touching.clone(), FingerContact::default()],
+            };
+            let mut out = Vec::new();
+            q.encode_contacts(&contacts, &mut out);
+            let back: ContactsProto = canonical(&out);
+            assert_eq!(back.n_contacts, n_contacts);
+            let f = &back.fingers[0];
+            assert!(f.touching && f.in_contact && f.slip && !f.in_cone);
+            assert_eq!(
+                f.normal_b_e6,
+                Some(Vector3i {
+                    x: 0,
+                    y: 0,
+                    z: -1_000_000
+                })
+            );
+            assert_eq!(f.penetration_e9, -200_000);
+            assert_eq!(f.transmitted, None);
+            assert_eq!(f.feedback.map(|c| c.torsion_e6), Some(1));
+            assert_eq!(back.fingers[1], FingerContactProto::default());
+            assert_eq!(
+                contacts_from_proto(back).fingers[0].point_b,
+                touching.point_b
+            );
+        }
+
+        // An object at rest at the origin: every message field but the vectors is there, even
+        // empty (an all-zero quaternion).
+        let mut rest = messages::ObjectState::default();
+        rest.pose_in_hand.orientation.w = 0.0;
+        let mut out = Vec::new();
+        q.encode_object(&rest, &mut out);
+        let back: ObjectStateProto = canonical(&out);
+        assert_eq!(back.linear_velocity_e6, None);
+        assert_eq!(back.f_ext_b, Some(Wrenchi::default()));
+        let pose = back.pose.unwrap();
+        assert_eq!(pose.position_e6, None);
+        assert_eq!(pose.orientation.map(|o| o.w_e6), Some(1_000_000));
+        let in_hand = back.pose_in_hand.unwrap();
+        assert_eq!(in_hand.orientation, Some(Quaternioni::default()));
+        assert!(q.refused.is_none());
     }
 
     #[test]

@@ -1,18 +1,20 @@
-//! [`read_session`]: a session file back into typed samples.
+//! Reading a session back: [`stream_session_file`] and [`stream_session_bytes`] check a session
+//! file in one pass and hand its raw samples to a [`SessionVisitor`] as they come, holding a
+//! chunk at a time whatever the file's length; [`read_session`] and its variants collect them
+//! into a [`Session`].
 
 use std::collections::BTreeMap;
 use std::path::Path;
 
-use serde::Deserialize;
-
 use super::messages::*;
-use super::proto::{self, schema_difference};
+use super::proto::schema_difference;
+use super::wire;
 use super::*;
 use crate::error::{RecordingError, Result};
 use crate::foxglove::{FRAME_TRANSFORMS_SCHEMA, JOINT_STATES_SCHEMA, SCENE_UPDATE_SCHEMA};
 use crate::mcap_io::{
-    message_location, par_map, read_raw_bytes, read_raw_file, JsonSchema, MessageRef, RawSession,
-    RawTopic, ReadLimits, MESSAGES_PER_JOB,
+    check_message, json_error, message_location, stream_raw_bytes, stream_raw_file, MetadataRecord,
+    RawTopic, RawVisitor, ReadLimits, StreamedRaw,
 };
 use crate::replay::REPLAY_METADATA;
 
@@ -66,49 +68,49 @@ impl Session {
     /// object (the reader has checked an object that is there). For everything that segments
     /// or stores a file as a session.
     pub fn ensure_grasp_session(&self, name: &str) -> Result<()> {
-        if !self.is_replay() {
-            if self
-                .metadata
-                .get("object")
-                .is_none_or(|o| o.trim().is_empty())
-            {
-                let record = if self.metadata.is_empty() {
-                    format!("has no `{SESSION_METADATA}` metadata record")
-                } else {
-                    format!("has no `object` in its `{SESSION_METADATA}` metadata record")
-                };
-                return Err(RecordingError::InvalidInput {
-                    location: name.to_owned(),
-                    detail: format!(
-                        "{record}: a grasp session names the object grasped (shape, sizes, \
-                         mass, mu, as a scenario file's `object`), which its skills carry into \
-                         the data base and onto robot hands"
-                    ),
-                });
-            }
-            return Ok(());
-        }
-        let get = |key: &str| {
-            self.replay
-                .as_ref()
-                .and_then(|r| r.get(key))
-                .filter(|v| !v.is_empty())
-        };
-        let hand = get("hand")
-            .or_else(|| self.metadata.get("replay_hand"))
-            .or_else(|| self.metadata.get("hand"));
-        let skill = get("skill").or_else(|| self.metadata.get("scenario"));
-        let what = match (skill, hand) {
-            (Some(s), Some(h)) => format!(" of {s} on the hand {h}"),
-            (None, Some(h)) => format!(" on the hand {h}"),
-            (Some(s), None) => format!(" of {s}"),
-            (None, None) => String::new(),
-        };
-        Err(RecordingError::ReplayRecording {
-            name: name.to_owned(),
-            what,
-        })
+        ensure_grasp_session(&self.metadata, self.replay.as_ref(), name)
     }
+}
+
+/// [`Session::ensure_grasp_session`] of a session's `session` and `replay` metadata records.
+fn ensure_grasp_session(
+    metadata: &BTreeMap<String, String>,
+    replay: Option<&BTreeMap<String, String>>,
+    name: &str,
+) -> Result<()> {
+    if !(replay.is_some() || metadata.get("source").is_some_and(|s| s == "replay")) {
+        if metadata.get("object").is_none_or(|o| o.trim().is_empty()) {
+            let record = if metadata.is_empty() {
+                format!("has no `{SESSION_METADATA}` metadata record")
+            } else {
+                format!("has no `object` in its `{SESSION_METADATA}` metadata record")
+            };
+            return Err(RecordingError::InvalidInput {
+                location: name.to_owned(),
+                detail: format!(
+                    "{record}: a grasp session names the object grasped (shape, sizes, \
+             mass, mu, as a scenario file's `object`), which its skills carry into \
+             the data base and onto robot hands"
+                ),
+            });
+        }
+        return Ok(());
+    }
+    let get = |key: &str| replay.and_then(|r| r.get(key)).filter(|v| !v.is_empty());
+    let hand = get("hand")
+        .or_else(|| metadata.get("replay_hand"))
+        .or_else(|| metadata.get("hand"));
+    let skill = get("skill").or_else(|| metadata.get("scenario"));
+    let what = match (skill, hand) {
+        (Some(s), Some(h)) => format!(" of {s} on the hand {h}"),
+        (None, Some(h)) => format!(" on the hand {h}"),
+        (Some(s), None) => format!(" of {s}"),
+        (None, None) => String::new(),
+    };
+    Err(RecordingError::ReplayRecording {
+        name: name.to_owned(),
+        what,
+    })
 }
 
 /// Which raw topics a read decodes into the [`Session`]. A topic left out is checked as one
@@ -135,6 +137,13 @@ impl DecodeTopics {
         contacts: true,
         object: true,
     };
+    /// No raw topic.
+    pub const NONE: DecodeTopics = DecodeTopics {
+        joint_states: false,
+        feedback: false,
+        contacts: false,
+        object: false,
+    };
     /// What [`crate::segmentation::segment`] reads: contacts and object state.
     pub const SEGMENTATION: DecodeTopics = DecodeTopics {
         joint_states: false,
@@ -144,15 +153,108 @@ impl DecodeTopics {
     };
 }
 
+impl DecodeTopics {
+    /// Whether raw topic `RAW_TOPICS[i]` is among these.
+    pub fn has(&self, i: usize) -> bool {
+        match i {
+            0 => self.joint_states,
+            1 => self.feedback,
+            2 => self.contacts,
+            _ => self.object,
+        }
+    }
+}
+
 impl Default for DecodeTopics {
     fn default() -> Self {
         DecodeTopics::ALL
     }
 }
 
-/// Reads a session file with default [`ReadLimits`]. See [`read_session_with_limits`].
+/// What a session holds besides its samples: what [`stream_session_file`] returns once every
+/// sample went to the visitor.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct SessionHead {
+    /// The `session` metadata record (empty if absent).
+    pub metadata: BTreeMap<String, String>,
+    /// Ground-truth phases (`ground_truth` record; empty if absent).
+    pub phases: Vec<GroundTruthPhase>,
+    /// Messages per topic, all topics of the file.
+    pub message_counts: BTreeMap<String, usize>,
+    /// The `replay` metadata record, present only in a replay recording.
+    pub replay: Option<BTreeMap<String, String>>,
+    /// Log times of the first and last `/object/state` message (ns).
+    pub object_span_ns: (u64, u64),
+}
+
+impl SessionHead {
+    /// [`Session::ensure_grasp_session`] of this session.
+    pub fn ensure_grasp_session(&self, name: &str) -> Result<()> {
+        ensure_grasp_session(&self.metadata, self.replay.as_ref(), name)
+    }
+
+    /// The session without samples, to fill.
+    fn into_session(self) -> Session {
+        Session {
+            metadata: self.metadata,
+            phases: self.phases,
+            joint_states: Vec::new(),
+            feedback: Vec::new(),
+            contacts: Vec::new(),
+            object: Vec::new(),
+            message_counts: self.message_counts,
+            replay: self.replay,
+        }
+    }
+}
+
+/// Receives a session's raw samples, checked, in file order (each topic in time order; the
+/// topics interleaved as written, tick by tick in our files). Each message is lent: copy
+/// what you keep. An error stops the read and is its result.
+///
+/// The samples come before the end of the file is checked: a read can still fail after the
+/// last one (a truncated file, a topic missing, metadata out of bounds). Keep nothing of a
+/// read that failed.
+pub trait SessionVisitor {
+    /// A `/glove/joint_states` sample.
+    fn joint_states(&mut self, _log_time_ns: u64, _m: &GloveJointStates) -> Result<()> {
+        Ok(())
+    }
+    /// A `/glove/feedback` sample.
+    fn feedback(&mut self, _log_time_ns: u64, _m: &GloveFeedback) -> Result<()> {
+        Ok(())
+    }
+    /// A `/dfs/contacts` sample.
+    fn contacts(&mut self, _log_time_ns: u64, _m: &Contacts) -> Result<()> {
+        Ok(())
+    }
+    /// An `/object/state` sample.
+    fn object(&mut self, _log_time_ns: u64, _m: &messages::ObjectState) -> Result<()> {
+        Ok(())
+    }
+    /// The raw topics whose samples it takes: the others are checked on the reading thread,
+    /// beside decompression, and never handed to it. Default: all four.
+    fn wants(&self) -> DecodeTopics {
+        DecodeTopics::ALL
+    }
+    /// Whether no sample to come can matter: a second read
+    /// ([`SessionSource::stream_again`]) stops there. A first read checks the whole file
+    /// whatever this says.
+    fn done(&self) -> bool {
+        false
+    }
+}
+
+/// A visitor that keeps nothing: [`stream_session_file`] with it only checks the file.
+impl SessionVisitor for () {
+    fn wants(&self) -> DecodeTopics {
+        DecodeTopics::NONE
+    }
+}
+
+/// Reads a session file with [`ReadLimits::streaming`]. See [`read_session_with_limits`].
 pub fn read_session(path: impl AsRef<Path>) -> Result<Session> {
-    read_session_with_limits(path, &ReadLimits::default())
+    read_session_with_limits(path, &ReadLimits::streaming())
 }
 
 /// Reads a session file safely (CRC prevalidation, record length limit, decompression bounded
@@ -191,16 +293,16 @@ pub fn read_session_with_limits(path: impl AsRef<Path>, limits: &ReadLimits) -> 
     read_session_file_with(path, limits, DecodeTopics::ALL)
 }
 
-/// [`read_session_with_limits`] decoding only the raw topics in `topics` (the others are
+/// [`read_session_with_limits`] keeping only the raw topics in `topics` (the others are
 /// checked and left empty).
 pub fn read_session_file_with(
     path: impl AsRef<Path>,
     limits: &ReadLimits,
     topics: DecodeTopics,
 ) -> Result<Session> {
-    let path = path.as_ref();
-    let raw = read_raw_file(path, limits)?;
-    from_raw(&raw, &path.display().to_string(), topics)
+    let mut keep = Collect::new(topics);
+    let head = stream_session_file(path, limits, &mut keep)?;
+    Ok(keep.into_session(head))
 }
 
 /// Reads a session from bytes already in memory (for example an HTTP upload), with the same
@@ -209,7 +311,7 @@ pub fn read_session_bytes(bytes: &[u8], name: &str, limits: &ReadLimits) -> Resu
     read_session_bytes_with(bytes, name, limits, DecodeTopics::ALL)
 }
 
-/// [`read_session_bytes`] decoding only the raw topics in `topics` (the others are checked and
+/// [`read_session_bytes`] keeping only the raw topics in `topics` (the others are checked and
 /// left empty).
 pub fn read_session_bytes_with(
     bytes: &[u8],
@@ -217,17 +319,165 @@ pub fn read_session_bytes_with(
     limits: &ReadLimits,
     topics: DecodeTopics,
 ) -> Result<Session> {
-    let raw = read_raw_bytes(bytes, limits)?;
-    from_raw(&raw, name, topics)
+    let mut keep = Collect::new(topics);
+    let head = stream_session_bytes(bytes, name, limits, &mut keep)?;
+    Ok(keep.into_session(head))
 }
 
-/// One job of [`from_raw`]: a block of one topic's messages, checked or decoded.
-enum Decoded {
-    Checked,
-    JointStates(Vec<(u64, GloveJointStates)>),
-    Feedback(Vec<(u64, GloveFeedback)>),
-    Contacts(Vec<(u64, Contacts)>),
-    Object(Vec<(u64, messages::ObjectState)>),
+/// Checks the session file at `path` in one pass, as [`read_session_with_limits`] describes,
+/// handing its raw samples to `visitor` as they are read: memory is bounded by the chunk size,
+/// not the file.
+pub fn stream_session_file(
+    path: impl AsRef<Path>,
+    limits: &ReadLimits,
+    visitor: &mut impl SessionVisitor,
+) -> Result<SessionHead> {
+    let path = path.as_ref();
+    let mut nothing = ();
+    let mut early = Checker::early(&mut nothing, visitor.wants());
+    let mut checker = Checker::new(visitor);
+    let raw = stream_raw_file(path, limits, &mut early, &mut checker)?;
+    checker.finish(raw, early, &path.display().to_string())
+}
+
+/// [`stream_session_file`] of bytes in memory; `name` appears in error messages.
+pub fn stream_session_bytes(
+    bytes: &[u8],
+    name: &str,
+    limits: &ReadLimits,
+    visitor: &mut impl SessionVisitor,
+) -> Result<SessionHead> {
+    let mut nothing = ();
+    let mut early = Checker::early(&mut nothing, visitor.wants());
+    let mut checker = Checker::new(visitor);
+    let raw = stream_raw_bytes(bytes, limits, &mut early, &mut checker)?;
+    checker.finish(raw, early, name)
+}
+
+/// Where a session is read from, as many times as a reader needs (segmentation reads twice).
+#[derive(Debug, Clone, Copy)]
+pub enum SessionSource<'a> {
+    /// A file.
+    File(&'a Path),
+    /// Bytes in memory, and the name errors give them.
+    Bytes {
+        /// The file's bytes.
+        bytes: &'a [u8],
+        /// What errors call them (an upload's name).
+        name: &'a str,
+    },
+}
+
+impl SessionSource<'_> {
+    /// What errors call the session: the file's path or the bytes' name.
+    pub fn name(&self) -> String {
+        match self {
+            SessionSource::File(path) => path.display().to_string(),
+            SessionSource::Bytes { name, .. } => (*name).to_owned(),
+        }
+    }
+
+    /// A second read of a source that [`SessionSource::stream`] read without error: only the
+    /// raw topics the visitor [wants](SessionVisitor::wants) are decoded (and checked as they
+    /// are) and handed to it, the rest of the file is only framed and its CRCs checked; the
+    /// read stops as soon as the visitor is [`done`](SessionVisitor::done). For readers that
+    /// need two passes (segmentation).
+    pub fn stream_again(
+        &self,
+        limits: &ReadLimits,
+        visitor: &mut impl SessionVisitor,
+    ) -> Result<()> {
+        let topics = visitor.wants();
+        let mut checker = Checker::new(visitor);
+        checker.again = Some(topics);
+        let read = match *self {
+            SessionSource::File(path) => {
+                stream_raw_file(path, limits, &mut (), &mut checker).map(drop)
+            }
+            SessionSource::Bytes { bytes, .. } => {
+                stream_raw_bytes(bytes, limits, &mut (), &mut checker).map(drop)
+            }
+        };
+        match read {
+            Err(_) if checker.stopped => Ok(()),
+            other => other,
+        }
+    }
+
+    /// [`stream_session_file`] or [`stream_session_bytes`] of the source.
+    pub fn stream(
+        &self,
+        limits: &ReadLimits,
+        visitor: &mut impl SessionVisitor,
+    ) -> Result<SessionHead> {
+        match *self {
+            SessionSource::File(path) => stream_session_file(path, limits, visitor),
+            SessionSource::Bytes { bytes, name } => {
+                stream_session_bytes(bytes, name, limits, visitor)
+            }
+        }
+    }
+}
+
+/// Keeps the samples of the topics asked for.
+struct Collect {
+    topics: DecodeTopics,
+    joint_states: Vec<(u64, GloveJointStates)>,
+    feedback: Vec<(u64, GloveFeedback)>,
+    contacts: Vec<(u64, Contacts)>,
+    object: Vec<(u64, messages::ObjectState)>,
+}
+
+impl Collect {
+    fn new(topics: DecodeTopics) -> Self {
+        Collect {
+            topics,
+            joint_states: Vec::new(),
+            feedback: Vec::new(),
+            contacts: Vec::new(),
+            object: Vec::new(),
+        }
+    }
+
+    fn into_session(self, head: SessionHead) -> Session {
+        Session {
+            joint_states: self.joint_states,
+            feedback: self.feedback,
+            contacts: self.contacts,
+            object: self.object,
+            ..head.into_session()
+        }
+    }
+}
+
+impl SessionVisitor for Collect {
+    fn wants(&self) -> DecodeTopics {
+        self.topics
+    }
+    fn joint_states(&mut self, t: u64, m: &GloveJointStates) -> Result<()> {
+        if self.topics.joint_states {
+            self.joint_states.push((t, m.clone()));
+        }
+        Ok(())
+    }
+    fn feedback(&mut self, t: u64, m: &GloveFeedback) -> Result<()> {
+        if self.topics.feedback {
+            self.feedback.push((t, m.clone()));
+        }
+        Ok(())
+    }
+    fn contacts(&mut self, t: u64, m: &Contacts) -> Result<()> {
+        if self.topics.contacts {
+            self.contacts.push((t, m.clone()));
+        }
+        Ok(())
+    }
+    fn object(&mut self, t: u64, m: &messages::ObjectState) -> Result<()> {
+        if self.topics.object {
+            self.object.push((t, m.clone()));
+        }
+        Ok(())
+    }
 }
 
 /// The `session` metadata's `object` (when there is one, not empty) must describe a real object: a known
@@ -242,21 +492,18 @@ fn check_session_object(metadata: &BTreeMap<String, String>, name: &str) -> Resu
         location: format!("{name}: metadata session.object"),
         detail,
     };
+    // With the path of a field that does not parse (`object.shape: unknown shape ...`).
+    let mut de = serde_json::Deserializer::from_str(text);
     let o: dfs_core::scenario::ScenarioObject =
-        serde_json::from_str(text).map_err(|e| invalid(e.to_string()))?;
+        serde_path_to_error::deserialize(&mut de).map_err(|e| {
+            match e.path().to_string().as_str() {
+                "." => invalid(e.inner().to_string()),
+                path => invalid(format!("object.{path}: {}", e.inner())),
+            }
+        })?;
+    de.end().map_err(|e| invalid(e.to_string()))?;
     o.to_object().map_err(|e| invalid(e.to_string()))?;
     Ok(())
-}
-
-/// What a job does with its block: checks a topic's JSON, or decodes a raw topic's messages
-/// and checks their content, keeping the samples (`true`) or not.
-#[derive(Clone, Copy)]
-enum Job {
-    Check,
-    JointStates(bool),
-    Feedback(bool),
-    Contacts(bool),
-    Object(bool),
 }
 
 /// The metadata records are few and small, and name the session once: at most
@@ -265,12 +512,11 @@ enum Job {
 /// [`MAX_METADATA_BYTES`] in all, and one record at most named `session`, `ground_truth` or
 /// `replay` (a second one would be ignored: which one describes the session?). The store keeps
 /// the `session` record with the session and lists it with every page of sessions.
-fn check_metadata(raw: &RawSession, name: &str) -> Result<()> {
+fn check_metadata(records: &[MetadataRecord], name: &str) -> Result<()> {
     let invalid = |location: String, detail: String| RecordingError::InvalidInput {
         location: format!("{name}: metadata {location}"),
         detail,
     };
-    let records = &raw.metadata;
     if records.len() > MAX_METADATA_RECORDS {
         return Err(invalid(
             "records".into(),
@@ -341,72 +587,6 @@ fn check_metadata(raw: &RawSession, name: &str) -> Result<()> {
     Ok(())
 }
 
-/// The session's DOF and fingertip names, from the first message of `/glove/joint_states` and
-/// of `/dfs/contacts` (`None` where that message does not decode: its own check reports it).
-fn tick_reference(raw: &RawSession) -> TickReference {
-    // (Not decoded when over the size limit: its own check refuses it.)
-    let first = |topic: &str| {
-        raw.topics
-            .get(topic)
-            .and_then(|t| t.messages.first())
-            .map(|m| raw.data(m))
-            .filter(|d| d.len() <= MAX_RAW_MESSAGE_BYTES)
-    };
-    // Only a list that passes its own check is a reference (an empty one would make every
-    // other message's list look wrong, before the culprit's own error).
-    let protobuf = |topic: &str| raw.topics.get(topic).is_some_and(|t| t.is_protobuf());
-    let dof_names = if protobuf(TOPIC_GLOVE_JOINT_STATES) {
-        first(TOPIC_GLOVE_JOINT_STATES)
-            .and_then(|d| <proto::GloveJointStatesProto as prost::Message>::decode(d).ok())
-            .map(|m| m.names)
-    } else {
-        first(TOPIC_GLOVE_JOINT_STATES)
-            .and_then(|d| serde_json::from_slice::<GloveJointStatesShape>(d).ok())
-            .map(|m| m.names())
-    };
-    let finger_names = if protobuf(TOPIC_CONTACTS) {
-        first(TOPIC_CONTACTS)
-            .and_then(|d| <proto::ContactsProto as prost::Message>::decode(d).ok())
-            .map(|m| m.fingers.into_iter().map(|f| f.name).collect::<Vec<_>>())
-    } else {
-        first(TOPIC_CONTACTS)
-            .and_then(|d| serde_json::from_slice::<Contacts>(d).ok())
-            .map(|m| m.fingers.into_iter().map(|f| f.name).collect::<Vec<_>>())
-    };
-    TickReference {
-        dof_names: dof_names.filter(|n| (1..=MAX_SESSION_DOFS).contains(&n.len())),
-        finger_names: finger_names.filter(|n| (1..=MAX_SESSION_FINGERS).contains(&n.len())),
-    }
-}
-
-/// Decodes a block of a raw topic's messages (`first`: the index of its first message in the
-/// topic) and checks each one's content against `reference`, keeping the samples if `keep`.
-/// The error names the topic, the message's index and log time, and the field.
-fn raw_block<'s, T: Deserialize<'s> + TickContent>(
-    raw: &'s RawSession,
-    t: &RawTopic,
-    first: usize,
-    messages: &[MessageRef],
-    reference: &TickReference,
-    keep: bool,
-) -> Result<Vec<(u64, T)>> {
-    refuse_oversized(raw, t, first, messages)?;
-    let mut out = Vec::with_capacity(if keep { messages.len() } else { 0 });
-    raw.decode_each(t, first, messages, |i, time, message: T| {
-        message
-            .check(reference)
-            .map_err(|detail| RecordingError::InvalidInput {
-                location: message_location(&t.topic, i, time),
-                detail,
-            })?;
-        if keep {
-            out.push((time, message));
-        }
-        Ok(())
-    })?;
-    Ok(out)
-}
-
 /// Largest raw message (bytes), in either format: ours are under 2 kB (a tick of a 30-DOF
 /// hand), and the most a session may hold ([`MAX_SESSION_DOFS`] names and values,
 /// [`MAX_SESSION_FINGERS`] fingertips) is far under this. Bigger messages are refused before
@@ -419,266 +599,10 @@ pub const MAX_RAW_MESSAGE_BYTES: usize = 256 * 1024;
 /// input and hundreds in memory).
 pub const MAX_RAW_SCHEMA_BYTES: usize = 64 * 1024;
 
-/// A raw message over [`MAX_RAW_MESSAGE_BYTES`] is [`RecordingError::InvalidInput`] naming it.
-fn refuse_oversized(
-    raw: &RawSession,
-    t: &RawTopic,
-    first: usize,
-    messages: &[MessageRef],
-) -> Result<()> {
-    match messages
-        .iter()
-        .enumerate()
-        .find(|(_, m)| raw.data(m).len() > MAX_RAW_MESSAGE_BYTES)
-    {
-        None => Ok(()),
-        Some((i, m)) => Err(RecordingError::InvalidInput {
-            location: message_location(&t.topic, first + i, m.log_time_ns),
-            detail: format!(
-                "the message is {} bytes; a message of this topic holds at most \
-                 {MAX_RAW_MESSAGE_BYTES}",
-                raw.data(m).len()
-            ),
-        }),
-    }
-}
-
 /// Largest Foxglove message of format 2 that is decoded to be checked (bytes); bigger ones
 /// (another tool's meshes in `/scene`, say) are for viewers and left unchecked rather than
 /// decoded at a hundred times their size.
 pub const MAX_CHECKED_FOXGLOVE_MESSAGE_BYTES: usize = 256 * 1024;
-
-/// [`raw_block`] for a protobuf (format 2) raw topic: each message decoded as `P`, converted
-/// to its SI form by `convert`, checked, and kept if `keep`.
-fn raw_block_protobuf<P: prost::Message + Default, T: TickContent>(
-    raw: &RawSession,
-    t: &RawTopic,
-    first: usize,
-    messages: &[MessageRef],
-    reference: &TickReference,
-    keep: bool,
-    convert: fn(P) -> T,
-) -> Result<Vec<(u64, T)>> {
-    let mut out = Vec::with_capacity(if keep { messages.len() } else { 0 });
-    refuse_oversized(raw, t, first, messages)?;
-    raw.decode_each_protobuf(t, first, messages, usize::MAX, |i, time, message: P| {
-        let message = convert(message);
-        message
-            .check(reference)
-            .map_err(|detail| RecordingError::InvalidInput {
-                location: message_location(&t.topic, i, time),
-                detail,
-            })?;
-        if keep {
-            out.push((time, message));
-        }
-        Ok(())
-    })?;
-    Ok(out)
-}
-
-/// Checks that every message of a protobuf Foxglove topic decodes as its official schema (the
-/// SDK's types); other protobuf topics are not ours to check.
-fn check_foxglove_protobuf(
-    raw: &RawSession,
-    t: &RawTopic,
-    first: usize,
-    messages: &[MessageRef],
-) -> Result<()> {
-    use foxglove::messages as fg;
-    let ok = |_: usize, _: u64, _: ()| Ok(());
-    let limit = MAX_CHECKED_FOXGLOVE_MESSAGE_BYTES;
-    match t.schema.as_ref().map(|s| s.name.as_str()) {
-        Some("foxglove.FrameTransforms") => {
-            raw.decode_each_protobuf(t, first, messages, limit, |i, l, _: fg::FrameTransforms| {
-                ok(i, l, ())
-            })
-        }
-        Some("foxglove.SceneUpdate") => {
-            raw.decode_each_protobuf(t, first, messages, limit, |i, l, _: fg::SceneUpdate| {
-                ok(i, l, ())
-            })
-        }
-        Some("foxglove.JointStates") => {
-            raw.decode_each_protobuf(t, first, messages, limit, |i, l, _: fg::JointStates| {
-                ok(i, l, ())
-            })
-        }
-        _ => Ok(()),
-    }
-}
-
-fn from_raw(raw: &RawSession, name: &str, topics: DecodeTopics) -> Result<Session> {
-    let expected: [(&str, &JsonSchema); 3] = [
-        (TOPIC_TF, &FRAME_TRANSFORMS_SCHEMA),
-        (TOPIC_SCENE, &SCENE_UPDATE_SCHEMA),
-        (TOPIC_JOINT_STATES, &JOINT_STATES_SCHEMA),
-    ];
-    for (topic, schema) in expected {
-        if raw.topics.contains_key(topic) {
-            raw.require_topic(topic, &schema.name)?;
-        }
-    }
-    check_metadata(raw, name)?;
-    let metadata = raw.metadata(SESSION_METADATA).cloned().unwrap_or_default();
-    if raw.metadata(REPLAY_METADATA).is_none()
-        && metadata.get("source").is_none_or(|s| s != "replay")
-    {
-        check_session_object(&metadata, name)?;
-    }
-    let phases = match raw
-        .metadata(GROUND_TRUTH_METADATA)
-        .and_then(|m| m.get("phases"))
-    {
-        None => Vec::new(),
-        Some(text) => serde_json::from_str(text).map_err(|e| RecordingError::InvalidInput {
-            location: format!("{name}: metadata ground_truth.phases"),
-            detail: e.to_string(),
-        })?,
-    };
-    let t = topics;
-    // The raw topics must be there with their schemas; their messages are decoded and their
-    // content checked whether they are kept or not (a topic not kept is read into borrowed
-    // shapes, at a fraction of the cost).
-    let raw_topics = [
-        (
-            TOPIC_GLOVE_JOINT_STATES,
-            &GLOVE_JOINT_STATES_SCHEMA,
-            Job::JointStates(t.joint_states),
-        ),
-        (
-            TOPIC_GLOVE_FEEDBACK,
-            &GLOVE_FEEDBACK_SCHEMA,
-            Job::Feedback(t.feedback),
-        ),
-        (TOPIC_CONTACTS, &CONTACTS_SCHEMA, Job::Contacts(t.contacts)),
-        (
-            TOPIC_OBJECT_STATE,
-            &OBJECT_STATE_SCHEMA,
-            Job::Object(t.object),
-        ),
-    ];
-    for (topic, schema, _) in &raw_topics {
-        let t = raw.require_topic(topic, &schema.name)?;
-        // A protobuf raw topic must be laid out as ours: another layout would decode into
-        // wrong numbers rather than fail.
-        if t.is_protobuf() {
-            let data = t.schema.as_ref().map_or(&[][..], |s| &s.data[..]);
-            if data.len() > MAX_RAW_SCHEMA_BYTES {
-                return Err(RecordingError::InvalidInput {
-                    location: format!("{name}: topic {topic} schema {}", schema.name),
-                    detail: format!(
-                        "the schema is {} bytes; a raw topic's schema holds at most \
-                         {MAX_RAW_SCHEMA_BYTES} (ours is a few kB)",
-                        data.len()
-                    ),
-                });
-            }
-            if let Some(detail) = schema_difference(data, &schema.name) {
-                return Err(RecordingError::InvalidInput {
-                    location: format!("{name}: topic {topic} schema {}", schema.name),
-                    detail: format!("differs from ours: {detail}"),
-                });
-            }
-        }
-    }
-    check_raw_log_times(raw)?;
-    let reference = tick_reference(raw);
-    // Every JSON message is checked or decoded, in blocks spread over the cores: the other
-    // topics first (their errors come first, as in file order they would), then the raw ones.
-    let mut plan: Vec<(&RawTopic, Job)> = raw
-        .topics
-        .values()
-        .filter(|t| (t.is_json() || t.is_protobuf()) && !RAW_TOPICS.contains(&t.topic.as_str()))
-        .map(|t| (t, Job::Check))
-        .collect();
-    for (topic, _, job) in raw_topics {
-        plan.push((&raw.topics[topic], job));
-    }
-    let jobs: Vec<(&RawTopic, usize, &[MessageRef], Job)> = plan
-        .iter()
-        .flat_map(|&(t, job)| {
-            t.messages
-                .chunks(MESSAGES_PER_JOB)
-                .enumerate()
-                .map(move |(k, m)| (t, k * MESSAGES_PER_JOB, m, job))
-        })
-        .collect();
-    let r = &reference;
-    let done = par_map(jobs.len(), |i| -> Result<Decoded> {
-        let (t, first, m, job) = jobs[i];
-        if t.is_protobuf() {
-            return Ok(match job {
-                Job::Check => {
-                    check_foxglove_protobuf(raw, t, first, m)?;
-                    Decoded::Checked
-                }
-                Job::JointStates(keep) => kept(
-                    keep,
-                    raw_block_protobuf(raw, t, first, m, r, keep, proto::joint_states_from_proto)?,
-                    Decoded::JointStates,
-                ),
-                Job::Feedback(keep) => kept(
-                    keep,
-                    raw_block_protobuf(raw, t, first, m, r, keep, proto::feedback_from_proto)?,
-                    Decoded::Feedback,
-                ),
-                Job::Contacts(keep) => kept(
-                    keep,
-                    raw_block_protobuf(raw, t, first, m, r, keep, proto::contacts_from_proto)?,
-                    Decoded::Contacts,
-                ),
-                Job::Object(keep) => kept(
-                    keep,
-                    raw_block_protobuf(raw, t, first, m, r, keep, proto::object_from_proto)?,
-                    Decoded::Object,
-                ),
-            });
-        }
-        Ok(match job {
-            Job::Check => {
-                raw.check_json_of(t, first, m)?;
-                Decoded::Checked
-            }
-            Job::JointStates(true) => Decoded::JointStates(raw_block(raw, t, first, m, r, true)?),
-            Job::JointStates(false) => {
-                raw_block::<GloveJointStatesShape>(raw, t, first, m, r, false)?;
-                Decoded::Checked
-            }
-            Job::Feedback(true) => Decoded::Feedback(raw_block(raw, t, first, m, r, true)?),
-            Job::Feedback(false) => {
-                raw_block::<GloveFeedbackShape>(raw, t, first, m, r, false)?;
-                Decoded::Checked
-            }
-            Job::Contacts(keep) => kept(
-                keep,
-                raw_block(raw, t, first, m, r, keep)?,
-                Decoded::Contacts,
-            ),
-            Job::Object(keep) => kept(keep, raw_block(raw, t, first, m, r, keep)?, Decoded::Object),
-        })
-    });
-    let mut session = Session {
-        metadata,
-        phases,
-        joint_states: Vec::new(),
-        feedback: Vec::new(),
-        contacts: Vec::new(),
-        object: Vec::new(),
-        message_counts: raw.message_counts(),
-        replay: raw.metadata(REPLAY_METADATA).cloned(),
-    };
-    for d in done {
-        match d? {
-            Decoded::Checked => {}
-            Decoded::JointStates(v) => append(&mut session.joint_states, v),
-            Decoded::Feedback(v) => append(&mut session.feedback, v),
-            Decoded::Contacts(v) => append(&mut session.contacts, v),
-            Decoded::Object(v) => append(&mut session.object, v),
-        }
-    }
-    Ok(session)
-}
 
 /// How far apart the raw topics' first (and last) log times may lie (ns): they are written
 /// together, tick by tick, so a session's topics start and end within a tick of each other;
@@ -686,64 +610,472 @@ fn from_raw(raw: &RawSession, name: &str, topics: DecodeTopics) -> Result<Sessio
 /// session than its glove stream says.
 pub const RAW_TOPIC_SKEW_NS: u64 = 100_000_000;
 
-/// The raw topics are tick streams recorded together: each has messages, is in time order,
-/// advances (more than one message do not share one log time), spans at least
-/// [`MIN_SESSION_NS`] (two ticks), starts and ends within
-/// [`RAW_TOPIC_SKEW_NS`] of the others, and lies within [`MAX_SESSION_NS`] of the session's
-/// first raw message; every log time fits the store's signed 64-bit columns. The error names
-/// the topic, the message and its log time (callers add the file's name).
-fn check_raw_log_times(raw: &RawSession) -> Result<()> {
-    let invalid =
-        |location: String, detail: String| RecordingError::InvalidInput { location, detail };
-    for topic in RAW_TOPICS {
-        if raw.topics[topic].messages.is_empty() {
+/// What a topic is to the reader.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Kind {
+    /// Raw topic `RAW_TOPICS[i]`, protobuf (format 2) or JSON (format 1).
+    Raw(usize, bool),
+    /// A Foxglove topic of ours, protobuf: decoded as the SDK's type to be checked.
+    Foxglove(FoxgloveType),
+    /// Another JSON topic: checked to be JSON.
+    Json,
+    /// Another topic: not ours to check.
+    Other,
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum FoxgloveType {
+    FrameTransforms,
+    SceneUpdate,
+    JointStates,
+}
+
+/// Per raw topic: what its log times were so far.
+#[derive(Debug, Clone, Copy, Default)]
+struct Times {
+    first: Option<u64>,
+    last: u64,
+    count: usize,
+}
+
+/// The messages decoded, reused from one to the next.
+#[derive(Default)]
+struct Scratch {
+    joint_states: GloveJointStates,
+    feedback: GloveFeedback,
+    contacts: Contacts,
+    object: messages::ObjectState,
+}
+
+/// The checks of a session read in one pass, in front of a [`SessionVisitor`].
+struct Checker<'v, V: SessionVisitor> {
+    visitor: &'v mut V,
+    kinds: Vec<Kind>,
+    times: [Times; 4],
+    /// The first raw log time seen so far.
+    t0: Option<u64>,
+    /// Per raw topic, its DOF and fingertip names as its message 0 lists them: each message is
+    /// checked against its own topic's (whichever thread checks it); the topics against each
+    /// other at the end.
+    references: [TickReference; 4],
+    scratch: Scratch,
+    /// A second read of a file read and checked before: only these raw topics are decoded
+    /// (and checked as they are), the others and the file-wide checks skipped.
+    again: Option<DecodeTopics>,
+    /// A second read stopped because the visitor was done (the error that stopped the
+    /// reader is not one).
+    stopped: bool,
+    /// The checker of the reading thread, for a visitor that takes these raw topics: it
+    /// claims the others, and the Foxglove and other JSON topics.
+    early_for: Option<DecodeTopics>,
+}
+
+impl<'v, V: SessionVisitor> Checker<'v, V> {
+    fn new(visitor: &'v mut V) -> Self {
+        Checker {
+            visitor,
+            kinds: Vec::new(),
+            times: [Times::default(); 4],
+            t0: None,
+            references: Default::default(),
+            scratch: Scratch::default(),
+            again: None,
+            stopped: false,
+            early_for: None,
+        }
+    }
+}
+
+impl<'v> Checker<'v, ()> {
+    /// The checker of the reading thread for a visitor that takes `wants`.
+    fn early(nothing: &'v mut (), wants: DecodeTopics) -> Self {
+        let mut checker = Checker::new(nothing);
+        checker.early_for = Some(wants);
+        checker
+    }
+}
+
+impl<'v, V: SessionVisitor> Checker<'v, V> {
+    /// A raw message's log time: in its topic's time order, within 2^63 ns and
+    /// [`MAX_SESSION_NS`] of the first raw message seen.
+    fn check_time(&mut self, raw: usize, topic: &str, index: usize, t: u64) -> Result<()> {
+        let times = &mut self.times[raw];
+        let t0 = *self.t0.get_or_insert(t);
+        let prev = if times.count == 0 {
+            t0.min(t)
+        } else {
+            times.last
+        };
+        let problem = if t > i64::MAX as u64 {
+            Some("the log time is beyond 2^63 ns".to_owned())
+        } else if t < prev {
+            Some(format!(
+                "the log time goes back before the previous message's ({prev} ns): a raw topic \
+                 must be in time order"
+            ))
+        } else if t.saturating_sub(t0) > MAX_SESSION_NS {
+            Some(format!(
+                "the log time is {:.1} s after the session's first message; a session spans at \
+                 most {} s",
+                (t - t0) as f64 * 1e-9,
+                MAX_SESSION_NS / 1_000_000_000
+            ))
+        } else {
+            None
+        };
+        if let Some(detail) = problem {
+            return Err(RecordingError::InvalidInput {
+                location: format!("topic {topic} message {index} (log time {t} ns)"),
+                detail,
+            });
+        }
+        times.first.get_or_insert(t);
+        times.last = t;
+        times.count += 1;
+        self.t0 = Some(t0.min(t));
+        Ok(())
+    }
+
+    /// Decodes raw message `index` of `topic` (raw topic `raw`) into the scratch message,
+    /// checks it and hands it on.
+    fn raw_message(
+        &mut self,
+        raw: usize,
+        protobuf: bool,
+        topic: &RawTopic,
+        index: usize,
+        t: u64,
+        data: &[u8],
+    ) -> Result<()> {
+        let name = topic.topic.as_str();
+        if data.len() > MAX_RAW_MESSAGE_BYTES {
+            return Err(RecordingError::InvalidInput {
+                location: message_location(name, index, t),
+                detail: format!(
+                    "the message is {} bytes; a message of this topic holds at most \
+                     {MAX_RAW_MESSAGE_BYTES}",
+                    data.len()
+                ),
+            });
+        }
+        self.check_time(raw, name, index, t)?;
+        let s = &mut self.scratch;
+        let undecodable = |e: wire::DecodeError| RecordingError::InvalidInput {
+            location: message_location(name, index, t),
+            detail: format!(
+                "does not decode as {}: failed to decode Protobuf message: {e}",
+                RAW_SCHEMA_NAMES[raw]
+            ),
+        };
+        fn json<T: serde::de::DeserializeOwned>(
+            topic: &str,
+            index: usize,
+            t: u64,
+            data: &[u8],
+        ) -> Result<T> {
+            serde_json::from_slice(data).map_err(|e| json_error::<T>(topic, index, t, data, e))
+        }
+        match (raw, protobuf) {
+            (0, true) => wire::joint_states(data, &mut s.joint_states).map_err(undecodable)?,
+            (0, false) => s.joint_states = json(name, index, t, data)?,
+            (1, true) => wire::feedback(data, &mut s.feedback).map_err(undecodable)?,
+            (1, false) => s.feedback = json(name, index, t, data)?,
+            (2, true) => wire::contacts(data, &mut s.contacts).map_err(undecodable)?,
+            (2, false) => s.contacts = json(name, index, t, data)?,
+            (_, true) => wire::object(data, &mut s.object).map_err(undecodable)?,
+            (_, false) => s.object = json(name, index, t, data)?,
+        }
+        let invalid = |detail: String| RecordingError::InvalidInput {
+            location: message_location(name, index, t),
+            detail,
+        };
+        let r = &mut self.references[raw];
+        match raw {
+            0 => {
+                r.learn_dofs(name, &s.joint_states.names);
+                s.joint_states.check(r).map_err(invalid)?;
+                self.visitor.joint_states(t, &s.joint_states)
+            }
+            1 => {
+                r.learn_dofs(name, &s.feedback.names);
+                r.learn_fingers(name, s.feedback.fingers.iter().map(|f| f.name.as_str()));
+                s.feedback.check(r).map_err(invalid)?;
+                self.visitor.feedback(t, &s.feedback)
+            }
+            2 => {
+                r.learn_fingers(name, s.contacts.fingers.iter().map(|f| f.name.as_str()));
+                s.contacts.check(r).map_err(invalid)?;
+                self.visitor.contacts(t, &s.contacts)
+            }
+            _ => {
+                s.object.check(r).map_err(invalid)?;
+                self.visitor.object(t, &s.object)
+            }
+        }
+    }
+
+    /// The checks that need the whole file: every raw topic there and spanning the session,
+    /// the metadata.
+    fn finish(
+        mut self,
+        raw: StreamedRaw,
+        early: Checker<'_, ()>,
+        name: &str,
+    ) -> Result<SessionHead> {
+        if self.again.is_some() {
+            return Ok(SessionHead::default());
+        }
+        // The raw topics the reading thread checked.
+        for ((mine, theirs), (my_ref, their_ref)) in self
+            .times
+            .iter_mut()
+            .zip(early.times)
+            .zip(self.references.iter_mut().zip(early.references))
+        {
+            if mine.count == 0 {
+                *mine = theirs;
+                *my_ref = their_ref;
+            }
+        }
+        // The topics name the same hand: /glove/feedback the DOFs of /glove/joint_states and
+        // the fingertips of /dfs/contacts.
+        let [joints, feedback, contacts, _] = &self.references;
+        for (what, a, b) in [
+            ("DOF names", &joints.dof_names, &feedback.dof_names),
+            ("fingertips", &contacts.finger_names, &feedback.finger_names),
+        ] {
+            if let (Some(a), Some(b)) = (a, b) {
+                if a != b {
+                    let (source_a, source_b) = if what == "DOF names" {
+                        (&joints.dof_source, &feedback.dof_source)
+                    } else {
+                        (&contacts.finger_source, &feedback.finger_source)
+                    };
+                    return Err(RecordingError::InvalidInput {
+                        location: format!("{name}: topic {TOPIC_GLOVE_FEEDBACK}"),
+                        detail: format!(
+                            "{source_b} are {b:?}, {source_a} {a:?}: a session records one \
+                             hand, with the same {what} on every topic"
+                        ),
+                    });
+                }
+            }
+        }
+        // (Schemas were checked as each topic appeared; a raw topic may be missing.)
+        for topic in RAW_TOPICS {
+            if raw.topic(topic).is_none() {
+                return Err(RecordingError::MissingTopic {
+                    topic: topic.to_owned(),
+                });
+            }
+        }
+        check_metadata(&raw.metadata, name)?;
+        let find = |record: &str| {
+            raw.metadata
+                .iter()
+                .find(|m| m.name == record)
+                .map(|m| m.entries.clone())
+        };
+        let metadata = find(SESSION_METADATA).unwrap_or_default();
+        let replay = find(REPLAY_METADATA);
+        if replay.is_none() && metadata.get("source").is_none_or(|s| s != "replay") {
+            check_session_object(&metadata, name)?;
+        }
+        let phases = match find(GROUND_TRUTH_METADATA)
+            .as_ref()
+            .and_then(|m| m.get("phases"))
+        {
+            None => Vec::new(),
+            Some(text) => serde_json::from_str(text).map_err(|e| RecordingError::InvalidInput {
+                location: format!("{name}: metadata ground_truth.phases"),
+                detail: e.to_string(),
+            })?,
+        };
+        check_spans(&self.times)?;
+        let object = &self.times[3];
+        Ok(SessionHead {
+            metadata,
+            phases,
+            message_counts: raw
+                .topics
+                .iter()
+                .map(|(t, n)| (t.topic.clone(), *n))
+                .collect(),
+            replay,
+            object_span_ns: (object.first.unwrap_or(0), object.last),
+        })
+    }
+}
+
+impl<V: SessionVisitor> RawVisitor for Checker<'_, V> {
+    fn claims(&self, topic_index: usize) -> bool {
+        let Some(wants) = self.early_for else {
+            return false;
+        };
+        match self.kinds.get(topic_index) {
+            Some(Kind::Raw(raw, _)) => !wants.has(*raw),
+            Some(Kind::Foxglove(_) | Kind::Json) => true,
+            _ => false,
+        }
+    }
+
+    fn topic(&mut self, topic: &RawTopic) -> Result<()> {
+        let name = topic.topic.as_str();
+        let kind = if let Some(raw) = RAW_TOPICS.iter().position(|t| *t == name) {
+            let schema_name = RAW_SCHEMA_NAMES[raw];
+            topic.require(schema_name)?;
+            if topic.is_protobuf() {
+                // A protobuf raw topic must be laid out as ours: another layout would decode
+                // into wrong numbers rather than fail.
+                let data = topic.schema.as_ref().map_or(&[][..], |s| &s.data[..]);
+                let location = format!("topic {name} schema {schema_name}");
+                if data.len() > MAX_RAW_SCHEMA_BYTES {
+                    return Err(RecordingError::InvalidInput {
+                        location,
+                        detail: format!(
+                            "the schema is {} bytes; a raw topic's schema holds at most \
+                             {MAX_RAW_SCHEMA_BYTES} (ours is a few kB)",
+                            data.len()
+                        ),
+                    });
+                }
+                if let Some(detail) = schema_difference(data, schema_name) {
+                    return Err(RecordingError::InvalidInput {
+                        location,
+                        detail: format!("differs from ours: {detail}"),
+                    });
+                }
+            }
+            Kind::Raw(raw, topic.is_protobuf())
+        } else {
+            let foxglove = [
+                (
+                    TOPIC_TF,
+                    &FRAME_TRANSFORMS_SCHEMA.name,
+                    FoxgloveType::FrameTransforms,
+                ),
+                (
+                    TOPIC_SCENE,
+                    &SCENE_UPDATE_SCHEMA.name,
+                    FoxgloveType::SceneUpdate,
+                ),
+                (
+                    TOPIC_JOINT_STATES,
+                    &JOINT_STATES_SCHEMA.name,
+                    FoxgloveType::JointStates,
+                ),
+                (
+                    TOPIC_HAND,
+                    &SCENE_UPDATE_SCHEMA.name,
+                    FoxgloveType::SceneUpdate,
+                ),
+            ];
+            match foxglove.iter().find(|(t, _, _)| *t == name) {
+                Some((_, schema, which)) => {
+                    topic.require(schema)?;
+                    if topic.is_protobuf() {
+                        Kind::Foxglove(*which)
+                    } else {
+                        Kind::Json
+                    }
+                }
+                None if topic.is_json() => Kind::Json,
+                None => Kind::Other,
+            }
+        };
+        self.kinds.push(kind);
+        Ok(())
+    }
+
+    fn message(
+        &mut self,
+        topic_index: usize,
+        topic: &RawTopic,
+        index: usize,
+        t: u64,
+        data: &[u8],
+    ) -> Result<()> {
+        let kind = self.kinds.get(topic_index).copied().unwrap_or(Kind::Other);
+        if let Some(topics) = self.again {
+            let wanted = match kind {
+                Kind::Raw(0, _) => topics.joint_states,
+                Kind::Raw(1, _) => topics.feedback,
+                Kind::Raw(2, _) => topics.contacts,
+                Kind::Raw(_, _) => topics.object,
+                _ => false,
+            };
+            if !wanted {
+                return Ok(());
+            }
+        }
+        match kind {
+            Kind::Raw(raw, protobuf) => {
+                self.raw_message(raw, protobuf, topic, index, t, data)?;
+                if self.again.is_some() && self.visitor.done() {
+                    self.stopped = true;
+                    return Err(RecordingError::InvalidInput {
+                        location: topic.topic.clone(),
+                        detail: "the reader needs no more samples".into(),
+                    });
+                }
+                Ok(())
+            }
+            Kind::Json => check_message(&topic.topic, index, t, data),
+            Kind::Foxglove(_) if data.len() > MAX_CHECKED_FOXGLOVE_MESSAGE_BYTES => Ok(()),
+            Kind::Foxglove(which) => {
+                use foxglove::messages as fg;
+                use prost::Message;
+                let decoded = match which {
+                    FoxgloveType::FrameTransforms => fg::FrameTransforms::decode(data).map(drop),
+                    FoxgloveType::SceneUpdate => fg::SceneUpdate::decode(data).map(drop),
+                    FoxgloveType::JointStates => fg::JointStates::decode(data).map(drop),
+                };
+                decoded.map_err(|e| RecordingError::InvalidInput {
+                    location: message_location(&topic.topic, index, t),
+                    detail: format!(
+                        "does not decode as {}: {e}",
+                        topic
+                            .schema
+                            .as_ref()
+                            .map_or("its schema", |s| s.name.as_str())
+                    ),
+                })
+            }
+            Kind::Other => Ok(()),
+        }
+    }
+}
+
+/// The raw topics are tick streams recorded together: each has messages, spans at least
+/// [`MIN_SESSION_NS`] (two ticks), starts and ends within [`RAW_TOPIC_SKEW_NS`] of the others
+/// and lies within [`MAX_SESSION_NS`] of the session's first raw message (their order and
+/// range message by message were checked as they came: [`Checker::check_time`]).
+fn check_spans(times: &[Times; 4]) -> Result<()> {
+    let invalid = |topic: &str, detail: String| RecordingError::InvalidInput {
+        location: format!("topic {topic}"),
+        detail,
+    };
+    for (topic, t) in RAW_TOPICS.iter().zip(times) {
+        if t.count == 0 {
             return Err(invalid(
-                format!("topic {topic}"),
+                topic,
                 "has no messages: a session records every raw topic at every tick".into(),
             ));
         }
     }
-    let span = |topic: &str| {
-        let m = &raw.topics[topic].messages;
-        (m[0].log_time_ns, m[m.len() - 1].log_time_ns)
-    };
-    let t0 = RAW_TOPICS.iter().map(|t| span(t).0).min().unwrap_or(0);
-    for topic in RAW_TOPICS {
-        let mut prev = t0;
-        for (i, m) in raw.topics[topic].messages.iter().enumerate() {
-            let t = m.log_time_ns;
-            let problem = if t > i64::MAX as u64 {
-                Some("the log time is beyond 2^63 ns".to_owned())
-            } else if t < prev {
-                Some(format!(
-                    "the log time goes back before the previous message's ({prev} ns): a raw \
-                     topic must be in time order"
-                ))
-            } else if t - t0 > MAX_SESSION_NS {
-                Some(format!(
-                    "the log time is {:.1} s after the session's first message; a session \
-                     spans at most {} s",
-                    (t - t0) as f64 * 1e-9,
-                    MAX_SESSION_NS / 1_000_000_000
-                ))
-            } else {
-                None
-            };
-            if let Some(detail) = problem {
-                return Err(invalid(
-                    format!("topic {topic} message {i} (log time {t} ns)"),
-                    detail,
-                ));
-            }
-            prev = t;
-        }
-    }
-    let t1 = RAW_TOPICS.iter().map(|t| span(t).1).max().unwrap_or(0);
+    let first = |t: &Times| t.first.unwrap_or(0);
+    let t0 = times.iter().map(first).min().unwrap_or(0);
+    let t1 = times.iter().map(|t| t.last).max().unwrap_or(0);
     let s = |ns: u64| (ns - t0) as f64 * 1e-9;
-    for topic in RAW_TOPICS {
-        let (first, last) = span(topic);
-        let n = raw.topics[topic].messages.len();
-        let detail = if n == 1 {
+    for (topic, t) in RAW_TOPICS.iter().zip(times) {
+        let (first, last, n) = (first(t), t.last, t.count);
+        let detail = if last - t0 > MAX_SESSION_NS {
+            format!(
+                "ends {:.1} s after the session's first message; a session spans at most {} s",
+                s(last),
+                MAX_SESSION_NS / 1_000_000_000
+            )
+        } else if n == 1 {
             format!(
                 "has one message: a session lasts at least {} ms (two ticks at 1 kHz) on every \
                  raw topic",
@@ -777,25 +1109,7 @@ fn check_raw_log_times(raw: &RawSession) -> Result<()> {
         } else {
             continue;
         };
-        return Err(invalid(format!("topic {topic}"), detail));
+        return Err(invalid(topic, detail));
     }
     Ok(())
-}
-
-/// The decoded samples if they are kept, else only [`Decoded::Checked`].
-fn kept<T>(keep: bool, v: Vec<(u64, T)>, decoded: fn(Vec<(u64, T)>) -> Decoded) -> Decoded {
-    if keep {
-        decoded(v)
-    } else {
-        Decoded::Checked
-    }
-}
-
-/// `out.extend(v)`, taking `v` itself when `out` is empty.
-fn append<T>(out: &mut Vec<T>, mut v: Vec<T>) {
-    if out.is_empty() {
-        *out = v;
-    } else {
-        out.append(&mut v);
-    }
 }

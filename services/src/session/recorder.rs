@@ -1,9 +1,9 @@
-//! [`SessionRecorder`]: ticks of the closed loop into a session file, with the writing on its
-//! own thread; [`record_simulation`]: a scenario run and recorded.
+//! [`SessionRecorder`]: ticks of the closed loop into a session file, with the serialising and
+//! the writing on threads of their own; [`record_simulation`]: a scenario run and recorded.
 
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
-use std::sync::mpsc::{channel, sync_channel, Receiver, SyncSender};
+use std::sync::mpsc::{sync_channel, Receiver, SyncSender};
 use std::thread::JoinHandle;
 
 use dfs_core::dfs::TickOutput;
@@ -18,28 +18,25 @@ use foxglove::messages as fg;
 use foxglove::Encode;
 
 use super::messages::*;
-use super::proto::{
-    ContactsProto, GloveFeedbackProto, GloveJointStatesProto, Quantiser, FILE_DESCRIPTOR_SET,
-    FORMAT_VERSION,
-};
+use super::proto::{GloveJointStatesProto, Quantiser, FILE_DESCRIPTOR_SET, FORMAT_VERSION};
 use super::*;
 use crate::error::{RecordingError, Result};
 use crate::foxglove::{Pose, Quaternion, Vector3};
 use crate::mcap_io::{SessionWriter, WriteSummary, WriterOptions};
 
-/// Ticks per batch handed to the writer thread (also the Foxglove period, so each batch holds
-/// exactly one set of Foxglove messages).
-const BATCH_TICKS: u64 = FOXGLOVE_DECIMATION;
+/// Ticks per batch handed from the simulation thread to the serialiser thread, and from it to
+/// the writer thread (a multiple of the Foxglove period).
+const BATCH_TICKS: usize = 5 * FOXGLOVE_DECIMATION as usize;
 /// zstd level of session files: 3, zstd's default. With format 1's JSON, level 1 was both
 /// faster and smaller; with format 2's protobuf, level 3 makes a 60 s `sphere-lift` 5 %
 /// smaller (13.6 against 14.3 MB before the coarser joint steps) on the writer thread, which
 /// runs beside the simulation.
 const ZSTD_LEVEL: u32 = 3;
-/// Batches in flight between the simulation and the writer thread.
-const CHANNEL_BOUND: usize = 8;
+/// Batches in flight on each of the two channels (simulation → serialiser → writer).
+const CHANNEL_BOUND: usize = 4;
 
 /// Topic indices used inside batches: the raw topics, then the Foxglove topics.
-const ALL_TOPICS: [&str; 7] = [
+const ALL_TOPICS: [&str; 8] = [
     TOPIC_GLOVE_JOINT_STATES,
     TOPIC_GLOVE_FEEDBACK,
     TOPIC_CONTACTS,
@@ -47,6 +44,7 @@ const ALL_TOPICS: [&str; 7] = [
     TOPIC_TF,
     TOPIC_SCENE,
     TOPIC_JOINT_STATES,
+    TOPIC_HAND,
 ];
 
 /// Serialised messages of several ticks: protobuf bytes back to back, and per message its
@@ -57,6 +55,82 @@ struct Batch {
     items: Vec<(u8, u64, usize, usize)>,
     /// Metadata records to write after the batch's messages.
     metadata: Vec<(String, BTreeMap<String, String>)>,
+}
+
+/// What the simulation thread keeps of one tick for the serialiser thread (besides its joint
+/// values and link poses, which [`Inputs`] holds in flat arrays).
+#[derive(Clone, Copy)]
+struct TickInput {
+    /// The tick's index among the ticks `record` accepted (0 for the first): it decides the
+    /// Foxglove ticks and the `/hand` ticks.
+    index: u64,
+    time_ns: u64,
+    /// How many values of q and of τ the tick gave (at most the DOF count; the rest of their
+    /// slots is 0).
+    q_len: usize,
+    tau_len: usize,
+    base: Isometry,
+}
+
+/// The inputs of several ticks, copied on the simulation thread: nothing is computed from them
+/// there. Reused: cleared and sent back by the serialiser thread.
+#[derive(Default)]
+struct Inputs {
+    ticks: Vec<TickInput>,
+    /// The DFS output of each tick (apart from [`TickInput`] so that it is copied once, with
+    /// one `memcpy`, straight from the simulation's).
+    outputs: Vec<TickOutput>,
+    /// Per tick, `dof` slots of q then `dof` of τ.
+    joints: Vec<f64>,
+    /// The link poses of the Foxglove ticks (`links` per such tick), in tick order.
+    link_poses: Vec<Isometry>,
+    /// Metadata records to write after the ticks.
+    metadata: Vec<(String, BTreeMap<String, String>)>,
+}
+
+impl Inputs {
+    fn with_capacity(hand: &HandFrames) -> Self {
+        Self {
+            ticks: Vec::with_capacity(BATCH_TICKS),
+            outputs: Vec::with_capacity(BATCH_TICKS),
+            joints: Vec::with_capacity(BATCH_TICKS * 2 * hand.dof),
+            link_poses: Vec::with_capacity(
+                BATCH_TICKS.div_ceil(FOXGLOVE_DECIMATION as usize) * hand.links,
+            ),
+            metadata: Vec::new(),
+        }
+    }
+
+    fn is_empty(&self) -> bool {
+        self.ticks.is_empty() && self.metadata.is_empty()
+    }
+
+    fn clear(&mut self) {
+        self.ticks.clear();
+        self.outputs.clear();
+        self.joints.clear();
+        self.link_poses.clear();
+        self.metadata.clear();
+    }
+}
+
+/// One tick as the serialisation reads it: either borrowed from the caller's [`TickData`] or
+/// rebuilt from [`Inputs`] on the serialiser thread.
+struct Tick<'a> {
+    index: u64,
+    time_ns: u64,
+    q: &'a [f64],
+    tau: &'a [f64],
+    base: &'a Isometry,
+    output: &'a TickOutput,
+    /// Pose of every link (only read on Foxglove ticks; may be empty on others).
+    link_poses: &'a [Isometry],
+}
+
+impl Tick<'_> {
+    fn is_foxglove(&self) -> bool {
+        self.index.is_multiple_of(FOXGLOVE_DECIMATION)
+    }
 }
 
 /// Descriptive parameters of a session, written to the `session` metadata record.
@@ -81,6 +155,10 @@ pub struct SessionInfo {
     pub started_at: Option<std::time::SystemTime>,
     /// Height of the table's top in the world (m), shown in `/scene`; `None`: no table.
     pub table_height: Option<f64>,
+    /// The URDF text the hand was built from, if any: its primitive link shapes are kept in
+    /// the `hand.urdf` attachment and on `/hand` (see [`super::hand_scene`]). `None`: a
+    /// built-in hand's own URDF, else shapes generated from the joints.
+    pub hand_urdf: Option<String>,
 }
 
 /// One tick of the closed loop, as the recorder needs it.
@@ -112,25 +190,32 @@ pub struct RecordSummary {
 }
 
 /// Hand structure needed for `/tf` and the per-finger messages.
+#[derive(Clone)]
 struct HandFrames {
     dof: usize,
     n_tips: usize,
+    /// Number of links (link poses copied per Foxglove tick).
+    links: usize,
     root: usize,
     /// Per joint: (parent link, child link).
     joints: Vec<(usize, usize)>,
 }
 
 /// Reused message instances: filled in place every tick, so that serialising the raw topics
-/// allocates nothing once warm. The raw topics are filled in SI units, then quantised into
-/// their protobuf form ([`super::proto`]); the Foxglove topics are the SDK's own types.
+/// allocates nothing once warm. The raw topics are filled in SI units, then quantised and
+/// encoded as protobuf ([`super::proto`]); the Foxglove topics are the SDK's own types.
 struct Messages {
+    /// `/glove/joint_states` without its DOF names (see `names_pb`).
     joints: GloveJointStates,
+    /// `/glove/feedback` without its DOF names (see `names_pb`).
     feedback: GloveFeedback,
     contacts: Contacts,
     object: messages::ObjectState,
-    joints_pb: GloveJointStatesProto,
-    feedback_pb: GloveFeedbackProto,
-    contacts_pb: ContactsProto,
+    quantiser: Quantiser,
+    /// The DOF names as protobuf (`repeated string names = 1`), encoded once: the first bytes
+    /// of every `/glove/joint_states` and `/glove/feedback` message (field 1 of both, so
+    /// written first), the same every tick; the rest is encoded from SI messages without names.
+    names_pb: Vec<u8>,
     tf: fg::FrameTransforms,
     scene: fg::SceneUpdate,
     fox_joints: fg::JointStates,
@@ -138,20 +223,45 @@ struct Messages {
     prev_time_ns: Option<u64>,
 }
 
-/// Records ticks into a session file. The file is written by a thread of its own; call
-/// [`finish`](Self::finish) to close it and see any error. Dropping an unfinished recorder
-/// finishes the file and ignores errors.
-pub struct SessionRecorder {
-    tx: Option<SyncSender<Batch>>,
-    recycled: Receiver<Batch>,
-    thread: Option<JoinHandle<Result<WriteSummary>>>,
-    batch: Batch,
-    batch_ticks: u64,
-    path: PathBuf,
+/// The serialiser thread's state: the hand, the scene and the reused messages.
+struct Serialiser {
     hand: HandFrames,
     shape: Shape,
     table_height: Option<f64>,
+    hand_scene: super::hand_scene::HandScene,
     msgs: Messages,
+}
+
+/// What the serialiser thread reports when its input ends.
+#[derive(Default)]
+struct SerialiserReport {
+    /// Ticks it left out (a value too large for its field).
+    refused: u64,
+    /// The first of those refusals.
+    first_refusal: Option<RecordingError>,
+}
+
+/// Records ticks into a session file.
+///
+/// Three threads share the work. The caller's thread ([`record`](Self::record)) only checks
+/// that the tick's numbers are finite and copies its inputs (q, τ, the base pose, the
+/// [`TickOutput`], and on Foxglove ticks the link poses) into a reused batch; a serialiser
+/// thread turns batches of ticks into messages (SI messages, fixed-point quantisation,
+/// protobuf) and a writer thread compresses and writes them (zstd, file I/O). Both hand-overs
+/// go through bounded channels and their buffers come back for reuse, so memory is bounded and
+/// nothing is allocated per tick once warm. Call [`finish`](Self::finish) to close the file and
+/// see any error. Dropping an unfinished recorder finishes the file and ignores errors.
+pub struct SessionRecorder {
+    tx: Option<SyncSender<Inputs>>,
+    recycled: Receiver<Inputs>,
+    serialiser: Option<JoinHandle<SerialiserReport>>,
+    writer: Option<JoinHandle<Result<WriteSummary>>>,
+    inputs: Inputs,
+    path: PathBuf,
+    hand: HandFrames,
+    /// Messages for naming the field of a tick that holds a non-finite number, on this thread:
+    /// their velocities follow the ticks accepted here.
+    check: Messages,
     ticks: u64,
 }
 
@@ -198,9 +308,50 @@ fn wrench6(w: &dfs_core::math::Wrench) -> [f64; 6] {
     [w[0], w[1], w[2], w[3], w[4], w[5]]
 }
 
+/// Whether every number of the tick that the raw topics are computed from is finite: q, τ, the
+/// base pose, and of the output those [`Messages::fill_raw`] reads (the fingertips' contact
+/// frames and penetrations even when not touching, so this may say no to a tick whose
+/// messages are all finite: the caller then runs the quantiser to be sure). Cheap: no
+/// branch per value, no division.
+fn inputs_finite(hand: &HandFrames, tick: &TickData<'_>) -> bool {
+    #[inline]
+    fn all(xs: &[f64]) -> bool {
+        xs.iter().fold(true, |ok, x| ok & x.is_finite())
+    }
+    fn iso(i: &Isometry) -> bool {
+        all(i.translation.vector.as_slice()) & all(i.rotation.coords.as_slice())
+    }
+    let n = hand.dof;
+    let out = tick.output;
+    let mut ok = all(&tick.q[..tick.q.len().min(n)])
+        & all(&tick.tau[..tick.tau.len().min(n)])
+        & iso(tick.base)
+        & all(&out.motor_q[..n])
+        & all(&out.motor_qd[..n])
+        & all(&out.feedback_torque[..n])
+        & iso(&out.object.pose)
+        & all(out.object.linear_velocity.as_slice())
+        & all(out.object.angular_velocity_b.as_slice())
+        & all(out.f_ext_b.as_slice())
+        & all(out.object_force_b.as_slice())
+        & all(out.table_force_b.as_slice());
+    for tip in &out.tips[..hand.n_tips] {
+        ok &= all(tip.feedback_force_world.as_slice())
+            & all(tip.tip_force_world.as_slice())
+            & tip.penetration.is_finite()
+            & all(tip.intensity.as_slice())
+            & all(tip.transmitted.as_slice())
+            & all(tip.feedback.as_slice());
+        if let Some(frame) = &tip.frame {
+            ok &= all(frame.p_b.as_slice()) & all(frame.rot_b.matrix().as_slice());
+        }
+    }
+    ok
+}
+
 impl SessionRecorder {
     /// Creates `out` (truncating it), writes the `session` and `ground_truth` metadata and the
-    /// channels, and starts the writer thread.
+    /// channels, and starts the serialiser and writer threads.
     pub fn create(
         out: impl AsRef<Path>,
         hand: &HandModel,
@@ -256,36 +407,58 @@ impl SessionRecorder {
         register_foxglove::<fg::FrameTransforms>(&mut writer, TOPIC_TF)?;
         register_foxglove::<fg::SceneUpdate>(&mut writer, TOPIC_SCENE)?;
         register_foxglove::<fg::JointStates>(&mut writer, TOPIC_JOINT_STATES)?;
-
-        let (tx, rx) = sync_channel::<Batch>(CHANNEL_BOUND);
-        let (recycle_tx, recycled) = channel::<Batch>();
-        let thread = std::thread::Builder::new()
-            .name("icms-session-writer".into())
-            .spawn(move || writer_thread(writer, rx, recycle_tx))
-            .map_err(|e| RecordingError::io("starting the session writer thread", e))?;
+        let hand_scene =
+            super::hand_scene::HandScene::create(&mut writer, hand, info.hand_urdf.as_deref())?;
 
         let frames = HandFrames {
             dof: hand.dof(),
             n_tips: hand.fingertips.len(),
+            links: hand.links.len(),
             root: hand.root,
             joints: hand.joints.iter().map(|j| (j.parent, j.child)).collect(),
         };
-        let msgs = Messages::new(hand);
+        let serialiser = Serialiser {
+            hand: frames.clone(),
+            shape: object.shape,
+            table_height: info.table_height,
+            hand_scene,
+            msgs: Messages::new(hand),
+        };
+
+        // Emptied buffers go back on channels of their own, bounded too (they hold at most
+        // the buffers in flight, and a bounded channel allocates nothing per message).
+        let (batch_tx, batch_rx) = sync_channel::<Batch>(CHANNEL_BOUND);
+        let (batch_recycle_tx, batch_recycled) = sync_channel::<Batch>(CHANNEL_BOUND + 2);
+        let writer = std::thread::Builder::new()
+            .name("icms-session-writer".into())
+            .spawn(move || writer_thread(writer, batch_rx, batch_recycle_tx))
+            .map_err(|e| RecordingError::io("starting the session writer thread", e))?;
+        let (tx, rx) = sync_channel::<Inputs>(CHANNEL_BOUND);
+        let (recycle_tx, recycled) = sync_channel::<Inputs>(CHANNEL_BOUND + 2);
+        let serialiser = match std::thread::Builder::new()
+            .name("icms-session-serialiser".into())
+            .spawn(move || serialiser.run(rx, recycle_tx, batch_tx, batch_recycled))
+        {
+            Ok(handle) => handle,
+            Err(e) => {
+                // The writer thread sees its channel closed and finishes the file.
+                let _ = writer.join();
+                return Err(RecordingError::io(
+                    "starting the session serialiser thread",
+                    e,
+                ));
+            }
+        };
+
         Ok(Self {
             tx: Some(tx),
             recycled,
-            thread: Some(thread),
-            batch: Batch {
-                data: Vec::with_capacity(64 * 1024),
-                items: Vec::with_capacity(BATCH_TICKS as usize * ALL_TOPICS.len()),
-                metadata: Vec::new(),
-            },
-            batch_ticks: 0,
+            serialiser: Some(serialiser),
+            writer: Some(writer),
+            inputs: Inputs::with_capacity(&frames),
             path,
+            check: Messages::new(hand),
             hand: frames,
-            shape: object.shape,
-            table_height: info.table_height,
-            msgs,
             ticks: 0,
         })
     }
@@ -295,83 +468,104 @@ impl SessionRecorder {
         &self.path
     }
 
-    /// Ticks recorded so far.
+    /// Ticks recorded so far (accepted by [`record`](Self::record)).
     pub fn ticks(&self) -> u64 {
         self.ticks
     }
 
     /// Records one tick: the raw topics always, the Foxglove topics when the tick index is a
-    /// multiple of [`FOXGLOVE_DECIMATION`]. Fails with [`RecordingError::NonFiniteNumber`] if a
-    /// value is NaN or infinite (nothing of the tick is written then), or with the writer
-    /// thread's error if it failed.
+    /// multiple of [`FOXGLOVE_DECIMATION`].
+    ///
+    /// Fails with [`RecordingError::NonFiniteNumber`], naming the topic and field, if a value
+    /// is NaN or infinite: nothing of the tick is written then, its velocities are not taken
+    /// as the next tick's reference, and the recorder goes on with the next tick. Fails with
+    /// the writer thread's error if it failed.
+    ///
+    /// This thread only checks and copies the tick; its messages are made on the serialiser
+    /// thread. A finite value too large for its fixed-point field (beyond ±2³¹ steps: a force
+    /// over 2.1·10⁶ N, a moment over 2147 N·m, a penetration over 2.1 m, a joint velocity over
+    /// 2.1·10⁷ rad/s, ...) is found there: that tick is left out just the same (nothing of it is
+    /// written, the next velocities are taken from the tick before it), the recording goes on,
+    /// and [`finish`](Self::finish) reports the first such refusal as
+    /// [`RecordingError::NonFiniteNumber`] (value "… (beyond the field's range)") after
+    /// finishing the file.
     pub fn record(&mut self, tick: &TickData<'_>) -> Result<()> {
-        let start_items = self.batch.items.len();
-        let start_data = self.batch.data.len();
-        let result = self.serialise_tick(tick);
-        if let Err(e) = result {
-            self.batch.items.truncate(start_items);
-            self.batch.data.truncate(start_data);
-            return Err(e);
+        let n = self.hand.dof;
+        let (q, tau) = (
+            &tick.q[..tick.q.len().min(n)],
+            &tick.tau[..tick.tau.len().min(n)],
+        );
+        let view = Tick {
+            index: self.ticks,
+            time_ns: tick.time_ns,
+            q,
+            tau,
+            base: tick.base,
+            output: tick.output,
+            link_poses: &tick.kinematics.link_poses[..self.hand.links],
+        };
+        if !inputs_finite(&self.hand, tick) {
+            // Name the field as the serialisation would (if none is refused, the non-finite
+            // number is one no message carries, and the tick is recorded).
+            self.check.raw_topics(&self.hand, &view, None)?;
+        }
+        let foxglove = view.is_foxglove();
+        if foxglove {
+            timestamp(tick.time_ns)?;
+        }
+        self.check.advance(&view);
+
+        let inputs = &mut self.inputs;
+        inputs.ticks.push(TickInput {
+            index: self.ticks,
+            time_ns: tick.time_ns,
+            q_len: q.len(),
+            tau_len: tau.len(),
+            base: *tick.base,
+        });
+        inputs
+            .outputs
+            .extend_from_slice(std::slice::from_ref(tick.output));
+        inputs.joints.extend_from_slice(q);
+        inputs
+            .joints
+            .resize(inputs.joints.len() + (n - q.len()), 0.0);
+        inputs.joints.extend_from_slice(tau);
+        inputs
+            .joints
+            .resize(inputs.joints.len() + (n - tau.len()), 0.0);
+        if foxglove {
+            inputs.link_poses.extend_from_slice(view.link_poses);
         }
         self.ticks += 1;
-        self.batch_ticks += 1;
-        if self.batch_ticks >= BATCH_TICKS {
-            self.send_batch()?;
+        if self.inputs.ticks.len() >= BATCH_TICKS {
+            self.send_inputs()?;
         }
-        Ok(())
-    }
-
-    fn serialise_tick(&mut self, tick: &TickData<'_>) -> Result<()> {
-        let t = tick.time_ns;
-        let m = &mut self.msgs;
-        m.fill_raw(&self.hand, tick);
-        let mut q = Quantiser::default();
-        q.joint_states(&m.joints, &mut m.joints_pb);
-        refused(&q, 0)?;
-        push(&mut self.batch, 0, t, &m.joints_pb);
-        q.feedback(&m.feedback, &mut m.feedback_pb);
-        refused(&q, 1)?;
-        push(&mut self.batch, 1, t, &m.feedback_pb);
-        q.contacts(&m.contacts, &mut m.contacts_pb);
-        refused(&q, 2)?;
-        push(&mut self.batch, 2, t, &m.contacts_pb);
-        let object = q.object(&m.object);
-        refused(&q, 3)?;
-        push(&mut self.batch, 3, t, &object);
-        if self.ticks.is_multiple_of(FOXGLOVE_DECIMATION) {
-            m.fill_foxglove(&self.hand, &self.shape, self.table_height, tick)?;
-            push(&mut self.batch, 4, t, &m.tf);
-            push(&mut self.batch, 5, t, &m.scene);
-            push(&mut self.batch, 6, t, &m.fox_joints);
-        }
-        m.advance(tick);
         Ok(())
     }
 
     /// Adds a metadata record (written after the ticks recorded so far), for records only
     /// known at the end such as a replay's report.
     pub fn add_metadata(&mut self, name: &str, metadata: BTreeMap<String, String>) -> Result<()> {
-        self.batch.metadata.push((name.to_owned(), metadata));
-        self.send_batch()
+        self.inputs.metadata.push((name.to_owned(), metadata));
+        self.send_inputs()
     }
 
-    fn send_batch(&mut self) -> Result<()> {
-        if self.batch.items.is_empty() && self.batch.metadata.is_empty() {
+    fn send_inputs(&mut self) -> Result<()> {
+        if self.inputs.is_empty() {
             return Ok(());
         }
-        let next = self.recycled.try_recv().unwrap_or_else(|_| Batch {
-            data: Vec::with_capacity(self.batch.data.capacity()),
-            items: Vec::with_capacity(self.batch.items.capacity()),
-            metadata: Vec::new(),
-        });
-        let full = std::mem::replace(&mut self.batch, next);
-        self.batch_ticks = 0;
+        let next = match self.recycled.try_recv() {
+            Ok(inputs) => inputs,
+            Err(_) => Inputs::with_capacity(&self.hand),
+        };
+        let full = std::mem::replace(&mut self.inputs, next);
         let sent = match &self.tx {
             Some(tx) => tx.send(full).is_ok(),
             None => false,
         };
         if !sent {
-            // The writer thread stopped: report its error.
+            // A thread stopped: report why.
             return Err(self.join().err().unwrap_or(RecordingError::WriterClosed {
                 path: self.path.clone(),
             }));
@@ -379,22 +573,37 @@ impl SessionRecorder {
         Ok(())
     }
 
+    /// Closes the channel to the serialiser thread and waits for both threads: the writer's
+    /// error first, then the first tick the serialiser refused.
     fn join(&mut self) -> Result<WriteSummary> {
         self.tx = None;
-        match self.thread.take() {
+        let report = match self.serialiser.take() {
+            Some(handle) => handle.join().ok(),
+            None => Some(SerialiserReport::default()),
+        };
+        let written = match self.writer.take() {
             Some(handle) => handle
                 .join()
                 .unwrap_or(Err(RecordingError::WriterThreadPanicked)),
             None => Err(RecordingError::WriterClosed {
                 path: self.path.clone(),
             }),
+        };
+        let report = report.ok_or(RecordingError::WriterThreadPanicked)?;
+        let write = written?;
+        self.ticks -= report.refused;
+        match report.first_refusal {
+            Some(e) => Err(e),
+            None => Ok(write),
         }
     }
 
     /// Writes the remaining ticks, finishes the file (summary, footer, sync) on the writer
-    /// thread and reports what was written.
+    /// thread and reports what was written. If the serialiser thread left out a tick (a value
+    /// beyond its field's range, see [`record`](Self::record)), the file is finished all the
+    /// same, without that tick, and the error is the first such refusal.
     pub fn finish(mut self) -> Result<RecordSummary> {
-        self.send_batch()?;
+        self.send_inputs()?;
         let write = self.join()?;
         let file_bytes = std::fs::metadata(&self.path)
             .map_err(|e| RecordingError::io(format!("reading {}", self.path.display()), e))?
@@ -409,10 +618,83 @@ impl SessionRecorder {
 
 impl Drop for SessionRecorder {
     fn drop(&mut self) {
-        if self.thread.is_some() {
-            let _ = self.send_batch();
+        if self.serialiser.is_some() || self.writer.is_some() {
+            let _ = self.send_inputs();
             let _ = self.join();
         }
+    }
+}
+
+impl Serialiser {
+    /// Turns batches of tick inputs into batches of messages for the writer thread, until the
+    /// input channel closes or the writer thread stops.
+    fn run(
+        mut self,
+        rx: Receiver<Inputs>,
+        recycle: SyncSender<Inputs>,
+        tx: SyncSender<Batch>,
+        recycled: Receiver<Batch>,
+    ) -> SerialiserReport {
+        let mut report = SerialiserReport::default();
+        let (n, links) = (self.hand.dof, self.hand.links);
+        for mut inputs in rx {
+            let mut batch = recycled.try_recv().unwrap_or_else(|_| Batch {
+                data: Vec::with_capacity(256 * 1024),
+                items: Vec::with_capacity(BATCH_TICKS * (RAW_TOPICS.len() + 1)),
+                metadata: Vec::new(),
+            });
+            let mut poses = 0;
+            for (k, (input, output)) in inputs.ticks.iter().zip(&inputs.outputs).enumerate() {
+                let joints = &inputs.joints[2 * n * k..2 * n * (k + 1)];
+                let mut tick = Tick {
+                    index: input.index,
+                    time_ns: input.time_ns,
+                    q: &joints[..input.q_len],
+                    tau: &joints[n..n + input.tau_len],
+                    base: &input.base,
+                    output,
+                    link_poses: &[],
+                };
+                if tick.is_foxglove() {
+                    tick.link_poses = &inputs.link_poses[poses..poses + links];
+                    poses += links;
+                }
+                let (start_items, start_data) = (batch.items.len(), batch.data.len());
+                if let Err(e) = self.serialise_tick(&tick, &mut batch) {
+                    batch.items.truncate(start_items);
+                    batch.data.truncate(start_data);
+                    report.refused += 1;
+                    report.first_refusal.get_or_insert(e);
+                }
+            }
+            batch.metadata.append(&mut inputs.metadata);
+            inputs.clear();
+            let _ = recycle.try_send(inputs);
+            if tx.send(batch).is_err() {
+                // The writer thread stopped: its own result says why.
+                break;
+            }
+        }
+        report
+    }
+
+    /// All the messages of one tick at the end of `batch`; on an error, the batch holds part of
+    /// them (the caller cuts them off) and the velocities' reference is left as it was.
+    fn serialise_tick(&mut self, tick: &Tick<'_>, batch: &mut Batch) -> Result<()> {
+        let t = tick.time_ns;
+        let m = &mut self.msgs;
+        m.raw_topics(&self.hand, tick, Some(batch))?;
+        if tick.is_foxglove() {
+            m.fill_foxglove(&self.hand, &self.shape, self.table_height, tick)?;
+            push(batch, 4, t, &m.tf);
+            push(batch, 5, t, &m.scene);
+            push(batch, 6, t, &m.fox_joints);
+            if let Some(hand) = self.hand_scene.due(tick.index, t) {
+                push(batch, 7, t, hand);
+            }
+        }
+        m.advance(tick);
+        Ok(())
     }
 }
 
@@ -453,7 +735,7 @@ fn register_foxglove<T: Encode>(writer: &mut SessionWriter, topic: &str) -> Resu
 fn writer_thread(
     mut writer: SessionWriter,
     rx: Receiver<Batch>,
-    recycle: std::sync::mpsc::Sender<Batch>,
+    recycle: SyncSender<Batch>,
 ) -> Result<WriteSummary> {
     for mut batch in rx {
         for &(topic, t, start, end) in &batch.items {
@@ -464,7 +746,7 @@ fn writer_thread(
         }
         batch.data.clear();
         batch.items.clear();
-        let _ = recycle.send(batch);
+        let _ = recycle.try_send(batch);
     }
     writer.finish()
 }
@@ -535,10 +817,17 @@ impl Messages {
                 })
                 .collect(),
         };
+        // The DOF names encoded once, and left out of the SI messages.
+        let names_pb = prost::Message::encode_to_vec(&GloveJointStatesProto {
+            names: joints.names.clone(),
+            ..GloveJointStatesProto::default()
+        });
+        let (mut joints, mut feedback) = (joints, feedback);
+        joints.names.clear();
+        feedback.names.clear();
         Self {
-            joints_pb: GloveJointStatesProto::default(),
-            feedback_pb: GloveFeedbackProto::default(),
-            contacts_pb: ContactsProto::default(),
+            quantiser: Quantiser::default(),
+            names_pb,
             joints,
             feedback,
             contacts,
@@ -554,7 +843,48 @@ impl Messages {
         }
     }
 
-    fn fill_raw(&mut self, hand: &HandFrames, tick: &TickData<'_>) {
+    /// Fills the raw topics of `tick` and quantises them, encoding each at the end of `batch`
+    /// if one is given; the first value the quantiser refuses is the error (the batch then
+    /// holds the topics before its own).
+    fn raw_topics(
+        &mut self,
+        hand: &HandFrames,
+        tick: &Tick<'_>,
+        batch: Option<&mut Batch>,
+    ) -> Result<()> {
+        let t = tick.time_ns;
+        self.fill_raw(hand, tick);
+        let q = &mut self.quantiser;
+        q.refused = None;
+        // Without a batch (naming a refused field), the messages go to a buffer of their own.
+        let mut spare = Vec::new();
+        let (data, mut items) = match batch {
+            Some(b) => (&mut b.data, Some(&mut b.items)),
+            None => (&mut spare, None),
+        };
+        for topic in 0..RAW_TOPICS.len() as u8 {
+            let start = data.len();
+            match topic {
+                0 => {
+                    data.extend_from_slice(&self.names_pb);
+                    q.encode_joint_states(&self.joints, data);
+                }
+                1 => {
+                    data.extend_from_slice(&self.names_pb);
+                    q.encode_feedback(&self.feedback, data);
+                }
+                2 => q.encode_contacts(&self.contacts, data),
+                _ => q.encode_object(&self.object, data),
+            }
+            refused(q, topic)?;
+            if let Some(items) = items.as_deref_mut() {
+                items.push((topic, t, start, data.len()));
+            }
+        }
+        Ok(())
+    }
+
+    fn fill_raw(&mut self, hand: &HandFrames, tick: &Tick<'_>) {
         let n = hand.dof;
         let out = tick.output;
         let dt = match self.prev_time_ns {
@@ -613,7 +943,7 @@ impl Messages {
 
     /// The tick just recorded becomes the one the next velocities are taken from (not called
     /// for a refused tick, which records nothing).
-    fn advance(&mut self, tick: &TickData<'_>) {
+    fn advance(&mut self, tick: &Tick<'_>) {
         for (prev, &q) in self.prev_q.iter_mut().zip(tick.q) {
             *prev = q;
         }
@@ -625,10 +955,10 @@ impl Messages {
         hand: &HandFrames,
         shape: &Shape,
         table_height: Option<f64>,
-        tick: &TickData<'_>,
+        tick: &Tick<'_>,
     ) -> Result<()> {
         let stamp = Some(timestamp(tick.time_ns)?);
-        let kin = tick.kinematics;
+        let link_poses = tick.link_poses;
         let out = tick.output;
         let tfs = &mut self.tf.transforms;
         let set = |tf: &mut fg::FrameTransform, iso: &Isometry| {
@@ -636,9 +966,9 @@ impl Messages {
             tf.translation = Some(fg_vector(&iso.translation.vector));
             tf.rotation = Some(fg_quaternion(&iso.rotation));
         };
-        set(&mut tfs[0], &kin.link_poses[hand.root]);
+        set(&mut tfs[0], &link_poses[hand.root]);
         for (j, &(parent, child)) in hand.joints.iter().enumerate() {
-            let rel = kin.link_poses[parent].inverse() * kin.link_poses[child];
+            let rel = link_poses[parent].inverse() * link_poses[child];
             set(&mut tfs[1 + j], &rel);
         }
         let last = tfs.len() - 1;
@@ -849,6 +1179,7 @@ pub fn record_simulation_until(
             .collect(),
         started_at: None,
         table_height: Some(sim.table_height()),
+        hand_urdf: None,
     };
     let dfs = sim.dfs();
     let recorder = SessionRecorder::create(out, dfs.hand(), dfs.object(), &info)?;
@@ -857,7 +1188,9 @@ pub fn record_simulation_until(
 
 /// Steps `sim` to its end, recording every tick with `recorder`, then finishes the file.
 /// `progress(done, total)` is called every 100 ticks and at the end. If the simulation or a
-/// write fails midway, the file is still finished with every tick recorded before it.
+/// write fails midway, the file is still finished with every tick recorded before it. A tick
+/// with a value beyond its field's range is left out of the file and reported at the end (see
+/// [`SessionRecorder::record`]).
 pub fn record_ticks(
     sim: &mut Simulation,
     recorder: SessionRecorder,
@@ -914,4 +1247,169 @@ pub fn record_ticks_until(
         }
     }
     recorder.finish()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// What [`record_with`] recorded: per tick its `record` result, time and q.
+    struct Recorded {
+        results: Vec<Result<()>>,
+        times: Vec<u64>,
+        q: Vec<Vec<f64>>,
+        finished: Result<RecordSummary>,
+    }
+
+    /// Records `seconds` of `sphere-lift` into `path`, with `edit(tick position, τ)` applied to
+    /// each tick's τ (0 for the first tick).
+    fn record_with(path: &Path, seconds: f64, edit: impl Fn(usize, &mut [f64])) -> Recorded {
+        let scenario = Scenario::builtin("sphere-lift", 3).unwrap();
+        let mut sim = Simulation::new(&scenario, HandModel::glove10(), Some(seconds)).unwrap();
+        let dfs = sim.dfs();
+        let mut rec =
+            SessionRecorder::create(path, dfs.hand(), dfs.object(), &SessionInfo::default())
+                .unwrap();
+        let (mut results, mut times, mut qs) = (Vec::new(), Vec::new(), Vec::new());
+        while sim.step().unwrap() {
+            let (q, tau, base) = sim.sample();
+            let mut tau = tau.to_vec();
+            edit(results.len(), &mut tau);
+            let tick = TickData {
+                time_ns: sim.time_ns(),
+                q,
+                tau: &tau,
+                base,
+                output: sim.output(),
+                kinematics: sim.dfs().kinematics(),
+            };
+            results.push(rec.record(&tick));
+            times.push(sim.time_ns());
+            qs.push(q.to_vec());
+        }
+        Recorded {
+            results,
+            times,
+            q: qs,
+            finished: rec.finish(),
+        }
+    }
+
+    #[test]
+    fn a_value_beyond_its_field_leaves_its_tick_out_and_finish_reports_it() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("big.mcap");
+        // τ₃ of 10⁵ N·m is 10¹⁰ steps of 10⁻⁵: finite, but beyond an sint32. Ticks 29, 30
+        // and 40 (counted from 0; 40 is a Foxglove tick).
+        let r = record_with(&path, 0.1, |tick, tau| {
+            if [29, 30, 40].contains(&tick) {
+                tau[3] = 1e5;
+            }
+        });
+        assert_eq!(r.results.len(), 100);
+        assert!(r.results.iter().all(Result::is_ok));
+        match r.finished.unwrap_err() {
+            RecordingError::NonFiniteNumber { topic, path, value } => {
+                assert_eq!(topic, TOPIC_GLOVE_JOINT_STATES);
+                assert_eq!(path, "efforts[3]");
+                assert!(value.contains("beyond the field's range"), "{value}");
+            }
+            e => panic!("{e}"),
+        }
+        // The file is finished without those ticks.
+        let session = read_session(&path).unwrap();
+        assert_eq!(session.ticks(), 97);
+        for topic in RAW_TOPICS {
+            assert_eq!(session.message_counts[topic], 97, "{topic}");
+        }
+        // The Foxglove ticks 0, 20, 60 and 80: not 40.
+        assert_eq!(session.message_counts[TOPIC_TF], 4);
+        let times: Vec<u64> = session.joint_states.iter().map(|(t, _)| *t).collect();
+        for k in [29, 30, 40] {
+            assert!(!times.contains(&r.times[k]), "{k}");
+        }
+        // Velocities after the gap are taken from the last tick recorded before it (28).
+        let after = &session.joint_states[times.iter().position(|&t| t == r.times[31]).unwrap()];
+        let dt = (r.times[31] - r.times[28]) as f64 * 1e-9;
+        for (i, v) in after.1.velocities.iter().enumerate() {
+            let expected = (r.q[31][i] - r.q[28][i]) / dt;
+            assert!(
+                (v - expected).abs() <= 0.0051,
+                "{i}: {v} against {expected}"
+            );
+        }
+    }
+
+    #[test]
+    fn a_non_finite_value_is_refused_at_once_naming_its_field() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("inf.mcap");
+        let r = record_with(&path, 0.05, |tick, tau| {
+            if tick == 20 {
+                tau[4] = f64::NEG_INFINITY;
+            }
+        });
+        let refused: Vec<_> = r
+            .results
+            .iter()
+            .enumerate()
+            .filter_map(|(i, r)| r.as_ref().err().map(|e| (i, e.to_string())))
+            .collect();
+        assert_eq!(refused.len(), 1, "{refused:?}");
+        assert_eq!(refused[0].0, 20);
+        assert!(refused[0].1.contains("efforts[4]"), "{}", refused[0].1);
+        assert_eq!(r.finished.unwrap().ticks, 49);
+        assert_eq!(read_session(&path).unwrap().ticks(), 49);
+    }
+
+    #[test]
+    fn each_raw_message_is_the_one_prost_writes_for_its_decoding() {
+        use super::super::proto::{ContactsProto, GloveFeedbackProto, ObjectStateProto};
+        use prost::Message;
+        /// `bytes` decoded as `M`, checked to be prost's own encoding of it.
+        fn canonical<M: Message + Default>(bytes: &[u8]) -> M {
+            let m = M::decode(bytes).unwrap();
+            assert_eq!(m.encode_to_vec(), bytes);
+            m
+        }
+        let scenario = Scenario::builtin("cylinder-power-grasp", 5).unwrap();
+        let mut sim = Simulation::new(&scenario, HandModel::glove10(), Some(3.0)).unwrap();
+        let hand = sim.dfs().hand().clone();
+        let frames = HandFrames {
+            dof: hand.dof(),
+            n_tips: hand.fingertips.len(),
+            links: hand.links.len(),
+            root: hand.root,
+            joints: hand.joints.iter().map(|j| (j.parent, j.child)).collect(),
+        };
+        let mut m = Messages::new(&hand);
+        let mut batch = Batch::default();
+        let mut touching = 0;
+        while sim.step().unwrap() {
+            let (q, tau, base) = sim.sample();
+            let tick = Tick {
+                index: sim.ticks(),
+                time_ns: sim.time_ns(),
+                q,
+                tau,
+                base,
+                output: sim.output(),
+                link_poses: &[],
+            };
+            batch.data.clear();
+            batch.items.clear();
+            m.raw_topics(&frames, &tick, Some(&mut batch)).unwrap();
+            m.advance(&tick);
+            let bytes = |k: usize| &batch.data[batch.items[k].2..batch.items[k].3];
+            let joints: GloveJointStatesProto = canonical(bytes(0));
+            assert_eq!(joints.names, hand.dof_names);
+            assert_eq!(joints.positions_e5.len(), hand.dof());
+            let feedback: GloveFeedbackProto = canonical(bytes(1));
+            assert_eq!(feedback.names, hand.dof_names);
+            let contacts: ContactsProto = canonical(bytes(2));
+            touching += contacts.fingers.iter().filter(|f| f.touching).count();
+            canonical::<ObjectStateProto>(bytes(3));
+        }
+        assert!(touching > 1000, "{touching}");
+    }
 }

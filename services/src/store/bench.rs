@@ -3,11 +3,14 @@
 
 use std::time::{Duration, Instant};
 
+use dfs_core::contact::ContactModel;
+use dfs_core::object::ShapeKind;
+use dfs_core::scenario::Phase;
 use serde::{Deserialize, Serialize};
 
 use super::{
-    NewSkill, SessionMeta, SkillQuery, SortField, SortKey, SortOrder, Store, StoreError,
-    CONTACT_MODELS, FEATURE_DIM,
+    NewSkill, ObjectShape, SessionMeta, SkillQuery, SortField, SortKey, SortOrder, Store,
+    StoreError, FEATURE_DIM,
 };
 
 /// Skills per synthetic session.
@@ -16,12 +19,25 @@ pub const SYNTHETIC_SKILLS_PER_SESSION: usize = 1000;
 pub const SYNTHETIC_SESSIONS_PER_TRANSACTION: usize = 10;
 
 /// Object shapes the generator draws from.
-pub const SYNTHETIC_SHAPES: [&str; 3] = ["sphere", "box", "cylinder"];
+pub const SYNTHETIC_SHAPES: [ShapeKind; 3] =
+    [ShapeKind::Sphere, ShapeKind::Box, ShapeKind::Cylinder];
+/// Contact models the generator draws from.
+pub const SYNTHETIC_CONTACT_MODELS: [ContactModel; 3] = [
+    ContactModel::Frictionless,
+    ContactModel::PointWithFriction,
+    ContactModel::SoftFinger,
+];
 /// Grasp types the generator draws from.
 pub const SYNTHETIC_GRASP_TYPES: [&str; 4] =
     ["precision-2vf", "precision-3vf", "power-2vf", "power-3vf"];
 /// Phases every synthetic skill has.
-pub const SYNTHETIC_PHASES: [&str; 5] = ["grasp", "lift", "hold", "place", "release"];
+pub const SYNTHETIC_PHASES: [Phase; 5] = [
+    Phase::Grasp,
+    Phase::Lift,
+    Phase::Hold,
+    Phase::Place,
+    Phase::Release,
+];
 
 /// A small deterministic generator (SplitMix64), enough for synthetic data.
 #[derive(Debug, Clone)]
@@ -56,9 +72,9 @@ impl SplitMix64 {
 
 /// One synthetic skill with plausible ranges (mass 0.05-2 kg, μ 0.3-1.5, ε 0-0.5, ...).
 pub fn synthetic_skill(rng: &mut SplitMix64) -> NewSkill {
-    let phase_durations: Vec<(String, f64)> = SYNTHETIC_PHASES
+    let phase_durations: Vec<(Phase, f64)> = SYNTHETIC_PHASES
         .iter()
-        .map(|p| (p.to_string(), rng.range(0.1, 2.0)))
+        .map(|p| (*p, rng.range(0.1, 2.0)))
         .collect();
     let duration_s = phase_durations.iter().map(|p| p.1).sum::<f64>();
     let start_ns = (rng.range(0.0, 5.0) * 1e9) as i64;
@@ -67,7 +83,7 @@ pub fn synthetic_skill(rng: &mut SplitMix64) -> NewSkill {
         object_mass: rng.range(0.05, 2.0),
         mu: rng.range(0.3, 1.5),
         contact_count: 2 + rng.index(4) as i64,
-        contact_model: CONTACT_MODELS[rng.index(3)].into(),
+        contact_model: SYNTHETIC_CONTACT_MODELS[rng.index(3)],
         grasp_type: SYNTHETIC_GRASP_TYPES[rng.index(4)].into(),
         quality: rng.range(0.0, 0.5),
         volume: rng.range(0.0, 0.01),
@@ -116,7 +132,7 @@ pub async fn generate_synthetic(
                 scenario: Some("synthetic".into()),
                 seed: Some(seed),
                 hand: "glove10".into(),
-                object_shape: skills[0].object_shape.clone(),
+                object_shape: skills[0].object_shape,
                 object_mass: skills[0].object_mass,
                 mu: skills[0].mu,
                 duration_ns: 0,
@@ -176,7 +192,7 @@ impl Timing {
 pub fn random_filtered_query(rng: &mut SplitMix64) -> SkillQuery {
     let mass_min = rng.range(0.05, 1.8);
     SkillQuery {
-        object_shape: Some(SYNTHETIC_SHAPES[rng.index(3)].into()),
+        object_shape: Some(ObjectShape::Known(SYNTHETIC_SHAPES[rng.index(3)])),
         mass_min: Some(mass_min),
         mass_max: Some(mass_min + 0.2),
         min_quality: Some(rng.range(0.0, 0.3)),

@@ -71,6 +71,164 @@ pub(crate) fn write_atomic(
     result.map(|()| rel)
 }
 
+/// A file being uploaded, written to a temporary file beside the blobs as it arrives and
+/// hashed on the way, so that an upload of any size takes no memory: [`StagedBlob::write`]
+/// each piece, [`StagedBlob::finish`], read it from [`StagedBlob::path`] (segmentation), then
+/// hand it to [`super::Store::ingest_staged`], which moves it to its content address. Dropped
+/// unfinished or uncommitted, the file is removed. Blocking: call on a blocking thread.
+#[derive(Debug)]
+pub struct StagedBlob {
+    path: PathBuf,
+    file: Option<std::io::BufWriter<File>>,
+    hasher: Sha256,
+    len: u64,
+    sha256: String,
+    /// The file's fsync, running on a thread of its own from [`Self::finish`] (or
+    /// [`Self::adopt`]) while the caller reads the file; [`Self::commit`] waits for it.
+    sync: Option<std::thread::JoinHandle<std::io::Result<()>>>,
+}
+
+impl StagedBlob {
+    /// A new staged file under `data_dir` (`blobs/sha256/staging/`, where the temporary-file
+    /// sweep of interrupted writes finds it).
+    pub fn create(data_dir: &Path) -> Result<Self, StoreError> {
+        static COUNTER: AtomicU64 = AtomicU64::new(0);
+        let dir = data_dir.join("blobs/sha256/staging");
+        fs::create_dir_all(&dir).map_err(|e| StoreError::io(&dir, e))?;
+        let path = dir.join(format!(
+            ".upload.{}.{}.tmp",
+            std::process::id(),
+            COUNTER.fetch_add(1, Ordering::Relaxed)
+        ));
+        let file = File::create(&path).map_err(|e| StoreError::io(&path, e))?;
+        Ok(StagedBlob {
+            path,
+            file: Some(std::io::BufWriter::with_capacity(1 << 20, file)),
+            hasher: Sha256::new(),
+            len: 0,
+            sha256: String::new(),
+            sync: None,
+        })
+    }
+
+    /// Appends `bytes`.
+    pub fn write(&mut self, bytes: &[u8]) -> Result<(), StoreError> {
+        let file = self
+            .file
+            .as_mut()
+            .ok_or_else(|| StoreError::Corrupt("write to a finished upload".into()))?;
+        file.write_all(bytes)
+            .map_err(|e| StoreError::io(&self.path, e))?;
+        self.hasher.update(bytes);
+        self.len += bytes.len() as u64;
+        Ok(())
+    }
+
+    /// Takes the file as another writer left it at [`Self::path`] (a recorder that writes a
+    /// session straight into the blob store's staging area): hashes it, reading
+    /// it a megabyte at a time (its fsync starts beside). Nothing may have been
+    /// [`Self::write`]n.
+    pub fn adopt(&mut self) -> Result<(), StoreError> {
+        use std::io::Read;
+        if self.len != 0 {
+            return Err(StoreError::Corrupt(
+                "adopting a staged file that was written to".into(),
+            ));
+        }
+        self.file = None;
+        let mut file = File::open(&self.path).map_err(|e| StoreError::io(&self.path, e))?;
+        self.start_sync();
+        let mut hasher = Sha256::new();
+        let mut buffer = vec![0u8; 1 << 20];
+        loop {
+            let n = file
+                .read(&mut buffer)
+                .map_err(|e| StoreError::io(&self.path, e))?;
+            if n == 0 {
+                break;
+            }
+            hasher.update(&buffer[..n]);
+            self.len += n as u64;
+        }
+        self.sha256 = hex::encode(hasher.finalize());
+        Ok(())
+    }
+
+    /// Flushes the file, takes its hash and starts its fsync (on a thread of its own: the disk
+    /// works while the caller reads the file back; [`Self::commit`] waits for it).
+    pub fn finish(&mut self) -> Result<(), StoreError> {
+        if let Some(file) = self.file.take() {
+            file.into_inner()
+                .map_err(|e| StoreError::io(&self.path, e.into_error()))?;
+            self.sha256 = hex::encode(std::mem::take(&mut self.hasher).finalize());
+            self.start_sync();
+        }
+        Ok(())
+    }
+
+    /// Starts the fsync of the file (measured: 42 ms for 11 MB here, a quarter of an upload's
+    /// time when it ran before the segmentation rather than beside it).
+    fn start_sync(&mut self) {
+        let path = self.path.clone();
+        self.sync = Some(std::thread::spawn(move || {
+            File::open(&path).and_then(|f| f.sync_all())
+        }));
+    }
+
+    /// The file, to read once finished.
+    pub fn path(&self) -> &Path {
+        &self.path
+    }
+
+    /// Bytes written.
+    pub fn len(&self) -> u64 {
+        self.len
+    }
+
+    /// Whether nothing was written.
+    pub fn is_empty(&self) -> bool {
+        self.len == 0
+    }
+
+    /// Hex SHA-256 of the bytes (empty until [`Self::finish`]).
+    pub fn sha256(&self) -> &str {
+        &self.sha256
+    }
+
+    /// Moves the finished file to its content address under `data_dir` (or drops it if a
+    /// complete blob is there already). Returns the relative path, as [`write_atomic`] does.
+    pub(crate) fn commit(mut self, data_dir: &Path) -> Result<String, StoreError> {
+        self.finish()?;
+        if let Some(sync) = self.sync.take() {
+            sync.join()
+                .map_err(|_| StoreError::Corrupt("the fsync thread panicked".into()))?
+                .map_err(|e| StoreError::io(&self.path, e))?;
+        }
+        let rel = relative_path(&self.sha256);
+        let path = data_dir.join(&rel);
+        let dir = path.parent().expect("blob path has a parent").to_path_buf();
+        if fs::metadata(&path).is_ok_and(|md| md.is_file() && md.len() == self.len) {
+            return Ok(rel);
+        }
+        if !dir.is_dir() {
+            fs::create_dir_all(&dir).map_err(|e| StoreError::io(&dir, e))?;
+            if let Some(parent) = dir.parent() {
+                sync_dir(parent)?;
+            }
+        }
+        fs::rename(&self.path, &path).map_err(|e| StoreError::io(&path, e))?;
+        sync_dir(&dir)?;
+        Ok(rel)
+    }
+}
+
+impl Drop for StagedBlob {
+    fn drop(&mut self) {
+        // Committed, the file was renamed away and this finds nothing.
+        let _ = fs::remove_file(&self.path);
+    }
+}
+
 /// Removes a blob (after its row is gone); a missing file is not an error.
 pub(crate) fn remove(data_dir: &Path, rel: &str) -> Result<(), StoreError> {
     let path = data_dir.join(rel);

@@ -11,13 +11,14 @@ use std::path::PathBuf;
 use std::sync::OnceLock;
 
 use dfs_core::hand::{HandModel, HandSpec, BUILTIN_HANDS};
-use dfs_core::replay::ReplayReport;
+use dfs_core::names::Named;
+use dfs_core::replay::{FailureReason, ReplayReport};
 use sqlx::sqlite::SqliteRow;
 use sqlx::{Row as _, Sqlite};
 
 use super::error::StoreError;
 use super::types::{Hand, HandSummary, Replay};
-use super::{blob, Store};
+use super::{blob, StagedBlob, Store};
 use crate::replay::{load_builtin_hand, LoadedHand};
 
 /// Longest hand name.
@@ -134,6 +135,7 @@ fn row_to_summary(row: &SqliteRow) -> Result<HandSummary, StoreError> {
 }
 
 fn row_to_replay(row: &SqliteRow) -> Result<Replay, StoreError> {
+    let id: i64 = row.try_get("id")?;
     let report: String = row.try_get("report")?;
     let mut report: serde_json::Value = serde_json::from_str(&report)?;
     // Replays stored before the report took the torque the joints applied (clamped at the
@@ -145,11 +147,15 @@ fn row_to_replay(row: &SqliteRow) -> Result<Replay, StoreError> {
         }
     }
     Ok(Replay {
-        id: row.try_get("id")?,
+        id,
         skill_id: row.try_get("skill_id")?,
         hand: row.try_get("hand")?,
         success: row.try_get("success")?,
-        failure_reason: row.try_get("failure_reason")?,
+        failure_reason: row
+            .try_get::<Option<&str>, _>("failure_reason")?
+            .map(FailureReason::from_name)
+            .transpose()
+            .map_err(|e| StoreError::Corrupt(format!("replay {id}: failure_reason: {e}")))?,
         report,
         sha256: row.try_get("sha256")?,
         size_bytes: row.try_get("size_bytes")?,
@@ -274,7 +280,6 @@ impl Store {
         report: &ReplayReport,
         mcap: Vec<u8>,
     ) -> Result<Replay, StoreError> {
-        let report_json = serde_json::to_string(report)?;
         let guard = self.inner.blob_lock.read().await;
         let dir = self.inner.dir.clone();
         let size = mcap.len() as i64;
@@ -284,6 +289,40 @@ impl Store {
         })
         .await
         .map_err(|e| StoreError::Corrupt(format!("blob writer task failed: {e}")))??;
+        self.insert_replay_row(skill_id, hand, report, (sha256, size, rel), guard)
+            .await
+    }
+
+    /// [`Store::insert_replay`] of a replay recorded straight into a [`StagedBlob`] (adopted
+    /// or finished): the file is moved to its content address, never read into memory.
+    pub async fn insert_replay_staged(
+        &self,
+        skill_id: i64,
+        hand: &str,
+        report: &ReplayReport,
+        mcap: StagedBlob,
+    ) -> Result<Replay, StoreError> {
+        let guard = self.inner.blob_lock.read().await;
+        let dir = self.inner.dir.clone();
+        let (sha256, size) = (mcap.sha256().to_owned(), mcap.len() as i64);
+        let rel = tokio::task::spawn_blocking(move || mcap.commit(&dir))
+            .await
+            .map_err(|e| StoreError::Corrupt(format!("blob writer task failed: {e}")))??;
+        self.insert_replay_row(skill_id, hand, report, (sha256, size, rel), guard)
+            .await
+    }
+
+    /// The row of a replay whose blob (sha256, size, relative path) is written, under the
+    /// blob lock's read `guard`.
+    async fn insert_replay_row(
+        &self,
+        skill_id: i64,
+        hand: &str,
+        report: &ReplayReport,
+        (sha256, size, rel): (String, i64, String),
+        guard: tokio::sync::RwLockReadGuard<'_, ()>,
+    ) -> Result<Replay, StoreError> {
+        let report_json = serde_json::to_string(report)?;
         let row = sqlx::query(&format!(
             "INSERT INTO replays (skill_id, hand, success, failure_reason, report, sha256, \
              size_bytes, blob_path) SELECT ?, ?, ?, ?, ?, ?, ?, ? \

@@ -33,9 +33,11 @@ use sqlx::sqlite::{
 };
 use sqlx::{Connection as _, QueryBuilder, Row as _, Sqlite, SqliteConnection};
 
+pub use blob::StagedBlob;
 pub use error::StoreError;
 
 use crate::segmentation::SEGMENTATION_VERSION;
+use dfs_core::names::Named;
 
 /// Youngest unreferenced blob the server's sweep removes (see [`Store::sweep_orphan_blobs`]):
 /// ten minutes, far longer than any ingest takes from its blob write to its commit.
@@ -64,13 +66,10 @@ pub struct SweepReport {
     pub removed_bytes: u64,
 }
 pub use hands::MAX_HAND_NAME;
-pub use query::{
-    SkillQuery, SortField, SortKey, SortOrder, CONTACT_MODELS, DEFAULT_LIMIT, MAX_LIMIT, SHAPES,
-    UNKNOWN_SHAPE,
-};
+pub use query::{SkillQuery, SortField, SortKey, SortOrder, DEFAULT_LIMIT, MAX_LIMIT};
 pub use types::{
-    Hand, HandSummary, IngestOutcome, NewSkill, Page, ReplacedSkills, Replay, Session, SessionMeta,
-    Skill, StaleSession, FEATURE_DIM,
+    Hand, HandSummary, IngestOutcome, NewSkill, ObjectShape, Page, ReplacedSkills, Replay, Session,
+    SessionMeta, Skill, StaleSession, FEATURE_DIM,
 };
 
 use knn::FeatureIndex;
@@ -206,6 +205,13 @@ fn feature_to_blob(f: &[f32; FEATURE_DIM]) -> Vec<u8> {
     f.iter().flat_map(|x| x.to_le_bytes()).collect()
 }
 
+/// The name in the TEXT column `column` of skill `id`'s row as a value of `T` (a shape, a
+/// contact model): a name `T` does not know is a corrupt row, named.
+fn named_column<T: Named>(row: &SqliteRow, id: i64, column: &str) -> Result<T, StoreError> {
+    let text: &str = row.try_get(column)?;
+    T::from_name(text).map_err(|e| StoreError::Corrupt(format!("skill {id}: {column}: {e}")))
+}
+
 fn row_to_skill(row: &SqliteRow) -> Result<Skill, StoreError> {
     let id: i64 = row.try_get("id")?;
     let feature: Vec<u8> = row.try_get("feature")?;
@@ -214,18 +220,19 @@ fn row_to_skill(row: &SqliteRow) -> Result<Skill, StoreError> {
     Ok(Skill {
         id,
         session_id: row.try_get("session_id")?,
-        object_shape: row.try_get("object_shape")?,
+        object_shape: named_column(row, id, "object_shape")?,
         object_mass: row.try_get("object_mass")?,
         mu: row.try_get("mu")?,
         contact_count: row.try_get("contact_count")?,
-        contact_model: row.try_get("contact_model")?,
+        contact_model: named_column(row, id, "contact_model")?,
         grasp_type: row.try_get("grasp_type")?,
         quality: row.try_get("quality")?,
         volume: row.try_get("volume")?,
         duration_s: row.try_get("duration_s")?,
         start_ns: row.try_get("start_ns")?,
         end_ns: row.try_get("end_ns")?,
-        phase_durations: serde_json::from_str(&phases)?,
+        phase_durations: serde_json::from_str(&phases)
+            .map_err(|e| StoreError::Corrupt(format!("skill {id}: phase_durations: {e}")))?,
         feature: feature_from_blob(id, &feature)?.to_vec(),
         params: serde_json::from_str(&params)?,
         segmentation_version: segmentation_version(row)?,
@@ -251,6 +258,25 @@ fn finite(what: &str, v: f64) -> Result<(), StoreError> {
 }
 
 /// Checks a skill before insertion; returns its feature as a fixed array.
+/// A session's skills with their checked feature vectors, and its duration as the store's
+/// signed column: what every ingest checks before it writes anything.
+#[allow(clippy::type_complexity)]
+fn checked_input(
+    meta: &SessionMeta,
+    skills: Vec<NewSkill>,
+) -> Result<(Vec<(NewSkill, [f32; FEATURE_DIM])>, i64), StoreError> {
+    let checked = skills
+        .into_iter()
+        .enumerate()
+        .map(|(i, s)| validate_skill(i, &s).map(|f| (s, f)))
+        .collect::<Result<Vec<_>, _>>()?;
+    finite("object_mass", meta.object_mass)?;
+    finite("mu", meta.mu)?;
+    let duration_ns = i64::try_from(meta.duration_ns)
+        .map_err(|_| StoreError::InvalidInput("duration_ns is too large".into()))?;
+    Ok((checked, duration_ns))
+}
+
 fn validate_skill(i: usize, s: &NewSkill) -> Result<[f32; FEATURE_DIM], StoreError> {
     let ctx = |field: &str| format!("skill {i}: {field}");
     finite(&ctx("object_mass"), s.object_mass)?;
@@ -302,11 +328,11 @@ async fn insert_skills(
         );
         b.push_values(&rows, |mut r, (s, f, ph, p)| {
             r.push_bind(session_id)
-                .push_bind(s.object_shape.as_str())
+                .push_bind(s.object_shape.name())
                 .push_bind(s.object_mass)
                 .push_bind(s.mu)
                 .push_bind(s.contact_count)
-                .push_bind(s.contact_model.as_str())
+                .push_bind(s.contact_model.name())
                 .push_bind(s.grasp_type.as_str())
                 .push_bind(s.quality)
                 .push_bind(s.volume)
@@ -333,7 +359,7 @@ async fn insert_skills(
                 s.phase_durations
                     .iter()
                     .enumerate()
-                    .map(move |(ord, (name, d))| (*id, ord as i64, name.as_str(), *d))
+                    .map(move |(ord, (phase, d))| (*id, ord as i64, phase.name(), *d))
             })
             .collect();
         for pchunk in phases.chunks(2000) {
@@ -518,15 +544,7 @@ impl Store {
         meta: SessionMeta,
         skills: Vec<NewSkill>,
     ) -> Result<IngestOutcome, StoreError> {
-        let checked = skills
-            .into_iter()
-            .enumerate()
-            .map(|(i, s)| validate_skill(i, &s).map(|f| (s, f)))
-            .collect::<Result<Vec<_>, _>>()?;
-        finite("object_mass", meta.object_mass)?;
-        finite("mu", meta.mu)?;
-        let duration_ns = i64::try_from(meta.duration_ns)
-            .map_err(|_| StoreError::InvalidInput("duration_ns is too large".into()))?;
+        let (checked, duration_ns) = checked_input(&meta, skills)?;
 
         let bytes = mcap.to_vec();
         let sha256 = tokio::task::spawn_blocking(move || (blob::sha256_hex(&bytes), bytes))
@@ -544,7 +562,49 @@ impl Store {
         let rel = tokio::task::spawn_blocking(move || blob::write_atomic(&dir, &sha, &bytes))
             .await
             .map_err(|e| StoreError::Corrupt(format!("blob writer task failed: {e}")))??;
+        self.insert_session(&sha256, size, &rel, meta, checked, duration_ns)
+            .await
+    }
 
+    /// A new [`StagedBlob`] in the data directory, for an upload to stream into. Blocking.
+    pub fn stage_upload(&self) -> Result<StagedBlob, StoreError> {
+        StagedBlob::create(&self.inner.dir)
+    }
+
+    /// [`Store::ingest`] of an upload already written to disk and hashed ([`StagedBlob`]):
+    /// the file is moved to its content address (or dropped, if those bytes are stored
+    /// already), never read into memory.
+    pub async fn ingest_staged(
+        &self,
+        staged: StagedBlob,
+        meta: SessionMeta,
+        skills: Vec<NewSkill>,
+    ) -> Result<IngestOutcome, StoreError> {
+        let (checked, duration_ns) = checked_input(&meta, skills)?;
+        let sha256 = staged.sha256().to_owned();
+        if let Some(found) = self.existing(&sha256).await? {
+            return Ok(found);
+        }
+        let _guard = self.inner.blob_lock.read().await;
+        let dir = self.inner.dir.clone();
+        let size = staged.len() as i64;
+        let rel = tokio::task::spawn_blocking(move || staged.commit(&dir))
+            .await
+            .map_err(|e| StoreError::Corrupt(format!("blob writer task failed: {e}")))??;
+        self.insert_session(&sha256, size, &rel, meta, checked, duration_ns)
+            .await
+    }
+
+    /// The rows of a session whose blob is at `rel`, in one transaction.
+    async fn insert_session(
+        &self,
+        sha256: &str,
+        size: i64,
+        rel: &str,
+        meta: SessionMeta,
+        checked: Vec<(NewSkill, [f32; FEATURE_DIM])>,
+        duration_ns: i64,
+    ) -> Result<IngestOutcome, StoreError> {
         let meta_json = serde_json::to_string(&meta)?;
         let mut tx = self.inner.pool.begin().await?;
         let session_id: Option<i64> = sqlx::query_scalar(
@@ -552,12 +612,12 @@ impl Store {
              duration_ns, meta, segmentation_version) VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?) \
              ON CONFLICT (sha256) DO NOTHING RETURNING id",
         )
-        .bind(&sha256)
+        .bind(sha256)
         .bind(size)
-        .bind(&rel)
+        .bind(rel)
         .bind(meta.scenario.as_deref())
         .bind(&meta.hand)
-        .bind(&meta.object_shape)
+        .bind(meta.object_shape.name())
         .bind(duration_ns)
         .bind(&meta_json)
         .bind(i64::from(SEGMENTATION_VERSION))
@@ -567,7 +627,7 @@ impl Store {
             // A concurrent ingest of the same bytes committed first.
             tx.rollback().await?;
             return self
-                .existing(&sha256)
+                .existing(sha256)
                 .await?
                 .ok_or_else(|| StoreError::Corrupt("session vanished during ingest".into()));
         };
@@ -631,7 +691,7 @@ impl Store {
                 .bind(rel)
                 .bind(meta.scenario.as_deref())
                 .bind(&meta.hand)
-                .bind(&meta.object_shape)
+                .bind(meta.object_shape.name())
                 .bind(i64::try_from(meta.duration_ns).unwrap_or(i64::MAX))
                 .bind(serde_json::to_string(meta)?)
                 .bind(i64::from(SEGMENTATION_VERSION))
@@ -658,14 +718,16 @@ impl Store {
     }
 
     fn row_to_session(row: &SqliteRow) -> Result<Session, StoreError> {
+        let id: i64 = row.try_get("id")?;
         let meta: String = row.try_get("meta")?;
         let skill_ids: String = row.try_get("skill_ids")?;
         Ok(Session {
-            id: row.try_get("id")?,
+            id,
             sha256: row.try_get("sha256")?,
             size_bytes: row.try_get("size_bytes")?,
             blob_path: row.try_get("blob_path")?,
-            meta: serde_json::from_str(&meta)?,
+            meta: serde_json::from_str(&meta)
+                .map_err(|e| StoreError::Corrupt(format!("session {id}: meta: {e}")))?,
             skill_ids: serde_json::from_str(&skill_ids)?,
             segmentation_version: segmentation_version(row)?,
             created_at: row.try_get("created_at")?,

@@ -6,6 +6,9 @@ use serde::{Deserialize, Serialize};
 use sqlx::{QueryBuilder, Sqlite};
 
 use super::error::StoreError;
+use super::types::ObjectShape;
+use dfs_core::contact::ContactModel;
+use dfs_core::names::Named;
 use dfs_core::scenario::Phase;
 
 /// Largest page size.
@@ -123,8 +126,8 @@ impl std::fmt::Display for SortKey {
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(default)]
 pub struct SkillQuery {
-    /// Object shape equals (`sphere`, `box`, `cylinder`).
-    pub object_shape: Option<String>,
+    /// Object shape equals.
+    pub object_shape: Option<ObjectShape>,
     /// Object mass at least, kg.
     pub mass_min: Option<f64>,
     /// Object mass at most, kg.
@@ -136,13 +139,13 @@ pub struct SkillQuery {
     /// Number of contacts equals.
     pub contact_count: Option<i64>,
     /// Contact model equals.
-    pub contact_model: Option<String>,
+    pub contact_model: Option<ContactModel>,
     /// Grasp type equals.
     pub grasp_type: Option<String>,
     /// Ferrari-Canny ε at least.
     pub min_quality: Option<f64>,
-    /// The skill has a phase of this name (with `phase_min_s`/`phase_max_s`: of that duration).
-    pub phase: Option<String>,
+    /// The skill has this phase (with `phase_min_s`/`phase_max_s`: of that duration).
+    pub phase: Option<Phase>,
     /// Duration of `phase` at least, s. Needs `phase`.
     pub phase_min_s: Option<f64>,
     /// Duration of `phase` at most, s. Needs `phase`.
@@ -229,28 +232,9 @@ pub(crate) fn decode_cursor(tag: &str, real: bool, cursor: &str) -> Result<After
     Ok(after)
 }
 
-/// The object shape of a skill from a session file without the object's metadata (stored
-/// before sessions had to name their object; such files are now refused).
-pub const UNKNOWN_SHAPE: &str = "unknown";
-/// Object shapes a skill can have.
-pub const SHAPES: [&str; 4] = ["sphere", "box", "cylinder", UNKNOWN_SHAPE];
-/// Contact models a skill can have.
-pub const CONTACT_MODELS: [&str; 3] = ["frictionless", "point_with_friction", "soft_finger"];
 /// Grasp type families. Segmented skills store the family as their label; a label may also
 /// name the opposing virtual fingers, `<family>-<n>vf` (the synthetic bench skills do).
 const GRASP_FAMILIES: [&str; 2] = ["precision", "power"];
-
-/// A filter value that no skill can have is a mistake (a typo, a wrong case), not an empty
-/// result: refused naming the accepted values.
-fn check_one_of(name: &str, value: Option<&str>, allowed: &[&str]) -> Result<(), StoreError> {
-    match value {
-        Some(v) if !allowed.contains(&v) => Err(StoreError::InvalidQuery(format!(
-            "{name} {v:?} is not one of {}",
-            allowed.join(", ")
-        ))),
-        _ => Ok(()),
-    }
-}
 
 /// The `grasp_type` filter: a family (`precision`, `power`: every label of it) or a whole
 /// label (`precision-2vf`).
@@ -331,10 +315,6 @@ pub(crate) fn build(q: &SkillQuery) -> Result<QueryBuilder<'_, Sqlite>, StoreErr
             "contacts {n} is negative; a skill has 0 or more contacts"
         )));
     }
-    check_one_of("shape", q.object_shape.as_deref(), &SHAPES)?;
-    check_one_of("contact_model", q.contact_model.as_deref(), &CONTACT_MODELS)?;
-    let phases = Phase::ALL.map(Phase::name);
-    check_one_of("phase", q.phase.as_deref(), &phases)?;
     let grasp = q
         .grasp_type
         .as_deref()
@@ -366,7 +346,7 @@ pub(crate) fn build(q: &SkillQuery) -> Result<QueryBuilder<'_, Sqlite>, StoreErr
     let mut b = QueryBuilder::new(format!("SELECT {SKILL_COLUMNS} FROM skills WHERE 1 = 1"));
     if let Some(v) = &q.object_shape {
         b.push(format!(" AND {}object_shape = ", plus(shape_leads)))
-            .push_bind(v.as_str());
+            .push_bind(v.name());
     }
     let by_mass = sort.field == SortField::Mass;
     if let Some(v) = q.mass_min {
@@ -387,7 +367,7 @@ pub(crate) fn build(q: &SkillQuery) -> Result<QueryBuilder<'_, Sqlite>, StoreErr
         b.push(" AND +contact_count = ").push_bind(v);
     }
     if let Some(v) = &q.contact_model {
-        b.push(" AND +contact_model = ").push_bind(v.as_str());
+        b.push(" AND +contact_model = ").push_bind(v.name());
     }
     match grasp {
         Some(GraspFilter::Label(v)) => {
@@ -413,7 +393,7 @@ pub(crate) fn build(q: &SkillQuery) -> Result<QueryBuilder<'_, Sqlite>, StoreErr
         b.push(
             " AND EXISTS (SELECT 1 FROM skill_phases p WHERE p.skill_id = skills.id AND p.name = ",
         )
-        .push_bind(name.as_str());
+        .push_bind(name.name());
         if let Some(v) = q.phase_min_s {
             b.push(" AND p.duration_s >= ").push_bind(v);
         }

@@ -2,6 +2,7 @@
 //! segmentation made the skills of, reading their files back, and replacing a session's skills
 //! with those of a new segmentation in one transaction.
 
+use dfs_core::names::Named;
 use sqlx::Row as _;
 
 use super::types::{NewSkill, ReplacedSkills, StaleSession};
@@ -32,11 +33,11 @@ impl StoredForm {
     /// What `insert_skills` writes for `s` (its checked feature `f`).
     fn of_new(s: &NewSkill, f: &[f32; FEATURE_DIM]) -> Result<Self, StoreError> {
         Ok(StoredForm {
-            object_shape: s.object_shape.clone(),
+            object_shape: s.object_shape.name().to_owned(),
             object_mass: s.object_mass,
             mu: s.mu,
             contact_count: s.contact_count,
-            contact_model: s.contact_model.clone(),
+            contact_model: s.contact_model.name().to_owned(),
             grasp_type: s.grasp_type.clone(),
             quality: s.quality,
             volume: s.volume,

@@ -1,9 +1,61 @@
 //! Plain data types of the store: what goes in (sessions, skills) and what comes out.
+//!
+//! Shapes, contact models and phases are dfs-core's types here; the data base keeps their
+//! names as TEXT, and the store converts at its edge (an unknown name in a row is
+//! [`StoreError::Corrupt`](super::StoreError::Corrupt), naming the row and the column).
 
+use dfs_core::contact::ContactModel;
+use dfs_core::names::Named;
+use dfs_core::object::ShapeKind;
+use dfs_core::replay::FailureReason;
+use dfs_core::scenario::Phase;
 use serde::{Deserialize, Serialize};
 
 /// Length of a skill's feature vector for similarity search.
 pub const FEATURE_DIM: usize = 16;
+
+/// The object shape of a stored session or skill: one of dfs-core's shapes, or `unknown` for
+/// a session file that did not describe its object (stored before sessions had to; such
+/// files are now refused). Named `sphere`, `box`, `cylinder` or `unknown` in the data base,
+/// the API and on the command line.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub enum ObjectShape {
+    /// The object's shape.
+    Known(ShapeKind),
+    /// The session did not describe its object.
+    Unknown,
+}
+
+impl Named for ObjectShape {
+    const WHAT: &'static str = "shape";
+    const ALL: &'static [Self] = &[
+        ObjectShape::Known(ShapeKind::Sphere),
+        ObjectShape::Known(ShapeKind::Box),
+        ObjectShape::Known(ShapeKind::Cylinder),
+        ObjectShape::Unknown,
+    ];
+
+    fn name(self) -> &'static str {
+        match self {
+            ObjectShape::Known(kind) => kind.name(),
+            ObjectShape::Unknown => "unknown",
+        }
+    }
+}
+
+dfs_core::named_enum!(ObjectShape);
+
+impl Serialize for ObjectShape {
+    fn serialize<S: serde::Serializer>(&self, s: S) -> Result<S::Ok, S::Error> {
+        s.serialize_str(self.name())
+    }
+}
+
+impl From<ShapeKind> for ObjectShape {
+    fn from(kind: ShapeKind) -> Self {
+        ObjectShape::Known(kind)
+    }
+}
 
 /// Metadata of a recorded session, stored beside its MCAP blob.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -14,8 +66,8 @@ pub struct SessionMeta {
     pub seed: Option<u64>,
     /// Name of the hand (glove) that performed the session, e.g. `glove10`.
     pub hand: String,
-    /// Object shape: `sphere`, `box` or `cylinder`.
-    pub object_shape: String,
+    /// Object shape.
+    pub object_shape: ObjectShape,
     /// Object mass, kg.
     pub object_mass: f64,
     /// Coulomb friction coefficient between fingertips and object (dimensionless).
@@ -31,16 +83,16 @@ pub struct SessionMeta {
 /// A skill to insert: the hand-independent parameters of one grasp, in the object frame B.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct NewSkill {
-    /// Object shape: `sphere`, `box` or `cylinder`.
-    pub object_shape: String,
+    /// Object shape.
+    pub object_shape: ObjectShape,
     /// Object mass, kg.
     pub object_mass: f64,
     /// Coulomb friction coefficient (dimensionless).
     pub mu: f64,
     /// Number of fingertip contacts during the grasp.
     pub contact_count: i64,
-    /// Contact model: `frictionless`, `point_with_friction` or `soft_finger`.
-    pub contact_model: String,
+    /// Contact model.
+    pub contact_model: ContactModel,
     /// Grasp type label, e.g. `precision-2vf`, `power-3vf`.
     pub grasp_type: String,
     /// Ferrari-Canny ε grasp quality (largest disturbance wrench ball resisted; N or N·m scale).
@@ -53,9 +105,9 @@ pub struct NewSkill {
     pub start_ns: i64,
     /// End of the skill in its session, ns since the session's start.
     pub end_ns: i64,
-    /// Time spent in each phase: (name, seconds), one per phase name in alphabetical order,
-    /// summed when a phase occurs more than once.
-    pub phase_durations: Vec<(String, f64)>,
+    /// Time spent in each phase: (phase, seconds), one per phase in alphabetical order of
+    /// their names (as [`Phase`] orders), summed when a phase occurs more than once.
+    pub phase_durations: Vec<(Phase, f64)>,
     /// Feature vector for similarity search, exactly [`FEATURE_DIM`] finite values.
     pub feature: Vec<f32>,
     /// The full hand-independent parameters (JSON object).
@@ -70,7 +122,7 @@ pub struct Skill {
     /// Id of the session the skill was found in.
     pub session_id: i64,
     /// Object shape.
-    pub object_shape: String,
+    pub object_shape: ObjectShape,
     /// Object mass, kg.
     pub object_mass: f64,
     /// Coulomb friction coefficient.
@@ -78,7 +130,7 @@ pub struct Skill {
     /// Number of contacts.
     pub contact_count: i64,
     /// Contact model.
-    pub contact_model: String,
+    pub contact_model: ContactModel,
     /// Grasp type label.
     pub grasp_type: String,
     /// Ferrari-Canny ε grasp quality.
@@ -91,9 +143,9 @@ pub struct Skill {
     pub start_ns: i64,
     /// End, ns since the session's start.
     pub end_ns: i64,
-    /// Time spent in each phase: (name, seconds), one per phase name in alphabetical order,
-    /// summed when a phase occurs more than once.
-    pub phase_durations: Vec<(String, f64)>,
+    /// Time spent in each phase: (phase, seconds), one per phase in alphabetical order of
+    /// their names, summed when a phase occurs more than once.
+    pub phase_durations: Vec<(Phase, f64)>,
     /// Feature vector ([`FEATURE_DIM`] values).
     pub feature: Vec<f32>,
     /// Full hand-independent parameters.
@@ -189,8 +241,8 @@ pub struct Replay {
     pub hand: String,
     /// Whether the object was held (the report's `success`).
     pub success: bool,
-    /// Why not: `unreachable`, `torque_limit`, `slip` or `no_force_closure`.
-    pub failure_reason: Option<String>,
+    /// Why not.
+    pub failure_reason: Option<FailureReason>,
     /// The replay report as JSON (dfs-core's `ReplayReport`).
     pub report: serde_json::Value,
     /// Hex SHA-256 of the replay's MCAP file.

@@ -25,7 +25,7 @@ pub fn meta(i: u64, n_skills: usize) -> SessionMeta {
         scenario: Some("test".into()),
         seed: Some(i),
         hand: "glove10".into(),
-        object_shape: "sphere".into(),
+        object_shape: "sphere".parse().unwrap(),
         object_mass: 0.5,
         mu: 0.8,
         duration_ns: 10_000_000_000,
