@@ -1367,8 +1367,6 @@ struct FingerAcc {
 /// per finger its sums and grip profile, whatever the skill's length.
 struct SkillAcc {
     phases: Vec<PhaseSpan>,
-    /// Log time of the skill's last phase's end.
-    end_ns: u64,
     grasp_start: u64,
     grasp_end: u64,
     held_span: (u64, u64),
@@ -1454,7 +1452,6 @@ impl SkillAcc {
             end_ns,
         };
         SkillAcc {
-            end_ns,
             grasp_start,
             grasp_end,
             held_span,
@@ -1480,9 +1477,11 @@ impl SkillAcc {
         }
     }
 
-    /// Whether samples from `t` on can change nothing.
+    /// Whether samples from `t` on can change nothing: the grasp's contact samples are in,
+    /// the key poses found, and whether the object was carried decided (which, for a grasp
+    /// that carried it, is early: the second pass then stops reading there).
     fn done(&self, t: u64) -> bool {
-        t > self.end_ns
+        t >= self.grasp_end
             && self.carry.done(t)
             && self.key_next == self.key_times.len()
             && self.start_pose.is_some()
