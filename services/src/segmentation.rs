@@ -1008,7 +1008,10 @@ pub fn segment(session: &Session, params: &SegmentParams) -> Segmentation {
 /// the first checks the file and resamples the hand's base onto the grid (about 41 bytes per
 /// millisecond of session), the second computes the parameters of each grasp found, keeping
 /// per grasp only its accumulators. Memory is bounded by the grid and a few chunks, not the
-/// file: an hour of session in 210 MB (peak resident of `icms segment`). A replay recording is refused
+/// file: an hour of session in 214 MB (peak resident of `icms segment`). A file that writes
+/// its object states well ahead of its contacts (valid MCAP: each topic in time order) also
+/// holds each grasp's object positions until its contacts come, 56 bytes a sample of the
+/// grasp at most. A replay recording is refused
 /// ([`crate::session::SessionHead::ensure_grasp_session`]) after the first pass.
 pub fn segment_source(
     source: &SessionSource<'_>,
@@ -1054,6 +1057,7 @@ impl PassOne {
             first_open: 0,
             last_contact: 0,
             last_object: 0,
+            before: None,
         }
     }
 }
@@ -1082,6 +1086,8 @@ struct PassTwo {
     /// Log times of the latest contact and object samples.
     last_contact: u64,
     last_object: u64,
+    /// The latest object sample.
+    before: Option<(u64, ObjectState)>,
 }
 
 impl PassTwo {
@@ -1119,9 +1125,16 @@ impl PassTwo {
 }
 
 impl SessionVisitor for PassTwo {
+    fn wants(&self) -> DecodeTopics {
+        DecodeTopics::SEGMENTATION
+    }
     fn contacts(&mut self, t: u64, m: &Contacts) -> Result<(), RecordingError> {
         self.last_contact = t;
+        // Skills are in time order: those not started yet take nothing.
         for s in &mut self.skills[self.first_open..] {
+            if t < s.start {
+                break;
+            }
             s.contacts(t, m);
         }
         self.close();
@@ -1130,13 +1143,20 @@ impl SessionVisitor for PassTwo {
     fn object(&mut self, t: u64, m: &ObjectState) -> Result<(), RecordingError> {
         self.last_object = t;
         for s in &mut self.skills[self.first_open..] {
+            if t < s.start {
+                break;
+            }
+            if !s.seeded {
+                s.seeded = true;
+                if let Some((tp, p)) = &self.before {
+                    s.object(*tp, p);
+                }
+            }
             s.object(t, m);
         }
+        self.before = Some((t, m.clone()));
         self.close();
         Ok(())
-    }
-    fn wants(&self) -> DecodeTopics {
-        DecodeTopics::SEGMENTATION
     }
     fn done(&self) -> bool {
         self.first_open == self.skills.len()
@@ -1203,7 +1223,10 @@ impl CarryState {
 
     fn object(&mut self, t: u64, o: &ObjectState) {
         let (p, h) = (v3(&o.pose.position), v3(&o.pose_in_hand.position));
-        if self.carried || !p.iter().chain(h.iter()).all(|v| v.is_finite()) {
+        // Past the skill's end one sample is enough (it says the ones before are final): the
+        // track holds at most the skill's samples, whatever the order of the file's topics.
+        let past_end = self.track.back().is_some_and(|s| s.0 >= self.to);
+        if self.carried || past_end || !p.iter().chain(h.iter()).all(|v| v.is_finite()) {
             return;
         }
         self.track.push_back((t, p, h));
@@ -1367,6 +1390,11 @@ struct FingerAcc {
 /// per finger its sums and grip profile, whatever the skill's length.
 struct SkillAcc {
     phases: Vec<PhaseSpan>,
+    /// Log time of the first phase's start: the skill takes samples from there (and the
+    /// object sample before it, for the first contact's object position).
+    start: u64,
+    /// Whether it was handed the object sample before its start.
+    seeded: bool,
     grasp_start: u64,
     grasp_end: u64,
     held_span: (u64, u64),
@@ -1452,6 +1480,8 @@ impl SkillAcc {
             end_ns,
         };
         SkillAcc {
+            start: start_ns,
+            seeded: false,
             grasp_start,
             grasp_end,
             held_span,

@@ -643,3 +643,28 @@ fn salvage_refuses_to_overwrite_its_input() {
     assert!(matches!(err, RecordingError::Io { .. }), "{err:?}");
     assert_eq!(std::fs::read(&path).unwrap(), before);
 }
+
+#[test]
+fn a_file_of_more_topics_than_a_session_could_have_is_refused() {
+    // Each topic holds its own copy of its schema: many topics sharing one large schema would
+    // otherwise hold copies without bound.
+    let mut out = std::io::Cursor::new(Vec::new());
+    {
+        let mut w = mcap::Writer::new(&mut out).unwrap();
+        let schema = w
+            .add_schema("big", "jsonschema", &vec![b' '; 4096])
+            .unwrap();
+        for i in 0..1100 {
+            w.add_channel(schema, &format!("/t{i}"), "json", &Default::default())
+                .unwrap();
+        }
+        w.finish().unwrap();
+    }
+    let bytes = out.into_inner();
+    let e = services::session::read_session_bytes(&bytes, "topics.mcap", &ReadLimits::default())
+        .unwrap_err();
+    assert!(
+        e.to_string().contains("topics") || e.to_string().contains("decompress"),
+        "{e}"
+    );
+}

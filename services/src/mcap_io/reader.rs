@@ -826,7 +826,7 @@ pub(crate) fn stream_raw<R: Read + Send>(
                 let result = match event {
                     Event::Topic(t) => {
                         let r = visitor.topic(&t);
-                        topics.push(t);
+                        topics.push(*t);
                         r
                     }
                     Event::Metadata(m) => visitor.metadata(&m),
@@ -872,7 +872,7 @@ struct Filed {
 
 /// One thing the calling thread of [`stream_raw`] hands its visitor.
 enum Event {
-    Topic(RawTopic),
+    Topic(Box<RawTopic>),
     Metadata(MetadataRecord),
     Message {
         topic: usize,
@@ -982,7 +982,7 @@ impl<E: RawVisitor> Filer<'_, E> {
             self.early.topic(t)?;
             self.claimed.push(self.early.claims(index));
             self.counts.push(0);
-            filed.events.push(Event::Topic(t.clone()));
+            filed.events.push(Event::Topic(Box::new(t.clone())));
         }
         if is_metadata {
             self.builder.metadata_added(offset, self.early)?;
@@ -995,7 +995,10 @@ impl<E: RawVisitor> Filer<'_, E> {
 }
 
 /// Chunks read and decompressed ahead of the one being filed by [`stream_raw`].
-const STREAM_CHUNKS_AHEAD: usize = 4;
+const STREAM_CHUNKS_AHEAD: usize = 2;
+
+/// Most topics a file may have (ours has nine).
+const MAX_TOPICS: usize = 1024;
 
 /// A chunk decompressed, checked and split into records: its content, and its records other
 /// than messages, parsed, in order (messages, most of a chunk, are framed again from `data`
@@ -1230,7 +1233,17 @@ impl SessionBuilder {
     }
 
     /// The metadata record just applied, handed to `visitor`; too many records are refused.
-    fn metadata_added(&self, offset: u64, visitor: &mut impl RawVisitor) -> Result<()> {
+    fn metadata_added(&mut self, offset: u64, visitor: &mut impl RawVisitor) -> Result<()> {
+        // Kept to the end of the read (and copied for the calling thread): counted against
+        // the input's budget like the chunks of a whole-file read.
+        let bytes = self.session.metadata.last().map_or(0, |m| {
+            m.name.len()
+                + m.entries
+                    .iter()
+                    .map(|(k, v)| k.len() + v.len())
+                    .sum::<usize>()
+        });
+        self.hold(offset, 2 * bytes as u64)?;
         let records = &self.session.metadata;
         if records.len() > STREAM_MAX_METADATA_RECORDS {
             return Err(RecordingError::Corrupt {
@@ -1344,6 +1357,15 @@ impl SessionBuilder {
                         index
                     }
                     None => {
+                        // Each topic holds its own copy of its schema: a file of many topics
+                        // sharing one large schema would otherwise hold copies without bound.
+                        if self.topics.len() >= MAX_TOPICS {
+                            return Err(corrupt(format!(
+                                "more than {MAX_TOPICS} topics (a session has about ten)"
+                            )));
+                        }
+                        let copy = schema.as_ref().map_or(0, |s| s.data.len()) + c.topic.len();
+                        self.hold(offset, 2 * copy as u64)?;
                         self.topics.push(RawTopic {
                             topic: c.topic.clone(),
                             message_encoding: c.message_encoding.clone(),

@@ -912,10 +912,11 @@ impl<V: SessionVisitor> RawVisitor for Checker<'_, V> {
         let Some(wants) = self.early_for else {
             return false;
         };
+        // Everything but the raw topics the visitor takes: the others are checked (or, not
+        // ours, passed over) on the reading thread and never queued for the calling one.
         match self.kinds.get(topic_index) {
             Some(Kind::Raw(raw, _)) => !wants.has(*raw),
-            Some(Kind::Foxglove(_) | Kind::Json) => true,
-            _ => false,
+            _ => true,
         }
     }
 
