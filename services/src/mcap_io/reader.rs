@@ -667,15 +667,7 @@ fn read_raw<R: Read>(src: R, total_len: Option<u64>, limits: &ReadLimits) -> Res
             }
         }
     }
-    if let Some(err) = outcome.error {
-        return Err(err);
-    }
-    if !outcome.complete {
-        return Err(RecordingError::Truncated {
-            offset: outcome.committed_offset,
-            detail: "no footer".into(),
-        });
-    }
+    outcome.into_result()?;
     let mut session = builder.session;
     session.buffers.push(builder.loose);
     session.topics = builder
@@ -805,15 +797,7 @@ pub(crate) fn stream_raw<R: Read + Send>(
                     path: std::path::PathBuf::from("the session stream"),
                 })
             })?;
-            if let Some(err) = outcome.error {
-                return Err(err);
-            }
-            if !outcome.complete {
-                return Err(RecordingError::Truncated {
-                    offset: outcome.committed_offset,
-                    detail: "no footer".into(),
-                });
-            }
+            outcome.into_result()?;
             Ok(StreamedRaw {
                 topics: filer.builder.topics.into_iter().zip(filer.counts).collect(),
                 metadata: filer.builder.session.metadata,
@@ -1408,6 +1392,23 @@ pub(crate) struct ScanOutcome {
     pub committed_offset: u64,
     /// Why the scan stopped early (bad record, truncation, or an error from the callback).
     pub error: Option<RecordingError>,
+}
+
+impl ScanOutcome {
+    /// `Ok` for a scan that read the whole file to its footer; its error, or
+    /// [`RecordingError::Truncated`] for a file that ends without one.
+    fn into_result(self) -> Result<()> {
+        if let Some(err) = self.error {
+            return Err(err);
+        }
+        if !self.complete {
+            return Err(RecordingError::Truncated {
+                offset: self.committed_offset,
+                detail: "no footer".into(),
+            });
+        }
+        Ok(())
+    }
 }
 
 const OPCODE_LEN_SIZE: u64 = 9;

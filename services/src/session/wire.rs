@@ -605,32 +605,43 @@ mod tests {
         Ok(())
     }
 
+    /// [`agree`] on `bytes`, on them cut short at `cut`, and with `junk` appended, reusing one
+    /// output message.
+    fn agree_whole_cut_and_extended<
+        P: Message + Default,
+        T: Default + PartialEq + std::fmt::Debug,
+    >(
+        bytes: &[u8],
+        cut: prop::sample::Index,
+        junk: &[u8],
+        ours: fn(&[u8], &mut T) -> Result<()>,
+        convert: fn(P) -> T,
+    ) -> std::result::Result<(), TestCaseError> {
+        let mut out = T::default();
+        agree(bytes, ours, &mut out, convert)?;
+        // Cut short, or with bytes appended: both refuse or both read the same.
+        agree(
+            &bytes[..cut.index(bytes.len() + 1)],
+            ours,
+            &mut out,
+            convert,
+        )?;
+        let mut longer = bytes.to_vec();
+        longer.extend_from_slice(junk);
+        agree(&longer, ours, &mut out, convert)
+    }
+
     proptest! {
         #![proptest_config(ProptestConfig::with_cases(2000))]
 
         #[test]
         fn contacts_decode_as_prost_decodes_them(m in contacts_proto(), cut in any::<prop::sample::Index>(), junk in proptest::collection::vec(any::<u8>(), 0..12)) {
-            let mut out = Contacts::default();
-            let bytes = m.encode_to_vec();
-            agree(&bytes, contacts, &mut out, proto::contacts_from_proto)?;
-            // Cut short, or with bytes appended: both refuse or both read the same.
-            let n = cut.index(bytes.len() + 1);
-            agree(&bytes[..n], contacts, &mut out, proto::contacts_from_proto)?;
-            let mut longer = bytes.clone();
-            longer.extend_from_slice(&junk);
-            agree(&longer, contacts, &mut out, proto::contacts_from_proto)?;
+            agree_whole_cut_and_extended(&m.encode_to_vec(), cut, &junk, contacts, proto::contacts_from_proto)?;
         }
 
         #[test]
         fn feedback_decodes_as_prost_decodes_it(m in feedback_proto(), cut in any::<prop::sample::Index>(), junk in proptest::collection::vec(any::<u8>(), 0..12)) {
-            let mut out = GloveFeedback::default();
-            let bytes = m.encode_to_vec();
-            agree(&bytes, feedback, &mut out, proto::feedback_from_proto)?;
-            let n = cut.index(bytes.len() + 1);
-            agree(&bytes[..n], feedback, &mut out, proto::feedback_from_proto)?;
-            let mut longer = bytes.clone();
-            longer.extend_from_slice(&junk);
-            agree(&longer, feedback, &mut out, proto::feedback_from_proto)?;
+            agree_whole_cut_and_extended(&m.encode_to_vec(), cut, &junk, feedback, proto::feedback_from_proto)?;
         }
 
         #[test]
