@@ -17,7 +17,7 @@ use dfs_core::{DfsError, Stop};
 
 use crate::error::{RecordingError, Result};
 use crate::segmentation::Skill;
-use crate::session::{SessionInfo, SessionRecorder, TickData};
+use crate::session::{SessionInfo, SessionOut, SessionRecorder, TickData};
 
 /// Name of the replay's metadata record.
 pub const REPLAY_METADATA: &str = "replay";
@@ -223,7 +223,14 @@ pub fn replay_skill(
     source: &ReplaySource,
     out: Option<&Path>,
 ) -> Result<ReplayReport> {
-    replay_skill_until(hand, skill, params, source, out, Stop::never())
+    replay_skill_until(
+        hand,
+        skill,
+        params,
+        source,
+        out.map(SessionOut::File),
+        Stop::never(),
+    )
 }
 
 /// A replay's error: a stop stays a cancellation, anything else is the input's fault.
@@ -245,7 +252,7 @@ pub fn replay_skill_until(
     skill: &SkillSpec,
     params: &ReplayParams,
     source: &ReplaySource,
-    out: Option<&Path>,
+    out: Option<SessionOut<'_>>,
     stop: &Stop,
 ) -> Result<ReplayReport> {
     let location = format!("hand {:?}", hand.model.name);
@@ -274,7 +281,7 @@ pub fn replay_skill_until(
         table_height: Some(0.0),
         hand_urdf: hand.urdf.clone(),
     };
-    let mut recorder = SessionRecorder::create(out, &hand.model, &object, &info)?;
+    let mut recorder = SessionRecorder::create_to(out, &hand.model, &object, &info)?;
     let mut failed: Option<RecordingError> = None;
     let report = run_with_stop(&hand.model, hand.thumb, skill, params, stop, |tick| {
         if failed.is_some() {

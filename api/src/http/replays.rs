@@ -10,6 +10,7 @@ use axum::response::Response;
 use dfs_core::replay::{FailureReason, ReplayParams, ReplayReport, SkillSpec};
 use serde::{Deserialize, Serialize};
 use services::replay::{replay_skill_until, skill_spec_from_json, ReplaySource};
+use services::session::SessionOut;
 use services::store::{Hand, Replay, StagedBlob, StoreError};
 use utoipa::ToSchema;
 use utoipa_axum::router::OpenApiRouter;
@@ -97,8 +98,8 @@ pub fn router() -> OpenApiRouter<AppState> {
         .routes(routes!(download_replay))
 }
 
-/// Replays `skill` on `hand` straight into a staged blob of the store, then hashes it:
-/// blocking work, for the blocking pool. Returns the report and the staged file, which
+/// Replays `skill` on `hand` straight into a staged blob of the store, hashed as the recorder
+/// writes it: blocking work, for the blocking pool. Returns the report and the staged file, which
 /// storing moves into place (never read into memory).
 fn replay_blocking(
     store: &services::store::Store,
@@ -109,12 +110,16 @@ fn replay_blocking(
 ) -> Result<(ReplayReport, StagedBlob), Problem> {
     let loaded = hand.load()?;
     let mut staged = store.stage_upload().map_err(|e| Problem::internal(&e))?;
+    let out = SessionOut::Stream {
+        out: Box::new(staged.writer().map_err(|e| Problem::internal(&e))?),
+        name: staged.path().to_path_buf(),
+    };
     let report = replay_skill_until(
         &loaded,
         skill,
         &ReplayParams::default(),
         source,
-        Some(staged.path()),
+        Some(out),
         stop,
     )
     .map_err(|e| match e {
@@ -123,7 +128,7 @@ fn replay_blocking(
         }
         other => Problem::internal(&other),
     })?;
-    staged.adopt().map_err(|e| Problem::internal(&e))?;
+    staged.finish().map_err(|e| Problem::internal(&e))?;
     Ok((report, staged))
 }
 

@@ -6,7 +6,7 @@ use axum::extract::State;
 use axum::response::Response;
 use dfs_core::scenario::Scenario;
 use serde::Deserialize;
-use services::session::SessionSource;
+use services::session::{SessionOut, SessionSource};
 use services::store::{IngestOutcome, StagedBlob};
 use utoipa::openapi::schema::{ObjectBuilder, OneOfBuilder, Schema, Type};
 use utoipa::openapi::RefOr;
@@ -113,8 +113,9 @@ fn scenario_of(req: &SimulationRequest) -> Result<Scenario, Problem> {
 }
 
 /// Simulates `scenario` straight into a staged blob of the store (`blobs/sha256/staging/`),
-/// hashes it and segments it from the file in two streamed passes: all blocking work, for the
-/// blocking pool. The file is never read into memory; storing it is a rename.
+/// hashed as the recorder writes it, and segments it from the file in two streamed passes:
+/// all blocking work, for the blocking pool. The file is never read into memory; storing it
+/// is a rename.
 fn simulate_blocking(
     store: &services::store::Store,
     scenario: &Scenario,
@@ -129,15 +130,20 @@ fn simulate_blocking(
     Problem,
 > {
     let mut staged = store.stage_upload().map_err(|e| Problem::internal(&e))?;
-    services::session::record_simulation_until(scenario, duration, staged.path(), |_, _| {}, stop)
-        .map_err(|e| match e {
+    let out = SessionOut::Stream {
+        out: Box::new(staged.writer().map_err(|e| Problem::internal(&e))?),
+        name: staged.path().to_path_buf(),
+    };
+    services::session::record_simulation_until(scenario, duration, out, |_, _| {}, stop).map_err(
+        |e| match e {
             services::RecordingError::InvalidInput { .. }
             | services::RecordingError::Simulation { .. } => {
                 Problem::unprocessable(format!("the simulation failed: {e}"))
             }
             other => Problem::internal(&other),
-        })?;
-    staged.adopt().map_err(|e| Problem::internal(&e))?;
+        },
+    )?;
+    staged.finish().map_err(|e| Problem::internal(&e))?;
     let (meta, skills) = services::ingest::analyse_source(&SessionSource::File(staged.path()))
         .map_err(|e| Problem::internal(&format!("a simulated session did not read back: {e}")))?;
     Ok((staged, meta, skills))

@@ -21,6 +21,7 @@ mod reader;
 mod salvage;
 pub mod schemas;
 mod writer;
+mod chunked;
 
 pub(crate) use reader::{
     check_message, json_error, message_location, stream_raw_bytes, stream_raw_file, RawTopic,
@@ -33,7 +34,9 @@ pub use reader::{
 };
 pub use salvage::{salvage, SalvageReport};
 pub use schemas::JsonSchema;
-pub use writer::{SessionWriter, WriteSummary, WriterOptions, MESSAGE_ENCODING, SCHEMA_ENCODING};
+pub use writer::{
+    SessionWriter, TopicHandle, WriteSummary, WriterOptions, MESSAGE_ENCODING, SCHEMA_ENCODING,
+};
 
 #[cfg(test)]
 mod tests {

@@ -6,8 +6,9 @@ use std::fs::File;
 use std::io::{BufWriter, Write};
 use std::path::{Path, PathBuf};
 
-use mcap::records::{MessageHeader, Metadata};
 use serde::Serialize;
+
+use super::chunked::{ChunkOptions, ChunkedWriter};
 
 use super::finite::find_non_finite;
 use super::schemas::JsonSchema;
@@ -82,11 +83,25 @@ impl WriterOptions {
     }
 }
 
+impl WriterOptions {
+    fn to_chunked(&self) -> ChunkOptions {
+        ChunkOptions {
+            zstd_level: self.compress.then_some(self.compression_level as i32),
+            chunk_size: usize::try_from(self.chunk_size).unwrap_or(usize::MAX),
+            message_indexes: self.message_indexes,
+            profile: self.profile.clone(),
+            library: concat!("icms-services/", env!("CARGO_PKG_VERSION")).to_owned(),
+        }
+    }
+}
+
 /// What [`SessionWriter::finish`] wrote.
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub struct WriteSummary {
-    /// The file written.
+    /// The file written (for a stream, the name it was given).
     pub path: PathBuf,
+    /// Bytes written.
+    pub bytes: u64,
     /// Messages written, all topics.
     pub messages: u64,
     /// Messages written per topic.
@@ -99,69 +114,86 @@ pub struct WriteSummary {
     pub log_time_range_ns: Option<(u64, u64)>,
 }
 
-/// The hasher of [`SessionWriter`]'s topic map, FxHash-like: 8 bytes per multiplication. Each
-/// message looks its topic up, and a session writes a few hundred thousand of them; the
-/// default SipHash made that lookup a few per cent of the recorder's writer thread. The keys
-/// are our own topic names, so there is no hash flooding to defend against.
-#[derive(Clone, Copy, Default)]
-struct TopicHasher(u64);
-
-impl TopicHasher {
-    fn add(&mut self, word: u64) {
-        self.0 = (self.0.rotate_left(5) ^ word).wrapping_mul(0x517c_c1b7_2722_0a95);
-    }
-}
-
-impl std::hash::Hasher for TopicHasher {
-    fn finish(&self) -> u64 {
-        self.0
-    }
-
-    fn write(&mut self, bytes: &[u8]) {
-        let mut chunks = bytes.chunks_exact(8);
-        for chunk in &mut chunks {
-            let mut word = [0; 8];
-            word.copy_from_slice(chunk);
-            self.add(u64::from_le_bytes(word));
-        }
-        let rest = chunks.remainder();
-        if !rest.is_empty() {
-            let mut word = [0; 8];
-            word[..rest.len()].copy_from_slice(rest);
-            self.add(u64::from_le_bytes(word) ^ ((rest.len() as u64) << 59));
-        }
-    }
-}
+/// A registered topic, for [`SessionWriter::write_to`]: writing through it skips looking the
+/// topic's name up (the recorder writes a few hundred thousand messages a minute).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct TopicHandle(usize);
 
 struct ChannelState {
+    topic: String,
     id: u16,
     schema_name: String,
     sequence: u32,
     count: u64,
 }
 
-/// Writes one recording session to an MCAP file.
+/// Writes one recording session to an MCAP file, or into any [`Write`]
+/// ([`SessionWriter::to_stream`]).
 ///
-/// Messages are JSON (`serde_json`), one channel per topic, each channel with a JSON Schema.
-/// Chunks are zstd-compressed, about 1 MiB, with message indexes, chunk indexes and a summary
-/// (Foxglove needs them to seek). The current chunk is closed and flushed whenever log time
-/// advances by [`WriterOptions::flush_interval_ns`], so a process that dies mid-session leaves a
-/// file that [`crate::mcap_io::salvage`] recovers up to the last flush.
+/// One channel per topic, protobuf or JSON messages (JSON channels with a JSON Schema).
+/// Chunks are zstd-compressed, about 1 MiB, with chunk indexes (message indexes unless turned
+/// off) and a summary (Foxglove needs them to seek); see [`super::chunked`] for the layout and
+/// why it is our own writer. The current chunk is closed and flushed whenever log time advances
+/// by [`WriterOptions::flush_interval_ns`], so a process that dies mid-session leaves a file
+/// that [`crate::mcap_io::salvage`] recovers up to the last flush.
 ///
 /// Call [`finish`](Self::finish) to write the summary and footer and see any error. Dropping an
 /// unfinished writer tries to finish it and ignores errors.
 pub struct SessionWriter {
-    inner: Option<mcap::Writer<BufWriter<File>>>,
+    inner: Option<ChunkedWriter<Sink>>,
     path: PathBuf,
     options: WriterOptions,
-    channels: HashMap<String, ChannelState, std::hash::BuildHasherDefault<TopicHasher>>,
+    channels: Vec<ChannelState>,
+    topics: HashMap<String, TopicHandle>,
     last_flush_ns: Option<u64>,
     unflushed: bool,
     metadata_records: u64,
     log_time_range_ns: Option<(u64, u64)>,
     buf: Vec<u8>,
-    /// Syncs the file in the background after each flush (see [`Syncer`]).
-    syncer: Syncer,
+}
+
+/// Where a [`SessionWriter`] writes: a file it syncs as it goes, or a stream of the caller's.
+enum Sink {
+    File {
+        file: BufWriter<File>,
+        /// Syncs the file in the background after each flush (see [`Syncer`]).
+        syncer: Syncer,
+        written: u64,
+    },
+    Stream {
+        out: Box<dyn Write + Send>,
+        written: u64,
+    },
+}
+
+impl Sink {
+    fn written(&self) -> u64 {
+        match self {
+            Sink::File { written, .. } | Sink::Stream { written, .. } => *written,
+        }
+    }
+}
+
+impl Write for Sink {
+    fn write(&mut self, buf: &[u8]) -> std::io::Result<usize> {
+        let (n, written) = match self {
+            Sink::File { file, written, .. } => (file.write(buf)?, written),
+            Sink::Stream { out, written } => (out.write(buf)?, written),
+        };
+        *written += n as u64;
+        Ok(n)
+    }
+
+    fn flush(&mut self) -> std::io::Result<()> {
+        match self {
+            Sink::File { file, syncer, .. } => {
+                file.flush()?;
+                syncer.request();
+                Ok(())
+            }
+            Sink::Stream { out, .. } => out.flush(),
+        }
+    }
 }
 
 /// Syncs the file to disk on a thread of its own after each [`SessionWriter::flush`], on a
@@ -222,7 +254,7 @@ impl std::fmt::Debug for SessionWriter {
         f.debug_struct("SessionWriter")
             .field("path", &self.path)
             .field("options", &self.options)
-            .field("topics", &self.channels.keys().collect::<Vec<_>>())
+            .field("topics", &self.topics.keys().collect::<Vec<_>>())
             .field("open", &self.inner.is_some())
             .finish()
     }
@@ -239,19 +271,39 @@ impl SessionWriter {
         let path = path.as_ref().to_path_buf();
         let file = File::create(&path)
             .map_err(|e| RecordingError::io(format!("creating {}", path.display()), e))?;
-        let syncer = Syncer::new(&file);
-        let inner = options.to_mcap().create(BufWriter::new(file))?;
+        let sink = Sink::File {
+            syncer: Syncer::new(&file),
+            file: BufWriter::new(file),
+            written: 0,
+        };
+        Self::on(sink, path, options)
+    }
+
+    /// Writes the session into `out` (which only needs [`Write`]: chunks are built in memory),
+    /// naming it `name` in errors and in the [`WriteSummary`]. Nothing is synced: that is the
+    /// owner of `out`'s business once [`finish`](Self::finish) returns.
+    pub fn to_stream(
+        out: Box<dyn Write + Send>,
+        name: impl Into<PathBuf>,
+        options: WriterOptions,
+    ) -> Result<Self> {
+        Self::on(Sink::Stream { out, written: 0 }, name.into(), options)
+    }
+
+    fn on(sink: Sink, path: PathBuf, options: WriterOptions) -> Result<Self> {
+        let inner = ChunkedWriter::new(sink, options.to_chunked())
+            .map_err(|e| RecordingError::io(format!("writing {}", path.display()), e))?;
         Ok(Self {
             inner: Some(inner),
             path,
             options,
-            channels: HashMap::default(),
+            channels: Vec::new(),
+            topics: HashMap::new(),
             last_flush_ns: None,
             unflushed: false,
             metadata_records: 0,
             log_time_range_ns: None,
             buf: Vec::with_capacity(4096),
-            syncer,
         })
     }
 
@@ -265,7 +317,11 @@ impl SessionWriter {
         &self.options
     }
 
-    fn writer(&mut self) -> Result<&mut mcap::Writer<BufWriter<File>>> {
+    fn io_error(&self, e: std::io::Error) -> RecordingError {
+        RecordingError::io(format!("writing {}", self.path.display()), e)
+    }
+
+    fn writer(&mut self) -> Result<&mut ChunkedWriter<Sink>> {
         match self.inner.as_mut() {
             Some(w) => Ok(w),
             None => Err(RecordingError::WriterClosed {
@@ -277,28 +333,13 @@ impl SessionWriter {
     /// Registers `topic` with a JSON Schema. Registering the same topic again with the same
     /// schema name is a no-op; with another schema name it is an error.
     pub fn register_channel(&mut self, topic: &str, schema: &JsonSchema) -> Result<()> {
-        if let Some(existing) = self.channels.get(topic) {
-            if existing.schema_name == schema.name {
-                return Ok(());
-            }
-            return Err(RecordingError::TopicConflict {
-                topic: topic.to_owned(),
-                existing: existing.schema_name.clone(),
-            });
-        }
-        let w = self.writer()?;
-        let schema_id = w.add_schema(&schema.name, SCHEMA_ENCODING, schema.data.as_bytes())?;
-        let id = w.add_channel(schema_id, topic, MESSAGE_ENCODING, &BTreeMap::new())?;
-        self.channels.insert(
-            topic.to_owned(),
-            ChannelState {
-                id,
-                schema_name: schema.name.to_string(),
-                sequence: 0,
-                count: 0,
-            },
-        );
-        Ok(())
+        self.register(
+            topic,
+            &schema.name,
+            SCHEMA_ENCODING,
+            schema.data.as_bytes(),
+            MESSAGE_ENCODING,
+        )
     }
 
     /// Registers `topic` with a protobuf schema: `name` is the message's full name (e.g.
@@ -311,8 +352,20 @@ impl SessionWriter {
         name: &str,
         descriptor_set: &[u8],
     ) -> Result<()> {
-        if let Some(existing) = self.channels.get(topic) {
-            if existing.schema_name == name {
+        self.register(topic, name, "protobuf", descriptor_set, "protobuf")
+    }
+
+    fn register(
+        &mut self,
+        topic: &str,
+        schema_name: &str,
+        schema_encoding: &str,
+        schema: &[u8],
+        message_encoding: &str,
+    ) -> Result<()> {
+        if let Some(&TopicHandle(i)) = self.topics.get(topic) {
+            let existing = &self.channels[i];
+            if existing.schema_name == schema_name {
                 return Ok(());
             }
             return Err(RecordingError::TopicConflict {
@@ -321,23 +374,37 @@ impl SessionWriter {
             });
         }
         let w = self.writer()?;
-        let schema_id = w.add_schema(name, "protobuf", descriptor_set)?;
-        let id = w.add_channel(schema_id, topic, "protobuf", &BTreeMap::new())?;
-        self.channels.insert(
-            topic.to_owned(),
-            ChannelState {
-                id,
-                schema_name: name.to_owned(),
-                sequence: 0,
-                count: 0,
-            },
-        );
+        let added = w
+            .add_schema(schema_name, schema_encoding, schema)
+            .and_then(|schema_id| {
+                w.add_channel(schema_id, topic, message_encoding, &BTreeMap::new())
+            });
+        let id = added.map_err(|e| self.io_error(e))?;
+        self.topics
+            .insert(topic.to_owned(), TopicHandle(self.channels.len()));
+        self.channels.push(ChannelState {
+            topic: topic.to_owned(),
+            id,
+            schema_name: schema_name.to_owned(),
+            sequence: 0,
+            count: 0,
+        });
         Ok(())
     }
 
     /// Whether `topic` has been registered.
     pub fn has_topic(&self, topic: &str) -> bool {
-        self.channels.contains_key(topic)
+        self.topics.contains_key(topic)
+    }
+
+    /// The handle of a registered topic, for [`write_to`](Self::write_to).
+    pub fn topic(&self, topic: &str) -> Result<TopicHandle> {
+        self.topics
+            .get(topic)
+            .copied()
+            .ok_or_else(|| RecordingError::UnregisteredTopic {
+                topic: topic.to_owned(),
+            })
     }
 
     /// Serialises `msg` as JSON and writes it on `topic` at `log_time_ns` (nanoseconds since the
@@ -389,20 +456,21 @@ impl SessionWriter {
     /// Writes an already-serialised message (JSON or protobuf, as the topic's channel says).
     /// The caller vouches that it matches the topic's schema (no check is made).
     pub fn write_raw(&mut self, topic: &str, log_time_ns: u64, data: &[u8]) -> Result<()> {
-        let Some(channel) = self.channels.get_mut(topic) else {
-            return Err(RecordingError::UnregisteredTopic {
-                topic: topic.to_owned(),
-            });
-        };
-        let header = MessageHeader {
-            channel_id: channel.id,
-            sequence: channel.sequence,
-            log_time: log_time_ns,
-            publish_time: log_time_ns,
-        };
+        let handle = self.topic(topic)?;
+        self.write_to(handle, log_time_ns, data)
+    }
+
+    /// [`write_raw`](Self::write_raw) on the topic of `handle` (from this writer's
+    /// [`topic`](Self::topic)).
+    pub fn write_to(&mut self, handle: TopicHandle, log_time_ns: u64, data: &[u8]) -> Result<()> {
+        let channel = &mut self.channels[handle.0];
+        let (id, sequence) = (channel.id, channel.sequence);
         channel.sequence = channel.sequence.wrapping_add(1);
         channel.count += 1;
-        self.writer()?.write_to_known_channel(&header, data)?;
+        let written = self
+            .writer()?
+            .write_message(id, sequence, log_time_ns, log_time_ns, data);
+        written.map_err(|e| self.io_error(e))?;
         self.unflushed = true;
         self.log_time_range_ns = Some(match self.log_time_range_ns {
             None => (log_time_ns, log_time_ns),
@@ -416,13 +484,13 @@ impl SessionWriter {
         Ok(())
     }
 
-    /// Closes the current chunk and flushes everything written so far to the OS (and has it
-    /// synced to disk in the background).
+    /// Closes the current chunk and flushes everything written so far to the OS (and, for a
+    /// file, has it synced to disk in the background).
     pub fn flush(&mut self) -> Result<()> {
         if self.unflushed {
-            self.writer()?.flush()?;
+            let flushed = self.writer()?.flush();
+            flushed.map_err(|e| self.io_error(e))?;
             self.unflushed = false;
-            self.syncer.request();
         }
         Ok(())
     }
@@ -430,11 +498,8 @@ impl SessionWriter {
     /// Writes an MCAP metadata record (e.g. `session` parameters, wall-clock start time).
     /// This closes the current chunk.
     pub fn add_metadata(&mut self, name: &str, metadata: BTreeMap<String, String>) -> Result<()> {
-        let record = Metadata {
-            name: name.to_owned(),
-            metadata,
-        };
-        self.writer()?.write_metadata(&record)?;
+        let written = self.writer()?.write_metadata(name, &metadata);
+        written.map_err(|e| self.io_error(e))?;
         self.metadata_records += 1;
         Ok(())
     }
@@ -444,64 +509,67 @@ impl SessionWriter {
     /// create times are 0, the session's start, so that a recording stays a function of its
     /// inputs byte for byte. This closes the current chunk.
     pub fn add_attachment(&mut self, name: &str, media_type: &str, data: &[u8]) -> Result<()> {
-        self.writer()?.attach(&mcap::Attachment {
-            log_time: 0,
-            create_time: 0,
-            name: name.to_owned(),
-            media_type: media_type.to_owned(),
-            data: std::borrow::Cow::Borrowed(data),
-        })?;
-        Ok(())
+        let written = self.writer()?.attach(0, 0, name, media_type, data);
+        written.map_err(|e| self.io_error(e))
     }
 
-    /// Writes the summary section and footer, flushes and syncs the file, and reports what was
-    /// written.
+    /// Writes the summary section and footer, flushes (and for a file, syncs) the output, and
+    /// reports what was written.
     pub fn finish(mut self) -> Result<WriteSummary> {
-        let mut inner = self
+        let inner = self
             .inner
             .take()
             .ok_or_else(|| RecordingError::WriterClosed {
                 path: self.path.clone(),
             })?;
-        let summary = inner.finish()?;
-        let buffered = inner.into_inner();
-        let file = buffered.into_inner().map_err(|e| {
-            RecordingError::io(format!("flushing {}", self.path.display()), e.into_error())
-        })?;
-        self.syncer
-            .stop()
-            .and_then(|()| file.sync_data())
-            .map_err(|e| RecordingError::io(format!("syncing {}", self.path.display()), e))?;
+        let (sink, chunks) = inner.finish().map_err(|e| self.io_error(e))?;
+        let bytes = sink.written();
+        match sink {
+            Sink::File {
+                file, mut syncer, ..
+            } => {
+                let file = file.into_inner().map_err(|e| {
+                    RecordingError::io(format!("flushing {}", self.path.display()), e.into_error())
+                })?;
+                syncer.stop().and_then(|()| file.sync_data()).map_err(|e| {
+                    RecordingError::io(format!("syncing {}", self.path.display()), e)
+                })?;
+            }
+            Sink::Stream { mut out, .. } => out.flush().map_err(|e| self.io_error(e))?,
+        }
         let messages_per_topic: BTreeMap<String, u64> = self
             .channels
             .iter()
-            .map(|(topic, c)| (topic.clone(), c.count))
+            .map(|c| (c.topic.clone(), c.count))
             .collect();
         Ok(WriteSummary {
             path: self.path.clone(),
+            bytes,
             messages: messages_per_topic.values().sum(),
             messages_per_topic,
-            chunks: summary.chunk_indexes.len() as u64,
+            chunks,
             metadata_records: self.metadata_records,
             log_time_range_ns: self.log_time_range_ns,
         })
     }
 
     /// Gives up on the file without finishing it and returns the underlying stream: everything
-    /// up to the last closed chunk is on it, followed by the current chunk left incomplete (as a
-    /// crash would leave it). Recover such a file with [`crate::mcap_io::salvage`].
-    pub fn into_inner(mut self) -> Option<BufWriter<File>> {
-        self.inner.take().map(mcap::Writer::into_inner)
+    /// up to the last closed chunk is on it, followed by the first half of the current chunk
+    /// (as a crash while writing it would leave it). Recover such a file with
+    /// [`crate::mcap_io::salvage`].
+    pub fn into_inner(mut self) -> Option<Box<dyn Write + Send>> {
+        self.inner.take().map(|w| match w.abandon() {
+            Sink::File { file, .. } => Box::new(file) as Box<dyn Write + Send>,
+            Sink::Stream { out, .. } => out,
+        })
     }
 }
 
 impl Drop for SessionWriter {
     fn drop(&mut self) {
-        if let Some(mut inner) = self.inner.take() {
+        if let Some(inner) = self.inner.take() {
             // Best effort: a writer dropped on an error path still leaves a complete file.
             let _ = inner.finish();
-            let mut buffered = inner.into_inner();
-            let _ = buffered.flush();
         }
     }
 }

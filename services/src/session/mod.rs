@@ -79,7 +79,7 @@ pub use read::{
 };
 pub use recorder::{
     record_simulation, record_simulation_until, record_ticks, record_ticks_until, RecordSummary,
-    SessionInfo, SessionRecorder, TickData, TABLE_ENTITY,
+    SessionInfo, SessionOut, SessionRecorder, TickData, TABLE_ENTITY,
 };
 pub use time::rfc3339_utc;
 

@@ -349,9 +349,56 @@ fn inputs_finite(hand: &HandFrames, tick: &TickData<'_>) -> bool {
     ok
 }
 
+/// Where a recording goes.
+pub enum SessionOut<'a> {
+    /// A file, created (truncated), synced as it is written and when finished.
+    File(&'a Path),
+    /// Any writer, written front to back (never read or seeked); `name` names it in errors
+    /// and summaries. Syncing it is its owner's business.
+    Stream {
+        /// The writer.
+        out: Box<dyn std::io::Write + Send>,
+        /// What to call it.
+        name: PathBuf,
+    },
+}
+
+impl<'a> From<&'a Path> for SessionOut<'a> {
+    fn from(path: &'a Path) -> Self {
+        SessionOut::File(path)
+    }
+}
+
+impl<'a> From<&'a PathBuf> for SessionOut<'a> {
+    fn from(path: &'a PathBuf) -> Self {
+        SessionOut::File(path)
+    }
+}
+
+impl std::fmt::Debug for SessionOut<'_> {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            SessionOut::File(path) => f.debug_tuple("File").field(path).finish(),
+            SessionOut::Stream { name, .. } => {
+                f.debug_struct("Stream").field("name", name).finish()
+            }
+        }
+    }
+}
+
 impl SessionRecorder {
+    /// The writer's options: zstd at [`ZSTD_LEVEL`], no message indexes.
+    fn writer_options() -> WriterOptions {
+        WriterOptions {
+            compression_level: ZSTD_LEVEL,
+            message_indexes: false,
+            ..WriterOptions::default()
+        }
+    }
+
     /// Creates `out` (truncating it), writes the `session` and `ground_truth` metadata and the
-    /// channels, and starts the serialiser and writer threads.
+    /// channels, and starts the serialiser and writer threads. The file is synced as it is
+    /// written (each second of session) and at [`finish`](Self::finish).
     pub fn create(
         out: impl AsRef<Path>,
         hand: &HandModel,
@@ -359,12 +406,35 @@ impl SessionRecorder {
         info: &SessionInfo,
     ) -> Result<Self> {
         let path = out.as_ref().to_path_buf();
-        let options = WriterOptions {
-            compression_level: ZSTD_LEVEL,
-            message_indexes: false,
-            ..WriterOptions::default()
-        };
-        let mut writer = SessionWriter::create_with_options(&path, options)?;
+        let writer = SessionWriter::create_with_options(&path, Self::writer_options())?;
+        Self::start(writer, hand, object, info)
+    }
+
+    /// [`create`](Self::create) into a file or any [`Write`](std::io::Write) (a socket, a
+    /// pipe, a store's staging file, memory): the session is written front to back, each chunk
+    /// whole, and nothing is ever read back or seeked.
+    pub fn create_to(
+        out: SessionOut<'_>,
+        hand: &HandModel,
+        object: &RigidObject,
+        info: &SessionInfo,
+    ) -> Result<Self> {
+        match out {
+            SessionOut::File(path) => Self::create(path, hand, object, info),
+            SessionOut::Stream { out, name } => {
+                let writer = SessionWriter::to_stream(out, name, Self::writer_options())?;
+                Self::start(writer, hand, object, info)
+            }
+        }
+    }
+
+    fn start(
+        mut writer: SessionWriter,
+        hand: &HandModel,
+        object: &RigidObject,
+        info: &SessionInfo,
+    ) -> Result<Self> {
+        let path = writer.path().to_path_buf();
         let mut meta = BTreeMap::new();
         meta.insert("scenario".to_owned(), info.scenario.clone());
         meta.insert(
@@ -605,12 +675,9 @@ impl SessionRecorder {
     pub fn finish(mut self) -> Result<RecordSummary> {
         self.send_inputs()?;
         let write = self.join()?;
-        let file_bytes = std::fs::metadata(&self.path)
-            .map_err(|e| RecordingError::io(format!("reading {}", self.path.display()), e))?
-            .len();
         Ok(RecordSummary {
             ticks: self.ticks,
-            file_bytes,
+            file_bytes: write.bytes,
             write,
         })
     }
@@ -737,9 +804,13 @@ fn writer_thread(
     rx: Receiver<Batch>,
     recycle: SyncSender<Batch>,
 ) -> Result<WriteSummary> {
+    let mut handles = Vec::with_capacity(ALL_TOPICS.len());
+    for topic in ALL_TOPICS {
+        handles.push(writer.topic(topic)?);
+    }
     for mut batch in rx {
         for &(topic, t, start, end) in &batch.items {
-            writer.write_raw(ALL_TOPICS[topic as usize], t, &batch.data[start..end])?;
+            writer.write_to(handles[topic as usize], t, &batch.data[start..end])?;
         }
         for (name, metadata) in batch.metadata.drain(..) {
             writer.add_metadata(&name, metadata)?;
@@ -1126,10 +1197,10 @@ fn rgba(r: f64, g: f64, b: f64, a: f64) -> fg::Color {
 /// A scenario that cannot be set up is [`RecordingError::InvalidInput`] (naming the field) and
 /// writes no file. If the simulation fails midway, the file is finished with every tick before the failure
 /// (it reads) and [`RecordingError::Simulation`] is returned with the failing tick's time.
-pub fn record_simulation(
+pub fn record_simulation<'a>(
     scenario: &Scenario,
     duration: Option<f64>,
-    out: &Path,
+    out: impl Into<SessionOut<'a>>,
     progress: impl FnMut(u64, u64),
 ) -> Result<RecordSummary> {
     record_simulation_until(scenario, duration, out, progress, Stop::never())
@@ -1139,10 +1210,10 @@ pub fn record_simulation(
 /// ticks recorded so far and the error is [`RecordingError::Simulation`] with
 /// [`dfs_core::DfsError::Cancelled`]. `stop` is looked at every 100 simulated milliseconds
 /// (well under a millisecond of CPU).
-pub fn record_simulation_until(
+pub fn record_simulation_until<'a>(
     scenario: &Scenario,
     duration: Option<f64>,
-    out: &Path,
+    out: impl Into<SessionOut<'a>>,
     progress: impl FnMut(u64, u64),
     stop: &Stop,
 ) -> Result<RecordSummary> {
@@ -1166,7 +1237,10 @@ pub fn record_simulation_until(
                 "duration_s".to_owned(),
                 (sim.total_ticks() as f64 * 1e-3).to_string(),
             ),
-            ("grasp_style".to_owned(), format!("{:?}", sim.style())),
+            (
+                "grasp_style".to_owned(),
+                dfs_core::names::Named::name(sim.style()).to_owned(),
+            ),
         ]),
         phases: sim
             .phases()
@@ -1182,7 +1256,7 @@ pub fn record_simulation_until(
         hand_urdf: None,
     };
     let dfs = sim.dfs();
-    let recorder = SessionRecorder::create(out, dfs.hand(), dfs.object(), &info)?;
+    let recorder = SessionRecorder::create_to(out.into(), dfs.hand(), dfs.object(), &info)?;
     record_ticks_until(&mut sim, recorder, progress, stop)
 }
 
@@ -1252,6 +1326,39 @@ pub fn record_ticks_until(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_recording_into_any_writer_is_the_file_byte_for_byte() {
+        /// A writer that cannot seek, whose bytes the test keeps.
+        struct Shared(std::sync::Arc<std::sync::Mutex<Vec<u8>>>);
+        impl std::io::Write for Shared {
+            fn write(&mut self, buf: &[u8]) -> std::io::Result<usize> {
+                self.0.lock().unwrap().extend_from_slice(buf);
+                Ok(buf.len())
+            }
+            fn flush(&mut self) -> std::io::Result<()> {
+                Ok(())
+            }
+        }
+        let scenario = Scenario::builtin("sphere-lift", 3).unwrap();
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("s.mcap");
+        let file = record_simulation(&scenario, Some(2.5), path.as_path(), |_, _| {}).unwrap();
+        let bytes = std::sync::Arc::new(std::sync::Mutex::new(Vec::new()));
+        let out = SessionOut::Stream {
+            out: Box::new(Shared(bytes.clone())),
+            name: "memory".into(),
+        };
+        let streamed = record_simulation(&scenario, Some(2.5), out, |_, _| {}).unwrap();
+        let bytes = bytes.lock().unwrap().clone();
+        assert_eq!(std::fs::read(&path).unwrap(), bytes);
+        assert_eq!(
+            (file.file_bytes, streamed.file_bytes),
+            (bytes.len() as u64, bytes.len() as u64)
+        );
+        assert_eq!(streamed.write.path, PathBuf::from("memory"));
+        assert_eq!(streamed.ticks, 2500);
+    }
 
     /// What [`record_with`] recorded: per tick its `record` result, time and q.
     struct Recorded {

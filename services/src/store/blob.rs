@@ -5,6 +5,7 @@ use std::fs::{self, File};
 use std::io::Write;
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::{Arc, Mutex};
 
 use sha2::{Digest, Sha256};
 
@@ -83,9 +84,43 @@ pub struct StagedBlob {
     hasher: Sha256,
     len: u64,
     sha256: String,
-    /// The file's fsync, running on a thread of its own from [`Self::finish`] (or
-    /// [`Self::adopt`]) while the caller reads the file; [`Self::commit`] waits for it.
+    /// The file's fsync, running on a thread of its own from [`Self::finish`] while the caller
+    /// reads the file; [`Self::commit`] waits for it.
     sync: Option<std::thread::JoinHandle<std::io::Result<()>>>,
+    /// The hash and length kept by the [`StagedWriter`] handed out, if one was.
+    handed_out: Option<Arc<Mutex<Hashed>>>,
+}
+
+/// What a [`StagedWriter`] has written: its hash so far and length.
+#[derive(Default, Debug)]
+struct Hashed {
+    hasher: Sha256,
+    len: u64,
+}
+
+/// A [`Write`] into a [`StagedBlob`] that can move to another thread (a recorder's writer
+/// thread owns its output): each piece is hashed as it is written, so the blob is never read
+/// back. Drop it, then [`StagedBlob::finish`] takes the hash.
+pub struct StagedWriter {
+    file: std::io::BufWriter<File>,
+    hashed: Arc<Mutex<Hashed>>,
+}
+
+impl Write for StagedWriter {
+    fn write(&mut self, buf: &[u8]) -> std::io::Result<usize> {
+        let n = self.file.write(buf)?;
+        let mut hashed = self
+            .hashed
+            .lock()
+            .map_err(|_| std::io::Error::other("a staged writer's hash was poisoned"))?;
+        hashed.hasher.update(&buf[..n]);
+        hashed.len += n as u64;
+        Ok(n)
+    }
+
+    fn flush(&mut self) -> std::io::Result<()> {
+        self.file.flush()
+    }
 }
 
 impl StagedBlob {
@@ -108,6 +143,7 @@ impl StagedBlob {
             len: 0,
             sha256: String::new(),
             sync: None,
+            handed_out: None,
         })
     }
 
@@ -124,39 +160,39 @@ impl StagedBlob {
         Ok(())
     }
 
-    /// Takes the file as another writer left it at [`Self::path`] (a recorder that writes a
-    /// session straight into the blob store's staging area): hashes it, reading
-    /// it a megabyte at a time (its fsync starts beside). Nothing may have been
-    /// [`Self::write`]n.
-    pub fn adopt(&mut self) -> Result<(), StoreError> {
-        use std::io::Read;
-        if self.len != 0 {
-            return Err(StoreError::Corrupt(
-                "adopting a staged file that was written to".into(),
-            ));
-        }
-        self.file = None;
-        let mut file = File::open(&self.path).map_err(|e| StoreError::io(&self.path, e))?;
-        self.start_sync();
-        let mut hasher = Sha256::new();
-        let mut buffer = vec![0u8; 1 << 20];
-        loop {
-            let n = file
-                .read(&mut buffer)
-                .map_err(|e| StoreError::io(&self.path, e))?;
-            if n == 0 {
-                break;
+    /// Hands the file to a [`StagedWriter`] (for a writer on another thread). Nothing may have
+    /// been [`Self::write`]n; afterwards only [`Self::finish`] and [`Self::commit`] apply.
+    pub fn writer(&mut self) -> Result<StagedWriter, StoreError> {
+        match self.file.take() {
+            Some(file) if self.len == 0 => {
+                let hashed = Arc::new(Mutex::new(Hashed::default()));
+                self.handed_out = Some(Arc::clone(&hashed));
+                Ok(StagedWriter { file, hashed })
             }
-            hasher.update(&buffer[..n]);
-            self.len += n as u64;
+            file => {
+                self.file = file;
+                Err(StoreError::Corrupt(
+                    "a staged file can be handed to one writer, before anything is written".into(),
+                ))
+            }
         }
-        self.sha256 = hex::encode(hasher.finalize());
-        Ok(())
     }
 
     /// Flushes the file, takes its hash and starts its fsync (on a thread of its own: the disk
     /// works while the caller reads the file back; [`Self::commit`] waits for it).
     pub fn finish(&mut self) -> Result<(), StoreError> {
+        if let Some(shared) = self.handed_out.take() {
+            let hashed = Arc::try_unwrap(shared)
+                .map_err(|shared| {
+                    self.handed_out = Some(shared);
+                    StoreError::Corrupt("a staged file still being written".into())
+                })?
+                .into_inner()
+                .map_err(|_| StoreError::Corrupt("a staged writer's hash was poisoned".into()))?;
+            self.len = hashed.len;
+            self.sha256 = hex::encode(hashed.hasher.finalize());
+            self.start_sync();
+        }
         if let Some(file) = self.file.take() {
             file.into_inner()
                 .map_err(|e| StoreError::io(&self.path, e.into_error()))?;
@@ -311,4 +347,41 @@ pub(crate) fn blobs_older_than(data_dir: &Path, min_age: std::time::Duration) ->
         }
     }
     out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_staged_writer_on_another_thread_hashes_what_it_writes() {
+        let dir = tempfile::tempdir().unwrap();
+        let mut staged = StagedBlob::create(dir.path()).unwrap();
+        let mut writer = staged.writer().unwrap();
+        assert!(staged.writer().is_err(), "one writer per staged file");
+        let pieces: Vec<Vec<u8>> = (0..40u32)
+            .map(|i| vec![i as u8; 1000 + i as usize * 977])
+            .collect();
+        let expected: Vec<u8> = pieces.concat();
+        let still_open = std::thread::scope(|s| {
+            s.spawn(|| {
+                for p in &pieces {
+                    writer.write_all(p).unwrap();
+                }
+                writer.flush().unwrap();
+            })
+            .join()
+            .unwrap();
+            // The writer is still alive here: its hash is not final.
+            staged.finish().is_err()
+        });
+        assert!(still_open);
+        drop(writer);
+        staged.finish().unwrap();
+        assert_eq!(staged.len(), expected.len() as u64);
+        assert_eq!(staged.sha256(), sha256_hex(&expected));
+        assert_eq!(fs::read(staged.path()).unwrap(), expected);
+        let rel = staged.commit(dir.path()).unwrap();
+        assert_eq!(fs::read(dir.path().join(rel)).unwrap(), expected);
+    }
 }

@@ -293,8 +293,9 @@ impl Store {
             .await
     }
 
-    /// [`Store::insert_replay`] of a replay recorded straight into a [`StagedBlob`] (adopted
-    /// or finished): the file is moved to its content address, never read into memory.
+    /// [`Store::insert_replay`] of a replay recorded straight into a [`StagedBlob`] (through its
+    /// [`StagedWriter`](super::StagedWriter), then finished): the file is moved to its content
+    /// address, never read into memory.
     pub async fn insert_replay_staged(
         &self,
         skill_id: i64,

@@ -33,7 +33,7 @@ use sqlx::sqlite::{
 };
 use sqlx::{Connection as _, QueryBuilder, Row as _, Sqlite, SqliteConnection};
 
-pub use blob::StagedBlob;
+pub use blob::{StagedBlob, StagedWriter};
 pub use error::StoreError;
 
 use crate::segmentation::SEGMENTATION_VERSION;
