@@ -27,11 +27,12 @@ use crate::mcap_io::{SessionWriter, WriteSummary, WriterOptions};
 /// Ticks per batch handed from the simulation thread to the serialiser thread, and from it to
 /// the writer thread (a multiple of the Foxglove period).
 const BATCH_TICKS: usize = 5 * FOXGLOVE_DECIMATION as usize;
-/// zstd level of session files: 3, zstd's default. With format 1's JSON, level 1 was both
-/// faster and smaller; with format 2's protobuf, level 3 makes a 60 s `sphere-lift` 5 %
-/// smaller (13.6 against 14.3 MB before the coarser joint steps) on the writer thread, which
-/// runs beside the simulation.
-const ZSTD_LEVEL: u32 = 3;
+/// zstd level of session files: 1. Measured on a 60 s `sphere-lift` (2026-11-26, `perf` by
+/// thread, chunks compressed whole by `mcap_io::chunked`): level 3 made a 10.75 MB file with
+/// 0.14 s of the writer thread's CPU, level 1 an 11.42 MB one with 0.10 s. Beside a simulation
+/// of 0.15 s on the other core, that difference is what keeps recording within a quarter of
+/// the simulation's time, and both sizes are within 12 MB per minute.
+const ZSTD_LEVEL: u32 = 1;
 /// Batches in flight on each of the two channels (simulation → serialiser → writer).
 const CHANNEL_BOUND: usize = 4;
 
@@ -1138,9 +1139,9 @@ impl Messages {
 
         self.fox_joints.timestamp = stamp;
         for (i, j) in self.fox_joints.joints.iter_mut().enumerate() {
-            j.position = Some(self.joints.positions[i]);
-            j.velocity = Some(self.joints.velocities[i]);
-            j.effort = Some(self.joints.efforts[i]);
+            j.position = Some(f32p(self.joints.positions[i]));
+            j.velocity = Some(f32p(self.joints.velocities[i]));
+            j.effort = Some(f32p(self.joints.efforts[i]));
         }
         Ok(())
     }
@@ -1162,21 +1163,32 @@ fn timestamp(ns: u64) -> Result<fg::Timestamp> {
     Ok(fg::Timestamp::new(sec, (ns % 1_000_000_000) as u32))
 }
 
+/// A Foxglove topic's number: `x` at `f32` precision, kept as the schema's `double`.
+///
+/// The Foxglove topics draw what the raw topics record, and `f32` (a relative 6e-8: 60 nm at a
+/// metre, 1e-7 of a unit quaternion) is far finer than the raw topics' steps (1e-6 m, 1e-6,
+/// 1e-5 rad). A `double` that holds an `f32` ends in 29 zero bits, which zstd takes for
+/// almost nothing: `/tf`, `/scene` and `/joint_states` come out a third smaller (0.73 MB of a
+/// minute's 11.48 MB).
+fn f32p(x: f64) -> f64 {
+    x as f32 as f64
+}
+
 fn fg_vector(v: &Vector) -> fg::Vector3 {
     fg::Vector3 {
-        x: v.x,
-        y: v.y,
-        z: v.z,
+        x: f32p(v.x),
+        y: f32p(v.y),
+        z: f32p(v.z),
     }
 }
 
 fn fg_quaternion(r: &Rotation) -> fg::Quaternion {
     let q = r.quaternion();
     fg::Quaternion {
-        x: q.i,
-        y: q.j,
-        z: q.k,
-        w: q.w,
+        x: f32p(q.i),
+        y: f32p(q.j),
+        z: f32p(q.k),
+        w: f32p(q.w),
     }
 }
 
