@@ -54,8 +54,8 @@ use crate::error::RecordingError;
 use crate::foxglove::Pose;
 use crate::mcap_io::ReadLimits;
 use crate::session::{
-    Contacts, DecodeTopics, GroundTruthPhase, ObjectState, Session, SessionHead, SessionSource,
-    SessionVisitor,
+    Contacts, DecodeTopics, GroundTruthPhase, KeptMessages, ObjectState, Session, SessionHead,
+    SessionSource, SessionVisitor, KEPT_MESSAGES_BUDGET,
 };
 
 /// Version of the segmentation: what the store records beside every session's skills, so
@@ -1007,8 +1007,11 @@ pub fn segment(session: &Session, params: &SegmentParams) -> Segmentation {
 /// Segments the session `source` in two streamed passes ([`crate::session::stream_session_file`]):
 /// the first checks the file and resamples the hand's base onto the grid (about 41 bytes per
 /// millisecond of session), the second computes the parameters of each grasp found, keeping
-/// per grasp only its accumulators. Memory is bounded by the grid and a few chunks, not the
-/// file: an hour of session in 214 MB (peak resident of `icms segment`). A file that writes
+/// per grasp only its accumulators. The second pass reads the contacts and object states the
+/// first kept ([`KeptMessages`], up to [`KEPT_MESSAGES_BUDGET`]: about two minutes of session)
+/// and decodes only what the accumulators read; a longer session is read again. Memory is
+/// bounded by the grid, that budget and a few chunks, not the file: a 60 s session in 34 MB,
+/// an hour in 218 MB (peak resident of `icms segment`). A file that writes
 /// its object states well ahead of its contacts (valid MCAP: each topic in time order) also
 /// holds each grasp's object positions until its contacts come, 56 bytes a sample of the
 /// grasp at most. A replay recording is refused
@@ -1019,10 +1022,13 @@ pub fn segment_source(
     params: &SegmentParams,
 ) -> Result<(SessionHead, Segmentation), RecordingError> {
     let mut one = PassOne::new(params);
-    let head = source.stream(limits, &mut one)?;
+    // The contacts and object states of a session of a minute or two are kept from the first
+    // pass for the second (no second decompression); a longer one is read again.
+    let mut kept = KeptMessages::new(KEPT_MESSAGES_BUDGET);
+    let head = source.stream_keeping(limits, &mut one, &mut kept)?;
     head.ensure_grasp_session(&source.name())?;
     let mut two = one.finish(&head.metadata, params);
-    source.stream_again(limits, &mut two)?;
+    source.stream_again_kept(limits, &mut two, &kept)?;
     Ok((head, two.finish()))
 }
 
@@ -1160,6 +1166,9 @@ impl SessionVisitor for PassTwo {
     }
     fn done(&self) -> bool {
         self.first_open == self.skills.len()
+    }
+    fn segmentation_fields_only(&self) -> bool {
+        true
     }
 }
 

@@ -123,3 +123,95 @@ fn a_file_that_writes_each_topic_in_one_block_segments_as_one_written_tick_by_ti
         assert_eq!(found, expected, "topics in blocks: {order:?}");
     }
 }
+
+/// What a second read hands its visitor: every contact and object sample (log time, fingers
+/// touching, object position), until it has taken `limit` of them.
+#[derive(Default)]
+struct Samples {
+    limit: usize,
+    seen: Vec<(u64, usize, [u64; 3])>,
+}
+
+impl services::session::SessionVisitor for Samples {
+    fn wants(&self) -> services::session::DecodeTopics {
+        services::session::DecodeTopics::SEGMENTATION
+    }
+    fn contacts(
+        &mut self,
+        t: u64,
+        m: &services::session::Contacts,
+    ) -> Result<(), services::RecordingError> {
+        let touching = m.fingers.iter().filter(|f| f.touching).count();
+        self.seen.push((t, touching, [0; 3]));
+        Ok(())
+    }
+    fn object(
+        &mut self,
+        t: u64,
+        m: &services::session::ObjectState,
+    ) -> Result<(), services::RecordingError> {
+        let p = &m.pose.position;
+        self.seen
+            .push((t, usize::MAX, [p.x.to_bits(), p.y.to_bits(), p.z.to_bits()]));
+        Ok(())
+    }
+    fn done(&self) -> bool {
+        self.seen.len() >= self.limit
+    }
+}
+
+#[test]
+fn a_second_read_from_the_kept_messages_hands_on_what_the_file_holds() {
+    use services::session::{KeptMessages, KEPT_MESSAGES_BUDGET};
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("s.mcap");
+    let scenario = Scenario::builtin("sphere-lift", 2).unwrap();
+    record_simulation(&scenario, Some(3.0), &path, |_, _| {}).unwrap();
+    let bytes = std::fs::read(&path).unwrap();
+    let limits = ReadLimits::streaming();
+    for source in [
+        SessionSource::File(&path),
+        SessionSource::Bytes {
+            bytes: &bytes,
+            name: "upload",
+        },
+    ] {
+        // The whole file, and a read that stops a third of the way.
+        for limit in [usize::MAX, 4000] {
+            let mut reread = Samples {
+                limit,
+                ..Samples::default()
+            };
+            source.stream_again(&limits, &mut reread).unwrap();
+            assert!(!reread.seen.is_empty());
+            // Kept within the budget, and over a budget (kept nothing: the file is read again).
+            for (budget, complete) in [(KEPT_MESSAGES_BUDGET, true), (10_000, false)] {
+                let mut kept = KeptMessages::new(budget);
+                let mut first = Samples {
+                    limit: usize::MAX,
+                    ..Samples::default()
+                };
+                source
+                    .stream_keeping(&limits, &mut first, &mut kept)
+                    .unwrap();
+                let wants = services::session::DecodeTopics::SEGMENTATION;
+                assert_eq!(kept.covers(wants), complete, "budget {budget}");
+                assert!(kept.held_bytes() <= budget);
+                if complete {
+                    assert!(!kept.covers(services::session::DecodeTopics::ALL));
+                }
+                let mut second = Samples {
+                    limit,
+                    ..Samples::default()
+                };
+                source
+                    .stream_again_kept(&limits, &mut second, &kept)
+                    .unwrap();
+                assert_eq!(second.seen, reread.seen, "budget {budget}, limit {limit}");
+                if limit == usize::MAX {
+                    assert_eq!(first.seen, reread.seen);
+                }
+            }
+        }
+    }
+}

@@ -58,8 +58,8 @@ pub enum BenchCommand {
         #[arg(long, default_value_t = 60.0)]
         duration: f64,
     },
-    /// Ingest (read and validate, segment, store) of simulated sessions held in memory; the
-    /// simulation that makes them is not timed.
+    /// Ingest (read and validate, segment, store) of simulated session files into a fresh data
+    /// base, as `icms ingest FILE...` does it; the simulation that makes them is not timed.
     Ingest {
         /// Print JSON: `{"sessions_per_second", "analyse_ms", "store_ms", ...}`.
         #[arg(long)]
@@ -74,16 +74,66 @@ pub enum BenchCommand {
         #[arg(long, default_value = "sphere-lift")]
         scenario: String,
     },
+    /// Uploads of simulated session files (`POST /api/v1/sessions`, each a distinct file) over
+    /// HTTP on loopback to the real server, started in-process on an ephemeral port with a
+    /// fresh data directory: the time from connecting to the end of the 201 reply (the body
+    /// streamed to disk and hashed, read and segmented, stored). The simulation that makes
+    /// the files and reading them into memory are not timed.
+    Upload {
+        /// Print JSON: `{"median_ms", "min_ms", "max_ms", "uploads_ms", ...}`.
+        #[arg(long)]
+        json: bool,
+        /// Number of uploads (sessions of seeds 1..=N).
+        #[arg(long, default_value_t = 10, value_parser = clap::value_parser!(u64).range(1..=1000))]
+        uploads: u64,
+        /// Simulated seconds per session.
+        #[arg(long, default_value_t = 60.0)]
+        duration: f64,
+        /// Built-in scenario.
+        #[arg(long, default_value = "sphere-lift")]
+        scenario: String,
+    },
+}
+
+/// Result of `icms bench upload`.
+#[derive(Debug, Serialize)]
+pub struct UploadBench {
+    /// Median time of one upload, from connecting to the end of the reply, ms.
+    pub median_ms: f64,
+    /// Fastest upload, ms.
+    pub min_ms: f64,
+    /// Slowest upload, ms.
+    pub max_ms: f64,
+    /// Every upload's time, in order, ms.
+    pub uploads_ms: Vec<f64>,
+    /// Median time to read, check and segment one of the files alone (no HTTP, no store),
+    /// timed after the uploads: the share of an upload that is analysis, ms.
+    pub analyse_ms: f64,
+    /// Median size of one session file (bytes).
+    pub file_bytes: u64,
+    /// Uploads.
+    pub uploads: u64,
+    /// Simulated seconds per session.
+    pub duration: f64,
+    /// Scenario.
+    pub scenario: String,
 }
 
 /// Result of `icms bench ingest`.
 #[derive(Debug, Serialize)]
 pub struct IngestBench {
     /// Sessions ingested per wall-clock second, as `icms ingest FILE...` does: files on disk
-    /// into a fresh data base, one after the other.
+    /// into a fresh data base, `in_flight` analysed at once ahead of the commits (one
+    /// transaction per session, in order).
     pub sessions_per_second: f64,
-    /// Median time to ingest one session file (copy into the store while hashed, read and
-    /// check, segment, store), ms.
+    /// The same files one after the other (each staged, analysed and committed before the
+    /// next starts: `icms ingest` before it overlapped them), into another fresh data base,
+    /// sessions per second.
+    pub sessions_per_second_one_at_a_time: f64,
+    /// Files `icms ingest` analyses at once.
+    pub in_flight: usize,
+    /// Median time to ingest one session file alone (copy into the store while hashed, read
+    /// and check, segment, store), ms.
     pub ingest_ms: f64,
     /// Median time to read, check and segment one session file (two streamed passes), ms,
     /// timed apart.
@@ -93,7 +143,7 @@ pub struct IngestBench {
     /// Median size of one session file (bytes).
     pub file_bytes: u64,
     /// `store_ms` with `synchronous=NORMAL` instead of the store's `FULL` (the cost of
-    /// durable commits), ms.
+    /// durable commits), one file at a time, ms.
     pub store_ms_synchronous_normal: f64,
     /// Sessions ingested.
     pub sessions: u64,
@@ -165,9 +215,28 @@ pub fn run(c: BenchCommand) -> Result<(), CliError> {
                 print_json(&r)
             } else {
                 println!(
-                    "ingest of {} {} s {} sessions ({} bytes each): {:.1} sessions/s; per session: read + segment {:.1} ms, store {:.1} ms (synchronous=FULL; NORMAL: {:.1} ms) (medians)",
+                    "ingest of {} {} s {} sessions ({} bytes each): {:.1} sessions/s ({} files at once; one at a time {:.1}/s); per session alone: read + segment {:.1} ms, store {:.1} ms (synchronous=FULL; NORMAL: {:.1} ms) (medians)",
                     r.sessions, r.duration, r.scenario, r.file_bytes, r.sessions_per_second,
+                    r.in_flight, r.sessions_per_second_one_at_a_time,
                     r.analyse_ms, r.store_ms, r.store_ms_synchronous_normal
+                );
+                Ok(())
+            }
+        }
+        BenchCommand::Upload {
+            json,
+            uploads,
+            duration,
+            scenario,
+        } => {
+            let r = bench_upload(&scenario, uploads, duration)?;
+            if json {
+                print_json(&r)
+            } else {
+                println!(
+                    "upload of {} {} s {} sessions ({} bytes each) over HTTP on loopback: median {:.1} ms, min {:.1} ms, max {:.1} ms (read + segment alone: {:.1} ms)",
+                    r.uploads, r.duration, r.scenario, r.file_bytes, r.median_ms, r.min_ms,
+                    r.max_ms, r.analyse_ms
                 );
                 Ok(())
             }
@@ -253,8 +322,6 @@ fn bench_ingest(name: &str, sessions: u64, duration: f64) -> Result<IngestBench,
         .enable_all()
         .build()
         .map_err(|e| CliError(format!("starting the async runtime: {e}")))?;
-    let data = dir.path().join("data");
-    let normal_data = dir.path().join("data-normal");
     // The analysis alone (read, check, segment: two streamed passes over the file), timed
     // apart first.
     let mut analyse = Vec::new();
@@ -263,32 +330,48 @@ fn bench_ingest(name: &str, sessions: u64, duration: f64) -> Result<IngestBench,
         services::ingest::analyse_source(&services::session::SessionSource::File(path))?;
         analyse.push(t0.elapsed().as_secs_f64() * 1e3);
     }
-    let (mut ingest_t, total, mut store_normal) = rt.block_on(async {
-        let store = services::store::Store::open(&data).await?;
-        let normal = services::store::Store::open_with_durability(
-            &normal_data,
-            services::store::Durability::Normal,
-        )
-        .await?;
-        let (mut s, mut n) = (Vec::new(), Vec::new());
-        // What `icms ingest FILE...` does for each file, into a fresh data base.
+    let (total, mut one_t, one_total, mut store_normal) = rt.block_on(async {
+        // What `icms ingest FILE...` does, into a fresh data base.
+        let store = services::store::Store::open(&dir.path().join("data")).await?;
+        let mut failed = None;
         let t_all = Instant::now();
-        for (i, path) in files.iter().enumerate() {
-            let t0 = Instant::now();
-            services::ingest::ingest_file(&store, path.clone(), format!("session {i}")).await?;
-            s.push(t0.elapsed().as_secs_f64() * 1e3);
-        }
+        super::skills::ingest_paths(&store, &files, |f, outcome| {
+            if let Err(e) = outcome {
+                failed.get_or_insert_with(|| format!("{}: {e}", f.display()));
+            }
+        })
+        .await;
         let total = t_all.elapsed().as_secs_f64();
-        // The same files stored again into a synchronous=NORMAL data base, right after, for
-        // the cost of durable commits measured in one run.
-        for (i, path) in files.iter().enumerate() {
-            let t0 = Instant::now();
-            services::ingest::ingest_file(&normal, path.clone(), format!("session {i}")).await?;
-            n.push(t0.elapsed().as_secs_f64() * 1e3);
-        }
         store.close().await;
-        normal.close().await;
-        Ok::<_, CliError>((s, total, n))
+        if let Some(e) = failed {
+            return Err(CliError(e));
+        }
+        // The same files one at a time into fresh data bases: with the store's
+        // synchronous=FULL, then NORMAL (the cost of durable commits), measured in one run.
+        let mut per_file = Vec::new();
+        let mut one_total = 0.0;
+        for durability in [
+            services::store::Durability::Full,
+            services::store::Durability::Normal,
+        ] {
+            let data = dir.path().join(format!("data-{durability:?}"));
+            let store = services::store::Store::open_with_durability(&data, durability).await?;
+            let mut times = Vec::new();
+            let t_all = Instant::now();
+            for (i, path) in files.iter().enumerate() {
+                let t0 = Instant::now();
+                services::ingest::ingest_file(&store, path.clone(), format!("session {i}")).await?;
+                times.push(t0.elapsed().as_secs_f64() * 1e3);
+            }
+            if durability == services::store::Durability::Full {
+                one_total = t_all.elapsed().as_secs_f64();
+            }
+            store.close().await;
+            per_file.push(times);
+        }
+        let normal = per_file.pop().unwrap_or_default();
+        let full = per_file.pop().unwrap_or_default();
+        Ok::<_, CliError>((total, full, one_total, normal))
     })?;
     let mut sizes: Vec<u64> = files
         .iter()
@@ -296,9 +379,11 @@ fn bench_ingest(name: &str, sessions: u64, duration: f64) -> Result<IngestBench,
         .collect();
     sizes.sort_unstable();
     let analyse_ms = services::segmentation::median(&mut analyse);
-    let ingest_ms = services::segmentation::median(&mut ingest_t);
+    let ingest_ms = services::segmentation::median(&mut one_t);
     Ok(IngestBench {
         sessions_per_second: sessions as f64 / total,
+        sessions_per_second_one_at_a_time: sessions as f64 / one_total,
+        in_flight: services::ingest::INGEST_FILES_IN_FLIGHT,
         analyse_ms,
         store_ms: (ingest_ms - analyse_ms).max(0.0),
         ingest_ms,
@@ -310,6 +395,138 @@ fn bench_ingest(name: &str, sessions: u64, duration: f64) -> Result<IngestBench,
         duration,
         scenario: name.to_string(),
     })
+}
+
+fn bench_upload(name: &str, uploads: u64, duration: f64) -> Result<UploadBench, CliError> {
+    let dir = tempfile::tempdir().map_err(|e| CliError(format!("temporary directory: {e}")))?;
+    let mut files = Vec::new();
+    for seed in 1..=uploads {
+        let scenario = dfs_core::scenario::Scenario::builtin(name, seed)
+            .ok_or_else(|| CliError(format!("no built-in scenario {name:?}")))?;
+        let path = dir.path().join(format!("{seed}.mcap"));
+        services::session::record_simulation(&scenario, Some(duration), &path, |_, _| {})?;
+        files.push(path);
+    }
+    // As `icms serve` runs: its allocator setting, a multi-threaded runtime.
+    crate::memory::limit_arenas();
+    let rt = tokio::runtime::Builder::new_multi_thread()
+        .enable_all()
+        .build()
+        .map_err(|e| CliError(format!("starting the async runtime: {e}")))?;
+    let mut times = rt.block_on(async {
+        let config = crate::config::ServeArgs {
+            addr: std::net::SocketAddr::from(([127, 0, 0, 1], 0)),
+            data: dir.path().join("data"),
+            no_demo: true,
+            ..crate::config::ServeArgs::default()
+        }
+        .into_config()?;
+        let app = crate::startup::Application::build(config).await?;
+        let addr = app.local_addr();
+        let (stop, stopped) = tokio::sync::oneshot::channel::<()>();
+        let server = tokio::spawn(app.run_until(async move {
+            let _ = stopped.await;
+        }));
+        let mut times = Vec::new();
+        let mut failed = None;
+        for path in &files {
+            let body = bytes::Bytes::from(
+                tokio::fs::read(path)
+                    .await
+                    .map_err(|e| CliError(format!("{}: {e}", path.display())))?,
+            );
+            let t0 = Instant::now();
+            let reply = post_session(addr, body).await;
+            let ms = t0.elapsed().as_secs_f64() * 1e3;
+            match reply {
+                Ok((201, _)) => times.push(ms),
+                Ok((status, body)) => {
+                    failed = Some(format!(
+                        "{}: the upload got {status}: {}",
+                        path.display(),
+                        String::from_utf8_lossy(&body)
+                    ));
+                    break;
+                }
+                Err(e) => {
+                    failed = Some(format!("{}: {}", path.display(), e.0));
+                    break;
+                }
+            }
+        }
+        let _ = stop.send(());
+        server
+            .await
+            .map_err(|e| CliError(format!("the server task: {e}")))??;
+        match failed {
+            Some(e) => Err(CliError(e)),
+            None => Ok(times),
+        }
+    })?;
+    let uploads_ms = times.clone();
+    let mut analyse = Vec::new();
+    for path in &files {
+        let t0 = Instant::now();
+        services::ingest::analyse_source(&services::session::SessionSource::File(path))?;
+        analyse.push(t0.elapsed().as_secs_f64() * 1e3);
+    }
+    let mut sizes: Vec<u64> = files
+        .iter()
+        .map(|f| std::fs::metadata(f).map(|m| m.len()).unwrap_or(0))
+        .collect();
+    sizes.sort_unstable();
+    Ok(UploadBench {
+        median_ms: services::segmentation::median(&mut times),
+        min_ms: uploads_ms.iter().copied().fold(f64::INFINITY, f64::min),
+        max_ms: uploads_ms.iter().copied().fold(0.0, f64::max),
+        uploads_ms,
+        analyse_ms: services::segmentation::median(&mut analyse),
+        file_bytes: sizes[sizes.len() / 2],
+        uploads,
+        duration,
+        scenario: name.to_string(),
+    })
+}
+
+/// `POST /api/v1/sessions` of `body` to the server at `addr` on a new connection, as
+/// `curl --data-binary @FILE -H 'content-type: application/x-mcap'` sends it: the reply's
+/// status and body.
+async fn post_session(
+    addr: std::net::SocketAddr,
+    body: bytes::Bytes,
+) -> Result<(u16, bytes::Bytes), CliError> {
+    use axum::http::{header, Request};
+    use http_body_util::{BodyExt, Full};
+    let stream = tokio::net::TcpStream::connect(addr)
+        .await
+        .map_err(|e| CliError(format!("connecting to {addr}: {e}")))?;
+    stream
+        .set_nodelay(true)
+        .map_err(|e| CliError(format!("TCP_NODELAY: {e}")))?;
+    let (mut sender, connection) =
+        hyper::client::conn::http1::handshake(hyper_util::rt::TokioIo::new(stream))
+            .await
+            .map_err(|e| CliError(format!("HTTP handshake with {addr}: {e}")))?;
+    let connection = tokio::spawn(connection);
+    let request = Request::post("/api/v1/sessions")
+        .header(header::HOST, addr.to_string())
+        .header(header::CONTENT_TYPE, crate::http::sessions::MCAP)
+        .body(Full::new(body))
+        .map_err(|e| CliError(format!("building the request: {e}")))?;
+    let reply = sender
+        .send_request(request)
+        .await
+        .map_err(|e| CliError(format!("uploading: {e}")))?;
+    let status = reply.status().as_u16();
+    let body = reply
+        .into_body()
+        .collect()
+        .await
+        .map_err(|e| CliError(format!("reading the reply: {e}")))?
+        .to_bytes();
+    drop(sender);
+    let _ = connection.await;
+    Ok((status, body))
 }
 
 fn bench_tick(iterations: usize) -> Result<TickBench, CliError> {

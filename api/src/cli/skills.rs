@@ -2,7 +2,8 @@
 
 use super::{open_existing_store, print_json, CliError};
 use crate::filters::SkillFilters;
-use services::ingest::ingest_file;
+use services::ingest::{ingest_files, IngestError, INGEST_FILES_IN_FLIGHT};
+use services::store::IngestOutcome;
 use services::store::{Store, DEFAULT_LIMIT, MAX_LIMIT};
 use std::path::PathBuf;
 
@@ -74,12 +75,8 @@ pub fn run_ingest(a: IngestArgs) -> Result<(), CliError> {
             .map_err(|e| CliError(format!("{}: {e}", a.data.display())))?;
         let mut results = Vec::new();
         let mut failed = Vec::new();
-        for f in &a.files {
-            // Streamed: copied into the store while hashed, segmented from there.
-            let stored = ingest_file(&store, f.clone(), f.display().to_string())
-                .await
-                .map_err(|e| e.to_string());
-            let out = match stored {
+        ingest_paths(&store, &a.files, |f, stored| {
+            let out = match stored.map_err(|e| e.to_string()) {
                 Ok(out) => out,
                 Err(e) => {
                     // The reader's errors already start with the file's name.
@@ -90,7 +87,7 @@ pub fn run_ingest(a: IngestArgs) -> Result<(), CliError> {
                         "file": f.display().to_string(),
                         "error": e,
                     }));
-                    continue;
+                    return;
                 }
             };
             if !a.json {
@@ -112,7 +109,8 @@ pub fn run_ingest(a: IngestArgs) -> Result<(), CliError> {
                 "created": out.created,
                 "skill_ids": out.skill_ids,
             }));
-        }
+        })
+        .await;
         store.close().await;
         if a.json {
             print_json(&serde_json::json!({ "sessions": results, "failed": failed }))?;
@@ -179,6 +177,26 @@ pub fn run_skills(a: SkillsArgs) -> Result<(), CliError> {
         }
         Ok(())
     })
+}
+
+/// What `icms ingest FILE...` does with its files (`icms bench ingest` times this): each
+/// streamed into the store's staging area while hashed and segmented from there,
+/// [`INGEST_FILES_IN_FLIGHT`] files analysed at once ahead of the commits, which stay one
+/// transaction per session, in the order given. `each` gets every file and its outcome in
+/// that order.
+pub(super) async fn ingest_paths(
+    store: &Store,
+    files: &[PathBuf],
+    mut each: impl FnMut(&PathBuf, Result<IngestOutcome, IngestError>),
+) {
+    let named: Vec<(PathBuf, String)> = files
+        .iter()
+        .map(|f| (f.clone(), f.display().to_string()))
+        .collect();
+    ingest_files(store, &named, INGEST_FILES_IN_FLIGHT, |i, outcome| {
+        each(&files[i], outcome)
+    })
+    .await;
 }
 
 /// Arguments of `icms demo`.

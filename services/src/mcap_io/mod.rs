@@ -13,15 +13,16 @@
 //! or `serde::Serialize` ones for JSON channels.
 
 mod bounded_zstd;
+mod chunked;
 mod finite;
 mod json_check;
 mod lengths;
 mod par;
+pub(crate) mod pool;
 mod reader;
 mod salvage;
 pub mod schemas;
 mod writer;
-mod chunked;
 
 pub(crate) use reader::{
     check_message, json_error, message_location, stream_raw_bytes, stream_raw_file, RawTopic,

@@ -15,6 +15,7 @@
 //! expands to gigabytes (a decompression bomb, a header that lies) is refused having allocated
 //! no more than its budget.
 
+use std::borrow::Cow;
 use std::collections::{BTreeMap, HashMap};
 use std::fs::File;
 use std::io::{BufReader, Read};
@@ -29,6 +30,7 @@ use serde::Deserialize;
 use super::bounded_zstd::{BoundedZstd, MAX_WINDOW_LOG};
 use super::json_check;
 use super::par::{par_map, MESSAGES_PER_JOB};
+use super::pool::CHUNK_BUFFERS;
 use super::writer::{MESSAGE_ENCODING, SCHEMA_ENCODING};
 use crate::error::{RecordingError, Result};
 
@@ -616,7 +618,7 @@ fn read_raw<R: Read>(src: R, total_len: Option<u64>, limits: &ReadLimits) -> Res
         .collect();
     let unpacked = par_map(chunks.len(), |i| {
         let (offset, header, data) = chunks[i];
-        unpack_chunk(offset, header, data, limits)
+        unpack_chunk(offset, header, data, limits, &mut None, None)
     });
     let loose_buffer = u32::try_from(chunks.len()).map_err(|_| RecordingError::Corrupt {
         offset: 0,
@@ -782,14 +784,12 @@ pub(crate) fn stream_raw<R: Read + Send>(
 ) -> Result<StreamedRaw> {
     std::thread::scope(|scope| -> Result<StreamedRaw> {
         let (tx, rx) = std::sync::mpsc::sync_channel::<Filed>(STREAM_CHUNKS_AHEAD);
+        // Decompressed chunks go back to the reading thread to be filled again: a fresh buffer
+        // for every chunk cost a page fault (and the kernel's zeroing) per 4 kB of it.
+        let (recycle, recycled) = std::sync::mpsc::sync_channel::<Vec<u8>>(RECYCLED_BUFFERS);
         let reader = scope.spawn(move || -> Result<StreamedRaw> {
-            let mut filer = Filer {
-                builder: SessionBuilder::new(*limits, total_len, 0),
-                counts: Vec::new(),
-                claimed: Vec::new(),
-                limits,
-                early,
-            };
+            let mut filer = Filer::new(total_len, limits, early);
+            filer.recycled = Some(recycled);
             let outcome = scan(src, total_len, limits, true, |batch| {
                 let filed = filer.file(batch)?;
                 // The calling thread stopped (an error there): stop reading.
@@ -798,40 +798,25 @@ pub(crate) fn stream_raw<R: Read + Send>(
                 })
             })?;
             outcome.into_result()?;
-            Ok(StreamedRaw {
-                topics: filer.builder.topics.into_iter().zip(filer.counts).collect(),
-                metadata: filer.builder.session.metadata,
-            })
+            Ok(filer.streamed())
         });
         let mut topics: Vec<RawTopic> = Vec::new();
         let mut failed = None;
-        'batches: for filed in rx.iter() {
-            for event in filed.events {
-                let result = match event {
-                    Event::Topic(t) => {
-                        let r = visitor.topic(&t);
-                        topics.push(*t);
-                        r
+        for filed in rx.iter() {
+            match deliver(filed, &mut topics, visitor) {
+                Ok(buffers) => {
+                    for buffer in buffers {
+                        // Full (the reader has enough) or gone: to the pool.
+                        if let Err(e) = recycle.try_send(buffer) {
+                            let (std::sync::mpsc::TrySendError::Full(b)
+                            | std::sync::mpsc::TrySendError::Disconnected(b)) = e;
+                            CHUNK_BUFFERS.give(b);
+                        }
                     }
-                    Event::Metadata(m) => visitor.metadata(&m),
-                    Event::Message {
-                        topic,
-                        index,
-                        log_time_ns,
-                        buffer,
-                        start,
-                        end,
-                    } => visitor.message(
-                        topic,
-                        &topics[topic],
-                        index,
-                        log_time_ns,
-                        &filed.buffers[buffer][start..end],
-                    ),
-                };
-                if let Err(e) = result {
+                }
+                Err(e) => {
                     failed = Some(e);
-                    break 'batches;
+                    break;
                 }
             }
         }
@@ -844,6 +829,40 @@ pub(crate) fn stream_raw<R: Read + Send>(
             None => read,
         }
     })
+}
+
+/// Hands the events of `filed` to `visitor` in order (`topics`: those announced so far);
+/// returns its buffers, to be filled again.
+fn deliver(
+    filed: Filed,
+    topics: &mut Vec<RawTopic>,
+    visitor: &mut impl RawVisitor,
+) -> Result<Vec<Vec<u8>>> {
+    for event in filed.events {
+        match event {
+            Event::Topic(t) => {
+                let r = visitor.topic(&t);
+                topics.push(*t);
+                r?
+            }
+            Event::Metadata(m) => visitor.metadata(&m)?,
+            Event::Message {
+                topic,
+                index,
+                log_time_ns,
+                buffer,
+                start,
+                end,
+            } => visitor.message(
+                topic,
+                &topics[topic],
+                index,
+                log_time_ns,
+                &filed.buffers[buffer][start..end],
+            )?,
+        }
+    }
+    Ok(filed.buffers)
 }
 
 /// What the reading thread of [`stream_raw`] hands on for one top-level record: the records'
@@ -876,9 +895,35 @@ struct Filer<'a, E: RawVisitor> {
     claimed: Vec<bool>,
     limits: &'a ReadLimits,
     early: &'a mut E,
+    /// The zstd context, reused from chunk to chunk.
+    dctx: Option<zstd::zstd_safe::DCtx<'static>>,
+    /// Chunk buffers the calling thread is done with, to decompress into again.
+    recycled: Option<std::sync::mpsc::Receiver<Vec<u8>>>,
 }
 
-impl<E: RawVisitor> Filer<'_, E> {
+impl<'a, E: RawVisitor> Filer<'a, E> {
+    fn new(total_len: Option<u64>, limits: &'a ReadLimits, early: &'a mut E) -> Self {
+        Filer {
+            builder: SessionBuilder::new(*limits, total_len, 0),
+            counts: Vec::new(),
+            claimed: Vec::new(),
+            limits,
+            early,
+            dctx: None,
+            recycled: None,
+        }
+    }
+
+    /// What the read found, once every record was filed.
+    fn streamed(&mut self) -> StreamedRaw {
+        let topics = std::mem::take(&mut self.builder.topics);
+        let counts = std::mem::take(&mut self.counts);
+        StreamedRaw {
+            topics: topics.into_iter().zip(counts).collect(),
+            metadata: std::mem::take(&mut self.builder.session.metadata),
+        }
+    }
+
     fn file(&mut self, batch: Batch) -> Result<Filed> {
         let offset = batch.offset;
         let mut filed = Filed {
@@ -888,7 +933,12 @@ impl<E: RawVisitor> Filer<'_, E> {
         for record in batch.records {
             match record {
                 Record::Chunk { header, data } => {
-                    let content = unpack_chunk(offset, &header, &data, self.limits)?;
+                    let reuse = self.recycled.as_ref().and_then(|r| r.try_recv().ok());
+                    let content =
+                        unpack_chunk(offset, &header, &data, self.limits, &mut self.dctx, reuse)?;
+                    if let Cow::Owned(compressed) = data {
+                        CHUNK_BUFFERS.give(compressed);
+                    }
                     let buffer = filed.buffers.len();
                     let mut others = content.others.into_iter();
                     let mut pos = 0;
@@ -978,8 +1028,22 @@ impl<E: RawVisitor> Filer<'_, E> {
     }
 }
 
+impl<E: RawVisitor> Drop for Filer<'_, E> {
+    fn drop(&mut self) {
+        if let Some(recycled) = &self.recycled {
+            while let Ok(buffer) = recycled.try_recv() {
+                CHUNK_BUFFERS.give(buffer);
+            }
+        }
+    }
+}
+
 /// Chunks read and decompressed ahead of the one being filed by [`stream_raw`].
 const STREAM_CHUNKS_AHEAD: usize = 2;
+
+/// Decompressed chunk buffers [`stream_raw`]'s calling thread hands back for reuse, at most
+/// (with those in flight, the buffers it holds stay a few chunks' worth).
+const RECYCLED_BUFFERS: usize = 2;
 
 /// Most topics a file may have (ours has nine).
 const MAX_TOPICS: usize = 1024;
@@ -1009,6 +1073,8 @@ fn unpack_chunk(
     header: &ChunkHeader,
     compressed: &[u8],
     limits: &ReadLimits,
+    dctx: &mut Option<zstd::zstd_safe::DCtx<'static>>,
+    reuse: Option<Vec<u8>>,
 ) -> Result<ChunkContent> {
     let corrupt = |detail: String| RecordingError::Corrupt { offset, detail };
     if header.uncompressed_size > limits.max_record_bytes {
@@ -1028,24 +1094,59 @@ fn unpack_chunk(
         ))
     };
     let data = match header.compression.as_str() {
-        "" => compressed.to_vec(),
+        "" => {
+            let mut out = reuse.unwrap_or_default();
+            out.clear();
+            out.extend_from_slice(compressed);
+            out
+        }
         "zstd" => {
             // Single-pass decoding into exactly the declared size: zstd fails rather than
-            // write past it.
-            let mut out = Vec::with_capacity(size);
-            let mut dctx = zstd::zstd_safe::DCtx::create();
-            dctx.set_parameter(zstd::zstd_safe::DParameter::WindowLogMax(MAX_WINDOW_LOG))
-                .and_then(|_| dctx.decompress(&mut out, compressed))
-                .map_err(|code| match zstd::zstd_safe::get_error_name(code) {
-                    ZSTD_DST_TOO_SMALL => overflows(),
-                    name => corrupt(format!("zstd: {name}")),
-                })?;
+            // write past it. The context is the caller's, reused from chunk to chunk (its
+            // window limit is a sticky parameter; each frame starts afresh), and the buffer is
+            // one handed back or pooled if one is big enough (its pages already mapped; the
+            // size was checked against the limit above).
+            let mut out = match reuse {
+                Some(buffer) if buffer.capacity() >= size => buffer,
+                Some(small) => {
+                    CHUNK_BUFFERS.give(small);
+                    CHUNK_BUFFERS.take(size)
+                }
+                None => CHUNK_BUFFERS.take(size),
+            };
+            let dctx = match dctx {
+                Some(d) => d,
+                None => {
+                    let mut d = zstd::zstd_safe::DCtx::create();
+                    d.set_parameter(zstd::zstd_safe::DParameter::WindowLogMax(MAX_WINDOW_LOG))
+                        .map_err(|code| {
+                            corrupt(format!("zstd: {}", zstd::zstd_safe::get_error_name(code)))
+                        })?;
+                    dctx.insert(d)
+                }
+            };
+            let written = if out.capacity() == size {
+                // Into its spare capacity, exactly the declared size: nothing to zero first.
+                out.clear();
+                dctx.decompress(&mut out, compressed)
+            } else {
+                // A bigger buffer: into its first `size` bytes (only what its previous content
+                // lacks of them is zeroed).
+                out.resize(size, 0);
+                dctx.decompress(&mut out[..], compressed)
+            }
+            .map_err(|code| match zstd::zstd_safe::get_error_name(code) {
+                ZSTD_DST_TOO_SMALL => overflows(),
+                name => corrupt(format!("zstd: {name}")),
+            })?;
+            out.truncate(written);
             out
         }
         "lz4" => {
             // An LZ4 frame, read to at most one byte past the declared size: a chunk that
             // decodes to more is refused there, before it can grow without bound.
-            let mut out = Vec::with_capacity(size);
+            let mut out = reuse.unwrap_or_default();
+            out.clear();
             lz4::Decoder::new(compressed)
                 .and_then(|d| d.take(size as u64 + 1).read_to_end(&mut out))
                 .map_err(|e| corrupt(format!("lz4: {e}")))?;
@@ -1164,6 +1265,9 @@ struct SessionBuilder {
     schemas: HashMap<u16, SchemaInfo>,
     /// Channel id -> (topic name, index in `topics`).
     channels: HashMap<u16, (String, usize)>,
+    /// The same lookup by the message's channel id, as an index (`u32::MAX`: none): hashing
+    /// the id of every message cost more than filing it.
+    channel_topics: Vec<u32>,
     total_bytes: u64,
     limits: ReadLimits,
     /// Length of the input, if known.
@@ -1185,6 +1289,7 @@ impl SessionBuilder {
             topic_index: HashMap::new(),
             schemas: HashMap::new(),
             channels: HashMap::new(),
+            channel_topics: Vec::new(),
             total_bytes: 0,
             limits,
             input_len,
@@ -1196,9 +1301,10 @@ impl SessionBuilder {
 
     /// The index in `topics` of the channel `channel_id` of a message at `offset`.
     fn channel_topic(&self, offset: u64, channel_id: u16) -> Result<usize> {
-        self.channels
-            .get(&channel_id)
-            .map(|(_, topic)| *topic)
+        self.channel_topics
+            .get(usize::from(channel_id))
+            .filter(|&&topic| topic != u32::MAX)
+            .map(|&topic| topic as usize)
             .ok_or_else(|| RecordingError::Corrupt {
                 offset,
                 detail: format!("message refers to unknown channel id {channel_id}"),
@@ -1361,6 +1467,12 @@ impl SessionBuilder {
                         self.topics.len() - 1
                     }
                 };
+                let id = usize::from(c.id);
+                if self.channel_topics.len() <= id {
+                    self.channel_topics.resize(id + 1, u32::MAX);
+                }
+                // At most MAX_TOPICS topics.
+                self.channel_topics[id] = index as u32;
                 self.channels.insert(c.id, (c.topic, index));
             }
             Record::Message { header, data } => self.loose_message(offset, &header, &data)?,
@@ -1459,7 +1571,9 @@ pub(crate) fn scan<R: Read>(
     // Decompressed bytes the chunks so far declare, against what the input's length allows.
     let budget = limits.budget(total_len);
     let mut declared = 0u64;
-    let mut record = Vec::new();
+    // The record being read, in a buffer reused from one read to the next.
+    let mut record = PooledBuffer(CHUNK_BUFFERS.take(0));
+    let record = &mut record.0;
     loop {
         // Frame the next top-level record.
         let mut head = [0u8; OPCODE_LEN_SIZE as usize];
@@ -1516,10 +1630,15 @@ pub(crate) fn scan<R: Read>(
             return Ok(outcome);
         }
         record.clear();
+        if total_len.is_some() {
+            // Its length is within what the input holds (checked above) and the record
+            // limit: room for it at once, not grown by doubling.
+            record.reserve(head.len() + len as usize);
+        }
         record.extend_from_slice(&head);
         // `take` + `read_to_end` grows the buffer with the data actually present, so a bogus
         // length on a stream of unknown size cannot force a large allocation.
-        if let Err(e) = (&mut src).take(len).read_to_end(&mut record) {
+        if let Err(e) = (&mut src).take(len).read_to_end(record) {
             outcome.error = Some(RecordingError::io(format!("reading at byte {offset}"), e));
             return Ok(outcome);
         }
@@ -1551,7 +1670,7 @@ pub(crate) fn scan<R: Read>(
         }
 
         // Hand the whole record to the sans-I/O reader and drain what it yields.
-        reader.insert(record.len()).copy_from_slice(&record);
+        reader.insert(record.len()).copy_from_slice(record);
         reader.notify_read(record.len());
         let mut batch = Batch {
             offset,
@@ -1576,6 +1695,17 @@ pub(crate) fn scan<R: Read>(
                                 detail: format!("reserved record opcode {opcode:#04x} in a chunk"),
                             });
                             break;
+                        }
+                        Ok(Record::Chunk { header, data }) => {
+                            // Its compressed bytes into a pooled buffer (the reader of the
+                            // batch gives it back).
+                            let mut owned = CHUNK_BUFFERS.take(data.len());
+                            owned.clear();
+                            owned.extend_from_slice(&data);
+                            batch.records.push(Record::Chunk {
+                                header,
+                                data: Cow::Owned(owned),
+                            });
                         }
                         Ok(r) => {
                             is_footer |= matches!(r, Record::Footer(_));
@@ -1616,6 +1746,15 @@ pub(crate) fn scan<R: Read>(
             }
             return Ok(outcome);
         }
+    }
+}
+
+/// A buffer given back to [`CHUNK_BUFFERS`] when dropped.
+struct PooledBuffer(Vec<u8>);
+
+impl Drop for PooledBuffer {
+    fn drop(&mut self) {
+        CHUNK_BUFFERS.give(std::mem::take(&mut self.0));
     }
 }
 

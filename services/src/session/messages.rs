@@ -291,6 +291,17 @@ fn check_dofs<'n>(
     arrays: [(&str, usize); 3],
     reference: &TickReference,
 ) -> Result<(), String> {
+    check_dofs_named(names, arrays, reference, true)
+}
+
+/// [`check_dofs`], the names compared with the reference only if `compare` (false: they are
+/// those of a message that passed).
+fn check_dofs_named<'n>(
+    names: impl ExactSizeIterator<Item = &'n str> + Clone,
+    arrays: [(&str, usize); 3],
+    reference: &TickReference,
+    compare: bool,
+) -> Result<(), String> {
     let n = names.len();
     if n == 0 || n > MAX_SESSION_DOFS {
         return Err(format!(
@@ -302,7 +313,7 @@ fn check_dofs<'n>(
             return Err(format!("{field} has {len} elements for {n} names"));
         }
     }
-    if let Some(expected) = &reference.dof_names {
+    if let Some(expected) = reference.dof_names.as_ref().filter(|_| compare) {
         same_names("names", names, expected, &reference.dof_source)?;
     }
     Ok(())
@@ -314,16 +325,83 @@ fn check_fingers<'n>(
     names: impl ExactSizeIterator<Item = &'n str> + Clone,
     reference: &TickReference,
 ) -> Result<(), String> {
+    check_fingers_named(names, reference, true)
+}
+
+/// [`check_fingers`], the names compared with the reference only if `compare`.
+fn check_fingers_named<'n>(
+    names: impl ExactSizeIterator<Item = &'n str> + Clone,
+    reference: &TickReference,
+    compare: bool,
+) -> Result<(), String> {
     let n = names.len();
     if n == 0 || n > MAX_SESSION_FINGERS {
         return Err(format!(
             "fingers has {n} entries; a hand has 1 to {MAX_SESSION_FINGERS} fingertips"
         ));
     }
-    if let Some(expected) = &reference.finger_names {
+    if let Some(expected) = reference.finger_names.as_ref().filter(|_| compare) {
         same_names("fingers", names, expected, &reference.finger_source)?;
     }
     Ok(())
+}
+
+/// What the checks of a `/glove/joint_states` or `/glove/feedback` message (format 2) read of
+/// it, when its values are not wanted (`super::wire::glove_shape`, which converts none): its
+/// DOF names, how many elements each of its three arrays has, its fingertips' names.
+#[derive(Debug, Default)]
+pub(crate) struct GloveShape {
+    /// DOF names.
+    pub names: Vec<String>,
+    /// Elements of `positions`, `velocities`, `efforts` (joint states) or `motor_positions`,
+    /// `motor_velocities`, `feedback_torques` (feedback).
+    pub arrays: [usize; 3],
+    /// Fingertip names (feedback; none in joint states).
+    pub fingers: Vec<String>,
+    /// Whether the names and fingertips are those of the message read into it before
+    /// (compared as they were read).
+    pub unchanged: bool,
+    /// The bytes of the name fields the last message read began with, and how many names
+    /// they hold: a message that begins with the same bytes begins with the same names.
+    pub lead: Vec<u8>,
+    /// Names in `lead`.
+    pub lead_names: usize,
+}
+
+impl GloveShape {
+    /// The checks of [`GloveJointStates`] (`feedback` false) or [`GloveFeedback`], on its
+    /// shape; `names_checked`: its names are those of a message that passed them (they are
+    /// not compared again).
+    pub(crate) fn check(
+        &self,
+        feedback: bool,
+        reference: &TickReference,
+        names_checked: bool,
+    ) -> Result<(), String> {
+        let fields = if feedback {
+            ["motor_positions", "motor_velocities", "feedback_torques"]
+        } else {
+            ["positions", "velocities", "efforts"]
+        };
+        check_dofs_named(
+            self.names.iter().map(String::as_str),
+            [
+                (fields[0], self.arrays[0]),
+                (fields[1], self.arrays[1]),
+                (fields[2], self.arrays[2]),
+            ],
+            reference,
+            !names_checked,
+        )?;
+        if feedback {
+            check_fingers_named(
+                self.fingers.iter().map(String::as_str),
+                reference,
+                !names_checked,
+            )?;
+        }
+        Ok(())
+    }
 }
 
 /// `names` (the entries of `field`) are `expected`, in order.

@@ -12,6 +12,7 @@ use super::wire;
 use super::*;
 use crate::error::{RecordingError, Result};
 use crate::foxglove::{FRAME_TRANSFORMS_SCHEMA, JOINT_STATES_SCHEMA, SCENE_UPDATE_SCHEMA};
+use crate::mcap_io::pool::Pool;
 use crate::mcap_io::{
     check_message, json_error, message_location, stream_raw_bytes, stream_raw_file, MetadataRecord,
     RawTopic, RawVisitor, ReadLimits, StreamedRaw,
@@ -243,6 +244,14 @@ pub trait SessionVisitor {
     fn done(&self) -> bool {
         false
     }
+    /// Whether it reads of contacts and object states only what segmentation reads: each
+    /// fingertip's name, `touching`, `in_contact`, `slip`, `point_b`, `normal_b` and
+    /// `intensity`, and the object's `pose` and `pose_in_hand`. A second read from kept
+    /// messages ([`SessionSource::stream_again_kept`]) then decodes only those, the other
+    /// fields left zero. Default: false.
+    fn segmentation_fields_only(&self) -> bool {
+        false
+    }
 }
 
 /// A visitor that keeps nothing: [`stream_session_file`] with it only checks the file.
@@ -332,10 +341,21 @@ pub fn stream_session_file(
     limits: &ReadLimits,
     visitor: &mut impl SessionVisitor,
 ) -> Result<SessionHead> {
-    let path = path.as_ref();
+    stream_file_keeping(path.as_ref(), limits, visitor, None)
+}
+
+/// [`stream_session_file`], keeping the messages handed to `visitor` in `keep` if given.
+fn stream_file_keeping(
+    path: &Path,
+    limits: &ReadLimits,
+    visitor: &mut impl SessionVisitor,
+    keep: Option<&mut KeptMessages>,
+) -> Result<SessionHead> {
     let mut nothing = ();
     let mut early = Checker::early(&mut nothing, visitor.wants());
     let mut checker = Checker::new(visitor);
+    let len = std::fs::metadata(path).map_or(0, |m| usize::try_from(m.len()).unwrap_or(usize::MAX));
+    checker.keep = keep.map(|k| k.start(checker.visitor.wants(), len));
     let raw = stream_raw_file(path, limits, &mut early, &mut checker)?;
     checker.finish(raw, early, &path.display().to_string())
 }
@@ -347,11 +367,143 @@ pub fn stream_session_bytes(
     limits: &ReadLimits,
     visitor: &mut impl SessionVisitor,
 ) -> Result<SessionHead> {
+    stream_bytes_keeping(bytes, name, limits, visitor, None)
+}
+
+/// [`stream_session_bytes`], keeping the messages handed to `visitor` in `keep` if given.
+fn stream_bytes_keeping(
+    bytes: &[u8],
+    name: &str,
+    limits: &ReadLimits,
+    visitor: &mut impl SessionVisitor,
+    keep: Option<&mut KeptMessages>,
+) -> Result<SessionHead> {
     let mut nothing = ();
     let mut early = Checker::early(&mut nothing, visitor.wants());
     let mut checker = Checker::new(visitor);
+    checker.keep = keep.map(|k| k.start(checker.visitor.wants(), bytes.len()));
     let raw = stream_raw_bytes(bytes, limits, &mut early, &mut checker)?;
     checker.finish(raw, early, name)
+}
+
+/// Default budget of [`KeptMessages`]: 32 MiB, the contacts and object states of about two
+/// minutes of session (190 to 240 bytes a millisecond, and 48 of index).
+pub const KEPT_MESSAGES_BUDGET: usize = 32 << 20;
+
+/// The raw messages a first read ([`SessionSource::stream_keeping`]) handed its visitor, as
+/// they were in the file, for a second read ([`SessionSource::stream_again_kept`]) that then
+/// reads no file: no decompression, no CRC, no framing, and no checks (these very bytes were
+/// checked). Up to a budget of bytes: a read that would keep more drops them all and keeps
+/// nothing further (the second read then reads the file again), so memory stays bounded
+/// whatever the session's length.
+#[derive(Debug)]
+pub struct KeptMessages {
+    budget: usize,
+    /// The raw topics kept: those the first read's visitor took.
+    topics: DecodeTopics,
+    /// Whether every message of `topics` the read handed on is here (false once over budget,
+    /// or before a read).
+    complete: bool,
+    messages: Vec<KeptMessage>,
+    bytes: Vec<u8>,
+}
+
+/// One kept message: where its payload lies in [`KeptMessages::bytes`], what it was.
+#[derive(Debug, Clone, Copy)]
+struct KeptMessage {
+    log_time_ns: u64,
+    start: u32,
+    len: u32,
+    index: u32,
+    raw: u8,
+    protobuf: bool,
+}
+
+/// The payloads of kept messages, reused from one segmentation to the next (16 MiB: a
+/// minute of session, or a few short ones analysed side by side).
+static KEPT_BYTES: Pool<u8> = Pool::new(16 << 20, 1);
+/// Their index, likewise (a minute's is 3 MB).
+static KEPT_INDEX: Pool<KeptMessage> = Pool::new(6 << 20, 1);
+
+impl KeptMessages {
+    /// Keeps at most `budget` bytes (payloads and their index).
+    pub fn new(budget: usize) -> Self {
+        KeptMessages {
+            budget,
+            topics: DecodeTopics::NONE,
+            complete: false,
+            messages: Vec::new(),
+            bytes: Vec::new(),
+        }
+    }
+
+    /// Empty, ready to keep the messages of `topics` of a new read of a file of `len` bytes
+    /// (their room taken at once: the contacts and object states are 85 to 100 % of one of
+    /// our session files' length, one message per 95 to 120 bytes of it).
+    fn start(&mut self, topics: DecodeTopics, len: usize) -> &mut Self {
+        self.release();
+        let room = len.min(self.budget);
+        self.bytes = KEPT_BYTES.take(room);
+        self.bytes.clear();
+        self.messages = KEPT_INDEX.take(room / 90);
+        self.messages.clear();
+        self.topics = topics;
+        self.complete = true;
+        self
+    }
+
+    /// Gives the buffers back to their pools.
+    fn release(&mut self) {
+        KEPT_BYTES.give(std::mem::take(&mut self.bytes));
+        KEPT_INDEX.give(std::mem::take(&mut self.messages));
+    }
+
+    /// Whether it holds every message of `topics` of the read (none dropped for the budget).
+    pub fn covers(&self, topics: DecodeTopics) -> bool {
+        self.complete && (0..RAW_TOPICS.len()).all(|i| !topics.has(i) || self.topics.has(i))
+    }
+
+    /// Bytes held (payloads and index).
+    pub fn held_bytes(&self) -> usize {
+        self.bytes.len() + self.messages.len() * std::mem::size_of::<KeptMessage>()
+    }
+
+    /// Keeps a message; over the budget (or past what the index can say), drops everything.
+    fn keep(&mut self, raw: usize, protobuf: bool, index: usize, t: u64, data: &[u8]) {
+        if !self.complete {
+            return;
+        }
+        let entry = (
+            u32::try_from(self.bytes.len()),
+            u32::try_from(data.len()),
+            u32::try_from(index),
+        );
+        let over =
+            self.held_bytes() + data.len() + std::mem::size_of::<KeptMessage>() > self.budget;
+        match entry {
+            (Ok(start), Ok(len), Ok(index)) if !over => {
+                self.bytes.extend_from_slice(data);
+                self.messages.push(KeptMessage {
+                    log_time_ns: t,
+                    start,
+                    len,
+                    index,
+                    raw: raw as u8,
+                    protobuf,
+                });
+            }
+            _ => {
+                self.complete = false;
+                self.release();
+            }
+        }
+    }
+}
+
+impl Drop for KeptMessages {
+    fn drop(&mut self) {
+        self.release();
+    }
 }
 
 /// Where a session is read from, as many times as a reader needs (segmentation reads twice).
@@ -410,12 +562,80 @@ impl SessionSource<'_> {
         limits: &ReadLimits,
         visitor: &mut impl SessionVisitor,
     ) -> Result<SessionHead> {
+        self.stream_with(limits, visitor, None)
+    }
+
+    /// [`SessionSource::stream`] keeping the raw messages handed to `visitor` in `keep`
+    /// (within its budget), for [`SessionSource::stream_again_kept`].
+    pub fn stream_keeping(
+        &self,
+        limits: &ReadLimits,
+        visitor: &mut impl SessionVisitor,
+        keep: &mut KeptMessages,
+    ) -> Result<SessionHead> {
+        let head = self.stream_with(limits, visitor, Some(&mut *keep));
+        if head.is_err() {
+            // Nothing of a read that failed is to be used.
+            keep.complete = false;
+            keep.release();
+        }
+        head
+    }
+
+    fn stream_with(
+        &self,
+        limits: &ReadLimits,
+        visitor: &mut impl SessionVisitor,
+        keep: Option<&mut KeptMessages>,
+    ) -> Result<SessionHead> {
         match *self {
-            SessionSource::File(path) => stream_session_file(path, limits, visitor),
+            SessionSource::File(path) => stream_file_keeping(path, limits, visitor, keep),
             SessionSource::Bytes { bytes, name } => {
-                stream_session_bytes(bytes, name, limits, visitor)
+                stream_bytes_keeping(bytes, name, limits, visitor, keep)
             }
         }
+    }
+
+    /// [`SessionSource::stream_again`] from the messages `kept` by a first read of the source
+    /// ([`SessionSource::stream_keeping`], without error) if it holds all the visitor
+    /// [wants](SessionVisitor::wants): they are decoded and handed on, in file order, until
+    /// the visitor is [`done`](SessionVisitor::done), and no file is read. Otherwise the
+    /// source is read again as [`SessionSource::stream_again`] does.
+    pub fn stream_again_kept(
+        &self,
+        limits: &ReadLimits,
+        visitor: &mut impl SessionVisitor,
+        kept: &KeptMessages,
+    ) -> Result<()> {
+        let topics = visitor.wants();
+        if !kept.covers(topics) {
+            return self.stream_again(limits, visitor);
+        }
+        let lean = visitor.segmentation_fields_only();
+        let mut checker = Checker::new(visitor);
+        checker.again = Some(topics);
+        checker.checked_before = true;
+        checker.lean = lean;
+        for m in &kept.messages {
+            let raw = usize::from(m.raw);
+            if !topics.has(raw) {
+                continue;
+            }
+            let start = m.start as usize;
+            let data = &kept.bytes[start..start + m.len as usize];
+            checker.raw_message(
+                raw,
+                m.protobuf,
+                RAW_TOPICS[raw],
+                m.index as usize,
+                m.log_time_ns,
+                data,
+            )?;
+            if checker.visitor.done() {
+                break;
+            }
+        }
+        Ok(())
     }
 }
 
@@ -630,6 +850,31 @@ enum FoxgloveType {
     JointStates,
 }
 
+/// The check of a Foxglove type's messages, made once from the SDK's schema (`None` if it
+/// could not be: prost decodes them then).
+fn foxglove_check(which: FoxgloveType) -> Option<&'static wire::MessageCheck> {
+    use foxglove::messages as fg;
+    use foxglove::Encode;
+    static CHECKS: std::sync::OnceLock<[Option<wire::MessageCheck>; 3]> =
+        std::sync::OnceLock::new();
+    let checks = CHECKS.get_or_init(|| {
+        let make = |schema: Option<foxglove::Schema>| {
+            schema.and_then(|s| wire::MessageCheck::new(&s.data, &s.name))
+        };
+        [
+            make(fg::FrameTransforms::get_schema()),
+            make(fg::SceneUpdate::get_schema()),
+            make(fg::JointStates::get_schema()),
+        ]
+    });
+    let i = match which {
+        FoxgloveType::FrameTransforms => 0,
+        FoxgloveType::SceneUpdate => 1,
+        FoxgloveType::JointStates => 2,
+    };
+    checks[i].as_ref()
+}
+
 /// Per raw topic: what its log times were so far.
 #[derive(Debug, Clone, Copy, Default)]
 struct Times {
@@ -645,6 +890,10 @@ struct Scratch {
     feedback: GloveFeedback,
     contacts: Contacts,
     object: messages::ObjectState,
+    /// `/glove/joint_states` and `/glove/feedback` read for their checks alone.
+    shapes: [GloveShape; 2],
+    /// Per glove topic: its last message passed the checks of its names.
+    names_checked: [bool; 2],
 }
 
 /// The checks of a session read in one pass, in front of a [`SessionVisitor`].
@@ -668,11 +917,22 @@ struct Checker<'v, V: SessionVisitor> {
     /// The checker of the reading thread, for a visitor that takes these raw topics: it
     /// claims the others, and the Foxglove and other JSON topics.
     early_for: Option<DecodeTopics>,
+    /// Where the raw messages handed to the visitor are kept for a second read.
+    keep: Option<&'v mut KeptMessages>,
+    /// The raw topics the visitor takes.
+    wants: DecodeTopics,
+    /// The messages were read and checked before, these very bytes ([`KeptMessages`]): they
+    /// are only decoded.
+    checked_before: bool,
+    /// With `checked_before`: contacts and object states are decoded only as far as the
+    /// visitor reads them ([`SessionVisitor::segmentation_fields_only`]).
+    lean: bool,
 }
 
 impl<'v, V: SessionVisitor> Checker<'v, V> {
     fn new(visitor: &'v mut V) -> Self {
         Checker {
+            wants: visitor.wants(),
             visitor,
             kinds: Vec::new(),
             times: [Times::default(); 4],
@@ -682,6 +942,9 @@ impl<'v, V: SessionVisitor> Checker<'v, V> {
             again: None,
             stopped: false,
             early_for: None,
+            keep: None,
+            checked_before: false,
+            lean: false,
         }
     }
 }
@@ -742,12 +1005,32 @@ impl<'v, V: SessionVisitor> Checker<'v, V> {
         &mut self,
         raw: usize,
         protobuf: bool,
-        topic: &RawTopic,
+        name: &str,
         index: usize,
         t: u64,
         data: &[u8],
     ) -> Result<()> {
-        let name = topic.topic.as_str();
+        if self.checked_before {
+            // These bytes passed every check in a first read: decoded only.
+            if self.lean && protobuf && raw >= 2 {
+                let s = &mut self.scratch;
+                let lean = if raw == 2 {
+                    wire::contacts_lean(data, &mut s.contacts)
+                } else {
+                    wire::object_lean(data, &mut s.object)
+                };
+                lean.map_err(|e| undecodable(raw, name, index, t, e))?;
+            } else {
+                self.decode(raw, protobuf, name, index, t, data)?;
+            }
+            let s = &self.scratch;
+            return match raw {
+                0 => self.visitor.joint_states(t, &s.joint_states),
+                1 => self.visitor.feedback(t, &s.feedback),
+                2 => self.visitor.contacts(t, &s.contacts),
+                _ => self.visitor.object(t, &s.object),
+            };
+        }
         if data.len() > MAX_RAW_MESSAGE_BYTES {
             return Err(RecordingError::InvalidInput {
                 location: message_location(name, index, t),
@@ -759,36 +1042,28 @@ impl<'v, V: SessionVisitor> Checker<'v, V> {
             });
         }
         self.check_time(raw, name, index, t)?;
-        let s = &mut self.scratch;
-        let undecodable = |e: wire::DecodeError| RecordingError::InvalidInput {
-            location: message_location(name, index, t),
-            detail: format!(
-                "does not decode as {}: failed to decode Protobuf message: {e}",
-                RAW_SCHEMA_NAMES[raw]
-            ),
-        };
-        fn json<T: serde::de::DeserializeOwned>(
-            topic: &str,
-            index: usize,
-            t: u64,
-            data: &[u8],
-        ) -> Result<T> {
-            serde_json::from_slice(data).map_err(|e| json_error::<T>(topic, index, t, data, e))
-        }
-        match (raw, protobuf) {
-            (0, true) => wire::joint_states(data, &mut s.joint_states).map_err(undecodable)?,
-            (0, false) => s.joint_states = json(name, index, t, data)?,
-            (1, true) => wire::feedback(data, &mut s.feedback).map_err(undecodable)?,
-            (1, false) => s.feedback = json(name, index, t, data)?,
-            (2, true) => wire::contacts(data, &mut s.contacts).map_err(undecodable)?,
-            (2, false) => s.contacts = json(name, index, t, data)?,
-            (_, true) => wire::object(data, &mut s.object).map_err(undecodable)?,
-            (_, false) => s.object = json(name, index, t, data)?,
-        }
         let invalid = |detail: String| RecordingError::InvalidInput {
             location: message_location(name, index, t),
             detail,
         };
+        if protobuf && raw < 2 && !self.wants.has(raw) {
+            // A glove topic no one takes: read only as far as its checks need (no value
+            // converted), its names compared with the reference only when they changed.
+            let shape = &mut self.scratch.shapes[raw];
+            wire::glove_shape(data, raw == 1, shape)
+                .map_err(|e| undecodable(raw, name, index, t, e))?;
+            let r = &mut self.references[raw];
+            r.learn_dofs(name, &shape.names);
+            if raw == 1 {
+                r.learn_fingers(name, shape.fingers.iter().map(String::as_str));
+            }
+            let checked = shape.unchanged && self.scratch.names_checked[raw];
+            shape.check(raw == 1, r, checked).map_err(invalid)?;
+            self.scratch.names_checked[raw] = true;
+            return Ok(());
+        }
+        self.decode(raw, protobuf, name, index, t, data)?;
+        let s = &mut self.scratch;
         let r = &mut self.references[raw];
         match raw {
             0 => {
@@ -812,6 +1087,39 @@ impl<'v, V: SessionVisitor> Checker<'v, V> {
                 self.visitor.object(t, &s.object)
             }
         }
+    }
+
+    /// Decodes raw message `index` of `name` (raw topic `raw`) into the scratch message.
+    fn decode(
+        &mut self,
+        raw: usize,
+        protobuf: bool,
+        name: &str,
+        index: usize,
+        t: u64,
+        data: &[u8],
+    ) -> Result<()> {
+        let s = &mut self.scratch;
+        let undecodable = |e: wire::DecodeError| undecodable(raw, name, index, t, e);
+        fn json<T: serde::de::DeserializeOwned>(
+            topic: &str,
+            index: usize,
+            t: u64,
+            data: &[u8],
+        ) -> Result<T> {
+            serde_json::from_slice(data).map_err(|e| json_error::<T>(topic, index, t, data, e))
+        }
+        match (raw, protobuf) {
+            (0, true) => wire::joint_states(data, &mut s.joint_states).map_err(undecodable)?,
+            (0, false) => s.joint_states = json(name, index, t, data)?,
+            (1, true) => wire::feedback(data, &mut s.feedback).map_err(undecodable)?,
+            (1, false) => s.feedback = json(name, index, t, data)?,
+            (2, true) => wire::contacts(data, &mut s.contacts).map_err(undecodable)?,
+            (2, false) => s.contacts = json(name, index, t, data)?,
+            (_, true) => wire::object(data, &mut s.object).map_err(undecodable)?,
+            (_, false) => s.object = json(name, index, t, data)?,
+        }
+        Ok(())
     }
 
     /// The checks that need the whole file: every raw topic there and spanning the session,
@@ -916,6 +1224,7 @@ impl<V: SessionVisitor> RawVisitor for Checker<'_, V> {
         // ours, passed over) on the reading thread and never queued for the calling one.
         match self.kinds.get(topic_index) {
             Some(Kind::Raw(raw, _)) => !wants.has(*raw),
+            Some(Kind::Foxglove(_)) if wants != DecodeTopics::NONE => false,
             _ => true,
         }
     }
@@ -1011,7 +1320,10 @@ impl<V: SessionVisitor> RawVisitor for Checker<'_, V> {
         }
         match kind {
             Kind::Raw(raw, protobuf) => {
-                self.raw_message(raw, protobuf, topic, index, t, data)?;
+                self.raw_message(raw, protobuf, &topic.topic, index, t, data)?;
+                if let Some(keep) = self.keep.as_deref_mut() {
+                    keep.keep(raw, protobuf, index, t, data);
+                }
                 if self.again.is_some() && self.visitor.done() {
                     self.stopped = true;
                     return Err(RecordingError::InvalidInput {
@@ -1026,10 +1338,21 @@ impl<V: SessionVisitor> RawVisitor for Checker<'_, V> {
             Kind::Foxglove(which) => {
                 use foxglove::messages as fg;
                 use prost::Message;
-                let decoded = match which {
-                    FoxgloveType::FrameTransforms => fg::FrameTransforms::decode(data).map(drop),
-                    FoxgloveType::SceneUpdate => fg::SceneUpdate::decode(data).map(drop),
-                    FoxgloveType::JointStates => fg::JointStates::decode(data).map(drop),
+                // Checked as prost decodes it, without building it (`wire::MessageCheck`);
+                // decoded by prost if the SDK's schema could not make the check.
+                let decoded = match (foxglove_check(which), which) {
+                    (Some(check), _) => check
+                        .check(data)
+                        .map_err(|e| format!("failed to decode Protobuf message: {e}")),
+                    (None, FoxgloveType::FrameTransforms) => fg::FrameTransforms::decode(data)
+                        .map(drop)
+                        .map_err(|e| e.to_string()),
+                    (None, FoxgloveType::SceneUpdate) => fg::SceneUpdate::decode(data)
+                        .map(drop)
+                        .map_err(|e| e.to_string()),
+                    (None, FoxgloveType::JointStates) => fg::JointStates::decode(data)
+                        .map(drop)
+                        .map_err(|e| e.to_string()),
                 };
                 decoded.map_err(|e| RecordingError::InvalidInput {
                     location: message_location(&topic.topic, index, t),
@@ -1044,6 +1367,24 @@ impl<V: SessionVisitor> RawVisitor for Checker<'_, V> {
             }
             Kind::Other => Ok(()),
         }
+    }
+}
+
+/// The error of raw message `index` (log time `t`) of `name` (raw topic `raw`) that does not
+/// decode.
+fn undecodable(
+    raw: usize,
+    name: &str,
+    index: usize,
+    t: u64,
+    e: wire::DecodeError,
+) -> RecordingError {
+    RecordingError::InvalidInput {
+        location: message_location(name, index, t),
+        detail: format!(
+            "does not decode as {}: failed to decode Protobuf message: {e}",
+            RAW_SCHEMA_NAMES[raw]
+        ),
     }
 }
 
