@@ -30,8 +30,9 @@ const BATCH_TICKS: usize = 5 * FOXGLOVE_DECIMATION as usize;
 /// zstd level of session files: 1. Measured on a 60 s `sphere-lift` (2026-11-26, `perf` by
 /// thread, chunks compressed whole by `mcap_io::chunked`): level 3 made a 10.75 MB file with
 /// 0.14 s of the writer thread's CPU, level 1 an 11.42 MB one with 0.10 s. Beside a simulation
-/// of 0.15 s on the other core, that difference is what keeps recording within a quarter of
-/// the simulation's time, and both sizes are within 12 MB per minute.
+/// of 0.15 s on the other core, a third of the writer's work is what recording's time over
+/// the simulation's comes down to (BENCHMARKS.md, "Recording"); both sizes are within 12 MB
+/// per minute.
 const ZSTD_LEVEL: u32 = 1;
 /// Batches in flight on each of the two channels (simulation → serialiser → writer).
 const CHANNEL_BOUND: usize = 4;
@@ -1169,9 +1170,15 @@ fn timestamp(ns: u64) -> Result<fg::Timestamp> {
 /// metre, 1e-7 of a unit quaternion) is far finer than the raw topics' steps (1e-6 m, 1e-6,
 /// 1e-5 rad). A `double` that holds an `f32` ends in 29 zero bits, which zstd takes for
 /// almost nothing: `/tf`, `/scene` and `/joint_states` come out a third smaller (0.73 MB of a
-/// minute's 11.48 MB).
+/// minute's 11.48 MB). A value beyond `f32`'s range (no real pose or angle) stays as it is,
+/// never infinite.
 fn f32p(x: f64) -> f64 {
-    x as f32 as f64
+    let y = x as f32;
+    if y.is_finite() {
+        f64::from(y)
+    } else {
+        x
+    }
 }
 
 fn fg_vector(v: &Vector) -> fg::Vector3 {
