@@ -341,23 +341,7 @@ pub fn stream_session_file(
     limits: &ReadLimits,
     visitor: &mut impl SessionVisitor,
 ) -> Result<SessionHead> {
-    stream_file_keeping(path.as_ref(), limits, visitor, None)
-}
-
-/// [`stream_session_file`], keeping the messages handed to `visitor` in `keep` if given.
-fn stream_file_keeping(
-    path: &Path,
-    limits: &ReadLimits,
-    visitor: &mut impl SessionVisitor,
-    keep: Option<&mut KeptMessages>,
-) -> Result<SessionHead> {
-    let mut nothing = ();
-    let mut early = Checker::early(&mut nothing, visitor.wants());
-    let mut checker = Checker::new(visitor);
-    let len = std::fs::metadata(path).map_or(0, |m| usize::try_from(m.len()).unwrap_or(usize::MAX));
-    checker.keep = keep.map(|k| k.start(checker.visitor.wants(), len));
-    let raw = stream_raw_file(path, limits, &mut early, &mut checker)?;
-    checker.finish(raw, early, &path.display().to_string())
+    stream_source(&SessionSource::File(path.as_ref()), limits, visitor, None)
 }
 
 /// [`stream_session_file`] of bytes in memory; `name` appears in error messages.
@@ -367,13 +351,13 @@ pub fn stream_session_bytes(
     limits: &ReadLimits,
     visitor: &mut impl SessionVisitor,
 ) -> Result<SessionHead> {
-    stream_bytes_keeping(bytes, name, limits, visitor, None)
+    stream_source(&SessionSource::Bytes { bytes, name }, limits, visitor, None)
 }
 
-/// [`stream_session_bytes`], keeping the messages handed to `visitor` in `keep` if given.
-fn stream_bytes_keeping(
-    bytes: &[u8],
-    name: &str,
+/// [`stream_session_file`] or [`stream_session_bytes`] of `source`, keeping the messages
+/// handed to `visitor` in `keep` if given.
+fn stream_source(
+    source: &SessionSource<'_>,
     limits: &ReadLimits,
     visitor: &mut impl SessionVisitor,
     keep: Option<&mut KeptMessages>,
@@ -381,9 +365,24 @@ fn stream_bytes_keeping(
     let mut nothing = ();
     let mut early = Checker::early(&mut nothing, visitor.wants());
     let mut checker = Checker::new(visitor);
-    checker.keep = keep.map(|k| k.start(checker.visitor.wants(), bytes.len()));
-    let raw = stream_raw_bytes(bytes, limits, &mut early, &mut checker)?;
-    checker.finish(raw, early, name)
+    let len = match source {
+        SessionSource::File(path) => {
+            std::fs::metadata(path).map_or(0, |m| usize::try_from(m.len()).unwrap_or(usize::MAX))
+        }
+        SessionSource::Bytes { bytes, .. } => bytes.len(),
+    };
+    checker.keep = keep.map(|k| k.start(checker.visitor.wants(), len));
+    let (raw, name) = match source {
+        SessionSource::File(path) => (
+            stream_raw_file(path, limits, &mut early, &mut checker)?,
+            path.display().to_string(),
+        ),
+        SessionSource::Bytes { bytes, name } => (
+            stream_raw_bytes(bytes, limits, &mut early, &mut checker)?,
+            (*name).to_owned(),
+        ),
+    };
+    checker.finish(raw, early, &name)
 }
 
 /// Default budget of [`KeptMessages`]: 32 MiB, the contacts and object states of about two
@@ -588,12 +587,7 @@ impl SessionSource<'_> {
         visitor: &mut impl SessionVisitor,
         keep: Option<&mut KeptMessages>,
     ) -> Result<SessionHead> {
-        match *self {
-            SessionSource::File(path) => stream_file_keeping(path, limits, visitor, keep),
-            SessionSource::Bytes { bytes, name } => {
-                stream_bytes_keeping(bytes, name, limits, visitor, keep)
-            }
-        }
+        stream_source(self, limits, visitor, keep)
     }
 
     /// [`SessionSource::stream_again`] from the messages `kept` by a first read of the source
