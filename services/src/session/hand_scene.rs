@@ -37,10 +37,11 @@ use dfs_core::hand::{
     builtin_hand, builtin_spec, hand_urdf, link_shapes, HandModel, LinkShape, Primitive,
     ShapeSource,
 };
-use dfs_core::math::{Isometry, Vector};
+use dfs_core::math::Vector;
 use foxglove::messages as fg;
 use foxglove::Encode;
 
+use super::recorder::{fg_pose, fg_vector};
 use crate::error::{RecordingError, Result};
 use crate::mcap_io::SessionWriter;
 
@@ -74,27 +75,6 @@ pub fn session_hand_urdf(hand: &HandModel, source_urdf: Option<&str>) -> Result<
         topic: HAND_URDF_ATTACHMENT.to_owned(),
         detail: e.to_string(),
     })
-}
-
-fn fg_vector(v: &Vector) -> fg::Vector3 {
-    fg::Vector3 {
-        x: v.x,
-        y: v.y,
-        z: v.z,
-    }
-}
-
-fn fg_pose(iso: &Isometry) -> fg::Pose {
-    let q = iso.rotation.quaternion();
-    fg::Pose {
-        position: Some(fg_vector(&iso.translation.vector)),
-        orientation: Some(fg::Quaternion {
-            x: q.i,
-            y: q.j,
-            z: q.k,
-            w: q.w,
-        }),
-    }
 }
 
 fn colour(source: ShapeSource) -> fg::Color {

@@ -1181,7 +1181,7 @@ fn f32p(x: f64) -> f64 {
     }
 }
 
-fn fg_vector(v: &Vector) -> fg::Vector3 {
+pub(super) fn fg_vector(v: &Vector) -> fg::Vector3 {
     fg::Vector3 {
         x: f32p(v.x),
         y: f32p(v.y),
@@ -1199,7 +1199,7 @@ fn fg_quaternion(r: &Rotation) -> fg::Quaternion {
     }
 }
 
-fn fg_pose(iso: &Isometry) -> fg::Pose {
+pub(super) fn fg_pose(iso: &Isometry) -> fg::Pose {
     fg::Pose {
         position: Some(fg_vector(&iso.translation.vector)),
         orientation: Some(fg_quaternion(&iso.rotation)),
