@@ -1,6 +1,7 @@
 //! Compiles `proto/icms/session.proto` (the raw topics' schema of session format v2) with
 //! protox (a protobuf compiler in Rust: no protoc to install) into a FileDescriptorSet, which
-//! the recorder writes as the MCAP schema of each raw topic, and into prost types.
+//! the recorder writes as the MCAP schema of each raw topic, and into prost types; and
+//! `proto/icms/live.proto` (the binary frames of live sessions) into prost types alone.
 
 use std::path::PathBuf;
 
@@ -26,4 +27,13 @@ fn main() {
         .out_dir(&out)
         .compile_fds(fds)
         .unwrap_or_else(|e| panic!("generating Rust from {proto}: {e}"));
+
+    // Compiled apart: the session files' schema stays the session types alone.
+    let live = "proto/icms/live.proto";
+    println!("cargo:rerun-if-changed={live}");
+    let fds = protox::compile([live], ["proto"]).unwrap_or_else(|e| panic!("{live}: {e}"));
+    prost_build::Config::new()
+        .out_dir(&out)
+        .compile_fds(fds)
+        .unwrap_or_else(|e| panic!("generating Rust from {live}: {e}"));
 }

@@ -66,10 +66,26 @@ pub fn analyse_source(
         mu: object.get("mu").and_then(|v| v.as_f64()).unwrap_or(0.0),
         duration_ns: last.saturating_sub(first),
         started_at: m.get("started_at").cloned(),
-        extra: serde_json::to_value(m).unwrap_or(serde_json::Value::Null),
+        extra: extra_of(m, head.live.as_ref()),
     };
     let skills = seg.skills.iter().map(to_new_skill).collect();
     Ok((meta, skills))
+}
+
+/// A session's further parameters for the store: its `session` metadata record, and a live
+/// session's `live` record (how it ended, whether it is complete) under `live`.
+fn extra_of(
+    session: &std::collections::BTreeMap<String, String>,
+    live: Option<&std::collections::BTreeMap<String, String>>,
+) -> serde_json::Value {
+    let mut extra = serde_json::to_value(session).unwrap_or(serde_json::Value::Null);
+    if let (Some(live), Some(map)) = (live, extra.as_object_mut()) {
+        map.insert(
+            crate::live::LIVE_METADATA.to_owned(),
+            serde_json::to_value(live).unwrap_or(serde_json::Value::Null),
+        );
+    }
+    extra
 }
 
 /// The store's indexed columns of a skill plus its full parameters.

@@ -12,6 +12,7 @@
 pub mod error;
 pub mod foxglove;
 pub mod ingest;
+pub mod live;
 pub mod mcap_io;
 pub mod replay;
 pub mod reprocess;

@@ -184,6 +184,9 @@ pub struct SessionHead {
     pub message_counts: BTreeMap<String, usize>,
     /// The `replay` metadata record, present only in a replay recording.
     pub replay: Option<BTreeMap<String, String>>,
+    /// The `live` metadata record ([`crate::live::LIVE_METADATA`]), present only in a live
+    /// session: how it ended and whether it is complete.
+    pub live: Option<BTreeMap<String, String>>,
     /// Log times of the first and last `/object/state` message (ns).
     pub object_span_ns: (u64, u64),
 }
@@ -740,7 +743,12 @@ fn check_metadata(records: &[MetadataRecord], name: &str) -> Result<()> {
             ),
         ));
     }
-    for unique in [SESSION_METADATA, GROUND_TRUTH_METADATA, REPLAY_METADATA] {
+    for unique in [
+        SESSION_METADATA,
+        GROUND_TRUTH_METADATA,
+        REPLAY_METADATA,
+        crate::live::LIVE_METADATA,
+    ] {
         let n = records.iter().filter(|r| r.name == unique).count();
         if n > 1 {
             return Err(invalid(
@@ -1204,6 +1212,7 @@ impl<'v, V: SessionVisitor> Checker<'v, V> {
                 .map(|(t, n)| (t.topic.clone(), *n))
                 .collect(),
             replay,
+            live: find(crate::live::LIVE_METADATA),
             object_span_ns: (object.first.unwrap_or(0), object.last),
         })
     }
