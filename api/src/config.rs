@@ -72,6 +72,13 @@ pub struct ServeArgs {
     /// descriptor limit less 64 when that is lower.
     #[arg(long)]
     pub max_connections: Option<usize>,
+    /// Live glove sessions (`GET /api/v1/live`) at once; more are answered 503.
+    #[arg(long, default_value_t = 16)]
+    pub max_live: usize,
+    /// Threads stepping the live sessions' DFS, shared by all of them. Default: the number of
+    /// cores.
+    #[arg(long)]
+    pub live_threads: Option<usize>,
 }
 
 /// Largest accepted `--max-body` and `--max-upload`: 64 GiB.
@@ -79,7 +86,7 @@ pub const MAX_MAX_BODY: usize = 64 << 30;
 /// Longest accepted `--request-timeout`, `--queue-wait`, `--header-timeout` and
 /// `--keep-alive-timeout`: one day.
 pub const MAX_TIMEOUT_S: f64 = 86_400.0;
-/// Largest accepted `--max-simulations` and `--max-ingests`.
+/// Largest accepted `--max-simulations`, `--max-ingests`, `--max-live` and `--live-threads`.
 pub const MAX_WORKERS: usize = 256;
 /// Largest accepted `--cache-mib` (64 GiB).
 pub const MAX_CACHE_MIB: usize = 1 << 16;
@@ -142,6 +149,8 @@ impl Default for ServeArgs {
             header_timeout: 10.0,
             keep_alive_timeout: 30.0,
             max_connections: None,
+            max_live: 16,
+            live_threads: None,
         }
     }
 }
@@ -206,6 +215,11 @@ impl ServeArgs {
         let max_simulations = count("--max-simulations", self.max_simulations, 1, MAX_WORKERS)?;
         let max_ingests = count("--max-ingests", self.max_ingests, 1, MAX_WORKERS)?;
         let cache_bytes = count("--cache-mib", self.cache_mib, 0, MAX_CACHE_MIB)? << 20;
+        let max_live = count("--max-live", self.max_live, 1, MAX_WORKERS)?;
+        let live_threads = match self.live_threads {
+            Some(n) => count("--live-threads", n, 1, MAX_WORKERS)?,
+            None => std::thread::available_parallelism().map_or(2, |n| n.get()),
+        };
         let max_connections = match self.max_connections {
             Some(n) => count("--max-connections", n, 1, MAX_CONNECTIONS)?,
             None => default_max_connections(),
@@ -232,6 +246,8 @@ impl ServeArgs {
                 max_ingests,
                 queue_wait,
                 cache_bytes,
+                max_live,
+                live_threads,
             },
             layers: LayerConfig {
                 request_timeout,

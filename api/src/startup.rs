@@ -48,6 +48,9 @@ pub struct Application {
     connections: ConnectionLimits,
 }
 
+/// Longest wait at shutdown for the live sessions to be finished and stored.
+pub const LIVE_STORE_GRACE: std::time::Duration = std::time::Duration::from_secs(30);
+
 /// How often the server sweeps unreferenced blobs (besides once at start-up).
 pub const SWEEP_INTERVAL: std::time::Duration = std::time::Duration::from_secs(3600);
 
@@ -70,7 +73,10 @@ impl Application {
                 path: config.data.display().to_string(),
                 source,
             })?;
-        let state = AppState::new(store, &config.state);
+        let state = AppState::new(store, &config.state).map_err(|source| StartupError::Io {
+            context: "starting the live stepping threads".into(),
+            source,
+        })?;
         clear_scratch(state.scratch_dir()).await;
         let router = http::app(state.clone(), &config.layers);
         let listener = TcpListener::bind(config.addr)
@@ -140,6 +146,14 @@ impl Application {
             })
             .await;
         self.state.stop_work();
+        // Live sessions end on stop_work; each is finished and stored before the store closes.
+        if !self.state.live().wait_stored(LIVE_STORE_GRACE).await {
+            tracing::warn!(
+                grace_s = LIVE_STORE_GRACE.as_secs_f64(),
+                "live sessions were still being stored after the grace; their recordings stay \
+                 in the staging area"
+            );
+        }
         if let Some(task) = seeding {
             let _ = task.await;
         }

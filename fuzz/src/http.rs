@@ -131,7 +131,8 @@ impl HttpTarget {
                 .skill_ids
                 .first()
                 .ok_or_else(|| err("storing the seed session", "no skills"))?;
-            let state = api::http::AppState::new(store, &config.state);
+            let state = api::http::AppState::new(store, &config.state)
+                .map_err(|e| err("starting the live stepping threads", e))?;
             Ok::<_, SeedError>((api::http::app(state, &config.layers), skill_id))
         })?;
 

@@ -15,6 +15,7 @@
 //! | `GET /api/v1/hands/{id}`, `GET /api/v1/hands/{id}/urdf` | one hand (id = name), its URDF |
 //! | `POST /api/v1/skills/{id}/replays`, `GET /api/v1/skills/{id}/replays` | replay on a hand, list |
 //! | `GET /api/v1/replays/{id}`, `GET /api/v1/replays/{id}/mcap` | one replay's report, its MCAP |
+//! | `GET /api/v1/live` | a live glove session (WebSocket; protocol in `docs/live.md`) |
 //! | `GET /healthz`, `GET /api/v1/openapi.json` | liveness, this API's document |
 
 pub mod cache;
@@ -23,6 +24,7 @@ pub mod extract;
 pub mod hands;
 pub mod hyper_errors;
 mod linger;
+pub mod live;
 pub mod meta;
 pub mod replays;
 pub mod server;
@@ -74,6 +76,7 @@ pub fn routes() -> OpenApiRouter<AppState> {
         .merge(simulations::router())
         .merge(hands::router())
         .merge(replays::router())
+        .merge(live::router())
         .merge(meta::api_router());
     OpenApiRouter::new()
         .nest(API_PREFIX, api)
@@ -119,9 +122,12 @@ fn finish_openapi(mut api: OpenApi, writes_need_token: bool) -> OpenApi {
         );
     }
     document_filter_values(&mut api);
-    for item in api.paths.paths.values_mut() {
+    for (path, item) in api.paths.paths.iter_mut() {
+        // A live session records and stores a session: it writes, though it is a GET (the
+        // WebSocket upgrade).
+        let get_writes = path == &format!("{API_PREFIX}/live");
         let ops = [
-            (&mut item.get, false),
+            (&mut item.get, get_writes),
             (&mut item.post, true),
             (&mut item.delete, true),
             (&mut item.put, true),

@@ -14,6 +14,10 @@
 //!   handled no clock runs here: the request's own time limit (`--request-timeout`) covers it.
 //! - **Shutdown grace.** On shutdown the loop stops accepting, asks every connection to close
 //!   after its current answer, and waits at most `shutdown_grace` for them.
+//!
+//! Connections may be upgraded (`GET /api/v1/live` is a WebSocket): once a request is answered
+//! `101 Switching Protocols` the connection is the WebSocket's, which has clocks of its own,
+//! so neither timeout applies to it any more.
 
 use std::future::Future;
 use std::io;
@@ -27,11 +31,12 @@ use axum::extract::Request;
 use axum::Router;
 use hyper::body::Incoming;
 use hyper_util::rt::{TokioIo, TokioTimer};
-use hyper_util::server::graceful::GracefulShutdown;
 use tokio::io::{AsyncRead, AsyncWrite, ReadBuf};
 use tokio::net::TcpListener;
 use tokio::sync::Semaphore;
 use tokio::time::{Instant, Sleep};
+use tokio_util::sync::CancellationToken;
+use tokio_util::task::TaskTracker;
 use tower::ServiceExt;
 
 use super::hyper_errors::ProblemIo;
@@ -95,7 +100,10 @@ pub async fn serve(
     shutdown: impl Future<Output = ()> + Send + 'static,
 ) -> io::Result<()> {
     let slots = Arc::new(Semaphore::new(limits.max_connections.max(1)));
-    let graceful = GracefulShutdown::new();
+    // hyper-util's GracefulShutdown does not take upgradeable HTTP/1 connections: the same,
+    // by hand.
+    let stopping = CancellationToken::new();
+    let connections = TaskTracker::new();
     let mut builder = hyper::server::conn::http1::Builder::new();
     // hyper's own header clock starts when a connection goes idle; as a backstop it gets the
     // sum of both limits, which TimedIo enforces one by one.
@@ -135,14 +143,29 @@ pub async fn serve(
             let call = router.clone().oneshot(req.map(axum::body::Body::new));
             async move {
                 let response = call.await;
+                if let Ok(r) = &response {
+                    if r.status() == axum::http::StatusCode::SWITCHING_PROTOCOLS {
+                        busy.0.upgraded.store(true, Ordering::SeqCst);
+                    }
+                }
                 drop(busy);
                 response
             }
         });
-        let conn = builder.serve_connection(TokioIo::new(io), service);
-        let conn = graceful.watch(conn);
-        tokio::spawn(async move {
-            if let Err(e) = conn.await {
+        let conn = builder
+            .serve_connection(TokioIo::new(io), service)
+            .with_upgrades();
+        let stop = stopping.clone();
+        connections.spawn(async move {
+            tokio::pin!(conn);
+            let served = tokio::select! {
+                r = conn.as_mut() => r,
+                () = stop.cancelled() => {
+                    conn.as_mut().graceful_shutdown();
+                    conn.await
+                }
+            };
+            if let Err(e) = served {
                 tracing::debug!(%peer, error = %e, "connection closed with an error");
             }
             drop(permit);
@@ -150,7 +173,9 @@ pub async fn serve(
     }
     drop(listener);
     tracing::info!("no longer accepting connections; finishing open ones");
-    if tokio::time::timeout(limits.shutdown_grace, graceful.shutdown())
+    stopping.cancel();
+    connections.close();
+    if tokio::time::timeout(limits.shutdown_grace, connections.wait())
         .await
         .is_err()
     {
@@ -169,6 +194,8 @@ struct Activity {
     in_flight: AtomicU64,
     started: AtomicU64,
     last_end: Mutex<Option<Instant>>,
+    /// Answered `101 Switching Protocols`: the connection is no longer HTTP's.
+    upgraded: std::sync::atomic::AtomicBool,
 }
 
 impl Activity {
@@ -235,7 +262,9 @@ impl<T> TimedIo<T> {
             self.seen_started = started;
             self.head_since = None;
         }
-        if self.activity.in_flight.load(Ordering::SeqCst) > 0 {
+        if self.activity.in_flight.load(Ordering::SeqCst) > 0
+            || self.activity.upgraded.load(Ordering::SeqCst)
+        {
             return None;
         }
         if let Some(end) = self.activity.last_end.lock().ok().and_then(|t| *t) {

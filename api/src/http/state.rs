@@ -14,6 +14,7 @@ use tokio_util::sync::CancellationToken;
 
 use super::cache::SkillCache;
 use super::error::Problem;
+use super::live::LiveHub;
 
 /// What the handlers need besides the request. Cheap to clone.
 #[derive(Clone)]
@@ -33,6 +34,7 @@ struct Inner {
     cache: SkillCache,
     scratch: PathBuf,
     openapi: OnceLock<Bytes>,
+    live: LiveHub,
 }
 
 impl std::fmt::Debug for AppState {
@@ -63,13 +65,18 @@ pub struct StateConfig {
     pub queue_wait: Duration,
     /// Bytes of skill JSON kept in memory.
     pub cache_bytes: usize,
+    /// Live glove sessions at once.
+    pub max_live: usize,
+    /// Threads stepping the live sessions.
+    pub live_threads: usize,
 }
 
 impl AppState {
-    /// State over an open store.
-    pub fn new(store: Store, config: &StateConfig) -> Self {
+    /// State over an open store. Fails only if the live stepping threads cannot start.
+    pub fn new(store: Store, config: &StateConfig) -> std::io::Result<Self> {
         let scratch = store.data_dir().join("tmp");
-        AppState {
+        let live = LiveHub::new(config.max_live, config.live_threads)?;
+        Ok(AppState {
             inner: Arc::new(Inner {
                 store,
                 token: config.token.clone(),
@@ -82,8 +89,14 @@ impl AppState {
                 cache: SkillCache::new(config.cache_bytes),
                 scratch,
                 openapi: OnceLock::new(),
+                live,
             }),
-        }
+        })
+    }
+
+    /// The live sessions: their stepping pool and slots.
+    pub fn live(&self) -> &LiveHub {
+        &self.inner.live
     }
 
     /// The skill store.
