@@ -2,6 +2,7 @@
 
 mod bench;
 mod dfs_static;
+mod glove;
 mod replay;
 mod reprocess;
 mod segment;
@@ -37,6 +38,10 @@ enum Command {
     /// Replays a real glove recording (MCAP or CSV) through the DFS against an object into a
     /// session file.
     ImportGlove(sessions::ImportArgs),
+    /// A live glove session against a server (`icms serve`): streams the simulated operator
+    /// of a scenario, or a real glove recording, to its `GET /api/v1/live`, printing the
+    /// events and a summary.
+    Glove(Box<glove::GloveArgs>),
     /// Segments a session file into skills (one per grasp) with their hand-independent
     /// parameters.
     Segment(segment::SegmentArgs),
@@ -91,6 +96,7 @@ pub fn run() -> ExitCode {
         Command::Simulate(a) => simulate::run_simulate(a),
         Command::Salvage(a) => sessions::run_salvage(a),
         Command::ImportGlove(a) => sessions::run_import(a),
+        Command::Glove(a) => glove::run_glove(*a),
         Command::Segment(a) => segment::run_segment(a),
         Command::Demo(a) => skills::run_demo(a),
         Command::Ingest(a) => skills::run_ingest(a),

@@ -89,7 +89,7 @@ pub struct ImportArgs {
 }
 
 /// The object of `--object`.
-fn load_object(spec: &str) -> Result<ScenarioObject, CliError> {
+pub(crate) fn load_object(spec: &str) -> Result<ScenarioObject, CliError> {
     if let Some(s) = Scenario::builtin(spec, 0) {
         return Ok(s.object);
     }
@@ -115,7 +115,7 @@ fn load_object(spec: &str) -> Result<ScenarioObject, CliError> {
 }
 
 /// Parses `--base`.
-fn parse_base(spec: &str) -> Result<Isometry, CliError> {
+pub(crate) fn parse_base(spec: &str) -> Result<Isometry, CliError> {
     let values: Result<Vec<f64>, _> = spec.split(',').map(|v| v.trim().parse::<f64>()).collect();
     let bad = || {
         CliError(format!(
