@@ -79,6 +79,9 @@ pub struct ServeArgs {
     /// cores.
     #[arg(long)]
     pub live_threads: Option<usize>,
+    /// Seconds without a sample after which a live session ends (stored as incomplete).
+    #[arg(long, default_value_t = 10.0)]
+    pub live_silence: f64,
 }
 
 /// Largest accepted `--max-body` and `--max-upload`: 64 GiB.
@@ -151,6 +154,7 @@ impl Default for ServeArgs {
             max_connections: None,
             max_live: 16,
             live_threads: None,
+            live_silence: 10.0,
         }
     }
 }
@@ -210,6 +214,7 @@ impl ServeArgs {
         let queue_wait = seconds("--queue-wait", self.queue_wait)?;
         let header_timeout = seconds("--header-timeout", self.header_timeout)?;
         let keep_alive_timeout = seconds("--keep-alive-timeout", self.keep_alive_timeout)?;
+        let live_silence = seconds("--live-silence", self.live_silence)?;
         let max_body = count("--max-body", self.max_body, 1, MAX_MAX_BODY)?;
         let max_upload = count("--max-upload", self.max_upload, 1, MAX_MAX_BODY)?;
         let max_simulations = count("--max-simulations", self.max_simulations, 1, MAX_WORKERS)?;
@@ -248,6 +253,7 @@ impl ServeArgs {
                 cache_bytes,
                 max_live,
                 live_threads,
+                live_silence,
             },
             layers: LayerConfig {
                 request_timeout,

@@ -48,8 +48,9 @@ pub mod proto {
 /// from stale state).
 pub const STALE_AFTER: Duration = Duration::from_millis(100);
 
-/// With no sample for this long a live session ends, stored as incomplete.
-pub const SILENCE_LIMIT: Duration = Duration::from_secs(10);
+/// With no sample for this long a live session ends, stored as incomplete (the default of
+/// `icms serve --live-silence`).
+pub const DEFAULT_SILENCE_LIMIT: Duration = Duration::from_secs(10);
 
 /// Largest frame a live session takes (bytes): a sample of [`MAX_DOF`] angles and torques and
 /// a pose is under 1 KiB.
@@ -133,6 +134,43 @@ pub enum ClientMessage {
     End,
 }
 
+impl ClientMessage {
+    /// Parses a text frame. Errors name the field (`object.shape: unknown shape "torus"`),
+    /// which serde's tagged enums alone do not.
+    pub fn parse(text: &str) -> std::result::Result<ClientMessage, String> {
+        let mut value: serde_json::Value =
+            serde_json::from_str(text).map_err(|e| format!("not JSON: {e}"))?;
+        let Some(map) = value.as_object_mut() else {
+            return Err("expected a JSON object {\"type\": ...}".to_owned());
+        };
+        let kind = match map.remove("type") {
+            Some(serde_json::Value::String(k)) => k,
+            Some(other) => return Err(format!("type: expected \"start\" or \"end\", got {other}")),
+            None => return Err("type: missing; expected \"start\" or \"end\"".to_owned()),
+        };
+        match kind.as_str() {
+            "start" => serde_path_to_error::deserialize::<_, StartMessage>(value)
+                .map(|s| ClientMessage::Start(Box::new(s)))
+                .map_err(|e| {
+                    let path = e.path().to_string();
+                    if path == "." {
+                        format!("start: {}", e.inner())
+                    } else {
+                        format!("{path}: {}", e.inner())
+                    }
+                }),
+            "end" if map.is_empty() => Ok(ClientMessage::End),
+            "end" => Err(format!(
+                "end takes no fields, got {}",
+                map.keys().cloned().collect::<Vec<_>>().join(", ")
+            )),
+            other => Err(format!(
+                "type: unknown message type {other:?}; expected \"start\" or \"end\""
+            )),
+        }
+    }
+}
+
 /// Why a live session ended.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
@@ -141,7 +179,7 @@ pub enum EndReason {
     Ended,
     /// The connection closed (or failed) without `end`.
     Disconnected,
-    /// No sample came for [`SILENCE_LIMIT`].
+    /// No sample came for the server's silence limit ([`DEFAULT_SILENCE_LIMIT`]).
     Silent,
     /// The server is shutting down.
     ServerStopping,
@@ -193,7 +231,7 @@ pub enum Event {
         /// Milliseconds without a sample before the feedback goes to zero force.
         stale_after_ms: u64,
         /// Seconds without a sample before the session ends as incomplete.
-        silence_limit_s: u64,
+        silence_limit_s: f64,
         /// Height of the table's top (m, world z).
         table_height: f64,
     },
@@ -509,8 +547,9 @@ impl LiveSession {
         })
     }
 
-    /// The `started` event of this session.
-    pub fn started_event(&self) -> Event {
+    /// The `started` event of this session on a server that ends sessions after `silence`
+    /// without a sample.
+    pub fn started_event(&self, silence: Duration) -> Event {
         let hand = self.dfs.hand();
         Event::Started {
             hand: hand.name.clone(),
@@ -518,7 +557,7 @@ impl LiveSession {
             fingers: hand.fingertips.iter().map(|t| t.name.clone()).collect(),
             rate_hz: crate::session::RATE_HZ,
             stale_after_ms: STALE_AFTER.as_millis() as u64,
-            silence_limit_s: SILENCE_LIMIT.as_secs(),
+            silence_limit_s: silence.as_secs_f64(),
             table_height: self.dfs.params().table_height.unwrap_or(0.0),
         }
     }

@@ -7,8 +7,9 @@
 //! before it reads the next, so a client that stops reading stops being read (TCP's flow
 //! control holds it), and memory does not grow with what a client sends.
 //!
-//! When the client sends `end`, disconnects, goes silent for
-//! [`SILENCE_LIMIT`](services::live::SILENCE_LIMIT) or the server stops, the recording is
+//! When the client sends `end`, disconnects, goes silent for the silence limit
+//! (`--live-silence`, [`DEFAULT_SILENCE_LIMIT`](services::live::DEFAULT_SILENCE_LIMIT)) or
+//! the server stops, the recording is
 //! finished (every tick stepped is in it), then stored and segmented like an upload; a session
 //! that did not end with `end` is stored marked incomplete.
 
@@ -24,7 +25,7 @@ use bytes::Bytes;
 use dfs_core::hand::HandModel;
 use services::live::{
     ClientMessage, EndReason, Event, LiveConfig, LiveSession, SampleError, StartMessage,
-    StoredSkill, MAX_FRAME_BYTES, SILENCE_LIMIT, STALE_AFTER,
+    StoredSkill, MAX_FRAME_BYTES, STALE_AFTER,
 };
 use services::session::{SessionOut, SessionSource};
 use services::store::{StagedBlob, StoreError};
@@ -143,15 +144,18 @@ pub struct LiveHub {
     pool: LivePool,
     slots: Arc<Semaphore>,
     tasks: TaskTracker,
+    silence: Duration,
 }
 
 impl LiveHub {
-    /// A hub for at most `max_sessions` sessions at once, stepped on `threads` threads.
-    pub fn new(max_sessions: usize, threads: usize) -> std::io::Result<LiveHub> {
+    /// A hub for at most `max_sessions` sessions at once, stepped on `threads` threads,
+    /// ending a session after `silence` without a sample.
+    pub fn new(max_sessions: usize, threads: usize, silence: Duration) -> std::io::Result<LiveHub> {
         Ok(LiveHub {
             pool: LivePool::new(threads)?,
             slots: Arc::new(Semaphore::new(max_sessions.max(1))),
             tasks: TaskTracker::new(),
+            silence,
         })
     }
 
@@ -279,7 +283,7 @@ async fn run_session(mut socket: WebSocket, st: AppState, _permit: OwnedSemaphor
             return;
         }
     };
-    send_event(&mut socket, &session.started_event()).await;
+    send_event(&mut socket, &session.started_event(st.live().silence)).await;
     tracing::info!(hand = %start.hand, "live session started");
     let (session, reason) = stream(&mut socket, &st, &pinned, session).await;
     let finished = pinned.run(move || session.finish(reason)).await;
@@ -363,17 +367,12 @@ async fn read_start(socket: &mut WebSocket, st: &AppState) -> Result<StartMessag
         };
         match msg {
             Message::Text(text) => {
-                let mut de = serde_json::Deserializer::from_str(text.as_str());
-                return match serde_path_to_error::deserialize::<_, ClientMessage>(&mut de) {
+                return match ClientMessage::parse(text.as_str()) {
                     Ok(ClientMessage::Start(start)) => Ok(*start),
                     Ok(ClientMessage::End) => {
                         Err("the first message must be start, not end".to_owned())
                     }
-                    Err(e) => Err(format!(
-                        "the start message is invalid at {}: {}",
-                        e.path(),
-                        e.inner()
-                    )),
+                    Err(e) => Err(format!("the start message is invalid: {e}")),
                 };
             }
             Message::Binary(_) => {
@@ -417,6 +416,7 @@ async fn stream(
     pinned: &Pinned,
     mut session: LiveSession,
 ) -> (LiveSession, EndReason) {
+    let silence = st.live().silence;
     let mut last_sample = Instant::now();
     let mut any_sample = false;
     let mut stale = false;
@@ -424,7 +424,7 @@ async fn stream(
         let wait_until = if any_sample && !stale {
             last_sample + STALE_AFTER
         } else {
-            last_sample + SILENCE_LIMIT
+            last_sample + silence
         };
         let msg = tokio::select! {
             biased;
@@ -457,7 +457,7 @@ async fn stream(
             Err(_) => {
                 let message = format!(
                     "no sample for {} s: the session ends, stored as incomplete",
-                    SILENCE_LIMIT.as_secs()
+                    silence.as_secs_f64()
                 );
                 send_error(socket, None, message).await;
                 return (session, EndReason::Silent);
@@ -499,7 +499,7 @@ async fn stream(
                     }
                 }
             }
-            Message::Text(text) => match serde_json::from_str::<ClientMessage>(text.as_str()) {
+            Message::Text(text) => match ClientMessage::parse(text.as_str()) {
                 Ok(ClientMessage::End) => return (session, EndReason::Ended),
                 Ok(ClientMessage::Start(_)) => {
                     send_error(

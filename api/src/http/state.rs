@@ -69,13 +69,15 @@ pub struct StateConfig {
     pub max_live: usize,
     /// Threads stepping the live sessions.
     pub live_threads: usize,
+    /// A live session ends after this long without a sample.
+    pub live_silence: Duration,
 }
 
 impl AppState {
     /// State over an open store. Fails only if the live stepping threads cannot start.
     pub fn new(store: Store, config: &StateConfig) -> std::io::Result<Self> {
         let scratch = store.data_dir().join("tmp");
-        let live = LiveHub::new(config.max_live, config.live_threads)?;
+        let live = LiveHub::new(config.max_live, config.live_threads, config.live_silence)?;
         Ok(AppState {
             inner: Arc::new(Inner {
                 store,

@@ -1,0 +1,488 @@
+//! Live glove sessions (`GET /api/v1/live`) over a real WebSocket against the in-process
+//! server: a streamed session is stored with the skills of its upload; bad input gets an
+//! error event naming what is wrong and is not stepped; stale and silent gloves, disconnects
+//! and tokens.
+
+use std::time::Duration;
+
+use api::live_client::{self, ClientOptions, Frame};
+use futures_util::{SinkExt, StreamExt};
+use prost::Message as _;
+use serde_json::{json, Value};
+use services::live::{proto, AssistSettings, StartMessage};
+use tests::{session_bytes, TestApp};
+use tokio_tungstenite::tungstenite::client::IntoClientRequest;
+use tokio_tungstenite::tungstenite::Message;
+
+type Ws =
+    tokio_tungstenite::WebSocketStream<tokio_tungstenite::MaybeTlsStream<tokio::net::TcpStream>>;
+
+fn url(app: &TestApp) -> String {
+    format!("ws://{}/api/v1/live", app.addr)
+}
+
+fn scenario(name: &str, seed: u64) -> dfs_core::scenario::Scenario {
+    dfs_core::scenario::Scenario::builtin(name, seed).unwrap()
+}
+
+fn start_for(s: &dfs_core::scenario::Scenario) -> StartMessage {
+    StartMessage {
+        hand: "glove10".into(),
+        object: s.object.clone(),
+        name: Some(s.name.clone()),
+        wrist: None,
+        assist: AssistSettings::default(),
+    }
+}
+
+async fn skills_of(app: &TestApp, session_id: i64) -> Vec<Value> {
+    let s = app
+        .client
+        .get(&format!("/api/v1/sessions/{session_id}"))
+        .await
+        .json();
+    let mut out = Vec::new();
+    for id in s["skill_ids"].as_array().unwrap() {
+        out.push(
+            app.client
+                .get(&format!("/api/v1/skills/{}", id.as_i64().unwrap()))
+                .await
+                .json(),
+        );
+    }
+    out
+}
+
+async fn session(app: &TestApp, id: i64) -> Value {
+    let r = app.client.get(&format!("/api/v1/sessions/{id}")).await;
+    assert_eq!(r.status, 200);
+    r.json()
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_simulated_operator_streamed_live_is_stored_with_the_skills_of_its_upload() {
+    let app = TestApp::spawn().await;
+    let s = scenario("two-grasps", 3);
+    let frames = live_client::simulated_frames(&s, None, 1).unwrap();
+    let n = frames.len() as u64;
+    let mut events = Vec::new();
+    let summary = live_client::run(
+        &url(&app),
+        &start_for(&s),
+        frames,
+        &ClientOptions::default(),
+        |e| events.push(serde_json::to_value(e).unwrap()),
+    )
+    .await
+    .unwrap();
+    assert_eq!(summary.samples_sent, n);
+    assert_eq!(summary.feedback_received, n, "every sample answered");
+    assert_eq!(summary.refused, 0);
+    assert!(summary.first_contact_ns.is_some());
+    assert_eq!(events[0]["type"], "started", "{events:?}");
+    assert_eq!(events[0]["dofs"].as_array().unwrap().len(), 10);
+    let stored = events.iter().find(|e| e["type"] == "stored").unwrap();
+    assert_eq!(stored["incomplete"], false);
+    let live_id = summary.session_id.unwrap();
+    let meta = session(&app, live_id).await;
+    assert_eq!(meta["meta"]["extra"]["source"], "live");
+    assert_eq!(meta["meta"]["extra"]["live"]["end_reason"], "ended");
+    assert_eq!(meta["meta"]["extra"]["live"]["samples"], n.to_string());
+    assert_eq!(meta["meta"]["duration_ns"], (n - 1) * 1_000_000);
+
+    // The same operator uploaded as a simulated session: the same grasps.
+    let r = app
+        .client
+        .upload(&session_bytes("two-grasps", 3, None), None)
+        .await;
+    assert_eq!(r.status, 201);
+    let uploaded = skills_of(&app, r.json()["session_id"].as_i64().unwrap()).await;
+    let live = skills_of(&app, live_id).await;
+    assert_eq!(live.len(), 2);
+    assert_eq!(live.len(), uploaded.len());
+    for (a, b) in live.iter().zip(&uploaded) {
+        for key in [
+            "grasp_type",
+            "contact_count",
+            "contact_model",
+            "object_shape",
+        ] {
+            assert_eq!(a[key], b[key], "{key}");
+        }
+        for key in ["start_ns", "end_ns"] {
+            let d = (a[key].as_i64().unwrap() - b[key].as_i64().unwrap()).abs();
+            assert!(d <= 20_000_000, "{key} differs by {d} ns");
+        }
+        let (qa, qb) = (
+            a["quality"].as_f64().unwrap(),
+            b["quality"].as_f64().unwrap(),
+        );
+        assert!(
+            (qa - qb).abs() <= 0.1 * qb.abs().max(1e-3),
+            "quality {qa} vs {qb}"
+        );
+    }
+    app.stop().await;
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_glove_at_60_hz_drives_the_1_khz_dfs_through_the_grasp() {
+    let app = TestApp::spawn().await;
+    let s = scenario("sphere-lift", 0);
+    // Every 16th tick: 62.5 Hz.
+    let frames = live_client::simulated_frames(&s, None, 16).unwrap();
+    let last_t = frames.last().unwrap().t_ns;
+    let summary = live_client::run(
+        &url(&app),
+        &start_for(&s),
+        frames,
+        &ClientOptions::default(),
+        |_| {},
+    )
+    .await
+    .unwrap();
+    assert_eq!(summary.refused, 0);
+    let meta = session(&app, summary.session_id.unwrap()).await;
+    // Every millisecond up to the last sample was stepped.
+    assert_eq!(
+        meta["meta"]["extra"]["live"]["ticks"],
+        (last_t / 1_000_000 + 1).to_string()
+    );
+    assert_eq!(summary.skill_ids.len(), 1, "{meta}");
+    app.stop().await;
+}
+
+async fn connect(app: &TestApp, token: Option<&str>) -> Ws {
+    let mut req = url(app).into_client_request().unwrap();
+    if let Some(t) = token {
+        req.headers_mut()
+            .insert("authorization", format!("Bearer {t}").parse().unwrap());
+    }
+    tokio_tungstenite::connect_async(req).await.unwrap().0
+}
+
+async fn send_json(ws: &mut Ws, v: Value) {
+    ws.send(Message::Text(v.to_string().into())).await.unwrap();
+}
+
+/// The next frame: an event (JSON) or feedback; `None` when closed.
+async fn recv(ws: &mut Ws) -> Option<Result<Value, proto::Feedback>> {
+    loop {
+        let msg = tokio::time::timeout(Duration::from_secs(30), ws.next())
+            .await
+            .expect("an answer within 30 s")?;
+        match msg.ok()? {
+            Message::Text(t) => return Some(Ok(serde_json::from_str(t.as_str()).unwrap())),
+            Message::Binary(b) => return Some(Err(proto::Feedback::decode(b.as_ref()).unwrap())),
+            Message::Close(_) => return None,
+            _ => continue,
+        }
+    }
+}
+
+async fn expect_event(ws: &mut Ws, kind: &str) -> Value {
+    match recv(ws).await {
+        Some(Ok(e)) if e["type"] == kind => e,
+        other => panic!("expected a {kind} event, got {other:?}"),
+    }
+}
+
+async fn expect_feedback(ws: &mut Ws) -> proto::Feedback {
+    match recv(ws).await {
+        Some(Err(fb)) => fb,
+        other => panic!("expected feedback, got {other:?}"),
+    }
+}
+
+fn sphere_start() -> Value {
+    json!({"type": "start", "object": {"shape": "sphere", "radius": 0.04, "mass": 0.3, "mu": 0.8}})
+}
+
+/// A glove10 sample at rest (all angles 0.1 rad, no torque) at `t_ns`.
+fn sample(t_ns: u64) -> proto::Sample {
+    proto::Sample {
+        t_ns,
+        q: vec![0.1; 10],
+        tau: vec![0.0; 10],
+        wrist: Some(live_client::pose(&dfs_core::math::Isometry::translation(
+            0.0, 0.0, 0.3,
+        ))),
+    }
+}
+
+async fn send_sample(ws: &mut Ws, s: &proto::Sample) {
+    ws.send(Message::Binary(s.encode_to_vec().into()))
+        .await
+        .unwrap();
+}
+
+/// Polls the session list until `n` sessions are stored (a disconnected client gets no
+/// `stored` event).
+async fn wait_for_sessions(app: &TestApp, n: usize) -> Vec<Value> {
+    for _ in 0..300 {
+        let r = app.client.get("/api/v1/sessions").await.json();
+        let items = r["items"].as_array().unwrap().clone();
+        if items.len() >= n {
+            return items;
+        }
+        tokio::time::sleep(Duration::from_millis(100)).await;
+    }
+    panic!("{n} session(s) were not stored within 30 s");
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_bad_start_is_refused_before_any_sample_naming_the_field() {
+    let app = TestApp::spawn().await;
+    let cases = [
+        (
+            json!({"type": "start", "hand": "octopus", "object": sphere_start()["object"]}),
+            "octopus",
+        ),
+        (
+            json!({"type": "start", "object": {"shape": "sphere", "radius": 0.04, "mass": -1, "mu": 0.8}}),
+            "mass",
+        ),
+        (
+            json!({"type": "start", "object": {"shape": "torus", "mass": 1, "mu": 0.8}}),
+            "object.shape",
+        ),
+        (
+            json!({"type": "start", "object": sphere_start()["object"], "assist": {"mode": "suggest"}}),
+            "assist.mode",
+        ),
+        (
+            json!({"type": "start", "object": sphere_start()["object"], "wrist": [0, 0, 0, 0, 0, 0, 0]}),
+            "wrist",
+        ),
+        (
+            json!({"type": "start", "object": sphere_start()["object"], "colour": "red"}),
+            "colour",
+        ),
+        (json!({"type": "end"}), "start"),
+        (json!({"hello": 1}), "type"),
+    ];
+    for (start, needle) in cases {
+        let mut ws = connect(&app, None).await;
+        send_json(&mut ws, start.clone()).await;
+        let e = expect_event(&mut ws, "error").await;
+        let m = e["message"].as_str().unwrap();
+        assert!(m.contains(needle), "{start}: {m}");
+        assert!(
+            recv(&mut ws).await.is_none(),
+            "{start}: closed after the error"
+        );
+    }
+    // A binary frame first.
+    let mut ws = connect(&app, None).await;
+    send_sample(&mut ws, &sample(0)).await;
+    let e = expect_event(&mut ws, "error").await;
+    assert!(e["message"].as_str().unwrap().contains("start"), "{e}");
+    // Nothing was stored.
+    let r = app.client.get("/api/v1/sessions").await.json();
+    assert_eq!(r["items"].as_array().unwrap().len(), 0, "{r}");
+    app.stop().await;
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn bad_samples_get_an_error_naming_what_is_wrong_and_lose_nothing_accepted() {
+    let app = TestApp::spawn().await;
+    let mut ws = connect(&app, None).await;
+    send_json(&mut ws, sphere_start()).await;
+    let started = expect_event(&mut ws, "started").await;
+    assert_eq!(started["fingers"].as_array().unwrap().len(), 5);
+    send_sample(&mut ws, &sample(1_000_000_000)).await;
+    let fb = expect_feedback(&mut ws).await;
+    assert_eq!((fb.t_ns, fb.session_ns, fb.ticks), (1_000_000_000, 0, 1));
+    assert_eq!(fb.motor_q.len(), 10);
+    assert_eq!(fb.fingers.len(), 5);
+
+    let mut wrong_length = sample(1_010_000_000);
+    wrong_length.q.truncate(3);
+    let mut nan = sample(1_010_000_000);
+    nan.tau[4] = f64::NAN;
+    let mut out_of_range = sample(1_010_000_000);
+    out_of_range.q[3] = 7.0;
+    let mut bad_wrist = sample(1_010_000_000);
+    bad_wrist.wrist.as_mut().unwrap().orientation = Some(proto::Quaternion {
+        x: 0.0,
+        y: 0.0,
+        z: 0.0,
+        w: 3.0,
+    });
+    let cases: Vec<(Vec<u8>, &str)> = vec![
+        (vec![0xff, 0xff, 0xff], "not an icms.live.Sample"),
+        (wrong_length.encode_to_vec(), "q has 3 values"),
+        (nan.encode_to_vec(), "tau[4]"),
+        (out_of_range.encode_to_vec(), "q: "),
+        (bad_wrist.encode_to_vec(), "wrist"),
+        (sample(1_000_000_000).encode_to_vec(), "time order"),
+        (sample(500_000_000).encode_to_vec(), "time order"),
+        (sample(60_000_000_000).encode_to_vec(), "at most 10 s"),
+    ];
+    let refused = cases.len();
+    for (frame, needle) in cases {
+        ws.send(Message::Binary(frame.into())).await.unwrap();
+        let e = expect_event(&mut ws, "error").await;
+        let m = e["message"].as_str().unwrap();
+        assert!(m.contains(needle), "expected {needle:?} in {m}");
+    }
+    ws.send(Message::Text("{\"type\": \"dance\"}".into()))
+        .await
+        .unwrap();
+    let e = expect_event(&mut ws, "error").await;
+    assert!(e["message"].as_str().unwrap().contains("end"), "{e}");
+    // The next good sample steps every tick since the last accepted one.
+    send_sample(&mut ws, &sample(1_010_000_000)).await;
+    let fb = expect_feedback(&mut ws).await;
+    assert_eq!((fb.session_ns, fb.ticks), (10_000_000, 10));
+    send_json(&mut ws, json!({"type": "end"})).await;
+    let ended = expect_event(&mut ws, "ended").await;
+    assert_eq!(ended["samples"], 2);
+    assert_eq!(ended["refused"], refused);
+    let stored = expect_event(&mut ws, "stored").await;
+    let meta = session(&app, stored["session_id"].as_i64().unwrap()).await;
+    let live = &meta["meta"]["extra"]["live"];
+    assert_eq!(live["ticks"], "11");
+    assert_eq!(live["refused_samples"], refused.to_string());
+    assert_eq!(live["incomplete"], "false");
+    app.stop().await;
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_stale_glove_gets_zero_force_and_a_silent_one_is_stored_incomplete() {
+    let app = TestApp::spawn_with(|a| a.live_silence = 1.0).await;
+    let s = scenario("sphere-lift", 0);
+    let frames = live_client::simulated_frames(&s, Some(3.0), 1).unwrap();
+    let mut ws = connect(&app, None).await;
+    send_json(
+        &mut ws,
+        serde_json::to_value(services::live::ClientMessage::Start(Box::new(start_for(
+            &s,
+        ))))
+        .unwrap(),
+    )
+    .await;
+    expect_event(&mut ws, "started").await;
+    // Up to the grasp: 2.5 s of samples, the fingers pushing on the sphere at the end.
+    let mut last = None;
+    for f in frames.iter().take(2500) {
+        ws.send(Message::Binary(f.bytes.clone())).await.unwrap();
+        last = Some(expect_feedback(&mut ws).await);
+    }
+    let last = last.unwrap();
+    assert!(
+        last.fingers.iter().any(|f| f.in_contact) && last.feedback_torque.iter().any(|t| *t != 0.0),
+        "{last:?}"
+    );
+    // No sample for 100 ms: zero force, and the session says so.
+    let fb = expect_feedback(&mut ws).await;
+    assert!(fb.stale);
+    assert!(fb.feedback_torque.iter().all(|t| *t == 0.0));
+    assert!(fb
+        .fingers
+        .iter()
+        .all(|f| !f.in_contact && f.normal_force == 0.0));
+    let e = expect_event(&mut ws, "stale").await;
+    assert_eq!(e["session_ns"], 2_499_000_000u64);
+    // A sample resumes it.
+    ws.send(Message::Binary(frames[2500].bytes.clone()))
+        .await
+        .unwrap();
+    let fb = expect_feedback(&mut ws).await;
+    assert!(!fb.stale);
+    expect_event(&mut ws, "resumed").await;
+    // Then silence for longer than the limit (1 s here): stale, then the session ends,
+    // stored incomplete up to its last sample.
+    assert!(expect_feedback(&mut ws).await.stale);
+    expect_event(&mut ws, "stale").await;
+    let e = expect_event(&mut ws, "error").await;
+    assert!(
+        e["message"].as_str().unwrap().contains("no sample for 1 s"),
+        "{e}"
+    );
+    let ended = expect_event(&mut ws, "ended").await;
+    assert_eq!(ended["reason"], "silent");
+    let stored = expect_event(&mut ws, "stored").await;
+    assert_eq!(stored["incomplete"], true);
+    let meta = session(&app, stored["session_id"].as_i64().unwrap()).await;
+    let live = &meta["meta"]["extra"]["live"];
+    assert_eq!(live["end_reason"], "silent");
+    assert_eq!(live["stale_periods"], "2");
+    assert_eq!(live["last_tick_ns"], "2500000000");
+    assert_eq!(meta["meta"]["duration_ns"], 2_500_000_000u64);
+    app.stop().await;
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_client_that_disconnects_mid_grasp_leaves_its_session_stored_incomplete() {
+    let app = TestApp::spawn().await;
+    let s = scenario("sphere-lift", 1);
+    let frames: Vec<Frame> = live_client::simulated_frames(&s, None, 1).unwrap();
+    let mut ws = connect(&app, None).await;
+    send_json(
+        &mut ws,
+        serde_json::to_value(services::live::ClientMessage::Start(Box::new(start_for(
+            &s,
+        ))))
+        .unwrap(),
+    )
+    .await;
+    expect_event(&mut ws, "started").await;
+    for f in frames.iter().take(3000) {
+        ws.send(Message::Binary(f.bytes.clone())).await.unwrap();
+        expect_feedback(&mut ws).await;
+    }
+    drop(ws);
+    let items = wait_for_sessions(&app, 1).await;
+    let meta = &items[0]["meta"];
+    assert_eq!(meta["extra"]["live"]["incomplete"], "true", "{meta}");
+    assert_eq!(meta["extra"]["live"]["end_reason"], "disconnected");
+    assert_eq!(meta["extra"]["live"]["samples"], "3000");
+    assert_eq!(meta["duration_ns"], 2_999_000_000u64);
+    // The file reads back whole.
+    let r = app
+        .client
+        .get(&format!("/api/v1/sessions/{}/mcap", items[0]["id"]))
+        .await;
+    assert_eq!(r.status, 200);
+    services::ingest::analyse(&r.body, "live.mcap").unwrap();
+    app.stop().await;
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn live_sessions_need_the_token_when_one_is_set() {
+    let app = TestApp::spawn_with(|a| a.token = Some("s3cret".into())).await;
+    let err = tokio_tungstenite::connect_async(url(&app))
+        .await
+        .unwrap_err();
+    match err {
+        tokio_tungstenite::tungstenite::Error::Http(r) => assert_eq!(r.status(), 401),
+        other => panic!("expected 401, got {other}"),
+    }
+    let mut ws = connect(&app, Some("s3cret")).await;
+    send_json(&mut ws, sphere_start()).await;
+    expect_event(&mut ws, "started").await;
+    app.stop().await;
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_session_open_at_shutdown_is_stored_incomplete_before_the_server_stops() {
+    let dir = tempfile::tempdir().unwrap();
+    let app = TestApp::spawn_in(dir.path(), |_| {}).await;
+    let mut ws = connect(&app, None).await;
+    send_json(&mut ws, sphere_start()).await;
+    expect_event(&mut ws, "started").await;
+    for i in 0..200u64 {
+        send_sample(&mut ws, &sample(i * 1_000_000)).await;
+        expect_feedback(&mut ws).await;
+    }
+    app.stop().await;
+    let app = TestApp::spawn_in(dir.path(), |_| {}).await;
+    let items = wait_for_sessions(&app, 1).await;
+    assert_eq!(
+        items[0]["meta"]["extra"]["live"]["end_reason"],
+        "server_stopping"
+    );
+    assert_eq!(items[0]["meta"]["extra"]["live"]["samples"], "200");
+    app.stop().await;
+}
