@@ -32,6 +32,17 @@ fn main() {
     let live = "proto/icms/live.proto";
     println!("cargo:rerun-if-changed={live}");
     let fds = protox::compile([live], ["proto"]).unwrap_or_else(|e| panic!("{live}: {e}"));
+    // Served at GET /api/v1/live/schema, so that a client builds the message classes with
+    // nothing but a protobuf runtime (no protoc).
+    let mut bare = fds.clone();
+    for f in &mut bare.file {
+        f.source_code_info = None;
+    }
+    std::fs::write(
+        out.join("icms_live.fds"),
+        prost::Message::encode_to_vec(&bare),
+    )
+    .expect("writing the live FileDescriptorSet");
     prost_build::Config::new()
         .out_dir(&out)
         .compile_fds(fds)

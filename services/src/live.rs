@@ -44,6 +44,10 @@ pub mod proto {
     include!(concat!(env!("OUT_DIR"), "/icms.live.rs"));
 }
 
+/// `services/proto/icms/live.proto` compiled: a serialized `google.protobuf.FileDescriptorSet`
+/// (served at `GET /api/v1/live/schema`).
+pub const FILE_DESCRIPTOR_SET: &[u8] = include_bytes!(concat!(env!("OUT_DIR"), "/icms_live.fds"));
+
 /// With no sample for this long the feedback goes to zero force (a glove must never be driven
 /// from stale state).
 pub const STALE_AFTER: Duration = Duration::from_millis(100);

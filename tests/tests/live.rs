@@ -3,6 +3,8 @@
 //! error event naming what is wrong and is not stepped; stale and silent gloves, disconnects
 //! and tokens.
 
+use std::path::Path;
+use std::process::Command;
 use std::time::Duration;
 
 use api::live_client::{self, ClientOptions, Frame};
@@ -13,6 +15,9 @@ use services::live::{proto, AssistSettings, StartMessage};
 use tests::{session_bytes, TestApp};
 use tokio_tungstenite::tungstenite::client::IntoClientRequest;
 use tokio_tungstenite::tungstenite::Message;
+
+#[path = "../python/interpreter.rs"]
+mod interpreter;
 
 type Ws =
     tokio_tungstenite::WebSocketStream<tokio_tungstenite::MaybeTlsStream<tokio::net::TcpStream>>;
@@ -484,5 +489,108 @@ async fn a_session_open_at_shutdown_is_stored_incomplete_before_the_server_stops
         "server_stopping"
     );
     assert_eq!(items[0]["meta"]["extra"]["live"]["samples"], "200");
+    app.stop().await;
+}
+
+/// Runs `tests/python/SCRIPT` with `args`; its stdout, or `None` (with a note) when the tests
+/// run without their Python set-up.
+async fn python(modules: &[&str], script: &str, args: Vec<String>) -> Option<String> {
+    let python = interpreter::python_with(modules)?;
+    let script = Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("python")
+        .join(script);
+    let out = tokio::task::spawn_blocking(move || {
+        Command::new(python)
+            .arg(script)
+            .args(args)
+            .output()
+            .expect("running Python")
+    })
+    .await
+    .unwrap();
+    assert!(
+        out.status.success(),
+        "{}: {}{}",
+        out.status,
+        String::from_utf8_lossy(&out.stderr),
+        String::from_utf8_lossy(&out.stdout)
+    );
+    Some(String::from_utf8(out.stdout).unwrap())
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_python_client_streams_a_session_and_python_decodes_its_recording() {
+    let app = TestApp::spawn().await;
+    // A live session from Python, the frames' classes built from GET /api/v1/live/schema.
+    let Some(out) = python(
+        &["websockets", "google.protobuf"],
+        "live_client.py",
+        vec![app.addr.to_string(), "500".into()],
+    )
+    .await
+    else {
+        return;
+    };
+    let stored: Value = serde_json::from_str(out.trim()).unwrap();
+    assert_eq!(stored["type"], "stored", "{stored}");
+    assert_eq!(stored["incomplete"], false);
+    let meta = session(&app, stored["session_id"].as_i64().unwrap()).await;
+    assert_eq!(meta["meta"]["scenario"], "python");
+    assert_eq!(meta["meta"]["extra"]["live"]["samples"], "500");
+
+    // A live recording (the simulated operator, grasping) decodes topic by topic with the
+    // reference Python reader and nothing but the schemas inside the file.
+    let s = scenario("sphere-lift", 2);
+    let frames = live_client::simulated_frames(&s, Some(3.0), 1).unwrap();
+    let summary = live_client::run(
+        &url(&app),
+        &start_for(&s),
+        frames,
+        &ClientOptions::default(),
+        |_| {},
+    )
+    .await
+    .unwrap();
+    let r = app
+        .client
+        .get(&format!(
+            "/api/v1/sessions/{}/mcap",
+            summary.session_id.unwrap()
+        ))
+        .await;
+    assert_eq!(r.status, 200);
+    let dir = tempfile::tempdir().unwrap();
+    let file = dir.path().join("live.mcap");
+    std::fs::write(&file, &r.body).unwrap();
+    let Some(out) = python(
+        &["mcap", "zstandard", "lz4", "mcap_protobuf"],
+        "read_mcap.py",
+        vec![file.display().to_string()],
+    )
+    .await
+    else {
+        return;
+    };
+    let report: Value = serde_json::from_str(&out).unwrap();
+    let topics = report["topics"].as_object().unwrap();
+    for topic in [
+        "/glove/joint_states",
+        "/glove/feedback",
+        "/dfs/contacts",
+        "/object/state",
+        "/tf",
+        "/scene",
+        "/joint_states",
+        "/hand",
+    ] {
+        assert!(topics[topic].as_u64().unwrap() > 0, "{topic}: {report}");
+        assert_eq!(
+            report["decoded"][topic], topics[topic],
+            "{topic} decodes: {report}"
+        );
+    }
+    assert_eq!(report["topics"]["/object/state"], 3000);
+    assert_eq!(report["metadata"]["live"]["end_reason"], "ended");
+    assert_eq!(report["metadata"]["session"]["source"], "live");
     app.stop().await;
 }

@@ -74,6 +74,28 @@ pub enum BenchCommand {
         #[arg(long, default_value = "sphere-lift")]
         scenario: String,
     },
+    /// Live glove sessions (`GET /api/v1/live`) at once against the real server, started
+    /// in-process on an ephemeral port with a fresh data directory, each streaming the
+    /// simulated operator of a scenario (different seeds) at its sample times: the round trip
+    /// of each sample to its feedback over loopback. The simulation that makes the samples is
+    /// done before and not timed.
+    Live {
+        /// Print JSON: `{"p50_us", "p99_us", "dropped", "load_before", ...}`.
+        #[arg(long)]
+        json: bool,
+        /// Concurrent sessions.
+        #[arg(long, default_value_t = 8, value_parser = clap::value_parser!(u64).range(1..=64))]
+        sessions: u64,
+        /// Seconds each session streams.
+        #[arg(long, default_value_t = 10.0)]
+        seconds: f64,
+        /// Samples per second per session, 60 to 1000.
+        #[arg(long, default_value_t = 1000, value_parser = clap::value_parser!(u32).range(60..=1000))]
+        rate: u32,
+        /// Built-in scenario.
+        #[arg(long, default_value = "sphere-lift")]
+        scenario: String,
+    },
     /// Uploads of simulated session files (`POST /api/v1/sessions`, each a distinct file) over
     /// HTTP on loopback to the real server, started in-process on an ephemeral port with a
     /// fresh data directory: the time from connecting to the end of the 201 reply (the body
@@ -93,6 +115,46 @@ pub enum BenchCommand {
         #[arg(long, default_value = "sphere-lift")]
         scenario: String,
     },
+}
+
+/// Result of `icms bench live`.
+#[derive(Debug, Serialize)]
+pub struct LiveBench {
+    /// Round trip sample → feedback over loopback, all sessions together, µs: median.
+    pub p50_us: f64,
+    /// 90th percentile.
+    pub p90_us: f64,
+    /// 99th percentile.
+    pub p99_us: f64,
+    /// 99.9th percentile.
+    pub p999_us: f64,
+    /// Slowest.
+    pub max_us: f64,
+    /// Samples sent, all sessions.
+    pub samples: u64,
+    /// Samples without an answer (sent less answered less refused).
+    pub dropped: u64,
+    /// Samples the server refused.
+    pub refused: u64,
+    /// Concurrent live sessions.
+    pub sessions: usize,
+    /// Samples per second per session.
+    pub rate_hz: u32,
+    /// Seconds streamed per session.
+    pub seconds: f64,
+    /// The sessions' samples were sent at their times (`true`), not as fast as answered.
+    pub realtime: bool,
+    /// Threads stepping the live sessions (`--live-threads`).
+    pub live_threads: usize,
+    /// Cores of this machine.
+    pub cores: usize,
+    /// The 1-minute load average before the run (from /proc/loadavg; -1 if unknown): how
+    /// quiet the machine was.
+    pub load_before: f64,
+    /// The 1-minute load average after the run.
+    pub load_after: f64,
+    /// Every session was stored.
+    pub stored: usize,
 }
 
 /// Result of `icms bench upload`.
@@ -237,6 +299,26 @@ pub fn run(c: BenchCommand) -> Result<(), CliError> {
                     "upload of {} {} s {} sessions ({} bytes each) over HTTP on loopback: median {:.1} ms, min {:.1} ms, max {:.1} ms (read + segment alone: {:.1} ms)",
                     r.uploads, r.duration, r.scenario, r.file_bytes, r.median_ms, r.min_ms,
                     r.max_ms, r.analyse_ms
+                );
+                Ok(())
+            }
+        }
+        BenchCommand::Live {
+            json,
+            sessions,
+            seconds,
+            rate,
+            scenario,
+        } => {
+            let r = bench_live(&scenario, sessions as usize, seconds, rate)?;
+            if json {
+                print_json(&r)
+            } else {
+                println!(
+                    "{} live sessions × {} s at {} Hz over loopback ({} stepping threads, {} cores, load {:.2} before): round trip p50 {:.0} µs, p90 {:.0} µs, p99 {:.0} µs, p99.9 {:.0} µs, max {:.0} µs; {} samples, {} dropped, {} refused; {} of {} stored",
+                    r.sessions, r.seconds, r.rate_hz, r.live_threads, r.cores, r.load_before,
+                    r.p50_us, r.p90_us, r.p99_us, r.p999_us, r.max_us, r.samples, r.dropped,
+                    r.refused, r.stored, r.sessions
                 );
                 Ok(())
             }
@@ -394,6 +476,122 @@ fn bench_ingest(name: &str, sessions: u64, duration: f64) -> Result<IngestBench,
         sessions,
         duration,
         scenario: name.to_string(),
+    })
+}
+
+/// The 1-minute load average (-1 where /proc/loadavg is not there).
+fn load_average() -> f64 {
+    std::fs::read_to_string("/proc/loadavg")
+        .ok()
+        .and_then(|t| t.split_whitespace().next()?.parse().ok())
+        .unwrap_or(-1.0)
+}
+
+fn bench_live(name: &str, sessions: usize, seconds: f64, rate: u32) -> Result<LiveBench, CliError> {
+    if !(seconds.is_finite() && (0.1..=600.0).contains(&seconds)) {
+        return Err(CliError(format!(
+            "--seconds must be 0.1 to 600, got {seconds}"
+        )));
+    }
+    let every = u64::from((1000 / rate).max(1));
+    let mut streams = Vec::new();
+    for seed in 0..sessions as u64 {
+        let scenario = dfs_core::scenario::Scenario::builtin(name, seed)
+            .ok_or_else(|| CliError(format!("no built-in scenario {name:?}")))?;
+        let frames = crate::live_client::simulated_frames(&scenario, Some(seconds), every)
+            .map_err(|e| CliError(e.0))?;
+        let start = services::live::StartMessage {
+            hand: "glove10".to_owned(),
+            object: scenario.object.clone(),
+            name: Some(format!("bench-live-{seed}")),
+            wrist: None,
+            assist: services::live::AssistSettings::default(),
+        };
+        streams.push((start, frames));
+    }
+    let dir = tempfile::tempdir().map_err(|e| CliError(format!("temporary directory: {e}")))?;
+    crate::memory::limit_arenas();
+    let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
+    let server_rt = tokio::runtime::Builder::new_multi_thread()
+        .enable_all()
+        .build()
+        .map_err(|e| CliError(format!("starting the async runtime: {e}")))?;
+    let args = crate::config::ServeArgs {
+        addr: std::net::SocketAddr::from(([127, 0, 0, 1], 0)),
+        data: dir.path().join("data"),
+        no_demo: true,
+        ..crate::config::ServeArgs::default()
+    };
+    let config = args.into_config()?;
+    let live_threads = config.state.live_threads;
+    let app = server_rt.block_on(crate::startup::Application::build(config))?;
+    let url = format!("ws://{}/api/v1/live", app.local_addr());
+    let (stop, stopped) = tokio::sync::oneshot::channel::<()>();
+    let server = server_rt.spawn(app.run_until(async move {
+        let _ = stopped.await;
+    }));
+    // The clients on a runtime of their own, as a glove's driver would be a process of its
+    // own.
+    let client_rt = tokio::runtime::Builder::new_current_thread()
+        .enable_all()
+        .build()
+        .map_err(|e| CliError(format!("starting the client runtime: {e}")))?;
+    let load_before = load_average();
+    let results = client_rt.block_on(async {
+        let mut tasks = Vec::new();
+        for (start, frames) in streams {
+            let url = url.clone();
+            tasks.push(tokio::spawn(async move {
+                let options = crate::live_client::ClientOptions {
+                    token: None,
+                    realtime: true,
+                };
+                crate::live_client::run(&url, &start, frames, &options, |_| {}).await
+            }));
+        }
+        let mut out = Vec::new();
+        for t in tasks {
+            out.push(t.await);
+        }
+        out
+    });
+    let load_after = load_average();
+    let _ = stop.send(());
+    server_rt
+        .block_on(server)
+        .map_err(|e| CliError(format!("the server task: {e}")))??;
+    let mut all = Vec::new();
+    let (mut samples, mut answered, mut refused, mut stored) = (0, 0, 0, 0);
+    for r in results {
+        let s = r
+            .map_err(|e| CliError(format!("a live client task: {e}")))?
+            .map_err(|e| CliError(e.0))?;
+        samples += s.samples_sent;
+        answered += s.feedback_received;
+        refused += s.refused;
+        stored += usize::from(s.session_id.is_some());
+        all.extend(s.round_trips_us);
+    }
+    all.sort_by(f64::total_cmp);
+    let p = |q| crate::live_client::percentile(&all, q);
+    Ok(LiveBench {
+        p50_us: p(0.5),
+        p90_us: p(0.9),
+        p99_us: p(0.99),
+        p999_us: p(0.999),
+        max_us: all.last().copied().unwrap_or(0.0),
+        samples,
+        dropped: samples - answered - refused,
+        refused,
+        sessions,
+        rate_hz: rate,
+        seconds,
+        realtime: true,
+        live_threads,
+        cores,
+        load_before,
+        load_after,
+        stored,
     })
 }
 

@@ -20,7 +20,7 @@ use std::time::Duration;
 
 use axum::extract::ws::{CloseFrame, Message, WebSocket, WebSocketUpgrade};
 use axum::extract::State;
-use axum::response::Response;
+use axum::response::{IntoResponse, Response};
 use bytes::Bytes;
 use dfs_core::hand::HandModel;
 use services::live::{
@@ -44,7 +44,25 @@ pub const START_TIMEOUT: Duration = Duration::from_secs(10);
 
 /// The routes of this resource.
 pub fn router() -> OpenApiRouter<AppState> {
-    OpenApiRouter::new().routes(routes!(live))
+    OpenApiRouter::new()
+        .routes(routes!(live))
+        .routes(routes!(live_schema))
+}
+
+/// The binary frames' schema: `services/proto/icms/live.proto` compiled into a serialized
+/// `google.protobuf.FileDescriptorSet` (package `icms.live`: `Sample`, `Feedback`), so that a
+/// client builds the message classes with a protobuf runtime alone, e.g. in Python
+/// `message_factory.GetMessages(FileDescriptorSet.FromString(body).file)`.
+#[utoipa::path(get, path = "/live/schema", tag = "live",
+    responses(
+        (status = 200, description = "The FileDescriptorSet", content_type = "application/x-protobuf", body = Vec<u8>),
+    ))]
+async fn live_schema() -> Response {
+    (
+        [(axum::http::header::CONTENT_TYPE, "application/x-protobuf")],
+        services::live::FILE_DESCRIPTOR_SET,
+    )
+        .into_response()
 }
 
 /// A few threads that step every live session's DFS; see the module docs.
