@@ -82,6 +82,11 @@ pub struct ServeArgs {
     /// Seconds without a sample after which a live session ends (stored as incomplete).
     #[arg(long, default_value_t = 10.0)]
     pub live_silence: f64,
+    /// Publish every live session's hand, object and forces through the Foxglove SDK's
+    /// WebSocket server on this address (host:port, e.g. 127.0.0.1:8765): the Foxglove app's
+    /// "Open connection" shows them as they happen, each session under `/live/N/`.
+    #[arg(long, value_parser = listen_address)]
+    pub foxglove: Option<SocketAddr>,
 }
 
 /// Largest accepted `--max-body` and `--max-upload`: 64 GiB.
@@ -155,6 +160,7 @@ impl Default for ServeArgs {
             max_live: 16,
             live_threads: None,
             live_silence: 10.0,
+            foxglove: None,
         }
     }
 }
@@ -170,6 +176,8 @@ pub struct ServeConfig {
     pub demo: bool,
     /// Handler state settings (token, body limit, simulations, cache).
     pub state: StateConfig,
+    /// Address of the Foxglove WebSocket server publishing live sessions, if any.
+    pub foxglove: Option<SocketAddr>,
     /// Layer settings (time limit, CORS).
     pub layers: LayerConfig,
     /// Connection settings (timeouts, connection limit).
@@ -243,6 +251,7 @@ impl ServeArgs {
             addr: self.addr,
             data: self.data,
             demo: !self.no_demo,
+            foxglove: self.foxglove,
             state: StateConfig {
                 token,
                 max_body,

@@ -46,6 +46,7 @@ pub struct Application {
     state: AppState,
     demo: bool,
     connections: ConnectionLimits,
+    foxglove: Option<foxglove::WebSocketServerHandle>,
 }
 
 /// Longest wait at shutdown for the live sessions to be finished and stored.
@@ -78,6 +79,26 @@ impl Application {
             source,
         })?;
         clear_scratch(state.scratch_dir()).await;
+        let foxglove = match config.foxglove {
+            None => None,
+            Some(addr) => {
+                let context = foxglove::Context::new();
+                let server = foxglove::WebSocketServer::new()
+                    .name("icms live sessions")
+                    .bind(addr.ip().to_string(), addr.port())
+                    .context(&context)
+                    .start()
+                    .await
+                    .map_err(|e| StartupError::Io {
+                        context: format!("starting the Foxglove WebSocket server on {addr}"),
+                        source: std::io::Error::other(e.to_string()),
+                    })?;
+                tracing::info!(addr = %addr, port = server.port(),
+                    "publishing live sessions to Foxglove (Open connection → Foxglove WebSocket)");
+                state.live().publish_to(context);
+                Some(server)
+            }
+        };
         let router = http::app(state.clone(), &config.layers);
         let listener = TcpListener::bind(config.addr)
             .await
@@ -96,12 +117,18 @@ impl Application {
             state,
             demo: config.demo,
             connections: config.connections,
+            foxglove,
         })
     }
 
     /// The address the server listens on.
     pub fn local_addr(&self) -> SocketAddr {
         self.addr
+    }
+
+    /// The port of the Foxglove WebSocket server (`--foxglove`), if one runs.
+    pub fn foxglove_port(&self) -> Option<u16> {
+        self.foxglove.as_ref().map(|s| s.port())
     }
 
     /// The handlers' state (its store is the server's).
@@ -153,6 +180,9 @@ impl Application {
                 "live sessions were still being stored after the grace; their recordings stay \
                  in the staging area"
             );
+        }
+        if let Some(server) = self.foxglove {
+            server.stop().wait().await;
         }
         if let Some(task) = seeding {
             let _ = task.await;

@@ -36,7 +36,9 @@ use prost::Message as _;
 use serde::{Deserialize, Serialize};
 
 use crate::error::{RecordingError, Result};
-use crate::session::{SessionInfo, SessionOut, SessionRecorder, TickData, MAX_SESSION_NS};
+use crate::session::{
+    LiveView, SessionInfo, SessionOut, SessionRecorder, TickData, MAX_SESSION_NS,
+};
 
 /// The binary frames of a live session, generated from `services/proto/icms/live.proto`.
 #[allow(missing_docs)]
@@ -488,8 +490,13 @@ impl std::fmt::Debug for LiveSession {
 }
 
 impl LiveSession {
-    /// Sets up the DFS and starts recording into `out`.
-    pub fn start(config: &LiveConfig, out: SessionOut<'_>) -> Result<LiveSession> {
+    /// Sets up the DFS and starts recording into `out` (its Foxglove topics published through
+    /// `view` too, when given).
+    pub fn start(
+        config: &LiveConfig,
+        out: SessionOut<'_>,
+        view: Option<LiveView>,
+    ) -> Result<LiveSession> {
         let (rigid, pose, table_height) = scene(&config.object)?;
         let params = DfsParams {
             // Fingertip pads are soft, as the simulated operator's (`Simulation::new`).
@@ -519,7 +526,8 @@ impl LiveSession {
             table_height: Some(table_height),
             hand_urdf: config.hand_urdf.clone(),
         };
-        let recorder = SessionRecorder::create_to(out, dfs.hand(), dfs.object(), &info)?;
+        let recorder =
+            SessionRecorder::create_with_view(out, dfs.hand(), dfs.object(), &info, view)?;
         let dof = dfs.hand().dof();
         let n_tips = dfs.hand().fingertips.len();
         let input = Input {

@@ -173,6 +173,8 @@ pub struct TestApp {
     _dir: Option<TempDir>,
     shutdown: Option<oneshot::Sender<()>>,
     task: Option<JoinHandle<()>>,
+    /// The port of its Foxglove WebSocket server (`--foxglove`), if one runs.
+    pub foxglove_port: Option<u16>,
 }
 
 impl TestApp {
@@ -196,6 +198,7 @@ impl TestApp {
         let config = args.into_config().expect("valid test configuration");
         let app = Application::build(config).await.expect("server starts");
         let addr = app.local_addr();
+        let foxglove_port = app.foxglove_port();
         let (tx, rx) = oneshot::channel::<()>();
         let task = tokio::spawn(async move {
             app.run_until(async {
@@ -211,6 +214,7 @@ impl TestApp {
             _dir: None,
             shutdown: Some(tx),
             task: Some(task),
+            foxglove_port,
         }
     }
 

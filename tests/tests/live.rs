@@ -594,3 +594,102 @@ async fn a_python_client_streams_a_session_and_python_decodes_its_recording() {
     assert_eq!(report["metadata"]["session"]["source"], "live");
     app.stop().await;
 }
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn serve_foxglove_publishes_a_live_session_to_a_foxglove_websocket_client() {
+    let app = TestApp::spawn_with(|a| a.foxglove = Some("127.0.0.1:0".parse().unwrap())).await;
+    let port = app.foxglove_port.expect("the Foxglove server runs");
+    // A Foxglove app, as its protocol (foxglove.sdk.v1: inline schemas) has it.
+    let mut req = format!("ws://127.0.0.1:{port}")
+        .into_client_request()
+        .unwrap();
+    req.headers_mut()
+        .insert("sec-websocket-protocol", "foxglove.sdk.v1".parse().unwrap());
+    let (mut viewer, _) = tokio_tungstenite::connect_async(req).await.unwrap();
+    // A live session streaming meanwhile.
+    let s = scenario("sphere-lift", 0);
+    let frames = live_client::simulated_frames(&s, Some(2.0), 1).unwrap();
+    let live_url = url(&app);
+    let start = start_for(&s);
+    let client = tokio::spawn(async move {
+        let options = ClientOptions {
+            token: None,
+            realtime: true,
+        };
+        live_client::run(&live_url, &start, frames, &options, |_| {}).await
+    });
+    let mut subscribed = std::collections::BTreeMap::new();
+    let mut got = std::collections::BTreeSet::new();
+    let deadline = tokio::time::Instant::now() + Duration::from_secs(20);
+    while got.len() < 4 {
+        let msg = tokio::time::timeout_at(deadline, viewer.next())
+            .await
+            .expect("Foxglove messages within 20 s")
+            .unwrap()
+            .unwrap();
+        match msg {
+            Message::Text(t) => {
+                let v: Value = serde_json::from_str(t.as_str()).unwrap();
+                if v["op"] != "advertise" {
+                    continue;
+                }
+                for ch in v["channels"].as_array().unwrap() {
+                    let topic = ch["topic"].as_str().unwrap().to_owned();
+                    assert!(topic.starts_with("/live/1/"), "{topic}");
+                    assert_eq!(ch["encoding"], "protobuf");
+                    let id = subscribed.len() as u64 + 1;
+                    subscribed.insert(id, (topic, ch["schemaName"].as_str().unwrap().to_owned()));
+                    let sub = json!({"op": "subscribe",
+                        "subscriptions": [{"id": id, "channelId": ch["id"]}]});
+                    viewer
+                        .send(Message::Text(sub.to_string().into()))
+                        .await
+                        .unwrap();
+                }
+            }
+            Message::Binary(b) => {
+                // Message data: opcode 1, subscription id (u32 LE), log time (u64 LE), payload.
+                assert_eq!(b[0], 1);
+                let id = u32::from_le_bytes(b[1..5].try_into().unwrap()) as u64;
+                let (topic, schema) = subscribed[&id].clone();
+                let payload = &b[13..];
+                match schema.as_str() {
+                    "foxglove.FrameTransforms" => {
+                        let m = <foxglove::messages::FrameTransforms as prost::Message>::decode(
+                            payload,
+                        )
+                        .unwrap();
+                        assert!(!m.transforms.is_empty());
+                    }
+                    "foxglove.SceneUpdate" => {
+                        let m =
+                            <foxglove::messages::SceneUpdate as prost::Message>::decode(payload)
+                                .unwrap();
+                        assert!(!m.entities.is_empty());
+                    }
+                    "foxglove.JointStates" => {
+                        let m =
+                            <foxglove::messages::JointStates as prost::Message>::decode(payload)
+                                .unwrap();
+                        assert_eq!(m.joints.len(), 10);
+                    }
+                    other => panic!("{topic}: unexpected schema {other}"),
+                }
+                got.insert(topic);
+            }
+            _ => {}
+        }
+    }
+    assert_eq!(
+        got.into_iter().collect::<Vec<_>>(),
+        [
+            "/live/1/hand",
+            "/live/1/joint_states",
+            "/live/1/scene",
+            "/live/1/tf"
+        ]
+    );
+    let summary = client.await.unwrap().unwrap();
+    assert!(summary.session_id.is_some());
+    app.stop().await;
+}

@@ -163,6 +163,10 @@ pub struct LiveHub {
     slots: Arc<Semaphore>,
     tasks: TaskTracker,
     silence: Duration,
+    /// The Foxglove SDK context whose WebSocket server shows the sessions live
+    /// (`icms serve --foxglove`), and the number of the last session published.
+    foxglove: std::sync::OnceLock<Arc<foxglove::Context>>,
+    published: std::sync::atomic::AtomicU64,
 }
 
 impl LiveHub {
@@ -174,7 +178,31 @@ impl LiveHub {
             slots: Arc::new(Semaphore::new(max_sessions.max(1))),
             tasks: TaskTracker::new(),
             silence,
+            foxglove: std::sync::OnceLock::new(),
+            published: std::sync::atomic::AtomicU64::new(0),
         })
+    }
+
+    /// Publishes every live session from now on through `context` (its Foxglove WebSocket
+    /// server), each under `/live/N/` (N counting sessions from 1). Set once.
+    pub fn publish_to(&self, context: Arc<foxglove::Context>) {
+        let _ = self.foxglove.set(context);
+    }
+
+    /// The live view of a new session, when the sessions are published.
+    fn view(&self, started_at: std::time::SystemTime) -> Option<services::session::LiveView> {
+        let context = self.foxglove.get()?;
+        let n = self.published.fetch_add(1, Ordering::Relaxed) + 1;
+        let epoch_ns = started_at
+            .duration_since(std::time::UNIX_EPOCH)
+            .map_or(0, |d| d.as_nanos() as u64);
+        match services::session::LiveView::new(context, &format!("/live/{n}"), epoch_ns) {
+            Ok(v) => Some(v),
+            Err(e) => {
+                tracing::warn!(error = %e, "a live session could not be published to Foxglove");
+                None
+            }
+        }
     }
 
     /// Waits at most `grace` for every live session to be finished and stored (at shutdown,
@@ -276,6 +304,7 @@ async fn run_session(mut socket: WebSocket, st: AppState, _permit: OwnedSemaphor
     };
     let pinned = st.live().pool.pin();
     let store = st.store().clone();
+    let view = st.live().view(config.started_at);
     let opened = pinned
         .run(move || -> Result<(StagedBlob, LiveSession), String> {
             let mut staged = store.stage_upload().map_err(|e| e.to_string())?;
@@ -283,7 +312,7 @@ async fn run_session(mut socket: WebSocket, st: AppState, _permit: OwnedSemaphor
                 out: Box::new(staged.writer().map_err(|e| e.to_string())?),
                 name: staged.path().to_path_buf(),
             };
-            let session = LiveSession::start(&config, out).map_err(|e| e.to_string())?;
+            let session = LiveSession::start(&config, out, view).map_err(|e| e.to_string())?;
             Ok((staged, session))
         })
         .await;

@@ -84,8 +84,8 @@ pub use read::{
     RAW_TOPIC_SKEW_NS,
 };
 pub use recorder::{
-    record_simulation, record_simulation_until, record_ticks, record_ticks_until, RecordSummary,
-    SessionInfo, SessionOut, SessionRecorder, TickData, TABLE_ENTITY,
+    record_simulation, record_simulation_until, record_ticks, record_ticks_until, LiveView,
+    RecordSummary, SessionInfo, SessionOut, SessionRecorder, TickData, TABLE_ENTITY,
 };
 pub use time::rfc3339_utc;
 

@@ -4,6 +4,7 @@
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 use std::sync::mpsc::{sync_channel, Receiver, SyncSender};
+use std::sync::Arc;
 use std::thread::JoinHandle;
 
 use dfs_core::dfs::TickOutput;
@@ -351,6 +352,79 @@ fn inputs_finite(hand: &HandFrames, tick: &TickData<'_>) -> bool {
     ok
 }
 
+/// A recording's Foxglove topics published as they are written, through the Foxglove SDK's
+/// channels of `context` (whose sinks, such as its WebSocket server, send them on): `/tf`,
+/// `/scene`, `/joint_states` and `/hand` under `prefix` (e.g. `/live/3/tf`), with the SDK's
+/// schemas, at the topics' 50 Hz, a batch at a time (every 0.1 s of session). The channels
+/// close when the recording ends.
+pub struct LiveView {
+    /// Per topic of [`ALL_TOPICS`] the channel it is published on (the Foxglove topics only).
+    channels: Vec<Option<Arc<foxglove::RawChannel>>>,
+    /// Added to a message's log time (the session's time) for the channel: the wall-clock
+    /// start of the session (ns since the Unix epoch).
+    epoch_ns: u64,
+}
+
+impl std::fmt::Debug for LiveView {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        let topics: Vec<&str> = self.channels.iter().flatten().map(|c| c.topic()).collect();
+        f.debug_struct("LiveView").field("topics", &topics).finish()
+    }
+}
+
+impl LiveView {
+    /// Channels under `prefix` in `context`, logging at `epoch_ns` plus the session time.
+    pub fn new(context: &Arc<foxglove::Context>, prefix: &str, epoch_ns: u64) -> Result<LiveView> {
+        let schemas = [
+            None,
+            None,
+            None,
+            None,
+            fg::FrameTransforms::get_schema(),
+            fg::SceneUpdate::get_schema(),
+            fg::JointStates::get_schema(),
+            fg::SceneUpdate::get_schema(),
+        ];
+        let mut channels = Vec::with_capacity(ALL_TOPICS.len());
+        for (topic, schema) in ALL_TOPICS.iter().zip(schemas) {
+            let Some(schema) = schema else {
+                channels.push(None);
+                continue;
+            };
+            let channel = foxglove::ChannelBuilder::new(format!("{prefix}{topic}"))
+                .context(context)
+                .message_encoding("protobuf")
+                .schema(schema)
+                .build_raw()
+                .map_err(|e| RecordingError::Serialize {
+                    topic: format!("{prefix}{topic}"),
+                    detail: format!("the live view's channel: {e}"),
+                })?;
+            channels.push(Some(channel));
+        }
+        Ok(LiveView { channels, epoch_ns })
+    }
+
+    fn publish(&self, topic: u8, log_time: u64, bytes: &[u8]) {
+        if let Some(Some(ch)) = self.channels.get(usize::from(topic)) {
+            if ch.has_sinks() {
+                ch.log_with_meta(
+                    bytes,
+                    foxglove::PartialMetadata::with_log_time(self.epoch_ns + log_time),
+                );
+            }
+        }
+    }
+}
+
+impl Drop for LiveView {
+    fn drop(&mut self) {
+        for ch in self.channels.iter().flatten() {
+            ch.close();
+        }
+    }
+}
+
 /// Where a recording goes.
 pub enum SessionOut<'a> {
     /// A file, created (truncated), synced as it is written and when finished.
@@ -421,20 +495,44 @@ impl SessionRecorder {
         object: &RigidObject,
         info: &SessionInfo,
     ) -> Result<Self> {
-        match out {
-            SessionOut::File(path) => Self::create(path, hand, object, info),
-            SessionOut::Stream { out, name } => {
-                let writer = SessionWriter::to_stream(out, name, Self::writer_options())?;
-                Self::start(writer, hand, object, info)
+        Self::create_with_view(out, hand, object, info, None)
+    }
+
+    /// [`create_to`](Self::create_to), publishing the Foxglove topics as they are written
+    /// through `view` too (a live session watched in the Foxglove app).
+    pub fn create_with_view(
+        out: SessionOut<'_>,
+        hand: &HandModel,
+        object: &RigidObject,
+        info: &SessionInfo,
+        view: Option<LiveView>,
+    ) -> Result<Self> {
+        let writer = match out {
+            SessionOut::File(path) => {
+                SessionWriter::create_with_options(path, Self::writer_options())?
             }
-        }
+            SessionOut::Stream { out, name } => {
+                SessionWriter::to_stream(out, name, Self::writer_options())?
+            }
+        };
+        Self::start_viewed(writer, hand, object, info, view)
     }
 
     fn start(
+        writer: SessionWriter,
+        hand: &HandModel,
+        object: &RigidObject,
+        info: &SessionInfo,
+    ) -> Result<Self> {
+        Self::start_viewed(writer, hand, object, info, None)
+    }
+
+    fn start_viewed(
         mut writer: SessionWriter,
         hand: &HandModel,
         object: &RigidObject,
         info: &SessionInfo,
+        view: Option<LiveView>,
     ) -> Result<Self> {
         let path = writer.path().to_path_buf();
         let mut meta = BTreeMap::new();
@@ -503,7 +601,7 @@ impl SessionRecorder {
         let (batch_recycle_tx, batch_recycled) = sync_channel::<Batch>(CHANNEL_BOUND + 2);
         let writer = std::thread::Builder::new()
             .name("icms-session-writer".into())
-            .spawn(move || writer_thread(writer, batch_rx, batch_recycle_tx))
+            .spawn(move || writer_thread(writer, batch_rx, batch_recycle_tx, view))
             .map_err(|e| RecordingError::io("starting the session writer thread", e))?;
         let (tx, rx) = sync_channel::<Inputs>(CHANNEL_BOUND);
         let (recycle_tx, recycled) = sync_channel::<Inputs>(CHANNEL_BOUND + 2);
@@ -805,6 +903,7 @@ fn writer_thread(
     mut writer: SessionWriter,
     rx: Receiver<Batch>,
     recycle: SyncSender<Batch>,
+    view: Option<LiveView>,
 ) -> Result<WriteSummary> {
     let mut handles = Vec::with_capacity(ALL_TOPICS.len());
     for topic in ALL_TOPICS {
@@ -813,6 +912,9 @@ fn writer_thread(
     for mut batch in rx {
         for &(topic, t, start, end) in &batch.items {
             writer.write_to(handles[topic as usize], t, &batch.data[start..end])?;
+            if let Some(view) = &view {
+                view.publish(topic, t, &batch.data[start..end]);
+            }
         }
         for (name, metadata) in batch.metadata.drain(..) {
             writer.add_metadata(&name, metadata)?;
