@@ -306,14 +306,16 @@ async fn run_session(mut socket: WebSocket, st: AppState, _permit: OwnedSemaphor
     let store = st.store().clone();
     let view = st.live().view(config.started_at);
     let opened = pinned
-        .run(move || -> Result<(StagedBlob, LiveSession), String> {
+        .run(move || -> Result<(StagedBlob, Box<LiveSession>), String> {
             let mut staged = store.stage_upload().map_err(|e| e.to_string())?;
             let out = SessionOut::Stream {
                 out: Box::new(staged.writer().map_err(|e| e.to_string())?),
                 name: staged.path().to_path_buf(),
             };
             let session = LiveSession::start(&config, out, view).map_err(|e| e.to_string())?;
-            Ok((staged, session))
+            // Boxed: the session (its DFS some tens of kB) moves to the worker and back with
+            // every frame, a pointer instead of a copy.
+            Ok((staged, Box::new(session)))
         })
         .await;
     let (staged, session) = match opened {
@@ -461,8 +463,8 @@ async fn stream(
     socket: &mut WebSocket,
     st: &AppState,
     pinned: &Pinned,
-    mut session: LiveSession,
-) -> (LiveSession, EndReason) {
+    mut session: Box<LiveSession>,
+) -> (Box<LiveSession>, EndReason) {
     let silence = st.live().silence;
     let mut last_sample = Instant::now();
     let mut any_sample = false;
@@ -585,7 +587,7 @@ enum Reply {
 }
 
 /// Steps one frame (on the session's worker).
-fn step(mut session: LiveSession, frame: Bytes) -> (LiveSession, Reply) {
+fn step(mut session: Box<LiveSession>, frame: Bytes) -> (Box<LiveSession>, Reply) {
     let reply = match session.on_frame(&frame) {
         Err(e) => Reply::Refused(e),
         Ok(answer) => Reply::Answered {
