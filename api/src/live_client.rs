@@ -118,7 +118,11 @@ pub async fn run(
             .map_err(|e| err("the token", e))?;
         request.headers_mut().insert("authorization", value);
     }
-    let (mut ws, _) = tokio_tungstenite::connect_async_with_config(request, None, true)
+    // A small read buffer: frames are a few hundred bytes (tungstenite's default 128 KiB is
+    // zeroed as it is read into).
+    let config = tokio_tungstenite::tungstenite::protocol::WebSocketConfig::default()
+        .read_buffer_size(8 * 1024);
+    let (mut ws, _) = tokio_tungstenite::connect_async_with_config(request, Some(config), true)
         .await
         .map_err(|e| err(&format!("connecting to {url}"), e))?;
     let start_text = serde_json::to_string(&ClientMessage::Start(Box::new(start.clone())))
