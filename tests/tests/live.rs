@@ -693,3 +693,39 @@ async fn serve_foxglove_publishes_a_live_session_to_a_foxglove_websocket_client(
     assert!(summary.session_id.is_some());
     app.stop().await;
 }
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn any_stored_hand_serves_as_the_glove_model() {
+    let app = TestApp::spawn().await;
+    let hand = dfs_core::hand::builtin_hand("allegro").unwrap();
+    let mid: Vec<f64> = (0..hand.dof())
+        .map(|i| 0.5 * (hand.dof_lower[i] + hand.dof_upper[i]))
+        .collect();
+    let mut ws = connect(&app, None).await;
+    let mut start = sphere_start();
+    start["hand"] = json!("allegro");
+    send_json(&mut ws, start).await;
+    let started = expect_event(&mut ws, "started").await;
+    assert_eq!(started["hand"], "allegro");
+    assert_eq!(started["dofs"], json!(hand.dof_names));
+    for i in 0..100u64 {
+        let s = proto::Sample {
+            t_ns: i * 1_000_000,
+            q: mid.clone(),
+            tau: vec![0.0; hand.dof()],
+            wrist: Some(live_client::pose(&dfs_core::math::Isometry::translation(
+                0.0, 0.0, 0.3,
+            ))),
+        };
+        send_sample(&mut ws, &s).await;
+        let fb = expect_feedback(&mut ws).await;
+        assert_eq!(fb.motor_q.len(), hand.dof());
+        assert_eq!(fb.fingers.len(), hand.fingertips.len());
+    }
+    send_json(&mut ws, json!({"type": "end"})).await;
+    expect_event(&mut ws, "ended").await;
+    let stored = expect_event(&mut ws, "stored").await;
+    let meta = session(&app, stored["session_id"].as_i64().unwrap()).await;
+    assert_eq!(meta["meta"]["hand"], "allegro");
+    app.stop().await;
+}
