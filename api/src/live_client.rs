@@ -313,6 +313,26 @@ pub fn simulated_frames(
     Ok(frames)
 }
 
+/// The samples of a glove recording, at its own times: its angles, its torques when it has
+/// them, its wrist poses when it has them.
+pub fn recording_frames(rec: &services::session::import::GloveRecording) -> Vec<Frame> {
+    let n = rec.names.len();
+    let mut sample = proto::Sample::default();
+    (0..rec.len())
+        .map(|i| {
+            sample.t_ns = rec.times_ns[i];
+            sample.q.clear();
+            sample.q.extend_from_slice(&rec.q[i * n..(i + 1) * n]);
+            sample.tau.clear();
+            if let Some(tau) = &rec.tau {
+                sample.tau.extend_from_slice(&tau[i * n..(i + 1) * n]);
+            }
+            sample.wrist = rec.wrist_at(rec.times_ns[i]).map(|w| pose(&w));
+            Frame::of(&sample)
+        })
+        .collect()
+}
+
 /// A pose as the live protocol sends it.
 pub fn pose(iso: &dfs_core::math::Isometry) -> proto::Pose {
     let t = iso.translation.vector;

@@ -1,5 +1,5 @@
-//! `icms scenarios`, `simulate`, `salvage` and `import-glove` end to end: the binary as a user
-//! runs it, the files it writes read back with the library.
+//! `icms scenarios`, `simulate`, `salvage`, `import-glove` and `export-glove` end to end: the
+//! binary as a user runs it, the files it writes read back with the library.
 
 mod common;
 use common::icms;
@@ -187,6 +187,161 @@ fn import_glove_reads_a_csv_and_rejects_bad_columns_naming_the_line() {
     ]);
     assert_ne!(code, 0);
     assert!(err.contains("object.mu"), "{err}");
+}
+
+/// The names of each skill's phases in `icms segment --json` of `path`.
+fn skill_phases(path: &Path) -> Vec<Vec<String>> {
+    let (code, out, err) = icms(&["segment", p(path), "--json"]);
+    assert_eq!(code, 0, "{err}");
+    let v: Value = serde_json::from_str(&out).unwrap();
+    v["skills"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|s| {
+            s["phases"]
+                .as_array()
+                .unwrap()
+                .iter()
+                .map(|ph| ph["name"].as_str().unwrap().to_owned())
+                .collect()
+        })
+        .collect()
+}
+
+#[test]
+fn export_glove_then_import_glove_finds_the_same_skills() {
+    let dir = tempfile::tempdir().unwrap();
+    let session = dir.path().join("s.mcap");
+    let (code, _, err) = icms(&[
+        "simulate",
+        "--scenario",
+        "sphere-lift",
+        "--seed",
+        "1",
+        "--out",
+        p(&session),
+    ]);
+    assert_eq!(code, 0, "{err}");
+    let csv = dir.path().join("s.csv");
+    let (code, out, err) = icms(&["export-glove", p(&session), "--out", p(&csv), "--json"]);
+    assert_eq!(code, 0, "{err}");
+    let report: Value = serde_json::from_str(&out).unwrap();
+    let ticks = read_session(&session).unwrap().ticks();
+    assert_eq!(report["rows"], ticks);
+    assert_eq!(report["hand"], "glove10");
+    assert_eq!(report["dofs"].as_array().unwrap().len(), 10);
+    let object = report["object"].to_string();
+    let (code, text, _) = icms(&["export-glove", p(&session), "--out", p(&csv)]);
+    assert_eq!(code, 0);
+    assert!(text.contains("import it with: icms import-glove"), "{text}");
+
+    let again = dir.path().join("again.mcap");
+    let import = |extra: &[&str]| {
+        let mut args = vec!["import-glove", "--input", p(&csv), "--object", &object];
+        args.extend_from_slice(extra);
+        icms(&args)
+    };
+    let (code, out, err) = import(&["--hand", "glove10", "--out", p(&again), "--json"]);
+    assert_eq!(code, 0, "{err}");
+    let report: Value = serde_json::from_str(&out).unwrap();
+    assert_eq!(report["glove_input"], "torques");
+    assert_eq!(report["wrist"], "csv");
+    assert_eq!(report["hand"], "glove10");
+    assert_eq!(report["contact_model"], "soft_finger");
+    assert_eq!(report["ticks"], ticks);
+    let skills = skill_phases(&session);
+    assert_eq!(skills.len(), 1);
+    assert_eq!(skill_phases(&again), skills);
+
+    // A calibration that names no DOF of the hand, a fixed base for a recording with wrist
+    // poses, another hand's columns, an unknown hand: refused, naming what is wrong.
+    let cal = dir.path().join("cal.json");
+    std::fs::write(
+        &cal,
+        r#"{"offsets": {"index_mcp": 0.01, "pinky_twist": 0.1}}"#,
+    )
+    .unwrap();
+    let (code, _, err) = import(&["--calibration", p(&cal), "--out", p(&again)]);
+    assert_ne!(code, 0);
+    assert!(
+        err.contains("cal.json") && err.contains("offsets.pinky_twist"),
+        "{err}"
+    );
+    std::fs::write(&cal, r#"{"offsets": {"index_mcp": 0.01}, "scale": {}}"#).unwrap();
+    let (code, _, err) = import(&["--calibration", p(&cal), "--out", p(&again)]);
+    assert_ne!(code, 0);
+    assert!(
+        err.contains("cal.json") && err.contains("unknown field `scale`"),
+        "{err}"
+    );
+    std::fs::write(&cal, r#"{"offsets": {"index_mcp": 0.01}}"#).unwrap();
+    let calibrated = dir.path().join("calibrated.mcap");
+    let (code, out, err) = import(&["--calibration", p(&cal), "--out", p(&calibrated)]);
+    assert_eq!(code, 0, "{err}");
+    assert!(
+        out.contains("torques") && out.contains("wrist csv"),
+        "{out}"
+    );
+    let s = read_session(&calibrated).unwrap();
+    assert!(s.metadata["calibration"].contains("index_mcp"));
+    let (code, _, err) = import(&["--base", "0,0,0.1", "--out", p(&again)]);
+    assert_ne!(code, 0);
+    assert!(
+        err.contains("--base") && err.contains("wrist poses"),
+        "{err}"
+    );
+    let (code, _, err) = import(&["--hand", "allegro", "--out", p(&again)]);
+    assert_ne!(code, 0);
+    assert!(
+        err.contains("s.csv line 1") && err.contains("allegro"),
+        "{err}"
+    );
+    let (code, _, err) = import(&[
+        "--hand",
+        "no-such-hand",
+        "--data",
+        p(dir.path()),
+        "--out",
+        p(&again),
+    ]);
+    assert_ne!(code, 0);
+    assert!(err.contains("--hand \"no-such-hand\""), "{err}");
+    let (code, _, err) = import(&["--calibration", p(&cal), "--out", p(&cal)]);
+    assert_ne!(code, 0);
+    assert!(err.contains("is the --calibration file"), "{err}");
+
+    // export-glove over its own input, or of a file that is not a session: refused, and no
+    // partial file is left behind.
+    let (code, _, err) = icms(&["export-glove", p(&session), "--out", p(&session)]);
+    assert_ne!(code, 0);
+    assert!(err.contains("is the session file"), "{err}");
+    let bad = dir.path().join("bad.csv");
+    let (code, _, err) = icms(&["export-glove", p(&csv), "--out", p(&bad)]);
+    assert_ne!(code, 0);
+    assert!(err.contains("s.csv") && err.contains("MCAP"), "{err}");
+    assert!(!bad.exists());
+    assert!(!dir.path().join("bad.csv.part").exists());
+
+    for (cmd, words) in [
+        (
+            "import-glove",
+            &[
+                "--hand",
+                "--calibration",
+                "--wrist-topic",
+                "wrist_qw",
+                "tau_<DOF>",
+            ][..],
+        ),
+        ("export-glove", &["--out", "wrist_x"][..]),
+    ] {
+        let (code, help, _) = icms(&[cmd, "--help"]);
+        assert_eq!(code, 0);
+        for w in words {
+            assert!(help.contains(w), "{cmd} --help lacks {w}: {help}");
+        }
+    }
 }
 
 #[test]

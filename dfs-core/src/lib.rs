@@ -7,7 +7,9 @@
 //!
 //! No I/O, no async, no database. The tick ([`dfs::Dfs::step`]) allocates nothing.
 
+pub mod calibration;
 pub mod contact;
+pub mod coupling;
 pub mod dfs;
 pub mod error;
 pub mod fixtures;

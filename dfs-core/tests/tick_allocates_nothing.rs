@@ -1,4 +1,5 @@
-//! A DFS tick allocates nothing: a counting global allocator around many ticks.
+//! A DFS tick allocates nothing: a counting global allocator around many ticks. Nor does the
+//! virtual coupling of a position-only glove or a calibration applied to its samples.
 
 use dfs_core::dfs::GloveSample;
 use dfs_core::fixtures::glove10_holding_paper_sphere;
@@ -14,6 +15,7 @@ static GLOBAL: &StatsAlloc<System> = &INSTRUMENTED_SYSTEM;
 fn dfs_ticks_allocate_nothing() {
     a_dfs_tick_with_four_contacts_allocates_nothing();
     a_free_falling_object_tick_and_a_refused_sample_allocate_nothing();
+    a_coupled_tick_with_a_calibration_allocates_nothing();
 }
 
 fn a_dfs_tick_with_four_contacts_allocates_nothing() {
@@ -69,4 +71,51 @@ fn a_free_falling_object_tick_and_a_refused_sample_allocate_nothing() {
         .unwrap();
     }
     assert_eq!(region.change().allocations, 0);
+}
+
+/// A position-only glove's tick: calibrate the measured angles, the coupling's torques from
+/// the last tick's motor state, the DFS step on the motor posture.
+fn a_coupled_tick_with_a_calibration_allocates_nothing() {
+    use dfs_core::calibration::Calibration;
+    use dfs_core::coupling::{CouplingParams, VirtualCoupling};
+    let (mut dfs, q, mut tau, base) = glove10_holding_paper_sphere().unwrap();
+    let coupling =
+        VirtualCoupling::for_hand(dfs.hand(), &CouplingParams::default(), dfs.params()).unwrap();
+    let calibration: Calibration =
+        serde_json::from_str(r#"{"offsets": {"index_pip": 0.01}, "scales": {"index_mcp": 1.01}}"#)
+            .unwrap();
+    let calibration = calibration.validate(dfs.hand()).unwrap();
+    let n = q.len();
+    let mut measured = q.clone();
+    let mut posture = q.clone();
+    dfs.step(&GloveSample {
+        q: &q,
+        tau: &tau,
+        base,
+    })
+    .unwrap();
+    let mut attempts = Vec::new();
+    for _ in 0..5 {
+        let region = Region::new(GLOBAL);
+        for _ in 0..1000 {
+            measured.copy_from_slice(&q);
+            calibration.apply(&mut measured);
+            coupling
+                .torques_from(&measured, dfs.output(), &mut tau)
+                .unwrap();
+            posture.copy_from_slice(&dfs.output().motor_q[..n]);
+            dfs.step(&GloveSample {
+                q: &posture,
+                tau: &tau,
+                base,
+            })
+            .unwrap();
+        }
+        let stats = region.change();
+        if stats.allocations == 0 && stats.reallocations == 0 {
+            return;
+        }
+        attempts.push(stats);
+    }
+    panic!("coupled ticks allocated in every attempt: {attempts:?}");
 }

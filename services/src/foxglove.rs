@@ -1,5 +1,6 @@
 //! Serde types for the Foxglove message schemas we record (`foxglove.FrameTransforms`,
-//! `foxglove.SceneUpdate`, `foxglove.JointStates`), matching the official JSON schemas in
+//! `foxglove.SceneUpdate`, `foxglove.JointStates`) and read from glove recordings
+//! (`foxglove.PoseInFrame`), matching the official JSON schemas in
 //! `services/schemas/` field for field: same names, same JSON types, every required field present.
 //!
 //! Units are SI (m, rad, s); colours are 0-1. Quaternions are `{x, y, z, w}`.
@@ -456,6 +457,23 @@ pub struct JointStates {
     /// The joints.
     pub joints: Vec<JointState>,
 }
+
+/// `foxglove.PoseInFrame`: a timestamped pose in a named frame (read from glove recordings:
+/// a tracker's pose of the hand's base link). Schema name [`POSE_IN_FRAME_SCHEMA_NAME`].
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+pub struct PoseInFrame {
+    /// Time of the pose.
+    #[serde(default)]
+    pub timestamp: Timestamp,
+    /// The frame the pose is expressed in.
+    #[serde(default)]
+    pub frame_id: String,
+    /// The pose.
+    pub pose: Pose,
+}
+
+/// Schema name of [`PoseInFrame`] messages.
+pub const POSE_IN_FRAME_SCHEMA_NAME: &str = "foxglove.PoseInFrame";
 
 #[cfg(test)]
 mod tests {

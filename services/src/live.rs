@@ -24,6 +24,7 @@
 use std::collections::BTreeMap;
 use std::time::{Duration, SystemTime};
 
+use dfs_core::calibration::{Calibration, DofCalibration};
 use dfs_core::contact::{ContactModel, Friction};
 use dfs_core::dfs::{Dfs, DfsParams, GloveSample};
 use dfs_core::hand::{HandModel, MAX_DOF};
@@ -36,6 +37,7 @@ use prost::Message as _;
 use serde::{Deserialize, Serialize};
 
 use crate::error::{RecordingError, Result};
+use crate::session::import::GloveDrive;
 use crate::session::{
     LiveView, SessionInfo, SessionOut, SessionRecorder, TickData, MAX_SESSION_NS,
 };
@@ -120,6 +122,10 @@ pub struct StartMessage {
     /// The assistant's settings. Default off.
     #[serde(default)]
     pub assist: AssistSettings,
+    /// The operator's calibration: `{"offsets": {DOF: rad}, "scales": {DOF: factor}}`,
+    /// applied to every sample's angles (`q = scale · q_raw + offset`). Default: none.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub calibration: Option<Calibration>,
 }
 
 fn default_hand() -> String {
@@ -298,6 +304,10 @@ pub struct LiveConfig {
     pub name: String,
     /// Wall-clock start.
     pub started_at: SystemTime,
+    /// The operator's calibration, resolved for the hand.
+    pub calibration: DofCalibration,
+    /// It as given (recorded in the session's metadata), if any.
+    pub calibration_given: Option<Calibration>,
 }
 
 impl LiveConfig {
@@ -339,6 +349,12 @@ impl LiveConfig {
                 .map_err(|m| invalid("wrist", m))?,
         };
         scene(&start.object)?;
+        let calibration = match &start.calibration {
+            Some(c) => c
+                .validate(&hand)
+                .map_err(|e| invalid("calibration", e.to_string()))?,
+            None => DofCalibration::identity(hand.dof()),
+        };
         Ok(LiveConfig {
             hand,
             hand_urdf,
@@ -346,6 +362,8 @@ impl LiveConfig {
             wrist,
             name,
             started_at: SystemTime::now(),
+            calibration,
+            calibration_given: start.calibration.clone().filter(|c| !c.is_empty()),
         })
     }
 }
@@ -464,6 +482,10 @@ pub struct LiveSession {
     dfs: Dfs,
     recorder: Option<SessionRecorder>,
     dof: usize,
+    calibration: DofCalibration,
+    /// How the samples drive the DFS: decided by the first sample (with torques or of
+    /// positions only); every later sample must be alike.
+    drive: Option<GloveDrive>,
     /// Client time of the first sample.
     first_t_ns: Option<u64>,
     last_t_ns: u64,
@@ -515,12 +537,19 @@ impl LiveSession {
             params,
         )
         .map_err(|e| invalid("hand", e.to_string()))?;
+        let mut extra = BTreeMap::new();
+        if let Some(c) = &config.calibration_given {
+            extra.insert(
+                "calibration".to_owned(),
+                serde_json::to_string(c).unwrap_or_default(),
+            );
+        }
         let info = SessionInfo {
             scenario: config.name.clone(),
             seed: None,
             object_json: serde_json::to_string(&config.object).unwrap_or_default(),
             source: "live".to_owned(),
-            extra: BTreeMap::new(),
+            extra,
             phases: Vec::new(),
             started_at: Some(config.started_at),
             table_height: Some(table_height),
@@ -540,6 +569,8 @@ impl LiveSession {
             dfs,
             recorder: Some(recorder),
             dof,
+            calibration: config.calibration,
+            drive: None,
             first_t_ns: None,
             last_t_ns: 0,
             next_tick: 0,
@@ -644,14 +675,32 @@ impl LiveSession {
                 ),
             );
         }
-        if s.tau.len() != n {
+        let torques = match self.drive {
+            Some(d) => d.torques(),
+            None => !s.tau.is_empty(),
+        };
+        if s.tau.len() != if torques { n } else { 0 } {
+            let kind = if self.drive.is_some() {
+                "the session's first sample"
+            } else {
+                "a glove"
+            };
             return refuse(
                 Some(t),
-                format!(
-                    "tau has {} values; the hand {} has {n} DOFs",
-                    s.tau.len(),
-                    hand.name
-                ),
+                if torques {
+                    format!(
+                        "tau has {} values; {kind} gave torques, so every sample gives one per \
+                         DOF ({n} for {})",
+                        s.tau.len(),
+                        hand.name
+                    )
+                } else {
+                    format!(
+                        "tau has {} values; the session's first sample gave none (a glove of \
+                         positions only), so no sample may",
+                        s.tau.len()
+                    )
+                },
             );
         }
         for (what, values) in [("q", &s.q), ("tau", &s.tau)] {
@@ -665,9 +714,17 @@ impl LiveSession {
                 );
             }
         }
+        let mut q = [0.0; MAX_DOF];
+        q[..n].copy_from_slice(&s.q);
+        self.calibration.apply(&mut q[..n]);
         let slack = self.dfs.params().angle_slack;
-        if let Err(e) = hand.check_angles(&s.q, slack) {
-            return refuse(Some(t), format!("q: {e}"));
+        if let Err(e) = hand.check_angles(&q[..n], slack) {
+            let calibrated = if self.calibration.is_identity() {
+                ""
+            } else {
+                " (calibrated)"
+            };
+            return refuse(Some(t), format!("q{calibrated}: {e}"));
         }
         let range = self.dfs.params().torque_range;
         for (i, &v) in s.tau.iter().enumerate() {
@@ -741,8 +798,19 @@ impl LiveSession {
             tau: [0.0; MAX_DOF],
             base,
         };
-        input.q[..n].copy_from_slice(&s.q);
-        input.tau[..n].copy_from_slice(&s.tau);
+        input.q[..n].copy_from_slice(&q[..n]);
+        if torques {
+            input.tau[..n].copy_from_slice(&s.tau);
+        }
+        if self.drive.is_none() {
+            let drive = GloveDrive::new(hand, self.dfs.params(), torques, None).map_err(|e| {
+                SampleError {
+                    t_ns: Some(t),
+                    message: format!("the glove's coupling: {e}"),
+                }
+            })?;
+            self.drive = Some(drive);
+        }
         if self.first_t_ns.is_none() {
             self.first_t_ns = Some(t);
             self.prev = input;
@@ -770,22 +838,39 @@ impl LiveSession {
             } else {
                 1.0
             };
-            let mut q = [0.0; MAX_DOF];
-            let mut tau = [0.0; MAX_DOF];
+            let (mut q_measured, mut tau_measured) = ([0.0; MAX_DOF], [0.0; MAX_DOF]);
             for i in 0..n {
-                q[i] = a.q[i] + w * (b.q[i] - a.q[i]);
-                tau[i] = a.tau[i] + w * (b.tau[i] - a.tau[i]);
+                q_measured[i] = a.q[i] + w * (b.q[i] - a.q[i]);
+                tau_measured[i] = a.tau[i] + w * (b.tau[i] - a.tau[i]);
             }
             let base = interpolate_pose(&a.base, &b.base, w);
+            let first = self.next_tick == 0;
             self.next_tick += 1;
             ticks += 1;
             self.stats.ticks += 1;
-            let sample = GloveSample {
-                q: &q[..n],
-                tau: &tau[..n],
-                base,
-            };
-            if let Err(e) = self.dfs.step(&sample) {
+            let (mut q, mut tau) = ([0.0; MAX_DOF], [0.0; MAX_DOF]);
+            let stepped = match &self.drive {
+                Some(drive) => drive.sample(
+                    self.dfs.hand(),
+                    first,
+                    &q_measured[..n],
+                    &tau_measured[..n],
+                    self.dfs.output(),
+                    &mut q[..n],
+                    &mut tau[..n],
+                ),
+                None => Err(dfs_core::DfsError::invalid("glove", "no sample yet")),
+            }
+            .and_then(|()| {
+                self.dfs
+                    .step(&GloveSample {
+                        q: &q[..n],
+                        tau: &tau[..n],
+                        base,
+                    })
+                    .map(|_| ())
+            });
+            if let Err(e) = stepped {
                 self.stats.failed_ticks += 1;
                 failure.get_or_insert(SampleError {
                     t_ns: Some(self.last_t_ns),
@@ -804,10 +889,17 @@ impl LiveSession {
                 self.stats.first_contact_ns = Some(t);
             }
             if let Some(recorder) = self.recorder.as_mut() {
+                // As an import records: a glove with torques as measured, one of positions
+                // only as stepped (its posture and the coupling's torque).
+                let (q_rec, tau_rec) = if self.drive.is_some_and(|d| d.torques()) {
+                    (&q_measured, &tau_measured)
+                } else {
+                    (&q, &tau)
+                };
                 let tick = TickData {
                     time_ns: t,
-                    q: &q[..n],
-                    tau: &tau[..n],
+                    q: &q_rec[..n],
+                    tau: &tau_rec[..n],
                     base: &base,
                     output: out,
                     kinematics: self.dfs.kinematics(),

@@ -12,12 +12,11 @@ use std::sync::OnceLock;
 
 use common::validate_against;
 use dfs_core::hand::HandModel;
-use dfs_core::math::Isometry;
 use dfs_core::operator::Simulation;
 use dfs_core::scenario::Scenario;
 use services::foxglove::JOINT_STATES_SCHEMA;
 use services::mcap_io::{read_session_file, SessionWriter};
-use services::session::import::{import_glove, parse_glove_csv, read_glove_mcap};
+use services::session::import::{import_glove, parse_glove_csv, read_glove_mcap, ImportOptions};
 use services::session::*;
 use services::RecordingError;
 
@@ -396,7 +395,7 @@ fn importing_a_glove_csv_produces_a_session_that_reads_back() {
     let summary = import_glove(
         &csv,
         &scenario_object("sphere-lift"),
-        Isometry::identity(),
+        &ImportOptions::default(),
         &out,
     )
     .unwrap();
@@ -445,7 +444,7 @@ fn importing_glove_joint_states_from_an_mcap_produces_a_session_that_reads_back(
     let summary = import_glove(
         &input,
         &scenario_object("sphere-lift"),
-        Isometry::identity(),
+        &ImportOptions::default(),
         &out,
     )
     .unwrap();
@@ -471,7 +470,7 @@ fn an_import_that_fails_midway_leaves_a_readable_file_up_to_the_failure() {
     let err = import_glove(
         &csv,
         &scenario_object("sphere-lift"),
-        Isometry::identity(),
+        &ImportOptions::default(),
         &out,
     )
     .unwrap_err();
@@ -559,7 +558,7 @@ fn a_glove_recording_shorter_than_the_shortest_phase_is_refused() {
         import_glove(
             &input,
             &scenario_object("sphere-lift"),
-            Isometry::identity(),
+            &ImportOptions::default(),
             &dir.path().join("out.mcap"),
         )
     };

@@ -37,6 +37,7 @@ fn start_for(s: &dfs_core::scenario::Scenario) -> StartMessage {
         name: Some(s.name.clone()),
         wrist: None,
         assist: AssistSettings::default(),
+        calibration: None,
     }
 }
 
@@ -727,5 +728,103 @@ async fn any_stored_hand_serves_as_the_glove_model() {
     let stored = expect_event(&mut ws, "stored").await;
     let meta = session(&app, stored["session_id"].as_i64().unwrap()).await;
     assert_eq!(meta["meta"]["hand"], "allegro");
+    app.stop().await;
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_session_exported_to_csv_and_streamed_live_gives_the_skills_of_its_upload() {
+    let app = TestApp::spawn().await;
+    let dir = tempfile::tempdir().unwrap();
+    let (session_file, csv) = (dir.path().join("s.mcap"), dir.path().join("s.csv"));
+    let bytes = session_bytes("two-grasps", 5, None);
+    std::fs::write(&session_file, &bytes).unwrap();
+    services::session::export::export_glove_csv(&session_file, &csv).unwrap();
+    let hand = dfs_core::hand::HandModel::glove10();
+    let recording = services::session::import::read_glove_file(&csv, &hand).unwrap();
+    assert!(recording.wrist.is_some() && recording.tau.is_some());
+    let s = scenario("two-grasps", 5);
+    let summary = live_client::run(
+        &url(&app),
+        &start_for(&s),
+        live_client::recording_frames(&recording),
+        &ClientOptions::default(),
+        |_| {},
+    )
+    .await
+    .unwrap();
+    assert_eq!(summary.refused, 0);
+    let r = app.client.upload(&bytes, None).await;
+    assert_eq!(r.status, 201);
+    let uploaded = skills_of(&app, r.json()["session_id"].as_i64().unwrap()).await;
+    let live = skills_of(&app, summary.session_id.unwrap()).await;
+    assert_eq!(live.len(), 2);
+    assert_eq!(live.len(), uploaded.len());
+    for (a, b) in live.iter().zip(&uploaded) {
+        for key in ["grasp_type", "contact_count", "object_shape"] {
+            assert_eq!(a[key], b[key], "{key}");
+        }
+        for key in ["start_ns", "end_ns"] {
+            let d = (a[key].as_i64().unwrap() - b[key].as_i64().unwrap()).abs();
+            assert!(d <= 20_000_000, "{key} differs by {d} ns");
+        }
+    }
+    app.stop().await;
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_glove_of_positions_only_is_coupled_and_calibrated() {
+    let app = TestApp::spawn().await;
+    let mut ws = connect(&app, None).await;
+    let mut start = sphere_start();
+    // Every raw angle reads 0.05 rad low on index_mcp.
+    start["calibration"] = json!({"offsets": {"index_mcp": 0.05}});
+    send_json(&mut ws, start).await;
+    expect_event(&mut ws, "started").await;
+    let positions = |t_ns: u64, index_mcp: f64| {
+        let mut s = sample(t_ns);
+        s.tau.clear();
+        s.q[3] = index_mcp;
+        s
+    };
+    send_sample(&mut ws, &positions(0, 0.05)).await;
+    let fb = expect_feedback(&mut ws).await;
+    // The simulated finger starts at the calibrated posture.
+    assert!((fb.motor_q[3] - 0.10).abs() < 1e-9, "{:?}", fb.motor_q);
+    // The operator closes index_mcp by 0.3 rad in 50 ms; the coupled finger follows.
+    for i in 1..=300u64 {
+        send_sample(
+            &mut ws,
+            &positions(i * 1_000_000, 0.05 + 0.3 * (i.min(50) as f64 / 50.0)),
+        )
+        .await;
+        expect_feedback(&mut ws).await;
+    }
+    send_sample(&mut ws, &positions(301_000_000, 0.35)).await;
+    let fb = expect_feedback(&mut ws).await;
+    assert!((fb.motor_q[3] - 0.40).abs() < 0.02, "{:?}", fb.motor_q);
+    // A glove of positions only stays one: a sample with torques is refused.
+    send_sample(&mut ws, &sample(302_000_000)).await;
+    let e = expect_event(&mut ws, "error").await;
+    assert!(
+        e["message"].as_str().unwrap().contains("positions only"),
+        "{e}"
+    );
+    // The calibration applies before the limits (with the DFS's slack of 0.05 rad): a raw
+    // angle within them may be out calibrated.
+    let upper = dfs_core::hand::HandModel::glove10().dof_upper[3];
+    send_sample(&mut ws, &positions(303_000_000, upper + 0.02)).await;
+    let e = expect_event(&mut ws, "error").await;
+    assert!(
+        e["message"].as_str().unwrap().contains("(calibrated)"),
+        "{e}"
+    );
+    send_json(&mut ws, json!({"type": "end"})).await;
+    expect_event(&mut ws, "ended").await;
+    let stored = expect_event(&mut ws, "stored").await;
+    let meta = session(&app, stored["session_id"].as_i64().unwrap()).await;
+    assert!(meta["meta"]["extra"]["calibration"]
+        .as_str()
+        .unwrap()
+        .contains("index_mcp"));
     app.stop().await;
 }

@@ -506,6 +506,7 @@ fn bench_live(name: &str, sessions: usize, seconds: f64, rate: u32) -> Result<Li
             name: Some(format!("bench-live-{seed}")),
             wrist: None,
             assist: services::live::AssistSettings::default(),
+            calibration: None,
         };
         streams.push((start, frames));
     }

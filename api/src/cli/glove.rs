@@ -6,10 +6,10 @@
 use std::path::PathBuf;
 
 use serde::Serialize;
-use services::live::{proto, AssistMode, AssistSettings, Event, StartMessage};
+use services::live::{AssistMode, AssistSettings, Event, StartMessage};
 
 use super::CliError;
-use crate::live_client::{self, ClientOptions, Frame};
+use crate::live_client::{self, ClientOptions};
 
 /// Arguments of `icms glove`.
 #[derive(Debug, clap::Args)]
@@ -43,6 +43,14 @@ pub struct GloveArgs {
     /// `x,y,z,roll,pitch,yaw` (rad). Default: identity.
     #[arg(long, requires = "input")]
     base: Option<String>,
+    /// The glove model of `--input`: glove10 or a built-in robot hand (the recording's
+    /// columns are its DOFs).
+    #[arg(long, default_value = "glove10", requires = "input")]
+    hand: String,
+    /// The operator's calibration (a JSON file as `icms import-glove --calibration` takes),
+    /// sent in the `start` message: the server applies it to every sample.
+    #[arg(long)]
+    calibration: Option<PathBuf>,
     /// The assistant: off, suggest or apply.
     #[arg(long, value_enum, default_value_t = Assist::Off)]
     assist: Assist,
@@ -83,6 +91,7 @@ pub fn run_glove(a: GloveArgs) -> Result<(), CliError> {
                 name: Some(scenario.name.clone()),
                 wrist: None,
                 assist: AssistSettings::default(),
+                calibration: None,
             };
             (start, frames)
         }
@@ -91,7 +100,8 @@ pub fn run_glove(a: GloveArgs) -> Result<(), CliError> {
                 CliError("--input needs --object (the object the recording grasps)".into())
             })?;
             let object = super::sessions::load_object(object)?;
-            let hand = dfs_core::hand::HandModel::glove10();
+            let hand = dfs_core::hand::builtin_hand(&a.hand)
+                .map_err(|e| CliError(format!("--hand {:?}: {e}", a.hand)))?;
             let recording = services::session::import::read_glove_file(path, &hand)?;
             let base = match &a.base {
                 Some(b) => super::sessions::parse_base(b)?,
@@ -100,17 +110,23 @@ pub fn run_glove(a: GloveArgs) -> Result<(), CliError> {
             let t = base.translation.vector;
             let r = base.rotation;
             let start = StartMessage {
-                hand: "glove10".to_owned(),
+                hand: a.hand.clone(),
                 object,
                 name: path.file_name().map(|n| n.to_string_lossy().into_owned()),
                 wrist: Some([t.x, t.y, t.z, r.i, r.j, r.k, r.w]),
                 assist: AssistSettings::default(),
+                calibration: None,
             };
-            (start, recording_frames(&recording))
+            (start, live_client::recording_frames(&recording))
         }
         (None, None) => unreachable!("clap requires --scenario or --input"),
     };
     let mut start = start;
+    if let Some(path) = &a.calibration {
+        let hand = dfs_core::hand::builtin_hand(&start.hand)
+            .map_err(|e| CliError(format!("--hand {:?}: {e}", start.hand)))?;
+        start.calibration = Some(super::sessions::load_calibration(path, &hand)?);
+    }
     start.assist = AssistSettings {
         mode: match a.assist {
             Assist::Off => AssistMode::Off,
@@ -217,20 +233,4 @@ fn print_event(event: &Event, json: bool) {
             skills.iter().map(|s| s.skill_id).collect::<Vec<_>>()
         ),
     }
-}
-
-/// The samples of a glove recording, at its own times.
-pub fn recording_frames(rec: &services::session::import::GloveRecording) -> Vec<Frame> {
-    let n = rec.names.len();
-    let mut sample = proto::Sample::default();
-    (0..rec.len())
-        .map(|i| {
-            sample.t_ns = rec.times_ns[i];
-            sample.q.clear();
-            sample.q.extend_from_slice(&rec.q[i * n..(i + 1) * n]);
-            sample.tau.clear();
-            sample.tau.extend_from_slice(&rec.tau[i * n..(i + 1) * n]);
-            Frame::of(&sample)
-        })
-        .collect()
 }

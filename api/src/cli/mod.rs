@@ -35,9 +35,17 @@ enum Command {
     Simulate(simulate::SimulateArgs),
     /// Recovers an MCAP file whose writer died, up to its last complete chunk.
     Salvage(sessions::SalvageArgs),
-    /// Replays a real glove recording (MCAP or CSV) through the DFS against an object into a
+    /// Replays a real glove recording (MCAP or CSV: joint angles, operator torques or
+    /// positions only, wrist pose) of any hand through the DFS against an object into a
     /// session file.
+    ///
+    /// A glove that measures positions only (no torques) drives the DFS through a virtual
+    /// coupling, a spring-damper from the measured posture to the simulated hand: the
+    /// simulated fingers stop on the object while the operator's close further and squeeze.
     ImportGlove(sessions::ImportArgs),
+    /// Writes a session's glove samples (angles, torques, wrist pose per tick) as a CSV file
+    /// that `icms import-glove` reads.
+    ExportGlove(sessions::ExportArgs),
     /// A live glove session against a server (`icms serve`): streams the simulated operator
     /// of a scenario, or a real glove recording, to its `GET /api/v1/live`, printing the
     /// events and a summary.
@@ -96,6 +104,7 @@ pub fn run() -> ExitCode {
         Command::Simulate(a) => simulate::run_simulate(a),
         Command::Salvage(a) => sessions::run_salvage(a),
         Command::ImportGlove(a) => sessions::run_import(a),
+        Command::ExportGlove(a) => sessions::run_export(a),
         Command::Glove(a) => glove::run_glove(*a),
         Command::Segment(a) => segment::run_segment(a),
         Command::Demo(a) => skills::run_demo(a),

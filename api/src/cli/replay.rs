@@ -93,7 +93,7 @@ pub fn run_hands(a: HandsArgs) -> Result<(), CliError> {
 
 /// Where a hand came from.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
-enum Origin {
+pub(super) enum Origin {
     Builtin,
     File,
     Uploaded,
@@ -101,7 +101,7 @@ enum Origin {
 
 /// A hand: built-in name, spec file, or (with a data base in `data`) an uploaded hand's name,
 /// and where it came from. `what` names the argument in errors (`--hand`, `hand`).
-fn resolve_hand(
+pub(super) fn resolve_hand(
     name_or_path: &str,
     data: Option<&Path>,
     what: &str,

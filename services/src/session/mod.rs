@@ -1,6 +1,7 @@
 //! Grasp sessions in MCAP files: the topics and metadata of a session ([`messages`]), the
 //! recorder ([`SessionRecorder`], [`record_simulation`]), reading a session back
-//! ([`read_session`]) and importing a real glove recording ([`import`]).
+//! ([`read_session`]), importing a real glove recording ([`import`]) and exporting a session's
+//! glove samples in the same format ([`export`]).
 //!
 //! # Layout of a session file
 //!
@@ -62,6 +63,7 @@
 //! the first when the session is two minutes or so at most ([`KeptMessages`]): an hour of
 //! session is checked and segmented in about 4 s in 220 MB.
 
+pub mod export;
 pub mod hand_scene;
 pub mod import;
 pub mod messages;
