@@ -504,6 +504,7 @@ pub fn replay_glove(
         started_at: None,
         table_height: Some(position.z - depth),
         hand_urdf: None,
+        scene: None,
     };
     let mut recorder = SessionRecorder::create(out, dfs.hand(), dfs.object(), &info)?;
     let n = recording.names.len();
