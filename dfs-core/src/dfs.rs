@@ -7,7 +7,8 @@
 //!    `(Jᵀ)⁺` (eq. 14), intensities in each contact frame, the contact model and Coulomb cone
 //!    (eq. 15-18);
 //! 4. [`object`](Dfs::stage_object): `ᴮf̃ = W c̃_h` (eq. 22-23), support by the table, gravity
-//!    and Newton-Euler (eq. 24-26), integration;
+//!    and Newton-Euler (eq. 24-26), integration, per object; then
+//!    [`overlaps`](Dfs::stage_overlaps): which objects of a scene overlap;
 //! 5. [`feedback`](Dfs::stage_feedback): `c_o = W⁺ f_ext`, friction-limited (eq. 27), the
 //!    feedback `c̃_h − c̃_o` per finger, finger dynamics `M θ̈ = τ − Σ Jᵀ f_fb` (eq. 19-21, in
 //!    joint space so wrist torques take part) integrated to the glove motor commands.
@@ -33,6 +34,15 @@
 //! limits horizontal force by Coulomb friction. Objects rest as a whole (no tipping on the
 //! table); the paper has no table at all.
 //!
+//! **Several objects.** A scene holds up to [`MAX_OBJECTS`] objects ([`Dfs::with_objects`]),
+//! each with its own state, Newton-Euler dynamics, table support and fingertip friction. Each
+//! fingertip contacts the object it touches (the one it penetrates deepest, when it is within
+//! the contact margin of several); the grasp matrix, the reaction and the feedback are formed
+//! per object from the contacts on it. Objects do not act on each other: an overlap of two
+//! objects (a carried object passing through another) is not resolved, but found every tick
+//! ([`TickOutput::overlap`], [`Dfs::overlap_ticks`]) for the caller to report. With one object
+//! ([`Dfs::new`]) every number is what the one-object DFS computed, bit for bit.
+//!
 //! Deterministic: the same inputs give bit-identical outputs. Allocation-free per tick.
 
 use crate::contact::{apply_friction, detect, ContactFrame, ContactModel, Friction, Intensity};
@@ -43,7 +53,52 @@ use crate::math::{
     cholesky_solve_in_place, envelope_cholesky_solve, force_of, moment_of, wrench, Isometry, Point,
     Real, Vector, Wrench,
 };
-use crate::object::{external_wrench_b, integrate, ObjectState, RigidObject};
+use crate::object::{external_wrench_b, integrate, shapes_overlap, ObjectState, RigidObject};
+
+/// Most objects a DFS scene holds: 8.
+pub const MAX_OBJECTS: usize = 8;
+
+/// One object of a DFS scene: the rigid body, the friction between it and the fingertips, and
+/// its state.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct DfsObject {
+    /// Shape and mass properties.
+    pub object: RigidObject,
+    /// Coulomb friction between the fingertips and this object.
+    pub friction: Friction,
+    /// Its state (pose, velocities).
+    pub state: ObjectState,
+}
+
+/// What a tick did to one object.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ObjectOutput {
+    /// The object's state after the tick.
+    pub state: ObjectState,
+    /// `ᴮf̃` (N, N·m) in B: the fingers' wrench on it.
+    pub object_force_b: Wrench,
+    /// `f_ext` in B (includes gravity, table and the gyroscopic term).
+    pub f_ext_b: Wrench,
+    /// Table wrench on the object in B.
+    pub table_force_b: Wrench,
+    /// Number of transmitting contacts on it.
+    pub n_contacts: usize,
+    /// Rank of the grasp matrix of those contacts.
+    pub grasp_rank: usize,
+}
+
+impl Default for ObjectOutput {
+    fn default() -> Self {
+        ObjectOutput {
+            state: ObjectState::at_rest(Isometry::identity()),
+            object_force_b: Wrench::zeros(),
+            f_ext_b: Wrench::zeros(),
+            table_force_b: Wrench::zeros(),
+            n_contacts: 0,
+            grasp_rank: 0,
+        }
+    }
+}
 
 /// How much of the explicit object step's damping limit the contacts' tangential dampers may
 /// use: `Σ_k c_k dt / m_k ≤ STABLE_DAMPING`, with `m_k` the object's least effective mass at
@@ -63,7 +118,9 @@ pub struct DfsParams {
     pub gravity: Vector,
     /// Contact model. Default point with friction.
     pub contact_model: ContactModel,
-    /// Friction between fingertips and object. Default μ = 0.8, μ_t = 0.005 m.
+    /// Friction between fingertips and object. Default μ = 0.8, μ_t = 0.005 m. The object's of
+    /// [`Dfs::new`]; a scene of [`Dfs::with_objects`] gives each object its own
+    /// ([`DfsObject::friction`]).
     pub friction: Friction,
     /// Gap (m) up to which a fingertip counts as touching. Default 0.001.
     pub contact_margin: Real,
@@ -190,6 +247,8 @@ pub struct GloveSample<'a> {
 pub struct TipContact {
     /// The fingertip is within the contact margin of the object surface.
     pub touching: bool,
+    /// Which object (index in the scene) it touches; 0 when not touching.
+    pub object: usize,
     /// Touching and pushing: the contact transmits force (it is a column block of `W`).
     pub in_contact: bool,
     /// Contact geometry in B (valid when touching).
@@ -212,25 +271,38 @@ pub struct TipContact {
     pub feedback_force_world: Vector,
 }
 
-/// Everything a tick produces. Fixed capacity; entries beyond the hand's tips are default.
+/// Everything a tick produces. Fixed capacity; entries beyond the hand's tips and the scene's
+/// objects are default.
+///
+/// `grasp_rank`, `object_force_b`, `f_ext_b`, `table_force_b` and `object` are object 0's (the
+/// only one of a one-object DFS); `objects` holds every object's.
 #[derive(Debug, Clone, Copy)]
 pub struct TickOutput {
     /// Per fingertip.
     pub tips: [TipContact; MAX_TIPS],
     /// Number of fingertips of the hand.
     pub n_tips: usize,
-    /// Number of transmitting contacts.
+    /// Number of transmitting contacts, on every object.
     pub n_contacts: usize,
-    /// Rank of the grasp matrix of the transmitting contacts.
+    /// Rank of the grasp matrix of the transmitting contacts (object 0).
     pub grasp_rank: usize,
-    /// `ᴮf̃` (N, N·m) in B.
+    /// `ᴮf̃` (N, N·m) in B (object 0).
     pub object_force_b: Wrench,
-    /// `f_ext` in B (includes gravity, table and the gyroscopic term).
+    /// `f_ext` in B (includes gravity, table and the gyroscopic term) (object 0).
     pub f_ext_b: Wrench,
-    /// Table wrench on the object in B.
+    /// Table wrench on the object in B (object 0).
     pub table_force_b: Wrench,
-    /// Object state after the tick.
+    /// Object state after the tick (object 0).
     pub object: ObjectState,
+    /// Per object of the scene, in its order.
+    pub objects: [ObjectOutput; MAX_OBJECTS],
+    /// Number of objects in the scene.
+    pub n_objects: usize,
+    /// Two objects that overlap after the tick (the pair of lowest indices, `i < j`), if any:
+    /// objects do not act on each other, so one passed into the other.
+    pub overlap: Option<(usize, usize)>,
+    /// How many pairs of objects overlap after the tick.
+    pub n_overlaps: usize,
     /// Glove motor position commands θ (the integrated finger dynamics).
     pub motor_q: [Real; MAX_DOF],
     /// Their velocities.
@@ -252,6 +324,10 @@ impl Default for TickOutput {
             f_ext_b: Wrench::zeros(),
             table_force_b: Wrench::zeros(),
             object: ObjectState::at_rest(Isometry::identity()),
+            objects: [ObjectOutput::default(); MAX_OBJECTS],
+            n_objects: 0,
+            overlap: None,
+            n_overlaps: 0,
             motor_q: [0.0; MAX_DOF],
             motor_qd: [0.0; MAX_DOF],
             feedback_torque: [0.0; MAX_DOF],
@@ -260,13 +336,27 @@ impl Default for TickOutput {
     }
 }
 
-/// The Dynamic Force Simulator for one hand and one object.
+/// The Dynamic Force Simulator for one hand and a scene of one to [`MAX_OBJECTS`] objects.
 #[derive(Debug, Clone)]
 pub struct Dfs {
     hand: HandModel,
-    object: RigidObject,
     params: DfsParams,
-    state: ObjectState,
+    /// The scene's objects (`n_objects` of them; the rest copies of the first).
+    objects: [DfsObject; MAX_OBJECTS],
+    n_objects: usize,
+    /// Per object: constants of its body made once.
+    bodies: [BodyConstants; MAX_OBJECTS],
+    /// Per object: its grasp matrix of the transmitting contacts on it, rebuilt in place each
+    /// tick; valid when `grasp_active` (one contact or more on it).
+    grasps: [GraspMatrix; MAX_OBJECTS],
+    grasp_active: [bool; MAX_OBJECTS],
+    /// Per object: its transmitting contacts, `frames[start..start + len]` (the contacts are
+    /// ordered by object, and by fingertip within one).
+    contact_range: [(usize, usize); MAX_OBJECTS],
+    /// Per tip: the object it touched the tick before (its anchor is on that object).
+    tip_object: [usize; MAX_TIPS],
+    /// Ticks after which two objects overlapped.
+    overlap_ticks: u64,
     q: [Real; MAX_DOF],
     qd: [Real; MAX_DOF],
     initialised: bool,
@@ -284,20 +374,12 @@ pub struct Dfs {
     /// Per tip: the tangential damping of its contact spring this tick (N·s/m), the surface
     /// damping limited by [`STABLE_DAMPING`].
     tangential_damping: [Real; MAX_TIPS],
-    /// The object's inverse mass (1/kg) and largest inverse principal moment of inertia
-    /// (1/(kg·m²)), for a bound on the inverse effective mass at a contact.
-    object_inv_mass: Real,
-    object_inv_inertia_max: Real,
     /// Per tip: how far the pad has twisted about the normal since it stuck (rad).
     twist: [Real; MAX_TIPS],
     passive_world: [Vector; MAX_TIPS],
     frames: [ContactFrame; MAX_CONTACTS],
     transmitted: [Intensity; MAX_CONTACTS],
     contact_tip: [usize; MAX_CONTACTS],
-    /// The grasp matrix of the transmitting contacts, rebuilt in place each tick; valid when
-    /// `grasp_active` (one contact or more).
-    grasp: GraspMatrix,
-    grasp_active: bool,
     /// Per tip: the DOFs that move it (the wrist's and its finger's), ascending. Every other
     /// column of its Jacobian is zero, so the per-tip joint-space sums skip them.
     tip_dofs: [TipDofs; MAX_TIPS],
@@ -314,6 +396,27 @@ pub struct Dfs {
     fk_plan: FkPlan,
     factor: DofMatrix,
     out: TickOutput,
+}
+
+/// Constants of one object's body, made once.
+#[derive(Debug, Clone, Copy)]
+struct BodyConstants {
+    /// The inverse mass (1/kg) and largest inverse principal moment of inertia
+    /// (1/(kg·m²)), for a bound on the inverse effective mass at a contact.
+    inv_mass: Real,
+    inv_inertia_max: Real,
+    /// Radius of the sphere about the centre that holds the shape (m).
+    bounding_radius: Real,
+}
+
+impl BodyConstants {
+    fn of(object: &RigidObject) -> Self {
+        BodyConstants {
+            inv_mass: 1.0 / object.mass,
+            inv_inertia_max: object.inertia_inv.symmetric_eigenvalues().max(),
+            bounding_radius: object.shape.bounding_radius(),
+        }
+    }
 }
 
 /// The order and envelope for [`envelope_cholesky_solve`] of the implicit finger step: the
@@ -426,13 +529,26 @@ impl TipDofs {
 }
 
 impl Dfs {
-    /// A DFS for `hand` and `object`, the object at `state`. Validates the hand and parameters.
+    /// A DFS for `hand` and `object`, the object at `state`, with the friction
+    /// `params.friction`: a scene of one object. Validates the hand and parameters.
     pub fn new(
         hand: HandModel,
         object: RigidObject,
         state: ObjectState,
         params: DfsParams,
     ) -> Result<Self> {
+        let one = DfsObject {
+            object,
+            friction: params.friction,
+            state,
+        };
+        Self::with_objects(hand, &[one], params)
+    }
+
+    /// A DFS for `hand` and a scene of 1 to [`MAX_OBJECTS`] objects, each with its own
+    /// friction (`params.friction` is not used). Validates the hand, the parameters and each
+    /// object's friction and state (errors name `objects[i]`).
+    pub fn with_objects(hand: HandModel, objects: &[DfsObject], params: DfsParams) -> Result<Self> {
         hand.validate()?;
         params.validate()?;
         if hand.fingertips.len() > MAX_CONTACTS {
@@ -441,12 +557,51 @@ impl Dfs {
                 format!("at most {MAX_CONTACTS} fingertips"),
             ));
         }
+        let Some(first) = objects.first() else {
+            return Err(DfsError::invalid("objects", "needs at least one object"));
+        };
+        if objects.len() > MAX_OBJECTS {
+            return Err(DfsError::invalid(
+                "objects",
+                format!(
+                    "{} objects; at most {MAX_OBJECTS} are simulated",
+                    objects.len()
+                ),
+            ));
+        }
+        for (i, o) in objects.iter().enumerate() {
+            for (what, v) in [("mu", o.friction.mu), ("mu_torsion", o.friction.mu_torsion)] {
+                if !(v.is_finite() && v >= 0.0) {
+                    return Err(DfsError::invalid(
+                        format!("objects[{i}].friction.{what}"),
+                        format!("must be a finite number ≥ 0, got {v}"),
+                    ));
+                }
+            }
+            if not_finite(&o.state, &Wrench::zeros()).is_some() {
+                return Err(DfsError::invalid(
+                    format!("objects[{i}].state"),
+                    "pose and velocities must be finite",
+                ));
+            }
+        }
+        let n_objects = objects.len();
+        let mut scene = [*first; MAX_OBJECTS];
+        scene[..n_objects].copy_from_slice(objects);
+        let mut bodies = [BodyConstants::of(&first.object); MAX_OBJECTS];
+        for (b, o) in bodies.iter_mut().zip(objects) {
+            *b = BodyConstants::of(&o.object);
+        }
+        let state = first.state;
         let mut out = TickOutput {
             n_tips: hand.fingertips.len(),
             object: state,
+            n_objects,
             ..TickOutput::default()
         };
-        out.object = state;
+        for (o, obj) in out.objects.iter_mut().zip(objects) {
+            o.state = obj.state;
+        }
         let mut tip_dofs = [TipDofs {
             dofs: [0; MAX_DOF],
             len: 0,
@@ -466,12 +621,18 @@ impl Dfs {
         }
         let mass_plan = hand.mass_plan();
         let fk_plan = hand.fk_plan();
-        let object_inv_inertia_max = object.inertia_inv.symmetric_eigenvalues().max();
+        let grasp = GraspMatrix::new(&[], params.contact_model);
         Ok(Dfs {
             hand,
-            object,
             params,
-            state,
+            objects: scene,
+            n_objects,
+            bodies,
+            grasps: [grasp; MAX_OBJECTS],
+            grasp_active: [false; MAX_OBJECTS],
+            contact_range: [(0, 0); MAX_OBJECTS],
+            tip_object: [0; MAX_TIPS],
+            overlap_ticks: 0,
             q: [0.0; MAX_DOF],
             qd: [0.0; MAX_DOF],
             initialised: false,
@@ -484,15 +645,11 @@ impl Dfs {
             spring_vel: [Vector::zeros(); MAX_TIPS],
             stick: [false; MAX_TIPS],
             tangential_damping: [params.surface_damping; MAX_TIPS],
-            object_inv_mass: 1.0 / object.mass,
-            object_inv_inertia_max,
             twist: [0.0; MAX_TIPS],
             passive_world: [Vector::zeros(); MAX_TIPS],
             frames: [ContactFrame::from_normal(Vector::zeros(), Vector::z()); MAX_CONTACTS],
             transmitted: [Intensity::zeros(); MAX_CONTACTS],
             contact_tip: [0; MAX_CONTACTS],
-            grasp: GraspMatrix::new(&[], params.contact_model),
-            grasp_active: false,
             tip_dofs,
             solve_order,
             solve_first,
@@ -509,14 +666,29 @@ impl Dfs {
         &self.hand
     }
 
-    /// The object.
+    /// The object (object 0 of a scene of several).
     pub fn object(&self) -> &RigidObject {
-        &self.object
+        &self.objects[0].object
     }
 
-    /// The object's current state.
+    /// The object's current state (object 0 of a scene of several).
     pub fn object_state(&self) -> &ObjectState {
-        &self.state
+        &self.objects[0].state
+    }
+
+    /// Number of objects in the scene.
+    pub fn n_objects(&self) -> usize {
+        self.n_objects
+    }
+
+    /// The scene's objects with their current states, in the scene's order.
+    pub fn objects(&self) -> &[DfsObject] {
+        &self.objects[..self.n_objects]
+    }
+
+    /// How many ticks ended with two objects overlapping ([`TickOutput::overlap`]).
+    pub fn overlap_ticks(&self) -> u64 {
+        self.overlap_ticks
     }
 
     /// Parameters.
@@ -534,10 +706,32 @@ impl Dfs {
         &self.kin
     }
 
-    /// Replaces the object's state (for example to place it at a scenario's start pose).
+    /// Replaces the object's state (for example to place it at a scenario's start pose);
+    /// object 0 of a scene of several.
     pub fn set_object_state(&mut self, state: ObjectState) {
-        self.state = state;
+        self.objects[0].state = state;
         self.out.object = state;
+        self.out.objects[0].state = state;
+    }
+
+    /// Replaces the state of object `index`; an index beyond the scene is refused.
+    pub fn set_object_state_at(&mut self, index: usize, state: ObjectState) -> Result<()> {
+        if index >= self.n_objects {
+            return Err(DfsError::invalid(
+                "object",
+                format!(
+                    "no object {index}: the scene has {} objects",
+                    self.n_objects
+                ),
+            ));
+        }
+        if index == 0 {
+            self.set_object_state(state);
+        } else {
+            self.objects[index].state = state;
+            self.out.objects[index].state = state;
+        }
+        Ok(())
     }
 
     /// One DFS tick. On an error (bad sample) nothing changes and no output is produced. A
@@ -548,14 +742,24 @@ impl Dfs {
         self.stage_glove(sample)?;
         self.stage_contacts();
         self.stage_forces(sample.tau);
-        let before = self.state;
+        let mut before = [ObjectState::at_rest(Isometry::identity()); MAX_OBJECTS];
+        for (b, o) in before.iter_mut().zip(&self.objects[..self.n_objects]) {
+            *b = o.state;
+        }
         self.stage_object();
-        if let Some(what) = not_finite(&self.state, &self.out.f_ext_b) {
-            self.state = before;
-            self.out.object = before;
+        let diverged = (0..self.n_objects)
+            .find_map(|i| not_finite(&self.objects[i].state, &self.out.objects[i].f_ext_b));
+        if let Some(what) = diverged {
+            for (i, b) in before.iter().enumerate().take(self.n_objects) {
+                self.objects[i].state = *b;
+                self.out.objects[i].state = *b;
+                self.out.objects[i].f_ext_b = Wrench::zeros();
+            }
+            self.out.object = before[0];
             self.out.f_ext_b = Wrench::zeros();
             return Err(DfsError::Diverged { what });
         }
+        self.stage_overlaps();
         self.stage_feedback(sample.tau);
         Ok(&self.out)
     }
@@ -608,25 +812,36 @@ impl Dfs {
         Ok(())
     }
 
-    /// Stage 2: contact detection between fingertip spheres and the object.
+    /// Stage 2: contact detection between fingertip spheres and the objects: each fingertip
+    /// touches the object it penetrates deepest among those within the contact margin.
     pub fn stage_contacts(&mut self) {
-        let rot_inv = self.state.pose.rotation.to_rotation_matrix().transpose();
-        let pos = self.state.pose.translation.vector;
+        let mut rot_inv = [nalgebra::Rotation3::<Real>::identity(); MAX_OBJECTS];
+        for (r, o) in rot_inv.iter_mut().zip(&self.objects[..self.n_objects]) {
+            *r = o.state.pose.rotation.to_rotation_matrix().transpose();
+        }
+        let margin = self.params.contact_margin;
         for (k, tip) in self.hand.fingertips.iter().enumerate() {
             let c_world = self.kin.tip_centres[k];
             self.out.tip_centres[k] = c_world;
-            let c_b = rot_inv * (c_world.coords - pos);
             let t = &mut self.out.tips[k];
             *t = TipContact::default();
-            if let Some(d) = detect(
-                &self.object.shape,
-                &c_b,
-                tip.radius,
-                self.params.contact_margin,
-            ) {
-                t.touching = true;
-                t.frame = Some(d.frame);
-                t.penetration = d.penetration;
+            for (i, o) in self.objects[..self.n_objects].iter().enumerate() {
+                let pos = o.state.pose.translation.vector;
+                // Beyond the bounding sphere by more than the radius and margin: no contact.
+                let reach = self.bodies[i].bounding_radius + tip.radius + margin;
+                let rel = c_world.coords - pos;
+                if rel.norm_squared() > reach * reach * (1.0 + 1e-9) {
+                    continue;
+                }
+                let c_b = rot_inv[i] * rel;
+                if let Some(d) = detect(&o.object.shape, &c_b, tip.radius, margin) {
+                    if !t.touching || d.penetration > t.penetration {
+                        t.touching = true;
+                        t.object = i;
+                        t.frame = Some(d.frame);
+                        t.penetration = d.penetration;
+                    }
+                }
             }
         }
     }
@@ -667,21 +882,21 @@ impl Dfs {
                 self.out.tips[tip].tip_force_world = f;
             }
         }
-        // The object's orientation as a matrix: applied about ten times per touching tip.
-        let rot = self.state.pose.rotation.to_rotation_matrix();
-        let rot_inv = rot.transpose();
-        let pos = self.state.pose.translation.vector;
-        let v_lin = self.state.linear_velocity;
-        let w_b = self.state.angular_velocity_b;
+        // Each object's orientation as a matrix: applied about ten times per touching tip.
+        let mut rots = [nalgebra::Rotation3::<Real>::identity(); MAX_OBJECTS];
+        for (r, o) in rots.iter_mut().zip(&self.objects[..self.n_objects]) {
+            *r = o.state.pose.rotation.to_rotation_matrix();
+        }
         let dt = self.params.dt;
-        let touching = self.out.tips[..self.hand.fingertips.len()]
+        let mut touching = [0usize; MAX_OBJECTS];
+        for t in self.out.tips[..self.hand.fingertips.len()]
             .iter()
             .filter(|t| t.frame.is_some())
-            .count();
-        // The tangential damping the object's explicit step can carry, shared by the touching
-        // tips ([`STABLE_DAMPING`]): per tip, `c / m_eff` may not exceed this.
-        let damping_budget = STABLE_DAMPING / (touching.max(1) as Real * dt);
+        {
+            touching[t.object] += 1;
+        }
         let mut n = 0;
+        let mut contact_object = [0usize; MAX_CONTACTS];
         for k in 0..self.hand.fingertips.len() {
             self.passive_world[k] = Vector::zeros();
             self.stick[k] = false;
@@ -691,6 +906,25 @@ impl Dfs {
                 self.twist[k] = 0.0;
                 continue;
             };
+            let o = self.out.tips[k].object;
+            if self.tip_object[k] != o {
+                // It went from one object to another: its anchor and twist were on the other.
+                self.anchors_b[k] = None;
+                self.prev_tip_points[k] = None;
+                self.twist[k] = 0.0;
+                self.tip_object[k] = o;
+            }
+            let body = &self.bodies[o];
+            let friction = self.objects[o].friction;
+            let state = &self.objects[o].state;
+            let rot = rots[o];
+            let rot_inv = rot.transpose();
+            let pos = state.pose.translation.vector;
+            let v_lin = state.linear_velocity;
+            let w_b = state.angular_velocity_b;
+            // The tangential damping the object's explicit step can carry, shared by the tips
+            // touching it ([`STABLE_DAMPING`]): per tip, `c / m_eff` may not exceed this.
+            let damping_budget = STABLE_DAMPING / (touching[o].max(1) as Real * dt);
             let c = frame.intensities_of_force_b(&(rot_inv * self.out.tips[k].tip_force_world));
             // Contact spring: the fingertip's deflection from where it stuck on the object.
             let z_world = rot * frame.normal_b();
@@ -715,10 +949,10 @@ impl Dfs {
             // The tangential damping at this contact: a cheap bound on the inverse effective
             // mass first (|r × t| ≤ |r|), the exact one only when that bound limits it.
             let mut damping = self.params.surface_damping;
-            let bound =
-                self.object_inv_mass + frame.p_b.norm_squared() * self.object_inv_inertia_max;
+            let bound = body.inv_mass + frame.p_b.norm_squared() * body.inv_inertia_max;
             if damping * bound > damping_budget {
-                damping = damping.min(damping_budget / inverse_mass_across(&self.object, &frame));
+                damping = damping
+                    .min(damping_budget / inverse_mass_across(&self.objects[o].object, &frame));
             }
             self.tangential_damping[k] = damping;
             // Passive friction: a sticking fingertip drags the object along with it (tangential
@@ -743,11 +977,7 @@ impl Dfs {
             } else {
                 c
             };
-            let split = apply_friction(
-                self.params.contact_model,
-                &self.params.friction,
-                &with_passive,
-            );
+            let split = apply_friction(self.params.contact_model, &friction, &with_passive);
             let t = &mut self.out.tips[k];
             t.intensity = c;
             t.transmitted = split.transmitted;
@@ -755,7 +985,7 @@ impl Dfs {
             t.in_contact = !split.separating;
             // The pad sticks unless it slides: a pad that only spins on the surface (torsional
             // slip of the soft finger) keeps its tangential anchor.
-            let limit = self.params.friction.mu.max(0.0) * with_passive[2];
+            let limit = friction.mu.max(0.0) * with_passive[2];
             let slides = limit < 0.0
                 || with_passive[0] * with_passive[0] + with_passive[1] * with_passive[1]
                     > limit * limit;
@@ -785,64 +1015,143 @@ impl Dfs {
                 self.frames[n] = frame;
                 self.transmitted[n] = split.transmitted;
                 self.contact_tip[n] = k;
+                contact_object[n] = o;
                 n += 1;
             }
         }
         self.out.n_contacts = n;
+        self.group_contacts_by_object(&contact_object[..n]);
     }
 
-    /// Stage 4: object wrench (eq. 22-23), table support, Newton-Euler (eq. 24-26), integration.
+    /// Orders the transmitting contacts by object (stably: by fingertip within one) and sets
+    /// each object's range of them. With one object nothing moves.
+    fn group_contacts_by_object(&mut self, contact_object: &[usize]) {
+        let n = contact_object.len();
+        let mut count = [0usize; MAX_OBJECTS];
+        for &o in contact_object {
+            count[o] += 1;
+        }
+        let mut start = 0;
+        for (o, range) in self.contact_range[..self.n_objects].iter_mut().enumerate() {
+            *range = (start, count[o]);
+            start += count[o];
+        }
+        if contact_object.iter().all(|&o| o == contact_object[0]) {
+            return;
+        }
+        let (frames, transmitted, tips) = (self.frames, self.transmitted, self.contact_tip);
+        let mut next = [0usize; MAX_OBJECTS];
+        for (o, r) in self.contact_range[..self.n_objects].iter().enumerate() {
+            next[o] = r.0;
+        }
+        for i in 0..n {
+            let o = contact_object[i];
+            let to = next[o];
+            next[o] += 1;
+            self.frames[to] = frames[i];
+            self.transmitted[to] = transmitted[i];
+            self.contact_tip[to] = tips[i];
+        }
+    }
+
+    /// Stage 4: per object, its wrench (eq. 22-23), table support, Newton-Euler (eq. 24-26),
+    /// integration.
     pub fn stage_object(&mut self) {
-        let n = self.out.n_contacts;
-        self.grasp_active = n > 0;
-        let (f_hand, rank) = if n > 0 {
-            let g = &mut self.grasp;
-            g.rebuild(&self.frames[..n], self.params.contact_model);
-            (g.wrench(&self.transmitted[..n]), g.rank)
-        } else {
-            (Wrench::zeros(), 0)
-        };
-        self.out.grasp_rank = rank;
-        self.out.object_force_b = f_hand;
-        let mut f_ext = external_wrench_b(&self.object, &self.state, &f_hand, &self.params.gravity);
-        let table = self.table_wrench_b(&f_ext);
-        f_ext += table;
-        self.out.table_force_b = table;
-        self.out.f_ext_b = f_ext;
-        integrate(&self.object, &mut self.state, &f_ext, self.params.dt);
-        self.clamp_to_table();
-        self.out.object = self.state;
+        for i in 0..self.n_objects {
+            let (start, n) = self.contact_range[i];
+            self.grasp_active[i] = n > 0;
+            let (f_hand, rank) = if n > 0 {
+                let g = &mut self.grasps[i];
+                g.rebuild(&self.frames[start..start + n], self.params.contact_model);
+                (g.wrench(&self.transmitted[start..start + n]), g.rank)
+            } else {
+                (Wrench::zeros(), 0)
+            };
+            let o = &self.objects[i];
+            let mut f_ext = external_wrench_b(&o.object, &o.state, &f_hand, &self.params.gravity);
+            let table = self.table_wrench_b(i, &f_ext);
+            f_ext += table;
+            let o = &mut self.objects[i];
+            integrate(&o.object, &mut o.state, &f_ext, self.params.dt);
+            self.clamp_to_table(i);
+            self.out.objects[i] = ObjectOutput {
+                state: self.objects[i].state,
+                object_force_b: f_hand,
+                f_ext_b: f_ext,
+                table_force_b: table,
+                n_contacts: n,
+                grasp_rank: rank,
+            };
+        }
+        let first = self.out.objects[0];
+        self.out.grasp_rank = first.grasp_rank;
+        self.out.object_force_b = first.object_force_b;
+        self.out.f_ext_b = first.f_ext_b;
+        self.out.table_force_b = first.table_force_b;
+        self.out.object = first.state;
     }
 
-    /// Stage 5: reaction `c_o = W⁺ f_ext` (eq. 27), friction-limited; feedback per finger;
-    /// finger dynamics (eq. 19-21) integrated implicitly to the motor commands.
+    /// Stage 4b: which objects overlap after the step (objects do not act on each other, so
+    /// this is reported, never resolved): [`TickOutput::overlap`] and
+    /// [`TickOutput::n_overlaps`].
+    pub fn stage_overlaps(&mut self) {
+        let mut first = None;
+        let mut count = 0;
+        for i in 0..self.n_objects {
+            for j in i + 1..self.n_objects {
+                let (a, b) = (&self.objects[i], &self.objects[j]);
+                if shapes_overlap(
+                    &a.object.shape,
+                    &a.state.pose,
+                    &b.object.shape,
+                    &b.state.pose,
+                ) {
+                    first.get_or_insert((i, j));
+                    count += 1;
+                }
+            }
+        }
+        self.out.overlap = first;
+        self.out.n_overlaps = count;
+        if count > 0 {
+            self.overlap_ticks += 1;
+        }
+    }
+
+    /// Stage 5: per object, the reaction `c_o = W⁺ f_ext` (eq. 27), friction-limited; feedback
+    /// per finger; finger dynamics (eq. 19-21) integrated implicitly to the motor commands.
     pub fn stage_feedback(&mut self, tau: &[Real]) {
-        let n = self.out.n_contacts;
-        let rot = self.state.pose.rotation.to_rotation_matrix();
-        if self.grasp_active {
-            let g = &self.grasp;
+        let mut rots = [nalgebra::Rotation3::<Real>::identity(); MAX_OBJECTS];
+        for (r, o) in rots.iter_mut().zip(&self.objects[..self.n_objects]) {
+            *r = o.state.pose.rotation.to_rotation_matrix();
+        }
+        for (i, rot) in rots.iter().enumerate().take(self.n_objects) {
+            if !self.grasp_active[i] {
+                continue;
+            }
+            let (start, n) = self.contact_range[i];
+            let g = &self.grasps[i];
+            let friction = self.objects[i].friction;
             // The reaction is distributed over the transmitting contacts only; the table's
             // share of f_ext is not the fingers' to carry.
-            let f_fingers = self.out.f_ext_b - self.out.table_force_b;
+            let f_fingers = self.out.objects[i].f_ext_b - self.out.objects[i].table_force_b;
             let mut c_o = [Intensity::zeros(); MAX_CONTACTS];
             g.distribute(&f_fingers, &mut c_o);
-            for i in 0..n {
-                let k = self.contact_tip[i];
+            for (c, ci) in c_o.iter().enumerate().take(n) {
+                let k = self.contact_tip[start + c];
                 let t = &mut self.out.tips[k];
-                t.reaction =
-                    apply_friction(self.params.contact_model, &self.params.friction, &c_o[i])
-                        .transmitted;
+                t.reaction = apply_friction(self.params.contact_model, &friction, ci).transmitted;
                 t.feedback = t.transmitted - t.reaction;
-                let frame = self.frames[i];
+                let frame = self.frames[start + c];
                 let fb = frame.rot_b * Vector::new(t.feedback[0], t.feedback[1], t.feedback[2]);
                 t.feedback_force_world = -(rot * fb);
             }
         }
-        self.integrate_fingers(tau, &rot);
+        self.integrate_fingers(tau, &rots);
     }
 
-    /// The implicit finger step; `rot` is the object's orientation as a matrix.
-    fn integrate_fingers(&mut self, tau: &[Real], rot: &nalgebra::Rotation3<Real>) {
+    /// The implicit finger step; `rots` holds each object's orientation as a matrix.
+    fn integrate_fingers(&mut self, tau: &[Real], rots: &[nalgebra::Rotation3<Real>; MAX_OBJECTS]) {
         let ndof = self.hand.dof();
         let p = &self.params;
         let dt = p.dt;
@@ -880,7 +1189,7 @@ impl Dfs {
                 fb_torque[d] += j[(0, d)] * f.x + j[(1, d)] * f.y + j[(2, d)] * f.z;
             }
             let Some(frame) = t.frame else { continue };
-            let z_world = rot * frame.normal_b();
+            let z_world = rots[t.object] * frame.normal_b();
             let stick = self.stick[k];
             let v = self.spring_vel[k];
             // A sticking tip is damped across the normal as the object is (`damping`), along it
@@ -957,29 +1266,31 @@ impl Dfs {
         self.out.motor_qd[..ndof].copy_from_slice(&self.qd[..ndof]);
     }
 
-    /// Distance (m) from the object's centre to its lowest point, for its current orientation.
-    fn support_depth(&self) -> Real {
-        self.object.shape.support_depth(&self.state.pose.rotation)
+    /// Distance (m) from object `i`'s centre to its lowest point, for its current orientation.
+    fn support_depth(&self, i: usize) -> Real {
+        let o = &self.objects[i];
+        o.object.shape.support_depth(&o.state.pose.rotation)
     }
 
-    fn resting_on_table(&self) -> bool {
+    fn resting_on_table(&self, i: usize) -> bool {
         match self.params.table_height {
-            Some(h) => self.state.pose.translation.z - self.support_depth() <= h + 1e-6,
+            Some(h) => self.objects[i].state.pose.translation.z - self.support_depth(i) <= h + 1e-6,
             None => false,
         }
     }
 
-    /// The table's wrench on the object (B) given the other forces `f_b` on it: cancels a
+    /// The table's wrench on object `i` (B) given the other forces `f_b` on it: cancels a
     /// downward force and velocity, resists horizontal force up to μ N, damps rotation.
-    fn table_wrench_b(&self, f_b: &Wrench) -> Wrench {
-        if !self.resting_on_table() {
+    fn table_wrench_b(&self, i: usize, f_b: &Wrench) -> Wrench {
+        if !self.resting_on_table(i) {
             return Wrench::zeros();
         }
-        let rot = self.state.pose.rotation;
+        let (object, state) = (&self.objects[i].object, &self.objects[i].state);
+        let rot = state.pose.rotation;
         let dt = self.params.dt;
-        let m = self.object.mass;
+        let m = object.mass;
         let f_w = rot * force_of(f_b);
-        let v = self.state.linear_velocity;
+        let v = state.linear_velocity;
         // Force needed to stop downward motion and cancel a downward net force this tick.
         let fz_needed = -(f_w.z + m * v.z.min(0.0) / dt);
         if fz_needed <= 0.0 {
@@ -994,30 +1305,31 @@ impl Dfs {
             want
         };
         let force_w = tangential + Vector::new(0.0, 0.0, normal);
-        let (support_w, stands) = self.object.shape.table_support(&rot);
+        let (support_w, stands) = object.shape.table_support(&rot);
         let moment_b = if stands {
             // Standing on a face (or a sphere on its point): it does not spin or tip; cancel
             // the moment and the angular velocity.
-            let h = self.object.inertia * self.state.angular_velocity_b / dt;
+            let h = object.inertia * state.angular_velocity_b / dt;
             -(moment_of(f_b) + h)
         } else {
             // On an edge or a corner: the table pushes at the support, which tips the object
             // over towards a face; the edge's rolling friction damps the rocking (time constant
             // 50 ms), so it settles instead of bouncing from edge to edge.
-            let damping = self.object.inertia * self.state.angular_velocity_b / 0.05;
+            let damping = object.inertia * state.angular_velocity_b / 0.05;
             rot.inverse() * support_w.cross(&force_w) - damping
         };
         wrench(&(rot.inverse() * force_w), &moment_b)
     }
 
-    fn clamp_to_table(&mut self) {
+    fn clamp_to_table(&mut self, i: usize) {
         if let Some(h) = self.params.table_height {
-            let depth = self.support_depth();
-            let z = self.state.pose.translation.z;
+            let depth = self.support_depth(i);
+            let state = &mut self.objects[i].state;
+            let z = state.pose.translation.z;
             if z - depth < h {
-                self.state.pose.translation.z = h + depth;
-                if self.state.linear_velocity.z < 0.0 {
-                    self.state.linear_velocity.z = 0.0;
+                state.pose.translation.z = h + depth;
+                if state.linear_velocity.z < 0.0 {
+                    state.linear_velocity.z = 0.0;
                 }
             }
         }
@@ -1258,6 +1570,233 @@ mod tests {
             let sum = t.reaction + t.feedback;
             assert!((sum - t.transmitted).norm() < 1e-9);
         }
+    }
+
+    /// The paper-sphere fixture's object as one of a scene.
+    fn paper_sphere(dfs: &Dfs) -> DfsObject {
+        DfsObject {
+            object: *dfs.object(),
+            friction: dfs.params().friction,
+            state: *dfs.object_state(),
+        }
+    }
+
+    fn ball_at(x: Real, y: Real, z: Real, radius: Real) -> DfsObject {
+        DfsObject {
+            object: RigidObject::new(crate::object::Shape::Sphere { radius }, 0.2).unwrap(),
+            friction: Friction {
+                mu: 0.5,
+                mu_torsion: 0.0,
+            },
+            state: ObjectState::at_rest(Isometry::translation(x, y, z)),
+        }
+    }
+
+    fn bits(o: &ObjectOutput) -> Vec<u64> {
+        let s = &o.state;
+        s.pose
+            .translation
+            .vector
+            .iter()
+            .chain(s.pose.rotation.coords.iter())
+            .chain(s.linear_velocity.iter())
+            .chain(s.angular_velocity_b.iter())
+            .chain(o.f_ext_b.iter())
+            .chain(o.object_force_b.iter())
+            .map(|v| v.to_bits())
+            .collect()
+    }
+
+    fn tip_bits(out: &TickOutput) -> Vec<u64> {
+        out.tips[..out.n_tips]
+            .iter()
+            .flat_map(|t| {
+                t.intensity
+                    .iter()
+                    .chain(t.transmitted.iter())
+                    .chain(t.reaction.iter())
+                    .chain(t.feedback.iter())
+                    .copied()
+                    .collect::<Vec<_>>()
+            })
+            .chain(out.motor_q.iter().copied())
+            .chain(out.feedback_torque.iter().copied())
+            .map(|v| v.to_bits())
+            .collect()
+    }
+
+    #[test]
+    fn an_object_among_others_moves_and_feels_bit_for_bit_as_it_does_alone() {
+        let (mut alone, q, tau, base) = glove10_holding_paper_sphere().unwrap();
+        // The sphere is object 1 here; two balls far off fall on their own.
+        let objects = [
+            ball_at(2.0, 0.0, 0.0, 0.03),
+            paper_sphere(&alone),
+            ball_at(-2.0, 1.0, 0.0, 0.05),
+        ];
+        let mut scene = Dfs::with_objects(alone.hand().clone(), &objects, *alone.params()).unwrap();
+        assert_eq!(scene.n_objects(), 3);
+        // Set up as the fixture set up the sphere alone: one tick, then back at rest.
+        scene
+            .step(&GloveSample {
+                q: &q,
+                tau: &tau,
+                base,
+            })
+            .unwrap();
+        for (i, o) in objects.iter().enumerate() {
+            scene.set_object_state_at(i, o.state).unwrap();
+        }
+        for i in 0..300 {
+            let mut t = tau.clone();
+            t[3] += 0.02 * (i as f64 * 0.1).sin();
+            let sample = GloveSample {
+                q: &q,
+                tau: &t,
+                base,
+            };
+            let a = *alone.step(&sample).unwrap();
+            let b = *scene.step(&sample).unwrap();
+            assert_eq!(bits(&a.objects[0]), bits(&b.objects[1]), "tick {i}");
+            assert_eq!(tip_bits(&a), tip_bits(&b), "tick {i}");
+            assert_eq!(a.n_contacts, b.n_contacts);
+            assert_eq!(b.objects[1].n_contacts, b.n_contacts);
+            assert_eq!((b.objects[0].n_contacts, b.objects[2].n_contacts), (0, 0));
+            for tip in b.tips[..b.n_tips].iter().filter(|t| t.touching) {
+                assert_eq!(tip.object, 1);
+            }
+            assert_eq!(b.overlap, None);
+        }
+        // The balls fell freely, each from where it was.
+        let dz = -9.81 * 1e-6 * 300.0 * 301.0 / 2.0;
+        for i in [0, 2] {
+            let s = scene.objects()[i].state;
+            let z0 = objects[i].state.pose.translation.z;
+            assert!((s.pose.translation.z - z0 - dz).abs() < 1e-9, "{i}");
+        }
+        // The legacy fields are object 0's.
+        assert_eq!(scene.output().object, scene.output().objects[0].state);
+        assert_eq!(*scene.object_state(), scene.objects()[0].state);
+    }
+
+    #[test]
+    fn a_fingertip_touching_two_objects_contacts_the_one_it_penetrates_deepest() {
+        let (dfs, q, tau, base) = glove10_holding_paper_sphere().unwrap();
+        let out = *dfs.output();
+        let hand = dfs.hand().clone();
+        let thumb = hand
+            .fingertips
+            .iter()
+            .position(|t| t.name == "thumb")
+            .unwrap();
+        let index = hand
+            .fingertips
+            .iter()
+            .position(|t| t.name == "index")
+            .unwrap();
+        assert!(!out.tips[thumb].touching && out.tips[index].touching);
+        // A ball touching the free thumb, and one pressed into the index fingertip deeper than
+        // the paper sphere is.
+        let ball_on = |k: usize, gap: Real, r: Real| {
+            let c = out.tip_centres[k].coords;
+            let away = (c - dfs.object_state().pose.translation.vector).normalize();
+            let p = c + away * (hand.fingertips[k].radius + r + gap);
+            ball_at(p.x, p.y, p.z, r)
+        };
+        let deep = out.tips[index].penetration + 0.002;
+        let objects = [
+            paper_sphere(&dfs),
+            ball_on(thumb, -0.0005, 0.02),
+            ball_on(index, -deep, 0.01),
+        ];
+        let mut scene = Dfs::with_objects(hand, &objects, *dfs.params()).unwrap();
+        let o = *scene
+            .step(&GloveSample {
+                q: &q,
+                tau: &tau,
+                base,
+            })
+            .unwrap();
+        assert!(o.tips[thumb].touching && o.tips[thumb].object == 1);
+        assert!(o.tips[index].touching && o.tips[index].object == 2);
+        assert!((o.tips[index].penetration - deep).abs() < 1e-9);
+        // The index fingertip pushes towards the paper sphere, away from the small ball behind
+        // it: that contact transmits nothing; the other three push the paper sphere.
+        assert!(!o.tips[index].in_contact);
+        assert_eq!((o.objects[0].n_contacts, o.objects[2].n_contacts), (3, 0));
+        assert_eq!(o.n_contacts, 3);
+        assert_eq!(o.objects[2].object_force_b, Wrench::zeros());
+        let f = o.objects[0].object_force_b;
+        assert!(force_of(&f).norm() > 1.0, "{f:?}");
+    }
+
+    #[test]
+    fn objects_passing_into_each_other_are_reported_every_tick_and_counted() {
+        let (dfs, q, tau, _) = glove10_holding_paper_sphere().unwrap();
+        let far = Isometry::translation(0.0, 0.0, -3.0);
+        // Two balls falling side by side, 1 cm into each other, and a third clear of both.
+        let objects = [
+            ball_at(0.0, 0.0, 1.0, 0.03),
+            ball_at(0.5, 0.0, 1.0, 0.03),
+            ball_at(0.0, 0.05, 1.0, 0.03),
+        ];
+        let mut scene = Dfs::with_objects(dfs.hand().clone(), &objects, *dfs.params()).unwrap();
+        for _ in 0..10 {
+            let o = scene
+                .step(&GloveSample {
+                    q: &q,
+                    tau: &tau,
+                    base: far,
+                })
+                .unwrap();
+            assert_eq!((o.overlap, o.n_overlaps), (Some((0, 2)), 1));
+            // Neither pushes the other: both fall freely.
+            assert_eq!(
+                o.objects[0].state.linear_velocity,
+                o.objects[2].state.linear_velocity
+            );
+        }
+        assert_eq!(scene.overlap_ticks(), 10);
+        // Moved apart, the overlap ends.
+        let mut apart = scene.objects()[2].state;
+        apart.pose.translation.y = 0.2;
+        scene.set_object_state_at(2, apart).unwrap();
+        let o = scene
+            .step(&GloveSample {
+                q: &q,
+                tau: &tau,
+                base: far,
+            })
+            .unwrap();
+        assert_eq!((o.overlap, o.n_overlaps), (None, 0));
+        assert_eq!(scene.overlap_ticks(), 10);
+    }
+
+    #[test]
+    fn a_bad_scene_is_refused_naming_the_field() {
+        let (dfs, ..) = glove10_holding_paper_sphere().unwrap();
+        let hand = dfs.hand().clone();
+        let p = *dfs.params();
+        let e = Dfs::with_objects(hand.clone(), &[], p).unwrap_err();
+        assert!(e.to_string().contains("invalid objects"), "{e}");
+        let nine = [ball_at(0.0, 0.0, 0.0, 0.01); MAX_OBJECTS + 1];
+        let e = Dfs::with_objects(hand.clone(), &nine, p).unwrap_err();
+        assert!(e.to_string().contains("9 objects; at most 8"), "{e}");
+        Dfs::with_objects(hand.clone(), &nine[..MAX_OBJECTS], p).unwrap();
+        let mut bad = [ball_at(0.0, 0.0, 0.0, 0.01), ball_at(1.0, 0.0, 0.0, 0.01)];
+        bad[1].friction.mu = f64::NAN;
+        let e = Dfs::with_objects(hand.clone(), &bad, p).unwrap_err();
+        assert!(e.to_string().contains("objects[1].friction.mu"), "{e}");
+        bad[1].friction.mu = 0.5;
+        bad[0].state.pose.translation.x = f64::INFINITY;
+        let e = Dfs::with_objects(hand.clone(), &bad, p).unwrap_err();
+        assert!(e.to_string().contains("objects[0].state"), "{e}");
+        bad[0].state.pose.translation.x = 0.0;
+        let mut ok = Dfs::with_objects(hand, &bad, p).unwrap();
+        let e = ok
+            .set_object_state_at(2, ObjectState::at_rest(Isometry::identity()))
+            .unwrap_err();
+        assert!(e.to_string().contains("no object 2"), "{e}");
     }
 
     proptest! {

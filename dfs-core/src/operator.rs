@@ -19,15 +19,21 @@
 //!
 //! The glove's motors are taken to track the DFS's position commands exactly; the measured
 //! angles are those plus sensor noise.
+//!
+//! In a scene of several objects ([`Scene`]) the operator plans, reaches for, squeezes and
+//! carries the scenario's `target` only; the other objects stay on the table as obstacles,
+//! simulated like it (a fingertip or the carried object that bumps one moves it or passes
+//! into it: that is physics, and the DFS reports an overlap). A fingertip on another object
+//! does not count as touching the target.
 
-use crate::contact::{ContactModel, Friction};
+use crate::contact::ContactModel;
 use crate::dfs::{Dfs, DfsParams, GloveSample, TickOutput};
 use crate::error::{DfsError, Result};
 use crate::hand::ik::{solve_tips, IkParams};
 use crate::hand::{HandModel, Joint, JointDrive, JointKind, Kinematics, Link, MAX_DOF, MAX_TIPS};
 use crate::math::{Isometry, Point, Real, Rotation, Vector};
 use crate::object::{ObjectState, RigidObject, Shape};
-use crate::scenario::{GraspStyle, Phase, ResolvedTask, Scenario, MAX_SCRIPT_S, MIN_TASK_S};
+use crate::scenario::{GraspStyle, Phase, ResolvedTask, Scenario, Scene, MAX_SCRIPT_S, MIN_TASK_S};
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use rand_distr::{Distribution, Normal};
@@ -698,6 +704,10 @@ pub const TICK_NS: u64 = 1_000_000;
 #[derive(Debug, Clone)]
 pub struct Simulation {
     dfs: Dfs,
+    /// The scene as the scenario set it up.
+    scene: Scene,
+    /// Index of the object the script grasps in the scene (and the DFS).
+    target: usize,
     params: OperatorParams,
     style: GraspStyle,
     spans: Vec<PhaseSpan>,
@@ -747,7 +757,8 @@ pub struct Simulation {
 }
 
 impl Simulation {
-    /// Sets up a scenario with `hand` (normally glove10). `duration_s`, when given, cuts the
+    /// Sets up a scenario with `hand` (normally glove10): its scene ([`Scenario::resolve_scene`])
+    /// in one DFS, the grasp planned on the target. `duration_s`, when given, cuts the
     /// script short or extends its last phase. Errors name the scenario's field, or say that no
     /// grasp of the object is reachable.
     pub fn new(
@@ -755,16 +766,13 @@ impl Simulation {
         hand: HandModel,
         duration_s: Option<Real>,
     ) -> Result<Simulation> {
-        let (object, tasks) = scenario.resolve()?;
-        let depth = object.shape.support_depth(&Rotation::identity());
-        let yaw = Rotation::from_euler_angles(0.0, 0.0, scenario.object.yaw);
-        let position = scenario
-            .object
-            .position
-            .map(Vector::from)
-            .unwrap_or(Vector::new(0.0, 0.0, depth));
-        let table_height = position.z - depth;
-        let pose = Isometry::from_parts(position.into(), yaw);
+        let (scene, tasks) = scenario.resolve_scene()?;
+        let target = scene.target;
+        let (object, pose, friction) = {
+            let t = scene.target();
+            (t.object, t.pose, t.friction)
+        };
+        let table_height = scene.table_height;
         let mut spans = Vec::with_capacity(tasks.len());
         let mut t = 0u64;
         for task in &tasks {
@@ -797,10 +805,7 @@ impl Simulation {
         let params = DfsParams {
             // Fingertip pads are soft: they resist spin about the normal (Table 1, soft finger).
             contact_model: ContactModel::SoftFinger,
-            friction: Friction {
-                mu: scenario.object.mu,
-                mu_torsion: scenario.object.mu_torsion,
-            },
+            friction,
             table_height: Some(table_height),
             ..DfsParams::default()
         };
@@ -811,7 +816,7 @@ impl Simulation {
         for (k, m) in mount.iter_mut().enumerate().take(hand.fingertips.len()) {
             *m = mount_link(&hand, k);
         }
-        let mut dfs = Dfs::new(hand, object, ObjectState::at_rest(pose), params)?;
+        let mut dfs = Dfs::with_objects(hand, &scene.dfs_objects(), params)?;
         let n = dfs.hand().dof();
         let mut rng = ChaCha8Rng::seed_from_u64(scenario.seed);
         let mut tremor_freq = [0.0; MAX_DOF + 3];
@@ -826,10 +831,14 @@ impl Simulation {
             tau: &zeros[..n],
             base: start_base,
         })?;
-        dfs.set_object_state(ObjectState::at_rest(pose));
-        let operator_mu = scenario.operator_mu.unwrap_or(scenario.object.mu).max(1e-3);
+        for (i, o) in scene.objects.iter().enumerate() {
+            dfs.set_object_state_at(i, ObjectState::at_rest(o.pose))?;
+        }
+        let operator_mu = scenario.operator_mu.unwrap_or(friction.mu).max(1e-3);
         let mut sim = Simulation {
             dfs,
+            scene,
+            target,
             params: OperatorParams::default(),
             style: scenario.grasp,
             spans,
@@ -875,9 +884,35 @@ impl Simulation {
         &self.spans
     }
 
-    /// The DFS (hand, object, last tick's output and kinematics).
+    /// The DFS (hand, objects, last tick's output and kinematics).
     pub fn dfs(&self) -> &Dfs {
         &self.dfs
+    }
+
+    /// The scene: the objects with their names and start poses, and the one the script grasps.
+    pub fn scene(&self) -> &Scene {
+        &self.scene
+    }
+
+    /// Index of the object the script grasps (in the scene and the DFS).
+    pub fn target(&self) -> usize {
+        self.target
+    }
+
+    /// The object the script grasps.
+    fn target_object(&self) -> &RigidObject {
+        &self.dfs.objects()[self.target].object
+    }
+
+    /// The state of the object the script grasps.
+    pub fn target_state(&self) -> &ObjectState {
+        &self.dfs.objects()[self.target].state
+    }
+
+    /// Fingertip `k`'s contact frame on the object the script grasps, if it touches that one.
+    fn target_frame(&self, k: usize) -> Option<crate::contact::ContactFrame> {
+        let tip = &self.dfs.output().tips[k];
+        tip.frame.filter(|_| tip.object == self.target)
     }
 
     /// Time of the last tick (ns since the start).
@@ -977,19 +1012,19 @@ impl Simulation {
         self.from_q = self.to_q;
         self.from_grip = self.to_grip;
         self.from_offset = self.to_offset;
-        self.seen_object = self.dfs.object_state().pose;
+        self.seen_object = self.target_state().pose;
         let n = self.dfs.hand().dof();
         match task.phase {
             Phase::Approach => {
-                let pose = self.dfs.object_state().pose;
-                self.plan = plan_grasp(self.dfs.hand(), self.dfs.object(), &pose, self.style)?;
+                let pose = self.target_state().pose;
+                self.plan = plan_grasp(self.dfs.hand(), self.target_object(), &pose, self.style)?;
                 self.resting = resting_tips(
                     &self.plan,
                     self.dfs.hand(),
                     self.operator_mu,
                     self.params.grip_safety,
                 );
-                self.to_base = approach_pose(&self.plan.base, &self.dfs.object().shape);
+                self.to_base = approach_pose(&self.plan.base, &self.target_object().shape);
                 self.to_q = self.plan.q_open;
                 self.to_grip = 0.0;
                 self.to_offset = 0.03;
@@ -1018,15 +1053,15 @@ impl Simulation {
             }
             Phase::Hold => {}
             Phase::Transport => {
-                let centre = self.dfs.object_state().pose.translation.vector;
+                let centre = self.target_state().pose.translation.vector;
                 let turn = Rotation::from_euler_angles(0.0, 0.0, task.turn);
                 let b = self.from_base;
                 let p = centre + turn * (b.translation.vector - centre) + Vector::from(task.offset);
                 self.to_base = Isometry::from_parts(p.into(), turn * b.rotation);
             }
             Phase::Place => {
-                let obj = self.dfs.object_state().pose;
-                let depth = self.dfs.object().shape.support_depth(&obj.rotation);
+                let obj = self.target_state().pose;
+                let depth = self.target_object().shape.support_depth(&obj.rotation);
                 let dz = self.table_height + depth - obj.translation.z - 0.002;
                 self.to_base = raise(&self.from_base, dz);
             }
@@ -1040,7 +1075,7 @@ impl Simulation {
                 // planned spots as they open.
                 let out = self.dfs.output();
                 for k in 0..out.n_tips.min(MAX_TIPS) {
-                    if let (true, Some(frame)) = (self.plan.tips[k], out.tips[k].frame) {
+                    if let (true, Some(frame)) = (self.plan.tips[k], self.target_frame(k)) {
                         let n_out = -frame.normal_b();
                         let r = self.dfs.hand().fingertips[k].radius;
                         self.plan.contacts_b[k] = frame.p_b + n_out * r;
@@ -1140,11 +1175,11 @@ impl Simulation {
         let q = &out.motor_q;
         let qd = &out.motor_qd;
         let obj_pose = if self.object_held {
-            self.dfs.object_state().pose
+            self.target_state().pose
         } else {
             self.seen_object
         };
-        let obj_rot = self.dfs.object_state().pose.rotation;
+        let obj_rot = self.target_state().pose.rotation;
         let k_s = self.dfs.params().surface_stiffness;
         let holding = matches!(
             self.phase(),
@@ -1155,7 +1190,7 @@ impl Simulation {
         // not shove the object away from the others.
         let all_touch = (0..out.n_tips.min(MAX_TIPS))
             .filter(|&k| self.plan.tips[k] && !self.resting[k])
-            .all(|k| out.tips[k].touching);
+            .all(|k| self.target_frame(k).is_some());
         let mut in_grasp = [false; MAX_DOF];
         let mut tau = [0.0; MAX_DOF];
         for g in &hand.finger_groups {
@@ -1174,7 +1209,7 @@ impl Simulation {
                 if !holding {
                     self.hold_in_mount[k] = None;
                 } else if let (true, None, Some(frame)) =
-                    (all_touch, self.hold_in_mount[k], tip.frame)
+                    (all_touch, self.hold_in_mount[k], self.target_frame(k))
                 {
                     // Where the fingertip met the object, with the pad just on the surface, and
                     // the inward normal there, both relative to the palm.
@@ -1278,8 +1313,8 @@ impl Simulation {
             return (mags, unit, lift);
         }
         let out = self.dfs.output();
-        let obj = self.dfs.object();
-        let st = self.dfs.object_state();
+        let obj = self.target_object();
+        let st = self.target_state();
         let g = self.dfs.params().gravity;
         let kin = self.dfs.kinematics();
         let hand = self.dfs.hand();
@@ -1292,7 +1327,7 @@ impl Simulation {
         let mut nt = 0;
         let mut squeezing = 0;
         for k in 0..out.n_tips.min(MAX_TIPS) {
-            if self.plan.tips[k] && out.tips[k].frame.is_some() {
+            if self.plan.tips[k] && self.target_frame(k).is_some() {
                 touching[nt] = k;
                 nt += 1;
                 squeezing += usize::from(!self.resting[k]);
@@ -1313,7 +1348,7 @@ impl Simulation {
         let mut range = [nalgebra::Matrix3::<Real>::zeros(); MAX_TIPS];
         let mut arm = [Vector::zeros(); MAX_TIPS];
         for &k in touching {
-            let Some(frame) = out.tips[k].frame else {
+            let Some(frame) = self.target_frame(k) else {
                 continue;
             };
             let n_in = st.pose.rotation * frame.normal_b();
@@ -1747,9 +1782,10 @@ mod tests {
     fn pinches_lift_hold_and_set_down_spheres_of_10_to_100_g() {
         for (radius, mass, mu) in [(0.02, 0.01, 0.8), (0.04, 0.05, 0.8), (0.03, 0.1, 0.6)] {
             let mut s = Scenario::builtin("sphere-lift", 2).unwrap();
-            s.object.radius = Some(radius);
-            s.object.mass = mass;
-            s.object.mu = mu;
+            let o = s.object.as_mut().unwrap();
+            o.radius = Some(radius);
+            o.mass = mass;
+            o.mu = mu;
             let o = outcome(&s);
             assert!(
                 o.lifted > 0.08 && o.hold_low > 0.08 && o.hold_contacts >= 2,
@@ -1774,8 +1810,9 @@ mod tests {
     fn power_grasps_lift_and_carry_cylinders_of_25_to_45_mm_radius_and_200_to_800_g() {
         for (radius, mass) in [(0.025, 0.2), (0.025, 0.8), (0.045, 0.2), (0.045, 0.8)] {
             let mut s = Scenario::builtin("cylinder-power-grasp", 1).unwrap();
-            s.object.radius = Some(radius);
-            s.object.mass = mass;
+            let o = s.object.as_mut().unwrap();
+            o.radius = Some(radius);
+            o.mass = mass;
             let o = outcome(&s);
             assert!(
                 o.lifted > 0.05 && o.hold_low > 0.05 && o.transport_low > 0.05,
@@ -1827,6 +1864,50 @@ mod tests {
             while sim.step().unwrap() {}
             assert_eq!(sim.ticks(), 1000, "{name}");
             assert!(sim.phases().iter().all(|p| p.end_ns <= 1_000_000_000));
+        }
+    }
+
+    #[test]
+    fn in_table_three_the_operator_lifts_the_box_from_between_the_ball_and_the_cylinder() {
+        for seed in [0, 3] {
+            let s = Scenario::builtin("table-three", seed).unwrap();
+            let mut sim = Simulation::new(&s, HandModel::glove10(), None).unwrap();
+            assert_eq!(sim.scene().target().name, "box");
+            let target = sim.target();
+            assert_eq!(target, 1);
+            let start: Vec<Vector> = sim
+                .dfs()
+                .objects()
+                .iter()
+                .map(|o| o.state.pose.translation.vector)
+                .collect();
+            let (mut lifted, mut others, mut overlaps) = (0.0, 0, 0);
+            while sim.step().unwrap() {
+                let out = sim.output();
+                overlaps += usize::from(out.overlap.is_some());
+                for tip in out.tips[..out.n_tips].iter().filter(|t| t.touching) {
+                    others += usize::from(tip.object != target);
+                }
+                if sim.phase() == Phase::Hold {
+                    let z = sim.target_state().pose.translation.z - start[target].z;
+                    lifted = Real::max(lifted, z);
+                }
+            }
+            assert!(lifted > 0.08, "seed {seed}: the box rose {lifted} m");
+            assert_eq!(others, 0, "seed {seed}: a fingertip touched an obstacle");
+            assert_eq!(overlaps, 0, "seed {seed}");
+            let end = sim.dfs().objects();
+            assert!(
+                (end[target].state.pose.translation.vector - start[target]).norm() < 0.01,
+                "seed {seed}: the box is set back down where it was"
+            );
+            for i in [0, 2] {
+                assert_eq!(
+                    end[i].state.pose.translation.vector, start[i],
+                    "seed {seed}: object {i} stayed where it was"
+                );
+            }
+            assert_eq!(sim.output().n_contacts, 0, "released");
         }
     }
 

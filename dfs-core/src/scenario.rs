@@ -13,11 +13,30 @@
 //! ```
 //! The table's top is at the object's lowest point at its start pose. Durations in s,
 //! lengths in m, angles in rad.
+//!
+//! A scene of several objects (up to [`MAX_OBJECTS`]) names each and says which one the script
+//! grasps, instead of `"object"`:
+//! ```json
+//! { "name": "pick-the-box",
+//!   "objects": [ { "name": "ball", "shape": "sphere", "radius": 0.04, "mass": 0.3, "mu": 0.8,
+//!                  "position": [0.0, 0.2, 0.04] },
+//!                { "name": "box", "shape": "box", "half_extents": [0.025, 0.025, 0.04],
+//!                  "mass": 0.2, "mu": 0.8, "position": [0.0, 0.0, 0.04] } ],
+//!   "target": "box",
+//!   "tasks": [ ... ] }
+//! ```
+//! Each object of several needs its `position`; the table's top is at the lowest object's
+//! lowest point, and objects above it fall onto it. Objects do not act on each other, so a
+//! scene whose objects overlap, at their start poses or once resting on the table, is refused
+//! ([`Scene::new`]).
 
+use crate::contact::Friction;
+use crate::dfs::DfsObject;
+pub use crate::dfs::MAX_OBJECTS;
 use crate::error::{DfsError, Result};
-use crate::math::Real;
+use crate::math::{Isometry, Real, Rotation, Vector};
 use crate::names::Named;
-use crate::object::{RigidObject, Shape, ShapeKind};
+use crate::object::{shapes_overlap, ObjectState, RigidObject, Shape, ShapeKind};
 use crate::statics::ObjectSpec;
 use serde::{Deserialize, Serialize};
 
@@ -143,6 +162,12 @@ crate::named_enum!(GraspStyle);
     expecting = "an object {\"shape\": ..., \"mass\": ..., \"mu\": ...}"
 )]
 pub struct ScenarioObject {
+    /// Its name in the scene, 1 to 64 characters ([`MAX_OBJECT_NAME_CHARS`]), unique among the
+    /// scene's objects: required in `objects`, optional for the one `object` (default
+    /// `"object"`, [`DEFAULT_OBJECT_NAME`]).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    #[cfg_attr(feature = "utoipa", schema(max_length = 64, min_length = 1))]
+    pub name: Option<String>,
     /// The shape: `sphere`, `box` or `cylinder`.
     pub shape: ShapeKind,
     /// Radius (m), sphere or cylinder.
@@ -298,7 +323,8 @@ pub struct Task {
     pub turn: Option<Real>,
 }
 
-/// A scenario file: the object, the grasp style and the operator's task script.
+/// A scenario file: the object (or the objects and which one is grasped), the grasp style and
+/// the operator's task script.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[cfg_attr(feature = "utoipa", derive(utoipa::ToSchema))]
 #[serde(
@@ -309,8 +335,18 @@ pub struct Task {
 pub struct Scenario {
     /// Name.
     pub name: String,
-    /// The object.
-    pub object: ScenarioObject,
+    /// The object, in a scene of one. Exactly one of `object` and `objects` is given.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub object: Option<ScenarioObject>,
+    /// The objects of a scene of 1 to 8 ([`MAX_OBJECTS`]), each named and placed
+    /// (`position`), none overlapping another. Exactly one of `object` and `objects` is given.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    #[cfg_attr(feature = "utoipa", schema(max_items = 8, min_items = 1))]
+    pub objects: Option<Vec<ScenarioObject>>,
+    /// The name of the object the script grasps: required with several `objects`; with one
+    /// it may name it.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub target: Option<String>,
     /// Grasp style. Default auto.
     #[serde(default)]
     pub grasp: GraspStyle,
@@ -368,19 +404,292 @@ fn check(field: String, ok: bool, reason: impl Into<String>) -> Result<()> {
     }
 }
 
-impl Scenario {
-    /// Validates the scenario and resolves its tasks; every error names the field.
-    pub fn resolve(&self) -> Result<(RigidObject, Vec<ResolvedTask>)> {
-        let o = &self.object;
-        let object = o.to_simulated_object()?;
-        if let Some(p) = o.position {
-            check(
-                "object.position".into(),
-                p.iter().all(|v| v.is_finite() && v.abs() < 10.0),
-                "must be finite and within 10 m",
-            )?;
+/// The name of the one object of a scenario's `object` that gives none.
+pub const DEFAULT_OBJECT_NAME: &str = "object";
+
+/// Longest object name, in characters: 64.
+pub const MAX_OBJECT_NAME_CHARS: usize = 64;
+
+/// One object of a resolved [`Scene`]: its name, what the scenario said of it, the rigid body,
+/// its fingertip friction and its start pose.
+#[derive(Debug, Clone, PartialEq)]
+pub struct SceneObject {
+    /// Its name, unique in the scene ([`DEFAULT_OBJECT_NAME`] for an unnamed `object`).
+    pub name: String,
+    /// The object as the scenario (or a live session's `start`) gave it.
+    pub spec: ScenarioObject,
+    /// Shape and mass properties, validated for the closed loop
+    /// ([`ScenarioObject::to_simulated_object`]).
+    pub object: RigidObject,
+    /// Friction between the fingertips and it (`mu`, `mu_torsion`).
+    pub friction: Friction,
+    /// Start pose in the world (the table's top at z = [`Scene::table_height`]).
+    pub pose: Isometry,
+}
+
+/// A validated scene: 1 to [`MAX_OBJECTS`] objects on a table, none overlapping another, and
+/// the one a script grasps. What the simulation and a live session build their DFS from
+/// ([`Scene::dfs_objects`]).
+#[derive(Debug, Clone, PartialEq)]
+pub struct Scene {
+    /// The objects, in the order given (the DFS's object indices).
+    pub objects: Vec<SceneObject>,
+    /// Index of the object the script grasps.
+    pub target: usize,
+    /// Height of the table's top (m, world z): the lowest object's lowest point.
+    pub table_height: Real,
+}
+
+/// `e` with a field `object...` renamed `prefix...` (`objects[2]` for the third object).
+fn at_object(prefix: &str, e: DfsError) -> DfsError {
+    match e {
+        DfsError::Invalid { field, reason } if prefix != "object" => {
+            let field = match field.strip_prefix("object") {
+                Some(rest) => format!("{prefix}{rest}"),
+                None => field,
+            };
+            DfsError::Invalid { field, reason }
         }
-        check("object.yaw".into(), o.yaw.is_finite(), "must be finite")?;
+        e => e,
+    }
+}
+
+impl Scene {
+    /// Validates and resolves a scene given as a scenario (or a live session's `start`) gives
+    /// it: exactly one of `object` (a scene of one, its name optional) and `objects` (1 to
+    /// [`MAX_OBJECTS`], each named, names unique, each with its `position` when there are
+    /// several), and `target`, the name of the object to grasp (required with several). A
+    /// scene whose objects overlap at their start poses, or once each rests on the table, is
+    /// refused naming both. Errors name the field (`objects[1].mass`, `target`).
+    pub fn new(
+        object: Option<&ScenarioObject>,
+        objects: Option<&[ScenarioObject]>,
+        target: Option<&str>,
+    ) -> Result<Scene> {
+        let (list, listed) = match (object, objects) {
+            (Some(_), Some(_)) => {
+                return Err(DfsError::invalid(
+                    "objects",
+                    "give either `object` (one object) or `objects` (a list), not both",
+                ))
+            }
+            (None, None) => {
+                return Err(DfsError::invalid(
+                    "object",
+                    "missing: a scene needs its `object` (or a list of `objects`)",
+                ))
+            }
+            (Some(o), None) => (std::slice::from_ref(o), false),
+            (None, Some(v)) => (v, true),
+        };
+        check(
+            "objects".into(),
+            (1..=MAX_OBJECTS).contains(&list.len()),
+            format!("{} objects; a scene holds 1 to {MAX_OBJECTS}", list.len()),
+        )?;
+        let several = list.len() > 1;
+        let field = |i: usize| {
+            if listed {
+                format!("objects[{i}]")
+            } else {
+                "object".to_owned()
+            }
+        };
+        let mut out: Vec<SceneObject> = Vec::with_capacity(list.len());
+        for (i, o) in list.iter().enumerate() {
+            let f = field(i);
+            let name = match &o.name {
+                Some(n) => {
+                    let chars = n.chars().count();
+                    check(
+                        format!("{f}.name"),
+                        (1..=MAX_OBJECT_NAME_CHARS).contains(&chars),
+                        format!("must be 1 to {MAX_OBJECT_NAME_CHARS} characters, got {chars}"),
+                    )?;
+                    check(
+                        format!("{f}.name"),
+                        !n.chars().any(char::is_control) && n.trim() == n,
+                        "must not hold control characters or start or end with a space",
+                    )?;
+                    n.clone()
+                }
+                None if listed => {
+                    return Err(DfsError::invalid(
+                        format!("{f}.name"),
+                        "missing: each object of `objects` needs a name",
+                    ))
+                }
+                None => DEFAULT_OBJECT_NAME.to_owned(),
+            };
+            if let Some(j) = out.iter().position(|other| other.name == name) {
+                return Err(DfsError::invalid(
+                    format!("{f}.name"),
+                    format!("{name:?} names objects[{j}] too; names must be unique"),
+                ));
+            }
+            let object = o.to_simulated_object().map_err(|e| at_object(&f, e))?;
+            if let Some(p) = o.position {
+                check(
+                    format!("{f}.position"),
+                    p.iter().all(|v| v.is_finite() && v.abs() < 10.0),
+                    "must be finite and within 10 m",
+                )?;
+            } else if several {
+                return Err(DfsError::invalid(
+                    format!("{f}.position"),
+                    "missing: with several objects each needs its position (at the default, the \
+                     origin, they would overlap)",
+                ));
+            }
+            check(format!("{f}.yaw"), o.yaw.is_finite(), "must be finite")?;
+            let depth = object.shape.support_depth(&Rotation::identity());
+            let yaw = Rotation::from_euler_angles(0.0, 0.0, o.yaw);
+            let position = o
+                .position
+                .map(Vector::from)
+                .unwrap_or(Vector::new(0.0, 0.0, depth));
+            out.push(SceneObject {
+                name,
+                spec: o.clone(),
+                object,
+                friction: Friction {
+                    mu: o.mu,
+                    mu_torsion: o.mu_torsion,
+                },
+                pose: Isometry::from_parts(position.into(), yaw),
+            });
+        }
+        let names = || {
+            out.iter()
+                .map(|o| format!("{:?}", o.name))
+                .collect::<Vec<_>>()
+                .join(", ")
+        };
+        let target = match target {
+            Some(t) => out.iter().position(|o| o.name == t).ok_or_else(|| {
+                DfsError::invalid(
+                    "target",
+                    format!(
+                        "{t:?} names no object of the scene; its objects are {}",
+                        names()
+                    ),
+                )
+            })?,
+            None if several => {
+                return Err(DfsError::invalid(
+                    "target",
+                    format!(
+                        "missing: with several objects, the name of the one the script grasps \
+                         (one of {})",
+                        names()
+                    ),
+                ))
+            }
+            None => 0,
+        };
+        let table_height = out
+            .iter()
+            .map(|o| o.pose.translation.z - o.object.shape.support_depth(&o.pose.rotation))
+            .fold(Real::INFINITY, Real::min);
+        let scene = Scene {
+            objects: out,
+            target,
+            table_height,
+        };
+        scene.check_overlaps(&field)?;
+        Ok(scene)
+    }
+
+    /// Refuses two objects that overlap at their start poses or once both rest on the table
+    /// (same place and yaw, lowered onto it), naming both.
+    fn check_overlaps(&self, field: &dyn Fn(usize) -> String) -> Result<()> {
+        let rest = |o: &SceneObject| {
+            let mut p = o.pose;
+            p.translation.z = self.table_height + o.object.shape.support_depth(&p.rotation);
+            p
+        };
+        for (j, b) in self.objects.iter().enumerate() {
+            for (i, a) in self.objects[..j].iter().enumerate() {
+                let (sa, sb) = (&a.object.shape, &b.object.shape);
+                let when = if shapes_overlap(sa, &a.pose, sb, &b.pose) {
+                    "at their start positions"
+                } else if shapes_overlap(sa, &rest(a), sb, &rest(b)) {
+                    "once both rest on the table"
+                } else {
+                    continue;
+                };
+                return Err(DfsError::invalid(
+                    format!("{}.position", field(j)),
+                    format!(
+                        "{:?} and {:?} ({}) overlap {when}: objects must be placed farther \
+                         apart than their sizes allow",
+                        b.name,
+                        a.name,
+                        field(i)
+                    ),
+                ));
+            }
+        }
+        Ok(())
+    }
+
+    /// The object the script grasps.
+    pub fn target(&self) -> &SceneObject {
+        &self.objects[self.target]
+    }
+
+    /// The index of the object named `name`.
+    pub fn index_of(&self, name: &str) -> Option<usize> {
+        self.objects.iter().position(|o| o.name == name)
+    }
+
+    /// The objects for [`Dfs::with_objects`](crate::dfs::Dfs::with_objects), each at rest at
+    /// its start pose with its friction.
+    pub fn dfs_objects(&self) -> Vec<DfsObject> {
+        self.objects
+            .iter()
+            .map(|o| DfsObject {
+                object: o.object,
+                friction: o.friction,
+                state: ObjectState::at_rest(o.pose),
+            })
+            .collect()
+    }
+}
+
+impl Scenario {
+    /// Validates the scenario and resolves its tasks; every error names the field. The
+    /// object is the one the script grasps ([`resolve_scene`](Self::resolve_scene) gives the
+    /// whole scene).
+    pub fn resolve(&self) -> Result<(RigidObject, Vec<ResolvedTask>)> {
+        let (scene, tasks) = self.resolve_scene()?;
+        Ok((scene.target().object, tasks))
+    }
+
+    /// The scene ([`Scene::new`] of the scenario's `object`, `objects` and `target`).
+    pub fn scene(&self) -> Result<Scene> {
+        Scene::new(
+            self.object.as_ref(),
+            self.objects.as_deref(),
+            self.target.as_deref(),
+        )
+    }
+
+    /// The object the script grasps as the scenario gives it: its `object`, or the one of its
+    /// `objects` that `target` names (the only one, without a target). `None` when the
+    /// scenario names none ([`scene`](Self::scene) says why).
+    pub fn target_object(&self) -> Option<&ScenarioObject> {
+        match (&self.object, &self.objects, &self.target) {
+            (Some(o), None, _) => Some(o),
+            (None, Some(v), Some(t)) => v.iter().find(|o| o.name.as_deref() == Some(t.as_str())),
+            (None, Some(v), None) if v.len() == 1 => v.first(),
+            _ => None,
+        }
+    }
+
+    /// Validates the scenario and resolves its scene and tasks; every error names the field.
+    pub fn resolve_scene(&self) -> Result<(Scene, Vec<ResolvedTask>)> {
+        let scene = self.scene()?;
         if let Some(mu) = self.operator_mu {
             check(
                 "operator_mu".into(),
@@ -473,7 +782,7 @@ impl Scenario {
             total <= MAX_SCRIPT_S,
             format!("the script lasts {total} s; a session lasts at most {MAX_SCRIPT_S} s"),
         )?;
-        Ok((object, out))
+        Ok((scene, out))
     }
 
     /// Total duration of the script (s).
@@ -489,6 +798,7 @@ impl Scenario {
         "sphere-rotate",
         "box-slip",
         "two-grasps",
+        "table-three",
     ];
 
     /// A built-in scenario by name, with the given seed.
@@ -498,6 +808,7 @@ impl Scenario {
         // two-finger pinch cannot carry the paper's 1 kg (dfs-static and the tick benchmark use
         // the paper's full-size, 1 kg sphere).
         let sphere = |mu: Real| ScenarioObject {
+            name: None,
             shape: ShapeKind::Sphere,
             radius: Some(0.04),
             half_extents: None,
@@ -509,6 +820,7 @@ impl Scenario {
             yaw: 0.0,
         };
         let small_box = |mu: Real| ScenarioObject {
+            name: None,
             shape: ShapeKind::Box,
             radius: None,
             half_extents: Some([0.025, 0.025, 0.04]),
@@ -556,6 +868,7 @@ impl Scenario {
             }
             "cylinder-power-grasp" => {
                 let cyl = ScenarioObject {
+                    name: None,
                     shape: ShapeKind::Cylinder,
                     radius: Some(0.035),
                     half_extents: None,
@@ -605,16 +918,79 @@ impl Scenario {
                 v.extend(put());
                 (small_box(0.8), GraspStyle::Pinch, v, None)
             }
+            "table-three" => return Some(Self::table_three(seed)),
             _ => return None,
         };
         Some(Scenario {
             name: name.into(),
-            object,
+            object: Some(object),
+            objects: None,
+            target: None,
             grasp,
             tasks,
             seed,
             operator_mu,
         })
+    }
+
+    /// `table-three`: a ball, a box and a cylinder on the table, 20 cm apart; the operator
+    /// pinches the box between the other two, lifts it, holds it and sets it down.
+    fn table_three(seed: u64) -> Scenario {
+        let t = |phase: Phase, duration: Real| Task {
+            phase,
+            duration,
+            height: None,
+            offset: None,
+            turn: None,
+        };
+        let object = |name: &str, shape: ShapeKind, position: [Real; 3]| ScenarioObject {
+            name: Some(name.to_owned()),
+            shape,
+            radius: None,
+            half_extents: None,
+            half_height: None,
+            mass: 0.3,
+            mu: 0.8,
+            mu_torsion: 0.005,
+            position: Some(position),
+            yaw: 0.0,
+        };
+        let ball = ScenarioObject {
+            radius: Some(0.04),
+            ..object("ball", ShapeKind::Sphere, [0.0, -0.2, 0.04])
+        };
+        let small_box = ScenarioObject {
+            half_extents: Some([0.025, 0.025, 0.04]),
+            mass: 0.2,
+            mu_torsion: 0.003,
+            ..object("box", ShapeKind::Box, [0.0, 0.0, 0.04])
+        };
+        let cylinder = ScenarioObject {
+            radius: Some(0.035),
+            half_height: Some(0.09),
+            mass: 0.5,
+            mu: 0.7,
+            ..object("cylinder", ShapeKind::Cylinder, [0.0, 0.2, 0.09])
+        };
+        Scenario {
+            name: "table-three".into(),
+            object: None,
+            objects: Some(vec![ball, small_box, cylinder]),
+            target: Some("box".into()),
+            grasp: GraspStyle::Pinch,
+            tasks: vec![
+                t(Phase::Approach, 0.8),
+                t(Phase::Preshape, 0.5),
+                t(Phase::Grasp, 0.8),
+                t(Phase::Lift, 1.0),
+                t(Phase::Hold, 1.0),
+                t(Phase::Place, 1.0),
+                t(Phase::Release, 0.6),
+                t(Phase::Retreat, 0.6),
+            ],
+            seed,
+            operator_mu: None,
+        }
     }
 }
 
@@ -645,33 +1021,33 @@ mod tests {
     #[test]
     fn bad_scenarios_name_the_field() {
         let mut s = Scenario::builtin("sphere-lift", 0).unwrap();
-        s.object.mass = -1.0;
+        s.object.as_mut().unwrap().mass = -1.0;
         assert!(s.resolve().unwrap_err().to_string().contains("object.mass"));
         // Too light for the explicit object step (1 g diverged at lift-off): refused up front.
-        s.object.mass = 0.001;
+        s.object.as_mut().unwrap().mass = 0.001;
         let e = s.resolve().unwrap_err().to_string();
         assert!(e.contains("object.mass") && e.contains("0.005"), "{e}");
-        s.object.mass = MIN_SIMULATED_MASS;
+        s.object.as_mut().unwrap().mass = MIN_SIMULATED_MASS;
         assert!(s.resolve().is_ok());
         // A grasp file's ranges hold for scenario objects too: a 1e30 kg sphere or one 1 km
         // across is not a hand-held object.
-        s.object.mass = 1e30;
+        s.object.as_mut().unwrap().mass = 1e30;
         let e = s.resolve().unwrap_err().to_string();
         assert!(e.contains("object.mass"), "{e}");
         let mut s = Scenario::builtin("sphere-lift", 0).unwrap();
-        s.object.radius = Some(500.0);
+        s.object.as_mut().unwrap().radius = Some(500.0);
         let e = s.resolve().unwrap_err().to_string();
         assert!(e.contains("object.radius"), "{e}");
         let mut s = Scenario::builtin("sphere-lift", 0).unwrap();
-        s.object.mu = -0.2;
+        s.object.as_mut().unwrap().mu = -0.2;
         assert!(s.resolve().unwrap_err().to_string().contains("object.mu"));
         // And for friction: a grasp file refuses μ above 10 and μ_t above 1 m.
         let mut s = Scenario::builtin("sphere-lift", 0).unwrap();
-        s.object.mu = 1e6;
+        s.object.as_mut().unwrap().mu = 1e6;
         let e = s.resolve().unwrap_err().to_string();
         assert!(e.contains("object.mu") && e.contains("[0.0, 10.0]"), "{e}");
         let mut s = Scenario::builtin("sphere-lift", 0).unwrap();
-        s.object.mu_torsion = 50.0;
+        s.object.as_mut().unwrap().mu_torsion = 50.0;
         let e = s.resolve().unwrap_err().to_string();
         assert!(
             e.contains("object.mu_torsion") && e.contains("[0.0, 1.0] m"),
@@ -773,7 +1149,7 @@ mod tests {
             "tasks": [{"phase": "approach", "duration": 0.5}],
         });
         let s = parse(&good).unwrap();
-        assert_eq!(s.object.shape, ShapeKind::Sphere);
+        assert_eq!(s.object.as_ref().unwrap().shape, ShapeKind::Sphere);
         assert_eq!(s.tasks[0].phase, Phase::Approach);
         // Written back as it was read.
         let back = serde_json::to_value(&s).unwrap();
@@ -818,6 +1194,203 @@ mod tests {
             serde_json::to_string(&by_phase).unwrap(),
             serde_json::to_string(&by_name).unwrap()
         );
+    }
+
+    /// A scene of a ball, a box and a cylinder, as a scenario file gives it.
+    fn three() -> serde_json::Value {
+        serde_json::json!({
+            "name": "three",
+            "objects": [
+                {"name": "ball", "shape": "sphere", "radius": 0.04, "mass": 0.3, "mu": 0.8,
+                 "position": [0.0, -0.2, 0.04]},
+                {"name": "box", "shape": "box", "half_extents": [0.025, 0.025, 0.04],
+                 "mass": 0.2, "mu": 0.6, "position": [0.0, 0.0, 0.04], "yaw": 0.3},
+                {"name": "cylinder", "shape": "cylinder", "radius": 0.035, "half_height": 0.09,
+                 "mass": 0.5, "mu": 0.7, "position": [0.0, 0.2, 0.09]},
+            ],
+            "target": "box",
+            "tasks": [{"phase": "approach", "duration": 0.5}],
+        })
+    }
+
+    fn scene_error(json: &serde_json::Value) -> String {
+        parse(json)
+            .unwrap()
+            .resolve_scene()
+            .unwrap_err()
+            .to_string()
+    }
+
+    #[test]
+    fn a_scene_of_several_named_objects_resolves_with_its_target() {
+        let s = parse(&three()).unwrap();
+        let (scene, _) = s.resolve_scene().unwrap();
+        let names: Vec<&str> = scene.objects.iter().map(|o| o.name.as_str()).collect();
+        assert_eq!(names, ["ball", "box", "cylinder"]);
+        assert_eq!(scene.target, 1);
+        assert_eq!(scene.target().name, "box");
+        assert_eq!(scene.target().friction.mu, 0.6);
+        assert_eq!(scene.table_height, 0.0);
+        assert_eq!(scene.index_of("cylinder"), Some(2));
+        assert_eq!(s.target_object().unwrap().name.as_deref(), Some("box"));
+        let (target, _) = s.resolve().unwrap();
+        assert_eq!(target, scene.target().object);
+        assert_eq!(scene.dfs_objects().len(), 3);
+        // Written back as it was read (with its defaults).
+        let back = serde_json::to_value(&s).unwrap();
+        assert_eq!(back["target"], "box");
+        assert_eq!(back["objects"][2]["name"], "cylinder");
+        assert_eq!(parse(&back).unwrap(), s);
+        // A single object is named "object" unless named, and is its own target.
+        let one = Scenario::builtin("sphere-lift", 0).unwrap();
+        let (scene, _) = one.resolve_scene().unwrap();
+        assert_eq!(
+            (scene.objects.len(), scene.target().name.as_str()),
+            (1, DEFAULT_OBJECT_NAME)
+        );
+        let back = serde_json::to_value(&one).unwrap();
+        assert!(back.get("objects").is_none() && back.get("target").is_none());
+        assert!(back["object"].get("name").is_none());
+        let mut named = serde_json::to_value(&one).unwrap();
+        named["object"]["name"] = "cup".into();
+        named["target"] = "cup".into();
+        let (scene, _) = parse(&named).unwrap().resolve_scene().unwrap();
+        assert_eq!(scene.target().name, "cup");
+        named["target"] = "mug".into();
+        let e = scene_error(&named);
+        assert!(e.contains("invalid target: \"mug\" names no object"), "{e}");
+    }
+
+    #[test]
+    fn objects_and_target_are_checked_naming_the_field() {
+        let mut j = three();
+        j["object"] = j["objects"][0].clone();
+        let e = scene_error(&j);
+        assert!(e.contains("invalid objects: give either `object`"), "{e}");
+        let mut j = three();
+        j.as_object_mut().unwrap().remove("objects");
+        let e = scene_error(&j);
+        assert!(e.contains("invalid object: missing"), "{e}");
+        let mut j = three();
+        j.as_object_mut().unwrap().remove("target");
+        let e = scene_error(&j);
+        assert!(
+            e.contains("invalid target: missing") && e.contains("\"ball\", \"box\""),
+            "{e}"
+        );
+        let mut j = three();
+        j["target"] = "cup".into();
+        assert!(scene_error(&j).contains("invalid target: \"cup\" names no object"));
+        let mut j = three();
+        j["objects"][2]["name"] = "ball".into();
+        let e = scene_error(&j);
+        assert!(
+            e.contains("invalid objects[2].name: \"ball\" names objects[0] too"),
+            "{e}"
+        );
+        for bad in ["", " ball", &"x".repeat(65), "a\nb"] {
+            let mut j = three();
+            j["objects"][1]["name"] = bad.into();
+            j["target"] = bad.into();
+            assert!(
+                scene_error(&j).contains("invalid objects[1].name"),
+                "{bad:?}"
+            );
+        }
+        let mut j = three();
+        j["objects"][1]["name"] = "é".repeat(64).into();
+        j["target"] = "é".repeat(64).into();
+        parse(&j).unwrap().resolve_scene().unwrap();
+        let mut j = three();
+        j["objects"][0].as_object_mut().unwrap().remove("name");
+        assert!(scene_error(&j).contains("invalid objects[0].name: missing"));
+        let mut j = three();
+        j["objects"][2].as_object_mut().unwrap().remove("position");
+        let e = scene_error(&j);
+        assert!(e.contains("invalid objects[2].position: missing"), "{e}");
+        // The object's own fields, under its path.
+        let mut j = three();
+        j["objects"][1]["mass"] = (-1.0).into();
+        assert!(scene_error(&j).contains("invalid objects[1].mass"));
+        let mut j = three();
+        j["objects"][2]["half_height"] = serde_json::Value::Null;
+        let e = scene_error(&j);
+        assert!(e.contains("invalid objects[2].half_height"), "{e}");
+        let mut j = three();
+        j["objects"][0]["mu"] = 20.0.into();
+        assert!(scene_error(&j).contains("invalid objects[0].mu"));
+        // 1 to 8 objects.
+        let mut j = three();
+        j["objects"] = serde_json::json!([]);
+        assert!(scene_error(&j).contains("invalid objects: 0 objects"));
+        let mut j = three();
+        let many: Vec<serde_json::Value> = (0..9)
+            .map(|i| {
+                let mut o = three()["objects"][0].clone();
+                o["name"] = format!("ball{i}").into();
+                o["position"] = serde_json::json!([0.0, 0.1 * i as f64, 0.04]);
+                o
+            })
+            .collect();
+        j["objects"] = many.into();
+        j["target"] = "ball0".into();
+        let e = scene_error(&j);
+        assert!(
+            e.contains("invalid objects: 9 objects; a scene holds 1 to 8"),
+            "{e}"
+        );
+        j["objects"].as_array_mut().unwrap().pop();
+        parse(&j).unwrap().resolve_scene().unwrap();
+        // One object in the list: the target may be left out.
+        let mut j = three();
+        j["objects"].as_array_mut().unwrap().truncate(1);
+        j.as_object_mut().unwrap().remove("target");
+        let (scene, _) = parse(&j).unwrap().resolve_scene().unwrap();
+        assert_eq!(scene.target().name, "ball");
+        // A field no object takes.
+        let mut j = three();
+        j["objects"][1]["colour"] = "red".into();
+        let e = parse(&j).unwrap_err();
+        assert!(e.contains("unknown field `colour`"), "{e}");
+    }
+
+    #[test]
+    fn a_scene_of_overlapping_objects_is_refused_naming_both() {
+        // The cylinder moved onto the box.
+        let mut j = three();
+        j["objects"][2]["position"] = serde_json::json!([0.05, 0.02, 0.09]);
+        let e = scene_error(&j);
+        assert!(
+            e.contains("invalid objects[2].position")
+                && e.contains("\"cylinder\" and \"box\" (objects[1]) overlap at their start"),
+            "{e}"
+        );
+        // Beside the box, but closer than their sizes allow: the box is 2.5 cm half wide
+        // (turned 0.3 rad: it reaches 3.1 cm along x), the cylinder 3.5 cm.
+        let mut j = three();
+        j["objects"][2]["position"] = serde_json::json!([0.062, 0.0, 0.09]);
+        assert!(scene_error(&j).contains("overlap at their start"));
+        j["objects"][2]["position"] = serde_json::json!([0.07, 0.0, 0.09]);
+        parse(&j).unwrap().resolve_scene().unwrap();
+        // Held above the box, clear of it, but falling onto it: they would overlap once both
+        // rest on the table.
+        let mut j = three();
+        j["objects"][0]["position"] = serde_json::json!([0.0, 0.0, 0.3]);
+        let e = scene_error(&j);
+        assert!(
+            e.contains("invalid objects[1].position")
+                && e.contains(
+                    "\"box\" and \"ball\" (objects[0]) overlap once both rest on the table"
+                ),
+            "{e}"
+        );
+        // Diagonal neighbours whose bounding spheres overlap but whose shapes do not.
+        let mut j = three();
+        j["objects"][0] = serde_json::json!({"name": "crate", "shape": "box",
+            "half_extents": [0.05, 0.05, 0.05], "mass": 0.5, "mu": 0.8,
+            "position": [0.085, 0.085, 0.05]});
+        j["objects"][1]["yaw"] = 0.0.into();
+        parse(&j).unwrap().resolve_scene().unwrap();
     }
 
     #[test]

@@ -16,6 +16,87 @@ fn dfs_ticks_allocate_nothing() {
     a_dfs_tick_with_four_contacts_allocates_nothing();
     a_free_falling_object_tick_and_a_refused_sample_allocate_nothing();
     a_coupled_tick_with_a_calibration_allocates_nothing();
+    a_tick_of_a_scene_of_several_objects_allocates_nothing();
+}
+
+/// The paper sphere among seven other objects, two of them overlapping (every tick runs the
+/// overlap test on them) and one touching the thumb: contacts on two objects, the overlap
+/// stage, eight objects' dynamics.
+fn a_tick_of_a_scene_of_several_objects_allocates_nothing() {
+    use dfs_core::dfs::{Dfs, DfsObject, MAX_OBJECTS};
+    use dfs_core::math::{Isometry, Vector};
+    use dfs_core::object::{ObjectState, RigidObject, Shape};
+    let (dfs, q, tau, base) = glove10_holding_paper_sphere().unwrap();
+    let thumb = dfs
+        .hand()
+        .fingertips
+        .iter()
+        .position(|t| t.name == "thumb")
+        .unwrap();
+    let at = |p: Vector, shape: Shape| DfsObject {
+        object: RigidObject::new(shape, 0.2).unwrap(),
+        friction: dfs.params().friction,
+        state: ObjectState::at_rest(Isometry::translation(p.x, p.y, p.z)),
+    };
+    let c = dfs.output().tip_centres[thumb].coords;
+    let away = (c - dfs.object_state().pose.translation.vector).normalize();
+    let r = dfs.hand().fingertips[thumb].radius;
+    let mut objects = vec![
+        DfsObject {
+            object: *dfs.object(),
+            friction: dfs.params().friction,
+            state: *dfs.object_state(),
+        },
+        at(c + away * (r + 0.0195), Shape::Sphere { radius: 0.02 }),
+        at(
+            Vector::new(1.0, 0.0, 0.0),
+            Shape::Box {
+                half_extents: [0.03, 0.03, 0.03],
+            },
+        ),
+        at(
+            Vector::new(1.0, 0.04, 0.0),
+            Shape::Cylinder {
+                radius: 0.02,
+                half_height: 0.05,
+            },
+        ),
+    ];
+    while objects.len() < MAX_OBJECTS {
+        let x = objects.len() as f64;
+        objects.push(at(
+            Vector::new(-1.0, x, 0.0),
+            Shape::Sphere { radius: 0.03 },
+        ));
+    }
+    let mut scene = Dfs::with_objects(dfs.hand().clone(), &objects, *dfs.params()).unwrap();
+    let sample = GloveSample {
+        q: &q,
+        tau: &tau,
+        base,
+    };
+    scene.step(&sample).unwrap();
+    let mut attempts = Vec::new();
+    for _ in 0..5 {
+        let region = Region::new(GLOBAL);
+        let (mut contacts, mut overlaps, mut thumb_on_ball) = (0, 0, 0);
+        for _ in 0..1000 {
+            for (i, o) in objects.iter().enumerate() {
+                scene.set_object_state_at(i, o.state).unwrap();
+            }
+            let out = scene.step(&sample).unwrap();
+            contacts += out.objects[0].n_contacts;
+            overlaps += usize::from(out.overlap == Some((2, 3)));
+            thumb_on_ball += usize::from(out.tips[thumb].touching && out.tips[thumb].object == 1);
+        }
+        let stats = region.change();
+        assert_eq!((contacts, overlaps, thumb_on_ball), (4000, 1000, 1000));
+        if stats.allocations == 0 && stats.reallocations == 0 {
+            return;
+        }
+        attempts.push(stats);
+    }
+    panic!("ticks of a scene allocated in every attempt: {attempts:?}");
 }
 
 fn a_dfs_tick_with_four_contacts_allocates_nothing() {

@@ -103,6 +103,7 @@ fn to_new_skill(s: &Skill) -> NewSkill {
     let end = s.phases.last().map(|x| x.end_ns).unwrap_or(p.source.end_ns);
     NewSkill {
         object_shape: shape,
+        object_name: p.object.as_ref().and_then(|o| o.name.clone()),
         object_mass: mass,
         mu,
         contact_count: p.contact_count as i64,

@@ -25,13 +25,12 @@ use std::collections::BTreeMap;
 use std::time::{Duration, SystemTime};
 
 use dfs_core::calibration::{Calibration, DofCalibration};
-use dfs_core::contact::{ContactModel, Friction};
+use dfs_core::contact::ContactModel;
 use dfs_core::dfs::{Dfs, DfsParams, GloveSample};
 use dfs_core::hand::{HandModel, MAX_DOF};
-use dfs_core::math::{Isometry, Rotation, Vector};
-use dfs_core::object::ObjectState;
+use dfs_core::math::{Isometry, Rotation};
 use dfs_core::operator::TICK_NS;
-use dfs_core::scenario::ScenarioObject;
+use dfs_core::scenario::{ScenarioObject, Scene};
 use nalgebra::{Quaternion, Translation3};
 use prost::Message as _;
 use serde::{Deserialize, Serialize};
@@ -110,8 +109,16 @@ pub struct StartMessage {
     /// The hand used as the glove model: `glove10` (default) or any stored hand's name.
     #[serde(default = "default_hand")]
     pub hand: String,
-    /// The object on the table, as in a scenario file.
-    pub object: ScenarioObject,
+    /// The object on the table, as in a scenario file; or `objects` and `target`.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub object: Option<ScenarioObject>,
+    /// Up to 8 objects on the table, each named (`"name": "ball"`) and placed, as a
+    /// scenario's `objects`; instead of `object`.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub objects: Option<Vec<ScenarioObject>>,
+    /// With `objects`: the name of the object the operator is to grasp.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub target: Option<String>,
     /// A name for the session (its `scenario` in the store). Default `live`.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub name: Option<String>,
@@ -296,8 +303,10 @@ pub struct LiveConfig {
     pub hand: HandModel,
     /// The URDF the hand was built from (a stored hand), for the recording's `/hand` topic.
     pub hand_urdf: Option<String>,
-    /// The object.
-    pub object: ScenarioObject,
+    /// The objects on the table (one unless `objects` were given).
+    pub scene: Scene,
+    /// Whether the scene was given as a list of objects (recorded as one).
+    pub listed: bool,
     /// Base pose until a sample gives one.
     pub wrist: Isometry,
     /// The session's name.
@@ -348,7 +357,12 @@ impl LiveConfig {
             Some(w) => pose_from([w[0], w[1], w[2]], [w[3], w[4], w[5], w[6]])
                 .map_err(|m| invalid("wrist", m))?,
         };
-        scene(&start.object)?;
+        let scene = Scene::new(
+            start.object.as_ref(),
+            start.objects.as_deref(),
+            start.target.as_deref(),
+        )
+        .map_err(|e| invalid("scene", e.to_string()))?;
         let calibration = match &start.calibration {
             Some(c) => c
                 .validate(&hand)
@@ -358,7 +372,8 @@ impl LiveConfig {
         Ok(LiveConfig {
             hand,
             hand_urdf,
-            object: start.object.clone(),
+            scene,
+            listed: start.objects.is_some(),
             wrist,
             name,
             started_at: SystemTime::now(),
@@ -397,35 +412,6 @@ fn pose_from(p: [f64; 3], q: [f64; 4]) -> std::result::Result<Isometry, String> 
         Translation3::new(p[0], p[1], p[2]),
         Rotation::from_quaternion(quat),
     ))
-}
-
-/// The object's rigid body, its start pose (resting on a table whose top is at z = 0 at the
-/// origin unless placed) and the table's height.
-fn scene(object: &ScenarioObject) -> Result<(dfs_core::object::RigidObject, Isometry, f64)> {
-    let rigid = object
-        .to_simulated_object()
-        .map_err(|e| invalid("object", e.to_string()))?;
-    if let Some(p) = object.position {
-        if !p.iter().all(|v| v.is_finite() && v.abs() < 10.0) {
-            return Err(invalid(
-                "object.position",
-                format!("must be finite and within 10 m, got {p:?}"),
-            ));
-        }
-    }
-    if !object.yaw.is_finite() {
-        return Err(invalid("object.yaw", "must be finite"));
-    }
-    let depth = rigid.shape.support_depth(&Rotation::identity());
-    let position = object
-        .position
-        .map(Vector::from)
-        .unwrap_or(Vector::new(0.0, 0.0, depth));
-    let pose = Isometry::from_parts(
-        position.into(),
-        Rotation::from_euler_angles(0.0, 0.0, object.yaw),
-    );
-    Ok((rigid, pose, position.z - depth))
 }
 
 /// Why a sample was refused: it was not stepped, and nothing accepted before it changes.
@@ -519,24 +505,17 @@ impl LiveSession {
         out: SessionOut<'_>,
         view: Option<LiveView>,
     ) -> Result<LiveSession> {
-        let (rigid, pose, table_height) = scene(&config.object)?;
+        let scene = &config.scene;
+        let table_height = scene.table_height;
         let params = DfsParams {
             // Fingertip pads are soft, as the simulated operator's (`Simulation::new`).
             contact_model: ContactModel::SoftFinger,
-            friction: Friction {
-                mu: config.object.mu,
-                mu_torsion: config.object.mu_torsion,
-            },
+            friction: scene.target().friction,
             table_height: Some(table_height),
             ..DfsParams::default()
         };
-        let dfs = Dfs::new(
-            config.hand.clone(),
-            rigid,
-            ObjectState::at_rest(pose),
-            params,
-        )
-        .map_err(|e| invalid("hand", e.to_string()))?;
+        let dfs = Dfs::with_objects(config.hand.clone(), &scene.dfs_objects(), params)
+            .map_err(|e| invalid("hand", e.to_string()))?;
         let mut extra = BTreeMap::new();
         if let Some(c) = &config.calibration_given {
             extra.insert(
@@ -547,13 +526,20 @@ impl LiveSession {
         let info = SessionInfo {
             scenario: config.name.clone(),
             seed: None,
-            object_json: serde_json::to_string(&config.object).unwrap_or_default(),
+            // A scene given as a list is recorded as one (every object, the target named), as
+            // a simulation records it.
+            object_json: if config.listed {
+                String::new()
+            } else {
+                serde_json::to_string(&scene.target().spec).unwrap_or_default()
+            },
             source: "live".to_owned(),
             extra,
             phases: Vec::new(),
             started_at: Some(config.started_at),
             table_height: Some(table_height),
             hand_urdf: config.hand_urdf.clone(),
+            scene: config.listed.then(|| scene.clone()),
         };
         let recorder =
             SessionRecorder::create_with_view(out, dfs.hand(), dfs.object(), &info, view)?;

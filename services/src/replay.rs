@@ -280,6 +280,7 @@ pub fn replay_skill_until(
         // The replay's DFS puts the table top at z = 0 (dfs_core::replay).
         table_height: Some(0.0),
         hand_urdf: hand.urdf.clone(),
+        scene: None,
     };
     let mut recorder = SessionRecorder::create_to(out, &hand.model, &object, &info)?;
     let mut failed: Option<RecordingError> = None;

@@ -55,7 +55,7 @@ use crate::foxglove::Pose;
 use crate::mcap_io::ReadLimits;
 use crate::session::{
     Contacts, DecodeTopics, GroundTruthPhase, KeptMessages, ObjectState, Session, SessionHead,
-    SessionSource, SessionVisitor, KEPT_MESSAGES_BUDGET,
+    SessionSource, SessionVisitor, KEPT_MESSAGES_BUDGET, MAX_SESSION_OBJECTS,
 };
 
 /// Version of the segmentation: what the store records beside every session's skills, so
@@ -194,6 +194,12 @@ impl Skill {
 /// The object as the session's metadata describes it.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct ObjectParams {
+    /// Its name in the session's scene, when the session names its objects (a scene of
+    /// several: the `objects` of the `session` metadata record; or a named `object`): the
+    /// object the skill grasped, the one its contacts pushed. Absent for a session's one
+    /// unnamed object.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub name: Option<String>,
     /// `sphere`, `box` or `cylinder`.
     pub shape: ShapeKind,
     /// Size (m): `[radius]` (sphere), half extents (box), `[radius, half_height]` (cylinder),
@@ -500,6 +506,29 @@ struct ContactRun {
     start: u64,
     end: u64,
     on: bool,
+    /// Per object of the scene: how many of the run's samples had most of their transmitting
+    /// fingertips on it.
+    objects: [u32; MAX_SESSION_OBJECTS],
+}
+
+/// The object most of `c`'s transmitting fingertips push (the lowest index of a tie).
+fn pushed_object(c: &Contacts) -> usize {
+    let mut count = [0u32; MAX_SESSION_OBJECTS];
+    for f in c.fingers.iter().filter(|f| f.in_contact) {
+        count[(f.object as usize).min(MAX_SESSION_OBJECTS - 1)] += 1;
+    }
+    argmax(&count)
+}
+
+/// The index of the largest count (the lowest of a tie).
+fn argmax<T: PartialOrd>(count: &[T]) -> usize {
+    let mut best = 0;
+    for (i, n) in count.iter().enumerate() {
+        if *n > count[best] {
+            best = i;
+        }
+    }
+    best
 }
 
 /// Pass one of segmentation: the hand base's pose resampled onto the grid as object samples
@@ -579,7 +608,13 @@ impl GridBuilder {
                 start: t,
                 end: t,
                 on,
+                objects: [0; MAX_SESSION_OBJECTS],
             }),
+        }
+        if on {
+            if let Some(r) = self.runs.last_mut() {
+                r.objects[pushed_object(c)] += 1;
+            }
         }
     }
 
@@ -616,6 +651,21 @@ impl GridBuilder {
             touching,
         })
     }
+}
+
+/// The object the contacts of `runs` from `start` to `end` (log times) pushed most: the one a
+/// skill of that span grasped (0 in a session of one object).
+fn grasped_object(runs: &[ContactRun], start: u64, end: u64) -> usize {
+    let mut count = [0u64; MAX_SESSION_OBJECTS];
+    for r in runs
+        .iter()
+        .filter(|r| r.on && r.end >= start && r.start <= end)
+    {
+        for (c, &n) in count.iter_mut().zip(&r.objects) {
+            *c += u64::from(n);
+        }
+    }
+    argmax(&count)
 }
 
 /// A move of the hand's base: grid indices of its refined start and end, and its displacement.
@@ -1046,13 +1096,21 @@ impl PassOne {
 
     /// The second pass, for the candidate skills the grid holds.
     fn finish(self, metadata: &BTreeMap<String, String>, params: &SegmentParams) -> PassTwo {
+        let runs = self.grid.runs.clone();
         let (t0, skills) = match self.grid.finish() {
             None => (0, Vec::new()),
             Some(g) => {
-                let object = object_params(metadata);
                 let skills = plan(&g, params)
                     .into_iter()
-                    .map(|phases| SkillAcc::new(phases, object.clone(), metadata, params))
+                    .map(|phases| {
+                        let start = phases.first().map_or(0, |p| p.start_ns);
+                        let end = phases.last().map_or(0, |p| p.end_ns);
+                        let index = grasped_object(&runs, start, end);
+                        let object = object_params(metadata, index);
+                        let mut acc = SkillAcc::new(phases, object, metadata, params);
+                        acc.object_index = index as u32;
+                        acc
+                    })
                     .collect();
                 (g.t0, skills)
             }
@@ -1141,7 +1199,7 @@ impl SessionVisitor for PassTwo {
             if t < s.start {
                 break;
             }
-            s.contacts(t, m);
+            s.contacts(t, &contacts_on(m, s.object_index));
         }
         self.close();
         Ok(())
@@ -1152,13 +1210,14 @@ impl SessionVisitor for PassTwo {
             if t < s.start {
                 break;
             }
+            let index = s.object_index;
             if !s.seeded {
                 s.seeded = true;
                 if let Some((tp, p)) = &self.before {
-                    s.object(*tp, p);
+                    s.object(*tp, &object_view(p, index));
                 }
             }
-            s.object(t, m);
+            s.object(t, &object_view(m, index));
         }
         self.before = Some((t, m.clone()));
         self.close();
@@ -1169,6 +1228,64 @@ impl SessionVisitor for PassTwo {
     }
     fn segmentation_fields_only(&self) -> bool {
         true
+    }
+}
+
+/// `c` as a skill of object `index` sees it: the fingertips touching another object of the
+/// scene are not touching (its object). Borrowed when none does (always with one object).
+fn contacts_on(c: &Contacts, index: u32) -> std::borrow::Cow<'_, Contacts> {
+    if c.fingers.iter().all(|f| !f.touching || f.object == index) {
+        return std::borrow::Cow::Borrowed(c);
+    }
+    let mut own = c.clone();
+    for f in own
+        .fingers
+        .iter_mut()
+        .filter(|f| f.touching && f.object != index)
+    {
+        *f = crate::session::FingerContact {
+            name: std::mem::take(&mut f.name),
+            ..Default::default()
+        };
+    }
+    own.n_contacts = own.fingers.iter().filter(|f| f.in_contact).count() as u32;
+    std::borrow::Cow::Owned(own)
+}
+
+/// Object `index`'s state from an `/object/state` sample: the sample itself when its main
+/// fields are that object's (always with one object), else its entry in `objects` with its
+/// pose in the hand (the hand's base from the main fields); wrenches are not recorded for it.
+/// An index the sample does not list gives the sample.
+fn object_view(m: &ObjectState, index: u32) -> std::borrow::Cow<'_, ObjectState> {
+    let Some(o) = m.objects.get(index as usize).filter(|_| m.index != index) else {
+        return std::borrow::Cow::Borrowed(m);
+    };
+    let base = iso(&m.pose) * iso(&m.pose_in_hand).inverse();
+    let pose = iso(&o.pose);
+    std::borrow::Cow::Owned(ObjectState {
+        pose: o.pose,
+        linear_velocity: o.linear_velocity,
+        angular_velocity_b: o.angular_velocity_b,
+        pose_in_hand: pose_of(&(base.inverse() * pose)),
+        index,
+        ..ObjectState::default()
+    })
+}
+
+fn pose_of(i: &Isometry) -> Pose {
+    let q = i.rotation.quaternion();
+    Pose {
+        position: crate::foxglove::Vector3::new(
+            i.translation.vector.x,
+            i.translation.vector.y,
+            i.translation.vector.z,
+        ),
+        orientation: crate::foxglove::Quaternion {
+            x: q.i,
+            y: q.j,
+            z: q.k,
+            w: q.w,
+        },
     }
 }
 
@@ -1353,10 +1470,20 @@ fn well_formed(
     skills
 }
 
-fn object_params(metadata: &BTreeMap<String, String>) -> Option<ObjectParams> {
-    let o: ScenarioObject = serde_json::from_str(metadata.get("object")?).ok()?;
+/// The object of index `index` in the session's scene as its metadata describes it: entry
+/// `index` of `objects` (a scene of several), else `object`.
+fn object_params(metadata: &BTreeMap<String, String>, index: usize) -> Option<ObjectParams> {
+    let listed = metadata.get("objects").and_then(|text| {
+        let list: Vec<ScenarioObject> = serde_json::from_str(text).ok()?;
+        list.into_iter().nth(index)
+    });
+    let o: ScenarioObject = match listed {
+        Some(o) => o,
+        None => serde_json::from_str(metadata.get("object")?).ok()?,
+    };
     let shape = o.to_shape().ok()?;
     Some(ObjectParams {
+        name: o.name.clone(),
         shape: o.shape,
         size: shape.sizes(),
         mass: o.mass,
@@ -1429,6 +1556,8 @@ struct SkillAcc {
     /// The first object sample at or after the grasp's start: the reference of the motion.
     start_pose: Option<Isometry>,
     last_object: Option<Isometry>,
+    /// Which object of the session's scene the skill grasps (0 with one object).
+    object_index: u32,
 }
 
 impl SkillAcc {
@@ -1512,6 +1641,7 @@ impl SkillAcc {
             key_next: 0,
             start_pose: None,
             last_object: None,
+            object_index: 0,
             phases,
         }
     }

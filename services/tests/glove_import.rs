@@ -556,7 +556,7 @@ fn any_hand_is_a_glove_model_and_its_dofs_name_the_columns() {
         ..ImportOptions::default()
     };
     let out = dir.path().join("allegro.mcap");
-    let object = Scenario::builtin("sphere-lift", 0).unwrap().object;
+    let object = Scenario::builtin("sphere-lift", 0).unwrap().object.unwrap();
     let summary = import_glove(&csv, &object, &options, &out).unwrap();
     assert_eq!(summary.ticks, 1197);
     let s = read_session(&out).unwrap();
@@ -807,7 +807,13 @@ fn every_builtin_grasp_exported_and_imported_again_gives_the_same_skills() {
             let csv = dir.path().join(format!("{name}-{seed}.csv"));
             export_glove_csv(&session, &csv).unwrap();
             let again = dir.path().join(format!("{name}-{seed}-again.mcap"));
-            import_glove(&csv, &scenario.object, &ImportOptions::default(), &again).unwrap();
+            import_glove(
+                &csv,
+                scenario.target_object().unwrap(),
+                &ImportOptions::default(),
+                &again,
+            )
+            .unwrap();
             let (a, b) = (skills_of(&session), skills_of(&again));
             assert_eq!(a.len(), 1, "{name} seed {seed}");
             let same = std::panic::catch_unwind(|| assert_same_skills(&a, &b, &tol));

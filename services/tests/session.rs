@@ -35,7 +35,7 @@ fn sphere_session() -> &'static (tempfile::TempDir, PathBuf, RecordSummary) {
 }
 
 fn scenario_object(name: &str) -> dfs_core::scenario::ScenarioObject {
-    Scenario::builtin(name, 0).unwrap().object
+    Scenario::builtin(name, 0).unwrap().object.unwrap()
 }
 
 #[test]

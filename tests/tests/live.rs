@@ -34,6 +34,8 @@ fn start_for(s: &dfs_core::scenario::Scenario) -> StartMessage {
     StartMessage {
         hand: "glove10".into(),
         object: s.object.clone(),
+        objects: s.objects.clone(),
+        target: s.target.clone(),
         name: Some(s.name.clone()),
         wrist: None,
         assist: AssistSettings::default(),
@@ -826,5 +828,44 @@ async fn a_glove_of_positions_only_is_coupled_and_calibrated() {
         .as_str()
         .unwrap()
         .contains("index_mcp"));
+    app.stop().await;
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_scene_of_several_objects_streams_live_and_its_skill_names_the_target() {
+    let app = TestApp::spawn().await;
+    let s = scenario("table-three", 0);
+    let frames = live_client::simulated_frames(&s, None, 1).unwrap();
+    let summary = live_client::run(
+        &url(&app),
+        &start_for(&s),
+        frames,
+        &ClientOptions::default(),
+        |_| {},
+    )
+    .await
+    .unwrap();
+    assert_eq!(summary.refused, 0);
+    let meta = session(&app, summary.session_id.unwrap()).await;
+    assert_eq!(meta["meta"]["extra"]["target"], "box", "{meta}");
+    let skills = skills_of(&app, summary.session_id.unwrap()).await;
+    assert_eq!(skills.len(), 1, "{meta}");
+    assert_eq!(skills[0]["object_name"], "box");
+    // Objects placed into one another are refused before any sample, naming both.
+    let mut ws = connect(&app, None).await;
+    send_json(
+        &mut ws,
+        json!({"type": "start", "target": "a", "objects": [
+            {"name": "a", "shape": "sphere", "radius": 0.04, "mass": 0.3, "mu": 0.8, "position": [0, 0, 0.04]},
+            {"name": "b", "shape": "sphere", "radius": 0.04, "mass": 0.3, "mu": 0.8, "position": [0.05, 0, 0.04]}
+        ]}),
+    )
+    .await;
+    let e = expect_event(&mut ws, "error").await;
+    let m = e["message"].as_str().unwrap();
+    assert!(
+        m.contains("\"a\"") && m.contains("\"b\"") || m.contains(" a ") && m.contains(" b"),
+        "{m}"
+    );
     app.stop().await;
 }

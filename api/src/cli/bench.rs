@@ -503,6 +503,8 @@ fn bench_live(name: &str, sessions: usize, seconds: f64, rate: u32) -> Result<Li
         let start = services::live::StartMessage {
             hand: "glove10".to_owned(),
             object: scenario.object.clone(),
+            objects: scenario.objects.clone(),
+            target: scenario.target.clone(),
             name: Some(format!("bench-live-{seed}")),
             wrist: None,
             assist: services::live::AssistSettings::default(),

@@ -88,6 +88,8 @@ pub fn run_glove(a: GloveArgs) -> Result<(), CliError> {
             let start = StartMessage {
                 hand: "glove10".to_owned(),
                 object: scenario.object.clone(),
+                objects: scenario.objects.clone(),
+                target: scenario.target.clone(),
                 name: Some(scenario.name.clone()),
                 wrist: None,
                 assist: AssistSettings::default(),
@@ -111,7 +113,9 @@ pub fn run_glove(a: GloveArgs) -> Result<(), CliError> {
             let r = base.rotation;
             let start = StartMessage {
                 hand: a.hand.clone(),
-                object,
+                object: Some(object),
+                objects: None,
+                target: None,
                 name: path.file_name().map(|n| n.to_string_lossy().into_owned()),
                 wrist: Some([t.x, t.y, t.z, r.i, r.j, r.k, r.w]),
                 assist: AssistSettings::default(),

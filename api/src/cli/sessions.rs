@@ -184,8 +184,8 @@ pub fn run_export(a: ExportArgs) -> Result<(), CliError> {
 
 /// The object of `--object`.
 pub(crate) fn load_object(spec: &str) -> Result<ScenarioObject, CliError> {
-    if let Some(s) = Scenario::builtin(spec, 0) {
-        return Ok(s.object);
+    if let Some(o) = Scenario::builtin(spec, 0).and_then(|s| s.target_object().cloned()) {
+        return Ok(o);
     }
     let (text, origin) = if spec.trim_start().starts_with('{') {
         (spec.to_owned(), "--object".to_owned())

@@ -36,6 +36,10 @@ const DESCRIPTIONS: &[(&str, &str)] = &[
         "two-grasps",
         "pick the box, carry it, place it, then pick it again and hold: two grasps in one session",
     ),
+    (
+        "table-three",
+        "a ball, a box and a cylinder on the table, 20 cm apart: pinch the box between the other two, lift, hold, place, release",
+    ),
 ];
 
 /// The description of a built-in scenario.
@@ -50,18 +54,22 @@ pub fn description(name: &str) -> &'static str {
 /// Arguments of `icms scenarios`.
 #[derive(Debug, clap::Args)]
 pub struct ScenariosArgs {
-    /// Print JSON: a list of `{name, description, duration_s, object, phases}`.
+    /// Print JSON: a list of `{name, description, duration_s, object, phases}` (and
+    /// `objects` for a scene of several).
     #[arg(long)]
     json: bool,
 }
 
-/// One entry of `icms scenarios --json`.
+/// One entry of `icms scenarios --json`: `object` is the one the script grasps; a scene of
+/// several objects lists them all in `objects`.
 #[derive(Debug, Serialize)]
 struct ScenarioEntry {
     name: &'static str,
     description: &'static str,
     duration_s: f64,
     object: dfs_core::scenario::ScenarioObject,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    objects: Option<Vec<dfs_core::scenario::ScenarioObject>>,
     phases: Vec<dfs_core::scenario::Phase>,
 }
 
@@ -76,7 +84,8 @@ pub fn run_scenarios(a: ScenariosArgs) -> Result<(), CliError> {
                 description: description(name),
                 duration_s: s.duration(),
                 phases: s.tasks.iter().map(|t| t.phase).collect(),
-                object: s.object,
+                object: s.target_object()?.clone(),
+                objects: s.objects,
             })
         })
         .collect();

@@ -229,9 +229,15 @@ mod tests {
         // code's.
         for name in Scenario::BUILTINS {
             let s = serde_json::to_value(Scenario::builtin(name, 3).unwrap()).unwrap();
+            // A scene of several objects: its objects' fields as the one object's.
+            let one = if s["object"].is_null() {
+                &s["objects"][0]
+            } else {
+                &s["object"]
+            };
             for (field, schema) in [
                 (&s, &schemas["Scenario"]),
-                (&s["object"], object),
+                (one, object),
                 (&s["tasks"][0], task),
             ] {
                 for key in field.as_object().unwrap().keys() {
@@ -256,7 +262,14 @@ mod tests {
         };
         assert_eq!(required(object), ["shape", "mass", "mu"]);
         assert_eq!(required(task), ["phase", "duration"]);
-        assert_eq!(required(&schemas["Scenario"]), ["name", "object", "tasks"]);
+        // `object` or `objects` (a scene of several), exactly one: neither is required alone.
+        assert_eq!(required(&schemas["Scenario"]), ["name", "tasks"]);
+        for key in ["object", "objects", "target"] {
+            assert!(
+                schemas["Scenario"]["properties"].get(key).is_some(),
+                "{key}"
+            );
+        }
     }
 
     #[test]

@@ -44,6 +44,10 @@ pub struct SkillBody {
     /// to name their object).
     #[schema(schema_with = object_shape_schema)]
     pub object_shape: ObjectShape,
+    /// The name of the object the skill grasped, when its session names its objects (a scene
+    /// of several objects); absent for a session's one unnamed object.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub object_name: Option<String>,
     /// Object mass, kg.
     pub object_mass: f64,
     /// Coulomb friction coefficient.
@@ -88,6 +92,7 @@ impl From<Skill> for SkillBody {
             id: s.id,
             session_id: s.session_id,
             object_shape: s.object_shape,
+            object_name: s.object_name,
             object_mass: s.object_mass,
             mu: s.mu,
             contact_count: s.contact_count,

@@ -364,9 +364,12 @@ pub fn scenario_skill(name: &str) -> SkillSpec {
     SkillSpec {
         shape: object.shape,
         mass: object.mass,
-        friction: Friction {
-            mu: scenario.object.mu,
-            mu_torsion: scenario.object.mu_torsion,
+        friction: {
+            let o = scenario.target_object().expect("the grasped object");
+            Friction {
+                mu: o.mu,
+                mu_torsion: o.mu_torsion,
+            }
         },
         contact_model: ContactModel::SoftFinger,
         contacts,

@@ -148,6 +148,15 @@ pub struct FingerContact {
     pub in_cone: bool,
     /// The requested intensities were outside the friction cone.
     pub slip: bool,
+    /// Which object of the scene it touches: its index in the `objects` list of the `session`
+    /// metadata record (0 when not touching, and in a scene of one object); `point_b` and
+    /// `normal_b` are in that object's frame.
+    #[serde(default, skip_serializing_if = "is_zero_u32")]
+    pub object: u32,
+}
+
+fn is_zero_u32(x: &u32) -> bool {
+    *x == 0
 }
 
 /// `icms.Contacts`: per-fingertip contact state at one tick.
@@ -178,6 +187,26 @@ pub struct ObjectState {
     pub table_force_b: [f64; 6],
     /// Pose of the object relative to the hand's base link (drift of a held object shows here).
     pub pose_in_hand: Pose,
+    /// Which object of the scene the fields above describe (the one the operator grasps): its
+    /// index in the `objects` list of the `session` metadata record; 0 with one object.
+    #[serde(default, skip_serializing_if = "is_zero_u32")]
+    pub index: u32,
+    /// Every object of a scene of several, in the order of the `objects` list of the
+    /// `session` metadata record; empty with one object.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub objects: Vec<SceneObjectState>,
+}
+
+/// `icms.SceneObjectState`: one object of a scene of several, after one tick.
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct SceneObjectState {
+    /// Pose of the object frame B (at its centre of mass) in the world.
+    pub pose: Pose,
+    /// Linear velocity, world frame (m/s).
+    pub linear_velocity: Vector3,
+    /// Angular velocity, object frame B (rad/s).
+    pub angular_velocity_b: Vector3,
 }
 
 /// One phase of the ground truth (`ground_truth` metadata, key `phases`).
@@ -495,14 +524,45 @@ impl TickContent for Contacts {
             if f.touching {
                 check_normal(&f.normal_b, i)?;
             }
+            if f.object as usize >= MAX_SESSION_OBJECTS {
+                return Err(format!(
+                    "fingers[{i}].object is {}; a scene holds at most {MAX_SESSION_OBJECTS} \
+                     objects",
+                    f.object
+                ));
+            }
         }
         Ok(())
     }
 }
 
+/// Most objects a session's `/object/state` may list: a scene holds 1 to
+/// [`dfs_core::dfs::MAX_OBJECTS`].
+pub const MAX_SESSION_OBJECTS: usize = dfs_core::dfs::MAX_OBJECTS;
+
 impl TickContent for ObjectState {
     fn check(&self, _: &TickReference) -> Result<(), String> {
         check_unit(&self.pose.orientation, "pose.orientation")?;
-        check_unit(&self.pose_in_hand.orientation, "pose_in_hand.orientation")
+        check_unit(&self.pose_in_hand.orientation, "pose_in_hand.orientation")?;
+        if self.objects.len() > MAX_SESSION_OBJECTS {
+            return Err(format!(
+                "objects has {} entries; a scene holds at most {MAX_SESSION_OBJECTS} objects",
+                self.objects.len()
+            ));
+        }
+        if !self.objects.is_empty() && self.index as usize >= self.objects.len() {
+            return Err(format!(
+                "index is {}, beyond the {} objects listed",
+                self.index,
+                self.objects.len()
+            ));
+        }
+        for (i, o) in self.objects.iter().enumerate() {
+            check_unit(
+                &o.pose.orientation,
+                &format!("objects[{i}].pose.orientation"),
+            )?;
+        }
+        Ok(())
     }
 }

@@ -32,6 +32,19 @@
 //! and `ground_truth` (key `phases`: a JSON list of `{"name", "start_ns", "end_ns"}`; empty
 //! for imports).
 //!
+//! # Scenes of several objects
+//!
+//! A session of a scene given as a list of objects ([`SessionInfo::scene`]) lists them in
+//! its `session` record: `objects` (a JSON list, as a scenario file's, each object named) and
+//! `target` (the name of the one the operator grasps, which `object` describes). Each
+//! fingertip of `/dfs/contacts` says which object it touches (`object`, an index in that
+//! list); `/object/state`'s main fields are the target's (`index`) and `objects` holds every
+//! object's pose and velocities; `/tf` has a frame and `/scene` an entity per object (the
+//! target `object`, the others `object/NAME`). At its end an [`OVERLAPS_METADATA`] record
+//! counts the ticks after which two objects overlapped (`overlap_ticks`) and names the first
+//! (`first_overlap_ns`, `first_overlap`); reading the session merges it into the `session`
+//! record's entries.
+//!
 //! # Writing
 //!
 //! Three threads. The simulation thread only checks that a tick's numbers are finite and
@@ -87,7 +100,8 @@ pub use read::{
 };
 pub use recorder::{
     record_simulation, record_simulation_until, record_ticks, record_ticks_until, LiveView,
-    RecordSummary, SessionInfo, SessionOut, SessionRecorder, TickData, TABLE_ENTITY,
+    RecordSummary, SessionInfo, SessionOut, SessionRecorder, TickData, OVERLAPS_METADATA,
+    TABLE_ENTITY,
 };
 pub use time::rfc3339_utc;
 

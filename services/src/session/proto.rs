@@ -19,7 +19,7 @@ pub use generated::{
     Contacts as ContactsProto, FingerContact as FingerContactProto,
     FingerFeedback as FingerFeedbackProto, GloveFeedback as GloveFeedbackProto,
     GloveJointStates as GloveJointStatesProto, Intensityi, ObjectState as ObjectStateProto, Posei,
-    Quaternioni, Vector3i, Wrenchi,
+    Quaternioni, SceneObjectState as SceneObjectStateProto, Vector3i, Wrenchi,
 };
 
 /// The compiled `proto/icms/session.proto` (a serialised `google.protobuf.FileDescriptorSet`):
@@ -158,8 +158,14 @@ struct Keys {
     fc_intensities: [u64; 3],
     fc_in_cone: u64,
     fc_slip: u64,
+    fc_object: u64,
     /// Of `ObjectState`: pose, linear and angular velocity, the three wrenches, pose in hand.
     object: [u64; 7],
+    /// Of `ObjectState`: `index` and `objects`.
+    object_index: u64,
+    object_objects: u64,
+    /// Of `SceneObjectState`: pose, linear and angular velocity.
+    scene_object: [u64; 3],
 }
 
 impl Keys {
@@ -237,6 +243,7 @@ impl Keys {
             ],
             fc_in_cone: key_of(|m: &mut FingerContactProto| m.in_cone = true),
             fc_slip: key_of(|m: &mut FingerContactProto| m.slip = true),
+            fc_object: key_of(|m: &mut FingerContactProto| m.object = 1),
             object: [
                 key_of(|m: &mut ObjectStateProto| m.pose = Some(Posei::default())),
                 key_of(|m: &mut ObjectStateProto| m.linear_velocity_e6 = v3()),
@@ -245,6 +252,15 @@ impl Keys {
                 key_of(|m: &mut ObjectStateProto| m.object_force_b = Some(Wrenchi::default())),
                 key_of(|m: &mut ObjectStateProto| m.table_force_b = Some(Wrenchi::default())),
                 key_of(|m: &mut ObjectStateProto| m.pose_in_hand = Some(Posei::default())),
+            ],
+            object_index: key_of(|m: &mut ObjectStateProto| m.index = 1),
+            object_objects: key_of(|m: &mut ObjectStateProto| {
+                m.objects = vec![SceneObjectStateProto::default()]
+            }),
+            scene_object: [
+                key_of(|m: &mut SceneObjectStateProto| m.pose = Some(Posei::default())),
+                key_of(|m: &mut SceneObjectStateProto| m.linear_velocity_e6 = v3()),
+                key_of(|m: &mut SceneObjectStateProto| m.angular_velocity_b_e6 = v3()),
             ],
         }
     }
@@ -614,6 +630,7 @@ impl Quantiser {
             w.intensity(kf, "feedback", &f.feedback);
             w.bool(k.fc_in_cone, f.in_cone);
             w.bool(k.fc_slip, f.slip);
+            w.uint32(k.fc_object, f.object);
             w.end(at);
         }
         w.finish(out);
@@ -631,6 +648,17 @@ impl Quantiser {
         w.wrench(k[4], "object_force_b", &m.object_force_b);
         w.wrench(k[5], "table_force_b", &m.table_force_b);
         w.pose(k[6], "pose_in_hand", &m.pose_in_hand);
+        let keys = w.keys;
+        w.uint32(keys.object_index, m.index);
+        let k = keys.scene_object;
+        for o in &m.objects {
+            let at = w.begin(keys.object_objects);
+            w.pose(k[0], "objects.pose", &o.pose);
+            let (v, omega) = (&o.linear_velocity, &o.angular_velocity_b);
+            w.vector(k[1], "objects.linear_velocity", v, LINEAR_VELOCITY);
+            w.vector(k[2], "objects.angular_velocity_b", omega, ANGULAR_VELOCITY);
+            w.end(at);
+        }
         w.finish(out);
     }
 
@@ -669,11 +697,22 @@ fn decode_own<M: prost::Message + Default>(bytes: &[u8]) -> M {
     M::decode(bytes).expect("the quantiser writes valid protobuf")
 }
 
+/// Fields added to format 2 since its first files (message, field number): a file's schema
+/// may lack them (a file written before them), and its messages then read them as protobuf's
+/// default (0, empty). For scenes of several objects: `FingerContact.object`,
+/// `ObjectState.index` and `ObjectState.objects`.
+pub const ADDED_FIELDS: [(&str, i32); 3] = [
+    (".icms.FingerContact", 12),
+    (".icms.ObjectState", 8),
+    (".icms.ObjectState", 9),
+];
+
 /// Where the protobuf schema `theirs` (a serialised `FileDescriptorSet`, as a file's schema
 /// record holds it) defines message `name` (e.g. `icms.Contacts`) differently from ours:
 /// `None` if it is the same (same fields, numbers, types and labels, recursively through the
-/// messages it uses; names of files and comments may differ), else which field differs and
-/// how. A raw topic of another layout would decode into wrong numbers, not fail.
+/// messages it uses; names of files and comments may differ; a field of [`ADDED_FIELDS`] may
+/// be missing), else which field differs and how. A raw topic of another layout would decode
+/// into wrong numbers, not fail.
 pub fn schema_difference(theirs: &[u8], name: &str) -> Option<String> {
     use prost::Message;
     use prost_types::FileDescriptorSet;
@@ -754,6 +793,9 @@ fn compare_message(
     for f in &mine.field {
         let at = format!("{path}.{}", f.name());
         let Some(g) = other.field.iter().find(|g| g.number() == f.number()) else {
+            if ADDED_FIELDS.contains(&(full, f.number())) {
+                continue;
+            }
             return Some(format!(
                 "{at}: ours is `{}`; the file's schema has no field {}",
                 describe(f),
@@ -880,6 +922,7 @@ pub fn contacts_from_proto(m: ContactsProto) -> Contacts {
                 feedback: intensity(f.feedback),
                 in_cone: f.in_cone,
                 slip: f.slip,
+                object: f.object,
                 name: f.name,
             })
             .collect(),
@@ -896,6 +939,16 @@ pub fn object_from_proto(m: ObjectStateProto) -> messages::ObjectState {
         object_force_b: wrench(m.object_force_b),
         table_force_b: wrench(m.table_force_b),
         pose_in_hand: pose(m.pose_in_hand),
+        index: m.index,
+        objects: m
+            .objects
+            .into_iter()
+            .map(|o| messages::SceneObjectState {
+                pose: pose(o.pose),
+                linear_velocity: v3(o.linear_velocity_e6, LINEAR_VELOCITY),
+                angular_velocity_b: v3(o.angular_velocity_b_e6, ANGULAR_VELOCITY),
+            })
+            .collect(),
     }
 }
 
@@ -960,6 +1013,43 @@ mod tests {
         let d = schema_difference(&bytes, "icms.ObjectState").unwrap();
         assert!(d.contains("does not define message icms.Posei"), "{d}");
         assert!(schema_difference(b"\xff\xff", "icms.Contacts").is_some());
+    }
+
+    /// A v2 file written before scenes of several objects: its schema has no
+    /// `FingerContact.object`, `ObjectState.index`, `ObjectState.objects` nor
+    /// `SceneObjectState`. It is the same schema, and its messages read those as 0 and empty.
+    #[test]
+    fn a_schema_from_before_the_fields_for_several_objects_is_accepted() {
+        let mut fds = prost_types::FileDescriptorSet::decode(FILE_DESCRIPTOR_SET).unwrap();
+        let file = &mut fds.file[0];
+        file.message_type.retain(|m| m.name() != "SceneObjectState");
+        for m in &mut file.message_type {
+            let full = format!(".icms.{}", m.name());
+            m.field
+                .retain(|f| !ADDED_FIELDS.contains(&(full.as_str(), f.number())));
+        }
+        let old = fds.encode_to_vec();
+        for name in super::super::RAW_SCHEMA_NAMES {
+            assert_eq!(schema_difference(&old, name), None, "{name}");
+        }
+        // Another change is still one.
+        let mut other = prost_types::FileDescriptorSet::decode(old.as_slice()).unwrap();
+        let m = other.file[0]
+            .message_type
+            .iter_mut()
+            .find(|m| m.name() == "FingerContact")
+            .unwrap();
+        m.field.retain(|f| f.number() != 11);
+        let d = schema_difference(&other.encode_to_vec(), "icms.Contacts").unwrap();
+        assert!(d.contains("slip") && d.contains("no field 11"), "{d}");
+        // A message of the old layout reads the new fields as their defaults.
+        let old_message = ObjectStateProto {
+            pose: Some(Posei::default()),
+            ..ObjectStateProto::default()
+        }
+        .encode_to_vec();
+        let back = object_from_proto(ObjectStateProto::decode(old_message.as_slice()).unwrap());
+        assert_eq!((back.index, back.objects.len()), (0, 0));
     }
 
     /// `bytes` decoded as `M`, checked to be what prost writes for it.
@@ -1043,6 +1133,7 @@ mod tests {
             },
             in_cone: false,
             slip: true,
+            object: 3,
         };
         for n_contacts in [0, 1] {
             let contacts = Contacts {
@@ -1108,11 +1199,30 @@ mod tests {
             object_force_b: [1.0; 6],
             table_force_b: [0.0; 6],
             pose_in_hand: Pose::default(),
+            index: 1,
+            objects: vec![
+                messages::SceneObjectState {
+                    pose: Pose {
+                        position: Vector3::new(0.3, 0.0, 0.04),
+                        orientation: Quaternion {
+                            x: 0.0,
+                            y: 0.0,
+                            z: 0.0,
+                            w: 1.0,
+                        },
+                    },
+                    ..messages::SceneObjectState::default()
+                },
+                messages::SceneObjectState::default(),
+            ],
         };
         let mut q = Quantiser::default();
         let back =
             object_from_proto(ObjectStateProto::decode(&*q.object(&m).encode_to_vec()).unwrap());
         assert!(q.refused.is_none());
+        assert_eq!(back.index, 1);
+        assert_eq!(back.objects.len(), 2);
+        assert!((back.objects[0].pose.position.x - 0.3).abs() < 1e-12);
         assert!((back.pose.position.x - m.pose.position.x).abs() <= POSITION / 2.0);
         assert_eq!(back.pose.position.z, 0.0);
         assert!((back.f_ext_b[2] + 2.943).abs() < 1e-12);

@@ -703,7 +703,7 @@ impl SessionVisitor for Collect {
 /// the boundary, naming the field.
 fn check_session_object(metadata: &BTreeMap<String, String>, name: &str) -> Result<()> {
     let Some(text) = metadata.get("object").filter(|t| !t.trim().is_empty()) else {
-        return Ok(());
+        return check_session_objects(metadata, name);
     };
     let invalid = |detail: String| RecordingError::InvalidInput {
         location: format!("{name}: metadata session.object"),
@@ -720,7 +720,86 @@ fn check_session_object(metadata: &BTreeMap<String, String>, name: &str) -> Resu
         })?;
     de.end().map_err(|e| invalid(e.to_string()))?;
     o.to_object().map_err(|e| invalid(e.to_string()))?;
+    check_session_objects(metadata, name)
+}
+
+/// The `objects` and `target` of a session's `session` metadata record (a scene of several
+/// objects), if it has them: a JSON list of 1 to 8 objects as a scenario file's, each named
+/// (1 to 64 characters, unique) and a valid object, and the name of one of them. Errors name
+/// the field.
+fn check_session_objects(metadata: &BTreeMap<String, String>, name: &str) -> Result<()> {
+    use dfs_core::scenario::{ScenarioObject, MAX_OBJECTS, MAX_OBJECT_NAME_CHARS};
+    let invalid = |field: String, detail: String| RecordingError::InvalidInput {
+        location: format!("{name}: metadata session.{field}"),
+        detail,
+    };
+    let (objects, target) = match (metadata.get("objects"), metadata.get("target")) {
+        (None, None) => return Ok(()),
+        (Some(o), Some(t)) => (o, t),
+        (None, Some(_)) => {
+            return Err(invalid(
+                "objects".into(),
+                "missing: `target` names one of the scene's `objects`".into(),
+            ))
+        }
+        (Some(_), None) => {
+            return Err(invalid(
+                "target".into(),
+                "missing: which of the `objects` is grasped".into(),
+            ))
+        }
+    };
+    let mut de = serde_json::Deserializer::from_str(objects);
+    let list: Vec<ScenarioObject> = serde_path_to_error::deserialize(&mut de).map_err(|e| {
+        invalid(
+            format!("objects{}", path_suffix(&e.path().to_string())),
+            e.inner().to_string(),
+        )
+    })?;
+    if !(1..=MAX_OBJECTS).contains(&list.len()) {
+        return Err(invalid(
+            "objects".into(),
+            format!("{} objects; a scene holds 1 to {MAX_OBJECTS}", list.len()),
+        ));
+    }
+    let mut names: Vec<&str> = Vec::with_capacity(list.len());
+    for (i, o) in list.iter().enumerate() {
+        let n = o.name.as_deref().unwrap_or("");
+        let chars = n.chars().count();
+        if !(1..=MAX_OBJECT_NAME_CHARS).contains(&chars) || n.chars().any(char::is_control) {
+            return Err(invalid(
+                format!("objects[{i}].name"),
+                format!(
+                    "must be 1 to {MAX_OBJECT_NAME_CHARS} characters, none a control character"
+                ),
+            ));
+        }
+        if names.contains(&n) {
+            return Err(invalid(
+                format!("objects[{i}].name"),
+                format!("{n:?} names two objects"),
+            ));
+        }
+        names.push(n);
+        o.to_object()
+            .map_err(|e| invalid(format!("objects[{i}]"), e.to_string()))?;
+    }
+    if !names.contains(&target.as_str()) {
+        return Err(invalid(
+            "target".into(),
+            format!("{target:?} names none of the `objects`"),
+        ));
+    }
     Ok(())
+}
+
+/// A `serde_path_to_error` path as a suffix of a field (`[2].mass`; empty for the root).
+fn path_suffix(path: &str) -> String {
+    match path {
+        "." => String::new(),
+        p if p.starts_with('[') => p.to_owned(),
+        p => format!(".{p}"),
+    }
 }
 
 /// The metadata records are few and small, and name the session once: at most
@@ -748,6 +827,7 @@ fn check_metadata(records: &[MetadataRecord], name: &str) -> Result<()> {
         GROUND_TRUTH_METADATA,
         REPLAY_METADATA,
         crate::live::LIVE_METADATA,
+        super::recorder::OVERLAPS_METADATA,
     ] {
         let n = records.iter().filter(|r| r.name == unique).count();
         if n > 1 {
@@ -1186,7 +1266,12 @@ impl<'v, V: SessionVisitor> Checker<'v, V> {
                 .find(|m| m.name == record)
                 .map(|m| m.entries.clone())
         };
-        let metadata = find(SESSION_METADATA).unwrap_or_default();
+        let mut metadata = find(SESSION_METADATA).unwrap_or_default();
+        // A scene of several objects says at its end whether they overlapped: with the
+        // session's parameters (never in place of one).
+        for (k, v) in find(super::recorder::OVERLAPS_METADATA).unwrap_or_default() {
+            metadata.entry(k).or_insert(v);
+        }
         let replay = find(REPLAY_METADATA);
         if replay.is_none() && metadata.get("source").is_none_or(|s| s != "replay") {
             check_session_object(&metadata, name)?;
@@ -1457,4 +1542,43 @@ fn check_spans(times: &[Times; 4]) -> Result<()> {
         return Err(invalid(topic, detail));
     }
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn metadata(objects: &str, target: &str) -> BTreeMap<String, String> {
+        BTreeMap::from([
+            ("objects".to_owned(), objects.to_owned()),
+            ("target".to_owned(), target.to_owned()),
+        ])
+    }
+
+    #[test]
+    fn the_objects_of_a_session_are_checked_naming_the_field() {
+        let ball = r#"{"name": "ball", "shape": "sphere", "radius": 0.04, "mass": 0.3, "mu": 0.8}"#;
+        let cup = r#"{"name": "cup", "shape": "cylinder", "radius": 0.04, "half_height": 0.05, "mass": 0.3, "mu": 0.8}"#;
+        let good = format!("[{ball}, {cup}]");
+        check_session_objects(&metadata(&good, "cup"), "f").unwrap();
+        check_session_objects(&BTreeMap::new(), "f").unwrap();
+        let error =
+            |m: BTreeMap<String, String>| check_session_objects(&m, "f").unwrap_err().to_string();
+        let e = error(metadata(&good, "mug"));
+        assert!(e.contains("session.target") && e.contains("\"mug\""), "{e}");
+        let e = error(metadata(&format!("[{ball}, {ball}]"), "ball"));
+        assert!(e.contains("session.objects[1].name"), "{e}");
+        let e = error(metadata(&good.replace("0.05", "-1"), "cup"));
+        assert!(
+            e.contains("session.objects[1]") && e.contains("half_height"),
+            "{e}"
+        );
+        let e = error(metadata(&good.replace("\"sphere\"", "\"torus\""), "cup"));
+        assert!(e.contains("session.objects[0].shape"), "{e}");
+        let e = error(metadata("[]", "cup"));
+        assert!(e.contains("0 objects"), "{e}");
+        let mut m = metadata(&good, "cup");
+        m.remove("target");
+        assert!(error(m).contains("session.target"));
+    }
 }

@@ -12,7 +12,7 @@ use dfs_core::hand::{HandModel, Kinematics};
 use dfs_core::math::{Isometry, Point, Rotation, Vector};
 use dfs_core::object::{RigidObject, Shape};
 use dfs_core::operator::Simulation;
-use dfs_core::scenario::Scenario;
+use dfs_core::scenario::{Scenario, Scene};
 use dfs_core::Stop;
 
 use foxglove::messages as fg;
@@ -162,6 +162,29 @@ pub struct SessionInfo {
     /// the `hand.urdf` attachment and on `/hand` (see [`super::hand_scene`]). `None`: a
     /// built-in hand's own URDF, else shapes generated from the joints.
     pub hand_urdf: Option<String>,
+    /// The scene, when it was given as a list of objects (a scenario's `objects`, a live
+    /// session's): the `session` record then lists them (`objects`, a JSON list as a
+    /// scenario's, each named, and `target`, the name of the one grasped), `/object/state`
+    /// holds every object's state (its main fields the target's) and `/scene` and `/tf` show
+    /// each object; at the end an [`OVERLAPS_METADATA`] record says whether and when two
+    /// objects overlapped. The DFS's object indices are the scene's. `None`: one object, as
+    /// the recorder's `object` and `object_json` describe it.
+    pub scene: Option<Scene>,
+}
+
+/// Metadata record written at the end of a session of several objects (see
+/// [`SessionInfo::scene`]): `overlap_ticks`, the number of ticks after which two objects
+/// overlapped (objects do not act on each other, so one passed into another), and, if any,
+/// `first_overlap_ns` (the session time of the first such tick) and `first_overlap` (the two
+/// objects' names, comma-separated). Reading a session merges its entries into the
+/// `session` record's.
+pub const OVERLAPS_METADATA: &str = "overlaps";
+
+/// Overlaps of objects seen so far in a recording.
+#[derive(Debug, Clone, Default)]
+struct OverlapCount {
+    ticks: u64,
+    first: Option<(u64, usize, usize)>,
 }
 
 /// One tick of the closed loop, as the recorder needs it.
@@ -214,6 +237,9 @@ struct Messages {
     feedback: GloveFeedback,
     contacts: Contacts,
     object: messages::ObjectState,
+    /// Which object fills `object`'s main fields, and whether it lists every object.
+    primary: usize,
+    listed: bool,
     quantiser: Quantiser,
     /// The DOF names as protobuf (`repeated string names = 1`), encoded once: the first bytes
     /// of every `/glove/joint_states` and `/glove/feedback` message (field 1 of both, so
@@ -221,15 +247,59 @@ struct Messages {
     names_pb: Vec<u8>,
     tf: fg::FrameTransforms,
     scene: fg::SceneUpdate,
+    /// The entities of the objects other than the grasped one, moved into `scene` after the
+    /// table's with the first update.
+    other_entities: Vec<fg::SceneEntity>,
     fox_joints: fg::JointStates,
     prev_q: Vec<f64>,
     prev_time_ns: Option<u64>,
 }
 
+/// The objects as `/scene` and `/object/state` show them.
+#[derive(Clone)]
+struct SceneObjects {
+    /// Per object: its entity id in `/scene` and frame id in `/tf` (the grasped one's is
+    /// [`OBJECT_FRAME`], the others' `object/NAME`), and its shape.
+    objects: Vec<(String, Shape)>,
+    /// Index of the object whose state fills `/object/state`'s main fields.
+    primary: usize,
+    /// Whether `/object/state` lists every object (a scene given as a list of objects).
+    listed: bool,
+}
+
+impl SceneObjects {
+    fn new(object: &RigidObject, scene: Option<&Scene>) -> Self {
+        match scene {
+            None => SceneObjects {
+                objects: vec![(OBJECT_FRAME.to_owned(), object.shape)],
+                primary: 0,
+                listed: false,
+            },
+            Some(scene) => SceneObjects {
+                objects: scene
+                    .objects
+                    .iter()
+                    .enumerate()
+                    .map(|(i, o)| {
+                        let id = if i == scene.target {
+                            OBJECT_FRAME.to_owned()
+                        } else {
+                            format!("{OBJECT_FRAME}/{}", o.name)
+                        };
+                        (id, o.object.shape)
+                    })
+                    .collect(),
+                primary: scene.target,
+                listed: true,
+            },
+        }
+    }
+}
+
 /// The serialiser thread's state: the hand, the scene and the reused messages.
 struct Serialiser {
     hand: HandFrames,
-    shape: Shape,
+    scene: SceneObjects,
     table_height: Option<f64>,
     hand_scene: super::hand_scene::HandScene,
     msgs: Messages,
@@ -266,6 +336,10 @@ pub struct SessionRecorder {
     /// their velocities follow the ticks accepted here.
     check: Messages,
     ticks: u64,
+    /// The scene's object names, when it was given as a list ([`SessionInfo::scene`]): the
+    /// [`OVERLAPS_METADATA`] record is written at the end.
+    object_names: Option<Vec<String>>,
+    overlaps: OverlapCount,
 }
 
 impl std::fmt::Debug for SessionRecorder {
@@ -326,6 +400,15 @@ fn inputs_finite(hand: &HandFrames, tick: &TickData<'_>) -> bool {
     }
     let n = hand.dof;
     let out = tick.output;
+    for o in &out.objects[..out.n_objects.min(out.objects.len())] {
+        let s = &o.state;
+        if !(iso(&s.pose)
+            & all(s.linear_velocity.as_slice())
+            & all(s.angular_velocity_b.as_slice()))
+        {
+            return false;
+        }
+    }
     let mut ok = all(&tick.q[..tick.q.len().min(n)])
         & all(&tick.tau[..tick.tau.len().min(n)])
         & iso(tick.base)
@@ -558,6 +641,31 @@ impl SessionRecorder {
             "foxglove_rate_hz".to_owned(),
             (u64::from(RATE_HZ) / FOXGLOVE_DECIMATION).to_string(),
         );
+        if let Some(scene) = &info.scene {
+            let named: Vec<_> = scene
+                .objects
+                .iter()
+                .map(|o| dfs_core::scenario::ScenarioObject {
+                    name: Some(o.name.clone()),
+                    ..o.spec.clone()
+                })
+                .collect();
+            let json = |e: serde_json::Error| RecordingError::Serialize {
+                topic: SESSION_METADATA.to_owned(),
+                detail: e.to_string(),
+            };
+            meta.insert(
+                "objects".to_owned(),
+                serde_json::to_string(&named).map_err(json)?,
+            );
+            meta.insert("target".to_owned(), scene.target().name.clone());
+            if info.object_json.is_empty() {
+                meta.insert(
+                    "object".to_owned(),
+                    serde_json::to_string(&named[scene.target]).map_err(json)?,
+                );
+            }
+        }
         for (k, v) in &info.extra {
             meta.entry(k.clone()).or_insert_with(|| v.clone());
         }
@@ -587,12 +695,13 @@ impl SessionRecorder {
             root: hand.root,
             joints: hand.joints.iter().map(|j| (j.parent, j.child)).collect(),
         };
+        let scene = SceneObjects::new(object, info.scene.as_ref());
         let serialiser = Serialiser {
             hand: frames.clone(),
-            shape: object.shape,
             table_height: info.table_height,
             hand_scene,
-            msgs: Messages::new(hand),
+            msgs: Messages::new(hand, &scene),
+            scene: scene.clone(),
         };
 
         // Emptied buffers go back on channels of their own, bounded too (they hold at most
@@ -627,9 +736,14 @@ impl SessionRecorder {
             writer: Some(writer),
             inputs: Inputs::with_capacity(&frames),
             path,
-            check: Messages::new(hand),
+            check: Messages::new(hand, &scene),
             hand: frames,
             ticks: 0,
+            object_names: info
+                .scene
+                .as_ref()
+                .map(|s| s.objects.iter().map(|o| o.name.clone()).collect()),
+            overlaps: OverlapCount::default(),
         })
     }
 
@@ -707,6 +821,10 @@ impl SessionRecorder {
         if foxglove {
             inputs.link_poses.extend_from_slice(view.link_poses);
         }
+        if let Some((i, j)) = tick.output.overlap {
+            self.overlaps.ticks += 1;
+            self.overlaps.first.get_or_insert((tick.time_ns, i, j));
+        }
         self.ticks += 1;
         if self.inputs.ticks.len() >= BATCH_TICKS {
             self.send_inputs()?;
@@ -773,6 +891,21 @@ impl SessionRecorder {
     /// beyond its field's range, see [`record`](Self::record)), the file is finished all the
     /// same, without that tick, and the error is the first such refusal.
     pub fn finish(mut self) -> Result<RecordSummary> {
+        if let Some(names) = self.object_names.take() {
+            let o = &self.overlaps;
+            let mut record = BTreeMap::from([("overlap_ticks".to_owned(), o.ticks.to_string())]);
+            if let Some((t, i, j)) = o.first {
+                let name = |k: usize| names.get(k).cloned().unwrap_or_else(|| k.to_string());
+                record.insert("first_overlap_ns".to_owned(), t.to_string());
+                record.insert(
+                    "first_overlap".to_owned(),
+                    format!("{},{}", name(i), name(j)),
+                );
+            }
+            self.inputs
+                .metadata
+                .push((OVERLAPS_METADATA.to_owned(), record));
+        }
         self.send_inputs()?;
         let write = self.join()?;
         Ok(RecordSummary {
@@ -852,7 +985,7 @@ impl Serialiser {
         let m = &mut self.msgs;
         m.raw_topics(&self.hand, tick, Some(batch))?;
         if tick.is_foxglove() {
-            m.fill_foxglove(&self.hand, &self.shape, self.table_height, tick)?;
+            m.fill_foxglove(&self.hand, &self.scene, self.table_height, tick)?;
             push(batch, 4, t, &m.tf);
             push(batch, 5, t, &m.scene);
             push(batch, 6, t, &m.fox_joints);
@@ -927,7 +1060,7 @@ fn writer_thread(
 }
 
 impl Messages {
-    fn new(hand: &HandModel) -> Self {
+    fn new(hand: &HandModel, scene: &SceneObjects) -> Self {
         let n = hand.dof();
         let names = hand.dof_names.clone();
         let tip_names: Vec<String> = hand.fingertips.iter().map(|t| t.name.clone()).collect();
@@ -973,12 +1106,27 @@ impl Messages {
                 .map(|j| transform(&hand.links[j.parent].name, &hand.links[j.child].name)),
         );
         transforms.push(transform(WORLD_FRAME, OBJECT_FRAME));
-        let entity = fg::SceneEntity {
+        for (i, (id, _)) in scene.objects.iter().enumerate() {
+            if i != scene.primary {
+                transforms.push(transform(WORLD_FRAME, id));
+            }
+        }
+        let entity = |id: &str| fg::SceneEntity {
             frame_id: WORLD_FRAME.to_owned(),
-            id: OBJECT_FRAME.to_owned(),
+            id: id.to_owned(),
             frame_locked: false,
             ..fg::SceneEntity::default()
         };
+        // The grasped object (with the contact forces) first, then the table (added with the
+        // first update, see `fill_foxglove`) and the other objects.
+        let entities = vec![entity(OBJECT_FRAME)];
+        let others: Vec<fg::SceneEntity> = scene
+            .objects
+            .iter()
+            .enumerate()
+            .filter(|(i, _)| *i != scene.primary)
+            .map(|(_, (id, _))| entity(id))
+            .collect();
         let fox_joints = fg::JointStates {
             timestamp: None,
             joints: names
@@ -1006,11 +1154,22 @@ impl Messages {
             joints,
             feedback,
             contacts,
-            object: messages::ObjectState::default(),
+            object: messages::ObjectState {
+                objects: if scene.listed {
+                    vec![messages::SceneObjectState::default(); scene.objects.len()]
+                } else {
+                    Vec::new()
+                },
+                index: scene.primary as u32,
+                ..messages::ObjectState::default()
+            },
+            primary: scene.primary,
+            listed: scene.listed,
+            other_entities: others,
             tf: fg::FrameTransforms { transforms },
             scene: fg::SceneUpdate {
                 deletions: Vec::new(),
-                entities: vec![entity],
+                entities,
             },
             fox_joints,
             prev_q: vec![0.0; n],
@@ -1105,15 +1264,24 @@ impl Messages {
             c.feedback = intensity(&tip.feedback);
             c.slip = tip.slip;
             c.in_cone = !tip.slip;
+            c.object = if tip.touching { tip.object as u32 } else { 0 };
         }
         let o = &mut self.object;
-        o.pose = pose(&out.object.pose);
-        o.linear_velocity = v3(&out.object.linear_velocity);
-        o.angular_velocity_b = v3(&out.object.angular_velocity_b);
-        o.f_ext_b = wrench6(&out.f_ext_b);
-        o.object_force_b = wrench6(&out.object_force_b);
-        o.table_force_b = wrench6(&out.table_force_b);
-        o.pose_in_hand = pose(&(tick.base.inverse() * out.object.pose));
+        let main = &out.objects[self.primary];
+        o.pose = pose(&main.state.pose);
+        o.linear_velocity = v3(&main.state.linear_velocity);
+        o.angular_velocity_b = v3(&main.state.angular_velocity_b);
+        o.f_ext_b = wrench6(&main.f_ext_b);
+        o.object_force_b = wrench6(&main.object_force_b);
+        o.table_force_b = wrench6(&main.table_force_b);
+        o.pose_in_hand = pose(&(tick.base.inverse() * main.state.pose));
+        if self.listed {
+            for (entry, each) in o.objects.iter_mut().zip(&out.objects) {
+                entry.pose = pose(&each.state.pose);
+                entry.linear_velocity = v3(&each.state.linear_velocity);
+                entry.angular_velocity_b = v3(&each.state.angular_velocity_b);
+            }
+        }
     }
 
     /// The tick just recorded becomes the one the next velocities are taken from (not called
@@ -1128,7 +1296,7 @@ impl Messages {
     fn fill_foxglove(
         &mut self,
         hand: &HandFrames,
-        shape: &Shape,
+        scene: &SceneObjects,
         table_height: Option<f64>,
         tick: &Tick<'_>,
     ) -> Result<()> {
@@ -1146,45 +1314,92 @@ impl Messages {
             let rel = link_poses[parent].inverse() * link_poses[child];
             set(&mut tfs[1 + j], &rel);
         }
-        let last = tfs.len() - 1;
-        set(&mut tfs[last], &out.object.pose);
-
-        let object_pose = &out.object.pose;
-        let entity = &mut self.scene.entities[0];
-        entity.timestamp = stamp;
-        entity.spheres.clear();
-        entity.cubes.clear();
-        entity.cylinders.clear();
-        entity.arrows.clear();
-        let p = Some(fg_pose(object_pose));
-        let colour = Some(rgba(0.25, 0.5, 0.85, 0.8));
-        let size = |x: f64, y: f64, z: f64| Some(fg::Vector3 { x, y, z });
-        match *shape {
-            Shape::Sphere { radius } => entity.spheres.push(fg::SpherePrimitive {
-                pose: p,
-                size: size(2.0 * radius, 2.0 * radius, 2.0 * radius),
-                color: colour,
-            }),
-            Shape::Box { half_extents: h } => entity.cubes.push(fg::CubePrimitive {
-                pose: p,
-                size: size(2.0 * h[0], 2.0 * h[1], 2.0 * h[2]),
-                color: colour,
-            }),
-            Shape::Cylinder {
-                radius,
-                half_height,
-            } => entity.cylinders.push(fg::CylinderPrimitive {
-                pose: p,
-                size: size(2.0 * radius, 2.0 * radius, 2.0 * half_height),
-                bottom_scale: 1.0,
-                top_scale: 1.0,
-                color: colour,
-            }),
+        // The grasped object's frame, then the others' in the scene's order.
+        let first = 1 + hand.joints.len();
+        set(&mut tfs[first], &out.objects[scene.primary].state.pose);
+        let others = (0..scene.objects.len()).filter(|&i| i != scene.primary);
+        for (k, i) in others.enumerate() {
+            set(&mut tfs[first + 1 + k], &out.objects[i].state.pose);
         }
+
+        // The table: a slab of TABLE_SIZE_M square under the world origin, its top at the
+        // table's height (in every update, so that a viewer opening the file mid-way sees it).
+        // Entities: the grasped object, the table, the other objects.
+        let size = |x: f64, y: f64, z: f64| Some(fg::Vector3 { x, y, z });
+        if self.scene.entities.len() == 1 {
+            if table_height.is_some() {
+                self.scene.entities.push(fg::SceneEntity {
+                    frame_id: WORLD_FRAME.to_owned(),
+                    id: TABLE_ENTITY.to_owned(),
+                    ..fg::SceneEntity::default()
+                });
+            }
+            self.scene.entities.append(&mut self.other_entities);
+        }
+        if let Some(h) = table_height {
+            let table = &mut self.scene.entities[1];
+            table.timestamp = stamp;
+            table.cubes.clear();
+            table.cubes.push(fg::CubePrimitive {
+                pose: Some(fg_pose(&Isometry::translation(
+                    0.0,
+                    0.0,
+                    h - 0.5 * TABLE_THICKNESS_M,
+                ))),
+                size: size(TABLE_SIZE_M, TABLE_SIZE_M, TABLE_THICKNESS_M),
+                color: Some(rgba(0.55, 0.45, 0.35, 1.0)),
+            });
+        }
+        let others_from = if table_height.is_some() { 2 } else { 1 };
+        let others = (0..scene.objects.len()).filter(|&i| i != scene.primary);
+        for (e, i) in std::iter::once((0, scene.primary))
+            .chain(others.enumerate().map(|(k, i)| (others_from + k, i)))
+        {
+            let entity = &mut self.scene.entities[e];
+            entity.timestamp = stamp;
+            entity.spheres.clear();
+            entity.cubes.clear();
+            entity.cylinders.clear();
+            entity.arrows.clear();
+            let p = Some(fg_pose(&out.objects[i].state.pose));
+            // The grasped object blue, the others grey.
+            let colour = Some(if i == scene.primary {
+                rgba(0.25, 0.5, 0.85, 0.8)
+            } else {
+                rgba(0.6, 0.6, 0.6, 0.8)
+            });
+            match scene.objects[i].1 {
+                Shape::Sphere { radius } => entity.spheres.push(fg::SpherePrimitive {
+                    pose: p,
+                    size: size(2.0 * radius, 2.0 * radius, 2.0 * radius),
+                    color: colour,
+                }),
+                Shape::Box { half_extents: h } => entity.cubes.push(fg::CubePrimitive {
+                    pose: p,
+                    size: size(2.0 * h[0], 2.0 * h[1], 2.0 * h[2]),
+                    color: colour,
+                }),
+                Shape::Cylinder {
+                    radius,
+                    half_height,
+                } => entity.cylinders.push(fg::CylinderPrimitive {
+                    pose: p,
+                    size: size(2.0 * radius, 2.0 * radius, 2.0 * half_height),
+                    bottom_scale: 1.0,
+                    top_scale: 1.0,
+                    color: colour,
+                }),
+            }
+        }
+        // The contact forces, on whichever object each fingertip pushes.
+        let entity = &mut self.scene.entities[0];
         for tip in out.tips.iter().take(hand.n_tips) {
             let Some(frame) = tip.frame.filter(|_| tip.in_contact) else {
                 continue;
             };
+            let object_pose = &out.objects[tip.object.min(out.objects.len() - 1)]
+                .state
+                .pose;
             let t = &tip.transmitted;
             let f_world = object_pose.rotation * (frame.rot_b * Vector::new(t[0], t[1], t[2]));
             let magnitude = f_world.norm();
@@ -1213,30 +1428,6 @@ impl Messages {
                 } else {
                     rgba(0.9, 0.1, 0.1, 1.0)
                 }),
-            });
-        }
-
-        // The table: a slab of TABLE_SIZE_M square under the world origin, its top at the
-        // table's height (in every update, so that a viewer opening the file mid-way sees it).
-        if let Some(h) = table_height {
-            if self.scene.entities.len() < 2 {
-                self.scene.entities.push(fg::SceneEntity {
-                    frame_id: WORLD_FRAME.to_owned(),
-                    id: TABLE_ENTITY.to_owned(),
-                    ..fg::SceneEntity::default()
-                });
-            }
-            let table = &mut self.scene.entities[1];
-            table.timestamp = stamp;
-            table.cubes.clear();
-            table.cubes.push(fg::CubePrimitive {
-                pose: Some(fg_pose(&Isometry::translation(
-                    0.0,
-                    0.0,
-                    h - 0.5 * TABLE_THICKNESS_M,
-                ))),
-                size: size(TABLE_SIZE_M, TABLE_SIZE_M, TABLE_THICKNESS_M),
-                color: Some(rgba(0.55, 0.45, 0.35, 1.0)),
             });
         }
 
@@ -1345,7 +1536,13 @@ pub fn record_simulation_until<'a>(
             detail: e.to_string(),
         }
     })?;
-    let object_json = serde_json::to_string(&scenario.object).unwrap_or_default();
+    // A scene given as a list of objects is recorded as one (every object, the target named);
+    // a scenario's one `object` as before.
+    let scene = scenario.objects.as_ref().map(|_| sim.scene().clone());
+    let object_json = match &scene {
+        Some(_) => String::new(),
+        None => serde_json::to_string(&scenario.object).unwrap_or_default(),
+    };
     let scenario_json = serde_json::to_string(scenario).unwrap_or_default();
     let info = SessionInfo {
         scenario: scenario.name.clone(),
@@ -1375,6 +1572,7 @@ pub fn record_simulation_until<'a>(
         started_at: None,
         table_height: Some(sim.table_height()),
         hand_urdf: None,
+        scene,
     };
     let dfs = sim.dfs();
     let recorder = SessionRecorder::create_to(out.into(), dfs.hand(), dfs.object(), &info)?;
@@ -1592,6 +1790,16 @@ mod tests {
 
     #[test]
     fn each_raw_message_is_the_one_prost_writes_for_its_decoding() {
+        for (name, seconds) in [("cylinder-power-grasp", 3.0), ("table-three", 3.5)] {
+            let scenario = Scenario::builtin(name, 5).unwrap();
+            let mut sim = Simulation::new(&scenario, HandModel::glove10(), Some(seconds)).unwrap();
+            let scene = scenario.objects.as_ref().map(|_| sim.scene().clone());
+            raw_messages_are_canonical(&mut sim, scene.as_ref());
+        }
+    }
+
+    /// Records `sim` to its end into messages, each checked to be prost's own encoding.
+    fn raw_messages_are_canonical(sim: &mut Simulation, scene: Option<&Scene>) {
         use super::super::proto::{ContactsProto, GloveFeedbackProto, ObjectStateProto};
         use prost::Message;
         /// `bytes` decoded as `M`, checked to be prost's own encoding of it.
@@ -1600,8 +1808,6 @@ mod tests {
             assert_eq!(m.encode_to_vec(), bytes);
             m
         }
-        let scenario = Scenario::builtin("cylinder-power-grasp", 5).unwrap();
-        let mut sim = Simulation::new(&scenario, HandModel::glove10(), Some(3.0)).unwrap();
         let hand = sim.dfs().hand().clone();
         let frames = HandFrames {
             dof: hand.dof(),
@@ -1610,7 +1816,7 @@ mod tests {
             root: hand.root,
             joints: hand.joints.iter().map(|j| (j.parent, j.child)).collect(),
         };
-        let mut m = Messages::new(&hand);
+        let mut m = Messages::new(&hand, &SceneObjects::new(sim.dfs().object(), scene));
         let mut batch = Batch::default();
         let mut touching = 0;
         while sim.step().unwrap() {
@@ -1636,7 +1842,17 @@ mod tests {
             assert_eq!(feedback.names, hand.dof_names);
             let contacts: ContactsProto = canonical(bytes(2));
             touching += contacts.fingers.iter().filter(|f| f.touching).count();
-            canonical::<ObjectStateProto>(bytes(3));
+            let object = canonical::<ObjectStateProto>(bytes(3));
+            if let Some(scene) = scene {
+                assert_eq!(object.index as usize, scene.target);
+                assert_eq!(object.objects.len(), scene.objects.len());
+                assert_eq!(object.objects[scene.target].pose, object.pose);
+                for f in contacts.fingers.iter().filter(|f| f.touching) {
+                    assert_eq!(f.object as usize, scene.target);
+                }
+            } else {
+                assert!(object.objects.is_empty() && object.index == 0);
+            }
         }
         assert!(touching > 1000, "{touching}");
     }

@@ -17,7 +17,7 @@
 
 use super::messages::{
     Contacts, FingerContact, FingerFeedback, GloveFeedback, GloveJointStates, GloveShape,
-    Intensity4, ObjectState,
+    Intensity4, ObjectState, SceneObjectState,
 };
 use super::proto::{
     ANGULAR_VELOCITY, FORCE, JOINT_ANGLE, JOINT_TORQUE, JOINT_VELOCITY, LINEAR_VELOCITY, MOMENT,
@@ -596,6 +596,10 @@ fn contacts_with(buf: &[u8], out: &mut Contacts, lean: bool) -> Result<()> {
                         9 => intensity(r, wire, &mut f.feedback)?,
                         10 => f.in_cone = boolean(r, wire)?,
                         11 => f.slip = boolean(r, wire)?,
+                        12 => {
+                            expect(wire, VARINT)?;
+                            f.object = r.varint()? as u32;
+                        }
                         _ => return Ok(false),
                     }
                     Ok(true)
@@ -631,20 +635,23 @@ pub(crate) fn object(buf: &[u8], out: &mut ObjectState) -> Result<()> {
     object_with(buf, out, false)
 }
 
-/// [`object`] of bytes that decoded before, only the fields segmentation reads: `pose` and
-/// `pose_in_hand`; the velocities and wrenches are skipped as unknown fields are, and stay
-/// zero.
+/// [`object`] of bytes that decoded before, only the fields segmentation reads: `pose`,
+/// `pose_in_hand`, `index` and `objects`; the velocities and wrenches are skipped as unknown
+/// fields are, and stay zero.
 pub(crate) fn object_lean(buf: &[u8], out: &mut ObjectState) -> Result<()> {
     object_with(buf, out, true)
 }
 
 fn object_with(buf: &[u8], out: &mut ObjectState, lean: bool) -> Result<()> {
+    // The list of objects keeps its room from message to message.
+    let mut objects = std::mem::take(&mut out.objects);
     *out = ObjectState {
         pose: zero_pose(),
         pose_in_hand: zero_pose(),
         ..ObjectState::default()
     };
-    fields(&mut Reader::new(buf), &mut |r, tag, wire| {
+    let mut n = 0;
+    let result = fields(&mut Reader::new(buf), &mut |r, tag, wire| {
         match tag {
             2..=6 if lean => return Ok(false),
             1 => pose(r, wire, &mut out.pose)?,
@@ -654,10 +661,37 @@ fn object_with(buf: &[u8], out: &mut ObjectState, lean: bool) -> Result<()> {
             5 => wrench(r, wire, &mut out.object_force_b)?,
             6 => wrench(r, wire, &mut out.table_force_b)?,
             7 => pose(r, wire, &mut out.pose_in_hand)?,
+            8 => {
+                expect(wire, VARINT)?;
+                out.index = r.varint()? as u32;
+            }
+            9 => {
+                if n == objects.len() {
+                    objects.push(SceneObjectState::default());
+                }
+                let o = &mut objects[n];
+                n += 1;
+                *o = SceneObjectState {
+                    pose: zero_pose(),
+                    ..SceneObjectState::default()
+                };
+                message(r, wire, |r, tag, wire| {
+                    match tag {
+                        1 => pose(r, wire, &mut o.pose)?,
+                        2 => vector3(r, wire, LINEAR_VELOCITY, &mut o.linear_velocity)?,
+                        3 => vector3(r, wire, ANGULAR_VELOCITY, &mut o.angular_velocity_b)?,
+                        _ => return Ok(false),
+                    }
+                    Ok(true)
+                })?;
+            }
             _ => return Ok(false),
         }
         Ok(true)
-    })
+    });
+    objects.truncate(n);
+    out.objects = objects;
+    result
 }
 
 /// What a field's bytes must be, by its type in a message prost decodes.
@@ -905,6 +939,7 @@ mod tests {
                     feedback: f,
                     in_cone: b[2],
                     slip: b[3],
+                    object: u32::from(b[0]) * u32::from(pen as u8 % 9),
                 }
             });
         (any::<u32>(), proptest::collection::vec(finger, 0..5)).prop_map(|(n_contacts, fingers)| {
@@ -946,16 +981,29 @@ mod tests {
             wrenchi(),
             wrenchi(),
             posei(),
+            any::<u32>(),
+            proptest::collection::vec((posei(), v3i(), v3i()), 0..4),
         )
-            .prop_map(|(pose, lv, av, f, o, t, ph)| ObjectStateProto {
-                pose,
-                linear_velocity_e6: lv,
-                angular_velocity_b_e6: av,
-                f_ext_b: f,
-                object_force_b: o,
-                table_force_b: t,
-                pose_in_hand: ph,
-            })
+            .prop_map(
+                |(pose, lv, av, f, o, t, ph, index, objects)| ObjectStateProto {
+                    pose,
+                    linear_velocity_e6: lv,
+                    angular_velocity_b_e6: av,
+                    f_ext_b: f,
+                    object_force_b: o,
+                    table_force_b: t,
+                    pose_in_hand: ph,
+                    index,
+                    objects: objects
+                        .into_iter()
+                        .map(|(pose, lv, av)| SceneObjectStateProto {
+                            pose,
+                            linear_velocity_e6: lv,
+                            angular_velocity_b_e6: av,
+                        })
+                        .collect(),
+                },
+            )
     }
 
     /// Both decoders on `bytes`: they agree on whether it decodes and, if it does, on the SI
@@ -1080,7 +1128,8 @@ mod tests {
             object(&o.encode_to_vec(), &mut full).unwrap();
             let mut lean = ObjectState::default();
             object_lean(&o.encode_to_vec(), &mut lean).unwrap();
-            let expected = ObjectState { pose: full.pose, pose_in_hand: full.pose_in_hand, ..ObjectState::default() };
+            // The scene's objects are read too (a skill may grasp any of them).
+            let expected = ObjectState { pose: full.pose, pose_in_hand: full.pose_in_hand, index: full.index, objects: full.objects, ..ObjectState::default() };
             prop_assert_eq!(&lean, &expected);
         }
 

@@ -80,6 +80,7 @@ pub fn synthetic_skill(rng: &mut SplitMix64) -> NewSkill {
     let start_ns = (rng.range(0.0, 5.0) * 1e9) as i64;
     NewSkill {
         object_shape: SYNTHETIC_SHAPES[rng.index(3)].into(),
+        object_name: None,
         object_mass: rng.range(0.05, 2.0),
         mu: rng.range(0.3, 1.5),
         contact_count: 2 + rng.index(4) as i64,

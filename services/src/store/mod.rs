@@ -221,6 +221,7 @@ fn row_to_skill(row: &SqliteRow) -> Result<Skill, StoreError> {
         id,
         session_id: row.try_get("session_id")?,
         object_shape: named_column(row, id, "object_shape")?,
+        object_name: row.try_get("object_name")?,
         object_mass: row.try_get("object_mass")?,
         mu: row.try_get("mu")?,
         contact_count: row.try_get("contact_count")?,
@@ -279,6 +280,15 @@ fn checked_input(
 
 fn validate_skill(i: usize, s: &NewSkill) -> Result<[f32; FEATURE_DIM], StoreError> {
     let ctx = |field: &str| format!("skill {i}: {field}");
+    if let Some(name) = &s.object_name {
+        let max = dfs_core::scenario::MAX_OBJECT_NAME_CHARS;
+        if name.is_empty() || name.chars().count() > max || name.chars().any(char::is_control) {
+            return Err(StoreError::InvalidInput(format!(
+                "{}: must be 1 to {max} characters, none a control character",
+                ctx("object_name")
+            )));
+        }
+    }
     finite(&ctx("object_mass"), s.object_mass)?;
     finite(&ctx("mu"), s.mu)?;
     finite(&ctx("quality"), s.quality)?;
@@ -322,13 +332,14 @@ async fn insert_skills(
             ));
         }
         let mut b: QueryBuilder<Sqlite> = QueryBuilder::new(
-            "INSERT INTO skills (session_id, object_shape, object_mass, mu, contact_count, \
-             contact_model, grasp_type, quality, volume, duration_s, start_ns, end_ns, \
-             phase_durations, feature, params) ",
+            "INSERT INTO skills (session_id, object_shape, object_name, object_mass, mu, \
+             contact_count, contact_model, grasp_type, quality, volume, duration_s, start_ns, \
+             end_ns, phase_durations, feature, params) ",
         );
         b.push_values(&rows, |mut r, (s, f, ph, p)| {
             r.push_bind(session_id)
                 .push_bind(s.object_shape.name())
+                .push_bind(s.object_name.as_deref())
                 .push_bind(s.object_mass)
                 .push_bind(s.mu)
                 .push_bind(s.contact_count)

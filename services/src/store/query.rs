@@ -292,7 +292,8 @@ fn check_range(name: &str, min: Option<f64>, max: Option<f64>) -> Result<(), Sto
 
 /// Columns of a skill row (`FROM skills`, not aliased), in the order `row_to_skill` reads
 /// them. The segmentation version is the session's (a primary-key lookup per row returned).
-pub(crate) const SKILL_COLUMNS: &str = "id, session_id, object_shape, object_mass, mu, \
+pub(crate) const SKILL_COLUMNS: &str =
+    "id, session_id, object_shape, object_name, object_mass, mu, \
      contact_count, contact_model, grasp_type, quality, volume, duration_s, start_ns, end_ns, \
      phase_durations, feature, params, created_at, \
      (SELECT segmentation_version FROM sessions WHERE sessions.id = skills.session_id) \

@@ -14,6 +14,7 @@ use super::{blob, feature_to_blob, insert_skills, validate_skill, Store, StoreEr
 #[derive(Debug, PartialEq, sqlx::FromRow)]
 struct StoredForm {
     object_shape: String,
+    object_name: Option<String>,
     object_mass: f64,
     mu: f64,
     contact_count: i64,
@@ -34,6 +35,7 @@ impl StoredForm {
     fn of_new(s: &NewSkill, f: &[f32; FEATURE_DIM]) -> Result<Self, StoreError> {
         Ok(StoredForm {
             object_shape: s.object_shape.name().to_owned(),
+            object_name: s.object_name.clone(),
             object_mass: s.object_mass,
             mu: s.mu,
             contact_count: s.contact_count,
@@ -52,7 +54,7 @@ impl StoredForm {
 }
 
 /// The columns a [`StoredForm`] is read from (`sqlx::FromRow`, by name), after `id`.
-const STORED_FORM_COLUMNS: &str = "id, object_shape, object_mass, mu, contact_count, \
+const STORED_FORM_COLUMNS: &str = "id, object_shape, object_name, object_mass, mu, contact_count, \
      contact_model, grasp_type, quality, volume, duration_s, start_ns, end_ns, phase_durations, \
      feature, params";
 

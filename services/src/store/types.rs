@@ -85,6 +85,9 @@ pub struct SessionMeta {
 pub struct NewSkill {
     /// Object shape.
     pub object_shape: ObjectShape,
+    /// The name of the object it grasped in its session's scene, when the session names its
+    /// objects (`params.object.name`); `None` for a session's one unnamed object.
+    pub object_name: Option<String>,
     /// Object mass, kg.
     pub object_mass: f64,
     /// Coulomb friction coefficient (dimensionless).
@@ -123,6 +126,10 @@ pub struct Skill {
     pub session_id: i64,
     /// Object shape.
     pub object_shape: ObjectShape,
+    /// The name of the object it grasped in its session's scene, if the session names its
+    /// objects (see [`NewSkill::object_name`]).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub object_name: Option<String>,
     /// Object mass, kg.
     pub object_mass: f64,
     /// Coulomb friction coefficient.

@@ -577,6 +577,7 @@ pub fn replay_glove(
         started_at: None,
         table_height: Some(position.z - depth),
         hand_urdf: options.hand_urdf.clone(),
+        scene: None,
     };
     let mut recorder = SessionRecorder::create(out, dfs.hand(), dfs.object(), &info)?;
     let n = hand.dof();
