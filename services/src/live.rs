@@ -36,7 +36,7 @@ use prost::Message as _;
 use serde::{Deserialize, Serialize};
 
 use crate::error::{RecordingError, Result};
-use crate::session::import::GloveDrive;
+use crate::session::import::{interpolate_pose, GloveDrive};
 use crate::session::{
     LiveView, SessionInfo, SessionOut, SessionRecorder, TickData, MAX_SESSION_NS,
 };
@@ -988,21 +988,4 @@ impl LiveSession {
         recorder.finish()?;
         Ok(self.stats)
     }
-}
-
-/// Linear interpolation of the position, slerp of the orientation (the nearer endpoint's when
-/// the two are opposite).
-fn interpolate_pose(a: &Isometry, b: &Isometry, w: f64) -> Isometry {
-    if w <= 0.0 {
-        return *a;
-    }
-    if w >= 1.0 {
-        return *b;
-    }
-    let p = a.translation.vector.lerp(&b.translation.vector, w);
-    let r = a
-        .rotation
-        .try_slerp(&b.rotation, w, 1e-9)
-        .unwrap_or(if w < 0.5 { a.rotation } else { b.rotation });
-    Isometry::from_parts(p.into(), r)
 }

@@ -447,7 +447,8 @@ pub fn median(v: &mut [f64]) -> f64 {
     }
 }
 
-fn iso(p: &Pose) -> Isometry {
+/// A recorded pose as an isometry (a zero quaternion as the identity rotation).
+pub(crate) fn iso(p: &Pose) -> Isometry {
     let q = nalgebra::Quaternion::new(
         p.orientation.w,
         p.orientation.x,

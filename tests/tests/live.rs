@@ -61,6 +61,35 @@ async fn skills_of(app: &TestApp, session_id: i64) -> Vec<Value> {
     out
 }
 
+/// `n` skills each, the same grasps: grasp type, contacts, contact model and shape equal,
+/// start and end within 20 ms, grasp quality within 10 %.
+fn assert_same_skills(live: &[Value], uploaded: &[Value], n: usize) {
+    assert_eq!(live.len(), n);
+    assert_eq!(uploaded.len(), n);
+    for (a, b) in live.iter().zip(uploaded) {
+        for key in [
+            "grasp_type",
+            "contact_count",
+            "contact_model",
+            "object_shape",
+        ] {
+            assert_eq!(a[key], b[key], "{key}");
+        }
+        for key in ["start_ns", "end_ns"] {
+            let d = (a[key].as_i64().unwrap() - b[key].as_i64().unwrap()).abs();
+            assert!(d <= 20_000_000, "{key} differs by {d} ns");
+        }
+        let (qa, qb) = (
+            a["quality"].as_f64().unwrap(),
+            b["quality"].as_f64().unwrap(),
+        );
+        assert!(
+            (qa - qb).abs() <= 0.1 * qb.abs().max(1e-3),
+            "quality {qa} vs {qb}"
+        );
+    }
+}
+
 async fn session(app: &TestApp, id: i64) -> Value {
     let r = app.client.get(&format!("/api/v1/sessions/{id}")).await;
     assert_eq!(r.status, 200);
@@ -106,30 +135,7 @@ async fn a_simulated_operator_streamed_live_is_stored_with_the_skills_of_its_upl
     assert_eq!(r.status, 201);
     let uploaded = skills_of(&app, r.json()["session_id"].as_i64().unwrap()).await;
     let live = skills_of(&app, live_id).await;
-    assert_eq!(live.len(), 2);
-    assert_eq!(live.len(), uploaded.len());
-    for (a, b) in live.iter().zip(&uploaded) {
-        for key in [
-            "grasp_type",
-            "contact_count",
-            "contact_model",
-            "object_shape",
-        ] {
-            assert_eq!(a[key], b[key], "{key}");
-        }
-        for key in ["start_ns", "end_ns"] {
-            let d = (a[key].as_i64().unwrap() - b[key].as_i64().unwrap()).abs();
-            assert!(d <= 20_000_000, "{key} differs by {d} ns");
-        }
-        let (qa, qb) = (
-            a["quality"].as_f64().unwrap(),
-            b["quality"].as_f64().unwrap(),
-        );
-        assert!(
-            (qa - qb).abs() <= 0.1 * qb.abs().max(1e-3),
-            "quality {qa} vs {qb}"
-        );
-    }
+    assert_same_skills(&live, &uploaded, 2);
     app.stop().await;
 }
 
@@ -759,17 +765,7 @@ async fn a_session_exported_to_csv_and_streamed_live_gives_the_skills_of_its_upl
     assert_eq!(r.status, 201);
     let uploaded = skills_of(&app, r.json()["session_id"].as_i64().unwrap()).await;
     let live = skills_of(&app, summary.session_id.unwrap()).await;
-    assert_eq!(live.len(), 2);
-    assert_eq!(live.len(), uploaded.len());
-    for (a, b) in live.iter().zip(&uploaded) {
-        for key in ["grasp_type", "contact_count", "object_shape"] {
-            assert_eq!(a[key], b[key], "{key}");
-        }
-        for key in ["start_ns", "end_ns"] {
-            let d = (a[key].as_i64().unwrap() - b[key].as_i64().unwrap()).abs();
-            assert!(d <= 20_000_000, "{key} differs by {d} ns");
-        }
-    }
+    assert_same_skills(&live, &uploaded, 2);
     app.stop().await;
 }
 

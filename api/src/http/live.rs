@@ -99,7 +99,11 @@ impl LivePool {
                 .name(format!("icms-live-{i}"))
                 .spawn(move || {
                     while let Ok(job) = rx.recv() {
-                        job();
+                        // A job that panics (a bug) loses its session, not the thread and the
+                        // other sessions pinned to it.
+                        if std::panic::catch_unwind(std::panic::AssertUnwindSafe(job)).is_err() {
+                            tracing::error!(thread = i, "a live session's step panicked");
+                        }
                     }
                 })?;
             workers.push(Worker {
@@ -153,7 +157,8 @@ impl Pinned {
         }
         match rx.await {
             Ok(v) => v,
-            Err(_) => unreachable!("a live job panicked on thread {}", self.index),
+            // The job panicked (logged on its thread): this session's task ends here.
+            Err(_) => panic!("a live session's step panicked on thread {}", self.index),
         }
     }
 }

@@ -26,7 +26,7 @@ use std::fmt::Write as _;
 use std::io::Write;
 use std::path::{Path, PathBuf};
 
-use dfs_core::math::{Isometry, Rotation, Vector};
+use dfs_core::math::Isometry;
 
 use super::import::WRIST_COLUMNS;
 use super::messages::{GloveJointStates, ObjectState};
@@ -34,8 +34,8 @@ use super::{
     stream_session_file, DecodeTopics, SessionVisitor, TOPIC_GLOVE_JOINT_STATES, TOPIC_OBJECT_STATE,
 };
 use crate::error::{RecordingError, Result};
-use crate::foxglove::Pose;
 use crate::mcap_io::ReadLimits;
+use crate::segmentation::iso;
 
 /// What [`export_glove_csv`] wrote.
 #[derive(Debug, Clone, PartialEq)]
@@ -57,24 +57,6 @@ pub struct ExportSummary {
 /// The hand base's pose of a tick: `pose ∘ pose_in_hand⁻¹`.
 fn base_of(o: &ObjectState) -> Isometry {
     iso(&o.pose) * iso(&o.pose_in_hand).inverse()
-}
-
-fn iso(p: &Pose) -> Isometry {
-    let q = nalgebra::Quaternion::new(
-        p.orientation.w,
-        p.orientation.x,
-        p.orientation.y,
-        p.orientation.z,
-    );
-    let r = if q.norm() > 1e-9 {
-        Rotation::from_quaternion(q)
-    } else {
-        Rotation::identity()
-    };
-    Isometry::from_parts(
-        Vector::new(p.position.x, p.position.y, p.position.z).into(),
-        r,
-    )
 }
 
 /// The visitor: pairs each `/glove/joint_states` sample with the `/object/state` sample of the
