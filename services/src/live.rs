@@ -980,6 +980,15 @@ impl LiveSession {
                 serde_json::to_string(&s.stale_at_ns).unwrap_or_default(),
             ),
             ("last_tick_ns".to_owned(), self.session_ns().to_string()),
+            (
+                "glove_input".to_owned(),
+                match self.drive {
+                    Some(d) if d.torques() => "torques",
+                    Some(_) => "positions",
+                    None => "none",
+                }
+                .to_owned(),
+            ),
         ]);
         if let Some(t) = s.first_contact_ns {
             meta.insert("first_contact_ns".to_owned(), t.to_string());

@@ -824,6 +824,7 @@ async fn a_glove_of_positions_only_is_coupled_and_calibrated() {
         .as_str()
         .unwrap()
         .contains("index_mcp"));
+    assert_eq!(meta["meta"]["extra"]["live"]["glove_input"], "positions");
     app.stop().await;
 }
 

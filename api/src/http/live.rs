@@ -274,7 +274,7 @@ async fn send_error(socket: &mut WebSocket, t_ns: Option<u64>, message: String) 
     send_event(socket, &Event::Error { t_ns, message }).await
 }
 
-/// Closes with a policy-violation code and `reason` (cut to the 123 bytes a close frame has).
+/// Closes with `code` and `reason` (cut to the 123 bytes a close frame has).
 async fn close(socket: &mut WebSocket, code: u16, reason: &str) {
     let mut end = reason.len().min(120);
     while !reason.is_char_boundary(end) {
