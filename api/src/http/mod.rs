@@ -102,7 +102,12 @@ fn finish_openapi(mut api: OpenApi, writes_need_token: bool) -> OpenApi {
              not parse as HTTP. A request over the server's time limit is answered 503. \
              Operations that take query parameters refuse unknown ones (400, naming them); \
              the others ignore a query string. A JSON body with a key twice in one object is \
-             refused (400, naming the key).",
+             refused (400, naming the key). Live glove sessions are a WebSocket, \
+             GET /api/v1/live: a JSON start message, then binary icms.live.Sample protobuf \
+             frames (schema at GET /api/v1/live/schema) each answered by an icms.live.Feedback \
+             frame, JSON events, and end; the DFS steps at 1 kHz of the samples' time, \
+             interpolating between samples; the session is recorded and stored as it ends \
+             (docs/live.md in the repository).",
         ))
         .build();
     let components = api.components.get_or_insert_with(Default::default);
