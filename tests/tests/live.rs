@@ -43,6 +43,24 @@ fn start_for(s: &dfs_core::scenario::Scenario) -> StartMessage {
     }
 }
 
+/// Streams `frames` as a live session of scenario `s`'s objects, as fast as answered, to the
+/// end: the client's summary.
+async fn stream(
+    app: &TestApp,
+    s: &dfs_core::scenario::Scenario,
+    frames: Vec<Frame>,
+) -> live_client::ClientSummary {
+    live_client::run(
+        &url(app),
+        &start_for(s),
+        frames,
+        &ClientOptions::default(),
+        |_| {},
+    )
+    .await
+    .unwrap()
+}
+
 async fn skills_of(app: &TestApp, session_id: i64) -> Vec<Value> {
     let s = app
         .client
@@ -146,15 +164,7 @@ async fn a_glove_at_60_hz_drives_the_1_khz_dfs_through_the_grasp() {
     // Every 16th tick: 62.5 Hz.
     let frames = live_client::simulated_frames(&s, None, 16).unwrap();
     let last_t = frames.last().unwrap().t_ns;
-    let summary = live_client::run(
-        &url(&app),
-        &start_for(&s),
-        frames,
-        &ClientOptions::default(),
-        |_| {},
-    )
-    .await
-    .unwrap();
+    let summary = stream(&app, &s, frames).await;
     assert_eq!(summary.refused, 0);
     let meta = session(&app, summary.session_id.unwrap()).await;
     // Every millisecond up to the last sample was stepped.
@@ -551,15 +561,7 @@ async fn a_python_client_streams_a_session_and_python_decodes_its_recording() {
     // reference Python reader and nothing but the schemas inside the file.
     let s = scenario("sphere-lift", 2);
     let frames = live_client::simulated_frames(&s, Some(3.0), 1).unwrap();
-    let summary = live_client::run(
-        &url(&app),
-        &start_for(&s),
-        frames,
-        &ClientOptions::default(),
-        |_| {},
-    )
-    .await
-    .unwrap();
+    let summary = stream(&app, &s, frames).await;
     let r = app
         .client
         .get(&format!(
@@ -751,15 +753,7 @@ async fn a_session_exported_to_csv_and_streamed_live_gives_the_skills_of_its_upl
     let recording = services::session::import::read_glove_file(&csv, &hand).unwrap();
     assert!(recording.wrist.is_some() && recording.tau.is_some());
     let s = scenario("two-grasps", 5);
-    let summary = live_client::run(
-        &url(&app),
-        &start_for(&s),
-        live_client::recording_frames(&recording),
-        &ClientOptions::default(),
-        |_| {},
-    )
-    .await
-    .unwrap();
+    let summary = stream(&app, &s, live_client::recording_frames(&recording)).await;
     assert_eq!(summary.refused, 0);
     let r = app.client.upload(&bytes, None).await;
     assert_eq!(r.status, 201);
@@ -833,15 +827,7 @@ async fn a_scene_of_several_objects_streams_live_and_its_skill_names_the_target(
     let app = TestApp::spawn().await;
     let s = scenario("table-three", 0);
     let frames = live_client::simulated_frames(&s, None, 1).unwrap();
-    let summary = live_client::run(
-        &url(&app),
-        &start_for(&s),
-        frames,
-        &ClientOptions::default(),
-        |_| {},
-    )
-    .await
-    .unwrap();
+    let summary = stream(&app, &s, frames).await;
     assert_eq!(summary.refused, 0);
     let meta = session(&app, summary.session_id.unwrap()).await;
     assert_eq!(meta["meta"]["extra"]["target"], "box", "{meta}");
