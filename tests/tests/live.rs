@@ -847,7 +847,7 @@ async fn a_scene_of_several_objects_streams_live_and_its_skill_names_the_target(
     let e = expect_event(&mut ws, "error").await;
     let m = e["message"].as_str().unwrap();
     assert!(
-        m.contains("\"a\"") && m.contains("\"b\"") || m.contains(" a ") && m.contains(" b"),
+        m.contains("objects[1].position: \"b\" and \"a\"") && m.contains("overlap"),
         "{m}"
     );
     app.stop().await;
