@@ -68,7 +68,19 @@ pub fn analyse_source(
         started_at: m.get("started_at").cloned(),
         extra: extra_of(m, head.live.as_ref()),
     };
-    let skills = seg.skills.iter().map(to_new_skill).collect();
+    // What recognition needs of each grasp: its approach template, from the file once more
+    // up to the last grasp's contact onset.
+    let templates = crate::assist::offline::approach_templates(source, m, &seg.skills, None)?;
+    let skills = seg
+        .skills
+        .iter()
+        .zip(templates)
+        .map(|(s, t)| {
+            let mut new = to_new_skill(s);
+            new.approach = t.map(|t| t.to_vec());
+            new
+        })
+        .collect();
     Ok((meta, skills))
 }
 
@@ -122,6 +134,8 @@ fn to_new_skill(s: &Skill) -> NewSkill {
         phase_durations: p.phase_durations.iter().map(|(k, v)| (*k, *v)).collect(),
         feature: p.feature.to_vec(),
         params: serde_json::to_value(s).unwrap_or(serde_json::Value::Null),
+        approach: None,
+        matched_skill_id: None,
     }
 }
 

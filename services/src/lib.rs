@@ -9,6 +9,7 @@
 //! - [`reprocess`]: stored sessions segmented again when the segmentation changed.
 //! - [`error`]: the crate's error type.
 
+pub mod assist;
 pub mod error;
 pub mod foxglove;
 pub mod ingest;

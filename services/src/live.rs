@@ -540,6 +540,7 @@ impl LiveSession {
             table_height: Some(table_height),
             hand_urdf: config.hand_urdf.clone(),
             scene: config.listed.then(|| scene.clone()),
+            assist_topics: false,
         };
         let recorder =
             SessionRecorder::create_with_view(out, dfs.hand(), dfs.object(), &info, view)?;

@@ -281,6 +281,7 @@ pub fn replay_skill_until(
         table_height: Some(0.0),
         hand_urdf: hand.urdf.clone(),
         scene: None,
+        assist_topics: false,
     };
     let mut recorder = SessionRecorder::create_to(out, &hand.model, &object, &info)?;
     let mut failed: Option<RecordingError> = None;

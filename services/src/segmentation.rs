@@ -75,8 +75,11 @@ use crate::session::{
 /// Version 0 stands for "not recorded": the sessions stored before versions were (migration
 /// `0003`), which reprocessing checks against the current segmentation.
 ///
-/// History: 1, the segmentation of issue 18 when versions began to be recorded.
-pub const SEGMENTATION_VERSION: u32 = 1;
+/// History: 1, the segmentation of issue 18 when versions began to be recorded; 2, the
+/// approach templates recognition compares (issue 20, `crate::assist`), computed at ingest
+/// with the skills (a skill that comes out the same keeps its id and replays and gets its
+/// template).
+pub const SEGMENTATION_VERSION: u32 = 2;
 
 /// Tuning of [`segment`]. The defaults suit human-speed grasping at any sample rate ≥ 100 Hz.
 #[derive(Debug, Clone, Copy, PartialEq)]

@@ -99,9 +99,9 @@ pub use read::{
     RAW_TOPIC_SKEW_NS,
 };
 pub use recorder::{
-    record_simulation, record_simulation_until, record_ticks, record_ticks_until, LiveView,
-    RecordSummary, SessionInfo, SessionOut, SessionRecorder, TickData, OVERLAPS_METADATA,
-    TABLE_ENTITY,
+    record_simulation, record_simulation_until, record_ticks, record_ticks_until, AssistTopic,
+    LiveView, RecordSummary, SessionInfo, SessionOut, SessionRecorder, TickData,
+    ASSIST_ROBOT_RATE_HZ, OVERLAPS_METADATA, TABLE_ENTITY, TOPIC_ASSIST_EVENTS, TOPIC_ASSIST_ROBOT,
 };
 pub use time::rfc3339_utc;
 

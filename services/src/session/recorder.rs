@@ -38,8 +38,9 @@ const ZSTD_LEVEL: u32 = 1;
 /// Batches in flight on each of the two channels (simulation → serialiser → writer).
 const CHANNEL_BOUND: usize = 4;
 
-/// Topic indices used inside batches: the raw topics, then the Foxglove topics.
-const ALL_TOPICS: [&str; 8] = [
+/// Topic indices used inside batches: the raw topics, then the Foxglove topics, then the
+/// assistant's (registered only when [`SessionInfo::assist_topics`]).
+const ALL_TOPICS: [&str; 10] = [
     TOPIC_GLOVE_JOINT_STATES,
     TOPIC_GLOVE_FEEDBACK,
     TOPIC_CONTACTS,
@@ -48,7 +49,27 @@ const ALL_TOPICS: [&str; 8] = [
     TOPIC_SCENE,
     TOPIC_JOINT_STATES,
     TOPIC_HAND,
+    TOPIC_ASSIST_EVENTS,
+    TOPIC_ASSIST_ROBOT,
 ];
+
+/// The assistant's events in a live session (`foxglove.Log`, one per event: its JSON as the
+/// message, `icms.assist` as the name), shown by Foxglove's Log panel.
+pub const TOPIC_ASSIST_EVENTS: &str = "/assist/events";
+/// The robot hand the assistant applies a skill on (`foxglove.SceneUpdate`: its fingertips and
+/// its object, drawn beside the operator's scene), at [`ASSIST_ROBOT_RATE_HZ`].
+pub const TOPIC_ASSIST_ROBOT: &str = "/assist/robot";
+/// Rate of [`TOPIC_ASSIST_ROBOT`] (Hz).
+pub const ASSIST_ROBOT_RATE_HZ: u64 = 20;
+
+/// A topic of the assistant, for [`SessionRecorder::log_assist`].
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum AssistTopic {
+    /// [`TOPIC_ASSIST_EVENTS`].
+    Events,
+    /// [`TOPIC_ASSIST_ROBOT`].
+    Robot,
+}
 
 /// Serialised messages of several ticks: protobuf bytes back to back, and per message its
 /// topic index, log time and byte range.
@@ -89,6 +110,8 @@ struct Inputs {
     link_poses: Vec<Isometry>,
     /// Metadata records to write after the ticks.
     metadata: Vec<(String, BTreeMap<String, String>)>,
+    /// Messages encoded by the caller (the assistant's): topic index, log time, bytes.
+    extras: Vec<(u8, u64, Vec<u8>)>,
 }
 
 impl Inputs {
@@ -101,11 +124,12 @@ impl Inputs {
                 BATCH_TICKS.div_ceil(FOXGLOVE_DECIMATION as usize) * hand.links,
             ),
             metadata: Vec::new(),
+            extras: Vec::new(),
         }
     }
 
     fn is_empty(&self) -> bool {
-        self.ticks.is_empty() && self.metadata.is_empty()
+        self.ticks.is_empty() && self.metadata.is_empty() && self.extras.is_empty()
     }
 
     fn clear(&mut self) {
@@ -114,6 +138,7 @@ impl Inputs {
         self.joints.clear();
         self.link_poses.clear();
         self.metadata.clear();
+        self.extras.clear();
     }
 }
 
@@ -170,6 +195,9 @@ pub struct SessionInfo {
     /// objects overlapped. The DFS's object indices are the scene's. `None`: one object, as
     /// the recorder's `object` and `object_json` describe it.
     pub scene: Option<Scene>,
+    /// Registers the assistant's topics ([`TOPIC_ASSIST_EVENTS`], [`TOPIC_ASSIST_ROBOT`]) for
+    /// [`SessionRecorder::log_assist`]: a live session with the assistant on.
+    pub assist_topics: bool,
 }
 
 /// Metadata record written at the end of a session of several objects (see
@@ -467,6 +495,8 @@ impl LiveView {
             fg::SceneUpdate::get_schema(),
             fg::JointStates::get_schema(),
             fg::SceneUpdate::get_schema(),
+            fg::Log::get_schema(),
+            fg::SceneUpdate::get_schema(),
         ];
         let mut channels = Vec::with_capacity(ALL_TOPICS.len());
         for (topic, schema) in ALL_TOPICS.iter().zip(schemas) {
@@ -685,6 +715,10 @@ impl SessionRecorder {
         register_foxglove::<fg::FrameTransforms>(&mut writer, TOPIC_TF)?;
         register_foxglove::<fg::SceneUpdate>(&mut writer, TOPIC_SCENE)?;
         register_foxglove::<fg::JointStates>(&mut writer, TOPIC_JOINT_STATES)?;
+        if info.assist_topics {
+            register_foxglove::<fg::Log>(&mut writer, TOPIC_ASSIST_EVENTS)?;
+            register_foxglove::<fg::SceneUpdate>(&mut writer, TOPIC_ASSIST_ROBOT)?;
+        }
         let hand_scene =
             super::hand_scene::HandScene::create(&mut writer, hand, info.hand_urdf.as_deref())?;
 
@@ -832,6 +866,17 @@ impl SessionRecorder {
         Ok(())
     }
 
+    /// Logs a message of the assistant's `topic` at session time `t_ns` (written with the
+    /// ticks recorded so far; ignored unless the session was created with
+    /// [`SessionInfo::assist_topics`]).
+    pub fn log_assist(&mut self, topic: AssistTopic, t_ns: u64, msg: &impl prost::Message) {
+        let index = match topic {
+            AssistTopic::Events => 8,
+            AssistTopic::Robot => 9,
+        };
+        self.inputs.extras.push((index, t_ns, msg.encode_to_vec()));
+    }
+
     /// Adds a metadata record (written after the ticks recorded so far), for records only
     /// known at the end such as a replay's report.
     pub fn add_metadata(&mut self, name: &str, metadata: BTreeMap<String, String>) -> Result<()> {
@@ -967,6 +1012,11 @@ impl Serialiser {
                     report.first_refusal.get_or_insert(e);
                 }
             }
+            for (topic, t, bytes) in inputs.extras.drain(..) {
+                let start = batch.data.len();
+                batch.data.extend_from_slice(&bytes);
+                batch.items.push((topic, t, start, batch.data.len()));
+            }
             batch.metadata.append(&mut inputs.metadata);
             inputs.clear();
             let _ = recycle.try_send(inputs);
@@ -1038,13 +1088,14 @@ fn writer_thread(
     recycle: SyncSender<Batch>,
     view: Option<LiveView>,
 ) -> Result<WriteSummary> {
-    let mut handles = Vec::with_capacity(ALL_TOPICS.len());
-    for topic in ALL_TOPICS {
-        handles.push(writer.topic(topic)?);
-    }
+    // The assistant's topics are registered only in sessions that have them.
+    let handles: Vec<_> = ALL_TOPICS.iter().map(|t| writer.topic(t).ok()).collect();
     for mut batch in rx {
         for &(topic, t, start, end) in &batch.items {
-            writer.write_to(handles[topic as usize], t, &batch.data[start..end])?;
+            let Some(handle) = handles[topic as usize] else {
+                continue;
+            };
+            writer.write_to(handle, t, &batch.data[start..end])?;
             if let Some(view) = &view {
                 view.publish(topic, t, &batch.data[start..end]);
             }
@@ -1573,6 +1624,7 @@ pub fn record_simulation_until<'a>(
         table_height: Some(sim.table_height()),
         hand_urdf: None,
         scene,
+        assist_topics: false,
     };
     let dfs = sim.dfs();
     let recorder = SessionRecorder::create_to(out.into(), dfs.hand(), dfs.object(), &info)?;

@@ -96,6 +96,8 @@ pub fn synthetic_skill(rng: &mut SplitMix64) -> NewSkill {
             .map(|_| rng.range(-1.0, 1.0) as f32)
             .collect(),
         params: serde_json::json!({ "synthetic": true }),
+        approach: None,
+        matched_skill_id: None,
     }
 }
 

@@ -36,6 +36,8 @@ use sqlx::{Connection as _, QueryBuilder, Row as _, Sqlite, SqliteConnection};
 pub use blob::{StagedBlob, StagedWriter};
 pub use error::StoreError;
 
+use crate::assist::features::TEMPLATE_DIM;
+use crate::assist::index::{RecognitionIndex, StoredTemplate};
 use crate::segmentation::SEGMENTATION_VERSION;
 use dfs_core::names::Named;
 
@@ -108,6 +110,9 @@ struct Inner {
     dir: PathBuf,
     pool: SqlitePool,
     index: std::sync::RwLock<FeatureIndex>,
+    /// The skills as recognition sees them; a snapshot is shared by the live sessions that
+    /// recognise (copied on the next change while one holds it).
+    recognition: std::sync::RwLock<Arc<RecognitionIndex>>,
     /// Ingests hold it shared from blob write to index update; deletes hold it exclusively.
     blob_lock: tokio::sync::RwLock<()>,
 }
@@ -205,6 +210,58 @@ fn feature_to_blob(f: &[f32; FEATURE_DIM]) -> Vec<u8> {
     f.iter().flat_map(|x| x.to_le_bytes()).collect()
 }
 
+/// An approach template from its column (`None` for NULL).
+fn approach_from_blob(
+    id: i64,
+    bytes: Option<&[u8]>,
+) -> Result<Option<[f32; TEMPLATE_DIM]>, StoreError> {
+    let Some(bytes) = bytes else { return Ok(None) };
+    if bytes.len() != TEMPLATE_DIM * 4 {
+        return Err(StoreError::Corrupt(format!(
+            "skill {id}: approach has {} bytes, expected {}",
+            bytes.len(),
+            TEMPLATE_DIM * 4
+        )));
+    }
+    let mut f = [0.0f32; TEMPLATE_DIM];
+    for (i, c) in bytes.chunks_exact(4).enumerate() {
+        f[i] = f32::from_le_bytes([c[0], c[1], c[2], c[3]]);
+    }
+    Ok(Some(f))
+}
+
+/// A new skill stored as `id`, as recognition sees it.
+fn new_template(id: i64, s: &NewSkill, feature: &[f32; FEATURE_DIM]) -> StoredTemplate {
+    stored_template(
+        id,
+        s.object_shape.name(),
+        &s.grasp_type,
+        s.object_name.clone(),
+        s.approach
+            .as_deref()
+            .and_then(|a| <[f32; TEMPLATE_DIM]>::try_from(a).ok()),
+        *feature,
+    )
+}
+
+/// A skill as recognition sees it ([`RecognitionIndex`]).
+fn stored_template(
+    id: i64,
+    shape: &str,
+    grasp_type: &str,
+    object_name: Option<String>,
+    approach: Option<[f32; TEMPLATE_DIM]>,
+    feature: [f32; FEATURE_DIM],
+) -> StoredTemplate {
+    StoredTemplate {
+        skill_id: id,
+        kind: format!("{shape}/{grasp_type}"),
+        object_name,
+        template: approach.unwrap_or([f32::NAN; TEMPLATE_DIM]),
+        feature,
+    }
+}
+
 /// The name in the TEXT column `column` of skill `id`'s row as a value of `T` (a shape, a
 /// contact model): a name `T` does not know is a corrupt row, named.
 fn named_column<T: Named>(row: &SqliteRow, id: i64, column: &str) -> Result<T, StoreError> {
@@ -236,6 +293,9 @@ fn row_to_skill(row: &SqliteRow) -> Result<Skill, StoreError> {
             .map_err(|e| StoreError::Corrupt(format!("skill {id}: phase_durations: {e}")))?,
         feature: feature_from_blob(id, &feature)?.to_vec(),
         params: serde_json::from_str(&params)?,
+        approach: approach_from_blob(id, row.try_get("approach")?)?
+            .map(|a| a.iter().map(|v| v.is_finite().then_some(*v)).collect()),
+        matched_skill_id: row.try_get("matched_skill_id")?,
         segmentation_version: segmentation_version(row)?,
         created_at: row.try_get("created_at")?,
     })
@@ -310,6 +370,15 @@ fn validate_skill(i: usize, s: &NewSkill) -> Result<[f32; FEATURE_DIM], StoreErr
             ctx("feature")
         )));
     }
+    if let Some(a) = &s.approach {
+        if a.len() != TEMPLATE_DIM || a.iter().any(|x| x.is_infinite()) {
+            return Err(StoreError::InvalidInput(format!(
+                "{}: needs {TEMPLATE_DIM} values, finite or NaN (not seen); got {}",
+                ctx("approach"),
+                a.len()
+            )));
+        }
+    }
     Ok(feature)
 }
 
@@ -334,7 +403,7 @@ async fn insert_skills(
         let mut b: QueryBuilder<Sqlite> = QueryBuilder::new(
             "INSERT INTO skills (session_id, object_shape, object_name, object_mass, mu, \
              contact_count, contact_model, grasp_type, quality, volume, duration_s, start_ns, \
-             end_ns, phase_durations, feature, params) ",
+             end_ns, phase_durations, feature, params, approach, matched_skill_id) ",
         );
         b.push_values(&rows, |mut r, (s, f, ph, p)| {
             r.push_bind(session_id)
@@ -352,7 +421,13 @@ async fn insert_skills(
                 .push_bind(s.end_ns)
                 .push_bind(ph.as_str())
                 .push_bind(f.as_slice())
-                .push_bind(p.as_str());
+                .push_bind(p.as_str())
+                .push_bind(
+                    s.approach
+                        .as_ref()
+                        .map(|a| a.iter().flat_map(|x| x.to_le_bytes()).collect::<Vec<u8>>()),
+                )
+                .push_bind(s.matched_skill_id);
         });
         b.push(" RETURNING id");
         let mut chunk_ids: Vec<i64> = b.build_query_scalar().fetch_all(&mut **tx).await?;
@@ -484,14 +559,26 @@ impl Store {
             );
         }
 
-        let rows = sqlx::query("SELECT id, feature FROM skills")
-            .fetch_all(&pool)
-            .await?;
+        let rows = sqlx::query(
+            "SELECT id, feature, object_shape, grasp_type, object_name, approach FROM skills",
+        )
+        .fetch_all(&pool)
+        .await?;
         let mut entries = Vec::with_capacity(rows.len());
+        let mut templates = Vec::with_capacity(rows.len());
         for row in &rows {
             let id: i64 = row.try_get(0)?;
             let bytes: &[u8] = row.try_get(1)?;
-            entries.push((id, feature_from_blob(id, bytes)?));
+            let feature = feature_from_blob(id, bytes)?;
+            entries.push((id, feature));
+            templates.push(stored_template(
+                id,
+                row.try_get(2)?,
+                row.try_get(3)?,
+                row.try_get(4)?,
+                approach_from_blob(id, row.try_get(5)?)?,
+                feature,
+            ));
         }
         drop(rows);
         Ok(Store {
@@ -499,9 +586,30 @@ impl Store {
                 dir: data_dir.to_path_buf(),
                 pool,
                 index: std::sync::RwLock::new(FeatureIndex::from_entries(entries)),
+                recognition: std::sync::RwLock::new(Arc::new(RecognitionIndex::new(templates))),
                 blob_lock: tokio::sync::RwLock::new(()),
             }),
         })
+    }
+
+    /// The stored skills as recognition sees them (a snapshot: skills stored later are in
+    /// the next one).
+    pub fn recognition_index(&self) -> Arc<RecognitionIndex> {
+        Arc::clone(&self.inner.recognition.read().expect("recognition lock"))
+    }
+
+    /// Removes `removed` from the recognition index and adds (or replaces) `added`.
+    pub(crate) fn update_recognition(
+        &self,
+        removed: &[i64],
+        added: impl IntoIterator<Item = StoredTemplate>,
+    ) {
+        let mut guard = self.inner.recognition.write().expect("recognition lock");
+        let index = Arc::make_mut(&mut guard);
+        index.remove(removed);
+        for t in added {
+            index.insert(t);
+        }
     }
 
     /// The data directory.
@@ -526,21 +634,30 @@ impl Store {
             .await?;
         match id {
             None => Ok(None),
-            Some(session_id) => Ok(Some(IngestOutcome {
-                session_id,
-                created: false,
-                skill_ids: self.skill_ids_of(session_id).await?,
-            })),
+            Some(session_id) => {
+                let (skill_ids, matched_skill_ids) = self.skill_ids_of(session_id).await?;
+                Ok(Some(IngestOutcome {
+                    session_id,
+                    created: false,
+                    skill_ids,
+                    matched_skill_ids,
+                }))
+            }
         }
     }
 
-    async fn skill_ids_of(&self, session_id: i64) -> Result<Vec<i64>, StoreError> {
-        Ok(
-            sqlx::query_scalar("SELECT id FROM skills WHERE session_id = ? ORDER BY id")
-                .bind(session_id)
-                .fetch_all(&self.inner.pool)
-                .await?,
+    /// A session's skill ids, ascending, and the skills they were recognised as.
+    async fn skill_ids_of(
+        &self,
+        session_id: i64,
+    ) -> Result<(Vec<i64>, Vec<Option<i64>>), StoreError> {
+        let rows: Vec<(i64, Option<i64>)> = sqlx::query_as(
+            "SELECT id, matched_skill_id FROM skills WHERE session_id = ? ORDER BY id",
         )
+        .bind(session_id)
+        .fetch_all(&self.inner.pool)
+        .await?;
+        Ok(rows.into_iter().unzip())
     }
 
     /// Stores a session: its MCAP bytes as a content-addressed blob, its metadata and skills.
@@ -613,10 +730,29 @@ impl Store {
         size: i64,
         rel: &str,
         meta: SessionMeta,
-        checked: Vec<(NewSkill, [f32; FEATURE_DIM])>,
+        mut checked: Vec<(NewSkill, [f32; FEATURE_DIM])>,
         duration_ns: i64,
     ) -> Result<IngestOutcome, StoreError> {
         let meta_json = serde_json::to_string(&meta)?;
+        // On-line learning: each grasp is linked to the stored skill it matches, or stored as
+        // new (against the skills stored before it).
+        let recognition = self.recognition_index();
+        let mut scratch = crate::assist::index::Scratch::default();
+        for (s, f) in &mut checked {
+            if s.matched_skill_id.is_none() {
+                let approach = s
+                    .approach
+                    .as_deref()
+                    .and_then(|a| <[f32; TEMPLATE_DIM]>::try_from(a).ok());
+                s.matched_skill_id = crate::assist::recognise::link_completed(
+                    &recognition,
+                    approach.as_ref(),
+                    f,
+                    &crate::assist::recognise::RecogniserParams::default(),
+                    &mut scratch,
+                );
+            }
+        }
         let mut tx = self.inner.pool.begin().await?;
         let session_id: Option<i64> = sqlx::query_scalar(
             "INSERT INTO sessions (sha256, size_bytes, blob_path, scenario, hand, object_shape, \
@@ -650,10 +786,18 @@ impl Store {
             index.insert(*id, *f);
         }
         drop(index);
+        self.update_recognition(
+            &[],
+            skill_ids
+                .iter()
+                .zip(&checked)
+                .map(|(id, (s, f))| new_template(*id, s, f)),
+        );
         tracing::debug!(session_id, skills = skill_ids.len(), "ingested session");
         Ok(IngestOutcome {
             session_id,
             created: true,
+            matched_skill_ids: checked.iter().map(|(s, _)| s.matched_skill_id).collect(),
             skill_ids,
         })
     }
@@ -710,7 +854,11 @@ impl Store {
                 .await?;
                 if let Some(session_id) = session_id {
                     let ids = insert_skills(&mut tx, session_id, checked).await?;
-                    inserted.extend(ids.into_iter().zip(checked.iter().map(|c| c.1)));
+                    inserted.extend(
+                        ids.into_iter()
+                            .zip(checked)
+                            .map(|(id, (s, f))| (id, *f, new_template(id, s, f))),
+                    );
                 }
             }
             tx.commit().await?;
@@ -722,10 +870,13 @@ impl Store {
             .await?;
         let inserted = result?;
         let mut index = self.inner.index.write().expect("index lock");
-        for (id, f) in &inserted {
+        for (id, f, _) in &inserted {
             index.insert(*id, *f);
         }
-        Ok(inserted.len())
+        drop(index);
+        let n = inserted.len();
+        self.update_recognition(&[], inserted.into_iter().map(|(_, _, t)| t));
+        Ok(n)
     }
 
     fn row_to_session(row: &SqliteRow) -> Result<Session, StoreError> {
@@ -932,6 +1083,7 @@ impl Store {
             .write()
             .expect("index lock")
             .remove_many(skill_ids);
+        self.update_recognition(skill_ids, []);
         self.remove_unreferenced_blobs(blobs).await;
     }
 

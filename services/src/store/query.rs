@@ -295,7 +295,7 @@ fn check_range(name: &str, min: Option<f64>, max: Option<f64>) -> Result<(), Sto
 pub(crate) const SKILL_COLUMNS: &str =
     "id, session_id, object_shape, object_name, object_mass, mu, \
      contact_count, contact_model, grasp_type, quality, volume, duration_s, start_ns, end_ns, \
-     phase_durations, feature, params, created_at, \
+     phase_durations, feature, params, approach, matched_skill_id, created_at, \
      (SELECT segmentation_version FROM sessions WHERE sessions.id = skills.session_id) \
      AS segmentation_version";
 

@@ -194,14 +194,27 @@ impl Store {
         drop(rows);
 
         // Each new skill keeps the first unclaimed identical stored skill, if any.
+        // A kept skill takes the new approach template (derived data, not the skill's
+        // identity: a skill stored before templates were gets one without losing its id).
         let mut claimed = vec![false; old.len()];
         let mut kept = Vec::new();
+        let mut kept_templates = Vec::new();
         let mut added = Vec::new();
         for (new, form) in checked.into_iter().zip(&new_forms) {
             match (0..old.len()).find(|&i| !claimed[i] && old[i].1 == *form) {
                 Some(i) => {
                     claimed[i] = true;
                     kept.push(old[i].0);
+                    kept_templates.push(super::new_template(old[i].0, &new.0, &new.1));
+                    sqlx::query("UPDATE skills SET approach = ? WHERE id = ?")
+                        .bind(
+                            new.0.approach.as_ref().map(|a| {
+                                a.iter().flat_map(|x| x.to_le_bytes()).collect::<Vec<u8>>()
+                            }),
+                        )
+                        .bind(old[i].0)
+                        .execute(&mut *tx)
+                        .await?;
                 }
                 None => added.push(new),
             }
@@ -254,6 +267,15 @@ impl Store {
                 index.insert(*id, *f);
             }
         }
+        self.update_recognition(
+            &removed,
+            kept_templates.into_iter().chain(
+                added_ids
+                    .iter()
+                    .zip(&added)
+                    .map(|(id, (s, f))| super::new_template(*id, s, f)),
+            ),
+        );
         self.remove_unreferenced_blobs(&replay_blobs).await;
         kept.sort_unstable();
         tracing::debug!(

@@ -115,6 +115,16 @@ pub struct NewSkill {
     pub feature: Vec<f32>,
     /// The full hand-independent parameters (JSON object).
     pub params: serde_json::Value,
+    /// The approach template recognition compares (`crate::assist::features`):
+    /// `crate::assist::features::TEMPLATE_DIM` values, NaN where the reach did not show one;
+    /// `None` when it could not be computed (the session's hand model is not known). Not in
+    /// the JSON form (NaN is not JSON).
+    #[serde(skip)]
+    pub approach: Option<Vec<f32>>,
+    /// The stored skill this one was recognised as (on-line learning links a grasp that matched
+    /// a stored skill to it); `None`: stored as new.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub matched_skill_id: Option<i64>,
 }
 
 /// A stored skill.
@@ -157,6 +167,14 @@ pub struct Skill {
     pub feature: Vec<f32>,
     /// Full hand-independent parameters.
     pub params: serde_json::Value,
+    /// The approach template recognition compares (`crate::assist::features`), `null` where
+    /// the reach did not show a value; absent when it was not computed (stored before
+    /// migration 0005 and not reprocessed, or a hand whose model is not known).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub approach: Option<Vec<Option<f32>>>,
+    /// The stored skill this one was recognised as when it was stored; absent: stored as new.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub matched_skill_id: Option<i64>,
     /// Version of the segmentation that made the skill (its session's, see
     /// [`crate::segmentation::SEGMENTATION_VERSION`]; 0: stored before versions were recorded).
     pub segmentation_version: u32,
@@ -196,6 +214,9 @@ pub struct IngestOutcome {
     pub created: bool,
     /// Ids of the session's skills, ascending.
     pub skill_ids: Vec<i64>,
+    /// Per skill (in `skill_ids`' order): the stored skill it was recognised as, `None` for a
+    /// skill stored as new ([`NewSkill::matched_skill_id`]).
+    pub matched_skill_ids: Vec<Option<i64>>,
 }
 
 /// One page of results.

@@ -578,6 +578,7 @@ pub fn replay_glove(
         table_height: Some(position.z - depth),
         hand_urdf: options.hand_urdf.clone(),
         scene: None,
+        assist_topics: false,
     };
     let mut recorder = SessionRecorder::create(out, dfs.hand(), dfs.object(), &info)?;
     let n = hand.dof();

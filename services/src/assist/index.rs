@@ -1,0 +1,332 @@
+//! The stored skills as recognition sees them: each skill's approach template, its feature
+//! vector (the one `similar` compares) and its kind, in columns scanned per decision.
+//!
+//! # Cost
+//!
+//! A decision compares the stream's template with every stored one: a pass over a column of
+//! `f32` per template value seen so far (at most [`TEMPLATE_DIM`]), which the compiler
+//! vectorises. `icms bench recognition` measures it with 10 000 stored skills.
+
+use std::collections::BTreeMap;
+
+use crate::store::FEATURE_DIM;
+
+use super::features::{TEMPLATE_DIM, TEMPLATE_SCALE};
+
+/// One stored skill as recognition needs it.
+#[derive(Debug, Clone, PartialEq)]
+pub struct StoredTemplate {
+    /// The skill's id.
+    pub skill_id: i64,
+    /// Its kind: object shape and grasp type (`box/precision-2vf`).
+    pub kind: String,
+    /// The name of the object it grasped, if its session named its objects.
+    pub object_name: Option<String>,
+    /// Its approach template (NaN where not seen).
+    pub template: [f32; TEMPLATE_DIM],
+    /// Its feature vector (`segmentation::FEATURE_DIMENSIONS`).
+    pub feature: [f32; FEATURE_DIM],
+}
+
+/// Dimensions of the feature vector known about a grasp shortly after its fingertips closed:
+/// the object (ln mass, μ, shape), the contacts (count, mean normal components) and the grasp
+/// quality on them. What the grasp does next (hold time, lift, transport, rotation) and its
+/// mean held force are not known yet.
+pub const GRASP_STAGE_DIMS: [usize; 11] = [0, 1, 2, 3, 4, 10, 11, 12, 13, 14, 15];
+
+/// The stored skills, in columns. Ids need not be sorted.
+#[derive(Debug, Clone, Default)]
+pub struct RecognitionIndex {
+    ids: Vec<i64>,
+    kinds: Vec<u32>,
+    kind_names: Vec<String>,
+    object_names: Vec<Option<String>>,
+    /// Per skill: its object's shape ([`shape_code`]).
+    shapes: Vec<u8>,
+    /// Per template value: the column of every skill's value divided by its scale.
+    template_cols: Vec<Vec<f32>>,
+    /// Per feature dimension: the column.
+    feature_cols: Vec<Vec<f32>>,
+}
+
+/// A stored skill ranked against a query.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Ranked {
+    /// Row in the index.
+    pub row: usize,
+    /// Distance: the mean squared scaled difference over the values compared (templates), or
+    /// the Euclidean distance over the dimensions compared (features).
+    pub distance: f32,
+}
+
+/// Reusable buffers of a ranking (sized to the index once, then no allocation).
+#[derive(Debug, Default)]
+pub struct Scratch {
+    sum: Vec<f32>,
+    count: Vec<f32>,
+    order: Vec<Ranked>,
+}
+
+impl RecognitionIndex {
+    /// An index of `skills`.
+    pub fn new(skills: impl IntoIterator<Item = StoredTemplate>) -> RecognitionIndex {
+        let mut index = RecognitionIndex {
+            template_cols: vec![Vec::new(); TEMPLATE_DIM],
+            feature_cols: vec![Vec::new(); FEATURE_DIM],
+            ..Default::default()
+        };
+        for s in skills {
+            index.insert(s);
+        }
+        index
+    }
+
+    /// Adds a skill (or replaces the one with its id).
+    pub fn insert(&mut self, s: StoredTemplate) {
+        self.remove(&[s.skill_id]);
+        if self.template_cols.is_empty() {
+            self.template_cols = vec![Vec::new(); TEMPLATE_DIM];
+            self.feature_cols = vec![Vec::new(); FEATURE_DIM];
+        }
+        let kind = match self.kind_names.iter().position(|k| *k == s.kind) {
+            Some(k) => k,
+            None => {
+                self.kind_names.push(s.kind.clone());
+                self.kind_names.len() - 1
+            }
+        };
+        self.ids.push(s.skill_id);
+        self.kinds.push(kind as u32);
+        self.object_names.push(s.object_name);
+        self.shapes.push(shape_code(&s.template));
+        for (j, col) in self.template_cols.iter_mut().enumerate() {
+            col.push(s.template[j] / TEMPLATE_SCALE[j]);
+        }
+        for (j, col) in self.feature_cols.iter_mut().enumerate() {
+            col.push(s.feature[j]);
+        }
+    }
+
+    /// Removes skills by id (unknown ids are ignored).
+    pub fn remove(&mut self, ids: &[i64]) {
+        if ids.is_empty() || self.ids.is_empty() {
+            return;
+        }
+        let keep: Vec<bool> = self.ids.iter().map(|id| !ids.contains(id)).collect();
+        if keep.iter().all(|k| *k) {
+            return;
+        }
+        fn retain<T>(v: &mut Vec<T>, keep: &[bool]) {
+            let mut i = 0;
+            v.retain(|_| {
+                i += 1;
+                keep[i - 1]
+            });
+        }
+        retain(&mut self.ids, &keep);
+        retain(&mut self.kinds, &keep);
+        retain(&mut self.object_names, &keep);
+        retain(&mut self.shapes, &keep);
+        for col in self.template_cols.iter_mut().chain(&mut self.feature_cols) {
+            retain(col, &keep);
+        }
+    }
+
+    /// Number of skills.
+    pub fn len(&self) -> usize {
+        self.ids.len()
+    }
+
+    /// Whether it holds no skill.
+    pub fn is_empty(&self) -> bool {
+        self.ids.is_empty()
+    }
+
+    /// The skill id of a row.
+    pub fn skill_id(&self, row: usize) -> i64 {
+        self.ids[row]
+    }
+
+    /// The kind of a row (`box/precision-2vf`).
+    pub fn kind(&self, row: usize) -> &str {
+        &self.kind_names[self.kinds[row] as usize]
+    }
+
+    /// The kind index of a row (kinds are numbered as they first appear).
+    pub fn kind_index(&self, row: usize) -> u32 {
+        self.kinds[row]
+    }
+
+    /// The object name of a row.
+    pub fn object_name(&self, row: usize) -> Option<&str> {
+        self.object_names[row].as_deref()
+    }
+
+    /// The row of a skill id.
+    pub fn row_of(&self, skill_id: i64) -> Option<usize> {
+        self.ids.iter().position(|&id| id == skill_id)
+    }
+
+    /// The feature vector of a row.
+    pub fn feature(&self, row: usize) -> [f32; FEATURE_DIM] {
+        std::array::from_fn(|j| self.feature_cols[j][row])
+    }
+
+    /// Skills per kind.
+    pub fn kinds(&self) -> BTreeMap<String, usize> {
+        let mut m = BTreeMap::new();
+        for &k in &self.kinds {
+            *m.entry(self.kind_names[k as usize].clone()).or_insert(0) += 1;
+        }
+        m
+    }
+
+    /// The `top` skills whose templates are nearest `query` (NaN values of either side left
+    /// out), nearest first, into `scratch.order`. Only skills of the query's object shape take
+    /// part (a grasp of a ball is no grasp of a box, however alike the reaches), and skills
+    /// with fewer than `min_compared` values in common are left out.
+    pub fn rank_templates<'s>(
+        &self,
+        query: &[f32; TEMPLATE_DIM],
+        top: usize,
+        min_compared: usize,
+        scratch: &'s mut Scratch,
+    ) -> &'s [Ranked] {
+        let n = self.len();
+        scratch.sum.clear();
+        scratch.sum.resize(n, 0.0);
+        scratch.count.clear();
+        scratch.count.resize(n, 0.0);
+        for (j, col) in self.template_cols.iter().enumerate() {
+            let q = query[j] / TEMPLATE_SCALE[j];
+            if q.is_nan() {
+                continue;
+            }
+            for ((s, c), &v) in scratch.sum.iter_mut().zip(&mut scratch.count).zip(col) {
+                let d = v - q;
+                let d2 = d * d;
+                // NaN (not seen in the stored skill) adds nothing and does not count.
+                let seen = !d2.is_nan();
+                *s += if seen { d2 } else { 0.0 };
+                *c += seen as u8 as f32;
+            }
+        }
+        let min = min_compared as f32;
+        let shape = shape_code(query);
+        scratch.order.clear();
+        for (row, (&s, &c)) in scratch.sum.iter().zip(&scratch.count).enumerate() {
+            if c >= min && c > 0.0 && self.shapes[row] == shape {
+                scratch.order.push(Ranked {
+                    row,
+                    distance: s / c,
+                });
+            }
+        }
+        select_top(&mut scratch.order, top)
+    }
+
+    /// The `top` skills whose features are nearest `query` over `dims` (Euclidean, as
+    /// `similar` measures, on those dimensions only), nearest first.
+    pub fn rank_features<'s>(
+        &self,
+        query: &[f32; FEATURE_DIM],
+        dims: &[usize],
+        top: usize,
+        scratch: &'s mut Scratch,
+    ) -> &'s [Ranked] {
+        let n = self.len();
+        scratch.sum.clear();
+        scratch.sum.resize(n, 0.0);
+        for &j in dims {
+            let q = query[j];
+            for (s, &v) in scratch.sum.iter_mut().zip(&self.feature_cols[j]) {
+                let d = v - q;
+                *s += d * d;
+            }
+        }
+        scratch.order.clear();
+        scratch
+            .order
+            .extend(scratch.sum.iter().enumerate().map(|(row, &s)| Ranked {
+                row,
+                distance: s.sqrt(),
+            }));
+        select_top(&mut scratch.order, top)
+    }
+}
+
+/// The shape a template's one-hot values name: 0 sphere, 1 box, 2 cylinder, 3 none.
+fn shape_code(template: &[f32; TEMPLATE_DIM]) -> u8 {
+    (0..3u8).find(|&k| template[k as usize] > 0.5).unwrap_or(3)
+}
+
+/// Keeps the `top` nearest of `order` (ties by row), sorted.
+fn select_top(order: &mut Vec<Ranked>, top: usize) -> &[Ranked] {
+    let cmp = |a: &Ranked, b: &Ranked| {
+        a.distance
+            .total_cmp(&b.distance)
+            .then_with(|| a.row.cmp(&b.row))
+    };
+    if order.len() > top && top > 0 {
+        order.select_nth_unstable_by(top - 1, cmp);
+        order.truncate(top);
+    } else if top == 0 {
+        order.clear();
+    }
+    order.sort_unstable_by(cmp);
+    order
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn skill(id: i64, kind: &str, fill: f32) -> StoredTemplate {
+        let mut template = [f32::NAN; TEMPLATE_DIM];
+        for (j, v) in template.iter_mut().enumerate().take(10) {
+            *v = fill * TEMPLATE_SCALE[j];
+        }
+        StoredTemplate {
+            skill_id: id,
+            kind: kind.into(),
+            object_name: None,
+            template,
+            feature: [fill; FEATURE_DIM],
+        }
+    }
+
+    #[test]
+    fn templates_rank_by_mean_scaled_difference_leaving_out_what_is_not_seen() {
+        let index =
+            RecognitionIndex::new([skill(1, "a", 0.0), skill(2, "b", 1.0), skill(3, "a", 3.0)]);
+        let mut q = [f32::NAN; TEMPLATE_DIM];
+        for (j, v) in q.iter_mut().enumerate().take(5) {
+            *v = 0.9 * TEMPLATE_SCALE[j];
+        }
+        let mut scratch = Scratch::default();
+        let r = index.rank_templates(&q, 2, 1, &mut scratch).to_vec();
+        assert_eq!(r.len(), 2);
+        assert_eq!(index.skill_id(r[0].row), 2);
+        assert!((r[0].distance - 0.01).abs() < 1e-5, "{r:?}");
+        assert_eq!(index.skill_id(r[1].row), 1);
+        assert!((r[1].distance - 0.81).abs() < 1e-5);
+        // Asking for more values in common than any skill has leaves nothing.
+        assert!(index.rank_templates(&q, 2, 11, &mut scratch).is_empty());
+        assert_eq!(index.kinds().get("a"), Some(&2));
+    }
+
+    #[test]
+    fn features_rank_over_the_dimensions_given_and_removal_keeps_columns_aligned() {
+        let mut index =
+            RecognitionIndex::new([skill(1, "a", 0.0), skill(2, "b", 1.0), skill(3, "a", 3.0)]);
+        index.remove(&[2]);
+        assert_eq!(index.len(), 2);
+        let mut scratch = Scratch::default();
+        let q = [2.0; FEATURE_DIM];
+        let r = index.rank_features(&q, &[0, 1], 5, &mut scratch).to_vec();
+        assert_eq!(index.skill_id(r[0].row), 3);
+        assert!((r[0].distance - 2f32.sqrt()).abs() < 1e-5);
+        assert_eq!(index.feature(r[1].row), [0.0; FEATURE_DIM]);
+        assert_eq!(index.kind(r[1].row), "a");
+    }
+}

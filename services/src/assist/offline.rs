@@ -1,0 +1,301 @@
+//! The assistant over a recorded session: the file's samples turned into [`Observation`]s,
+//! for the approach templates stored with a session's skills at ingest and for
+//! `icms recognise`.
+//!
+//! A session file records the glove's joint angles, the contacts and the objects, not the
+//! fingertips: they are recomputed by forward kinematics of the hand the session names
+//! (`hand` metadata), with the base at `object pose ∘ pose_in_hand⁻¹` as the segmentation
+//! finds it. A session of a hand that is not built in needs its model given
+//! ([`Observer::new`]); without one, its skills get no template (they are still matched by
+//! their features).
+
+use std::collections::BTreeMap;
+
+use dfs_core::dfs::MAX_OBJECTS;
+use dfs_core::hand::{builtin_hand, thumb_of, HandModel, Kinematics, MAX_DOF, MAX_TIPS};
+use dfs_core::math::{Isometry, Vector};
+use dfs_core::scenario::{ScenarioObject, DEFAULT_OBJECT_NAME};
+
+use crate::error::RecordingError;
+use crate::mcap_io::ReadLimits;
+use crate::segmentation::{iso, Skill};
+use crate::session::{
+    Contacts, DecodeTopics, GloveJointStates, ObjectState, SessionSource, SessionVisitor,
+};
+
+use super::features::{
+    ObjectInfo, Observation, TemplateBuilder, TipTouch, ONSET_WINDOW_NS, TEMPLATE_DIM,
+};
+
+/// Observations are made every this much session time (ns): 10 ms, 100 Hz. The hand moves at
+/// most a few millimetres between two at a person's speed.
+pub const OBSERVATION_PERIOD_NS: u64 = 10_000_000;
+
+/// The objects of a session as its `session` metadata lists them (`objects`, or the one
+/// `object`), in the scene's order. Errors name the metadata key.
+pub fn scene_of(metadata: &BTreeMap<String, String>) -> Result<Vec<ObjectInfo>, RecordingError> {
+    let invalid = |key: &str, detail: String| RecordingError::InvalidInput {
+        location: format!("metadata session.{key}"),
+        detail,
+    };
+    let list: Vec<ScenarioObject> = match (metadata.get("objects"), metadata.get("object")) {
+        (Some(text), _) if !text.is_empty() => {
+            serde_json::from_str(text).map_err(|e| invalid("objects", e.to_string()))?
+        }
+        (_, Some(text)) if !text.is_empty() => {
+            vec![serde_json::from_str(text).map_err(|e| invalid("object", e.to_string()))?]
+        }
+        _ => {
+            return Err(invalid(
+                "object",
+                "the session does not describe its object".to_owned(),
+            ))
+        }
+    };
+    list.into_iter()
+        .take(MAX_OBJECTS)
+        .enumerate()
+        .map(|(i, o)| {
+            let shape = o
+                .to_shape()
+                .map_err(|e| invalid(&format!("objects[{i}]"), e.to_string()))?;
+            Ok(ObjectInfo {
+                name: o.name.unwrap_or_else(|| DEFAULT_OBJECT_NAME.to_owned()),
+                shape,
+                mass: o.mass,
+                mu: o.mu,
+                mu_torsion: o.mu_torsion,
+            })
+        })
+        .collect()
+}
+
+/// The built-in hand a session names (`hand` metadata), if it is one.
+pub fn builtin_hand_of(metadata: &BTreeMap<String, String>) -> Option<HandModel> {
+    builtin_hand(metadata.get("hand")?).ok()
+}
+
+/// The latest sample of each topic an observation is made of.
+struct Latest {
+    q_ns: Option<u64>,
+    q: [f64; MAX_DOF],
+    contacts_ns: Option<u64>,
+    touch: [Option<TipTouch>; MAX_TIPS],
+    object_ns: Option<u64>,
+    base: Isometry,
+    n_objects: usize,
+    objects: [Isometry; MAX_OBJECTS],
+}
+
+/// Turns a session's samples into an [`Observation`] every [`OBSERVATION_PERIOD_NS`] of
+/// session time (the ticks whose joint angles, contacts and object state have all come), and
+/// hands each to `f`. Session time counts from the first `/object/state` sample, as the
+/// segmentation's does.
+pub struct Observer<F> {
+    hand: HandModel,
+    kin: Box<Kinematics>,
+    thumb: usize,
+    latest: Box<Latest>,
+    t0: Option<u64>,
+    next_ns: u64,
+    until_ns: Option<u64>,
+    f: F,
+}
+
+impl<F: FnMut(&Observation)> Observer<F> {
+    /// An observer with `hand`'s kinematics.
+    pub fn new(hand: HandModel, f: F) -> Observer<F> {
+        let thumb = thumb_of(&hand);
+        Observer {
+            kin: Box::default(),
+            hand,
+            thumb,
+            latest: Box::new(Latest {
+                q_ns: None,
+                q: [0.0; MAX_DOF],
+                contacts_ns: None,
+                touch: [None; MAX_TIPS],
+                object_ns: None,
+                base: Isometry::identity(),
+                n_objects: 0,
+                objects: [Isometry::identity(); MAX_OBJECTS],
+            }),
+            t0: None,
+            next_ns: 0,
+            until_ns: None,
+            f,
+        }
+    }
+
+    /// Stops reading after this session time (ns): [`SessionVisitor::done`] says so.
+    pub fn until(mut self, session_ns: u64) -> Self {
+        self.until_ns = Some(session_ns);
+        self
+    }
+
+    fn maybe_observe(&mut self) {
+        let l = &self.latest;
+        let (Some(tq), Some(tc), Some(to)) = (l.q_ns, l.contacts_ns, l.object_ns) else {
+            return;
+        };
+        if tq != tc || tc != to {
+            return;
+        }
+        let Some(t0) = self.t0 else { return };
+        let t = to.saturating_sub(t0);
+        if t < self.next_ns {
+            return;
+        }
+        self.next_ns = t + OBSERVATION_PERIOD_NS;
+        let n = self.hand.dof();
+        self.hand
+            .forward_kinematics(&l.base, &l.q[..n], &mut self.kin);
+        let mut o = Observation::empty();
+        o.t_ns = t;
+        o.base = l.base;
+        o.n_tips = self.hand.fingertips.len().min(MAX_TIPS);
+        o.thumb = self.thumb.min(o.n_tips.saturating_sub(1));
+        o.tips[..o.n_tips].copy_from_slice(&self.kin.tip_centres[..o.n_tips]);
+        o.touch = l.touch;
+        o.n_objects = l.n_objects;
+        o.objects = l.objects;
+        (self.f)(&o);
+    }
+}
+
+fn v3(v: &crate::foxglove::Vector3) -> Vector {
+    Vector::new(v.x, v.y, v.z)
+}
+
+impl<F: FnMut(&Observation)> SessionVisitor for Observer<F> {
+    fn wants(&self) -> DecodeTopics {
+        DecodeTopics {
+            joint_states: true,
+            feedback: false,
+            contacts: true,
+            object: true,
+        }
+    }
+
+    fn done(&self) -> bool {
+        self.until_ns
+            .is_some_and(|u| self.next_ns > u + OBSERVATION_PERIOD_NS)
+    }
+
+    fn joint_states(&mut self, t: u64, m: &GloveJointStates) -> Result<(), RecordingError> {
+        let n = m.positions.len().min(MAX_DOF);
+        self.latest.q = [0.0; MAX_DOF];
+        self.latest.q[..n].copy_from_slice(&m.positions[..n]);
+        self.latest.q_ns = Some(t);
+        self.maybe_observe();
+        Ok(())
+    }
+
+    fn contacts(&mut self, t: u64, m: &Contacts) -> Result<(), RecordingError> {
+        let touch = &mut self.latest.touch;
+        *touch = [None; MAX_TIPS];
+        for (k, f) in m.fingers.iter().take(MAX_TIPS).enumerate() {
+            if f.touching {
+                touch[k] = Some(TipTouch {
+                    object: f.object as usize,
+                    p_b: v3(&f.point_b),
+                    normal_b: v3(&f.normal_b),
+                    normal_force: if f.in_contact {
+                        f.transmitted.z.max(0.0)
+                    } else {
+                        0.0
+                    },
+                });
+            }
+        }
+        self.latest.contacts_ns = Some(t);
+        self.maybe_observe();
+        Ok(())
+    }
+
+    fn object(&mut self, t: u64, m: &ObjectState) -> Result<(), RecordingError> {
+        self.t0.get_or_insert(t);
+        let l = &mut self.latest;
+        l.base = iso(&m.pose) * iso(&m.pose_in_hand).inverse();
+        if m.objects.is_empty() {
+            l.n_objects = 1;
+            l.objects[0] = iso(&m.pose);
+        } else {
+            l.n_objects = m.objects.len().min(MAX_OBJECTS);
+            for (i, o) in m.objects.iter().take(MAX_OBJECTS).enumerate() {
+                l.objects[i] = iso(&o.pose);
+            }
+        }
+        l.object_ns = Some(t);
+        self.maybe_observe();
+        Ok(())
+    }
+}
+
+/// The approach template of each of a session's skills (see
+/// [`super::features`]), in the skills' order: built from the skill's first phase to
+/// [`ONSET_WINDOW_NS`] after its first touch, on the object it grasped. `None` for every skill
+/// when the session's hand is not built in and `hand` is not given, or its objects are not
+/// described. Reads the file once more, up to the last skill's onset.
+pub fn approach_templates(
+    source: &SessionSource<'_>,
+    metadata: &BTreeMap<String, String>,
+    skills: &[Skill],
+    hand: Option<HandModel>,
+) -> Result<Vec<Option<[f32; TEMPLATE_DIM]>>, RecordingError> {
+    let none = vec![None; skills.len()];
+    let (Some(hand), Ok(objects)) = (
+        hand.or_else(|| builtin_hand_of(metadata)),
+        scene_of(metadata),
+    ) else {
+        return Ok(none);
+    };
+    if skills.is_empty() {
+        return Ok(none);
+    }
+    // Each skill's builder, on its object, fed over its span.
+    struct Track {
+        builder: TemplateBuilder,
+        start_ns: u64,
+        end_ns: u64,
+    }
+    let mut tracks: Vec<Option<Track>> = skills
+        .iter()
+        .map(|s| {
+            let name = s
+                .parameters
+                .object
+                .as_ref()
+                .and_then(|o| o.name.as_deref())
+                .unwrap_or(DEFAULT_OBJECT_NAME);
+            let i = objects.iter().position(|o| o.name == name).or(
+                // A session's one object, whatever its name.
+                (objects.len() == 1).then_some(0),
+            )?;
+            Some(Track {
+                builder: TemplateBuilder::new(i, &objects[i]),
+                start_ns: s.phases.first()?.start_ns,
+                end_ns: s.phases.last()?.end_ns,
+            })
+        })
+        .collect();
+    let last_end = tracks.iter().flatten().map(|t| t.end_ns).max().unwrap_or(0);
+    let shapes: Vec<_> = objects.iter().map(|o| o.shape).collect();
+    let observer = Observer::new(hand, |obs: &Observation| {
+        let hand_view = obs.hand();
+        for t in tracks.iter_mut().flatten() {
+            if obs.t_ns < t.start_ns || obs.t_ns > t.end_ns || t.builder.onset_done() {
+                continue;
+            }
+            let shape = shapes[t.builder.object()];
+            t.builder.observe(obs, &hand_view, &shape);
+        }
+    });
+    let mut observer = observer.until(last_end + ONSET_WINDOW_NS);
+    source.stream_again(&ReadLimits::streaming(), &mut observer)?;
+    drop(observer);
+    Ok(tracks
+        .into_iter()
+        .map(|t| t.map(|t| *t.builder.template()))
+        .collect())
+}

@@ -1,0 +1,607 @@
+//! The on-line recogniser: from a stream of [`Observation`]s, which stored skill the operator
+//! is performing and on which object, as early as it can say.
+//!
+//! # How it decides
+//!
+//! Every object of the scene has a [`TemplateBuilder`]. When the grasp centre crosses one of
+//! [`CHECKPOINTS_M`] of an object (from the one at index [`RecogniserParams::decide_from`]
+//! in) and that object is among the nearest to the hand (within
+//! [`RecogniserParams::near_margin_m`] of the nearest's distance), the object's template so
+//! far is compared with every stored skill's ([`RecognitionIndex::rank_templates`]):
+//!
+//! - nearest distance above [`RecogniserParams::open_set_distance`]: nothing stored fits,
+//!   `unknown` (open set);
+//! - else the [`RecogniserParams::top_k`] nearest vote for their kinds with weights
+//!   `exp(−(d − d_best) / T)`; when the best skill's kind has at least
+//!   [`RecogniserParams::min_confidence`] of the weight, `recognised` names the object, the
+//!   skill, the confidence and the runners-up (the best skills of the other kinds). A weaker
+//!   vote waits for the next checkpoint; at the contact onset the best guess is said whatever
+//!   its confidence.
+//!
+//! A verdict is sent again only when it changes (another object, another kind, or known ↔
+//! unknown), so a reach that turns to another object is followed.
+//!
+//! Once two fingertips have touched the object for [`RecogniserParams::grasp_stage_ns`], the
+//! *grasp stage* compares what is known of the grasp by then (object, contacts, grasp
+//! quality: [`GRASP_STAGE_DIMS`] of the feature vector `similar` uses) with the stored
+//! skills' features, and names the stored skill nearest to it. When no fingertip has touched
+//! for [`RecogniserParams::release_ns`], the grasp is over and the next reach begins.
+
+use std::sync::Arc;
+
+use dfs_core::contact::{ContactFrame, ContactModel, Friction};
+use dfs_core::grasp::quality::{grasp_quality, QualityParams};
+use dfs_core::hand::MAX_TIPS;
+use dfs_core::math::Vector;
+use dfs_core::object::ShapeKind;
+use serde::{Deserialize, Serialize};
+
+use crate::store::FEATURE_DIM;
+
+use super::features::{
+    ObjectInfo, Observation, Progress, TemplateBuilder, CHECKPOINTS_M, TEMPLATE_DIM,
+};
+use super::index::{RecognitionIndex, Scratch, GRASP_STAGE_DIMS};
+
+/// Tuning of the recogniser. The defaults were set on `icms bench recognition`'s training
+/// sessions (seeds apart from its held-out ones).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct RecogniserParams {
+    /// First checkpoint (index into [`CHECKPOINTS_M`]) whose crossing may decide. Default 1
+    /// (8 cm).
+    pub decide_from: usize,
+    /// Share of the vote the best kind needs. Default 0.8.
+    pub min_confidence: f32,
+    /// Above this nearest template distance (mean squared scaled difference) nothing stored
+    /// fits. Default 6.
+    pub open_set_distance: f32,
+    /// Skills that vote. Default 16.
+    pub top_k: usize,
+    /// Temperature of the vote's weights. Default 1.
+    pub temperature: f32,
+    /// Objects farther than this beyond the nearest one's distance (m) are not named.
+    /// Default 0.03.
+    pub near_margin_m: f64,
+    /// The grasp stage decides when two fingertips have touched the object this long (ns).
+    /// Default 300 ms.
+    pub grasp_stage_ns: u64,
+    /// Above this feature distance the grasp stage says `unknown` when the approach gave no
+    /// verdict. Default 1.
+    pub grasp_open_set_distance: f32,
+    /// A grasp is over when no fingertip has touched an object this long (ns). Default 300 ms.
+    pub release_ns: u64,
+}
+
+impl Default for RecogniserParams {
+    fn default() -> Self {
+        RecogniserParams {
+            decide_from: 1,
+            min_confidence: 0.8,
+            open_set_distance: 6.0,
+            top_k: 16,
+            temperature: 1.0,
+            near_margin_m: 0.03,
+            grasp_stage_ns: 300_000_000,
+            grasp_open_set_distance: 1.0,
+            release_ns: 300_000_000,
+        }
+    }
+}
+
+/// Which part of a grasp a verdict was made in.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Stage {
+    /// Before the fingertips closed: from the reach and the hand's shape.
+    Approach,
+    /// Shortly after they closed: from the contacts too.
+    Grasp,
+}
+
+/// A stored skill a verdict names.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Candidate {
+    /// The skill's id.
+    pub skill_id: i64,
+    /// Its kind (`box/precision-2vf`).
+    pub kind: String,
+    /// Its distance to what was seen (see [`RecognitionIndex::rank_templates`] and
+    /// [`RecognitionIndex::rank_features`]).
+    pub distance: f32,
+    /// Its kind's share of the vote (approach stage; 0 at the grasp stage).
+    pub confidence: f32,
+}
+
+/// What the recogniser says.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(tag = "type", rename_all = "snake_case")]
+pub enum Verdict {
+    /// A stored skill fits.
+    Recognised {
+        /// Session time of the decision (ns).
+        session_ns: u64,
+        /// Approach or grasp.
+        stage: Stage,
+        /// The object the operator is expected to grasp (its name in the scene).
+        object: String,
+        /// The skill.
+        skill: Candidate,
+        /// The best skills of the other kinds (approach), or the next nearest (grasp).
+        runners_up: Vec<Candidate>,
+    },
+    /// Nothing stored fits: the grasp will be learned.
+    Unknown {
+        /// Session time of the decision (ns).
+        session_ns: u64,
+        /// Approach or grasp.
+        stage: Stage,
+        /// The object the operator is expected to grasp.
+        object: String,
+        /// The nearest stored skill, if any is stored.
+        nearest: Option<Candidate>,
+    },
+}
+
+impl Verdict {
+    /// Session time of the decision (ns).
+    pub fn session_ns(&self) -> u64 {
+        match self {
+            Verdict::Recognised { session_ns, .. } | Verdict::Unknown { session_ns, .. } => {
+                *session_ns
+            }
+        }
+    }
+
+    /// The stage.
+    pub fn stage(&self) -> Stage {
+        match self {
+            Verdict::Recognised { stage, .. } | Verdict::Unknown { stage, .. } => *stage,
+        }
+    }
+
+    /// The object named.
+    pub fn object(&self) -> &str {
+        match self {
+            Verdict::Recognised { object, .. } | Verdict::Unknown { object, .. } => object,
+        }
+    }
+
+    /// The skill recognised (`None` for `unknown`).
+    pub fn skill(&self) -> Option<&Candidate> {
+        match self {
+            Verdict::Recognised { skill, .. } => Some(skill),
+            Verdict::Unknown { .. } => None,
+        }
+    }
+}
+
+/// What is accumulated of one fingertip's contact with the grasped object.
+#[derive(Debug, Clone, Copy, Default)]
+struct TipSum {
+    p_b: Vector,
+    n_b: Vector,
+    count: u32,
+}
+
+/// The grasp being made: the object two fingertips touch and what they did.
+#[derive(Debug, Clone, Copy)]
+struct GraspTrack {
+    object: usize,
+    since_ns: u64,
+    observations: u32,
+    tips: [TipSum; MAX_TIPS],
+    decided: bool,
+}
+
+/// The recogniser of one stream. See the module docs.
+#[derive(Debug)]
+pub struct Recogniser {
+    index: Arc<RecognitionIndex>,
+    objects: Vec<ObjectInfo>,
+    params: RecogniserParams,
+    builders: Vec<TemplateBuilder>,
+    /// The last approach verdict of this grasp: object, and the kind (`None`: unknown).
+    said: Option<(usize, Option<u32>)>,
+    grasp: Option<GraspTrack>,
+    last_touch_ns: Option<u64>,
+    scratch: Scratch,
+    /// Decisions taken (template or feature comparisons), and the verdicts.
+    decisions: u64,
+    verdicts: Vec<Verdict>,
+}
+
+impl Recogniser {
+    /// A recogniser of a scene's `objects` (in the scene's order) against `index`.
+    pub fn new(
+        index: Arc<RecognitionIndex>,
+        objects: Vec<ObjectInfo>,
+        params: RecogniserParams,
+    ) -> Recogniser {
+        let builders = fresh_builders(&objects);
+        Recogniser {
+            index,
+            objects,
+            params,
+            builders,
+            said: None,
+            grasp: None,
+            last_touch_ns: None,
+            scratch: Scratch::default(),
+            decisions: 0,
+            verdicts: Vec::new(),
+        }
+    }
+
+    /// The stored skills it compares with.
+    pub fn index(&self) -> &RecognitionIndex {
+        &self.index
+    }
+
+    /// Every verdict so far, in order.
+    pub fn verdicts(&self) -> &[Verdict] {
+        &self.verdicts
+    }
+
+    /// Comparisons with the stored skills made so far.
+    pub fn decisions(&self) -> u64 {
+        self.decisions
+    }
+
+    /// Takes one observation; returns the verdicts it led to (usually none).
+    pub fn observe(&mut self, obs: &Observation) -> &[Verdict] {
+        let before = self.verdicts.len();
+        let hand = obs.hand();
+        let n = self.builders.len().min(obs.n_objects);
+        let mut crossed: Option<(usize, usize)> = None;
+        let mut onset: Option<usize> = None;
+        for i in 0..n {
+            let shape = self.objects[i].shape;
+            match self.builders[i].observe(obs, &hand, &shape) {
+                Progress::Checkpoint(k) if crossed.is_none_or(|(_, kk)| k > kk) => {
+                    crossed = Some((i, k))
+                }
+                Progress::Onset => onset = Some(i),
+                _ => {}
+            }
+        }
+        if let Some((i, k)) = crossed {
+            if k >= self.params.decide_from && self.is_near(i) {
+                self.decide_approach(i, obs.t_ns, k + 1 == CHECKPOINTS_M.len());
+            }
+        }
+        if let Some(i) = onset {
+            self.decide_approach(i, obs.t_ns, true);
+        }
+        self.track_grasp(obs);
+        &self.verdicts[before..]
+    }
+
+    /// Whether object `i` is among the nearest to the hand.
+    fn is_near(&self, i: usize) -> bool {
+        let nearest = self
+            .builders
+            .iter()
+            .map(|b| b.distance_m())
+            .fold(f64::INFINITY, f64::min);
+        self.builders[i].distance_m() <= nearest + self.params.near_margin_m
+    }
+
+    /// An approach-stage decision on object `i`; `last` says it at any confidence.
+    fn decide_approach(&mut self, i: usize, t_ns: u64, last: bool) {
+        if self.grasp.is_some_and(|g| g.decided) {
+            return;
+        }
+        self.decisions += 1;
+        let template: [f32; TEMPLATE_DIM] = *self.builders[i].template();
+        let p = self.params;
+        let index = Arc::clone(&self.index);
+        let ranked = index
+            .rank_templates(&template, p.top_k, MIN_COMPARED, &mut self.scratch)
+            .to_vec();
+        let object = self.objects[i].name.clone();
+        let Some(best) = ranked.first().copied() else {
+            self.say(i, None, || Verdict::Unknown {
+                session_ns: t_ns,
+                stage: Stage::Approach,
+                object,
+                nearest: None,
+            });
+            return;
+        };
+        let candidate = |r: &super::index::Ranked, confidence: f32| Candidate {
+            skill_id: index.skill_id(r.row),
+            kind: index.kind(r.row).to_owned(),
+            distance: r.distance,
+            confidence,
+        };
+        if best.distance > p.open_set_distance {
+            let nearest = candidate(&best, 0.0);
+            self.say(i, None, || Verdict::Unknown {
+                session_ns: t_ns,
+                stage: Stage::Approach,
+                object,
+                nearest: Some(nearest),
+            });
+            return;
+        }
+        let (kind, confidence, shares) = vote(&index, &ranked, p.temperature);
+        if confidence < p.min_confidence && !last {
+            return;
+        }
+        let skill = candidate(&best, confidence);
+        let runners_up: Vec<Candidate> = shares
+            .iter()
+            .filter(|s| s.0 != kind)
+            .take(3)
+            .map(|s| {
+                let r = ranked
+                    .iter()
+                    .find(|r| r.row == s.2)
+                    .copied()
+                    .unwrap_or(best);
+                candidate(&r, s.1)
+            })
+            .collect();
+        self.say(i, Some(kind), || Verdict::Recognised {
+            session_ns: t_ns,
+            stage: Stage::Approach,
+            object,
+            skill,
+            runners_up,
+        });
+    }
+
+    /// Records a verdict on object `i` of kind `kind` (`None`: unknown) if it differs from the
+    /// last one said of this grasp.
+    fn say(&mut self, i: usize, kind: Option<u32>, verdict: impl FnOnce() -> Verdict) {
+        if self.said == Some((i, kind)) {
+            return;
+        }
+        self.said = Some((i, kind));
+        self.verdicts.push(verdict());
+    }
+
+    /// Follows the grasp: the grasp stage, and the end of the grasp.
+    fn track_grasp(&mut self, obs: &Observation) {
+        let t = obs.t_ns;
+        let mut touching_any = false;
+        for touch in obs.touch[..obs.n_tips].iter().flatten() {
+            touching_any |= touch.object < self.builders.len();
+        }
+        if touching_any {
+            self.last_touch_ns = Some(t);
+        } else if let Some(last) = self.last_touch_ns {
+            if t.saturating_sub(last) >= self.params.release_ns {
+                // The grasp is over: the next reach starts from scratch.
+                self.builders = fresh_builders(&self.objects);
+                self.said = None;
+                self.grasp = None;
+                self.last_touch_ns = None;
+            }
+            return;
+        }
+        // The object two or more fingertips touch.
+        let held = (0..self.builders.len().min(obs.n_objects)).find(|&i| obs.touching(i) >= 2);
+        let Some(i) = held else {
+            if self.grasp.is_some_and(|g| !g.decided) {
+                self.grasp = None;
+            }
+            return;
+        };
+        let g = match &mut self.grasp {
+            Some(g) if g.object == i => g,
+            Some(g) if g.decided => return,
+            _ => self.grasp.insert(GraspTrack {
+                object: i,
+                since_ns: t,
+                observations: 0,
+                tips: [TipSum::default(); MAX_TIPS],
+                decided: false,
+            }),
+        };
+        if g.decided {
+            return;
+        }
+        g.observations += 1;
+        for (k, touch) in obs.touch[..obs.n_tips].iter().enumerate() {
+            if let Some(touch) = touch.filter(|x| x.object == i) {
+                let s = &mut g.tips[k];
+                s.p_b += touch.p_b;
+                s.n_b += touch.normal_b;
+                s.count += 1;
+            }
+        }
+        if t.saturating_sub(g.since_ns) >= self.params.grasp_stage_ns {
+            g.decided = true;
+            let g = *g;
+            self.decide_grasp(&g, t);
+        }
+    }
+
+    /// The grasp-stage decision.
+    fn decide_grasp(&mut self, g: &GraspTrack, t_ns: u64) {
+        self.decisions += 1;
+        let i = g.object;
+        let query = grasp_feature(&self.objects[i], g);
+        let index = Arc::clone(&self.index);
+        let ranked = index
+            .rank_features(&query, &GRASP_STAGE_DIMS, 4, &mut self.scratch)
+            .to_vec();
+        let object = self.objects[i].name.clone();
+        let candidate = |r: &super::index::Ranked| Candidate {
+            skill_id: index.skill_id(r.row),
+            kind: index.kind(r.row).to_owned(),
+            distance: r.distance,
+            confidence: 0.0,
+        };
+        let approach_unknown = self.said == Some((i, None));
+        let approach_said = self.said.is_some_and(|s| s.0 == i);
+        let unknown = match ranked.first() {
+            None => true,
+            Some(best) => {
+                approach_unknown
+                    || (!approach_said && best.distance > self.params.grasp_open_set_distance)
+            }
+        };
+        let verdict = if unknown {
+            Verdict::Unknown {
+                session_ns: t_ns,
+                stage: Stage::Grasp,
+                object,
+                nearest: ranked.first().map(candidate),
+            }
+        } else {
+            Verdict::Recognised {
+                session_ns: t_ns,
+                stage: Stage::Grasp,
+                object,
+                skill: candidate(&ranked[0]),
+                runners_up: ranked[1..].iter().map(candidate).collect(),
+            }
+        };
+        self.verdicts.push(verdict);
+    }
+}
+
+fn fresh_builders(objects: &[ObjectInfo]) -> Vec<TemplateBuilder> {
+    objects
+        .iter()
+        .enumerate()
+        .map(|(i, o)| TemplateBuilder::new(i, o))
+        .collect()
+}
+
+/// What the feature vector of a grasp is known to be at the grasp stage: the object, and the
+/// fingertips that touched it for 30 % of the observations since two first did (their mean
+/// points and normals), as the segmentation computes them over the held part
+/// (`segmentation::FEATURE_DIMENSIONS`). The other dimensions are 0 (not compared).
+fn grasp_feature(object: &ObjectInfo, g: &GraspTrack) -> [f32; FEATURE_DIM] {
+    let mut frames = [ContactFrame::from_normal(Vector::zeros(), Vector::z()); MAX_TIPS];
+    let mut n = 0;
+    let mut mean_abs = Vector::zeros();
+    let needed = (g.observations as f64 * 0.3).max(1.0);
+    for s in &g.tips {
+        if (s.count as f64) < needed {
+            continue;
+        }
+        let p = s.p_b / s.count as f64;
+        let Some(normal) = s.n_b.try_normalize(1e-9) else {
+            continue;
+        };
+        frames[n] = ContactFrame::from_normal(p, normal);
+        mean_abs += normal.abs();
+        n += 1;
+    }
+    if n > 0 {
+        mean_abs /= n as f64;
+    }
+    let sizes = object.shape.sizes();
+    let qp = QualityParams {
+        torque_scale: Some(sizes.iter().map(|v| v * v).sum::<f64>().sqrt()),
+        ..QualityParams::default()
+    };
+    let friction = Friction {
+        mu: object.mu,
+        mu_torsion: object.mu_torsion,
+    };
+    let quality = (n > 0)
+        .then(|| grasp_quality(&frames[..n], ContactModel::SoftFinger, &friction, &qp).ok())
+        .flatten();
+    let kind = object.shape.kind();
+    let raw = [
+        object.mass.max(1e-9).ln(),
+        object.mu,
+        n as f64,
+        quality.as_ref().map_or(0.0, |q| q.epsilon),
+        quality
+            .as_ref()
+            .map_or(0.0, |q| q.volume.max(0.0).powf(1.0 / 6.0)),
+        0.0,
+        0.0,
+        0.0,
+        0.0,
+        0.0,
+        mean_abs.x,
+        mean_abs.y,
+        mean_abs.z,
+        (kind == ShapeKind::Sphere) as u8 as f64,
+        (kind == ShapeKind::Box) as u8 as f64,
+        (kind == ShapeKind::Cylinder) as u8 as f64,
+    ];
+    raw.map(|v| if v.is_finite() { v as f32 } else { 0.0 })
+}
+
+/// Values a stored template and a query must have in common to be compared in an approach
+/// decision: the object and one checkpoint (a skill without a template is left out).
+pub const MIN_COMPARED: usize = super::features::OBJECT_DIMS + super::features::CHECKPOINT_DIMS;
+
+/// On-line learning's decision for a completed grasp: the stored skill it matched, or `None`
+/// (store it as new). With an approach template, the template decides as the approach stage
+/// does (nearest farther than [`RecogniserParams::open_set_distance`]: new; else the vote's
+/// kind), and the grasp is linked to the stored skill of that kind nearest by its whole
+/// feature vector (the distance `similar` uses). Without one, the nearest by feature within
+/// [`RecogniserParams::grasp_open_set_distance`] of the grasp-stage dimensions.
+pub fn link_completed(
+    index: &RecognitionIndex,
+    template: Option<&[f32; TEMPLATE_DIM]>,
+    feature: &[f32; FEATURE_DIM],
+    params: &RecogniserParams,
+    scratch: &mut Scratch,
+) -> Option<i64> {
+    if index.is_empty() {
+        return None;
+    }
+    let all: [usize; FEATURE_DIM] = std::array::from_fn(|j| j);
+    let Some(template) = template else {
+        let near = index
+            .rank_features(feature, &GRASP_STAGE_DIMS, 1, scratch)
+            .first()?;
+        if near.distance > params.grasp_open_set_distance {
+            return None;
+        }
+        let row = index.rank_features(feature, &all, 1, scratch).first()?.row;
+        return Some(index.skill_id(row));
+    };
+    let ranked = index
+        .rank_templates(template, params.top_k, MIN_COMPARED, scratch)
+        .to_vec();
+    let best = *ranked.first()?;
+    if best.distance > params.open_set_distance {
+        return None;
+    }
+    let kind = vote(index, &ranked, params.temperature).0;
+    let n = index.len();
+    index
+        .rank_features(feature, &all, n, scratch)
+        .iter()
+        .find(|r| index.kind_index(r.row) == kind)
+        .map(|r| index.skill_id(r.row))
+}
+
+/// The kind the ranked skills vote for, its share, and every kind's (kind, share, best row).
+fn vote(
+    index: &RecognitionIndex,
+    ranked: &[super::index::Ranked],
+    temperature: f32,
+) -> (u32, f32, Vec<(u32, f32, usize)>) {
+    let Some(best) = ranked.first() else {
+        return (0, 0.0, Vec::new());
+    };
+    let mut shares: Vec<(u32, f32, usize)> = Vec::new();
+    let mut total = 0.0f32;
+    for r in ranked {
+        let w = (-(r.distance - best.distance) / temperature.max(1e-6)).exp();
+        total += w;
+        let k = index.kind_index(r.row);
+        match shares.iter_mut().find(|s| s.0 == k) {
+            Some(s) => s.1 += w,
+            None => shares.push((k, w, r.row)),
+        }
+    }
+    for s in &mut shares {
+        s.1 /= total;
+    }
+    let kind = index.kind_index(best.row);
+    let share = shares.iter().find(|s| s.0 == kind).map_or(0.0, |s| s.1);
+    (kind, share, shares)
+}
