@@ -71,6 +71,13 @@ pub struct ClientSummary {
     pub session_id: Option<i64>,
     /// Its skills.
     pub skill_ids: Vec<i64>,
+    /// The assistant's events (`recognised`, `unknown`, `applying`, `robot`, `robot_report`,
+    /// ...), in order, as the server sent them.
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub assist_events: Vec<serde_json::Value>,
+    /// Per stored skill: the stored skill it matched (`None`: stored as new).
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub matched_skill_ids: Vec<Option<i64>>,
     /// Whether it was stored as incomplete.
     pub incomplete: Option<bool>,
     /// Wall-clock seconds from connecting to `stored`.
@@ -131,6 +138,7 @@ pub async fn run(
         .await
         .map_err(|e| err("sending start", e))?;
     // The answer to start: `started`, or an error and a close.
+    let mut summary_assist = Vec::new();
     loop {
         match next(&mut ws).await? {
             Incoming::Event(e @ Event::Started { .. }) => {
@@ -143,6 +151,7 @@ pub async fn run(
                 )))
             }
             Incoming::Event(e) => on_event(&e),
+            Incoming::Assist(v) => summary_assist.push(v),
             Incoming::Feedback(_) => {
                 return Err(ClientError("feedback before the session started".into()))
             }
@@ -155,6 +164,7 @@ pub async fn run(
     }
     let mut summary = ClientSummary {
         kind: "summary",
+        assist_events: summary_assist,
         ..ClientSummary::default()
     };
     let mut first_t: Option<(u64, Instant)> = None;
@@ -196,6 +206,7 @@ pub async fn run(
                     break;
                 }
                 Incoming::Event(e) => on_event(&e),
+                Incoming::Assist(v) => summary.assist_events.push(v),
                 Incoming::Closed(reason) => {
                     return Err(ClientError(format!(
                         "the server closed the connection mid-session: {reason}"
@@ -222,10 +233,12 @@ pub async fn run(
                     summary.session_id = Some(*session_id);
                     summary.incomplete = Some(*incomplete);
                     summary.skill_ids = skills.iter().map(|s| s.skill_id).collect();
+                    summary.matched_skill_ids = skills.iter().map(|s| s.matched_skill_id).collect();
                 }
             }
             Incoming::Feedback(fb) if fb.stale => summary.stale_frames += 1,
             Incoming::Feedback(_) => {}
+            Incoming::Assist(v) => summary.assist_events.push(v),
             Incoming::Closed(_) => break,
         }
     }
@@ -242,6 +255,8 @@ pub async fn run(
 
 enum Incoming {
     Event(Event),
+    /// An event of the assistant (`recognised`, `unknown`, `robot`, ...).
+    Assist(serde_json::Value),
     Feedback(proto::Feedback),
     Closed(String),
 }
@@ -257,9 +272,18 @@ where
         match msg {
             Err(e) => return Ok(Incoming::Closed(e.to_string())),
             Ok(Message::Text(text)) => {
-                let event: Event = serde_json::from_str(text.as_str())
+                if let Ok(event) = serde_json::from_str::<Event>(text.as_str()) {
+                    return Ok(Incoming::Event(event));
+                }
+                // The assistant's events have types of their own.
+                let value: serde_json::Value = serde_json::from_str(text.as_str())
                     .map_err(|e| err(&format!("an event from the server ({text})"), e))?;
-                return Ok(Incoming::Event(event));
+                if value.get("type").and_then(|t| t.as_str()).is_none() {
+                    return Err(ClientError(format!(
+                        "an event from the server without a type: {text}"
+                    )));
+                }
+                return Ok(Incoming::Assist(value));
             }
             Ok(Message::Binary(bytes)) => {
                 let fb = proto::Feedback::decode(bytes.as_ref())

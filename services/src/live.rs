@@ -35,6 +35,9 @@ use nalgebra::{Quaternion, Translation3};
 use prost::Message as _;
 use serde::{Deserialize, Serialize};
 
+use crate::assist::assistant::{AssistSetup, Assistant};
+use crate::assist::features::Observation;
+use crate::assist::offline::OBSERVATION_PERIOD_NS;
 use crate::error::{RecordingError, Result};
 use crate::session::import::{interpolate_pose, GloveDrive};
 use crate::session::{
@@ -77,7 +80,7 @@ const MAX_LISTED_STALE: usize = 32;
 /// How far a wrist quaternion's norm may be from 1 before it is refused (it is normalised).
 const QUATERNION_NORM_TOLERANCE: f64 = 0.01;
 
-/// What the assistant does in a live session (the assistant itself is issue 20's).
+/// What the assistant does in a live session ([`crate::assist`]).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
 pub enum AssistMode {
@@ -317,6 +320,8 @@ pub struct LiveConfig {
     pub calibration: DofCalibration,
     /// It as given (recorded in the session's metadata), if any.
     pub calibration_given: Option<Calibration>,
+    /// The assistant's mode (its set-up is given to [`LiveSession::start_assisted`]).
+    pub assist: AssistMode,
 }
 
 impl LiveConfig {
@@ -327,23 +332,21 @@ impl LiveConfig {
         hand: HandModel,
         hand_urdf: Option<String>,
     ) -> Result<LiveConfig> {
-        match start.assist.mode {
-            AssistMode::Off => {}
-            mode => {
+        match (start.assist.mode, &start.assist.robot) {
+            (AssistMode::Apply, None) => {
                 return Err(invalid(
-                    "assist.mode",
-                    format!(
-                        "{:?} needs the assistant, which is not built yet: use \"off\"",
-                        serde_json::to_value(mode).unwrap_or_default()
-                    ),
+                    "assist.robot",
+                    "assist mode \"apply\" needs the robot hand to apply the skill on (a \
+                     built-in hand or one of GET /api/v1/hands)",
                 ))
             }
-        }
-        if let Some(robot) = &start.assist.robot {
-            return Err(invalid(
-                "assist.robot",
-                format!("{robot:?} is only taken with assist mode \"apply\""),
-            ));
+            (AssistMode::Off | AssistMode::Suggest, Some(robot)) => {
+                return Err(invalid(
+                    "assist.robot",
+                    format!("{robot:?} is only taken with assist mode \"apply\""),
+                ))
+            }
+            _ => {}
         }
         let name = start.name.clone().unwrap_or_else(|| "live".to_owned());
         if name.is_empty() || name.len() > MAX_NAME_BYTES || name.chars().any(char::is_control) {
@@ -379,6 +382,7 @@ impl LiveConfig {
             started_at: SystemTime::now(),
             calibration,
             calibration_given: start.calibration.clone().filter(|c| !c.is_empty()),
+            assist: start.assist.mode,
         })
     }
 }
@@ -433,6 +437,8 @@ pub struct Answer<'a> {
     pub failure: Option<SampleError>,
     /// The sample ended a stale period.
     pub resumed: bool,
+    /// The assistant's events since the last frame, as JSON text frames.
+    pub events: Vec<String>,
 }
 
 /// Counts of a live session, written to its `live` metadata record at the end.
@@ -452,6 +458,9 @@ pub struct LiveStats {
     pub failed_ticks: u64,
     /// Session time of the first tick a fingertip transmitted force (ns).
     pub first_contact_ns: Option<u64>,
+    /// The assistant's events at the end of the session (the robot's report), as JSON text
+    /// frames.
+    pub assist_tail: Vec<String>,
 }
 
 /// The glove's input at one sample, in session time.
@@ -486,6 +495,11 @@ pub struct LiveSession {
     sample: proto::Sample,
     feedback: proto::Feedback,
     encoded: Vec<u8>,
+    /// The assistant (issue 20), when the session has one, and the mode.
+    assistant: Option<Assistant>,
+    assist_mode: AssistMode,
+    /// Index of the thumb's fingertip (for the assistant's observations).
+    thumb: usize,
 }
 
 impl std::fmt::Debug for LiveSession {
@@ -504,6 +518,18 @@ impl LiveSession {
         config: &LiveConfig,
         out: SessionOut<'_>,
         view: Option<LiveView>,
+    ) -> Result<LiveSession> {
+        Self::start_assisted(config, out, view, None)
+    }
+
+    /// [`LiveSession::start`] with the assistant set up by `assist` (its own thread; the
+    /// recording gets its topics, [`crate::session::TOPIC_ASSIST_EVENTS`] and
+    /// [`crate::session::TOPIC_ASSIST_ROBOT`]).
+    pub fn start_assisted(
+        config: &LiveConfig,
+        out: SessionOut<'_>,
+        view: Option<LiveView>,
+        assist: Option<AssistSetup>,
     ) -> Result<LiveSession> {
         let scene = &config.scene;
         let table_height = scene.table_height;
@@ -540,12 +566,20 @@ impl LiveSession {
             table_height: Some(table_height),
             hand_urdf: config.hand_urdf.clone(),
             scene: config.listed.then(|| scene.clone()),
-            assist_topics: false,
+            assist_topics: assist.is_some(),
         };
         let recorder =
             SessionRecorder::create_with_view(out, dfs.hand(), dfs.object(), &info, view)?;
         let dof = dfs.hand().dof();
         let n_tips = dfs.hand().fingertips.len();
+        let thumb = dfs_core::hand::thumb_of(dfs.hand());
+        let assistant = match assist {
+            None => None,
+            Some(setup) => Some(
+                Assistant::start(setup)
+                    .map_err(|e| RecordingError::io("starting the assistant's thread", e))?,
+            ),
+        };
         let input = Input {
             session_ns: 0,
             q: [0.0; MAX_DOF],
@@ -574,6 +608,9 @@ impl LiveSession {
                 ..Default::default()
             },
             encoded: Vec::with_capacity(1024),
+            assistant,
+            assist_mode: config.assist,
+            thumb,
         })
     }
 
@@ -620,12 +657,29 @@ impl LiveSession {
         let failure = self.step_to_current();
         self.stats.samples += 1;
         let resumed = std::mem::replace(&mut self.stale, false);
+        let events = self.assist_events();
         self.fill_feedback(self.sample.t_ns);
         Ok(Answer {
             feedback: &self.encoded,
             failure,
             resumed,
+            events,
         })
+    }
+
+    /// The assistant's events since the last call, recorded on its topics, as JSON texts.
+    fn assist_events(&mut self) -> Vec<String> {
+        let Some(assistant) = &self.assistant else {
+            return Vec::new();
+        };
+        let mut out = Vec::new();
+        for e in assistant.drain() {
+            if let Some(recorder) = self.recorder.as_mut() {
+                crate::assist::record::log_event(recorder, &e);
+            }
+            out.push(serde_json::to_string(&e).unwrap_or_default());
+        }
+        out
     }
 
     /// Decodes and validates a frame into `self.cur` (leaving `self.prev` the last accepted).
@@ -875,6 +929,11 @@ impl LiveSession {
             {
                 self.stats.first_contact_ns = Some(t);
             }
+            if let Some(assistant) = &self.assistant {
+                if t.is_multiple_of(OBSERVATION_PERIOD_NS) {
+                    assistant.offer(&Observation::of_tick(t, &base, self.thumb, out));
+                }
+            }
             if let Some(recorder) = self.recorder.as_mut() {
                 // As an import records: a glove with torques as measured, one of positions
                 // only as stepped (its posture and the coupling's torque).
@@ -964,9 +1023,23 @@ impl LiveSession {
     /// Ends the session: writes the `live` metadata record (why it ended, whether it is
     /// complete, the counts) and finishes the file. Every tick stepped is in it.
     pub fn finish(mut self, reason: EndReason) -> Result<LiveStats> {
+        let assisted = self.assistant.take().map(Assistant::finish);
         let Some(mut recorder) = self.recorder.take() else {
             return Ok(self.stats);
         };
+        let mut assist_meta = None;
+        if let Some((summary, tail)) = assisted {
+            for e in &tail {
+                crate::assist::record::log_event(&mut recorder, e);
+                self.stats
+                    .assist_tail
+                    .push(serde_json::to_string(e).unwrap_or_default());
+            }
+            assist_meta = Some(crate::assist::record::summary_metadata(
+                self.assist_mode,
+                &summary,
+            ));
+        }
         let s = &self.stats;
         let mut meta = BTreeMap::from([
             ("end_reason".to_owned(), reason.name().to_owned()),
@@ -993,6 +1066,9 @@ impl LiveSession {
         ]);
         if let Some(t) = s.first_contact_ns {
             meta.insert("first_contact_ns".to_owned(), t.to_string());
+        }
+        if let Some(m) = assist_meta {
+            meta.extend(m);
         }
         recorder.add_metadata(LIVE_METADATA, meta)?;
         recorder.finish()?;

@@ -2,6 +2,8 @@
 //! `skills`, or a stored skill's parameters) into dfs-core's [`SkillSpec`], hand specs read
 //! from files, and the replay recorded as an MCAP file that Foxglove shows like a session
 //! (same topics), with a `replay` metadata record holding the skill, the hand and the report.
+//! A replay driven by the operator's phases as they happen ([`driven_replay`]) is the
+//! assistant's `apply` mode: the live session owns it and ticks it with its own.
 
 use std::collections::BTreeMap;
 use std::path::Path;
@@ -10,7 +12,8 @@ use dfs_core::contact::Friction;
 use dfs_core::hand::{builtin_hand, builtin_spec, thumb_of, HandModel, HandSpec};
 use dfs_core::math::Vector;
 use dfs_core::replay::{
-    run_with_stop, ReplayParams, ReplayReport, SkillContact, SkillKeyPose, SkillSpec,
+    run_with_stop, DrivenReplay, DrivenStart, ReplayParams, ReplayReport, ReplayTick, SkillContact,
+    SkillKeyPose, SkillSpec,
 };
 use dfs_core::scenario::Phase;
 use dfs_core::{DfsError, Stop};
@@ -289,15 +292,7 @@ pub fn replay_skill_until(
         if failed.is_some() {
             return;
         }
-        let data = TickData {
-            time_ns: tick.time_ns,
-            q: tick.q,
-            tau: tick.tau,
-            base: tick.base,
-            output: tick.output,
-            kinematics: tick.kinematics,
-        };
-        if let Err(e) = recorder.record(&data) {
+        if let Err(e) = recorder.record(&replay_tick_data(tick)) {
             failed = Some(e);
         }
     })
@@ -320,4 +315,38 @@ pub fn replay_skill_until(
     recorder.add_metadata(REPLAY_METADATA, meta)?;
     recorder.finish()?;
     Ok(report)
+}
+
+/// A replay tick as a recorder's tick (the same topics as a session's), at the tick's own
+/// `time_ns`; a live session recording its driven replay sets its own session time.
+pub fn replay_tick_data<'a>(tick: &ReplayTick<'a>) -> TickData<'a> {
+    TickData {
+        time_ns: tick.time_ns,
+        q: tick.q,
+        tau: tick.tau,
+        base: tick.base,
+        output: tick.output,
+        kinematics: tick.kinematics,
+    }
+}
+
+/// Retargets `skill` onto `hand` for a replay driven by the operator's phases as they happen
+/// (the assistant's `apply` mode, [`DrivenReplay`]): its clock's real time starts at `start_s`
+/// (the live session's time, so that phase changes are told in session time). A plan the hand
+/// cannot carry out is [`DrivenStart::Refused`] with its report, as [`replay_skill`] reports
+/// it without simulating. Errors as [`replay_skill_until`]'s: invalid input (the skill's
+/// object included, as a recorded replay checks it) and [`RecordingError::Simulation`] of
+/// [`DfsError::Cancelled`] once `stop` is set while planning.
+pub fn driven_replay(
+    hand: &LoadedHand,
+    skill: &SkillSpec,
+    params: &ReplayParams,
+    start_s: f64,
+    stop: &Stop,
+) -> Result<DrivenStart> {
+    dfs_core::object::RigidObject::new(skill.shape, skill.mass)
+        .map_err(|e| invalid("skill.object", e.to_string()))?;
+    let location = format!("hand {:?}", hand.model.name);
+    DrivenReplay::start(&hand.model, hand.thumb, skill, params, start_s, stop)
+        .map_err(|e| run_error(location, e))
 }

@@ -1,12 +1,15 @@
 //! Skill replay on robot hands, end to end: a built-in scenario recorded with glove10,
 //! segmented into a skill, retargeted onto a hand and simulated in the DFS.
 
-use dfs_core::replay::{FailureReason, ReplayParams, ReplayReport, SkillSpec};
-use dfs_core::scenario::Scenario;
+use dfs_core::replay::{
+    DrivenReplay, DrivenStart, FailureReason, ReplayParams, ReplayReport, SkillSpec,
+};
+use dfs_core::scenario::{Phase, Scenario};
+use dfs_core::Stop;
 use services::mcap_io::{read_session_file, ReadLimits};
 use services::replay::{
-    load_builtin_hand, load_hand_from_texts, replay_skill, skill_spec_from_json, LoadedHand,
-    ReplaySource, REPLAY_METADATA,
+    driven_replay, load_builtin_hand, load_hand_from_texts, replay_skill, skill_spec_from_json,
+    LoadedHand, ReplaySource, REPLAY_METADATA,
 };
 use services::segmentation::{segment, SegmentParams, Skill};
 use services::session::{
@@ -71,6 +74,104 @@ fn a_sphere_lift_recorded_with_glove10_replays_on_allegro_barrett_inspire_and_th
         );
         assert!(r.quality.force_closure, "{name}");
     }
+}
+
+/// A driven replay of `skill` on `hand`, its clock starting at session time 10 s.
+fn start_driven(hand: &LoadedHand, skill: &SkillSpec) -> DrivenStart {
+    driven_replay(hand, skill, &ReplayParams::default(), 10.0, Stop::never()).unwrap()
+}
+
+/// Drives `replay` by the operator's phases `(phase, seconds in it)` from session time 10 s
+/// and ticks it to its end; the report and the object's last reference.
+fn drive(replay: &mut DrivenReplay, schedule: &[(Phase, f64)]) -> (ReplayReport, [f64; 3]) {
+    let mut now = 10.0;
+    'schedule: for &(phase, d) in schedule {
+        assert!(replay.set_phase(phase, now), "{phase:?}");
+        for _ in 0..(d / 1e-3).round() as usize {
+            if !replay.tick().unwrap() {
+                assert_eq!(phase, Phase::Retreat, "over early at {now}");
+                break 'schedule;
+            }
+            now += 1e-3;
+        }
+    }
+    while replay.tick().unwrap() {}
+    let s = replay.state();
+    assert!((s.now_s - now).abs() < 1.0, "{} vs {now}", s.now_s);
+    let r = s.tick.reference.translation.vector;
+    (replay.report(), [r.x, r.y, r.z])
+}
+
+/// In the assistant's `apply` mode the skill follows the operator's phases as they happen: the
+/// glove10 sphere lift on allegro, barrett and inspire, driven by the skill's own phases at its
+/// own times, holds like the fixed-clock replay; driven by a slower operator (each phase 1.5×,
+/// the hold 3×) or a quicker one (0.7×), it still holds the sphere, lifts it and sets it down
+/// where the skill did.
+#[test]
+fn a_recorded_sphere_lift_replays_driven_by_the_operators_phases() {
+    let skill = recorded_skill("sphere-lift");
+    let last = skill.motion.last().unwrap();
+    let end = skill.start_pose() * skill.key_pose(last.time_s);
+    for name in ["allegro", "barrett", "inspire"] {
+        let hand = load_builtin_hand(name).unwrap();
+        let fixed = replay(&hand, &skill);
+        assert!(fixed.success, "{name}: {}", fixed.detail);
+        let scaled = |f: f64, hold: f64| -> Vec<(Phase, f64)> {
+            let k = |p: Phase| if p == Phase::Hold { hold } else { f };
+            skill.phases.iter().map(|&(p, d)| (p, d * k(p))).collect()
+        };
+        for (what, schedule) in [
+            ("own", scaled(1.0, 1.0)),
+            ("stretched", scaled(1.5, 3.0)),
+            ("compressed", scaled(0.7, 0.7)),
+        ] {
+            let DrivenStart::Running(mut driven) = start_driven(&hand, &skill) else {
+                panic!("{name}: refused");
+            };
+            let (r, reference) = drive(&mut driven, &schedule);
+            eprintln!(
+                "{name} {what}: {} {:.2} mm (fixed clock {:.2} mm), lifted {:.1} mm",
+                r.success,
+                r.position_error_max_m * 1e3,
+                fixed.position_error_max_m * 1e3,
+                r.lift_height_m * 1e3
+            );
+            assert!(
+                r.success,
+                "{name} {what}: {:?} {}",
+                r.failure_reason, r.detail
+            );
+            assert!(r.position_error_max_m < 0.02, "{name} {what}");
+            assert!(r.lift_height_m > 0.07, "{name} {what}: {}", r.lift_height_m);
+            if what == "own" {
+                let (a, b) = (fixed.position_error_max_m, r.position_error_max_m);
+                assert!((a - b).abs() < 0.005, "{name}: {a} vs {b}");
+            }
+            let e = (0..3)
+                .map(|i| (reference[i] - end.translation.vector[i]).powi(2))
+                .sum::<f64>()
+                .sqrt();
+            assert!(e < 1e-9, "{name} {what}: {e}");
+        }
+    }
+}
+
+/// A plan the hand cannot carry out is refused before anything runs, driven or not; a skill
+/// whose object is invalid is refused naming it.
+#[test]
+fn a_driven_replay_is_refused_like_a_replay() {
+    let skill = recorded_skill("box-pinch-lift");
+    let inspire = load_builtin_hand("inspire").unwrap();
+    let DrivenStart::Refused(r) = start_driven(&inspire, &skill) else {
+        panic!("inspire cannot pinch the box");
+    };
+    assert_refused_up_front(&r, FailureReason::Unreachable);
+    let mut bad = skill.clone();
+    bad.mass = -1.0;
+    let err =
+        driven_replay(&inspire, &bad, &ReplayParams::default(), 0.0, Stop::never()).unwrap_err();
+    assert!(matches!(err, RecordingError::InvalidInput { .. }), "{err}");
+    assert!(err.to_string().contains("skill.object"), "{err}");
 }
 
 #[test]

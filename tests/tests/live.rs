@@ -271,8 +271,8 @@ async fn a_bad_start_is_refused_before_any_sample_naming_the_field() {
             "object.shape",
         ),
         (
-            json!({"type": "start", "object": sphere_start()["object"], "assist": {"mode": "suggest"}}),
-            "assist.mode",
+            json!({"type": "start", "object": sphere_start()["object"], "assist": {"mode": "apply"}}),
+            "assist.robot",
         ),
         (
             json!({"type": "start", "object": sphere_start()["object"], "wrist": [0, 0, 0, 0, 0, 0, 0]}),

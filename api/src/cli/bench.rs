@@ -44,6 +44,25 @@ pub enum BenchCommand {
         #[arg(long, default_value = "allegro")]
         hand: String,
     },
+    /// Early recognition (issue 20): skills of every built-in grasp kind stored from training
+    /// seeds, held-out seeds recognised as they stream (anticipation 200 ms before the first
+    /// contact, the nearest stored skill by 1 s after it, each kind left out for the open set),
+    /// and the cost per observation with 10 000 stored skills.
+    Recognition {
+        /// Print JSON: `{"anticipated_fraction", "nearest_fraction", "unknown_fraction",
+        /// "stored_as_new_fraction", "median_decided_fraction", "cost", "sessions", ...}`.
+        #[arg(long)]
+        json: bool,
+        /// Training seeds per grasp kind.
+        #[arg(long, default_value_t = 5)]
+        train: u64,
+        /// Held-out seeds per grasp kind.
+        #[arg(long, default_value_t = 5)]
+        test: u64,
+        /// Stored skills the cost is measured with.
+        #[arg(long, default_value_t = 10_000)]
+        stored: usize,
+    },
     /// Segmentation of every built-in scenario × seeds scored against the ground truth, and
     /// the time to segment a long sphere-lift session.
     Segmentation {
@@ -299,6 +318,29 @@ pub fn run(c: BenchCommand) -> Result<(), CliError> {
                     "upload of {} {} s {} sessions ({} bytes each) over HTTP on loopback: median {:.1} ms, min {:.1} ms, max {:.1} ms (read + segment alone: {:.1} ms)",
                     r.uploads, r.duration, r.scenario, r.file_bytes, r.median_ms, r.min_ms,
                     r.max_ms, r.analyse_ms
+                );
+                Ok(())
+            }
+        }
+        BenchCommand::Recognition {
+            json,
+            train,
+            test,
+            stored,
+        } => {
+            let r = bench_recognition(train, test, stored)?;
+            if json {
+                print_json(&r)
+            } else {
+                let c = r.cost.as_ref();
+                println!(
+                    "recognition over {} held-out sessions ({:?} stored): target and kind named 200 ms before first contact {:.0} %, median decision at {:.0} % of the reach ({:.0} ms before contact); nearest stored skill named by 1 s after contact {:.0} %; kind left out: unknown {:.0} %, stored as new {:.0} %; cost per observation with {} skills: mean {:.2} µs, p99 {:.2} µs, max {:.0} µs, a deciding one {:.0} µs",
+                    r.sessions.len(), r.stored_per_kind, 100.0 * r.anticipated_fraction,
+                    100.0 * r.median_decided_fraction, r.median_lead_ms,
+                    100.0 * r.nearest_fraction, 100.0 * r.unknown_fraction,
+                    100.0 * r.stored_as_new_fraction, c.map_or(0, |c| c.stored_skills),
+                    c.map_or(0.0, |c| c.mean_us), c.map_or(0.0, |c| c.p99_us),
+                    c.map_or(0.0, |c| c.max_us), c.map_or(0.0, |c| c.decision_mean_us)
                 );
                 Ok(())
             }
@@ -763,4 +805,54 @@ fn bench_tick(iterations: usize) -> Result<TickBench, CliError> {
         iterations,
         contacts,
     })
+}
+
+/// The grasp kinds `icms bench recognition` stores and recognises: the built-in scenarios of
+/// one grasp each (a scene of three objects among them).
+const RECOGNITION_KINDS: [&str; 4] = [
+    "sphere-lift",
+    "box-pinch-lift",
+    "cylinder-power-grasp",
+    "table-three",
+];
+
+fn bench_recognition(
+    train: u64,
+    test: u64,
+    stored: usize,
+) -> Result<services::assist::evaluate::Evaluation, CliError> {
+    use dfs_core::scenario::Scenario;
+    let dir = tempfile::tempdir()?;
+    let scenarios = |seeds: std::ops::Range<u64>| -> Vec<Scenario> {
+        RECOGNITION_KINDS
+            .iter()
+            .flat_map(|k| {
+                seeds
+                    .clone()
+                    .filter_map(move |s| recognition_scenario(k, s))
+            })
+            .collect()
+    };
+    let mut progress = |done: usize, total: usize| {
+        eprint!("\rsessions recorded: {done}/{total}");
+        if done == total {
+            eprintln!();
+        }
+    };
+    Ok(services::assist::evaluate::evaluate(
+        services::assist::evaluate::EvalSetup {
+            train: scenarios(1..1 + train),
+            // Held-out seeds: never among the training ones.
+            test: scenarios(1000..1000 + test),
+            dir: dir.path(),
+            params: services::assist::recognise::RecogniserParams::default(),
+            cost_skills: Some(stored),
+            progress: &mut progress,
+        },
+    )?)
+}
+
+/// The scenario of a grasp kind for a seed.
+fn recognition_scenario(kind: &str, seed: u64) -> Option<dfs_core::scenario::Scenario> {
+    dfs_core::scenario::Scenario::builtin(kind, seed)
 }

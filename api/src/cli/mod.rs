@@ -3,6 +3,7 @@
 mod bench;
 mod dfs_static;
 mod glove;
+mod recognise;
 mod replay;
 mod reprocess;
 mod segment;
@@ -53,6 +54,9 @@ enum Command {
     /// Segments a session file into skills (one per grasp) with their hand-independent
     /// parameters.
     Segment(segment::SegmentArgs),
+    /// Runs the live assistant's recogniser over a recorded session against the stored skills:
+    /// which skill it recognises on which object, and when (session times).
+    Recognise(recognise::RecogniseArgs),
     /// The main job end to end: simulates every built-in scenario, stores the sessions and
     /// their skills in the skill data base (./icms-data) and lists the skills.
     Demo(skills::DemoArgs),
@@ -107,6 +111,7 @@ pub fn run() -> ExitCode {
         Command::ExportGlove(a) => sessions::run_export(a),
         Command::Glove(a) => glove::run_glove(*a),
         Command::Segment(a) => segment::run_segment(a),
+        Command::Recognise(a) => recognise::run_recognise(a),
         Command::Demo(a) => skills::run_demo(a),
         Command::Ingest(a) => skills::run_ingest(a),
         Command::Reprocess(a) => reprocess::run_reprocess(a),

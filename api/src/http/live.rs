@@ -23,9 +23,12 @@ use axum::extract::State;
 use axum::response::{IntoResponse, Response};
 use bytes::Bytes;
 use dfs_core::hand::HandModel;
+use services::assist::assistant::{AssistSetup, SkillLoader};
+use services::assist::features::ObjectInfo;
+use services::assist::recognise::RecogniserParams;
 use services::live::{
-    ClientMessage, EndReason, Event, LiveConfig, LiveSession, SampleError, StartMessage,
-    StoredSkill, MAX_FRAME_BYTES, STALE_AFTER,
+    AssistMode, ClientMessage, EndReason, Event, LiveConfig, LiveSession, SampleError,
+    StartMessage, StoredSkill, MAX_FRAME_BYTES, STALE_AFTER,
 };
 use services::session::{SessionOut, SessionSource};
 use services::store::{StagedBlob, StoreError};
@@ -305,7 +308,7 @@ async fn run_session(mut socket: WebSocket, st: AppState, _permit: OwnedSemaphor
             return;
         }
     };
-    let config = match resolve(&st, &start).await {
+    let (config, assist) = match resolve(&st, &start).await {
         Ok(c) => c,
         Err(message) => {
             send_error(&mut socket, None, message.clone()).await;
@@ -323,7 +326,8 @@ async fn run_session(mut socket: WebSocket, st: AppState, _permit: OwnedSemaphor
                 out: Box::new(staged.writer().map_err(|e| e.to_string())?),
                 name: staged.path().to_path_buf(),
             };
-            let session = LiveSession::start(&config, out, view).map_err(|e| e.to_string())?;
+            let session = LiveSession::start_assisted(&config, out, view, assist)
+                .map_err(|e| e.to_string())?;
             // Boxed: the session (its DFS some tens of kB) moves to the worker and back with
             // every frame, a pointer instead of a copy.
             Ok((staged, Box::new(session)))
@@ -356,6 +360,9 @@ async fn run_session(mut socket: WebSocket, st: AppState, _permit: OwnedSemaphor
             return;
         }
     };
+    for text in &stats.assist_tail {
+        let _ = socket.send(Message::Text(text.clone().into())).await;
+    }
     send_event(
         &mut socket,
         &Event::Ended {
@@ -448,25 +455,70 @@ async fn read_start(socket: &mut WebSocket, st: &AppState) -> Result<StartMessag
     }
 }
 
+/// A hand by name: built in, or stored (`GET /api/v1/hands`). `field` names the start's field
+/// in errors.
+async fn hand_named(
+    st: &AppState,
+    name: &str,
+    field: &str,
+) -> Result<services::replay::LoadedHand, String> {
+    if dfs_core::hand::BUILTIN_HANDS.contains(&name) {
+        return services::replay::load_builtin_hand(name).map_err(|e| format!("{field}: {e}"));
+    }
+    let stored = match st.store().get_hand(name).await {
+        Ok(h) => h,
+        Err(StoreError::HandNotFound(name)) => {
+            return Err(format!(
+                "{field}: no hand named {name:?} (a built-in hand or one of GET /api/v1/hands)"
+            ))
+        }
+        Err(e) => return Err(format!("{field}: {e}")),
+    };
+    stored.load().map_err(|e| format!("{field}: {e}"))
+}
+
 /// The session's set-up from its `start` message: the hand looked up (built-in or stored),
-/// every field validated. Errors name the field.
-async fn resolve(st: &AppState, start: &StartMessage) -> Result<LiveConfig, String> {
+/// every field validated, and the assistant's set-up when it is on (the stored skills as they
+/// are now, the robot hand looked up). Errors name the field.
+async fn resolve(
+    st: &AppState,
+    start: &StartMessage,
+) -> Result<(LiveConfig, Option<AssistSetup>), String> {
     let (hand, urdf) = if start.hand == "glove10" {
         (HandModel::glove10(), None)
     } else {
-        let stored = match st.store().get_hand(&start.hand).await {
-            Ok(h) => h,
-            Err(StoreError::HandNotFound(name)) => {
-                return Err(format!(
-                    "hand: no hand named {name:?} (glove10 or a hand of GET /api/v1/hands)"
-                ))
-            }
-            Err(e) => return Err(format!("hand: {e}")),
-        };
-        let loaded = stored.load().map_err(|e| format!("hand: {e}"))?;
+        let loaded = hand_named(st, &start.hand, "hand").await?;
         (loaded.model, loaded.urdf)
     };
-    LiveConfig::from_start(start, hand, urdf).map_err(|e| e.to_string())
+    let config = LiveConfig::from_start(start, hand, urdf).map_err(|e| e.to_string())?;
+    let assist = match config.assist {
+        AssistMode::Off => None,
+        mode => {
+            let apply = match (mode, &start.assist.robot) {
+                (AssistMode::Apply, Some(robot)) => {
+                    let robot = hand_named(st, robot, "assist.robot").await?;
+                    let store = st.store().clone();
+                    let runtime = tokio::runtime::Handle::current();
+                    // Called on the assistant's thread, never on the runtime's.
+                    let loader: SkillLoader = Box::new(move |id| {
+                        runtime
+                            .block_on(store.get_skill(id))
+                            .map(|s| s.params)
+                            .map_err(|e| e.to_string())
+                    });
+                    Some((robot, loader))
+                }
+                _ => None,
+            };
+            Some(AssistSetup {
+                index: st.store().recognition_index(),
+                objects: ObjectInfo::of_scene(&config.scene),
+                params: RecogniserParams::default(),
+                apply,
+            })
+        }
+    };
+    Ok((config, assist))
 }
 
 /// Streams samples until the session ends; returns the session and why it ended.
@@ -537,6 +589,7 @@ async fn stream(
                         feedback,
                         failure,
                         resumed,
+                        events,
                     } => {
                         any_sample = true;
                         last_sample = Instant::now();
@@ -555,6 +608,11 @@ async fn stream(
                         }
                         if let Some(e) = failure {
                             send_error(socket, e.t_ns, e.message).await;
+                        }
+                        for text in events {
+                            if socket.send(Message::Text(text.into())).await.is_err() {
+                                return (session, EndReason::Disconnected);
+                            }
                         }
                     }
                 }
@@ -594,6 +652,7 @@ enum Reply {
         feedback: Bytes,
         failure: Option<SampleError>,
         resumed: bool,
+        events: Vec<String>,
     },
 }
 
@@ -605,6 +664,7 @@ fn step(mut session: Box<LiveSession>, frame: Bytes) -> (Box<LiveSession>, Reply
             feedback: Bytes::copy_from_slice(answer.feedback),
             failure: answer.failure,
             resumed: answer.resumed,
+            events: answer.events,
         },
     };
     (session, reply)
@@ -635,10 +695,11 @@ async fn store_session(st: &AppState, mut staged: StagedBlob) -> Result<Event, P
         skills: out
             .skill_ids
             .iter()
-            .map(|&id| StoredSkill {
+            .zip(&out.matched_skill_ids)
+            .map(|(&id, &matched)| StoredSkill {
                 skill_id: id,
-                new: true,
-                matched_skill_id: None,
+                new: matched.is_none(),
+                matched_skill_id: matched,
             })
             .collect(),
     })

@@ -95,6 +95,9 @@ pub struct SessionBody {
     pub meta: SessionMetaBody,
     /// Ids of the session's skills, ascending.
     pub skill_ids: Vec<i64>,
+    /// Per skill (in `skill_ids`' order): the stored skill it matched when it was stored
+    /// (on-line learning linked the grasp to it), `null` for a skill stored as new.
+    pub matched_skill_ids: Vec<Option<i64>>,
     /// Version of the segmentation that made its skills: `icms reprocess` segments sessions of
     /// older versions again. 0: stored before versions were recorded.
     pub segmentation_version: u32,
@@ -113,6 +116,7 @@ impl From<Session> for SessionBody {
             size_bytes: s.size_bytes,
             meta: s.meta.into(),
             skill_ids: s.skill_ids,
+            matched_skill_ids: s.matched_skill_ids,
             segmentation_version: s.segmentation_version,
             created_at: s.created_at,
         }

@@ -78,6 +78,16 @@ pub struct SkillBody {
     /// The full hand-independent parameters, as `icms segment --json` prints them.
     #[schema(value_type = Object)]
     pub params: serde_json::Value,
+    /// The approach template early recognition compares (27 values: the object, then the
+    /// hand's aperture, spread, elevation and pointing at 20, 12, 8, 5 and 3 cm from the
+    /// object's surface, then the fingertips touching at contact onset; `null` where the reach
+    /// did not show one). Absent when not computed (run `icms reprocess`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub approach: Option<Vec<Option<f32>>>,
+    /// The stored skill this one matched when it was stored (on-line learning linked it);
+    /// absent for a skill stored as new.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub matched_skill_id: Option<i64>,
     /// Version of the segmentation that made the skill (its session's): `icms reprocess`
     /// segments sessions of older versions again. 0: stored before versions were recorded.
     pub segmentation_version: u32,
@@ -106,6 +116,8 @@ impl From<Skill> for SkillBody {
             phase_durations: s.phase_durations,
             feature: s.feature,
             params: s.params,
+            approach: s.approach,
+            matched_skill_id: s.matched_skill_id,
             segmentation_version: s.segmentation_version,
             created_at: s.created_at,
         }

@@ -73,11 +73,25 @@
 //!    springs act on the fingers only, so a pinch carries no load along its jaw line: the hand
 //!    turns by the least rotation that keeps that line horizontal while it follows the skill
 //!    (otherwise gravity pulls the object along a tilted line and one jaw opens).
+//!
+//! # Fixed clock or the operator's phases
+//!
+//! [`run`] and [`Replay::step`] play the skill on a fixed clock: tick `i` at `i` ms of the
+//! skill's [`Timeline`]. In the assistant's `apply` mode (IP-flow 3) the replay follows the
+//! operator instead: a [`PhaseClock`] turns the operator's phase changes, as the on-line phase
+//! estimate reports them, into replay time (real rate within a phase, waiting at the end of a
+//! phase held longer than the skill's, catching up at most [`MAX_CATCH_UP_RATE`] × real time
+//! when the operator moves on early), and [`DrivenReplay`] steps its [`Replay`] to that time
+//! ([`Replay::step_to`]) every tick, exposing the robot's state ([`DrivenTick`]).
 
+mod clock;
 mod closing;
+mod driven;
 mod plan;
 mod run;
 
+pub use clock::{PhaseClock, PhaseSpan, MAX_CATCH_UP_RATE, MAX_HELD_CATCH_UP_RATE, RATE_SLEW};
+pub use driven::{DrivenReplay, DrivenStart, DrivenTick};
 pub use plan::{plan, plan_with_stop, Plan, RetargetStep};
 pub use run::{run, run_with, run_with_stop, Replay, ReplayTick};
 
@@ -616,6 +630,59 @@ mod tests {
         assert!(r.position_error_max_m < 0.02);
         assert!(r.peak_torque_ratio > 0.0 && r.peak_torque_ratio <= 1.0 + 1e-9);
         assert_eq!(r.ticks, 4900);
+    }
+
+    /// The fixed-clock replay, tick for tick, as it was before replays could be driven by the
+    /// operator's phases ([`Replay::step_to`]): the box pinch on the gripper, its report's
+    /// numbers and a sum over every tick's base, joint angles and object pose.
+    #[test]
+    fn the_fixed_clock_replay_is_pinned() {
+        let hand = builtin_hand("gripper").unwrap();
+        let mut sum = [0.0; 3];
+        let r = run_with(
+            &hand,
+            thumb_of(&hand),
+            &box_pinch(0.2),
+            &ReplayParams::default(),
+            |tick| {
+                sum[0] += tick.base.translation.vector.sum();
+                sum[1] += tick.q.iter().sum::<Real>();
+                sum[2] += tick.output.object.pose.translation.vector.sum();
+            },
+        )
+        .unwrap();
+        let got = [
+            r.position_error_max_m,
+            r.position_error_rms_m,
+            r.orientation_error_max_rad,
+            r.orientation_error_rms_rad,
+            r.max_slip_m,
+            r.min_friction_margin,
+            r.peak_torque_ratio,
+            r.lift_height_m,
+            sum[0],
+            sum[1],
+            sum[2],
+        ];
+        // Taken from the replay before `step_to` existed.
+        let pinned = [
+            0.00042056261333334177,
+            0.00033272708867277935,
+            0.0,
+            0.0,
+            0.0003389494460199552,
+            0.0,
+            0.9687423580329151,
+            0.08467833333333338,
+            1289.7726830768931,
+            146.88552392330593,
+            317.49695474361107,
+        ];
+        for (i, (g, p)) in got.iter().zip(pinned).enumerate() {
+            assert!((g - p).abs() <= 1e-12 * p.abs().max(1.0), "{i}: {g} != {p}");
+        }
+        assert!(r.success, "{}", r.detail);
+        assert_eq!((r.ticks, r.slip_ticks), (4900, 1));
     }
 
     #[test]

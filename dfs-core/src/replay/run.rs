@@ -12,7 +12,7 @@ use crate::object::{ObjectState, RigidObject};
 use crate::stop::Stop;
 
 /// Tick length (s): 1 kHz.
-const DT: Real = 1e-3;
+pub(super) const DT: Real = 1e-3;
 
 /// One tick of a replay, for recording.
 #[derive(Debug, Clone, Copy)]
@@ -370,12 +370,43 @@ impl Replay {
         about_mid * base
     }
 
-    /// Runs one tick; `Ok(false)` when the replay is over.
+    /// Runs one tick on the fixed clock (tick `i` at replay time `i · 1 ms`); `Ok(false)` when
+    /// the replay is over.
     pub fn step(&mut self) -> Result<bool> {
         if self.step >= self.n_steps {
             return Ok(false);
         }
-        let t = self.step as Real * DT;
+        self.run_tick(self.step as Real * DT)?;
+        Ok(true)
+    }
+
+    /// Runs one tick (1 ms of simulation) at replay time `t` (s on the skill's [`Timeline`])
+    /// instead of the fixed clock's: a replay driven by the operator's phases
+    /// ([`super::PhaseClock`], [`super::DrivenReplay`]) steps to the time its clock gives.
+    /// `t` should not decrease from one tick to the next and should move by little more than a
+    /// tick's worth (the base follows the schedule at `t` kinematically, so a jump in `t` is a
+    /// jump of the arm). `Ok(false)`, running nothing, once `t` reaches the timeline's end (or
+    /// is not a number); the report's `ticks` and `duration_s` count the ticks run.
+    pub fn step_to(&mut self, t: Real) -> Result<bool> {
+        if t.is_nan() || t >= self.timeline.end {
+            return Ok(false);
+        }
+        self.run_tick(t.max(0.0))?;
+        Ok(true)
+    }
+
+    /// The skill's timeline.
+    pub fn timeline(&self) -> &Timeline {
+        &self.timeline
+    }
+
+    /// The skill replayed.
+    pub fn skill(&self) -> &SkillSpec {
+        &self.skill
+    }
+
+    /// One tick at replay time `t`.
+    fn run_tick(&mut self, t: Real) -> Result<()> {
         self.reference = self.skill.reference_in(&self.timeline, t);
         let (base, offset, grip, preshaped) = self.schedule(t);
         self.control(t, offset, grip, preshaped);
@@ -393,7 +424,7 @@ impl Replay {
         })?;
         self.observe(t);
         self.step += 1;
-        Ok(true)
+        Ok(())
     }
 
     /// Updates the statistics after the tick at `t`.
@@ -532,6 +563,19 @@ impl Replay {
     }
 }
 
+impl Plan {
+    /// The report of a plan that is not simulated, as [`run`] gives it: contacts the hand
+    /// cannot reach, or contacts that cannot carry the object at rest
+    /// ([`Plan::fails_at_rest`]); `None` when the plan is to be simulated.
+    pub fn refusal(&self) -> Option<ReplayReport> {
+        if self.fails_at_rest || matches!(self.failure, Some((FailureReason::Unreachable, _))) {
+            Some(refused_report(self))
+        } else {
+            None
+        }
+    }
+}
+
 /// A report for a plan that is not simulated (unreachable contacts, or contacts that cannot
 /// carry the object at rest, [`Plan::fails_at_rest`]): nothing ran.
 fn refused_report(plan: &Plan) -> ReplayReport {
@@ -598,8 +642,8 @@ pub fn run_with_stop(
     mut on_tick: impl FnMut(&ReplayTick<'_>),
 ) -> Result<ReplayReport> {
     let plan = plan_with_stop(hand, thumb, skill, params, stop)?;
-    if plan.fails_at_rest || matches!(plan.failure, Some((FailureReason::Unreachable, _))) {
-        return Ok(refused_report(&plan));
+    if let Some(report) = plan.refusal() {
+        return Ok(report);
     }
     let mut replay = Replay::from_plan(plan, skill, params)?;
     loop {

@@ -28,7 +28,7 @@ use dfs_core::object::{Shape, ShapeKind};
 
 /// Distances of the grasp centre to the object's surface (m) at which the template records
 /// the hand, farthest first.
-pub const CHECKPOINTS_M: [f64; 5] = [0.12, 0.08, 0.05, 0.03, 0.015];
+pub const CHECKPOINTS_M: [f64; 5] = [0.20, 0.12, 0.08, 0.05, 0.03];
 
 /// Values recorded at each checkpoint: aperture, spread, elevation, pointing.
 pub const CHECKPOINT_DIMS: usize = 4;
@@ -110,6 +110,21 @@ pub struct ObjectInfo {
 }
 
 impl ObjectInfo {
+    /// The objects of a scene, in its order.
+    pub fn of_scene(scene: &dfs_core::scenario::Scene) -> Vec<ObjectInfo> {
+        scene
+            .objects
+            .iter()
+            .map(|o| ObjectInfo {
+                name: o.name.clone(),
+                shape: o.object.shape,
+                mass: o.object.mass,
+                mu: o.friction.mu,
+                mu_torsion: o.friction.mu_torsion,
+            })
+            .collect()
+    }
+
     /// The object's part of a template.
     pub fn descriptor(&self) -> [f32; OBJECT_DIMS] {
         let kind = self.shape.kind();
@@ -141,6 +156,8 @@ pub struct TipTouch {
     pub p_b: Vector,
     /// The contact normal in B, pointing into the object.
     pub normal_b: Vector,
+    /// Touching and pushing: the contact transmits force.
+    pub in_contact: bool,
     /// Normal force the contact transmits (N; 0 when touching without pushing).
     pub normal_force: f64,
 }
@@ -197,6 +214,7 @@ impl Observation {
                     object: tip.object,
                     p_b: frame.p_b,
                     normal_b: frame.normal_b(),
+                    in_contact: tip.in_contact,
                     normal_force: if tip.in_contact {
                         tip.transmitted[2].max(0.0)
                     } else {
@@ -211,6 +229,14 @@ impl Observation {
             o.objects[i] = out.objects[i].state.pose;
         }
         o
+    }
+
+    /// Fingertips in contact (pushing) on any object.
+    pub fn in_contact(&self) -> usize {
+        self.touch[..self.n_tips]
+            .iter()
+            .filter(|t| t.is_some_and(|t| t.in_contact))
+            .count()
     }
 
     /// Fingertips touching object `i`.
@@ -435,8 +461,8 @@ mod tests {
         assert!(b.template()[OBJECT_DIMS..].iter().all(|v| v.is_nan()));
         // From 0.2 m above the surface down to it, the aperture opening with distance.
         let mut reached = Vec::new();
-        for i in 0..=200 {
-            let d = 0.2 - i as f64 * 0.001;
+        for i in 0..=250 {
+            let d = 0.25 - i as f64 * 0.001;
             let c = Vector::new(0.0, 0.0, 0.08 + d);
             let o = obs_at(c, 0.05 + d * 0.1, &[pose]);
             let h = o.hand();
@@ -475,12 +501,12 @@ mod tests {
         let near = obs_at(Vector::new(0.3, 0.045, 0.06), 0.07, &[pose]);
         assert_eq!(
             b.observe(&near, &near.hand(), &info.shape),
-            Progress::Checkpoint(3)
+            Progress::Checkpoint(4)
         );
-        for k in 0..4 {
+        for k in 0..5 {
             assert!((b.template()[OBJECT_DIMS + k * CHECKPOINT_DIMS] - 0.07).abs() < 1e-6);
         }
-        assert!(b.template()[OBJECT_DIMS + 4 * CHECKPOINT_DIMS].is_nan());
+        assert!(b.template()[ONSET_DIM].is_nan());
     }
 
     #[test]
@@ -498,6 +524,7 @@ mod tests {
             object: 0,
             p_b: Vector::x() * 0.04,
             normal_b: -Vector::x(),
+            in_contact: true,
             normal_force: 1.0,
         };
         for (t_ms, n) in [(0u64, 0usize), (10, 1), (60, 2), (110, 2), (120, 2)] {

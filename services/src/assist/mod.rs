@@ -12,8 +12,11 @@
 //! The same code runs inside a live session (on a thread of its own, so it never delays the
 //! feedback), over a recorded session (`icms recognise`) and in `icms bench recognition`.
 
+pub mod assistant;
 pub mod evaluate;
 pub mod features;
 pub mod index;
 pub mod offline;
+pub mod phase;
 pub mod recognise;
+pub mod record;

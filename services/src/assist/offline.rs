@@ -200,6 +200,7 @@ impl<F: FnMut(&Observation)> SessionVisitor for Observer<F> {
                     object: f.object as usize,
                     p_b: v3(&f.point_b),
                     normal_b: v3(&f.normal_b),
+                    in_contact: f.in_contact,
                     normal_force: if f.in_contact {
                         f.transmitted.z.max(0.0)
                     } else {
@@ -298,4 +299,61 @@ pub fn approach_templates(
         .into_iter()
         .map(|t| t.map(|t| *t.builder.template()))
         .collect())
+}
+
+/// What the assistant said over a recorded session ([`recognise_source`]).
+#[derive(Debug, Clone, serde::Serialize)]
+pub struct RecognitionRun {
+    /// The session's objects, in its scene's order.
+    pub objects: Vec<String>,
+    /// Observations made (one per [`OBSERVATION_PERIOD_NS`]).
+    pub observations: u64,
+    /// Session time (ns) a fingertip first touched each object, by object name.
+    pub first_touch_ns: BTreeMap<String, u64>,
+    /// The verdicts, with their session times.
+    pub verdicts: Vec<super::recognise::Verdict>,
+}
+
+/// Runs the live assistant's recogniser over a recorded session against `index`, as it would
+/// have run while the session streamed (`icms recognise`). The hand is the session's built-in
+/// hand unless `hand` is given. A replay recording is refused.
+pub fn recognise_source(
+    source: &SessionSource<'_>,
+    index: std::sync::Arc<super::index::RecognitionIndex>,
+    hand: Option<HandModel>,
+    params: &super::recognise::RecogniserParams,
+) -> Result<RecognitionRun, RecordingError> {
+    let head = source.stream(&ReadLimits::streaming(), &mut ())?;
+    head.ensure_grasp_session(&source.name())?;
+    let objects = scene_of(&head.metadata)?;
+    let Some(hand) = hand.or_else(|| builtin_hand_of(&head.metadata)) else {
+        return Err(RecordingError::InvalidInput {
+            location: "metadata session.hand".to_owned(),
+            detail: format!(
+                "{:?} is not a built-in hand: its model is needed to see the fingertips",
+                head.metadata.get("hand").map(String::as_str).unwrap_or("")
+            ),
+        });
+    };
+    let names: Vec<String> = objects.iter().map(|o| o.name.clone()).collect();
+    let mut recogniser = super::recognise::Recogniser::new(index, objects, *params);
+    let mut first_touch_ns = BTreeMap::new();
+    let mut observations = 0u64;
+    let mut observer = Observer::new(hand, |o: &Observation| {
+        observations += 1;
+        for (i, name) in names.iter().enumerate() {
+            if o.touching(i) > 0 {
+                first_touch_ns.entry(name.clone()).or_insert(o.t_ns);
+            }
+        }
+        recogniser.observe(o);
+    });
+    source.stream_again(&ReadLimits::streaming(), &mut observer)?;
+    drop(observer);
+    Ok(RecognitionRun {
+        objects: names,
+        observations,
+        first_touch_ns,
+        verdicts: recogniser.verdicts().to_vec(),
+    })
 }

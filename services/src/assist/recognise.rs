@@ -48,7 +48,7 @@ use super::index::{RecognitionIndex, Scratch, GRASP_STAGE_DIMS};
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct RecogniserParams {
     /// First checkpoint (index into [`CHECKPOINTS_M`]) whose crossing may decide. Default 1
-    /// (8 cm).
+    /// (12 cm).
     pub decide_from: usize,
     /// Share of the vote the best kind needs. Default 0.8.
     pub min_confidence: f32,

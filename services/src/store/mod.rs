@@ -96,7 +96,9 @@ pub const MAX_SESSION_LIMIT: u32 = 1000;
 const SESSION_COLUMNS: &str = "id, sha256, size_bytes, blob_path, meta, segmentation_version, \
      created_at, \
      (SELECT json_group_array(id) FROM (SELECT id FROM skills WHERE session_id = s.id \
-     ORDER BY id)) AS skill_ids";
+     ORDER BY id)) AS skill_ids, \
+     (SELECT json_group_array(matched_skill_id) FROM (SELECT matched_skill_id FROM skills \
+     WHERE session_id = s.id ORDER BY id)) AS matched_skill_ids";
 
 static MIGRATOR: Migrator = sqlx::migrate!("../migrations");
 
@@ -883,6 +885,7 @@ impl Store {
         let id: i64 = row.try_get("id")?;
         let meta: String = row.try_get("meta")?;
         let skill_ids: String = row.try_get("skill_ids")?;
+        let matched: String = row.try_get("matched_skill_ids")?;
         Ok(Session {
             id,
             sha256: row.try_get("sha256")?,
@@ -891,6 +894,7 @@ impl Store {
             meta: serde_json::from_str(&meta)
                 .map_err(|e| StoreError::Corrupt(format!("session {id}: meta: {e}")))?,
             skill_ids: serde_json::from_str(&skill_ids)?,
+            matched_skill_ids: serde_json::from_str(&matched)?,
             segmentation_version: segmentation_version(row)?,
             created_at: row.try_get("created_at")?,
         })

@@ -197,6 +197,10 @@ pub struct Session {
     pub meta: SessionMeta,
     /// Ids of the session's skills, ascending.
     pub skill_ids: Vec<i64>,
+    /// Per skill (in `skill_ids`' order): the stored skill it matched when it was stored
+    /// (on-line learning linked it), `null` for a skill stored as new.
+    #[serde(default)]
+    pub matched_skill_ids: Vec<Option<i64>>,
     /// Version of the segmentation that made the session's skills
     /// ([`crate::segmentation::SEGMENTATION_VERSION`] when they were stored or last
     /// reprocessed; 0: stored before versions were recorded).
