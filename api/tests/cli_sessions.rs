@@ -430,6 +430,74 @@ fn simulate_rejects_bad_scenario_files_naming_the_field() {
     assert_eq!(read_session(&out).unwrap().ticks(), 200);
 }
 
+/// `--variant`: the built-in scenario's variant for the seed, recorded with its scenario
+/// (reaches varied, objects perturbed, in `table-three` the target drawn); only for a
+/// built-in scenario's name.
+#[test]
+fn simulate_variant_records_the_builtin_scenarios_variant_for_the_seed() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("v.mcap");
+    let (code, stdout, err) = icms(&[
+        "simulate",
+        "--scenario",
+        "table-three",
+        "--seed",
+        "4",
+        "--variant",
+        "--out",
+        p(&out),
+        "--json",
+    ]);
+    assert_eq!(code, 0, "{err}");
+    let report: Value = serde_json::from_str(&stdout).unwrap();
+    assert_eq!(
+        (&report["variant"], &report["seed"]),
+        (&true.into(), &4.into())
+    );
+    let session = read_session(&out).unwrap();
+    let recorded: dfs_core::scenario::Scenario =
+        serde_json::from_str(&session.metadata["scenario_json"]).unwrap();
+    assert_eq!(
+        recorded,
+        dfs_core::scenario::Scenario::variant("table-three", 4).unwrap()
+    );
+    assert!(recorded.vary_reach);
+    assert_eq!(session.metadata["target"], recorded.target.unwrap());
+    // Without it, the scenario itself: no `variant` in the report.
+    let plain = dir.path().join("plain.mcap");
+    let (code, stdout, err) = icms(&[
+        "simulate",
+        "--scenario",
+        "box-pinch-lift",
+        "--duration",
+        "0.5",
+        "--out",
+        p(&plain),
+        "--json",
+    ]);
+    assert_eq!(code, 0, "{err}");
+    let report: Value = serde_json::from_str(&stdout).unwrap();
+    assert!(report.get("variant").is_none(), "{report}");
+    // A scenario file has no variant.
+    let file = dir.path().join("mine.json");
+    std::fs::write(&file, "{}").unwrap();
+    let never = dir.path().join("never.mcap");
+    let (code, _, err) = icms(&[
+        "simulate",
+        "--scenario",
+        p(&file),
+        "--variant",
+        "--out",
+        p(&never),
+    ]);
+    assert_ne!(code, 0);
+    assert!(
+        err.contains("--variant takes a built-in scenario's name"),
+        "{err}"
+    );
+    assert!(!never.exists());
+}
+
 #[test]
 fn simulate_refuses_a_duration_shorter_than_the_shortest_phase() {
     let dir = tempfile::tempdir().unwrap();

@@ -12,6 +12,14 @@ pub fn progress(tau: Real) -> Real {
     t * t * t * (10.0 - 15.0 * t + 6.0 * t * t)
 }
 
+/// The first derivative `ds/dτ` of [`progress`] at `tau`, `tau` clamped to [0, 1] (0 at both
+/// ends, 1.875 halfway; multiply by `1 / duration` for a rate per second).
+pub fn velocity(tau: Real) -> Real {
+    let t = tau.clamp(0.0, 1.0);
+    let u = t * (1.0 - t);
+    30.0 * u * u
+}
+
 /// The second derivative `d²s/dτ²` of [`progress`] at `tau`, `tau` clamped to [0, 1] (0 at
 /// both ends; multiply by `1 / duration²` for an acceleration per second squared).
 pub fn acceleration(tau: Real) -> Real {
@@ -53,13 +61,18 @@ mod tests {
         assert_eq!(progress(2.0), 1.0);
         assert!((progress(0.5) - 0.5).abs() < 1e-15);
         assert_eq!(acceleration(0.0), 0.0);
+        assert_eq!((velocity(0.0), velocity(1.0)), (0.0, 0.0));
+        assert!((velocity(0.5) - 1.875).abs() < 1e-15);
         assert!(acceleration(1.0).abs() < 1e-12);
         for k in 0..=20 {
             let t = k as Real / 20.0;
             assert!((progress(t) + progress(1.0 - t) - 1.0).abs() < 1e-12, "{t}");
-            // The acceleration is the second difference of the progress.
+            // The velocity and acceleration are the first and second differences of the
+            // progress.
             let h = 1e-4;
             if (h..=1.0 - h).contains(&t) {
+                let first = (progress(t + h) - progress(t - h)) / (2.0 * h);
+                assert!((first - velocity(t)).abs() < 1e-6, "{t}");
                 let second = (progress(t + h) - 2.0 * progress(t) + progress(t - h)) / (h * h);
                 assert!((second - acceleration(t)).abs() < 1e-4, "{t}");
             }

@@ -20,6 +20,36 @@
 //! The glove's motors are taken to track the DFS's position commands exactly; the measured
 //! angles are those plus sensor noise.
 //!
+//! # Varied reaches
+//!
+//! By default every seed reaches alike: the hand starts 0.15 m straight above its approach
+//! pose (beside the target, where it waits before sliding in) and goes straight down to it in
+//! the script's durations; only the tremor and the sensor noise differ. A scenario with
+//! `vary_reach` varies the reaches by its seed, from a ChaCha8 stream of their own
+//! ([`REACH_STREAM`]; the tremor and the noise are those of the same seed without it):
+//! - the hand starts at a *home* [`REACH_HOME_M`] from the first approach pose, in a direction
+//!   up to ±90° ([`REACH_HOME_AZIMUTH`]) about the horizontal one pointing from the target to
+//!   the approach pose (the side the hand comes from) and [`REACH_HOME_ELEVATION`] above the
+//!   horizontal, its palm turned up to ±[`REACH_HOME_YAW`] about the vertical from its grasp
+//!   orientation;
+//! - each `approach` bends off the straight line by `b sin(π u)` for the path parameter `u`
+//!   (a minimum-jerk profile in time), `b` perpendicular to the line, pointing sideways or up
+//!   (never down), of up to [`REACH_BEND`] of the length: zero at both ends, with continuous
+//!   velocity and acceleration;
+//! - its speed is scaled by `s` in [`REACH_SPEED`]: the `approach` and the `preshape` after it
+//!   take their durations / `s`;
+//! - with chance [`REACH_PAUSE_CHANCE`] it pauses [`REACH_PAUSE_S`] part-way
+//!   ([`REACH_PAUSE_AT`] of the path): two minimum-jerk moves with a rest between them, all in
+//!   `approach` (the ground truth, [`Simulation::phases`], holds the changed durations).
+//!
+//! The fingers of the grasp keep the open hand's posture over the first
+//! [`REACH_SHAPE_FROM`] of a varied reach's path, then reach for their spots on the object.
+//! Homes and bends are checked against the table and the objects: along the path the open
+//! hand (its fingertips, joints and the middles of its segments) keeps [`REACH_CLEARANCE_M`]
+//! from both, or at least what it keeps at the path's ends; a home is redrawn (up to 16 times,
+//! then the fixed start above the approach pose is used) and a bend redrawn smaller (up to 8
+//! times, then the straight line) until it does.
+//!
 //! In a scene of several objects ([`Scene`]) the operator plans, reaches for, squeezes and
 //! carries the scenario's `target` only; the other objects stay on the table as obstacles,
 //! simulated like it (a fingertip or the carried object that bumps one moves it or passes
@@ -27,6 +57,7 @@
 //! does not count as touching the target.
 
 use crate::contact::ContactModel;
+use crate::dfs::DfsObject;
 use crate::dfs::{Dfs, DfsParams, GloveSample, TickOutput};
 use crate::error::{DfsError, Result};
 use crate::hand::ik::{solve_tips, IkParams};
@@ -34,7 +65,7 @@ use crate::hand::{HandModel, Joint, JointDrive, JointKind, Kinematics, Link, MAX
 use crate::math::{Isometry, Point, Real, Rotation, Vector};
 use crate::object::{ObjectState, RigidObject, Shape};
 use crate::scenario::{GraspStyle, Phase, ResolvedTask, Scenario, Scene, MAX_SCRIPT_S, MIN_TASK_S};
-use rand::SeedableRng;
+use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use rand_distr::{Distribution, Normal};
 
@@ -616,6 +647,333 @@ fn min_jerk(t: Real) -> (Real, Real) {
     )
 }
 
+/// The ChaCha8 stream of the scenario's seed that varied reaches draw from (`vary_reach`);
+/// the tremor and the sensor noise draw from stream 0, so they stay those of the seed.
+pub const REACH_STREAM: u64 = 1;
+
+/// Range of a varied reach's speed factor `s`: its `approach` and the `preshape` after it take
+/// their script durations / `s`.
+pub const REACH_SPEED: (Real, Real) = (0.7, 1.3);
+
+/// Largest bend of a varied reach off its straight line, as a fraction of its length (the
+/// bend is drawn uniformly from 0 to this).
+pub const REACH_BEND: Real = 0.3;
+
+/// Chance that a varied reach pauses part-way.
+pub const REACH_PAUSE_CHANCE: Real = 0.5;
+
+/// Range of a varied reach's pause (s).
+pub const REACH_PAUSE_S: (Real, Real) = (0.1, 0.3);
+
+/// Range of where a varied reach pauses: the fraction of its path (and of its moving time)
+/// before the pause.
+pub const REACH_PAUSE_AT: (Real, Real) = (0.3, 0.7);
+
+/// Range of the distance (m) of a varied start (the home) from the first approach pose.
+pub const REACH_HOME_M: (Real, Real) = (0.25, 0.40);
+
+/// Range of the elevation (rad) of the home above the first approach pose: 15° to 60°.
+pub const REACH_HOME_ELEVATION: (Real, Real) =
+    (std::f64::consts::PI / 12.0, std::f64::consts::PI / 3.0);
+
+/// Largest azimuth (rad) of the home about the horizontal direction from the target to the
+/// first approach pose: ±90°, the half-circle on the side the hand approaches from.
+pub const REACH_HOME_AZIMUTH: Real = std::f64::consts::FRAC_PI_2;
+
+/// Largest turn (rad) of the hand at its home about the vertical, from its grasp orientation
+/// (it turns back during the first approach).
+pub const REACH_HOME_YAW: Real = 0.4;
+
+/// Clearance (m) a varied reach keeps between the open hand and the table or any object, or
+/// at least what it keeps at the reach's ends (the approach pose is beside the target).
+pub const REACH_CLEARANCE_M: Real = 0.02;
+
+/// Least height (m) of the hand's base at its home above the table's top.
+pub const REACH_HOME_ABOVE_TABLE_M: Real = 0.05;
+
+/// Fraction of a varied reach's path over which the fingers of the grasp keep the open hand's
+/// posture; over the rest they go over (a minimum-jerk blend of the two controls) to reaching
+/// for their spots on the object, as they do throughout a reach that is not varied. (Reaching
+/// for spots from afar pulls the thumb down and sideways by up to 10 cm, into whatever lies
+/// under the path.)
+pub const REACH_SHAPE_FROM: Real = 0.6;
+
+/// Homes drawn before the fixed start (0.15 m above the approach pose) is used.
+const HOME_TRIES: usize = 16;
+
+/// Bends tried (each redrawn smaller) before the straight line is used.
+const BEND_TRIES: usize = 8;
+
+/// Points along a reach at which its clearance is checked.
+const CLEARANCE_SAMPLES: usize = 48;
+
+/// The seeded variation of one `approach` task, drawn when the simulation is set up.
+#[derive(Debug, Clone, Copy, PartialEq)]
+struct Reach {
+    /// Speed factor ([`REACH_SPEED`]).
+    speed: Real,
+    /// Moving time (s, whole ticks), the pause excluded.
+    move_s: Real,
+    /// The pause (s, whole ticks; 0 for none).
+    pause_s: Real,
+    /// Fraction of the path, and of the moving time, before the pause.
+    pause_at: Real,
+    /// The first bend to try: fraction of the length ([`REACH_BEND`]).
+    bend: Real,
+    /// ... and its direction about the line (rad, 0 to π: sideways, up, other side).
+    bend_angle: Real,
+}
+
+impl Reach {
+    /// Draws a reach for an `approach` of `duration` s: speed, pause and bend.
+    fn draw(rng: &mut ChaCha8Rng, duration: Real) -> Reach {
+        let speed = rng.random_range(REACH_SPEED.0..=REACH_SPEED.1);
+        let pauses = rng.random::<Real>() < REACH_PAUSE_CHANCE;
+        let pause_s = rng.random_range(REACH_PAUSE_S.0..=REACH_PAUSE_S.1);
+        let pause_at = rng.random_range(REACH_PAUSE_AT.0..=REACH_PAUSE_AT.1);
+        let bend = rng.random_range(0.0..=REACH_BEND);
+        let bend_angle = rng.random_range(0.0..=std::f64::consts::PI);
+        Reach {
+            speed,
+            move_s: whole_ticks_ns(duration / speed).max(TICK_NS) as Real * 1e-9,
+            pause_s: if pauses {
+                whole_ticks_ns(pause_s) as Real * 1e-9
+            } else {
+                0.0
+            },
+            pause_at,
+            bend,
+            bend_angle,
+        }
+    }
+
+    /// The path parameter `u` (0 to 1) at `t` s into the reach, with `du/dt` and `d²u/dt²`:
+    /// a minimum-jerk move to [`pause_at`](Self::pause_at), the pause, and a minimum-jerk
+    /// move on to 1 (one move when there is no pause); each rests at both ends, so `u` has
+    /// continuous first and second derivatives.
+    fn progress(&self, t: Real) -> (Real, Real, Real) {
+        let at = if self.pause_s > 0.0 {
+            self.pause_at
+        } else {
+            1.0
+        };
+        let t1 = at * self.move_s;
+        if t >= self.move_s + self.pause_s {
+            return (1.0, 0.0, 0.0);
+        }
+        let (from, share, start, dur) = if t < t1 {
+            (0.0, at, 0.0, t1)
+        } else if t < t1 + self.pause_s {
+            return (at, 0.0, 0.0);
+        } else {
+            (at, 1.0 - at, t1 + self.pause_s, self.move_s - t1)
+        };
+        if dur <= 0.0 {
+            return (from + share, 0.0, 0.0);
+        }
+        let tau = (t - start) / dur;
+        (
+            from + share * crate::min_jerk::progress(tau),
+            share * crate::min_jerk::velocity(tau) / dur,
+            share * crate::min_jerk::acceleration(tau) / (dur * dur),
+        )
+    }
+}
+
+/// A duration rounded to whole ticks (ns), as a script's tasks are.
+fn whole_ticks_ns(seconds: Real) -> u64 {
+    (seconds * 1e9).round() as u64 / TICK_NS * TICK_NS
+}
+
+/// The varied approach under way: its reach and its bend.
+#[derive(Debug, Clone, Copy, PartialEq)]
+struct ReachPath {
+    reach: Reach,
+    /// The bend: the path's displacement from the straight line halfway (m, world).
+    bend: Vector,
+}
+
+/// The bend of a reach along `dp` (m): `fraction` of its length, perpendicular to it, turned
+/// `angle` (0 to π) about it from horizontal through up (never down).
+fn bend_vector(dp: &Vector, fraction: Real, angle: Real) -> Vector {
+    let len = dp.norm();
+    if len < 1e-9 {
+        return Vector::zeros();
+    }
+    let d = dp / len;
+    let e1 = Vector::z()
+        .cross(&d)
+        .try_normalize(1e-6)
+        .unwrap_or(Vector::x());
+    let mut e2 = d.cross(&e1);
+    if e2.z < 0.0 {
+        e2 = -e2;
+    }
+    (e1 * angle.cos() + e2 * angle.sin()) * (fraction * len)
+}
+
+/// The point of a reach from `from` by `dp` with bend `bend` at path parameter `u`.
+fn reach_point(from: &Vector, dp: &Vector, bend: &Vector, u: Real) -> Vector {
+    from + dp * u + bend * (std::f64::consts::PI * u).sin()
+}
+
+/// The points of the hand a reach keeps clear of the table and the objects, with their radii
+/// (m), from `kin` (the hand's forward kinematics): every link's origin (the joints), the
+/// middle of every link between two joints, every fingertip sphere and the middle of its
+/// distal segment.
+fn hand_points(hand: &HandModel, kin: &Kinematics, out: &mut Vec<(Vector, Real)>) {
+    out.clear();
+    let origin = |l: usize| kin.link_poses[l].translation.vector;
+    for l in 0..hand.links.len() {
+        out.push((origin(l), 0.0));
+    }
+    for j in &hand.joints {
+        out.push(((origin(j.parent) + origin(j.child)) * 0.5, 0.0));
+    }
+    for (k, tip) in hand.fingertips.iter().enumerate() {
+        let c = kin.tip_centres[k].coords;
+        out.push((c, tip.radius));
+        out.push(((c + origin(tip.link)) * 0.5, 0.0));
+    }
+}
+
+/// How far (m) a sphere of radius `r` at `p` is from the table's top and from every object.
+fn clearance(p: &Vector, r: Real, objects: &[DfsObject], table_height: Real) -> Real {
+    objects.iter().fold(p.z - r - table_height, |c, o| {
+        let local = o.state.pose.inverse_transform_point(&Point::from(*p));
+        c.min(o.object.shape.closest(&local.coords).0 - r)
+    })
+}
+
+/// A reach of the hand from `from` to `to`, its joints going from `q_from` to `q_to`, bent by
+/// `bend`, as [`reach_is_clear`] checks it.
+struct ReachCheck<'a> {
+    hand: &'a HandModel,
+    q_from: &'a [Real],
+    q_to: &'a [Real],
+    from: &'a Isometry,
+    to: &'a Isometry,
+    objects: &'a [DfsObject],
+    table_height: Real,
+}
+
+impl ReachCheck<'_> {
+    /// The hand's pose and joints at path parameter `u` along the reach bent by `bend`, into
+    /// `kin`, and its points ([`hand_points`]) into `points`.
+    fn points_at(
+        &self,
+        u: Real,
+        bend: &Vector,
+        q: &mut [Real; MAX_DOF],
+        kin: &mut Kinematics,
+        points: &mut Vec<(Vector, Real)>,
+    ) {
+        let a = self.from.translation.vector;
+        let dp = self.to.translation.vector - a;
+        let base = Isometry::from_parts(
+            reach_point(&a, &dp, bend, u).into(),
+            self.from.rotation.slerp(&self.to.rotation, u),
+        );
+        let n = self.q_from.len();
+        for d in 0..n {
+            q[d] = self.q_from[d] + (self.q_to[d] - self.q_from[d]) * u;
+        }
+        self.hand.forward_kinematics(&base, &q[..n], kin);
+        hand_points(self.hand, kin, points);
+    }
+
+    /// The least clearance ([`clearance`]) of each hand point at `u`.
+    fn clearances_at(&self, u: Real, bend: &Vector, kin: &mut Kinematics) -> Vec<Real> {
+        let mut q = [0.0; MAX_DOF];
+        let mut points = Vec::new();
+        self.points_at(u, bend, &mut q, kin, &mut points);
+        points
+            .iter()
+            .map(|(p, r)| clearance(p, *r, self.objects, self.table_height))
+            .collect()
+    }
+
+    /// Whether the reach bent by `bend` keeps clear: at [`CLEARANCE_SAMPLES`] points along
+    /// it, every hand point keeps from the table and every object at least the least of
+    /// [`REACH_CLEARANCE_M`] and its clearances at the reach's start and end, less 2 mm.
+    fn is_clear(&self, bend: &Vector, kin: &mut Kinematics) -> bool {
+        let start = self.clearances_at(0.0, bend, kin);
+        let end = self.clearances_at(1.0, bend, kin);
+        let mut q = [0.0; MAX_DOF];
+        let mut points = Vec::new();
+        (1..CLEARANCE_SAMPLES).all(|i| {
+            let u = i as Real / CLEARANCE_SAMPLES as Real;
+            self.points_at(u, bend, &mut q, kin, &mut points);
+            points.iter().enumerate().all(|(k, (p, r))| {
+                let least = REACH_CLEARANCE_M.min(start[k]).min(end[k]) - 0.002;
+                clearance(p, *r, self.objects, self.table_height) >= least
+            })
+        })
+    }
+}
+
+/// The varied start of a simulation ([`REACH_HOME_M`] and the other `REACH_HOME_` ranges):
+/// drawn from `rng` until one keeps [`REACH_CLEARANCE_M`] clear of the table and the objects,
+/// has its base [`REACH_HOME_ABOVE_TABLE_M`] above the table and a straight reach from it to
+/// `approach` keeps clear ([`ReachCheck::is_clear`]); after [`HOME_TRIES`] draws, the fixed
+/// start 0.15 m above `approach`.
+fn draw_home(
+    rng: &mut ChaCha8Rng,
+    hand: &HandModel,
+    q_open: &[Real],
+    approach: &Isometry,
+    target: &Vector,
+    objects: &[DfsObject],
+    table_height: Real,
+) -> Isometry {
+    let a = approach.translation.vector;
+    let mut out = a - target;
+    out.z = 0.0;
+    let out = out
+        .try_normalize(1e-6)
+        .or_else(|| {
+            let mut y = approach.rotation * Vector::y();
+            y.z = 0.0;
+            y.try_normalize(1e-6)
+        })
+        .unwrap_or(Vector::x());
+    let side = Vector::z().cross(&out);
+    let mut kin = Kinematics::default();
+    for _ in 0..HOME_TRIES {
+        let distance = rng.random_range(REACH_HOME_M.0..=REACH_HOME_M.1);
+        let azimuth = rng.random_range(-REACH_HOME_AZIMUTH..=REACH_HOME_AZIMUTH);
+        let elevation = rng.random_range(REACH_HOME_ELEVATION.0..=REACH_HOME_ELEVATION.1);
+        let yaw = rng.random_range(-REACH_HOME_YAW..=REACH_HOME_YAW);
+        let dir = (out * azimuth.cos() + side * azimuth.sin()) * elevation.cos()
+            + Vector::z() * elevation.sin();
+        let home = Isometry::from_parts(
+            (a + dir * distance).into(),
+            Rotation::from_euler_angles(0.0, 0.0, yaw) * approach.rotation,
+        );
+        if home.translation.z < table_height + REACH_HOME_ABOVE_TABLE_M {
+            continue;
+        }
+        let check = ReachCheck {
+            hand,
+            q_from: q_open,
+            q_to: q_open,
+            from: &home,
+            to: approach,
+            objects,
+            table_height,
+        };
+        let straight = Vector::zeros();
+        let clear_at_home = check
+            .clearances_at(0.0, &straight, &mut kin)
+            .iter()
+            .all(|&c| c >= REACH_CLEARANCE_M);
+        if clear_at_home && check.is_clear(&straight, &mut kin) {
+            return home;
+        }
+    }
+    raise(approach, 0.15)
+}
+
 /// Parameters of the simulated operator. SI units.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct OperatorParams {
@@ -754,6 +1112,18 @@ pub struct Simulation {
     rng: ChaCha8Rng,
     tremor_freq: [Real; MAX_DOF + 3],
     tremor_phase: [Real; MAX_DOF + 3],
+    /// Per span: the variation of its reach (a varied `approach`), see
+    /// [the module docs](self#varied-reaches).
+    reaches: Vec<Option<Reach>>,
+    /// The stream varied reaches draw their bends from ([`REACH_STREAM`]); `None` when the
+    /// scenario does not vary its reaches.
+    reach_rng: Option<ChaCha8Rng>,
+    /// The varied approach under way.
+    reach_path: Option<ReachPath>,
+    /// In a varied approach, how far the fingers of the grasp have gone over from holding
+    /// the open hand's posture to reaching for their spots on the object (0-1,
+    /// [`REACH_SHAPE_FROM`]).
+    reach_shaping: Real,
 }
 
 impl Simulation {
@@ -775,8 +1145,26 @@ impl Simulation {
         let table_height = scene.table_height;
         let mut spans = Vec::with_capacity(tasks.len());
         let mut t = 0u64;
-        for task in &tasks {
-            let d = (task.duration * 1e9).round() as u64 / TICK_NS * TICK_NS;
+        // Varied reaches: their own stream of the seed, so the tremor and the noise below are
+        // the seed's either way.
+        let mut reach_rng = scenario.vary_reach.then(|| {
+            let mut rng = ChaCha8Rng::seed_from_u64(scenario.seed);
+            rng.set_stream(REACH_STREAM);
+            rng
+        });
+        let mut reaches = vec![None; tasks.len()];
+        let mut speed = 1.0;
+        for (i, task) in tasks.iter().enumerate() {
+            let d = match (reach_rng.as_mut(), task.phase) {
+                (Some(rng), Phase::Approach) => {
+                    let reach = Reach::draw(rng, task.duration);
+                    speed = reach.speed;
+                    reaches[i] = Some(reach);
+                    ((reach.move_s + reach.pause_s) * 1e9).round() as u64
+                }
+                (Some(_), Phase::Preshape) => whole_ticks_ns(task.duration / speed),
+                _ => (task.duration * 1e9).round() as u64 / TICK_NS * TICK_NS,
+            };
             spans.push(PhaseSpan {
                 phase: task.phase,
                 start_ns: t,
@@ -784,6 +1172,16 @@ impl Simulation {
                 task: *task,
             });
             t += d.max(TICK_NS);
+        }
+        if scenario.vary_reach && t as Real * 1e-9 > MAX_SCRIPT_S {
+            return Err(DfsError::invalid(
+                "vary_reach",
+                format!(
+                    "the varied reaches make the script last {} s; a session lasts at most \
+                     {MAX_SCRIPT_S} s",
+                    t as Real * 1e-9
+                ),
+            ));
         }
         let mut n_steps = t / TICK_NS;
         if let Some(d) = duration_s {
@@ -810,7 +1208,19 @@ impl Simulation {
             ..DfsParams::default()
         };
         let plan = plan_grasp(&hand, &object, &pose, scenario.grasp)?;
-        let start_base = raise(&approach_pose(&plan.base, &object.shape), 0.15);
+        let approach = approach_pose(&plan.base, &object.shape);
+        let start_base = match reach_rng.as_mut() {
+            Some(rng) => draw_home(
+                rng,
+                &hand,
+                &plan.q_open[..hand.dof()],
+                &approach,
+                &pose.translation.vector,
+                &scene.dfs_objects(),
+                table_height,
+            ),
+            None => raise(&approach, 0.15),
+        };
         let q0 = plan.q_open;
         let mut mount = [0; MAX_TIPS];
         for (k, m) in mount.iter_mut().enumerate().take(hand.fingertips.len()) {
@@ -874,6 +1284,10 @@ impl Simulation {
             rng,
             tremor_freq,
             tremor_phase,
+            reaches,
+            reach_rng,
+            reach_path: None,
+            reach_shaping: 1.0,
         };
         sim.begin_phase()?;
         Ok(sim)
@@ -1013,6 +1427,7 @@ impl Simulation {
         self.from_grip = self.to_grip;
         self.from_offset = self.to_offset;
         self.seen_object = self.target_state().pose;
+        self.reach_path = None;
         let n = self.dfs.hand().dof();
         match task.phase {
             Phase::Approach => {
@@ -1029,6 +1444,9 @@ impl Simulation {
                 self.to_grip = 0.0;
                 self.to_offset = 0.03;
                 self.object_held = false;
+                if let Some(reach) = self.reaches.get(self.span).copied().flatten() {
+                    self.reach_path = Some(self.bend_reach(reach));
+                }
             }
             Phase::Preshape => {
                 self.to_base = self.plan.base;
@@ -1093,6 +1511,41 @@ impl Simulation {
         Ok(())
     }
 
+    /// The path of a varied approach from `from_base` to `to_base`: its first bend, or
+    /// smaller ones drawn from the reach stream, the first that keeps clear of the table and
+    /// the objects ([`ReachCheck::is_clear`]), else the straight line.
+    fn bend_reach(&mut self, reach: Reach) -> ReachPath {
+        let n = self.dfs.hand().dof();
+        let check = ReachCheck {
+            hand: self.dfs.hand(),
+            q_from: &self.from_q[..n],
+            q_to: &self.to_q[..n],
+            from: &self.from_base,
+            to: &self.to_base,
+            objects: self.dfs.objects(),
+            table_height: self.table_height,
+        };
+        let dp = self.to_base.translation.vector - self.from_base.translation.vector;
+        let mut kin = Kinematics::default();
+        let (mut fraction, mut angle) = (reach.bend, reach.bend_angle);
+        for attempt in 1..=BEND_TRIES {
+            let bend = bend_vector(&dp, fraction, angle);
+            if check.is_clear(&bend, &mut kin) {
+                return ReachPath { reach, bend };
+            }
+            let Some(rng) = self.reach_rng.as_mut() else {
+                break;
+            };
+            let shrink = 1.0 - attempt as Real / BEND_TRIES as Real;
+            fraction = rng.random_range(0.0..=REACH_BEND) * shrink;
+            angle = rng.random_range(0.0..=std::f64::consts::PI);
+        }
+        ReachPath {
+            reach,
+            bend: Vector::zeros(),
+        }
+    }
+
     fn update_intention(&mut self, t: u64) {
         let span = *self.span_now();
         let dur = (span.end_ns - span.start_ns) as Real * 1e-9;
@@ -1105,11 +1558,31 @@ impl Simulation {
             Phase::Release => (((s - 0.4) / 0.6).max(0.0), (s / 0.4).min(1.0)),
             _ => (s, s),
         };
-        let (mq, _) = min_jerk(sq);
+        let (mut mq, _) = min_jerk(sq);
         let (mg, _) = min_jerk(sg);
         let dp = self.to_base.translation.vector - self.from_base.translation.vector;
-        let p = self.from_base.translation.vector + dp * m;
-        let r = self.from_base.rotation.slerp(&self.to_base.rotation, m);
+        let (p, r, acceleration) = match &self.reach_path {
+            None => (
+                self.from_base.translation.vector + dp * m,
+                self.from_base.rotation.slerp(&self.to_base.rotation, m),
+                dp * (m2 / (dur * dur)),
+            ),
+            // A varied approach: along its bent path, pausing if it does; the fingers follow
+            // the same progress.
+            Some(path) => {
+                let (u, du, ddu) = path.reach.progress((t - span.start_ns) as Real * 1e-9);
+                let (sin, cos) = (std::f64::consts::PI * u).sin_cos();
+                let pi = std::f64::consts::PI;
+                mq = u;
+                self.reach_shaping =
+                    crate::min_jerk::progress((u - REACH_SHAPE_FROM) / (1.0 - REACH_SHAPE_FROM));
+                (
+                    reach_point(&self.from_base.translation.vector, &dp, &path.bend, u),
+                    self.from_base.rotation.slerp(&self.to_base.rotation, u),
+                    (dp + path.bend * (pi * cos)) * ddu - path.bend * (pi * pi * sin * du * du),
+                )
+            }
+        };
         let time = t as Real * 1e-9;
         let mut tremor = Vector::zeros();
         for (k, c) in tremor.iter_mut().enumerate() {
@@ -1118,7 +1591,7 @@ impl Simulation {
                 * (std::f64::consts::TAU * self.tremor_freq[i] * time + self.tremor_phase[i]).sin();
         }
         let new_base = Isometry::from_parts((p + tremor).into(), r);
-        self.base_acceleration = dp * (m2 / (dur * dur));
+        self.base_acceleration = acceleration;
         self.base = new_base;
         let n = self.dfs.hand().dof();
         for d in 0..n {
@@ -1274,16 +1747,20 @@ impl Simulation {
             }
         }
         for d in 0..n {
-            if in_grasp[d] {
-                continue;
-            }
             let kp = self.params.stiffness * hand.torque_limit[d];
             let kd = if hand.dof_names[d].starts_with("wrist") {
                 self.params.wrist_damping
             } else {
                 0.0
             };
-            tau[d] += kp * (self.q_intent[d] - q[d]) - kd * qd[d];
+            let posture = kp * (self.q_intent[d] - q[d]) - kd * qd[d];
+            if !in_grasp[d] {
+                tau[d] += posture;
+            } else if self.reach_path.is_some() {
+                // A varied reach keeps the open hand's posture until it nears the object.
+                let w = self.reach_shaping;
+                tau[d] = w * tau[d] + (1.0 - w) * posture;
+            }
         }
         for d in 0..n {
             let lim = 1.9 * hand.torque_limit[d];
@@ -1908,6 +2385,333 @@ mod tests {
                 );
             }
             assert_eq!(sim.output().n_contacts, 0, "released");
+        }
+    }
+
+    /// A hash (FNV-1a over the bits) of every 10th tick's base position, measured angles and
+    /// torques and target pose of a run, with the run's last target and base poses.
+    fn fingerprint(s: &Scenario) -> (u64, u64, Isometry, Isometry) {
+        let mut sim = Simulation::new(s, HandModel::glove10(), None).unwrap();
+        let mut h: u64 = 0xcbf2_9ce4_8422_2325;
+        let mut mix = |v: Real| {
+            for b in v.to_bits().to_le_bytes() {
+                h ^= u64::from(b);
+                h = h.wrapping_mul(0x0000_0100_0000_01b3);
+            }
+        };
+        while sim.step().unwrap() {
+            if !sim.ticks().is_multiple_of(10) {
+                continue;
+            }
+            let (q, tau, base) = sim.sample();
+            for v in base.translation.vector.iter().chain(q).chain(tau) {
+                mix(*v);
+            }
+            let st = sim.target_state();
+            let pose = &st.pose;
+            for v in pose
+                .translation
+                .vector
+                .iter()
+                .chain(pose.rotation.coords.iter())
+            {
+                mix(*v);
+            }
+        }
+        let (_, _, base) = sim.sample();
+        (sim.ticks(), h, sim.target_state().pose, *base)
+    }
+
+    /// `vary_reach` off (absent from the file, or false) leaves a session as it was before the
+    /// field existed: `sphere-lift` seed 7 as computed before it, on x86-64 Linux bit for bit
+    /// (elsewhere the platform's `sin` may round differently: to 1e-9 m there).
+    #[test]
+    fn without_vary_reach_a_session_is_the_one_it_was_before() {
+        let builtin = Scenario::builtin("sphere-lift", 7).unwrap();
+        assert!(!builtin.vary_reach);
+        let mut json = serde_json::to_value(&builtin).unwrap();
+        assert!(json.get("vary_reach").is_none(), "not written when off");
+        let absent: Scenario = serde_json::from_value(json.clone()).unwrap();
+        json["vary_reach"] = false.into();
+        let off: Scenario = serde_json::from_value(json).unwrap();
+        assert_eq!((&absent, &off), (&builtin, &builtin));
+        let (ticks, hash, object, base) = fingerprint(&absent);
+        // Computed before `vary_reach` existed.
+        let before_object = Isometry::from_parts(
+            Vector::new(
+                f64::from_bits(0xbf6a_f474_9476_72c4),
+                f64::from_bits(0xbf6b_a570_86f1_1730),
+                f64::from_bits(0x3fa4_7ae1_47ae_147b),
+            )
+            .into(),
+            nalgebra::UnitQuaternion::new_unchecked(nalgebra::Quaternion::new(
+                f64::from_bits(0x3fef_f9ed_4330_9e4b),
+                f64::from_bits(0xbfa2_01af_6d76_6f2b),
+                f64::from_bits(0x3f8f_ea45_a166_bbc3),
+                f64::from_bits(0x3f59_a57d_45a6_c5a2),
+            )),
+        );
+        let before_base = Vector::new(
+            f64::from_bits(0xbfa3_9a46_223c_d271),
+            f64::from_bits(0xbfa0_f823_c88b_0412),
+            f64::from_bits(0x3fcf_01ba_20c4_3985),
+        );
+        assert_eq!(ticks, 7300);
+        let moved = (object.translation.vector - before_object.translation.vector).norm();
+        let turned = object.rotation.angle_to(&before_object.rotation);
+        let base_moved = (base.translation.vector - before_base).norm();
+        assert!(
+            moved < 1e-9 && turned < 1e-9 && base_moved < 1e-9,
+            "object {moved} m, {turned} rad, base {base_moved} m from before"
+        );
+        if cfg!(all(target_arch = "x86_64", target_os = "linux")) {
+            assert_eq!(hash, 0xed99_9992_db8b_1020, "{hash:#x}");
+            assert_eq!(object, before_object);
+            assert_eq!(base.translation.vector, before_base);
+        }
+    }
+
+    /// A varied run of `name` with `seed` up to the end of its first approach: the
+    /// simulation, the approach's path, and per tick the base position, its planned
+    /// acceleration and whether any fingertip touched anything or any object overlapped
+    /// another.
+    fn varied(name: &str, seed: u64) -> (Simulation, ReachPath, Vec<(Vector, Vector, bool)>) {
+        let mut s = Scenario::builtin(name, seed).unwrap();
+        s.vary_reach = true;
+        let mut sim = Simulation::new(&s, HandModel::glove10(), None).unwrap();
+        let path = sim.reach_path.expect("a varied approach");
+        let mut trace = Vec::new();
+        while sim.step().unwrap() {
+            if sim.span > 0 {
+                break;
+            }
+            let out = sim.output();
+            let touched = out.tips[..out.n_tips].iter().any(|t| t.touching);
+            trace.push((
+                sim.base.translation.vector,
+                sim.base_acceleration,
+                touched || out.overlap.is_some(),
+            ));
+        }
+        (sim, path, trace)
+    }
+
+    #[test]
+    fn varied_reaches_differ_by_seed_keep_the_noise_and_their_durations_make_the_ground_truth() {
+        let plain = Simulation::new(
+            &Scenario::builtin("table-three", 4).unwrap(),
+            HandModel::glove10(),
+            None,
+        )
+        .unwrap();
+        let mut s = Scenario::builtin("table-three", 4).unwrap();
+        s.vary_reach = true;
+        let a = Simulation::new(&s, HandModel::glove10(), None).unwrap();
+        // The tremor and the noise stream are the seed's, varied or not.
+        assert_eq!(
+            (a.tremor_freq, a.tremor_phase),
+            (plain.tremor_freq, plain.tremor_phase)
+        );
+        assert_eq!(a.rng, plain.rng);
+        // The plain start is 15 cm above the approach pose; a varied one is not.
+        let approach = approach_pose(&plain.plan.base, &plain.target_object().shape);
+        assert_eq!(plain.base, raise(&approach, 0.15));
+        s.seed = 5;
+        let b = Simulation::new(&s, HandModel::glove10(), None).unwrap();
+        for sim in [&a, &b] {
+            let d = (sim.base.translation.vector - approach.translation.vector).norm();
+            assert!(
+                (REACH_HOME_M.0 - 1e-9..=REACH_HOME_M.1 + 1e-9).contains(&d),
+                "home {d} m from the approach pose"
+            );
+            assert!(
+                sim.base.translation.z > sim.table_height + REACH_HOME_ABOVE_TABLE_M,
+                "home above the table"
+            );
+            // The spans tile the session; only approach and preshape changed, and the session
+            // is no longer than the scenario says it can be.
+            assert!(sim.n_steps as Real * 1e-3 <= s.longest_duration() + 1e-9);
+            assert!(s.longest_duration() > s.duration());
+            assert_eq!(sim.spans[0].start_ns, 0);
+            assert!(sim.spans.windows(2).all(|w| w[0].end_ns == w[1].start_ns));
+            assert_eq!(sim.spans.last().unwrap().end_ns, sim.n_steps * TICK_NS);
+            for (v, p) in sim.spans.iter().zip(&plain.spans) {
+                let (dv, dp) = (v.end_ns - v.start_ns, p.end_ns - p.start_ns);
+                match v.phase {
+                    Phase::Approach | Phase::Preshape => {
+                        let r = dv as Real / dp as Real;
+                        assert!((0.7..=1.0 / 0.7 + 0.3 / 0.8 + 1e-9).contains(&r), "{r}")
+                    }
+                    _ => assert_eq!(dv, dp),
+                }
+            }
+        }
+        assert!((a.base.translation.vector - b.base.translation.vector).norm() > 0.01);
+        assert_ne!(a.spans, b.spans);
+        assert_ne!(a.reach_path, b.reach_path);
+    }
+
+    /// The varied reaches' random parts over many seeds: within their ranges, every one
+    /// taken, a pause about half the time.
+    #[test]
+    fn varied_reaches_spread_over_their_ranges() {
+        let mut pauses = 0;
+        let (mut slow, mut fast) = (Real::INFINITY, 0.0 as Real);
+        for seed in 0..200 {
+            let mut rng = ChaCha8Rng::seed_from_u64(seed);
+            rng.set_stream(REACH_STREAM);
+            let r = Reach::draw(&mut rng, 0.8);
+            assert!((REACH_SPEED.0..=REACH_SPEED.1).contains(&r.speed));
+            assert!((r.move_s - 0.8 / r.speed).abs() <= 1e-3);
+            slow = slow.min(r.speed);
+            fast = fast.max(r.speed);
+            if r.pause_s > 0.0 {
+                pauses += 1;
+                assert!((REACH_PAUSE_S.0 - 1e-3..=REACH_PAUSE_S.1 + 1e-3).contains(&r.pause_s));
+            }
+            assert!((0.0..=REACH_BEND).contains(&r.bend));
+            // The path parameter runs from 0 to 1, rests in the pause, and its derivatives
+            // are those of its values.
+            let total = r.move_s + r.pause_s;
+            let (u0, _, _) = r.progress(0.0);
+            let (u1, v1, _) = r.progress(total);
+            assert_eq!((u0, u1, v1), (0.0, 1.0, 0.0));
+            let h = 1e-5;
+            for k in 1..100 {
+                let t = total * k as Real / 100.0;
+                let (u, v, a) = r.progress(t);
+                let (up, vp, _) = r.progress(t + h);
+                let (um, vm, _) = r.progress(t - h);
+                assert!((0.0..=1.0).contains(&u));
+                assert!(((up - um) / (2.0 * h) - v).abs() < 1e-4, "{seed} {t}");
+                assert!(
+                    ((vp - vm) / (2.0 * h) - a).abs() < 1e-2 * (1.0 + a.abs()),
+                    "{t}"
+                );
+            }
+        }
+        assert!((70..=130).contains(&pauses), "{pauses} of 200 pause");
+        assert!(slow < 0.75 && fast > 1.25, "{slow} {fast}");
+    }
+
+    #[test]
+    fn a_varied_first_approach_is_smooth_clear_of_everything_and_as_planned() {
+        for (name, seed) in [
+            ("table-three", 1),
+            ("table-three", 2),
+            ("table-three", 9),
+            ("sphere-lift", 3),
+            ("cylinder-power-grasp", 4),
+        ] {
+            let (sim, path, trace) = varied(name, seed);
+            let end = approach_pose(&sim.plan.base, &sim.target_object().shape);
+            let last = trace.last().unwrap().0;
+            assert!(
+                (last - end.translation.vector).norm() < 1e-4,
+                "{name} {seed}"
+            );
+            let mut moved = 0.0 as Real;
+            for (i, w) in trace.windows(3).enumerate() {
+                let step = (w[1].0 - w[0].0).norm();
+                moved = moved.max(step);
+                assert!(step < 3e-3, "{name} {seed}: a {step} m jump at tick {i}");
+                // The planned acceleration is the path's (the tremor, 5 µm at 8-12 Hz, adds up
+                // to 0.05 m/s²).
+                let second = (w[2].0 - 2.0 * w[1].0 + w[0].0) / 1e-6;
+                let err = (second - w[1].1).norm();
+                assert!(
+                    err < 0.1 + 0.01 * w[1].1.norm(),
+                    "{name} {seed}: acceleration {} vs {} at tick {i}",
+                    second,
+                    w[1].1
+                );
+            }
+            assert!(moved > 5e-4, "{name} {seed}: it moved");
+            assert!(
+                trace.iter().all(|t| !t.2),
+                "{name} {seed}: touched or overlapped while approaching"
+            );
+            assert!(
+                trace.iter().all(|t| t.0.z > sim.table_height + 0.02),
+                "{name} {seed}: the base stayed above the table"
+            );
+            // Bent as drawn (or less, never down), paused as drawn.
+            let len = (end.translation.vector - trace[0].0).norm();
+            assert!(path.bend.norm() <= REACH_BEND * len + 1e-9);
+            let span = &sim.spans[0];
+            let planned = path.reach.move_s + path.reach.pause_s;
+            assert!(((span.end_ns - span.start_ns) as Real * 1e-9 - planned).abs() < 1e-9);
+        }
+    }
+
+    /// Over the variants of `table-three` (every object a target in turn) and `two-grasps`
+    /// (a second reach from where the first grasp left the hand): no fingertip touches
+    /// anything while the hand reaches, none ever touches an object but the target, no two
+    /// objects overlap, and the hand (its joints and fingertips) stays above the table.
+    #[test]
+    fn varied_reaches_touch_nothing_on_the_way_and_stay_above_the_table() {
+        let runs = (1..=20)
+            .map(|seed| ("table-three", seed))
+            .chain((1..=5).map(|seed| ("two-grasps", seed)));
+        for (name, seed) in runs {
+            let s = Scenario::variant(name, seed).unwrap();
+            let mut sim = Simulation::new(&s, HandModel::glove10(), None).unwrap();
+            let target = sim.target();
+            let mut points = Vec::new();
+            while sim.step().unwrap() {
+                let out = sim.output();
+                assert!(out.overlap.is_none(), "{name} {seed}");
+                for tip in out.tips[..out.n_tips].iter().filter(|t| t.touching) {
+                    assert_eq!(tip.object, target, "{name} {seed}: touched another object");
+                    assert_ne!(
+                        sim.phase(),
+                        Phase::Approach,
+                        "{name} {seed}: touched while reaching, at {} ms",
+                        sim.ticks()
+                    );
+                }
+                if sim.phase() == Phase::Approach {
+                    hand_points(sim.dfs.hand(), sim.dfs.kinematics(), &mut points);
+                    let low = points
+                        .iter()
+                        .map(|(p, r)| p.z - r - sim.table_height)
+                        .fold(Real::INFINITY, Real::min);
+                    assert!(low > 0.0, "{name} {seed}: {low} m above the table");
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn a_varied_second_grasp_reaches_from_where_the_hand_is() {
+        let mut s = Scenario::builtin("two-grasps", 3).unwrap();
+        s.vary_reach = true;
+        let mut sim = Simulation::new(&s, HandModel::glove10(), None).unwrap();
+        let second = sim
+            .spans
+            .iter()
+            .enumerate()
+            .filter(|(_, p)| p.phase == Phase::Approach)
+            .nth(1)
+            .unwrap()
+            .0;
+        let mut before = None;
+        let mut prev: Option<Vector> = None;
+        while sim.step().unwrap() {
+            let p = sim.base.translation.vector;
+            if let Some(q) = prev {
+                assert!((p - q).norm() < 3e-3, "a jump at {}", sim.ticks());
+            }
+            prev = Some(p);
+            if sim.span + 1 == second {
+                before = Some(p);
+            }
+            if sim.span == second {
+                assert!(sim.reach_path.is_some());
+                // Started where the retreat left the hand.
+                let start = sim.from_base.translation.vector;
+                assert!((start - before.unwrap()).norm() < 1e-4);
+            }
         }
     }
 

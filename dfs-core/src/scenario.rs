@@ -38,6 +38,8 @@ use crate::math::{Isometry, Real, Rotation, Vector};
 use crate::names::Named;
 use crate::object::{shapes_overlap, ObjectState, RigidObject, Shape, ShapeKind};
 use crate::statics::ObjectSpec;
+use rand::{Rng, SeedableRng};
+use rand_chacha::ChaCha8Rng;
 use serde::{Deserialize, Serialize};
 
 /// The phases of a grasp task, in the order they usually come (`Phase::ALL`), named as in
@@ -360,6 +362,23 @@ pub struct Scenario {
     #[serde(default, skip_serializing_if = "Option::is_none")]
     #[cfg_attr(feature = "utoipa", schema(value_type = Option<f64>))]
     pub operator_mu: Option<Real>,
+    /// Vary the operator's reaches by `seed` (a ChaCha8 stream of its own, so the tremor and
+    /// the sensor noise are those of the same seed without it). Default false: every seed
+    /// reaches along the same straight path from 0.15 m above its approach pose, in the
+    /// script's durations. When true, the hand starts at a seeded home 0.25-0.40 m from the
+    /// first approach pose (on the side it approaches from, 15-60° up), and each `approach`
+    /// bends sideways or upwards (up to 30 % of its length), runs at a seeded speed (its and
+    /// the next `preshape`'s durations divided by 0.7-1.3) and pauses mid-way half the time
+    /// (0.1-0.3 s, counted in `approach`): see
+    /// [`operator`](crate::operator#varied-reaches). Written only when true.
+    #[serde(default, skip_serializing_if = "is_false")]
+    #[cfg_attr(feature = "utoipa", schema(default = false))]
+    pub vary_reach: bool,
+}
+
+/// serde's `skip_serializing_if` for a flag written only when set.
+fn is_false(v: &bool) -> bool {
+    !*v
 }
 
 /// Longest script (s): the sum of a scenario's task durations, like `icms simulate --duration`.
@@ -790,6 +809,26 @@ impl Scenario {
         self.tasks.iter().map(|t| t.duration).sum()
     }
 
+    /// The longest a session of the script can last (s): its [`duration`](Self::duration),
+    /// or with [`vary_reach`](Self::vary_reach) the script with every `approach` and
+    /// `preshape` at the slowest reach speed and every `approach` with the longest pause
+    /// ([`REACH_SPEED`](crate::operator::REACH_SPEED),
+    /// [`REACH_PAUSE_S`](crate::operator::REACH_PAUSE_S)).
+    pub fn longest_duration(&self) -> Real {
+        if !self.vary_reach {
+            return self.duration();
+        }
+        let slowest = crate::operator::REACH_SPEED.0;
+        self.tasks
+            .iter()
+            .map(|t| match t.phase {
+                Phase::Approach => t.duration / slowest + crate::operator::REACH_PAUSE_S.1,
+                Phase::Preshape => t.duration / slowest,
+                _ => t.duration,
+            })
+            .sum()
+    }
+
     /// Names of the built-in scenarios.
     pub const BUILTINS: &'static [&'static str] = &[
         "sphere-lift",
@@ -930,6 +969,7 @@ impl Scenario {
             tasks,
             seed,
             operator_mu,
+            vary_reach: false,
         })
     }
 
@@ -990,7 +1030,95 @@ impl Scenario {
             ],
             seed,
             operator_mu: None,
+            vary_reach: false,
         }
+    }
+}
+
+/// Range of the factor a scenario variant ([`Scenario::variant`]) scales each size of each
+/// object by (radius, each half extent, half height; drawn one by one).
+pub const VARIANT_SIZE_SCALE: (Real, Real) = (0.85, 1.15);
+
+/// Range of the factor a scenario variant scales each object's mass by.
+pub const VARIANT_MASS_SCALE: (Real, Real) = (0.7, 1.3);
+
+/// Range of the factor a scenario variant scales each object's μ (fingertip friction) by.
+pub const VARIANT_MU_SCALE: (Real, Real) = (0.8, 1.2);
+
+/// Largest shift (m) of each placed object of a scenario variant along world x and y (drawn
+/// uniformly in ± this, redrawn while objects would overlap).
+pub const VARIANT_JITTER_M: Real = 0.02;
+
+/// The ChaCha8 stream of the seed a scenario variant's objects are drawn from (the tremor and
+/// the noise draw from stream 0, varied reaches from
+/// [`REACH_STREAM`](crate::operator::REACH_STREAM)).
+pub const VARIANT_STREAM: u64 = 2;
+
+impl Scenario {
+    /// The built-in scenario `name` varied by `seed` (`None` for an unknown name): its reaches
+    /// varied ([`vary_reach`](Scenario::vary_reach)), and each object's sizes, mass and μ
+    /// scaled by factors drawn from [`VARIANT_SIZE_SCALE`], [`VARIANT_MASS_SCALE`] and
+    /// [`VARIANT_MU_SCALE`] (`operator_mu`, where the scenario gives one, stays: in
+    /// `box-slip` the operator still grips for μ 0.8). A scene of several objects
+    /// (`table-three`) also has its target drawn among them, grasped as its kind is in the
+    /// single-object scenarios (the ball and the box pinched, the cylinder in a power grasp),
+    /// and each object shifted up to [`VARIANT_JITTER_M`] along x and y, resting on the table,
+    /// none overlapping another. Draws come from the seed's [`VARIANT_STREAM`]; the same name
+    /// and seed give the same variant.
+    pub fn variant(name: &str, seed: u64) -> Option<Scenario> {
+        let mut s = Scenario::builtin(name, seed)?;
+        s.vary_reach = true;
+        let mut rng = ChaCha8Rng::seed_from_u64(seed);
+        rng.set_stream(VARIANT_STREAM);
+        let factor = |rng: &mut ChaCha8Rng, (lo, hi): (Real, Real)| rng.random_range(lo..=hi);
+        let mut perturb = |o: &mut ScenarioObject| {
+            for v in o
+                .radius
+                .iter_mut()
+                .chain(o.half_extents.iter_mut().flatten())
+                .chain(o.half_height.iter_mut())
+            {
+                *v *= factor(&mut rng, VARIANT_SIZE_SCALE);
+            }
+            o.mass *= factor(&mut rng, VARIANT_MASS_SCALE);
+            o.mu *= factor(&mut rng, VARIANT_MU_SCALE);
+        };
+        if let Some(o) = s.object.as_mut() {
+            perturb(o);
+        }
+        let Some(mut objects) = s.objects.take() else {
+            return Some(s);
+        };
+        objects.iter_mut().for_each(&mut perturb);
+        let target = rng.random_range(0..objects.len());
+        s.target = objects[target].name.clone();
+        s.grasp = match objects[target].shape {
+            ShapeKind::Cylinder => GraspStyle::Power,
+            ShapeKind::Sphere | ShapeKind::Box => GraspStyle::Pinch,
+        };
+        let placed: Vec<[Real; 3]> = objects
+            .iter()
+            .map(|o| o.position.unwrap_or_default())
+            .collect();
+        let rest = |o: &ScenarioObject| {
+            o.to_shape()
+                .map(|shape| shape.support_depth(&Rotation::from_euler_angles(0.0, 0.0, o.yaw)))
+                .unwrap_or(0.0)
+        };
+        for attempt in 0..=8 {
+            // The last attempt: where the scenario places them, unshifted.
+            let shift = if attempt < 8 { VARIANT_JITTER_M } else { 0.0 };
+            for (o, p) in objects.iter_mut().zip(&placed) {
+                let dx = rng.random_range(-1.0..=1.0) * shift;
+                let dy = rng.random_range(-1.0..=1.0) * shift;
+                o.position = Some([p[0] + dx, p[1] + dy, rest(o)]);
+            }
+            if Scene::new(None, Some(&objects), s.target.as_deref()).is_ok() {
+                break;
+            }
+        }
+        s.objects = Some(objects);
+        Some(s)
     }
 }
 
@@ -1391,6 +1519,85 @@ mod tests {
             "position": [0.085, 0.085, 0.05]});
         j["objects"][1]["yaw"] = 0.0.into();
         parse(&j).unwrap().resolve_scene().unwrap();
+    }
+
+    #[test]
+    fn a_variant_perturbs_the_objects_within_their_ranges_and_varies_the_reaches() {
+        assert!(Scenario::variant("juggle", 1).is_none());
+        let within = |v: Real, base: Real, (lo, hi): (Real, Real)| {
+            (base * lo - 1e-12..=base * hi + 1e-12).contains(&v)
+        };
+        let mut targets = std::collections::BTreeSet::new();
+        let mut masses = std::collections::BTreeSet::new();
+        for name in Scenario::BUILTINS {
+            for seed in 0..30 {
+                let v = Scenario::variant(name, seed).unwrap();
+                let b = Scenario::builtin(name, seed).unwrap();
+                assert_eq!(
+                    Scenario::variant(name, seed).unwrap(),
+                    v,
+                    "the same each time"
+                );
+                assert!(v.vary_reach && !b.vary_reach);
+                assert_eq!(
+                    (&v.name, &v.tasks, v.seed, v.operator_mu),
+                    (&b.name, &b.tasks, b.seed, b.operator_mu)
+                );
+                v.resolve_scene().unwrap();
+                // Written with the flag, and read back as it was.
+                let json = serde_json::to_value(&v).unwrap();
+                assert_eq!(json["vary_reach"], true);
+                assert_eq!(parse(&json).unwrap(), v);
+                let pairs: Vec<(&ScenarioObject, &ScenarioObject)> =
+                    match (&v.object, &b.object, &v.objects, &b.objects) {
+                        (Some(x), Some(y), None, None) => vec![(x, y)],
+                        (None, None, Some(x), Some(y)) => x.iter().zip(y).collect(),
+                        _ => panic!("{name}: the variant keeps the scene's form"),
+                    };
+                for (o, base) in pairs {
+                    masses.insert(o.mass.to_bits());
+                    assert!(within(o.mass, base.mass, VARIANT_MASS_SCALE), "{name}");
+                    assert!(within(o.mu, base.mu, VARIANT_MU_SCALE), "{name}");
+                    for (x, y) in o.radius.iter().zip(&base.radius).chain(
+                        o.half_extents
+                            .iter()
+                            .flatten()
+                            .zip(base.half_extents.iter().flatten()),
+                    ) {
+                        assert!(within(*x, *y, VARIANT_SIZE_SCALE), "{name}");
+                    }
+                    if let (Some(x), Some(y)) = (o.half_height, base.half_height) {
+                        assert!(within(x, y, VARIANT_SIZE_SCALE), "{name}");
+                    }
+                    assert_eq!(
+                        (&o.name, o.shape, o.yaw),
+                        (&base.name, base.shape, base.yaw)
+                    );
+                    if let (Some(p), Some(q)) = (o.position, base.position) {
+                        // Shifted by at most the jitter, resting on the table.
+                        assert!((p[0] - q[0]).abs() <= VARIANT_JITTER_M + 1e-12);
+                        assert!((p[1] - q[1]).abs() <= VARIANT_JITTER_M + 1e-12);
+                        let depth = o.to_shape().unwrap().support_depth(&Rotation::identity());
+                        assert!((p[2] - depth).abs() < 1e-12, "{name}");
+                    }
+                }
+                if let Some(t) = &v.target {
+                    let style = match v.target_object().unwrap().shape {
+                        ShapeKind::Cylinder => GraspStyle::Power,
+                        _ => GraspStyle::Pinch,
+                    };
+                    assert_eq!(v.grasp, style);
+                    targets.insert(t.clone());
+                } else {
+                    assert_eq!(v.grasp, b.grasp);
+                }
+            }
+        }
+        assert_eq!(
+            targets.into_iter().collect::<Vec<_>>(),
+            ["ball", "box", "cylinder"]
+        );
+        assert!(masses.len() > 100, "the masses vary");
     }
 
     #[test]

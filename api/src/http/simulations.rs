@@ -102,7 +102,8 @@ fn scenario_of(req: &SimulationRequest) -> Result<Scenario, Problem> {
     scenario
         .resolve()
         .map_err(|e| Problem::unprocessable(format!("scenario: {e}")))?;
-    let length = req.duration.unwrap_or_else(|| scenario.duration());
+    // A scenario that varies its reaches may run longer than its script.
+    let length = req.duration.unwrap_or_else(|| scenario.longest_duration());
     if !(length.is_finite() && (MIN_SIMULATED_S..=MAX_SIMULATED_S).contains(&length)) {
         return Err(Problem::unprocessable(format!(
             "duration: the session would be {length} s long; the server simulates sessions of \
@@ -264,7 +265,7 @@ mod tests {
         assert_eq!(required(task), ["phase", "duration"]);
         // `object` or `objects` (a scene of several), exactly one: neither is required alone.
         assert_eq!(required(&schemas["Scenario"]), ["name", "tasks"]);
-        for key in ["object", "objects", "target"] {
+        for key in ["object", "objects", "target", "vary_reach"] {
             assert!(
                 schemas["Scenario"]["properties"].get(key).is_some(),
                 "{key}"
