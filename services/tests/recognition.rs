@@ -16,7 +16,7 @@ fn grasps_are_anticipated_and_an_absent_kind_is_unknown_and_learned() {
     let scen = |seeds: std::ops::RangeInclusive<u64>| {
         KINDS
             .iter()
-            .flat_map(|k| seeds.clone().map(move |s| Scenario::builtin(k, s).unwrap()))
+            .flat_map(|k| seeds.clone().map(move |s| Scenario::variant(k, s).unwrap()))
             .collect::<Vec<_>>()
     };
     let e = evaluate(EvalSetup {

@@ -852,7 +852,9 @@ fn bench_recognition(
     )?)
 }
 
-/// The scenario of a grasp kind for a seed.
+/// The scenario of a grasp kind for a seed: the built-in scenario's variant (object size,
+/// mass and μ perturbed, the target of `table-three` drawn, a varied reach: see
+/// `dfs_core::scenario::Scenario::variant`), so that no two sessions are alike.
 fn recognition_scenario(kind: &str, seed: u64) -> Option<dfs_core::scenario::Scenario> {
-    dfs_core::scenario::Scenario::builtin(kind, seed)
+    dfs_core::scenario::Scenario::variant(kind, seed)
 }
