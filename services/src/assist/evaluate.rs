@@ -140,6 +140,8 @@ pub struct SessionScore {
     pub decided_fraction: Option<f64>,
     /// The nearest stored skill was named by 1 s after the first contact.
     pub nearest_named: bool,
+    /// The stored skill nearest the completed grasp (by the whole feature vector).
+    pub nearest_skill_id: Option<i64>,
     /// The verdicts.
     pub verdicts: Vec<Verdict>,
 }
@@ -303,6 +305,7 @@ pub fn evaluate(setup: EvalSetup<'_>) -> Result<Evaluation, RecordingError> {
                 .zip(fc)
                 .map(|(d, fc)| d as f64 / fc.max(1) as f64),
             nearest_named,
+            nearest_skill_id: nearest_truth.flatten(),
             verdicts,
         });
     }
