@@ -114,6 +114,10 @@ pub enum BenchCommand {
         /// Built-in scenario.
         #[arg(long, default_value = "sphere-lift")]
         scenario: String,
+        /// With the assistant on (`suggest`), recognising against three stored sessions of the
+        /// scenario (seeds 100-102).
+        #[arg(long)]
+        assist: bool,
     },
     /// Uploads of simulated session files (`POST /api/v1/sessions`, each a distinct file) over
     /// HTTP on loopback to the real server, started in-process on an ephemeral port with a
@@ -163,6 +167,8 @@ pub struct LiveBench {
     pub seconds: f64,
     /// The sessions' samples were sent at their times (`true`), not as fast as answered.
     pub realtime: bool,
+    /// The assistant was on (`suggest`, against three stored sessions).
+    pub assist: bool,
     /// Threads stepping the live sessions (`--live-threads`).
     pub live_threads: usize,
     /// Cores of this machine.
@@ -351,8 +357,9 @@ pub fn run(c: BenchCommand) -> Result<(), CliError> {
             seconds,
             rate,
             scenario,
+            assist,
         } => {
-            let r = bench_live(&scenario, sessions as usize, seconds, rate)?;
+            let r = bench_live(&scenario, sessions as usize, seconds, rate, assist)?;
             if json {
                 print_json(&r)
             } else {
@@ -529,7 +536,13 @@ fn load_average() -> f64 {
         .unwrap_or(-1.0)
 }
 
-fn bench_live(name: &str, sessions: usize, seconds: f64, rate: u32) -> Result<LiveBench, CliError> {
+fn bench_live(
+    name: &str,
+    sessions: usize,
+    seconds: f64,
+    rate: u32,
+    assist: bool,
+) -> Result<LiveBench, CliError> {
     if !(seconds.is_finite() && (0.1..=600.0).contains(&seconds)) {
         return Err(CliError(format!(
             "--seconds must be 0.1 to 600, got {seconds}"
@@ -549,7 +562,14 @@ fn bench_live(name: &str, sessions: usize, seconds: f64, rate: u32) -> Result<Li
             target: scenario.target.clone(),
             name: Some(format!("bench-live-{seed}")),
             wrist: None,
-            assist: services::live::AssistSettings::default(),
+            assist: services::live::AssistSettings {
+                mode: if assist {
+                    services::live::AssistMode::Suggest
+                } else {
+                    services::live::AssistMode::Off
+                },
+                robot: None,
+            },
             calibration: None,
         };
         streams.push((start, frames));
@@ -567,6 +587,22 @@ fn bench_live(name: &str, sessions: usize, seconds: f64, rate: u32) -> Result<Li
         no_demo: true,
         ..crate::config::ServeArgs::default()
     };
+    if assist {
+        // Skills to recognise: three sessions of the scenario, stored before the server starts.
+        let rt = tokio::runtime::Runtime::new()?;
+        rt.block_on(async {
+            let store = services::store::Store::open(&dir.path().join("data")).await?;
+            for seed in 100..103 {
+                let scenario = dfs_core::scenario::Scenario::builtin(name, seed)
+                    .ok_or_else(|| CliError(format!("no built-in scenario {name:?}")))?;
+                let path = dir.path().join(format!("stored-{seed}.mcap"));
+                services::session::record_simulation(&scenario, None, path.as_path(), |_, _| {})?;
+                services::ingest::ingest_file(&store, path, format!("stored-{seed}")).await?;
+            }
+            store.close().await;
+            Ok::<_, CliError>(())
+        })?;
+    }
     let config = args.into_config()?;
     let live_threads = config.state.live_threads;
     let app = server_rt.block_on(crate::startup::Application::build(config))?;
@@ -632,6 +668,7 @@ fn bench_live(name: &str, sessions: usize, seconds: f64, rate: u32) -> Result<Li
         rate_hz: rate,
         seconds,
         realtime: true,
+        assist,
         live_threads,
         cores,
         load_before,
