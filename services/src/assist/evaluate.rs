@@ -142,6 +142,9 @@ pub struct SessionScore {
     pub nearest_named: bool,
     /// The stored skill nearest the completed grasp (by the whole feature vector).
     pub nearest_skill_id: Option<i64>,
+    /// That skill is also the nearest on the dimensions known at the grasp stage, taken
+    /// exactly from the completed grasp (what any decision 1 s after the touch could reach).
+    pub nearest_on_known_dims: bool,
     /// The verdicts.
     pub verdicts: Vec<Verdict>,
 }
@@ -189,6 +192,9 @@ pub struct Evaluation {
     pub anticipated_fraction: f64,
     /// Fraction whose nearest stored skill was named.
     pub nearest_fraction: f64,
+    /// Fraction whose nearest stored skill is the nearest on the dimensions known at the grasp
+    /// stage, taken exactly from the completed grasp: the most a decision then could name.
+    pub nearest_bound_fraction: f64,
     /// Median decision time as a fraction of the reach.
     pub median_decided_fraction: f64,
     /// Median decision lead before the first contact (ms).
@@ -293,6 +299,17 @@ pub fn evaluate(setup: EvalSetup<'_>) -> Result<Evaluation, RecordingError> {
                 .is_some_and(|c| c.skill_id == truth),
             _ => false,
         };
+        // What any grasp-stage decision could do: the nearest on the dimensions known 1 s
+        // after the touch, taken from the completed grasp itself (exactly, not estimated).
+        let bound_named = r.skill.is_some_and(|(_, f)| {
+            let mut dims: Vec<usize> = super::index::GRASP_STAGE_DIMS.to_vec();
+            dims.push(5);
+            let top = index
+                .rank_features(&f, &dims, 1, &mut Scratch::default())
+                .first()
+                .map(|x| index.skill_id(x.row));
+            top.is_some() && top == nearest_truth.flatten()
+        });
         sessions.push(SessionScore {
             scenario: r.scenario.name.clone(),
             seed: r.scenario.seed,
@@ -306,6 +323,7 @@ pub fn evaluate(setup: EvalSetup<'_>) -> Result<Evaluation, RecordingError> {
                 .map(|(d, fc)| d as f64 / fc.max(1) as f64),
             nearest_named,
             nearest_skill_id: nearest_truth.flatten(),
+            nearest_on_known_dims: bound_named,
             verdicts,
         });
     }
@@ -390,6 +408,10 @@ pub fn evaluate(setup: EvalSetup<'_>) -> Result<Evaluation, RecordingError> {
         ),
         nearest_fraction: frac(
             sessions.iter().filter(|s| s.nearest_named).count(),
+            sessions.len(),
+        ),
+        nearest_bound_fraction: frac(
+            sessions.iter().filter(|s| s.nearest_on_known_dims).count(),
             sessions.len(),
         ),
         median_decided_fraction: crate::segmentation::median(&mut fractions),

@@ -172,6 +172,37 @@ impl RecognitionIndex {
         std::array::from_fn(|j| self.feature_cols[j][row])
     }
 
+    /// The held force per weight (feature dimension 5) of the stored skills of an object
+    /// shape (feature dimensions 13-15 equal to `shape`) as a line in 1/μ (dimension 1),
+    /// `(a, b)` of `a + b / μ` by least squares; `None` with fewer than three such skills or
+    /// no spread in μ. A person grips for the friction they expect: the grip per weight goes
+    /// with 1/μ (`dfs_core::operator`, Johansson & Westling 1984).
+    pub fn held_force_line(&self, shape: [f32; 3]) -> Option<(f32, f32)> {
+        let (mut n, mut sx, mut sy, mut sxx, mut sxy) = (0.0f64, 0.0, 0.0, 0.0, 0.0);
+        for row in 0..self.len() {
+            if (0..3).any(|k| self.feature_cols[13 + k][row] != shape[k]) {
+                continue;
+            }
+            let mu = f64::from(self.feature_cols[1][row]);
+            if mu <= 0.05 {
+                continue;
+            }
+            let (x, y) = (1.0 / mu, f64::from(self.feature_cols[5][row]));
+            n += 1.0;
+            sx += x;
+            sy += y;
+            sxx += x * x;
+            sxy += x * y;
+        }
+        let det = n * sxx - sx * sx;
+        if n < 3.0 || det.abs() < 1e-12 * n * n {
+            return None;
+        }
+        let b = (n * sxy - sx * sy) / det;
+        let a = (sy - b * sx) / n;
+        Some((a as f32, b as f32))
+    }
+
     /// Skills per kind.
     pub fn kinds(&self) -> BTreeMap<String, usize> {
         let mut m = BTreeMap::new();

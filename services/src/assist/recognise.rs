@@ -425,13 +425,25 @@ impl Recogniser {
     fn decide_grasp(&mut self, g: &GraspTrack, t_ns: u64) {
         self.decisions += 1;
         let i = g.object;
-        let query = grasp_feature(&self.objects[i], g);
+        let mut query = grasp_feature(&self.objects[i], g);
         let index = Arc::clone(&self.index);
-        // The held force per weight (dimension 5) is left out: estimated from the first
-        // tenths of a second of the lift (the grip's peak at lift-off) it made the nearest
-        // skill right less often (25 % against 50 % on `icms bench recognition`).
+        // The held force per weight (dimension 5) is not seen yet (the grip peaks at lift-off
+        // and relaxes after; measured over the first tenths of a second it made the nearest
+        // skill right less often): it is predicted from μ as the stored grasps of the shape
+        // hold theirs.
+        let mut dims = [0usize; GRASP_STAGE_DIMS.len() + 1];
+        dims[..GRASP_STAGE_DIMS.len()].copy_from_slice(&GRASP_STAGE_DIMS);
+        dims[GRASP_STAGE_DIMS.len()] = 5;
+        let mut n_dims = GRASP_STAGE_DIMS.len();
+        let mu = self.objects[i].mu as f32;
+        if let Some((a, b)) = index.held_force_line([query[13], query[14], query[15]]) {
+            if mu > 0.05 {
+                query[5] = a + b / mu;
+                n_dims += 1;
+            }
+        }
         let ranked = index
-            .rank_features(&query, &GRASP_STAGE_DIMS, 4, &mut self.scratch)
+            .rank_features(&query, &dims[..n_dims], 4, &mut self.scratch)
             .to_vec();
         let object = self.objects[i].name.clone();
         let candidate = |r: &super::index::Ranked| Candidate {
