@@ -590,3 +590,66 @@ async fn a_data_base_from_before_versions_is_migrated_to_version_0_and_brought_u
     assert_eq!(o.skill_ids.len(), expected.len());
     store.integrity_check().await.unwrap();
 }
+
+/// Issue 20: skills stored before approach templates existed (version 1, `approach` NULL, as
+/// migration 0005 leaves them) get theirs from a reprocessing, keeping their ids; until then
+/// they take no part in approach recognition.
+#[tokio::test]
+async fn skills_stored_before_templates_get_them_from_reprocessing_and_keep_their_ids() {
+    let tmp = tempfile::tempdir().unwrap();
+    let data = tmp.path().join("data");
+    let store = Store::open(&data).await.unwrap();
+    let bytes = simulate(tmp.path(), "box-pinch-lift", 2, None);
+    let o = ingest_bytes(&store, bytes, "box.mcap".into())
+        .await
+        .unwrap();
+    assert_eq!(o.skill_ids.len(), 1);
+    let id = o.skill_ids[0];
+    let fresh = store.get_skill(id).await.unwrap().approach.unwrap();
+    assert_eq!(fresh.len(), services::assist::features::TEMPLATE_DIM);
+    assert!(fresh.iter().flatten().count() > 10, "{fresh:?}");
+    store.close().await;
+    sql(
+        &data,
+        &[
+            ("UPDATE skills SET approach = NULL", None),
+            ("UPDATE sessions SET segmentation_version = 1", None),
+        ],
+    )
+    .await;
+
+    let store = Store::open(&data).await.unwrap();
+    assert!(store.get_skill(id).await.unwrap().approach.is_none());
+    let index = store.recognition_index();
+    let mut scratch = services::assist::index::Scratch::default();
+    let template: [f32; services::assist::features::TEMPLATE_DIM] = fresh
+        .iter()
+        .map(|v| v.unwrap_or(f32::NAN))
+        .collect::<Vec<_>>()
+        .try_into()
+        .unwrap();
+    let min = services::assist::recognise::MIN_COMPARED;
+    assert!(
+        index
+            .rank_templates(&template, 4, min, &mut scratch)
+            .is_empty(),
+        "a skill without a template is not compared"
+    );
+
+    let (r, _) = run(&store).await;
+    assert_eq!((r.sessions_stale, r.sessions_reprocessed), (1, 1));
+    assert_eq!((r.skills_kept, r.skills_added), (1, 0));
+    let after = store.get_skill(id).await.unwrap();
+    assert_eq!(
+        after.approach.as_ref(),
+        Some(&fresh),
+        "the same template again"
+    );
+    let index = store.recognition_index();
+    let ranked = index
+        .rank_templates(&template, 4, min, &mut scratch)
+        .to_vec();
+    assert_eq!(ranked.len(), 1);
+    assert_eq!(index.skill_id(ranked[0].row), id);
+    store.integrity_check().await.unwrap();
+}

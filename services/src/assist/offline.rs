@@ -52,6 +52,9 @@ pub fn scene_of(metadata: &BTreeMap<String, String>) -> Result<Vec<ObjectInfo>, 
             ))
         }
     };
+    if list.is_empty() {
+        return Err(invalid("objects", "the scene has no object".to_owned()));
+    }
     list.into_iter()
         .take(MAX_OBJECTS)
         .enumerate()
