@@ -34,7 +34,7 @@ pub struct StoredTemplate {
 /// mean held force are not known yet.
 pub const GRASP_STAGE_DIMS: [usize; 11] = [0, 1, 2, 3, 4, 10, 11, 12, 13, 14, 15];
 
-/// The stored skills, in columns. Ids need not be sorted.
+/// The stored skills, in columns, their rows grouped by object shape. Ids need not be sorted.
 #[derive(Debug, Clone, Default)]
 pub struct RecognitionIndex {
     ids: Vec<i64>,
@@ -75,8 +75,16 @@ impl RecognitionIndex {
             feature_cols: vec![Vec::new(); FEATURE_DIM],
             ..Default::default()
         };
+        let mut skills: Vec<StoredTemplate> = skills.into_iter().collect();
+        // Grouped by shape, the last of a repeated id kept (as inserting them in turn would).
+        skills.reverse();
+        let mut seen = std::collections::HashSet::new();
+        skills.retain(|s| seen.insert(s.skill_id));
+        skills.reverse();
+        skills.sort_by_key(|s| shape_code(&s.template));
         for s in skills {
-            index.insert(s);
+            let at = index.len();
+            index.put(at, s);
         }
         index
     }
@@ -84,6 +92,16 @@ impl RecognitionIndex {
     /// Adds a skill (or replaces the one with its id).
     pub fn insert(&mut self, s: StoredTemplate) {
         self.remove(&[s.skill_id]);
+        // Rows stay grouped by shape (a decision scans its shape's rows only): a new skill
+        // goes at the end of its shape's rows.
+        let at = self
+            .shapes
+            .partition_point(|&c| c <= shape_code(&s.template));
+        self.put(at, s);
+    }
+
+    /// Puts a skill at row `at` (its shape's rows must stay contiguous).
+    fn put(&mut self, at: usize, s: StoredTemplate) {
         if self.template_cols.is_empty() {
             self.template_cols = vec![Vec::new(); TEMPLATE_DIM];
             self.feature_cols = vec![Vec::new(); FEATURE_DIM];
@@ -95,15 +113,16 @@ impl RecognitionIndex {
                 self.kind_names.len() - 1
             }
         };
-        self.ids.push(s.skill_id);
-        self.kinds.push(kind as u32);
-        self.object_names.push(s.object_name);
-        self.shapes.push(shape_code(&s.template));
+        let shape = shape_code(&s.template);
+        self.ids.insert(at, s.skill_id);
+        self.kinds.insert(at, kind as u32);
+        self.object_names.insert(at, s.object_name);
+        self.shapes.insert(at, shape);
         for (j, col) in self.template_cols.iter_mut().enumerate() {
-            col.push(s.template[j] / TEMPLATE_SCALE[j]);
+            col.insert(at, s.template[j] / TEMPLATE_SCALE[j]);
         }
         for (j, col) in self.feature_cols.iter_mut().enumerate() {
-            col.push(s.feature[j]);
+            col.insert(at, s.feature[j]);
         }
     }
 
@@ -223,7 +242,11 @@ impl RecognitionIndex {
         min_compared: usize,
         scratch: &'s mut Scratch,
     ) -> &'s [Ranked] {
-        let n = self.len();
+        // Only the rows of the query's shape (contiguous, see `insert`).
+        let shape = shape_code(query);
+        let lo = self.shapes.partition_point(|&c| c < shape);
+        let hi = self.shapes.partition_point(|&c| c <= shape);
+        let n = hi - lo;
         scratch.sum.clear();
         scratch.sum.resize(n, 0.0);
         scratch.count.clear();
@@ -233,7 +256,12 @@ impl RecognitionIndex {
             if q.is_nan() {
                 continue;
             }
-            for ((s, c), &v) in scratch.sum.iter_mut().zip(&mut scratch.count).zip(col) {
+            for ((s, c), &v) in scratch
+                .sum
+                .iter_mut()
+                .zip(&mut scratch.count)
+                .zip(&col[lo..hi])
+            {
                 let d = v - q;
                 let d2 = d * d;
                 // NaN (not seen in the stored skill) adds nothing and does not count.
@@ -243,12 +271,11 @@ impl RecognitionIndex {
             }
         }
         let min = min_compared as f32;
-        let shape = shape_code(query);
         scratch.order.clear();
-        for (row, (&s, &c)) in scratch.sum.iter().zip(&scratch.count).enumerate() {
-            if c >= min && c > 0.0 && self.shapes[row] == shape {
+        for (k, (&s, &c)) in scratch.sum.iter().zip(&scratch.count).enumerate() {
+            if c >= min && c > 0.0 {
                 scratch.order.push(Ranked {
-                    row,
+                    row: lo + k,
                     distance: s / c,
                 });
             }
@@ -359,5 +386,47 @@ mod tests {
         assert!((r[0].distance - 2f32.sqrt()).abs() < 1e-5);
         assert_eq!(index.feature(r[1].row), [0.0; FEATURE_DIM]);
         assert_eq!(index.kind(r[1].row), "a");
+    }
+
+    #[test]
+    fn rows_stay_grouped_by_shape_and_a_query_sees_its_shape_only() {
+        let shaped = |id: i64, shape: usize, v: f32| {
+            let mut t = [f32::NAN; TEMPLATE_DIM];
+            t[..3].fill(0.0);
+            t[shape] = 1.0;
+            for (j, x) in t.iter_mut().enumerate().take(10).skip(3) {
+                *x = v * TEMPLATE_SCALE[j];
+            }
+            StoredTemplate {
+                skill_id: id,
+                kind: format!("k{shape}"),
+                object_name: None,
+                template: t,
+                feature: [v; FEATURE_DIM],
+            }
+        };
+        let mut index =
+            RecognitionIndex::new([shaped(1, 2, 0.0), shaped(2, 0, 0.0), shaped(3, 1, 0.0)]);
+        index.insert(shaped(4, 0, 1.0));
+        index.insert(shaped(5, 2, 1.0));
+        // Replacing a skill moves it to its (new) shape's rows.
+        index.insert(shaped(1, 1, 2.0));
+        assert_eq!(index.len(), 5);
+        let codes: Vec<u8> = (0..index.len()).map(|r| index.shapes[r]).collect();
+        assert!(codes.windows(2).all(|w| w[0] <= w[1]), "{codes:?}");
+        let mut scratch = Scratch::default();
+        for (shape, ids) in [(0usize, vec![2, 4]), (1, vec![3, 1]), (2, vec![5])] {
+            let q = shaped(0, shape, 0.5).template;
+            let mut got: Vec<i64> = index
+                .rank_templates(&q, 10, 1, &mut scratch)
+                .iter()
+                .map(|r| index.skill_id(r.row))
+                .collect();
+            let mut want = ids.clone();
+            got.sort_unstable();
+            want.sort_unstable();
+            assert_eq!(got, want, "shape {shape}");
+        }
+        assert_eq!(index.feature(index.row_of(1).unwrap()), [2.0; FEATURE_DIM]);
     }
 }
