@@ -230,8 +230,12 @@ impl LiveHub {
 /// samples as binary `icms.live.Sample` protobuf frames (services/proto/icms/live.proto), each
 /// answered with a binary `icms.live.Feedback`; the DFS steps at 1 kHz of the samples' time,
 /// interpolating between samples. Events (`error`, `stale`, `resumed`, `ended`, `stored`) are
-/// JSON text frames. `{"type": "end"}` ends the session: it is stored and segmented, `stored`
-/// names its skills, and the server closes. Full description: docs/live.md.
+/// JSON text frames. With `"assist": {"mode": "suggest"}` (or `"apply"` with `"robot": HAND`)
+/// the assistant sends `recognised` / `unknown` events as it recognises the stored skill being
+/// performed, and in `apply` mode `applying`, `robot` and `robot_report` as the robot hand
+/// applies it. `{"type": "end"}` ends the session: it is stored and segmented, `stored` names
+/// its skills (each `new`, or the stored skill it matched), and the server closes. Full
+/// description: docs/live.md.
 #[utoipa::path(get, path = "/live", tag = "live",
     security((), ("bearer" = [])),
     responses(

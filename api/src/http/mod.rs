@@ -106,8 +106,11 @@ fn finish_openapi(mut api: OpenApi, writes_need_token: bool) -> OpenApi {
              GET /api/v1/live: a JSON start message, then binary icms.live.Sample protobuf \
              frames (schema at GET /api/v1/live/schema) each answered by an icms.live.Feedback \
              frame, JSON events, and end; the DFS steps at 1 kHz of the samples' time, \
-             interpolating between samples; the session is recorded and stored as it ends \
-             (docs/live.md in the repository).",
+             interpolating between samples; the session is recorded and stored as it ends. \
+             With assist suggest or apply (and a robot hand) in the start message, the \
+             assistant recognises the stored skill being performed early (recognised / \
+             unknown events) and applies it on the robot hand (applying, robot, robot_report \
+             events) (docs/live.md in the repository).",
         ))
         .build();
     let components = api.components.get_or_insert_with(Default::default);
