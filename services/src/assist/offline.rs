@@ -279,7 +279,16 @@ pub fn approach_templates(
             Some(Track {
                 builder: TemplateBuilder::new(i, &objects[i]),
                 start_ns: s.phases.first()?.start_ns,
-                end_ns: s.phases.last()?.end_ns,
+                // The template ends at the contact onset: the fingers close on the object in
+                // `grasp` (the first phase in contact ends it), so the file is read no further
+                // than the end of the last grasp's `grasp` phase and the onset window.
+                end_ns: s
+                    .phases
+                    .iter()
+                    .find(|p| p.name == dfs_core::scenario::Phase::Grasp)
+                    .or(s.phases.last())?
+                    .end_ns
+                    + ONSET_WINDOW_NS,
             })
         })
         .collect();
