@@ -447,19 +447,24 @@ mod tests {
         o
     }
 
-    #[test]
-    fn checkpoints_are_filled_once_in_order_as_the_hand_comes_in() {
-        let info = ObjectInfo {
+    /// The built-in scenarios' 4 cm ball.
+    fn ball() -> ObjectInfo {
+        ObjectInfo {
             name: "object".into(),
             shape: Shape::Sphere { radius: 0.04 },
             mass: 0.3,
             mu: 0.8,
             mu_torsion: 0.0,
-        };
+        }
+    }
+
+    #[test]
+    fn checkpoints_are_filled_once_in_order_as_the_hand_comes_in() {
+        let info = ball();
         let pose = Isometry::translation(0.0, 0.0, 0.04);
         let mut b = TemplateBuilder::new(0, &info);
         assert!(b.template()[OBJECT_DIMS..].iter().all(|v| v.is_nan()));
-        // From 0.2 m above the surface down to it, the aperture opening with distance.
+        // From 0.25 m above the surface down to it, the aperture opening with distance.
         let mut reached = Vec::new();
         for i in 0..=250 {
             let d = 0.25 - i as f64 * 0.001;
@@ -511,13 +516,7 @@ mod tests {
 
     #[test]
     fn the_onset_counts_fingertips_touching_after_the_window() {
-        let info = ObjectInfo {
-            name: "object".into(),
-            shape: Shape::Sphere { radius: 0.04 },
-            mass: 0.3,
-            mu: 0.8,
-            mu_torsion: 0.0,
-        };
+        let info = ball();
         let pose = Isometry::translation(0.0, 0.0, 0.04);
         let mut b = TemplateBuilder::new(0, &info);
         let touch = TipTouch {
