@@ -3,20 +3,22 @@
 //! contents checked), segmented into hand-independent skills, and stored atomically and
 //! idempotently by [`Store::ingest`].
 //!
-//! Memory: a session is read in two streamed passes ([`segment_source`]), holding a chunk at
+//! Memory: a session is read in two streamed passes ([`segment_source`](crate::segmentation::segment_source)), holding a chunk at
 //! a time, the hand's base resampled onto a 1 ms grid (41 bytes per millisecond of session),
-//! the contacts and object states of a session of a minute or two between the passes, and
-//! each grasp's accumulators: 34 MB for a minute, 218 MB for an hour (see [`segment_source`]).
+//! the joint angles, contacts and object states of a session of a minute or so between the
+//! passes (read by the second pass and then by the approach templates), and
+//! each grasp's accumulators: 34 MB for a minute, 218 MB for an hour (see [`segment_source`](crate::segmentation::segment_source)).
 //! [`ingest_files`] analyses [`INGEST_FILES_IN_FLIGHT`] files at once.
 
 use std::collections::VecDeque;
 use std::path::{Path, PathBuf};
 
+use crate::assist::offline::{approach_templates, APPROACH_TOPICS};
 use crate::error::RecordingError;
 use crate::mcap_io::pool::CHUNK_BUFFERS;
 use crate::mcap_io::ReadLimits;
-use crate::segmentation::{segment_source, SegmentParams, Skill};
-use crate::session::SessionSource;
+use crate::segmentation::{segment_source_keeping, SegmentParams, Skill};
+use crate::session::{KeptMessages, SessionSource, KEPT_MESSAGES_BUDGET};
 use crate::store::{
     IngestOutcome, NewSkill, ObjectShape, SessionMeta, StagedBlob, Store, StoreError,
 };
@@ -39,14 +41,24 @@ pub fn analyse(bytes: &[u8], name: &str) -> Result<(SessionMeta, Vec<NewSkill>),
     analyse_source(&SessionSource::Bytes { bytes, name })
 }
 
-/// [`analyse`] of a session file or bytes, streamed ([`segment_source`]): memory bounded by
+/// [`analyse`] of a session file or bytes, streamed ([`segment_source`](crate::segmentation::segment_source)): memory bounded by
 /// the session's grid and a chunk, not the file.
 pub fn analyse_source(
     source: &SessionSource<'_>,
 ) -> Result<(SessionMeta, Vec<NewSkill>), RecordingError> {
     // A replay's MCAP reads like a session but is a robot replaying a skill: its "skill" would
     // be shape `unknown` with no parameters (refused by `segment_source`).
-    let (head, seg) = segment_source(source, &ReadLimits::streaming(), &SegmentParams::default())?;
+    // The first pass keeps the joint angles too, so the approach templates below need no third
+    // pass over the file. They add about half to what segmentation keeps (0.67 MB a second of
+    // a three-object session in all), so the budget grows by half: the sessions whose second
+    // pass reads no file stay the same (a minute or so).
+    let mut kept = KeptMessages::new(KEPT_MESSAGES_BUDGET * 3 / 2).also(APPROACH_TOPICS);
+    let (head, seg) = segment_source_keeping(
+        source,
+        &ReadLimits::streaming(),
+        &SegmentParams::default(),
+        &mut kept,
+    )?;
     let m = &head.metadata;
     let object: serde_json::Value = m
         .get("object")
@@ -68,9 +80,10 @@ pub fn analyse_source(
         started_at: m.get("started_at").cloned(),
         extra: extra_of(m, head.live.as_ref()),
     };
-    // What recognition needs of each grasp: its approach template, from the file once more
-    // up to the last grasp's contact onset.
-    let templates = crate::assist::offline::approach_templates(source, m, &seg.skills, None)?;
+    // What recognition needs of each grasp: its approach template, from the kept messages (or
+    // the file once more, for a long session) up to the last grasp's contact onset.
+    let templates = approach_templates(source, Some(&kept), m, &seg.skills, None)?;
+    drop(kept);
     let skills = seg
         .skills
         .iter()

@@ -1075,14 +1075,26 @@ pub fn segment_source(
     limits: &ReadLimits,
     params: &SegmentParams,
 ) -> Result<(SessionHead, Segmentation), RecordingError> {
-    let mut one = PassOne::new(params);
     // The contacts and object states of a session of a minute or two are kept from the first
     // pass for the second (no second decompression); a longer one is read again.
     let mut kept = KeptMessages::new(KEPT_MESSAGES_BUDGET);
-    let head = source.stream_keeping(limits, &mut one, &mut kept)?;
+    segment_source_keeping(source, limits, params, &mut kept)
+}
+
+/// [`segment_source`] keeping the first pass's messages in `kept` (the topics segmentation
+/// reads and those `kept` is asked to keep [as well](KeptMessages::also)) for a reader after
+/// it: ingest's approach templates read them without a third pass over the file.
+pub fn segment_source_keeping(
+    source: &SessionSource<'_>,
+    limits: &ReadLimits,
+    params: &SegmentParams,
+    kept: &mut KeptMessages,
+) -> Result<(SessionHead, Segmentation), RecordingError> {
+    let mut one = PassOne::new(params);
+    let head = source.stream_keeping(limits, &mut one, kept)?;
     head.ensure_grasp_session(&source.name())?;
     let mut two = one.finish(&head.metadata, params);
-    source.stream_again_kept(limits, &mut two, &kept)?;
+    source.stream_again_kept(limits, &mut two, kept)?;
     Ok((head, two.finish()))
 }
 

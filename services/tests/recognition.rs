@@ -36,3 +36,40 @@ fn grasps_are_anticipated_and_an_absent_kind_is_unknown_and_learned() {
     assert!(e.unknown_fraction >= 0.9, "{report}");
     assert!(e.stored_as_new_fraction >= 0.9, "{report}");
 }
+
+/// Ingest builds the approach templates from the messages segmentation's first pass kept; a
+/// session too long for the kept budget reads its file again. Both give the templates a plain
+/// second read of the file gives (a scene of three objects, so the target is looked up too).
+#[test]
+fn templates_from_kept_messages_equal_those_of_a_second_read() {
+    use services::assist::features::TEMPLATE_DIM;
+    use services::assist::offline::{approach_templates, APPROACH_TOPICS};
+    use services::mcap_io::ReadLimits;
+    use services::segmentation::{segment_source_keeping, SegmentParams};
+    use services::session::{record_simulation, KeptMessages, SessionSource, KEPT_MESSAGES_BUDGET};
+
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("three.mcap");
+    let scenario = Scenario::variant("table-three", 7).unwrap();
+    record_simulation(&scenario, None, &path, |_, _| {}).unwrap();
+    let source = SessionSource::File(&path);
+    let limits = ReadLimits::streaming();
+    let params = SegmentParams::default();
+    for budget in [KEPT_MESSAGES_BUDGET, 4096] {
+        let mut kept = KeptMessages::new(budget).also(APPROACH_TOPICS);
+        let (head, seg) = segment_source_keeping(&source, &limits, &params, &mut kept).unwrap();
+        assert!(!seg.skills.is_empty());
+        assert_eq!(kept.covers(APPROACH_TOPICS), budget == KEPT_MESSAGES_BUDGET);
+        let m = &head.metadata;
+        let from_kept = approach_templates(&source, Some(&kept), m, &seg.skills, None).unwrap();
+        let from_file = approach_templates(&source, None, m, &seg.skills, None).unwrap();
+        assert!(from_file.iter().all(Option::is_some), "{from_file:?}");
+        // Bit for bit (NaN marks a checkpoint never reached, so compare the bits).
+        let bits = |t: &[Option<[f32; TEMPLATE_DIM]>]| -> Vec<Vec<u32>> {
+            t.iter()
+                .map(|t| t.unwrap().iter().map(|x| x.to_bits()).collect())
+                .collect()
+        };
+        assert_eq!(bits(&from_kept), bits(&from_file), "budget {budget}");
+    }
+}

@@ -20,7 +20,8 @@ use crate::error::RecordingError;
 use crate::mcap_io::ReadLimits;
 use crate::segmentation::{iso, Skill};
 use crate::session::{
-    Contacts, DecodeTopics, GloveJointStates, ObjectState, SessionSource, SessionVisitor,
+    Contacts, DecodeTopics, GloveJointStates, KeptMessages, ObjectState, SessionSource,
+    SessionVisitor,
 };
 
 use super::features::{
@@ -172,12 +173,7 @@ fn v3(v: &crate::foxglove::Vector3) -> Vector {
 
 impl<F: FnMut(&Observation)> SessionVisitor for Observer<F> {
     fn wants(&self) -> DecodeTopics {
-        DecodeTopics {
-            joint_states: true,
-            feedback: false,
-            contacts: true,
-            object: true,
-        }
+        APPROACH_TOPICS
     }
 
     fn done(&self) -> bool {
@@ -236,13 +232,25 @@ impl<F: FnMut(&Observation)> SessionVisitor for Observer<F> {
     }
 }
 
+/// The raw topics the assistant observes: joint angles (forward kinematics of the hand),
+/// contacts (the touch) and object states (where the objects are).
+pub const APPROACH_TOPICS: DecodeTopics = DecodeTopics {
+    joint_states: true,
+    feedback: false,
+    contacts: true,
+    object: true,
+};
+
 /// The approach template of each of a session's skills (see
 /// [`super::features`]), in the skills' order: built from the skill's first phase to
 /// [`ONSET_WINDOW_NS`] after its first touch, on the object it grasped. `None` for every skill
 /// when the session's hand is not built in and `hand` is not given, or its objects are not
-/// described. Reads the file once more, up to the last skill's onset.
+/// described. Reads the messages `kept` by segmentation's first pass if they hold the joint
+/// angles, contacts and object states ([`APPROACH_TOPICS`]); otherwise the file once more, up
+/// to the last skill's onset.
 pub fn approach_templates(
     source: &SessionSource<'_>,
+    kept: Option<&KeptMessages>,
     metadata: &BTreeMap<String, String>,
     skills: &[Skill],
     hand: Option<HandModel>,
@@ -305,7 +313,10 @@ pub fn approach_templates(
         }
     });
     let mut observer = observer.until(last_end + ONSET_WINDOW_NS);
-    source.stream_again(&ReadLimits::streaming(), &mut observer)?;
+    match kept {
+        Some(kept) => source.stream_again_kept(&ReadLimits::streaming(), &mut observer, kept)?,
+        None => source.stream_again(&ReadLimits::streaming(), &mut observer)?,
+    }
     drop(observer);
     Ok(tracks
         .into_iter()

@@ -155,6 +155,16 @@ impl DecodeTopics {
 }
 
 impl DecodeTopics {
+    /// The raw topics in either.
+    pub const fn union(self, other: DecodeTopics) -> DecodeTopics {
+        DecodeTopics {
+            joint_states: self.joint_states || other.joint_states,
+            feedback: self.feedback || other.feedback,
+            contacts: self.contacts || other.contacts,
+            object: self.object || other.object,
+        }
+    }
+
     /// Whether raw topic `RAW_TOPICS[i]` is among these.
     pub fn has(&self, i: usize) -> bool {
         match i {
@@ -366,7 +376,10 @@ fn stream_source(
     keep: Option<&mut KeptMessages>,
 ) -> Result<SessionHead> {
     let mut nothing = ();
-    let mut early = Checker::early(&mut nothing, visitor.wants());
+    // The reading thread checks the raw topics neither the visitor takes nor `keep` keeps;
+    // the others come to this one.
+    let kept_also = keep.as_ref().map_or(DecodeTopics::NONE, |k| k.also);
+    let mut early = Checker::early(&mut nothing, visitor.wants().union(kept_also));
     let mut checker = Checker::new(visitor);
     let len = match source {
         SessionSource::File(path) => {
@@ -401,7 +414,9 @@ pub const KEPT_MESSAGES_BUDGET: usize = 32 << 20;
 #[derive(Debug)]
 pub struct KeptMessages {
     budget: usize,
-    /// The raw topics kept: those the first read's visitor took.
+    /// Raw topics kept besides those the first read's visitor takes ([`KeptMessages::also`]).
+    also: DecodeTopics,
+    /// The raw topics kept: those the first read's visitor took, and `also`.
     topics: DecodeTopics,
     /// Whether every message of `topics` the read handed on is here (false once over budget,
     /// or before a read).
@@ -432,11 +447,20 @@ impl KeptMessages {
     pub fn new(budget: usize) -> Self {
         KeptMessages {
             budget,
+            also: DecodeTopics::NONE,
             topics: DecodeTopics::NONE,
             complete: false,
             messages: Vec::new(),
             bytes: Vec::new(),
         }
+    }
+
+    /// Keeps the messages of `topics` as well as those the first read's visitor takes, for a
+    /// later reader of other topics (ingest's approach templates read the joint angles after
+    /// segmentation, which reads contacts and object states).
+    pub fn also(mut self, topics: DecodeTopics) -> Self {
+        self.also = topics;
+        self
     }
 
     /// Empty, ready to keep the messages of `topics` of a new read of a file of `len` bytes
@@ -449,7 +473,7 @@ impl KeptMessages {
         self.bytes.clear();
         self.messages = KEPT_INDEX.take(room / 90);
         self.messages.clear();
-        self.topics = topics;
+        self.topics = topics.union(self.also);
         self.complete = true;
         self
     }
@@ -472,7 +496,7 @@ impl KeptMessages {
 
     /// Keeps a message; over the budget (or past what the index can say), drops everything.
     fn keep(&mut self, raw: usize, protobuf: bool, index: usize, t: u64, data: &[u8]) {
-        if !self.complete {
+        if !self.complete || !self.topics.has(raw) {
             return;
         }
         let entry = (
