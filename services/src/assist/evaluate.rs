@@ -177,8 +177,14 @@ pub struct Cost {
     pub p99_us: f64,
     /// Slowest (µs).
     pub max_us: f64,
-    /// Mean time of an observation that decided (compared with the stored skills) (µs).
-    pub decision_mean_us: f64,
+    /// Mean time of an observation that decided at the approach stage (compared the reach
+    /// with the stored skills' templates) (µs).
+    pub approach_decision_mean_us: f64,
+    /// The slowest of those (µs).
+    pub approach_decision_max_us: f64,
+    /// Mean time of an observation that decided at the grasp stage (the grasp quality of the
+    /// contacts so far, then the stored skills' features) (µs).
+    pub grasp_decision_mean_us: f64,
 }
 
 /// The whole evaluation.
@@ -370,12 +376,15 @@ pub fn evaluate(setup: EvalSetup<'_>) -> Result<Evaluation, RecordingError> {
     let cost = setup.cost_skills.map(|n| {
         let big = Arc::new(grown(&stored, n));
         let mut times = Vec::new();
-        let mut decision_times = Vec::new();
+        let mut approach_times = Vec::new();
+        let mut grasp_times = Vec::new();
         for r in &held {
             let (_, t, d) = run(&big, r, &setup.params);
             times.extend(t);
-            decision_times.extend(d);
+            approach_times.extend(d.approach);
+            grasp_times.extend(d.grasp);
         }
+        let mean = |v: &[f64]| v.iter().sum::<f64>() / v.len().max(1) as f64;
         let mut sorted = times.clone();
         sorted.sort_by(f64::total_cmp);
         let pick = |q: f64| {
@@ -390,8 +399,9 @@ pub fn evaluate(setup: EvalSetup<'_>) -> Result<Evaluation, RecordingError> {
             mean_us: times.iter().sum::<f64>() / times.len().max(1) as f64,
             p99_us: pick(0.99),
             max_us: sorted.last().copied().unwrap_or(0.0),
-            decision_mean_us: decision_times.iter().sum::<f64>()
-                / decision_times.len().max(1) as f64,
+            approach_decision_mean_us: mean(&approach_times),
+            approach_decision_max_us: approach_times.iter().copied().fold(0.0, f64::max),
+            grasp_decision_mean_us: mean(&grasp_times),
         }
     });
 
@@ -433,25 +443,34 @@ pub fn evaluate(setup: EvalSetup<'_>) -> Result<Evaluation, RecordingError> {
 
 /// The recogniser over a held-out session: its verdicts, the time of every observation and of
 /// those that decided (µs).
+/// The times (µs) of the observations that decided, by stage.
+#[derive(Debug, Default)]
+struct DecisionTimes {
+    approach: Vec<f64>,
+    grasp: Vec<f64>,
+}
+
 fn run(
     index: &Arc<RecognitionIndex>,
     r: &Recorded,
     params: &RecogniserParams,
-) -> (Vec<Verdict>, Vec<f64>, Vec<f64>) {
+) -> (Vec<Verdict>, Vec<f64>, DecisionTimes) {
     let mut rec = Recogniser::new(Arc::clone(index), r.objects.clone(), *params);
     let mut times = Vec::with_capacity(r.observations.len());
-    let mut decision_times = Vec::new();
+    let mut decided = DecisionTimes::default();
     for o in &r.observations {
-        let before = rec.decisions();
+        let before = (rec.decisions(), rec.grasp_decisions());
         let t = Instant::now();
         rec.observe(o);
         let us = t.elapsed().as_secs_f64() * 1e6;
         times.push(us);
-        if rec.decisions() > before {
-            decision_times.push(us);
+        if rec.grasp_decisions() > before.1 {
+            decided.grasp.push(us);
+        } else if rec.decisions() > before.0 {
+            decided.approach.push(us);
         }
     }
-    (rec.verdicts().to_vec(), times, decision_times)
+    (rec.verdicts().to_vec(), times, decided)
 }
 
 /// The stored skill nearest `feature` by the whole feature vector.

@@ -207,8 +207,10 @@ pub struct Recogniser {
     grasp: Option<GraspTrack>,
     last_touch_ns: Option<u64>,
     scratch: Scratch,
-    /// Decisions taken (template or feature comparisons), and the verdicts.
+    /// Decisions taken (template or feature comparisons), of them at the grasp stage, and
+    /// the verdicts.
     decisions: u64,
+    grasp_decisions: u64,
     verdicts: Vec<Verdict>,
 }
 
@@ -230,6 +232,7 @@ impl Recogniser {
             last_touch_ns: None,
             scratch: Scratch::default(),
             decisions: 0,
+            grasp_decisions: 0,
             verdicts: Vec::new(),
         }
     }
@@ -247,6 +250,11 @@ impl Recogniser {
     /// Comparisons with the stored skills made so far.
     pub fn decisions(&self) -> u64 {
         self.decisions
+    }
+
+    /// Of [`Recogniser::decisions`], those of the grasp stage.
+    pub fn grasp_decisions(&self) -> u64 {
+        self.grasp_decisions
     }
 
     /// Takes one observation; returns the verdicts it led to (usually none).
@@ -424,6 +432,7 @@ impl Recogniser {
     /// The grasp-stage decision.
     fn decide_grasp(&mut self, g: &GraspTrack, t_ns: u64) {
         self.decisions += 1;
+        self.grasp_decisions += 1;
         let i = g.object;
         let mut query = grasp_feature(&self.objects[i], g);
         let index = Arc::clone(&self.index);
