@@ -2,23 +2,35 @@
 //! compare ratios against peers run in the same session, not absolute numbers.
 
 use super::{print_json, CliError};
-use dfs_core::dfs::GloveSample;
-use dfs_core::fixtures::glove10_holding_paper_sphere;
 use serde::Serialize;
 use std::hint::black_box;
 use std::time::Instant;
 
+pub mod tick;
+
 /// Benchmarks.
 #[derive(Debug, clap::Subcommand)]
 pub enum BenchCommand {
-    /// One DFS tick for glove10 holding the paper's sphere on 4 contacts.
+    /// The DFS tick on a held-object scene that evolves (`fingertips`: glove10 holding a ball
+    /// on four fingertips, the grip swinging), timed as the MuJoCo peer of the same scene
+    /// (`benches/peers/mujoco_peer.py`) times its step: the median over batches of 100 ticks
+    /// of the time per tick.
     Tick {
-        /// Print JSON: `{"median_ns", "p99_ns", "allocations_per_tick"}`.
+        /// Print JSON: `{"median_ns", "p99_ns", "allocations_per_tick", "median_tick_ns", ...}`.
         #[arg(long)]
         json: bool,
-        /// Number of timed ticks, at least 1000 (a percentile of fewer says little).
+        /// The scene (`power-grasp` needs palm and phalanx contact, not built yet).
+        #[arg(long, value_enum, default_value_t = tick::TickScene::Fingertips)]
+        scene: tick::TickScene,
+        /// Number of timed ticks, at least 1000 (a percentile of fewer says little); at most
+        /// 2 000 000 for a held scene, whose glove samples are made beforehand.
         #[arg(long, default_value_t = 200_000, value_parser = clap::value_parser!(u64).range(1000..=100_000_000))]
         iterations: u64,
+        /// Print the scene (hand pose, ball, the operator's set posture, torques and gains) as
+        /// JSON instead of timing it: what the MuJoCo peer builds its scene from
+        /// (`benches/peers/fingertips_scene.json`).
+        #[arg(long, conflicts_with_all = ["json", "iterations"])]
+        describe: bool,
     },
     /// A scenario simulated alone, then simulated and recorded into an MCAP session (written
     /// to a temporary file, deleted afterwards).
@@ -265,23 +277,6 @@ pub struct SessionBench {
     pub scenario: String,
 }
 
-/// Result of `icms bench tick`.
-#[derive(Debug, Serialize)]
-pub struct TickBench {
-    /// Median time of one tick (ns).
-    pub median_ns: f64,
-    /// 99th percentile (ns).
-    pub p99_ns: f64,
-    /// Mean time of one tick (ns).
-    pub mean_ns: f64,
-    /// Heap allocations per tick (counted by the global allocator).
-    pub allocations_per_tick: f64,
-    /// Ticks timed.
-    pub iterations: usize,
-    /// Transmitting contacts in the tick.
-    pub contacts: usize,
-}
-
 /// Runs a benchmark.
 pub fn run(c: BenchCommand) -> Result<(), CliError> {
     match c {
@@ -375,14 +370,23 @@ pub fn run(c: BenchCommand) -> Result<(), CliError> {
                 Ok(())
             }
         }
-        BenchCommand::Tick { json, iterations } => {
-            let r = bench_tick(iterations as usize)?;
+        BenchCommand::Tick {
+            json,
+            scene,
+            iterations,
+            describe,
+        } => {
+            if describe {
+                return print_json(&tick::describe(scene)?);
+            }
+            let r = tick::bench_tick(scene, iterations as usize)?;
             if json {
                 print_json(&r)
             } else {
                 println!(
-                    "DFS tick (glove10, paper sphere, {} contacts): median {:.0} ns, p99 {:.0} ns, mean {:.0} ns, {} allocations/tick over {} ticks",
-                    r.contacts, r.median_ns, r.p99_ns, r.mean_ns, r.allocations_per_tick, r.iterations
+                    "DFS tick, scene {:?} ({} contacts at the end, at least {}): median {:.0} ns per tick (batches of {}), p99 {:.0} ns, median of single ticks {:.0} ns, {} allocations/tick over {} ticks",
+                    scene, r.contacts, r.min_contacts, r.median_ns, r.batch_ticks, r.p99_ns,
+                    r.median_tick_ns, r.allocations_per_tick, r.iterations
                 );
                 Ok(())
             }
@@ -810,41 +814,6 @@ async fn post_session(
     drop(sender);
     let _ = connection.await;
     Ok((status, body))
-}
-
-fn bench_tick(iterations: usize) -> Result<TickBench, CliError> {
-    let (mut dfs, q, tau, base) = glove10_holding_paper_sphere()?;
-    let start = *dfs.object_state();
-    let sample = GloveSample {
-        q: &q,
-        tau: &tau,
-        base,
-    };
-    for _ in 0..iterations / 10 {
-        dfs.set_object_state(start);
-        black_box(dfs.step(&sample)?);
-    }
-    let contacts = dfs.output().n_contacts;
-    let mut times = vec![0u32; iterations];
-    let region = stats_alloc::Region::new(&stats_alloc::INSTRUMENTED_SYSTEM);
-    let total = Instant::now();
-    for t in times.iter_mut() {
-        let t0 = Instant::now();
-        dfs.set_object_state(start);
-        black_box(dfs.step(black_box(&sample))?);
-        *t = t0.elapsed().as_nanos().min(u32::MAX as u128) as u32;
-    }
-    let total = total.elapsed();
-    let allocs = region.change().allocations;
-    times.sort_unstable();
-    Ok(TickBench {
-        median_ns: times[iterations / 2] as f64,
-        p99_ns: times[iterations * 99 / 100] as f64,
-        mean_ns: total.as_nanos() as f64 / iterations as f64,
-        allocations_per_tick: allocs as f64 / iterations as f64,
-        iterations,
-        contacts,
-    })
 }
 
 /// The grasp kinds `icms bench recognition` stores and recognises: the built-in scenarios of

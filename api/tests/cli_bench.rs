@@ -1,0 +1,107 @@
+//! `icms bench tick`: the held-object scene prints its figures and allocates nothing per tick,
+//! the power-grasp scene is refused naming what is missing, and the scene the MuJoCo peer
+//! reads (`benches/peers/fingertips_scene.json`) is the DFS's. No test asserts a time.
+
+mod common;
+use common::icms;
+
+use serde_json::Value;
+
+fn json(out: &str) -> Value {
+    serde_json::from_str(out).unwrap_or_else(|e| panic!("not JSON ({e}): {out}"))
+}
+
+#[test]
+fn the_fingertips_scene_prints_its_figures_without_allocating() {
+    let (c, out, e) = icms(&[
+        "bench",
+        "tick",
+        "--scene",
+        "fingertips",
+        "--json",
+        "--iterations",
+        "2000",
+    ]);
+    assert_eq!(c, 0, "{e}");
+    let r = json(&out);
+    for field in ["median_ns", "p99_ns", "allocations_per_tick"] {
+        assert!(r[field].is_number(), "no {field}: {r}");
+    }
+    assert!(r["median_ns"].as_f64().unwrap() > 0.0, "{r}");
+    assert_eq!(r["allocations_per_tick"].as_f64(), Some(0.0), "{r}");
+    assert_eq!(r["scene"], "fingertips");
+    assert_eq!(r["iterations"], 2000);
+    // Held through the run: the bench itself fails otherwise.
+    assert!(r["min_contacts"].as_u64().unwrap() >= 3, "{r}");
+}
+
+#[test]
+fn the_frozen_scene_of_issue_2_still_runs() {
+    let (c, out, e) = icms(&[
+        "bench",
+        "tick",
+        "--scene",
+        "frozen",
+        "--json",
+        "--iterations",
+        "2000",
+    ]);
+    assert_eq!(c, 0, "{e}");
+    let r = json(&out);
+    assert_eq!(r["allocations_per_tick"].as_f64(), Some(0.0), "{r}");
+    assert_eq!(r["contacts"], 4, "{r}");
+}
+
+#[test]
+fn the_power_grasp_scene_is_refused_until_palm_contact_exists() {
+    let (c, out, e) = icms(&["bench", "tick", "--scene", "power-grasp", "--json"]);
+    assert_eq!(c, 1, "{out}");
+    assert!(out.is_empty(), "{out}");
+    assert!(
+        e.contains("palm or phalanx contact") && e.contains("issue 21 item 5"),
+        "{e}"
+    );
+}
+
+/// Every number of `a` equal to `b`'s to 1e-12 (relative), every string and key the same.
+fn same(a: &Value, b: &Value, at: &str) {
+    match (a, b) {
+        (Value::Number(x), Value::Number(y)) => {
+            let (x, y) = (x.as_f64().unwrap(), y.as_f64().unwrap());
+            assert!(
+                (x - y).abs() <= 1e-12 * x.abs().max(y.abs()).max(1.0),
+                "{at}: {x} against {y}"
+            );
+        }
+        (Value::Array(x), Value::Array(y)) => {
+            assert_eq!(x.len(), y.len(), "{at}");
+            for (i, (x, y)) in x.iter().zip(y).enumerate() {
+                same(x, y, &format!("{at}[{i}]"));
+            }
+        }
+        (Value::Object(x), Value::Object(y)) => {
+            let keys = |o: &serde_json::Map<String, Value>| o.keys().cloned().collect::<Vec<_>>();
+            assert_eq!(keys(x), keys(y), "{at}");
+            for (k, v) in x {
+                same(v, &y[k], &format!("{at}.{k}"));
+            }
+        }
+        _ => assert_eq!(a, b, "{at}"),
+    }
+}
+
+#[test]
+fn the_mujoco_peer_reads_the_dfs_scene() {
+    let (c, out, e) = icms(&["bench", "tick", "--scene", "fingertips", "--describe"]);
+    assert_eq!(c, 0, "{e}");
+    let path = concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/../benches/peers/fingertips_scene.json"
+    );
+    let file = std::fs::read_to_string(path).unwrap();
+    same(
+        &json(&out),
+        &json(&file),
+        "benches/peers/fingertips_scene.json (rewrite it with `icms bench tick --scene fingertips --describe`)",
+    );
+}

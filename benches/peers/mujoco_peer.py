@@ -1,0 +1,232 @@
+"""MuJoCo peer of `icms bench tick`: the same held-object scene, timed with the same statistic.
+
+    python3 -m venv /tmp/mj && /tmp/mj/bin/pip install mujoco
+    /tmp/mj/bin/python benches/peers/mujoco_peer.py --scene fingertips
+
+Prints the scene and the per-batch figures, and on its last line the median microseconds per
+1 ms step. Run it in the same minutes as `icms bench tick --scene fingertips --json` and quote
+the ratio of the two medians, not absolute times (the machine's speed varies between runs).
+
+The scene (`--scene fingertips`) is the DFS's, read from `fingertips_scene.json` beside this
+file (written by `icms bench tick --scene fingertips --describe`; a test in
+api/tests/cli_bench.rs keeps the two equal):
+
+- glove10 as MJCF (`glove10_mjcf.py`: the same links, masses, inertias, joint limits, armature
+  and damping; the coupled joints as stiff joint equality constraints), its base (forearm)
+  fixed where the DFS has it (palm up, rolled 20°), the hand's own weight compensated (the
+  DFS's fingers have no weight);
+- the ball: the same radius, mass and friction (point contacts with friction, `condim` 3,
+  elliptic cones), where the DFS starts it, touching the same four fingertips; only the
+  fingertip spheres collide, and only with the ball (the DFS has no other contact geometry);
+- the operator's grip: a position actuator per DOF with the DFS operator's stiffness and damping
+  and its set posture as target, offset by the feed-forward torque over the stiffness, so the
+  actuator's force is the DFS operator's `g(t) τ_ff + K_p (θ_set − θ) − K_d θ̇`, with the same
+  slowly swinging grip `g(t)`;
+- 1 ms steps (`implicitfast`), `impratio` 10 (MuJoCo's advice for grasps: friction ten times
+  stiffer than by default; with the default the ball creeps out of the grip within seconds),
+  the ball's contacts with `solref` 0.004 s (the default 0.02 s lets it sink millimetres into
+  the fingertips).
+
+Timing: a warm-up (the grasp settles), then `--batches` batches of `--batch-steps` steps, each
+one call of `mujoco.rollout.rollout` (the steps run in C with the precomputed controls, no
+Python per step; a call of a single step takes about a step's time, so a call's own cost is
+well under 1 % of a batch), each batch continuing from the state and warm start the one before
+ended in. The printed figure is the median over the batches of the batch's time per step: what
+`icms bench tick` reports as `median_ns` (its batches of 100 ticks timed whole). On a shared
+machine a batch is either untouched by another process's time slice (a few ms) or slowed by a
+whole one; batches much shorter than a slice (100 steps: 1.5-2 ms here, the DFS's 100 ticks
+0.3 ms) are mostly untouched, and the median keeps those. After the run the script checks that
+the ball is still held (at least three fingertip contacts, moved less than 10 mm in the hand)
+and fails otherwise.
+
+`--scene power-grasp` (a cylinder pressed into the palm by the wrapped fingers, the palm and
+every phalanx colliding) waits for the DFS's scene, which needs palm and phalanx contact (issue
+21 item 5): like `icms bench tick --scene power-grasp`, it refuses until then.
+"""
+
+import argparse
+import json
+import math
+import os
+import statistics
+import sys
+import time
+
+import numpy as np
+import mujoco
+from mujoco import rollout
+
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+import glove10_mjcf as glove10  # noqa: E402
+
+HERE = os.path.dirname(os.path.abspath(__file__))
+# Friction's impedance relative to the normal's (MuJoCo's advice for grasps).
+IMPRATIO = 10
+
+
+def f(*v):
+    return " ".join(f"{x:.17g}" for x in v)
+
+
+def joint_values(dofs, q):
+    """glove10's DOF values → every MJCF joint's value (the coupled joints follow)."""
+    v = dict(zip(dofs, q))
+    v["thumb_ip"] = v["thumb_mcp"]
+    for finger in ["ring", "little"]:
+        v[f"{finger}_mcp"] = v["middle_mcp"]
+        v[f"{finger}_pip"] = v["middle_pip"]
+    for finger in ["middle", "ring", "little"]:
+        v[f"{finger}_dip"] = glove10.DIP_PIP_RATIO * v[f"{finger}_pip"]
+    return v
+
+
+def fingertips_model(scene):
+    dofs = scene["dofs"]
+    kp, kd = scene["kp"], scene["kd"]
+    actuators = "\n".join(
+        f'<position name="{d}" joint="{d}" kp="{kp[i]:.17g}" kv="{kd[i]:.17g}" ctrllimited="false"/>'
+        for i, d in enumerate(dofs)
+    )
+    xml = f"""<mujoco model="glove10_fingertips">
+  <compiler angle="radian"/>
+  <option timestep="{scene['dt']}" gravity="{f(*scene['gravity'])}" cone="elliptic"
+          impratio="{IMPRATIO}" integrator="implicitfast"/>
+  <worldbody>
+    <body name="object" pos="{f(*scene['ball_position'])}">
+      <freejoint/>
+      <geom name="object" type="sphere" size="{scene['ball_radius']:.17g}" mass="{scene['ball_mass']:.17g}"
+            friction="{scene['ball_mu']:.17g} 0 0" condim="3" contype="0" conaffinity="1"
+            solref="0.004 1"/>
+    </body>
+    <body name="forearm" mocap="true" pos="{f(*scene['base_position'])}" quat="{f(*scene['base_quaternion'])}">
+      {glove10.glove10_body(["thumb", "index", "middle", "ring", "little"])}
+    </body>
+  </worldbody>
+  <equality>
+    {glove10.glove10_equalities()}
+  </equality>
+  <actuator>
+    {actuators}
+  </actuator>
+</mujoco>"""
+    model = mujoco.MjModel.from_xml_string(xml)
+    data = mujoco.MjData(model)
+    for name, value in joint_values(dofs, scene["q"]).items():
+        data.qpos[model.joint(name).qposadr[0]] = value
+    mujoco.mj_forward(model, data)
+    # The MJCF hand is glove10: at the DFS's start the same fingertips touch the ball.
+    centre = data.body("object").xpos
+    for tip in scene["contact_tips"]:
+        geom = model.geom(f"tip_{tip}").id
+        gap = np.linalg.norm(data.geom_xpos[geom] - centre) - scene["ball_radius"] - model.geom_size[geom][0]
+        if abs(gap) >= 1e-6:
+            sys.exit(f"mujoco_peer.py: fingertip {tip} starts {gap * 1e3:.3f} mm from the ball, not on it")
+    q = np.array(scene["q"])
+    tau = np.array(scene["tau_ff"])
+    kp = np.array(kp)
+
+    def controls(step0, nstep):
+        """Actuator targets for steps step0.. : θ_set + g(t) τ_ff / K_p."""
+        t = (step0 + np.arange(nstep)) * scene["dt"]
+        grip = 1.0 + scene["grip_swing"] * np.sin(2.0 * math.pi * t / scene["grip_period_s"])
+        return q[None, :] + grip[:, None] * (tau / kp)[None, :]
+
+    return model, data, controls
+
+
+def held(model, data, start_in_hand):
+    """(the hand's contacts on the object, distance the object moved in the hand (m))."""
+    obj = model.geom("object").id
+    touching = sum(
+        1
+        for i in range(data.ncon)
+        if obj in (data.contact[i].geom[0], data.contact[i].geom[1]) and data.contact[i].dist <= 0
+    )
+    return touching, float(np.linalg.norm(in_hand(model, data) - start_in_hand))
+
+
+def in_hand(model, data):
+    base = data.body("forearm")
+    return base.xmat.reshape(3, 3).T @ (data.body("object").xpos - base.xpos)
+
+
+def main():
+    p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    p.add_argument("--scene", choices=["fingertips", "power-grasp"], default="fingertips")
+    p.add_argument("--scene-file", default=os.path.join(HERE, "fingertips_scene.json"))
+    p.add_argument("--warmup", type=int, default=2000, help="steps before timing (default 2000)")
+    p.add_argument("--batches", type=int, default=1000, help="timed batches (default 1000)")
+    p.add_argument(
+        "--batch-steps", type=int, default=100, help="steps per batch (default 100, as the DFS's)"
+    )
+    a = p.parse_args()
+
+    if a.scene == "fingertips":
+        with open(a.scene_file) as fh:
+            scene = json.load(fh)
+        model, data, controls = fingertips_model(scene)
+        min_contacts = len(scene["contact_tips"]) - 1
+    else:
+        sys.exit(
+            "mujoco_peer.py: scene power-grasp: not written yet. It is the peer of the DFS's "
+            "power-grasp scene (a cylinder pressed into the palm by the wrapped fingers), which "
+            "needs palm and phalanx contact (issue 21 item 5); glove10_mjcf.glove10_body("
+            "..., whole_hand=True) gives the MJCF hand that contact geometry for it."
+        )
+
+    spec = mujoco.mjtState.mjSTATE_FULLPHYSICS
+    nstate = mujoco.mj_stateSize(model, spec)
+    state = np.empty(nstate)
+    mujoco.mj_getState(model, data, state, spec)
+    start = in_hand(model, data)
+    warmstart = data.qacc_warmstart.copy()
+    ctrl_spec = mujoco.mjtState.mjSTATE_CTRL
+
+    def run(step0, nstep, out):
+        """Steps nstep from `state` in C; leaves `state`, `warmstart` at the end."""
+        nonlocal state, warmstart
+        ctrl = controls(step0, nstep)[None, :, :]
+        rollout.rollout(
+            [model], [data], state[None, :], ctrl, control_spec=ctrl_spec, skip_checks=True,
+            nstep=nstep, initial_warmstart=warmstart[None, :], state=out,
+        )
+        state = out[0, -1].copy()
+        warmstart = data.qacc_warmstart.copy()
+
+    step = 0
+    if a.warmup:
+        run(step, a.warmup, np.empty((1, a.warmup, nstate)))
+        step += a.warmup
+    out = np.empty((1, a.batch_steps, nstate))
+    per_step_us = []
+    for _ in range(a.batches):
+        ctrl_ready = controls(step, a.batch_steps)  # made before the clock starts
+        t0 = time.perf_counter()
+        rollout.rollout(
+            [model], [data], state[None, :], ctrl_ready[None, :, :], control_spec=ctrl_spec,
+            skip_checks=True, nstep=a.batch_steps, initial_warmstart=warmstart[None, :], state=out,
+        )
+        per_step_us.append((time.perf_counter() - t0) / a.batch_steps * 1e6)
+        state = out[0, -1].copy()
+        warmstart = data.qacc_warmstart.copy()
+        step += a.batch_steps
+
+    mujoco.mj_setState(model, data, state, spec)
+    mujoco.mj_forward(model, data)
+    contacts, shift = held(model, data, start)
+    print(
+        f"MuJoCo {mujoco.__version__}, scene {a.scene}: {model.nv} DOFs, {model.neq} equality constraints, "
+        f"{contacts} fingertip contacts at the end, ball moved {shift * 1e3:.2f} mm in the hand; "
+        f"{a.batches} batches of {a.batch_steps} steps after {a.warmup}: per step "
+        f"min {min(per_step_us):.3f} us, mean {statistics.fmean(per_step_us):.3f} us"
+    )
+    if contacts < min_contacts or shift >= 0.010:
+        sys.exit(
+            f"mujoco_peer.py: the ball is no longer held ({contacts} contacts, moved "
+            f"{shift * 1e3:.1f} mm in the hand): the timing is not of a held-object scene"
+        )
+    print(f"{statistics.median(per_step_us):.3f}")
+
+
+if __name__ == "__main__":
+    main()
