@@ -483,3 +483,33 @@ async fn an_ingested_skill_is_labelled_and_found_by_its_whole_grasp_type() {
         assert_eq!(ids, s.skill_ids, "grasp_type={filter}");
     }
 }
+
+/// One writer per data directory: a second open to write is refused naming the holder (two
+/// servers would answer from caches the other's writes leave stale), a reader still opens, and
+/// once the writer closes the next one comes in.
+#[tokio::test]
+async fn a_second_writer_of_a_data_directory_is_refused_naming_the_first() {
+    let tmp = tempfile::tempdir().unwrap();
+    let first = Store::open(tmp.path()).await.unwrap();
+    for second in [
+        Store::open(tmp.path()).await,
+        Store::open_existing_to_write(tmp.path()).await,
+    ] {
+        match second {
+            Err(StoreError::InUse { dir, holder }) => {
+                assert_eq!(dir, tmp.path());
+                assert!(
+                    holder.contains(&format!("pid {}", std::process::id())),
+                    "{holder}"
+                );
+            }
+            other => panic!("a second writer opened: {other:?}"),
+        }
+    }
+    let reader = Store::open_existing(tmp.path()).await.unwrap();
+    assert_eq!(reader.skill_count(), 0);
+    reader.close().await;
+    first.close().await;
+    let next = Store::open(tmp.path()).await.unwrap();
+    next.close().await;
+}

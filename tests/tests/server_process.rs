@@ -117,3 +117,33 @@ fn serving_beyond_loopback_without_a_token_is_refused_at_start_up() {
         "refused before touching anything"
     );
 }
+
+/// A second `icms serve` on a data directory another one serves is refused at start-up, naming
+/// the first (its caches would go stale under the other's writes); `icms ingest` there too.
+#[test]
+fn a_second_server_on_one_data_directory_is_refused_naming_the_first() {
+    let dir = tempfile::tempdir().unwrap();
+    let server = ServerProcess::start(ICMS, dir.path(), &["--no-demo"], "info");
+    let second = std::process::Command::new(ICMS)
+        .current_dir(dir.path())
+        .args(["serve", "--addr", "127.0.0.1:0", "--no-demo"])
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&second.stderr);
+    assert!(!second.status.success(), "{err}");
+    assert!(err.contains("in use by another icms process"), "{err}");
+    assert!(err.contains("icms-e2e serve"), "{err}");
+    let session = dir.path().join("s.mcap");
+    std::fs::write(&session, session_bytes("sphere-lift", 1, Some(1.0))).unwrap();
+    let ingest = std::process::Command::new(ICMS)
+        .current_dir(dir.path())
+        .args(["ingest", "--data", "icms-data"])
+        .arg(&session)
+        .output()
+        .unwrap();
+    assert!(!ingest.status.success());
+    assert!(String::from_utf8_lossy(&ingest.stderr).contains("in use by another icms process"));
+    server.terminate();
+    let (code, log) = server.wait();
+    assert_eq!(code, Some(0), "{log}");
+}

@@ -136,9 +136,26 @@ pub fn run() -> ExitCode {
 pub(crate) async fn open_existing_store(
     data: &std::path::Path,
 ) -> Result<services::store::Store, CliError> {
-    use services::store::{Store, StoreError};
-    Store::open_existing(data).await.map_err(|e| match e {
-        StoreError::NoDataBase(_) => CliError(no_data_base(data)),
+    store_opened(data, services::store::Store::open_existing(data).await)
+}
+
+/// [`open_existing_store`] for a command that writes (`icms reprocess`): it takes the data
+/// directory's writer lock, so it is refused, naming the holder, while `icms serve` runs there.
+pub(crate) async fn open_existing_store_to_write(
+    data: &std::path::Path,
+) -> Result<services::store::Store, CliError> {
+    store_opened(
+        data,
+        services::store::Store::open_existing_to_write(data).await,
+    )
+}
+
+fn store_opened(
+    data: &std::path::Path,
+    opened: Result<services::store::Store, services::store::StoreError>,
+) -> Result<services::store::Store, CliError> {
+    opened.map_err(|e| match e {
+        services::store::StoreError::NoDataBase(_) => CliError(no_data_base(data)),
         e => CliError(format!("{}: {e}", data.display())),
     })
 }

@@ -1,7 +1,7 @@
 //! `icms reprocess`: the stored sessions whose skills an older segmentation made are segmented
 //! again (see `services::reprocess`).
 
-use super::{open_existing_store, print_json, CliError};
+use super::{open_existing_store_to_write, print_json, CliError};
 use services::reprocess::{reprocess, ReprocessEvent, ReprocessReport};
 use services::store::ReplacedSkills;
 use std::io::{IsTerminal, Write};
@@ -122,7 +122,7 @@ fn summary(r: &ReprocessReport) -> Vec<String> {
 /// Reprocesses the data base in `--data`; see the `Reprocess` subcommand's help.
 pub fn run_reprocess(a: ReprocessArgs) -> Result<(), CliError> {
     super::skills::runtime()?.block_on(async {
-        let store = open_existing_store(&a.data).await?;
+        let store = open_existing_store_to_write(&a.data).await?;
         // SIGINT or SIGTERM: finish the session in hand, then stop; a second one stops at
         // once (the session's transaction is rolled back, nothing is lost either way).
         let stop = Arc::new(AtomicBool::new(false));

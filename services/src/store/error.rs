@@ -18,6 +18,18 @@ pub enum StoreError {
     /// database file, or an empty one); nothing was created.
     #[error("no ICMS data base at {0}")]
     NoDataBase(PathBuf),
+    /// Another process writes this data directory (an `icms serve`, an `icms ingest`, ...): one
+    /// writer at a time, or the other's caches would answer wrongly.
+    #[error(
+        "the data directory {dir} is in use by another icms process ({holder}); one process at a \
+         time may write it: stop that one, or send the work to its HTTP API"
+    )]
+    InUse {
+        /// The data directory.
+        dir: PathBuf,
+        /// Who holds it, as it wrote itself into the lock file (pid and command line).
+        holder: String,
+    },
     /// The database was migrated by a newer binary than this one.
     #[error(
         "the database schema is version {found}, newer than this binary supports ({supported}); \

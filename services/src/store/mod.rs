@@ -117,6 +117,55 @@ struct Inner {
     recognition: std::sync::RwLock<Arc<RecognitionIndex>>,
     /// Ingests hold it shared from blob write to index update; deletes hold it exclusively.
     blob_lock: tokio::sync::RwLock<()>,
+    /// The data directory's writer lock ([`WRITER_LOCK_FILE`]), held until [`Store::close`]
+    /// or the last clone is dropped; `None` for a store opened to read only.
+    writer: std::sync::Mutex<Option<std::fs::File>>,
+}
+
+/// The file in the data directory whose lock says a process writes it (`flock`, released by
+/// the kernel when the process ends, however it ends). It holds the writer's pid and command
+/// line, for the message another process gets.
+pub const WRITER_LOCK_FILE: &str = "icms.lock";
+
+/// Takes the data directory's writer lock, or says who holds it.
+fn lock_for_writing(data_dir: &Path) -> Result<std::fs::File, StoreError> {
+    use std::io::{Read, Seek, Write};
+    let path = data_dir.join(WRITER_LOCK_FILE);
+    let mut file = std::fs::OpenOptions::new()
+        .read(true)
+        .write(true)
+        .create(true)
+        .truncate(false)
+        .open(&path)
+        .map_err(|e| StoreError::io(&path, e))?;
+    match file.try_lock() {
+        Ok(()) => {}
+        Err(std::fs::TryLockError::WouldBlock) => {
+            let mut holder = String::new();
+            let _ = Read::by_ref(&mut file)
+                .take(512)
+                .read_to_string(&mut holder);
+            let holder = holder.trim();
+            return Err(StoreError::InUse {
+                dir: data_dir.to_path_buf(),
+                holder: if holder.is_empty() {
+                    "it did not say which".to_owned()
+                } else {
+                    holder.to_owned()
+                },
+            });
+        }
+        Err(std::fs::TryLockError::Error(e)) => return Err(StoreError::io(&path, e)),
+    }
+    let command: Vec<String> = std::env::args().collect();
+    let mut me = format!("pid {}: {}", std::process::id(), command.join(" "));
+    me.truncate(me.floor_char_boundary(400));
+    // Who holds it is only a courtesy to the next one: the lock itself is what counts.
+    let _ = file
+        .set_len(0)
+        .and_then(|()| file.rewind())
+        .and_then(|()| file.write_all(me.as_bytes()));
+    Ok(file)
 }
 
 impl std::fmt::Debug for Store {
@@ -474,8 +523,13 @@ impl Store {
     /// `foreign_keys=ON`, busy timeout 5 s, `synchronous=FULL` (a commit is on disk before it returns: an
     /// acknowledged write survives a power cut; the cost is in BENCHMARKS.md). Loads the feature
     /// index.
+    ///
+    /// Takes the data directory's writer lock ([`WRITER_LOCK_FILE`]): while this store is
+    /// open, another process's open to write fails with [`StoreError::InUse`] naming it (two
+    /// `icms serve` on one directory would each answer from caches the other's writes leave
+    /// stale). Stores opened to read ([`Store::open_existing`]) take no lock.
     pub async fn open(data_dir: &Path) -> Result<Store, StoreError> {
-        Self::open_with(data_dir, true, Durability::Full).await
+        Self::open_with(data_dir, true, Durability::Full, true).await
     }
 
     /// [`Store::open`] with another [`Durability`]: `icms bench ingest` measures what
@@ -484,7 +538,7 @@ impl Store {
         data_dir: &Path,
         durability: Durability,
     ) -> Result<Store, StoreError> {
-        Self::open_with(data_dir, true, durability).await
+        Self::open_with(data_dir, true, durability, true).await
     }
 
     /// Opens the store in `data_dir` like [`Store::open`], but only if a data base is already
@@ -492,15 +546,23 @@ impl Store {
     /// [`StoreError::NoDataBase`] and creates nothing, neither the directory nor a file. For
     /// commands that only read (`icms skills`, `icms hands --data`): a mistyped directory must
     /// not leave an empty data base behind and answer as if it held no skills. An existing data
-    /// base of an older schema is still migrated.
+    /// base of an older schema is still migrated. It takes no writer lock, so it reads beside
+    /// a running `icms serve`.
     pub async fn open_existing(data_dir: &Path) -> Result<Store, StoreError> {
-        Self::open_with(data_dir, false, Durability::Full).await
+        Self::open_with(data_dir, false, Durability::Full, false).await
+    }
+
+    /// [`Store::open_existing`] for a command that writes (`icms reprocess`, `icms replay
+    /// --data`): it takes the writer lock as [`Store::open`] does.
+    pub async fn open_existing_to_write(data_dir: &Path) -> Result<Store, StoreError> {
+        Self::open_with(data_dir, false, Durability::Full, true).await
     }
 
     async fn open_with(
         data_dir: &Path,
         create: bool,
         durability: Durability,
+        write: bool,
     ) -> Result<Store, StoreError> {
         if create {
             // create_dir_all on a file says only "File exists".
@@ -534,6 +596,16 @@ impl Store {
         } else if !create {
             return Err(StoreError::NoDataBase(data_dir.to_path_buf()));
         }
+        let writer = if write {
+            let dir = data_dir.to_path_buf();
+            Some(
+                tokio::task::spawn_blocking(move || lock_for_writing(&dir))
+                    .await
+                    .map_err(|e| StoreError::io(data_dir, std::io::Error::other(e)))??,
+            )
+        } else {
+            None
+        };
         let opts = SqliteConnectOptions::new()
             .filename(&db_path)
             .create_if_missing(create)
@@ -590,6 +662,7 @@ impl Store {
                 index: std::sync::RwLock::new(FeatureIndex::from_entries(entries)),
                 recognition: std::sync::RwLock::new(Arc::new(RecognitionIndex::new(templates))),
                 blob_lock: tokio::sync::RwLock::new(()),
+                writer: std::sync::Mutex::new(writer),
             }),
         })
     }
@@ -619,9 +692,14 @@ impl Store {
         &self.inner.dir
     }
 
-    /// Closes the connection pool (waits for in-flight queries); later calls fail.
+    /// Closes the connection pool (waits for in-flight queries; later calls fail) and releases
+    /// the data directory's writer lock.
     pub async fn close(&self) {
         self.inner.pool.close().await;
+        // The next writer may come in now, even while clones of this store live on.
+        if let Ok(mut writer) = self.inner.writer.lock() {
+            writer.take();
+        }
     }
 
     /// Number of skills in the feature index (equal to the skills table).
