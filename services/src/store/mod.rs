@@ -159,7 +159,9 @@ fn lock_for_writing(data_dir: &Path) -> Result<std::fs::File, StoreError> {
     }
     let command: Vec<String> = std::env::args().collect();
     let mut me = format!("pid {}: {}", std::process::id(), command.join(" "));
-    me.truncate(me.floor_char_boundary(400));
+    if let Some((end, _)) = me.char_indices().nth(400) {
+        me.truncate(end);
+    }
     // Who holds it is only a courtesy to the next one: the lock itself is what counts.
     let _ = file
         .set_len(0)
