@@ -17,9 +17,9 @@ pub fn run_serve(a: ServeArgs) -> Result<(), CliError> {
         tokio::spawn(crate::memory::trim_periodically());
         let app = Application::build(config).await?;
         eprintln!(
-            "icms: serving on http://{}/api/v1 (OpenAPI document: http://{}/api/v1/openapi.json); Ctrl-C stops",
-            app.local_addr(),
-            app.local_addr()
+            "icms: serving on http://{addr}/api/v1 (OpenAPI document: http://{addr}/api/v1/openapi.json; \
+             the web page: http://{addr}/); Ctrl-C stops",
+            addr = app.local_addr(),
         );
         app.run_until(shutdown_signal()).await?;
         Ok(())

@@ -16,11 +16,16 @@
 //! | `POST /api/v1/skills/{id}/replays`, `GET /api/v1/skills/{id}/replays` | replay on a hand, list |
 //! | `GET /api/v1/replays/{id}`, `GET /api/v1/replays/{id}/mcap` | one replay's report, its MCAP |
 //! | `GET /api/v1/live` | a live glove session (WebSocket; protocol in `docs/live.md`) |
+//! | `GET /api/v1/skills/summaries`, `GET /api/v1/skills/{id}/forces` | skills in brief, a skill's contact forces |
+//! | `GET /api/v1/hands/{id}/geometry`, `GET /api/v1/replays/{id}/frames` | what the web page draws in 3D |
 //! | `GET /healthz`, `GET /api/v1/openapi.json` | liveness, this API's document |
+//! | `GET /`, `GET /docs`, `GET /assets/...` | the web page ([`web`]), not in the document |
 
 pub mod cache;
 pub mod error;
 pub mod extract;
+pub mod forces;
+pub mod frames;
 pub mod hands;
 pub mod hyper_errors;
 mod linger;
@@ -32,6 +37,7 @@ pub mod sessions;
 pub mod simulations;
 pub mod skills;
 pub mod state;
+pub mod web;
 
 use std::time::Duration;
 
@@ -73,6 +79,8 @@ pub fn routes() -> OpenApiRouter<AppState> {
     let api = OpenApiRouter::new()
         .merge(sessions::router())
         .merge(skills::router())
+        .merge(forces::router())
+        .merge(frames::router())
         .merge(simulations::router())
         .merge(hands::router())
         .merge(replays::router())
@@ -218,7 +226,8 @@ pub fn app(state: AppState, layers: &LayerConfig) -> Router {
     ));
     let max_body = state.max_body();
     let mut router = router
-        .fallback(not_found)
+        .merge(web::router())
+        .fallback(web::not_found)
         .with_state(state)
         .layer(DefaultBodyLimit::max(max_body))
         .layer(middleware::from_fn_with_state(max_body, linger::linger))
@@ -230,8 +239,23 @@ pub fn app(state: AppState, layers: &LayerConfig) -> Router {
         router = router.layer(
             CorsLayer::new()
                 .allow_origin(AllowOrigin::list(layers.cors_origins.clone()))
-                .allow_methods([Method::GET, Method::POST, Method::DELETE])
-                .allow_headers([header::AUTHORIZATION, header::CONTENT_TYPE]),
+                .allow_methods([Method::GET, Method::HEAD, Method::POST, Method::DELETE])
+                // Range requests and their answers' headers: what a viewer reading a file by
+                // URL in pieces (Foxglove's remote files) needs.
+                .allow_headers([
+                    header::AUTHORIZATION,
+                    header::CONTENT_TYPE,
+                    header::RANGE,
+                    header::IF_NONE_MATCH,
+                    header::IF_RANGE,
+                ])
+                .expose_headers([
+                    header::ACCEPT_RANGES,
+                    header::CONTENT_RANGE,
+                    header::CONTENT_LENGTH,
+                    header::CONTENT_DISPOSITION,
+                    header::ETAG,
+                ]),
         );
     }
     router
@@ -246,10 +270,6 @@ pub(crate) fn created(body: impl serde::Serialize, location: &str) -> Response {
         r.headers_mut().insert(header::LOCATION, v);
     }
     r
-}
-
-async fn not_found() -> Problem {
-    Problem::not_found("no such route; the API is described at /api/v1/openapi.json")
 }
 
 /// Middleware: a request that takes longer than the limit (reading its body included) is

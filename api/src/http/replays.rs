@@ -234,12 +234,19 @@ async fn get_replay(
     params(("id" = i64, Path, description = "Replay id")),
     responses(
         (status = 200, description = "The MCAP file", content_type = "application/x-mcap", body = McapFile),
+        (status = 206, description = "The bytes of the one range asked for (`Range: bytes=a-b`), with `Content-Range`", content_type = "application/x-mcap", body = McapFile),
+        (status = 304, description = "`If-None-Match` names the file's ETag (its SHA-256)"),
         (status = 400, description = "The id is not an integer", body = ProblemBody, content_type = "application/problem+json"),
         (status = 404, description = "No replay with this id", body = ProblemBody, content_type = "application/problem+json"),
+        (status = 416, description = "The range starts past the end of the file", body = ProblemBody, content_type = "application/problem+json"),
     ))]
-async fn download_replay(State(st): State<AppState>, Id(id): Id) -> Result<Response, Problem> {
+async fn download_replay(
+    State(st): State<AppState>,
+    Id(id): Id,
+    request: axum::http::HeaderMap,
+) -> Result<Response, Problem> {
     let path = st.store().replay_blob_path(id).await?;
-    send_mcap(&path, &format!("replay-{id}.mcap"), || {
+    send_mcap(&path, &format!("replay-{id}.mcap"), &request, || {
         Problem::not_found(format!("no replay with id {id}"))
     })
     .await

@@ -292,14 +292,22 @@ async fn get_session(
     params(("id" = i64, Path, description = "Session id")),
     responses(
         (status = 200, description = "The MCAP file", content_type = "application/x-mcap", body = McapFile),
+        (status = 206, description = "The bytes of the one range asked for (`Range: bytes=a-b`), with `Content-Range`", content_type = "application/x-mcap", body = McapFile),
+        (status = 304, description = "`If-None-Match` names the file's ETag (its SHA-256)"),
         (status = 400, description = "The id is not an integer", body = ProblemBody, content_type = "application/problem+json"),
         (status = 404, description = "No session with this id", body = ProblemBody, content_type = "application/problem+json"),
+        (status = 416, description = "The range starts past the end of the file", body = ProblemBody, content_type = "application/problem+json"),
     ))]
-async fn download_session(State(st): State<AppState>, Id(id): Id) -> Result<Response, Problem> {
+async fn download_session(
+    State(st): State<AppState>,
+    Id(id): Id,
+    request: HeaderMap,
+) -> Result<Response, Problem> {
     let path = st.store().session_blob_path(id).await?;
     send_mcap(
         &path,
         &format!("session-{id}.mcap"),
+        &request,
         // Deleted between the lookup and the open, or the file was removed from the data
         // directory behind the server's back: say both rather than deny the session exists.
         || {
@@ -314,12 +322,19 @@ async fn download_session(State(st): State<AppState>, Id(id): Id) -> Result<Resp
 
 /// Streams the MCAP file at `path` as an attachment named `filename`; `missing` is the problem
 /// when the file is gone (its row was deleted since the lookup).
+///
+/// For viewers that read a file by URL in pieces (Foxglove's remote files): `Accept-Ranges:
+/// bytes`, a single `Range: bytes=a-b` (or `a-`, `-n`) answered 206 with `Content-Range`, a
+/// range past the end 416, and the blob's SHA-256 as a strong `ETag` (`If-None-Match` → 304,
+/// `If-Range` honoured). Several ranges in one request are answered with the whole file.
 pub(super) async fn send_mcap(
     path: &std::path::Path,
     filename: &str,
+    request: &HeaderMap,
     missing: impl FnOnce() -> Problem,
 ) -> Result<Response, Problem> {
-    let file = match tokio::fs::File::open(path).await {
+    use tokio::io::{AsyncReadExt, AsyncSeekExt};
+    let mut file = match tokio::fs::File::open(path).await {
         Ok(f) => f,
         Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Err(missing()),
         Err(e) => return Err(Problem::internal(&e)),
@@ -329,18 +344,192 @@ pub(super) async fn send_mcap(
         .await
         .map_err(|e| Problem::internal(&e))?
         .len();
+    let etag = etag_of(path);
+    let matches = |value: &HeaderValue| {
+        etag.as_deref().is_some_and(|tag| {
+            value
+                .to_str()
+                .is_ok_and(|v| v.split(',').any(|t| t.trim() == tag || t.trim() == "*"))
+        })
+    };
+    if request.get(header::IF_NONE_MATCH).is_some_and(matches) {
+        let mut r = StatusCode::NOT_MODIFIED.into_response();
+        insert_file_headers(r.headers_mut(), etag.as_deref(), filename);
+        return Ok(r);
+    }
+    let if_range_ok = request.get(header::IF_RANGE).is_none_or(|v| {
+        etag.as_deref()
+            .is_some_and(|tag| v.as_bytes() == tag.as_bytes())
+    });
+    let range = match request.get(header::RANGE) {
+        Some(v) if if_range_ok => byte_range(v.to_str().unwrap_or(""), len),
+        _ => RangeAsked::Whole,
+    };
+    let (status, start, count) = match range {
+        RangeAsked::Whole => (StatusCode::OK, 0, len),
+        RangeAsked::Part { start, end } => (StatusCode::PARTIAL_CONTENT, start, end + 1 - start),
+        RangeAsked::Unsatisfiable => {
+            let mut r = Problem::new(
+                StatusCode::RANGE_NOT_SATISFIABLE,
+                format!(
+                    "the range {:?} starts past the file's {len} bytes",
+                    request[header::RANGE]
+                ),
+            )
+            .into_response();
+            if let Ok(v) = HeaderValue::from_str(&format!("bytes */{len}")) {
+                r.headers_mut().insert(header::CONTENT_RANGE, v);
+            }
+            return Ok(r);
+        }
+    };
+    if start > 0 {
+        file.seek(std::io::SeekFrom::Start(start))
+            .await
+            .map_err(|e| Problem::internal(&e))?;
+    }
     let body = Body::from_stream(tokio_util::io::ReaderStream::with_capacity(
-        file,
+        file.take(count),
         256 * 1024,
     ));
     let mut r = Response::new(body);
+    *r.status_mut() = status;
     let h = r.headers_mut();
     h.insert(header::CONTENT_TYPE, HeaderValue::from_static(MCAP));
-    h.insert(header::CONTENT_LENGTH, HeaderValue::from(len));
+    h.insert(header::CONTENT_LENGTH, HeaderValue::from(count));
+    if status == StatusCode::PARTIAL_CONTENT {
+        if let Ok(v) = HeaderValue::from_str(&format!("bytes {start}-{}/{len}", start + count - 1))
+        {
+            h.insert(header::CONTENT_RANGE, v);
+        }
+    }
+    insert_file_headers(h, etag.as_deref(), filename);
+    Ok(r)
+}
+
+fn insert_file_headers(h: &mut HeaderMap, etag: Option<&str>, filename: &str) {
+    h.insert(header::ACCEPT_RANGES, HeaderValue::from_static("bytes"));
+    if let Some(v) = etag.and_then(|t| HeaderValue::from_str(t).ok()) {
+        h.insert(header::ETAG, v);
+    }
     if let Ok(v) = HeaderValue::from_str(&format!("attachment; filename=\"{filename}\"")) {
         h.insert(header::CONTENT_DISPOSITION, v);
     }
-    Ok(r)
+}
+
+/// The strong entity tag of a content-addressed blob (`blobs/sha256/ab/cdef….mcap`): its
+/// quoted SHA-256, which changes exactly when its bytes do.
+fn etag_of(path: &std::path::Path) -> Option<String> {
+    let prefix = path.parent()?.file_name()?.to_str()?;
+    let rest = path.file_stem()?.to_str()?;
+    let hex = format!("{prefix}{rest}");
+    (hex.len() == 64 && hex.bytes().all(|b| b.is_ascii_hexdigit())).then(|| format!("\"{hex}\""))
+}
+
+/// What a `Range` header asks of a file of `len` bytes.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum RangeAsked {
+    /// No usable range (absent, malformed, several ranges): the whole file, 200.
+    Whole,
+    /// Bytes `start..=end`, 206.
+    Part { start: u64, end: u64 },
+    /// A range starting past the end, 416.
+    Unsatisfiable,
+}
+
+/// Parses one `bytes=a-b`, `bytes=a-` or `bytes=-n` range (RFC 9110 §14.1.2); anything else
+/// is ignored, as the RFC allows.
+fn byte_range(value: &str, len: u64) -> RangeAsked {
+    let Some(spec) = value.trim().strip_prefix("bytes=") else {
+        return RangeAsked::Whole;
+    };
+    if spec.contains(',') {
+        return RangeAsked::Whole;
+    }
+    let Some((a, b)) = spec.trim().split_once('-') else {
+        return RangeAsked::Whole;
+    };
+    let (a, b) = (a.trim(), b.trim());
+    let parse = |s: &str| s.parse::<u64>().ok();
+    match (a.is_empty(), b.is_empty()) {
+        // The last n bytes.
+        (true, false) => match parse(b) {
+            Some(0) => RangeAsked::Unsatisfiable,
+            Some(n) if len > 0 => RangeAsked::Part {
+                start: len.saturating_sub(n),
+                end: len - 1,
+            },
+            Some(_) => RangeAsked::Unsatisfiable,
+            None => RangeAsked::Whole,
+        },
+        (false, _) => {
+            let Some(start) = parse(a) else {
+                return RangeAsked::Whole;
+            };
+            let end = if b.is_empty() {
+                Some(u64::MAX)
+            } else {
+                parse(b)
+            };
+            match end {
+                None => RangeAsked::Whole,
+                Some(end) if end < start => RangeAsked::Whole,
+                Some(_) if start >= len => RangeAsked::Unsatisfiable,
+                Some(end) => RangeAsked::Part {
+                    start,
+                    end: end.min(len - 1),
+                },
+            }
+        }
+        (true, true) => RangeAsked::Whole,
+    }
+}
+
+#[cfg(test)]
+mod range_tests {
+    use super::{byte_range, etag_of, RangeAsked};
+
+    #[test]
+    fn ranges_parse_as_rfc_9110_says() {
+        use RangeAsked::*;
+        assert_eq!(byte_range("bytes=0-99", 1000), Part { start: 0, end: 99 });
+        assert_eq!(
+            byte_range("bytes=900-", 1000),
+            Part {
+                start: 900,
+                end: 999
+            }
+        );
+        assert_eq!(
+            byte_range("bytes=900-5000", 1000),
+            Part {
+                start: 900,
+                end: 999
+            }
+        );
+        assert_eq!(
+            byte_range("bytes=-100", 1000),
+            Part {
+                start: 900,
+                end: 999
+            }
+        );
+        assert_eq!(byte_range("bytes=-5000", 1000), Part { start: 0, end: 999 });
+        assert_eq!(byte_range("bytes=1000-", 1000), Unsatisfiable);
+        assert_eq!(byte_range("bytes=-0", 1000), Unsatisfiable);
+        assert_eq!(byte_range("bytes=0-1,5-9", 1000), Whole);
+        assert_eq!(byte_range("bytes=9-1", 1000), Whole);
+        assert_eq!(byte_range("items=0-1", 1000), Whole);
+        assert_eq!(byte_range("bytes=x-1", 1000), Whole);
+    }
+
+    #[test]
+    fn a_blob_path_gives_its_sha256_as_etag() {
+        let hex = "ab".to_owned() + &"c".repeat(62);
+        let p = std::path::PathBuf::from(format!("/d/blobs/sha256/ab/{}.mcap", &hex[2..]));
+        assert_eq!(etag_of(&p), Some(format!("\"{hex}\"")));
+        assert_eq!(etag_of(std::path::Path::new("/tmp/x.mcap")), None);
+    }
 }
 
 /// Deletes a session with its skills, their replays and the MCAP files.

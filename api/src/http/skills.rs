@@ -68,10 +68,10 @@ pub struct SkillBody {
     pub start_ns: i64,
     /// End of the skill, ns since the session's start.
     pub end_ns: i64,
-    /// Time spent in each phase: `[name, seconds]` pairs, one per phase name in alphabetical
-    /// order, summed when a phase occurs more than once (the `phase_min_s` / `phase_max_s`
-    /// filters compare these sums). The phases in time order are in the full parameters.
-    pub phase_durations: Vec<(Phase, f64)>,
+    /// Time spent in each phase, one entry per phase name in alphabetical order, summed when
+    /// a phase occurs more than once (the `phase_min_s` / `phase_max_s` filters compare these
+    /// sums, unrounded). The phases in time order are in the full parameters.
+    pub phase_durations: Vec<PhaseDuration>,
     /// Feature vector for similarity search (16 values).
     #[schema(min_items = 16, max_items = 16)]
     pub feature: Vec<f32>,
@@ -95,6 +95,37 @@ pub struct SkillBody {
     pub created_at: String,
 }
 
+/// The time a skill spent in one phase.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize, ToSchema)]
+pub struct PhaseDuration {
+    /// The phase.
+    pub phase: Phase,
+    /// Its duration, s, rounded to the recording's 1 ms tick ([`TICK_S`]).
+    pub seconds: f64,
+}
+
+/// The recording's clock: sessions are recorded tick by tick at 1 kHz, so a phase boundary
+/// is known to 1 ms and durations are given to that resolution (the store keeps the sums of
+/// the boundaries' nanosecond differences, which carry sub-tick noise from the log times).
+pub const TICK_S: f64 = 1e-3;
+
+/// `x` rounded to a multiple of `step`.
+fn round_to(x: f64, step: f64) -> f64 {
+    // Dividing by the rounded count (not multiplying by `step`) keeps 0.8 as 0.8, not
+    // 0.8000000000000002.
+    (x / step).round() / (1.0 / step)
+}
+
+impl PhaseDuration {
+    /// `seconds` in `phase`, rounded to [`TICK_S`].
+    pub fn new(phase: Phase, seconds: f64) -> Self {
+        PhaseDuration {
+            phase,
+            seconds: round_to(seconds, TICK_S),
+        }
+    }
+}
+
 impl From<Skill> for SkillBody {
     fn from(s: Skill) -> Self {
         debug_assert_eq!(s.feature.len(), FEATURE_DIM);
@@ -113,7 +144,11 @@ impl From<Skill> for SkillBody {
             duration_s: s.duration_s,
             start_ns: s.start_ns,
             end_ns: s.end_ns,
-            phase_durations: s.phase_durations,
+            phase_durations: s
+                .phase_durations
+                .into_iter()
+                .map(|(phase, seconds)| PhaseDuration::new(phase, seconds))
+                .collect(),
             feature: s.feature,
             params: s.params,
             approach: s.approach,
@@ -129,6 +164,67 @@ impl From<Skill> for SkillBody {
 pub struct SkillPage {
     /// The skills of this page, in the requested order.
     pub items: Vec<SkillBody>,
+    /// Pass as `cursor` (with the same filters and sort) for the next page; `null` on the last.
+    pub next_cursor: Option<String>,
+}
+
+/// A skill in brief: what a list row shows (about 300 bytes against the full skill's 8 kB,
+/// most of it the parameters). `GET /skills/summaries` takes the same filters, sort and
+/// pages as `GET /skills`.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, ToSchema)]
+pub struct SkillSummary {
+    /// Skill id.
+    pub id: i64,
+    /// Id of the session the skill was found in.
+    pub session_id: i64,
+    /// Object shape.
+    #[schema(schema_with = object_shape_schema)]
+    pub object_shape: ObjectShape,
+    /// The name of the object grasped, in a scene of several; absent otherwise.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub object_name: Option<String>,
+    /// Object mass, kg.
+    pub object_mass: f64,
+    /// Coulomb friction coefficient.
+    pub mu: f64,
+    /// Number of fingertip contacts.
+    pub contact_count: i64,
+    /// Contact model.
+    pub contact_model: ContactModel,
+    /// Grasp type label, e.g. precision-2vf.
+    pub grasp_type: String,
+    /// Ferrari-Canny ε grasp quality.
+    pub quality: f64,
+    /// Duration of the skill, s.
+    pub duration_s: f64,
+    /// When the skill was stored (UTC, RFC 3339).
+    pub created_at: String,
+}
+
+impl From<Skill> for SkillSummary {
+    fn from(s: Skill) -> Self {
+        SkillSummary {
+            id: s.id,
+            session_id: s.session_id,
+            object_shape: s.object_shape,
+            object_name: s.object_name,
+            object_mass: s.object_mass,
+            mu: s.mu,
+            contact_count: s.contact_count,
+            contact_model: s.contact_model,
+            grasp_type: s.grasp_type,
+            quality: s.quality,
+            duration_s: s.duration_s,
+            created_at: s.created_at,
+        }
+    }
+}
+
+/// One page of skill summaries.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, ToSchema)]
+pub struct SkillSummaryPage {
+    /// The skills of this page, in the requested order.
+    pub items: Vec<SkillSummary>,
     /// Pass as `cursor` (with the same filters and sort) for the next page; `null` on the last.
     pub next_cursor: Option<String>,
 }
@@ -150,6 +246,8 @@ pub struct Neighbour {
     pub skill_id: i64,
     /// Euclidean distance between the two feature vectors.
     pub distance: f32,
+    /// The similar skill in brief, so a client needs no request per neighbour.
+    pub skill: SkillSummary,
 }
 
 /// The skills most similar to one.
@@ -165,6 +263,7 @@ pub struct SimilarSkills {
 pub fn router() -> OpenApiRouter<AppState> {
     OpenApiRouter::new()
         .routes(routes!(list_skills))
+        .routes(routes!(list_skill_summaries))
         .routes(routes!(get_skill, delete_skill))
         .routes(routes!(similar_skills))
 }
@@ -184,6 +283,26 @@ async fn list_skills(
     let page = st.store().query_skills(&q).await?;
     Ok(axum::Json(SkillPage {
         items: page.items.into_iter().map(SkillBody::from).collect(),
+        next_cursor: page.next_cursor,
+    }))
+}
+
+/// Skills matching every given filter, one page at a time, in brief: the filters, sort and
+/// cursor of `GET /skills`, each item a [`SkillSummary`].
+#[utoipa::path(get, path = "/skills/summaries", tag = "skills",
+    params(SkillFilters),
+    responses(
+        (status = 200, description = "One page of matching skills, in brief", body = SkillSummaryPage),
+        (status = 400, description = "An invalid filter, sort, limit or cursor, or an unknown parameter", body = ProblemBody, content_type = "application/problem+json"),
+    ))]
+async fn list_skill_summaries(
+    State(st): State<AppState>,
+    Query(filters): Query<SkillFilters>,
+) -> Result<axum::Json<SkillSummaryPage>, Problem> {
+    let q = filters.to_query()?;
+    let page = st.store().query_skills(&q).await?;
+    Ok(axum::Json(SkillSummaryPage {
+        items: page.items.into_iter().map(SkillSummary::from).collect(),
         next_cursor: page.next_cursor,
     }))
 }
@@ -256,11 +375,21 @@ async fn similar_skills(
         return Err(Problem::bad_request(format!("k {k} is outside 1..=1000")));
     }
     let near = st.store().nearest_to_skill(id, k as usize)?;
+    let mut items = Vec::with_capacity(near.len());
+    for (skill_id, distance) in near {
+        match st.store().get_skill(skill_id).await {
+            Ok(s) => items.push(Neighbour {
+                skill_id,
+                distance,
+                skill: SkillSummary::from(s),
+            }),
+            // Deleted since the index was read: leave it out.
+            Err(services::store::StoreError::SkillNotFound(_)) => {}
+            Err(e) => return Err(e.into()),
+        }
+    }
     Ok(axum::Json(SimilarSkills {
         similar_to: id,
-        items: near
-            .into_iter()
-            .map(|(skill_id, distance)| Neighbour { skill_id, distance })
-            .collect(),
+        items,
     }))
 }
