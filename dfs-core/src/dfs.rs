@@ -29,10 +29,20 @@
 //!   carry ([`STABLE_DAMPING`]); only light objects (a solid sphere under about 0.1 kg) meet
 //!   the limit.
 //!
-//! **Table.** An optional horizontal support plane carries the object before it is grasped
-//! and after it is placed: it cancels downward force and velocity of a resting object and
-//! limits horizontal force by Coulomb friction. Objects rest as a whole (no tipping on the
-//! table); the paper has no table at all.
+//! **Table.** An optional horizontal plane ([`crate::table`]) carries the objects before they
+//! are grasped and after they are placed; the paper has no table at all. It pushes only where
+//! an object touches it: at its lowest points (a sphere's lowest point; a box's 4 corners of
+//! the face it stands on, 2 of an edge or 1 corner; a cylinder's rim points), each with a
+//! normal force that only pushes, plus Coulomb friction (`table_mu`) at their centre of
+//! pressure. The forces are found each tick as the impulses that keep those points out of the
+//! table (a velocity-level complementarity problem: the normal impulses exactly, as a
+//! least-distance problem, then friction, torsion and rolling resistance in turn, warm-started
+//! from the last tick), so the table's moment is only what those points can give and its
+//! centre of pressure stays inside their support polygon: a box tips when its centre of mass
+//! (with the other forces) leaves the face or edge it stands on, and rests flat on a face
+//! otherwise; a sphere or a cylinder on its side meets a small rolling resistance
+//! (`table_rolling`). The supports are rigid (impulses, not springs), so they are stable for
+//! any object mass at the DFS step; a landing is inelastic.
 //!
 //! **Several objects.** A scene holds up to [`MAX_OBJECTS`] objects ([`Dfs::with_objects`]),
 //! each with its own state, Newton-Euler dynamics, table support and fingertip friction. Each
@@ -50,10 +60,10 @@ use crate::error::{DfsError, Result};
 use crate::grasp::{GraspMatrix, MAX_CONTACTS};
 use crate::hand::{DofMatrix, DofSet, FkPlan, HandModel, Kinematics, MassPlan, MAX_DOF, MAX_TIPS};
 use crate::math::{
-    cholesky_solve_in_place, envelope_cholesky_solve, force_of, moment_of, wrench, Isometry, Point,
-    Real, Vector, Wrench,
+    cholesky_solve_in_place, envelope_cholesky_solve, Isometry, Point, Real, Vector, Wrench,
 };
 use crate::object::{external_wrench_b, integrate, shapes_overlap, ObjectState, RigidObject};
+use crate::table::{Table, TableSupport};
 
 /// Most objects a DFS scene holds: 8.
 pub const MAX_OBJECTS: usize = 8;
@@ -158,6 +168,11 @@ pub struct DfsParams {
     pub table_height: Option<Real>,
     /// Coulomb coefficient between object and table. Default 0.5.
     pub table_mu: Real,
+    /// Rolling resistance of a sphere, or a cylinder lying or on its rim, on the table: the
+    /// lever (m) of the couple that resists its rolling and spinning, at most
+    /// `table_rolling × N` (a box or a standing cylinder has none: its corners or rim resist).
+    /// Default 0.001 (a 4 cm ball bumped at 0.1 m/s rolls about 1.5 cm).
+    pub table_rolling: Real,
 }
 
 impl Default for DfsParams {
@@ -178,6 +193,7 @@ impl Default for DfsParams {
             torque_range: 2.0,
             table_height: None,
             table_mu: 0.5,
+            table_rolling: 1e-3,
         }
     }
 }
@@ -221,6 +237,7 @@ impl DfsParams {
         nonneg("angle_slack", self.angle_slack)?;
         pos("torque_range", self.torque_range)?;
         nonneg("table_mu", self.table_mu)?;
+        nonneg("table_rolling", self.table_rolling)?;
         if let Some(h) = self.table_height {
             if !h.is_finite() {
                 return Err(DfsError::invalid("table_height", "must be finite"));
@@ -357,6 +374,8 @@ pub struct Dfs {
     tip_object: [usize; MAX_TIPS],
     /// Ticks after which two objects overlapped.
     overlap_ticks: u64,
+    /// Per object: the table's impulses at its support points last tick (the warm start).
+    table_support: [TableSupport; MAX_OBJECTS],
     q: [Real; MAX_DOF],
     qd: [Real; MAX_DOF],
     initialised: bool,
@@ -633,6 +652,7 @@ impl Dfs {
             contact_range: [(0, 0); MAX_OBJECTS],
             tip_object: [0; MAX_TIPS],
             overlap_ticks: 0,
+            table_support: [TableSupport::default(); MAX_OBJECTS],
             q: [0.0; MAX_DOF],
             qd: [0.0; MAX_DOF],
             initialised: false,
@@ -710,6 +730,7 @@ impl Dfs {
     /// object 0 of a scene of several.
     pub fn set_object_state(&mut self, state: ObjectState) {
         self.objects[0].state = state;
+        self.table_support[0].clear();
         self.out.object = state;
         self.out.objects[0].state = state;
     }
@@ -729,6 +750,7 @@ impl Dfs {
             self.set_object_state(state);
         } else {
             self.objects[index].state = state;
+            self.table_support[index].clear();
             self.out.objects[index].state = state;
         }
         Ok(())
@@ -752,6 +774,8 @@ impl Dfs {
         if let Some(what) = diverged {
             for (i, b) in before.iter().enumerate().take(self.n_objects) {
                 self.objects[i].state = *b;
+                // The table's solve starts over next tick (its warm start may hold the NaN).
+                self.table_support[i].clear();
                 self.out.objects[i].state = *b;
                 self.out.objects[i].f_ext_b = Wrench::zeros();
             }
@@ -1266,72 +1290,30 @@ impl Dfs {
         self.out.motor_qd[..ndof].copy_from_slice(&self.qd[..ndof]);
     }
 
-    /// Distance (m) from object `i`'s centre to its lowest point, for its current orientation.
-    fn support_depth(&self, i: usize) -> Real {
-        let o = &self.objects[i];
-        o.object.shape.support_depth(&o.state.pose.rotation)
+    /// The table, if the scene has one.
+    fn table(&self) -> Option<Table> {
+        self.params.table_height.map(|height| Table {
+            height,
+            mu: self.params.table_mu,
+            rolling: self.params.table_rolling,
+        })
     }
 
-    fn resting_on_table(&self, i: usize) -> bool {
-        match self.params.table_height {
-            Some(h) => self.objects[i].state.pose.translation.z - self.support_depth(i) <= h + 1e-6,
-            None => false,
-        }
-    }
-
-    /// The table's wrench on object `i` (B) given the other forces `f_b` on it: cancels a
-    /// downward force and velocity, resists horizontal force up to μ N, damps rotation.
-    fn table_wrench_b(&self, i: usize, f_b: &Wrench) -> Wrench {
-        if !self.resting_on_table(i) {
+    /// The table's wrench on object `i` (B) given every other force `f_b` on it this tick:
+    /// support at its lowest points with friction ([`Table::support_wrench_b`]).
+    fn table_wrench_b(&mut self, i: usize, f_b: &Wrench) -> Wrench {
+        let Some(table) = self.table() else {
             return Wrench::zeros();
-        }
-        let (object, state) = (&self.objects[i].object, &self.objects[i].state);
-        let rot = state.pose.rotation;
-        let dt = self.params.dt;
-        let m = object.mass;
-        let f_w = rot * force_of(f_b);
-        let v = state.linear_velocity;
-        // Force needed to stop downward motion and cancel a downward net force this tick.
-        let fz_needed = -(f_w.z + m * v.z.min(0.0) / dt);
-        if fz_needed <= 0.0 {
-            return Wrench::zeros();
-        }
-        let normal = fz_needed;
-        let want = -(Vector::new(f_w.x, f_w.y, 0.0) + Vector::new(v.x, v.y, 0.0) * (m / dt));
-        let limit = self.params.table_mu * normal;
-        let tangential = if want.norm() > limit {
-            want * (limit / want.norm())
-        } else {
-            want
         };
-        let force_w = tangential + Vector::new(0.0, 0.0, normal);
-        let (support_w, stands) = object.shape.table_support(&rot);
-        let moment_b = if stands {
-            // Standing on a face (or a sphere on its point): it does not spin or tip; cancel
-            // the moment and the angular velocity.
-            let h = object.inertia * state.angular_velocity_b / dt;
-            -(moment_of(f_b) + h)
-        } else {
-            // On an edge or a corner: the table pushes at the support, which tips the object
-            // over towards a face; the edge's rolling friction damps the rocking (time constant
-            // 50 ms), so it settles instead of bouncing from edge to edge.
-            let damping = object.inertia * state.angular_velocity_b / 0.05;
-            rot.inverse() * support_w.cross(&force_w) - damping
-        };
-        wrench(&(rot.inverse() * force_w), &moment_b)
+        let (o, support) = (&self.objects[i], &mut self.table_support[i]);
+        table.support_wrench_b(support, &o.object, &o.state, f_b, self.params.dt)
     }
 
+    /// Lifts object `i` out of the table if the step left it below ([`Table::lift_out`]).
     fn clamp_to_table(&mut self, i: usize) {
-        if let Some(h) = self.params.table_height {
-            let depth = self.support_depth(i);
-            let state = &mut self.objects[i].state;
-            let z = state.pose.translation.z;
-            if z - depth < h {
-                state.pose.translation.z = h + depth;
-                if state.linear_velocity.z < 0.0 {
-                    state.linear_velocity.z = 0.0;
-                }
-            }
+        if let Some(table) = self.table() {
+            let o = &mut self.objects[i];
+            table.lift_out(&o.object.shape, &mut o.state);
         }
     }
 }
@@ -1340,6 +1322,7 @@ impl Dfs {
 mod tests {
     use super::*;
     use crate::fixtures::glove10_holding_paper_sphere;
+    use crate::math::force_of;
     use proptest::prelude::*;
 
     fn all_finite(out: &TickOutput) -> bool {

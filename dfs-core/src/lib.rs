@@ -26,6 +26,7 @@ pub mod replay;
 pub mod scenario;
 pub mod statics;
 pub mod stop;
+pub mod table;
 
 pub use error::{DfsError, Result};
 pub use stop::Stop;

@@ -74,17 +74,20 @@ fn base_poses(session: &Session) -> Vec<Isometry> {
 /// How closely the skills of a session and of its export imported again agree in geometry.
 #[derive(Debug, Clone, Copy)]
 struct Tolerance {
-    /// Contact positions in the object frame and the object's key positions (m).
+    /// Contact positions in the object frame (m).
     position_m: f64,
+    /// The object's key positions (m).
+    motion_m: f64,
     /// The contacts' distances from one another (m).
     span_m: f64,
     /// The angles between the contacts' normals (degrees).
     normals_deg: f64,
 }
 
-/// Pinches (sphere, box): 3 mm, 1 mm, 2°.
+/// Pinches (sphere, box): 3 mm, 1 mm, 2°; the object's key poses 3 mm.
 const PINCH: Tolerance = Tolerance {
     position_m: 3e-3,
+    motion_m: 3e-3,
     span_m: 1e-3,
     normals_deg: 2.0,
 };
@@ -103,6 +106,7 @@ const PINCH: Tolerance = Tolerance {
 fn assert_same_skills(a: &[Skill], b: &[Skill], tol: &Tolerance) {
     let Tolerance {
         position_m,
+        motion_m,
         span_m,
         normals_deg,
     } = *tol;
@@ -161,7 +165,7 @@ fn assert_same_skills(a: &[Skill], b: &[Skill], tol: &Tolerance) {
         for (k, l) in x.motion.iter().zip(&y.motion) {
             assert!((k.time_s - l.time_s).abs() < 5e-3);
             let dist = (Vector::from(k.position) - Vector::from(l.position)).norm();
-            assert!(dist < position_m, "key pose at {} s: {dist} m", k.time_s);
+            assert!(dist < motion_m, "key pose at {} s: {dist} m", k.time_s);
             let turn = (Vector::from(k.rotation) - Vector::from(l.rotation)).norm();
             assert!(turn < 0.6, "key pose at {} s: {turn} rad", k.time_s);
         }
@@ -782,16 +786,19 @@ fn bad_wrist_messages_in_an_mcap_are_refused_naming_the_message() {
 /// Every grasp the built-in scenarios make, exported and imported again, gives its skills
 /// again (within the tolerances of [`assert_same_skills`]): the pinched sphere (seeds 0-7)
 /// and box (seeds 0-3) within [`PINCH`], and glove10's power grasp of the cylinder (seeds
-/// 0-3) within 6 mm, 3 mm and 10°. That grasp holds at the edge of its friction cones (its
-/// friction margin is 0: the pads creep round the cylinder, and the middle finger only rests
-/// on it), and where the pads settle comes back a little apart, the same for every seed:
-/// contacts 5 mm, their spans 1.7 mm, their normals 9-9.4°, the carried cylinder 5 mm (phases
-/// to the microsecond, internal force within 0.8 %, ε within 1.1 %).
+/// 0-3) within 6 mm, 3 mm and 10°, its key poses 7 mm. That grasp holds at the edge of its
+/// friction cones (its friction margin is 0: the pads creep round the cylinder, and the middle
+/// finger only rests on it), and where the pads settle comes back a little apart, the same for
+/// every seed: contacts 5 mm, their spans 1.7 mm, their normals 9-9.4°, the carried cylinder
+/// 5 mm (phases to the microsecond, internal force within 0.8 %, ε within 1.1 %). Set down, it
+/// lands on its rim and the table, pushing only there, rocks it back upright: its key pose then
+/// comes back 5.8-6.6 mm apart (under 6 mm when the table held a landing object still).
 #[test]
 fn every_builtin_grasp_exported_and_imported_again_gives_the_same_skills() {
     let dir = tempfile::tempdir().unwrap();
     let power = Tolerance {
         position_m: 6e-3,
+        motion_m: 7e-3,
         span_m: 3e-3,
         normals_deg: 10.0,
     };
