@@ -2,7 +2,7 @@
 //!
 //! Frames: fingertip T_i, contact C_i, object B. `U_i` is the pose of C_i expressed in T_i
 //! (`C_i = T_i U_i`, eq. 3) and `V_i` the pose of B expressed in C_i (`B = C_i V_i`, eq. 4).
-//! The paper's eq. 9-10 are garbled in the scan; we derive the maps (NOTES.md):
+//! The paper's eq. 9-10 are garbled in the scan; we derive the maps (docs/physics.md):
 //! for a pose `X = [R p; 0 1]` of frame b in frame a, a wrench (f, m) given in b at b's origin
 //! is, in a at a's origin, `f_a = R f_b`, `m_a = R m_b + p × (R f_b)`, i.e. the 6x6 matrix
 //! `[R 0; [p]×R R]` ([`wrench_map`]).

@@ -1,6 +1,6 @@
 //! Objects: shapes with mass properties, their state, and the Newton-Euler step (eq. 24-26).
 //!
-//! Formulation (NOTES.md, "eq. 25-26 mix frames"): the object frame B sits at the centre of
+//! Formulation (docs/physics.md, "eq. 25-26 mix frames"): the object frame B sits at the centre of
 //! mass; position and linear velocity are in the world frame, angular velocity in B. Wrenches
 //! on the object are given in B at its origin, as the paper does. Newton-Euler:
 //! `m v̇ = R f_B + m g`, `H ω̇ = m_B − ω × Hω`; orientation is integrated as a unit quaternion.

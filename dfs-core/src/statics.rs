@@ -253,7 +253,7 @@ fn default_gravity() -> [Real; 3] {
     [0.0, 0.0, -crate::math::STANDARD_GRAVITY]
 }
 
-/// A grasp file (DESIGN.md, "Grasp file"): an object, contacts in B, contact and friction
+/// A grasp file (README.md, "Grasp file"): an object, contacts in B, contact and friction
 /// model, gravity in B and a requested object acceleration.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(
@@ -296,7 +296,7 @@ fn finite_field(field: String, values: &[Real]) -> Result<()> {
 
 impl GraspSpec {
     /// The paper's §3.4 example: a 1 kg sphere of radius 0.1 m on four point contacts with
-    /// friction, μ = 1.5 (the minimum-norm solution needs μ ≥ 1.3, NOTES.md).
+    /// friction, μ = 1.5 (the minimum-norm solution needs μ ≥ 1.3, docs/physics.md).
     pub fn paper_sphere() -> Self {
         let pts = [
             [0.054, 0.054, -0.059],
