@@ -54,7 +54,7 @@ pub struct ServeArgs {
     #[arg(long, default_value_t = 64)]
     pub cache_mib: usize,
     /// Session uploads read and segmented at once (each holds up to a bounded multiple of its
-    /// size in memory, see the README); further uploads wait up to `--queue-wait` seconds for
+    /// size in memory, see docs/api.md); further uploads wait up to `--queue-wait` seconds for
     /// a turn, then get 503 with `Retry-After`.
     #[arg(long, default_value_t = 2)]
     pub max_ingests: usize,

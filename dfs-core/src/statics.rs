@@ -253,7 +253,7 @@ fn default_gravity() -> [Real; 3] {
     [0.0, 0.0, -crate::math::STANDARD_GRAVITY]
 }
 
-/// A grasp file (README.md, "Grasp file"): an object, contacts in B, contact and friction
+/// A grasp file (docs/skills.md, "Grasp file"): an object, contacts in B, contact and friction
 /// model, gravity in B and a requested object acceleration.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(

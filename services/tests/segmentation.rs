@@ -255,7 +255,7 @@ fn a_session_extended_by_duration_keeps_every_boundary_within_30_ms() {
     }
 }
 
-/// The README's box scenario with another object.
+/// The box scenario of docs/scenarios.md with another object.
 fn box_scenario(object: &str) -> Scenario {
     let json = format!(
         r#"{{ "name": "odd-box", "object": {object}, "grasp": "pinch",

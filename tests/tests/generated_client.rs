@@ -4,7 +4,7 @@
 //!
 //! The generator takes the binary media types (`application/x-mcap`, `application/x-protobuf`)
 //! as bytes and URDF downloads as text through its `content_type_overrides` setting
-//! (documented in the README); with it, it reports nothing about the document.
+//! (documented in docs/api.md); with it, it reports nothing about the document.
 
 #[path = "../python/interpreter.rs"]
 mod interpreter;

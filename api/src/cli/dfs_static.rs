@@ -7,7 +7,7 @@ use std::path::Path;
 /// Arguments of `icms dfs-static`.
 #[derive(Debug, clap::Args)]
 pub struct Args {
-    /// A built-in grasp (`paper-sphere`) or a grasp file (JSON, format in the README, "Grasp file").
+    /// A built-in grasp (`paper-sphere`) or a grasp file (JSON, format in docs/skills.md).
     #[arg(long)]
     grasp: String,
     /// The operator pushes `scale` times the intensities that hold the object.
