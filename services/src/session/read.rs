@@ -377,9 +377,16 @@ fn stream_source(
 ) -> Result<SessionHead> {
     let mut nothing = ();
     // The reading thread checks the raw topics neither the visitor takes nor `keep` keeps;
-    // the others come to this one.
+    // the others come to this one. A thread finds a file's faults in file order, so the two
+    // glove topics are checked on one thread: a file whose joint states and feedback are both
+    // broken is refused naming the same message by every read.
     let kept_also = keep.as_ref().map_or(DecodeTopics::NONE, |k| k.also);
-    let mut early = Checker::early(&mut nothing, visitor.wants().union(kept_also));
+    let mut here = visitor.wants().union(kept_also);
+    if here.joint_states || here.feedback {
+        here.joint_states = true;
+        here.feedback = true;
+    }
+    let mut early = Checker::early(&mut nothing, here);
     let mut checker = Checker::new(visitor);
     let len = match source {
         SessionSource::File(path) => {
