@@ -396,3 +396,53 @@ async fn mcap_downloads_answer_ranges_etags_and_cors() {
     }
     app.stop().await;
 }
+
+/// A skill's forces read its session's stored file: a file gone from the data directory is a
+/// 404 naming the session, a file that no longer reads as a recording a 500 naming it (never
+/// a bare "internal error").
+#[tokio::test]
+async fn forces_of_a_session_whose_file_is_gone_or_damaged_name_it() {
+    let app = TestApp::spawn().await;
+    let c = &app.client;
+    let r = c
+        .upload(&session_bytes("sphere-lift", 2, Some(3.0)), None)
+        .await;
+    assert_eq!(r.status, 201, "{}", String::from_utf8_lossy(&r.body));
+    let stored = r.json();
+    let skill = stored["skills"][0]["id"].as_i64().unwrap();
+    let session = stored["session_id"].as_i64().unwrap();
+    let blobs: Vec<_> = walk(&app.data.join("blobs"));
+    assert_eq!(blobs.len(), 1, "{blobs:?}");
+    let path = format!("/api/v1/skills/{skill}/forces");
+
+    std::fs::write(&blobs[0], b"not an MCAP file").unwrap();
+    let damaged = c.get(&path).await;
+    assert_eq!(damaged.status, 500);
+    let detail = damaged.json()["detail"].as_str().unwrap().to_owned();
+    assert!(detail.contains(&format!("session {session}")), "{detail}");
+    assert!(detail.contains("does not read as a recording"), "{detail}");
+
+    std::fs::remove_file(&blobs[0]).unwrap();
+    let gone = c.get(&path).await;
+    assert_eq!(gone.status, 404);
+    let detail = gone.json()["detail"].as_str().unwrap().to_owned();
+    assert!(detail.contains(&format!("session {session}")), "{detail}");
+    assert!(
+        detail.contains("missing from the data directory"),
+        "{detail}"
+    );
+}
+
+/// Every file under `dir`, recursively.
+fn walk(dir: &std::path::Path) -> Vec<std::path::PathBuf> {
+    let mut out = Vec::new();
+    for e in std::fs::read_dir(dir).unwrap() {
+        let p = e.unwrap().path();
+        if p.is_dir() {
+            out.extend(walk(&p));
+        } else {
+            out.push(p);
+        }
+    }
+    out
+}

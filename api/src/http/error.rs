@@ -97,6 +97,33 @@ impl Problem {
             ..Self::new(StatusCode::SERVICE_UNAVAILABLE, detail)
         }
     }
+
+    /// A stored recording (`what`: `session 4`, `replay 9`) that could not be read back: 404
+    /// when its file is missing from the data directory; otherwise 500 naming the recording
+    /// (the file was checked when it was stored, so the data directory changed under us), the
+    /// reader's error in the server's log.
+    pub fn stored_recording(what: &str, error: services::RecordingError) -> Self {
+        match error {
+            services::RecordingError::Io { source, .. }
+                if source.kind() == std::io::ErrorKind::NotFound =>
+            {
+                Self::not_found(format!(
+                    "no MCAP file for {what}: it is missing from the data directory"
+                ))
+            }
+            error => {
+                tracing::error!(%error, what, "a stored recording does not read back");
+                Self::new(
+                    StatusCode::INTERNAL_SERVER_ERROR,
+                    format!(
+                        "the stored file of {what} does not read as a recording; the server's \
+                         log has the details"
+                    ),
+                )
+            }
+        }
+    }
+
     /// 500: a fault of the server; `error` is logged, the client sees no internals.
     pub fn internal(error: &dyn std::fmt::Display) -> Self {
         tracing::error!(%error, "internal error");

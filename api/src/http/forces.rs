@@ -91,17 +91,8 @@ async fn skill_forces(
     })
     .await
     .map_err(|e| Problem::internal(&e))?;
-    let bins = series.map_err(|e| match e {
-        services::RecordingError::Io { source, .. }
-            if source.kind() == std::io::ErrorKind::NotFound =>
-        {
-            Problem::not_found(format!(
-                "no MCAP file for session {}: it is missing from the data directory",
-                skill.session_id
-            ))
-        }
-        e => Problem::internal(&e),
-    })?;
+    let bins = series
+        .map_err(|e| Problem::stored_recording(&format!("session {}", skill.session_id), e))?;
     Ok(axum::Json(bins.into_forces(id, skill.session_id)))
 }
 

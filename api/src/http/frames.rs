@@ -228,16 +228,7 @@ async fn replay_frames(
     })
     .await
     .map_err(|e| Problem::internal(&e))?;
-    let (v, links) = frames.map_err(|e| match e {
-        services::RecordingError::Io { source, .. }
-            if source.kind() == std::io::ErrorKind::NotFound =>
-        {
-            Problem::not_found(format!(
-                "no MCAP file for replay {id}: it is missing from the data directory"
-            ))
-        }
-        e => Problem::internal(&e),
-    })?;
+    let (v, links) = frames.map_err(|e| Problem::stored_recording(&format!("replay {id}"), e))?;
     Ok(axum::Json(ReplayFrames {
         replay_id: id,
         hand: hand_name,
