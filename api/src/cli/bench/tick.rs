@@ -541,14 +541,61 @@ pub fn bench_tick(scene: TickScene, iterations: usize) -> Result<TickBench, CliE
     }
 }
 
-/// Percentiles and the result from the timings.
-fn summary(
-    scene: TickScene,
-    batch_ns: &mut [u64],
-    tick_ns: &mut [u32],
-    batch: usize,
+/// What [`time_alternating`] measured.
+struct Timings {
+    /// The batches timed whole (ns per batch).
+    batch_ns: Vec<u64>,
+    /// The ticks of the batches timed tick by tick (ns per tick).
+    tick_ns: Vec<u32>,
+    /// Heap allocations during the batches (not during the checks between them).
     allocations: usize,
-) -> TickBench {
+}
+
+/// Runs `batches` batches of `batch` ticks of `state`, alternately timed whole (the statistic
+/// the MuJoCo peer uses) and tick by tick (the percentiles); `check` runs untimed after each
+/// batch and may stop the benchmark.
+fn time_alternating<S>(
+    state: &mut S,
+    batch: usize,
+    batches: usize,
+    mut tick: impl FnMut(&mut S) -> Result<(), CliError>,
+    mut check: impl FnMut(&mut S, usize) -> Result<(), CliError>,
+) -> Result<Timings, CliError> {
+    let mut batch_ns = vec![0u64; batches / 2];
+    let mut tick_ns = vec![0u32; batches / 2 * batch];
+    let mut region = stats_alloc::Region::new(&stats_alloc::INSTRUMENTED_SYSTEM);
+    let mut allocations = 0;
+    for b in 0..batches {
+        if b % 2 == 0 {
+            let t0 = Instant::now();
+            for _ in 0..batch {
+                tick(state)?;
+            }
+            batch_ns[b / 2] = t0.elapsed().as_nanos().min(u64::MAX as u128) as u64;
+        } else {
+            for t in &mut tick_ns[b / 2 * batch..(b / 2 + 1) * batch] {
+                let t0 = Instant::now();
+                tick(state)?;
+                *t = t0.elapsed().as_nanos().min(u32::MAX as u128) as u32;
+            }
+        }
+        allocations += region.change_and_reset().allocations;
+        check(state, b)?;
+    }
+    Ok(Timings {
+        batch_ns,
+        tick_ns,
+        allocations,
+    })
+}
+
+/// Percentiles and the result from the timings.
+fn summary(scene: TickScene, timings: Timings, batch: usize) -> TickBench {
+    let Timings {
+        mut batch_ns,
+        mut tick_ns,
+        allocations,
+    } = timings;
     batch_ns.sort_unstable();
     tick_ns.sort_unstable();
     let per = |ns: u64| ns as f64 / batch as f64;
@@ -578,71 +625,56 @@ fn bench_held(
 ) -> Result<TickBench, CliError> {
     let n = samples.n;
     let base = held.base;
-    let mut dfs = held.dfs.clone();
     let sample = |i: usize| GloveSample {
         q: &samples.q[i * n..(i + 1) * n],
         tau: &samples.tau[i * n..(i + 1) * n],
         base,
     };
     let in_hand = |s: &ObjectState| base.inverse_transform_vector(&s.pose.translation.vector);
-    let start = in_hand(dfs.object_state());
-    let mut i = 0;
+    // The DFS and the index of its next sample.
+    let mut state = (held.dfs.clone(), 0usize);
+    let start = in_hand(state.0.object_state());
     for _ in 0..WARMUP_TICKS {
-        dfs.step(&sample(i))?;
-        i += 1;
+        state.0.step(&sample(state.1))?;
+        state.1 += 1;
     }
-    let mut batch_ns = vec![0u64; batches / 2];
-    let mut tick_ns = vec![0u32; batches / 2 * batch];
     let (mut min_contacts, mut max_shift) = (usize::MAX, 0.0 as Real);
-    let mut region = stats_alloc::Region::new(&stats_alloc::INSTRUMENTED_SYSTEM);
-    let mut allocations = 0;
-    for b in 0..batches {
-        if b % 2 == 0 {
-            let t0 = Instant::now();
-            for _ in 0..batch {
-                black_box(dfs.step(black_box(&sample(i)))?);
-                i += 1;
+    let timings = time_alternating(
+        &mut state,
+        batch,
+        batches,
+        |(dfs, i)| {
+            black_box(dfs.step(black_box(&sample(*i)))?);
+            *i += 1;
+            Ok(())
+        },
+        // The ball is still held.
+        |(dfs, _), b| {
+            let out = dfs.output();
+            let shift = (in_hand(&out.object) - start).norm();
+            min_contacts = min_contacts.min(out.n_contacts);
+            max_shift = max_shift.max(shift);
+            if out.n_contacts < 3 || shift > 0.010 {
+                return Err(CliError(format!(
+                    "fingertips scene: the ball is no longer held after {} timed ticks ({} contacts, moved {:.1} mm in the hand)",
+                    (b + 1) * batch,
+                    out.n_contacts,
+                    shift * 1e3
+                )));
             }
-            batch_ns[b / 2] = t0.elapsed().as_nanos().min(u64::MAX as u128) as u64;
-        } else {
-            for t in &mut tick_ns[b / 2 * batch..(b / 2 + 1) * batch] {
-                let t0 = Instant::now();
-                black_box(dfs.step(black_box(&sample(i)))?);
-                *t = t0.elapsed().as_nanos().min(u32::MAX as u128) as u32;
-                i += 1;
-            }
-        }
-        // Untimed: the ball is still held.
-        allocations += region.change_and_reset().allocations;
-        let out = dfs.output();
-        let shift = (in_hand(&out.object) - start).norm();
-        min_contacts = min_contacts.min(out.n_contacts);
-        max_shift = max_shift.max(shift);
-        if out.n_contacts < 3 || shift > 0.010 {
-            return Err(CliError(format!(
-                "fingertips scene: the ball is no longer held after {} timed ticks ({} contacts, moved {:.1} mm in the hand)",
-                (b + 1) * batch,
-                out.n_contacts,
-                shift * 1e3
-            )));
-        }
-    }
+            Ok(())
+        },
+    )?;
+    let dfs = &state.0;
     // The replay is the closed loop, tick for tick.
     if *dfs.object_state() != samples.end {
         return Err(CliError(
             "fingertips scene: the replayed ticks ended elsewhere than the closed loop that made their samples".into(),
         ));
     }
-    let contacts = dfs.output().n_contacts;
-    let mut r = summary(
-        TickScene::Fingertips,
-        &mut batch_ns,
-        &mut tick_ns,
-        batch,
-        allocations,
-    );
+    let mut r = summary(TickScene::Fingertips, timings, batch);
     r.warmup_ticks = WARMUP_TICKS;
-    r.contacts = contacts;
+    r.contacts = dfs.output().n_contacts;
     r.min_contacts = min_contacts;
     r.max_object_shift_mm = max_shift * 1e3;
     Ok(r)
@@ -658,40 +690,18 @@ fn bench_frozen(batch: usize, batches: usize) -> Result<TickBench, CliError> {
         tau: &tau,
         base,
     };
+    let tick = |dfs: &mut Dfs| -> Result<(), CliError> {
+        dfs.set_object_state(start);
+        black_box(dfs.step(black_box(&sample))?);
+        Ok(())
+    };
     let warmup = batch * batches / 10;
     for _ in 0..warmup {
-        dfs.set_object_state(start);
-        black_box(dfs.step(&sample)?);
+        tick(&mut dfs)?;
     }
-    let mut batch_ns = vec![0u64; batches / 2];
-    let mut tick_ns = vec![0u32; batches / 2 * batch];
-    let region = stats_alloc::Region::new(&stats_alloc::INSTRUMENTED_SYSTEM);
-    for b in 0..batches {
-        if b % 2 == 0 {
-            let t0 = Instant::now();
-            for _ in 0..batch {
-                dfs.set_object_state(start);
-                black_box(dfs.step(black_box(&sample))?);
-            }
-            batch_ns[b / 2] = t0.elapsed().as_nanos().min(u64::MAX as u128) as u64;
-        } else {
-            for t in &mut tick_ns[b / 2 * batch..(b / 2 + 1) * batch] {
-                let t0 = Instant::now();
-                dfs.set_object_state(start);
-                black_box(dfs.step(black_box(&sample))?);
-                *t = t0.elapsed().as_nanos().min(u32::MAX as u128) as u32;
-            }
-        }
-    }
-    let allocations = region.change().allocations;
+    let timings = time_alternating(&mut dfs, batch, batches, tick, |_, _| Ok(()))?;
     let contacts = dfs.output().n_contacts;
-    let mut r = summary(
-        TickScene::Frozen,
-        &mut batch_ns,
-        &mut tick_ns,
-        batch,
-        allocations,
-    );
+    let mut r = summary(TickScene::Frozen, timings, batch);
     r.warmup_ticks = warmup;
     r.contacts = contacts;
     r.min_contacts = contacts;
