@@ -174,6 +174,17 @@ async fn deleting_a_skill_keeps_its_session() {
         store.delete_skill(s.skill_ids[1]).await,
         Err(StoreError::SkillNotFound(_))
     ));
+    // Several at once come back in the order asked, the deleted one left out.
+    let ids = [s.skill_ids[2], s.skill_ids[1], s.skill_ids[0]];
+    let got: Vec<i64> = store
+        .get_skills(&ids)
+        .await
+        .unwrap()
+        .iter()
+        .map(|k| k.id)
+        .collect();
+    assert_eq!(got, vec![s.skill_ids[2], s.skill_ids[0]]);
+    assert!(store.get_skills(&[]).await.unwrap().is_empty());
 }
 
 #[tokio::test]

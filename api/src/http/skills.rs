@@ -375,19 +375,18 @@ async fn similar_skills(
         return Err(Problem::bad_request(format!("k {k} is outside 1..=1000")));
     }
     let near = st.store().nearest_to_skill(id, k as usize)?;
-    let mut items = Vec::with_capacity(near.len());
-    for (skill_id, distance) in near {
-        match st.store().get_skill(skill_id).await {
-            Ok(s) => items.push(Neighbour {
-                skill_id,
-                distance,
-                skill: SkillSummary::from(s),
-            }),
-            // Deleted since the index was read: leave it out.
-            Err(services::store::StoreError::SkillNotFound(_)) => {}
-            Err(e) => return Err(e.into()),
-        }
-    }
+    let ids: Vec<i64> = near.iter().map(|&(skill_id, _)| skill_id).collect();
+    // One query for every neighbour; one deleted since the index was read is left out.
+    let skills = st.store().get_skills(&ids).await?;
+    let distance: std::collections::HashMap<i64, f32> = near.into_iter().collect();
+    let items = skills
+        .into_iter()
+        .map(|s| Neighbour {
+            skill_id: s.id,
+            distance: distance[&s.id],
+            skill: SkillSummary::from(s),
+        })
+        .collect();
     Ok(axum::Json(SimilarSkills {
         similar_to: id,
         items,

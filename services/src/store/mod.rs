@@ -1140,6 +1140,27 @@ impl Store {
         row_to_skill(&row)
     }
 
+    /// The skills of `ids` in one query, in the order of `ids`; ids with no skill (deleted
+    /// meanwhile) are left out. What `similar` answers its neighbours with, instead of one
+    /// query per neighbour.
+    pub async fn get_skills(&self, ids: &[i64]) -> Result<Vec<Skill>, StoreError> {
+        if ids.is_empty() {
+            return Ok(Vec::new());
+        }
+        let rows = sqlx::query(&format!(
+            "SELECT {} FROM skills WHERE id IN (SELECT value FROM json_each(?))",
+            query::SKILL_COLUMNS
+        ))
+        .bind(serde_json::to_string(ids)?)
+        .fetch_all(&self.inner.pool)
+        .await?;
+        let mut by_id = rows
+            .iter()
+            .map(|row| row_to_skill(row).map(|s| (s.id, s)))
+            .collect::<Result<std::collections::HashMap<_, _>, _>>()?;
+        Ok(ids.iter().filter_map(|id| by_id.remove(id)).collect())
+    }
+
     /// Deletes one skill, its phase rows and its replays (one transaction; its session stays),
     /// then the replays' blobs.
     pub async fn delete_skill(&self, id: i64) -> Result<(), StoreError> {
