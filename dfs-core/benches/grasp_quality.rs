@@ -15,8 +15,8 @@ fn quality(c: &mut Criterion) {
         mu_torsion: 0.005,
     };
     let params = QualityParams::default();
-    // 4 soft fingers × 8 cone edges × 2 torsion signs = 64 primitive wrenches.
-    c.bench_function("grasp_quality_paper_sphere_soft_finger_64", |b| {
+    // 4 soft fingers × (8 + 2 × 5 + 2) points of the elliptic cone = 80 primitive wrenches.
+    c.bench_function("grasp_quality_paper_sphere_soft_finger_80", |b| {
         b.iter(|| {
             grasp_quality(
                 black_box(&contacts),

@@ -11,6 +11,25 @@
 //! and y (N), the normal force along z (N) and the torsional moment about z (N·m). A contact
 //! model uses a subset: frictionless `c_z`; point with friction `c_x, c_y, c_z`; soft finger all
 //! four. Unused components are zero in every transmitted quantity.
+//!
+//! **Friction cones** ([`apply_friction`]). Point with friction: the exact, unilateral Coulomb
+//! cone `‖c_t‖ ≤ μ c_z` (eq. 17 as the paper's NOTES correct it). Soft finger: the *elliptic*
+//! soft-finger cone, which limits the tangential force and the torsion jointly,
+//!
+//! ```text
+//! ‖c_t‖² / μ² + c_τ² / μ_t² ≤ c_z²,   c_z ≥ 0
+//! ```
+//!
+//! the ellipsoidal approximation of a pad's limit surface (Howe & Cutkosky 1996; Kao &
+//! Cutkosky 1992 for soft fingertips), as MuJoCo's elliptic cones write a `condim` 4 contact
+//! (friction `(μ, μ, μ_t)`, `μ_t` a length) and GraspIt!'s soft contact linearises it. A pad
+//! that carries its whole torsion `μ_t c_z` has no tangential friction left, and the other way
+//! round: the box `‖c_t‖ ≤ μ c_z`, `|c_τ| ≤ μ_t c_z` would overstate what it carries by up to
+//! √2. With the characteristic length `e = μ_t / μ` ([`Friction::torsion_length`]) it is the
+//! second-order cone `‖(c_x, c_y, c_τ / e)‖ ≤ μ c_z`, round in intensities whose torsion is
+//! measured in `c_τ / e` (N): the grasp force optimiser and the DFS's `W⁺` weigh the torsion
+//! by that same length, so their results do not depend on the unit of length. With `μ = 0` or
+//! `μ_t = 0` the ellipse degenerates to the other limit alone.
 
 use crate::math::{Real, RotationMatrix, Vector, Wrench};
 use nalgebra::{Matrix3, Vector4};
@@ -92,8 +111,20 @@ impl ContactModel {
 pub struct Friction {
     /// Coulomb coefficient μ (dimensionless), ≥ 0. Default 0.8.
     pub mu: Real,
-    /// Torsional coefficient μ_t (m): `|c_τ| ≤ μ_t c_z` for the soft finger. Default 0.005.
+    /// Torsional coefficient μ_t (m), ≥ 0: the most torsion a soft finger's pad carries per
+    /// newton of normal force when it carries no tangential force, `|c_τ| ≤ μ_t c_z`; with a
+    /// tangential force too, the elliptic cone of the module documentation. Default 0.005.
     pub mu_torsion: Real,
+}
+
+impl Friction {
+    /// The soft-finger cone's characteristic length `e = μ_t / μ` (m): the torsion `e f`
+    /// costs a pad as much of its friction as the tangential force `f`. `None` when `μ` or
+    /// `μ_t` is zero (or not finite), where the cone limits only the other.
+    pub fn torsion_length(&self) -> Option<Real> {
+        let e = self.mu_torsion / self.mu;
+        (self.mu > 0.0 && self.mu_torsion > 0.0 && e.is_finite() && e > 0.0).then_some(e)
+    }
 }
 
 impl Default for Friction {
@@ -193,10 +224,14 @@ pub struct FrictionSplit {
     pub separating: bool,
 }
 
-/// Applies the contact model and the exact, unilateral Coulomb cone to intensities `c`
+/// Applies the contact model and the exact, unilateral friction cone to intensities `c`
 /// (eq. 15-18): components the model does not transmit go to the rest; `c_z ≤ 0` transmits
 /// nothing; a tangential part beyond `μ c_z` is scaled back onto the cone (direction kept) and
-/// the excess joins the rest; likewise `|c_τ| ≤ μ_t c_z` for the soft finger.
+/// the excess joins the rest. For the soft finger the tangential force and the torsion are
+/// limited jointly by the elliptic cone `‖c_t‖²/μ² + c_τ²/μ_t² ≤ c_z²` (module documentation):
+/// beyond it both are scaled back by the same factor onto the cone, the nearest point on it in
+/// the metric in which it is round (`c_τ` measured as `c_τ / e`).
+#[inline]
 pub fn apply_friction(model: ContactModel, friction: &Friction, c: &Intensity) -> FrictionSplit {
     let masked = c.component_mul(&model.mask());
     let mut t = masked;
@@ -211,25 +246,75 @@ pub fn apply_friction(model: ContactModel, friction: &Friction, c: &Intensity) -
     }
     let n = masked[2];
     let tan2 = masked[0] * masked[0] + masked[1] * masked[1];
-    let limit = friction.mu.max(0.0) * n;
-    // Compared squared (both sides are ≥ 0): the square root only for a contact that slips.
-    if tan2 > limit * limit {
-        let tan = tan2.sqrt();
-        let s = if tan > 0.0 { limit / tan } else { 0.0 };
-        t[0] *= s;
-        t[1] *= s;
-        slip = true;
-    }
-    let tl = friction.mu_torsion.max(0.0) * n;
-    if t[3].abs() > tl {
-        t[3] = t[3].signum() * tl;
-        slip = true;
+    let mu = friction.mu.max(0.0);
+    let mu_t = friction.mu_torsion.max(0.0);
+    if model == ContactModel::SoftFinger && mu > 0.0 && mu_t > 0.0 {
+        // The elliptic cone: ρ² = ‖c_t‖²/μ² + c_τ²/μ_t² ≤ c_z², compared squared.
+        let rho2 = tan2 / (mu * mu) + (masked[3] / mu_t) * (masked[3] / mu_t);
+        if rho2 > n * n {
+            let s = n / rho2.sqrt();
+            t[0] *= s;
+            t[1] *= s;
+            t[3] *= s;
+            slip = true;
+        }
+    } else {
+        // Point with friction, and the soft finger's degenerate cones (μ = 0: torsion only;
+        // μ_t = 0: tangential force only), where the ellipse is the two limits apart.
+        let limit = mu * n;
+        // Compared squared (both sides are ≥ 0): the square root only for a contact that slips.
+        if tan2 > limit * limit {
+            let tan = tan2.sqrt();
+            let s = if tan > 0.0 { limit / tan } else { 0.0 };
+            t[0] *= s;
+            t[1] *= s;
+            slip = true;
+        }
+        let tl = mu_t * n;
+        if t[3].abs() > tl {
+            t[3] = t[3].signum() * tl;
+            slip = true;
+        }
     }
     FrictionSplit {
         transmitted: t,
         rest: c - t,
         slip,
         separating: false,
+    }
+}
+
+/// How much of its friction cone intensities `c` use: 0 for a pure normal force, 1 on the
+/// cone, above 1 outside it. `‖c_t‖ / (μ c_z)` for a point contact (and a soft finger whose
+/// cone is degenerate), `sqrt(‖c_t‖²/μ² + c_τ²/μ_t²) / c_z` for the soft finger's elliptic
+/// cone; 0 for the frictionless model. Components the model does not transmit are ignored; a
+/// force that does not push (`c_z ≤ 0`) with any load on the cone, or a load the cone cannot
+/// carry at all (`μ = 0`), uses it infinitely.
+pub fn cone_usage(model: ContactModel, friction: &Friction, c: &Intensity) -> Real {
+    let m = c.component_mul(&model.mask());
+    let tan = (m[0] * m[0] + m[1] * m[1]).sqrt();
+    let (mu, mu_t) = (friction.mu.max(0.0), friction.mu_torsion.max(0.0));
+    let share = |load: Real, coefficient: Real| {
+        if load == 0.0 {
+            0.0
+        } else if coefficient > 0.0 {
+            load / coefficient
+        } else {
+            Real::INFINITY
+        }
+    };
+    let (a, b) = (share(tan, mu), share(m[3].abs(), mu_t));
+    let rho = if model == ContactModel::SoftFinger && friction.torsion_length().is_some() {
+        a.hypot(b)
+    } else {
+        a.max(b)
+    };
+    if rho == 0.0 {
+        0.0
+    } else if m[2] > 0.0 {
+        rho / m[2]
+    } else {
+        Real::INFINITY
     }
 }
 
@@ -363,6 +448,97 @@ mod tests {
     }
 
     #[test]
+    fn a_soft_pad_cannot_carry_its_whole_tangential_friction_and_torsion_at_once() {
+        // The corner of the old box, ‖c_t‖ = μ c_z and |c_τ| = μ_t c_z: outside the elliptic
+        // cone by √2, scaled back onto it with its direction in (c_t/μ, c_τ/μ_t) kept.
+        let (n, fr) = (2.0, f());
+        let c = Intensity::new(fr.mu * n * 0.6, fr.mu * n * 0.8, n, -fr.mu_torsion * n);
+        let s = apply_friction(ContactModel::SoftFinger, &fr, &c);
+        assert!(s.slip && !s.separating);
+        let k = 1.0 / 2.0_f64.sqrt();
+        let expected = Intensity::new(c[0] * k, c[1] * k, n, c[3] * k);
+        assert!(
+            (s.transmitted - expected).norm() < 1e-12,
+            "{:?}",
+            s.transmitted
+        );
+        let (_, t) = normal_and_tangential(&s.transmitted);
+        let rho2 = (t / fr.mu).powi(2) + (s.transmitted[3] / fr.mu_torsion).powi(2);
+        assert!((rho2 - n * n).abs() < 1e-9);
+        // Inside the ellipse (a share of 0.6² + 0.7² = 0.85 of it): all of it transmitted.
+        let c = Intensity::new(0.0, fr.mu * n * 0.6, n, fr.mu_torsion * n * 0.7);
+        let s = apply_friction(ContactModel::SoftFinger, &fr, &c);
+        assert!(!s.slip);
+        assert_eq!(s.transmitted, c);
+        // A point contact transmits no torsion and keeps the plain Coulomb cone.
+        let c = Intensity::new(fr.mu * n, 0.0, n, fr.mu_torsion * n);
+        let s = apply_friction(ContactModel::PointWithFriction, &fr, &c);
+        assert!(!s.slip);
+        assert_eq!(s.transmitted, Intensity::new(fr.mu * n, 0.0, n, 0.0));
+    }
+
+    #[test]
+    fn the_cone_usage_is_one_on_the_cone_for_every_model() {
+        let fr = f();
+        let n = 2.0;
+        // Friction loads ten times what the cone carries, scaled back onto it.
+        for (model, c) in [
+            (
+                ContactModel::PointWithFriction,
+                Intensity::new(0.0, 1.0, n, 0.0),
+            ),
+            (
+                ContactModel::PointWithFriction,
+                Intensity::new(0.6, -0.8, n, 0.05),
+            ),
+            (ContactModel::SoftFinger, Intensity::new(0.0, 1.0, n, 0.02)),
+            (
+                ContactModel::SoftFinger,
+                Intensity::new(0.6, -0.8, n, -0.05),
+            ),
+            (ContactModel::SoftFinger, Intensity::new(0.0, 0.0, n, 0.3)),
+        ] {
+            let load = Intensity::new(10.0 * c[0], 10.0 * c[1], n, 10.0 * c[3]);
+            let on = apply_friction(model, &fr, &load).transmitted;
+            let u = cone_usage(model, &fr, &on);
+            assert!((u - 1.0).abs() < 1e-12, "{model:?} {c:?}: {u}");
+        }
+        let c = Intensity::new(0.3, 0.0, 2.0, 0.01);
+        let soft = cone_usage(ContactModel::SoftFinger, &fr, &c);
+        assert!((soft - (0.6_f64.powi(2) + 1.0).sqrt() / 2.0).abs() < 1e-12);
+        assert_eq!(cone_usage(ContactModel::PointWithFriction, &fr, &c), 0.3);
+        assert_eq!(cone_usage(ContactModel::Frictionless, &fr, &c), 0.0);
+        assert_eq!(
+            cone_usage(
+                ContactModel::PointWithFriction,
+                &fr,
+                &Intensity::new(0.1, 0.0, 0.0, 0.0)
+            ),
+            Real::INFINITY
+        );
+    }
+
+    #[test]
+    fn the_soft_finger_cone_without_friction_or_torsion_limits_only_the_other() {
+        let c = Intensity::new(0.3, 0.4, 1.0, 0.02);
+        let no_torsion = Friction {
+            mu: 0.8,
+            mu_torsion: 0.0,
+        };
+        assert_eq!(no_torsion.torsion_length(), None);
+        let s = apply_friction(ContactModel::SoftFinger, &no_torsion, &c);
+        assert_eq!(s.transmitted, Intensity::new(0.3, 0.4, 1.0, 0.0));
+        let no_friction = Friction {
+            mu: 0.0,
+            mu_torsion: 0.01,
+        };
+        assert_eq!(no_friction.torsion_length(), None);
+        let s = apply_friction(ContactModel::SoftFinger, &no_friction, &c);
+        assert_eq!(s.transmitted, Intensity::new(0.0, 0.0, 1.0, 0.01));
+        assert_eq!(f().torsion_length(), Some(0.01 / 0.5));
+    }
+
+    #[test]
     fn soft_finger_torsion_is_limited() {
         let s = apply_friction(
             ContactModel::SoftFinger,
@@ -387,6 +563,11 @@ mod tests {
             prop_assert!(n >= 0.0);
             prop_assert!(t <= mu * n + 1e-12);
             prop_assert!(s.transmitted[3].abs() <= 0.01 * n + 1e-12);
+            if model == ContactModel::SoftFinger && mu > 0.0 {
+                // The elliptic cone, tangential force and torsion together.
+                let rho2 = (t / mu).powi(2) + (s.transmitted[3] / 0.01).powi(2);
+                prop_assert!(rho2 <= n * n * (1.0 + 1e-12) + 1e-24, "{} > {}", rho2, n * n);
+            }
             if !s.separating && !s.slip {
                 prop_assert!(in_cone(model, &fr, &c));
             }

@@ -4,8 +4,8 @@
 //!    kinematics, fingertip Jacobians and M(θ);
 //! 2. [`contacts`](Dfs::stage_contacts): fingertip spheres against the object, contact frames;
 //! 3. [`forces`](Dfs::stage_forces): fingertip forces from joint torques through the damped
-//!    `(Jᵀ)⁺` (eq. 14), intensities in each contact frame, the contact model and Coulomb cone
-//!    (eq. 15-18);
+//!    `(Jᵀ)⁺` (eq. 14), intensities in each contact frame, the contact model and friction cone
+//!    (eq. 15-18; the soft finger's cone is elliptic, see [`crate::contact`]);
 //! 4. [`object`](Dfs::stage_object): `ᴮf̃ = W c̃_h` (eq. 22-23), support by the table, gravity
 //!    and Newton-Euler (eq. 24-26), integration, per object; then
 //!    [`overlaps`](Dfs::stage_overlaps): which objects of a scene overlap;
@@ -16,18 +16,42 @@
 //! **Departures from the paper, documented.** The paper integrates θ̈ open-loop and moves the
 //! object only by the operator's intensities. In a closed loop that lets fingers sink into the
 //! object and cannot hold anything against a moving hand, so:
-//! - along the normal, a touching fingertip is kept on the surface by a stiff spring-damper that
-//!   acts on the finger only (integrated implicitly);
+//! - contacts are unilateral: a fingertip within the contact margin of the object is
+//!   *detected* (its contact frame is known, [`TipContact::touching`]), but only a pad pressed
+//!   into the object transmits force, in proportion to how far it presses in up to a small
+//!   depth ([`DfsParams::contact_ramp`], 0.05 mm) and wholly beyond: across any gap the force
+//!   on the object is zero however hard the operator pushes, and it does not jump as the gap
+//!   closes. What the pad does not pass on of the operator's push stays on the finger (the
+//!   rest of eq. 15) and draws it in, stiffly (in the implicit step);
+//! - along the normal, a detected fingertip is kept on the surface by a stiff spring-damper
+//!   that acts on the finger only (integrated implicitly), across the margin's gap too. The
+//!   feedback returns a pushing finger's whole push while the object does not move, so nothing
+//!   else fixes its depth: the spring holds a pushing fingertip at a depth
+//!   ([`DfsParams::contact_preload`], 0.1 mm) where its pad passes on all of the push, clear of
+//!   the ramp, rather than at the surface itself, where the contact would open and close from
+//!   tick to tick;
 //! - tangentially, a *sticking* fingertip is tied to an anchor point on the object by a
 //!   spring-damper acting on finger and object alike (stick friction), plus a torsional
 //!   spring-damper for the soft pad (the pad's twist about the normal since it stuck); added to
-//!   the operator's intensities, the total is kept inside the Coulomb cone, and beyond it the
+//!   the operator's intensities, the total is kept inside the friction cone, and beyond it the
 //!   contact slips and the anchor moves with the fingertip (a pad that only turns on the surface
 //!   keeps its tangential anchor and the twist the torsional cone allows). At rest the springs
 //!   hold a fixed deflection instead of creeping; near the cone's edge slow slip remains. The
-//!   object is stepped explicitly, so the tangential damping is limited to what that step can
-//!   carry ([`STABLE_DAMPING`]); only light objects (a solid sphere under about 0.1 kg) meet
-//!   the limit.
+//!   object is stepped explicitly, so the tangential and torsional damping are limited to what
+//!   that step can carry ([`STABLE_DAMPING`]); only light objects (a solid sphere under about
+//!   0.1 kg) meet the limit;
+//! - the contact springs and dampers act on the fingertip of the finger dynamics, not on the
+//!   measured one: the fingertip of the measured angles moved by
+//!   `J (θ − θ_measured)` (first order; θ the joint angles integrated here, which the glove's
+//!   motors are commanded to), with its own closest point and normal on the object, and the
+//!   damper's velocity is how fast that contact point moves relative to the object. The
+//!   measured angles differ from θ by the sensors' noise: differencing the measured fingertip
+//!   turned a 5e-5 rad noise into some mm/s at 1 kHz, which the 30 N·s/m damper passed to the
+//!   object as a 0.6-1 N force chattering near 460 Hz (and the 3 kN/m springs a few µm of it as
+//!   tens of mN). Detection (which object, the contact frame, the penetration that the ramp
+//!   follows) stays with the measured fingertip, whose noise the preload keeps clear of the
+//!   ramp. When the glove's samples are the motor commands (replays, the virtual coupling) the
+//!   two fingertips are the same.
 //!
 //! **Table.** An optional horizontal plane ([`crate::table`]) carries the objects before they
 //! are grasped and after they are placed; the paper has no table at all. It pushes only where
@@ -117,6 +141,7 @@ impl Default for ObjectOutput {
 /// `c dt / m < 2`; beyond it a light object rattles between the fingertips from tick to tick
 /// (a 50 g solid sphere of 4 cm radius pinched by two pads at 30 N·s/m: 4.2) and is
 /// flung out of the grasp. A damper stronger than that cannot act within one tick anyway.
+/// The soft pads' torsional dampers get the same budget about the normal: `Σ_k c_τ dt nᵀI⁻¹n`.
 pub const STABLE_DAMPING: Real = 1.5;
 
 /// Parameters of the DFS. Units SI.
@@ -132,7 +157,9 @@ pub struct DfsParams {
     /// [`Dfs::new`]; a scene of [`Dfs::with_objects`] gives each object its own
     /// ([`DfsObject::friction`]).
     pub friction: Friction,
-    /// Gap (m) up to which a fingertip counts as touching. Default 0.001.
+    /// Gap (m) up to which a fingertip is detected as touching the object (its contact frame
+    /// is known and reported); it transmits force only once the gap has closed (see
+    /// `contact_preload`). Default 0.001.
     pub contact_margin: Real,
     /// Damping λ (m) of the pseudo-inverse `J (JᵀJ + λ²I)⁻¹` that resolves joint torques into
     /// fingertip forces; keeps it finite for a stretched finger. Default 1e-3.
@@ -142,14 +169,31 @@ pub struct DfsParams {
     /// Stiffness (N/m) keeping a touching fingertip on the surface (finger side only).
     /// Default 3000.
     pub surface_stiffness: Real,
+    /// Depth (m) over which a fingertip's pad takes up the operator's push: it passes on the
+    /// operator's intensities in proportion to how far it presses into the object up to this
+    /// depth, and all of them beyond; across a gap, none. 0: all or nothing at the surface.
+    /// Default 5e-5 (0.05 mm).
+    pub contact_ramp: Real,
+    /// Depth (m) at which the surface spring holds a fingertip that pushes: the pad's resting
+    /// compression (the spring draws it in up to this depth and pushes it out beyond). Deeper
+    /// than `contact_ramp`, so that a resting pad passes on the whole push, its depth clear of
+    /// the ramp by more than the angle sensors' noise (some µm), rather than at the surface,
+    /// where the contact would open and close from tick to tick. A fingertip that does not
+    /// push rests on the surface. Default 1e-4 (0.1 mm).
+    pub contact_preload: Real,
     /// Damping (N·s/m) of the same, and of a sticking fingertip's tangential spring to its
-    /// anchor on the object. Default 30. The tangential part acts on the object too, whose
+    /// anchor on the object. Default 30. It damps how fast the contact point of the finger
+    /// dynamics' fingertip moves relative to the object (see the module documentation), never a
+    /// difference of measured angles. The tangential part acts on the object too, whose
     /// step is explicit: it is limited per contact to what that step can carry (see
     /// [`STABLE_DAMPING`]), which only a light object (a solid sphere under about 0.1 kg)
     /// ever meets.
     pub surface_damping: Real,
     /// Viscous torsional coupling between a soft fingertip pad and the object (N·m·s/rad),
-    /// limited by the torsional friction cone. Default 0.005: with the torsional stiffness,
+    /// limited by the torsional friction cone and, like the tangential damping, per contact to
+    /// what the object's explicit step can carry about the normal ([`STABLE_DAMPING`] with the
+    /// object's inverse inertia about the normal, which a solid sphere of 2 cm radius under
+    /// about 25 g meets). Default 0.005: with the torsional stiffness,
     /// two pads pinching a 0.3 kg, 4 cm sphere are about critically damped about the pinch
     /// axis. (It was 0.05, twelve times overdamped: the pinched sphere then swung to its
     /// hanging rest over seconds, a creep of 20-50 µm/s in the hand.)
@@ -186,6 +230,8 @@ impl Default for DfsParams {
             tip_force_damping: 1e-3,
             joint_damping: 0.02,
             surface_stiffness: 3000.0,
+            contact_ramp: 5e-5,
+            contact_preload: 1e-4,
             surface_damping: 30.0,
             torsion_damping: 0.005,
             torsion_stiffness: 0.04,
@@ -231,6 +277,8 @@ impl DfsParams {
         pos("tip_force_damping", self.tip_force_damping)?;
         nonneg("joint_damping", self.joint_damping)?;
         nonneg("surface_stiffness", self.surface_stiffness)?;
+        nonneg("contact_ramp", self.contact_ramp)?;
+        nonneg("contact_preload", self.contact_preload)?;
         nonneg("surface_damping", self.surface_damping)?;
         nonneg("torsion_damping", self.torsion_damping)?;
         nonneg("torsion_stiffness", self.torsion_stiffness)?;
@@ -262,11 +310,13 @@ pub struct GloveSample<'a> {
 /// Contact state of one fingertip after a tick.
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
 pub struct TipContact {
-    /// The fingertip is within the contact margin of the object surface.
+    /// The fingertip is within the contact margin of the object surface (it may still be
+    /// across a gap: see `in_contact`).
     pub touching: bool,
     /// Which object (index in the scene) it touches; 0 when not touching.
     pub object: usize,
-    /// Touching and pushing: the contact transmits force (it is a column block of `W`).
+    /// Pressed into the object (penetration > 0) and pushing: the contact transmits force (it
+    /// is a column block of `W`).
     pub in_contact: bool,
     /// Contact geometry in B (valid when touching).
     pub frame: Option<ContactFrame>,
@@ -378,21 +428,32 @@ pub struct Dfs {
     table_support: [TableSupport; MAX_OBJECTS],
     q: [Real; MAX_DOF],
     qd: [Real; MAX_DOF],
+    /// The sample's measured joint angles (the kinematics are of these).
+    q_measured: [Real; MAX_DOF],
     initialised: bool,
     kin: Kinematics,
     mass: DofMatrix,
     scratch: DofMatrix,
     anchors_b: [Option<Vector>; MAX_TIPS],
+    /// Per tip: its contact point the tick before (world), of the finger dynamics' fingertip.
     prev_tip_points: [Option<Vector>; MAX_TIPS],
+    /// The hand base's pose in the last sample and the one before (for its turn).
+    base: Option<Isometry>,
+    prev_base: Option<Isometry>,
     /// Per tip: contact spring deflection (world; tangential from the stick anchor plus the
-    /// penetration along the normal), the tip's velocity not explained by its joints relative to
-    /// the object (world), whether it sticks, and the passive friction force on the object.
+    /// penetration along the normal, less the preload of a pushing tip), the tip's velocity not
+    /// explained by its joints relative to the object (world), whether it sticks, and the
+    /// passive friction force on the object.
     spring_err: [Vector; MAX_TIPS],
     spring_vel: [Vector; MAX_TIPS],
     stick: [bool; MAX_TIPS],
     /// Per tip: the tangential damping of its contact spring this tick (N·s/m), the surface
     /// damping limited by [`STABLE_DAMPING`].
     tangential_damping: [Real; MAX_TIPS],
+    /// Per tip: the stiffness (N/m) along the normal with which the operator's untransmitted
+    /// push draws a fingertip whose pad is on the contact ramp back in (its normal intensity
+    /// over the ramp's depth; 0 off the ramp), for the implicit step.
+    ramp_stiffness: [Real; MAX_TIPS],
     /// Per tip: how far the pad has twisted about the normal since it stuck (rad).
     twist: [Real; MAX_TIPS],
     passive_world: [Vector; MAX_TIPS],
@@ -640,7 +701,7 @@ impl Dfs {
         }
         let mass_plan = hand.mass_plan();
         let fk_plan = hand.fk_plan();
-        let grasp = GraspMatrix::new(&[], params.contact_model);
+        let grasp = GraspMatrix::new(&[], params.contact_model, &first.friction);
         Ok(Dfs {
             hand,
             params,
@@ -655,16 +716,20 @@ impl Dfs {
             table_support: [TableSupport::default(); MAX_OBJECTS],
             q: [0.0; MAX_DOF],
             qd: [0.0; MAX_DOF],
+            q_measured: [0.0; MAX_DOF],
             initialised: false,
             kin: Kinematics::default(),
             mass: DofMatrix::identity(),
             scratch: DofMatrix::identity(),
             anchors_b: [None; MAX_TIPS],
             prev_tip_points: [None; MAX_TIPS],
+            base: None,
+            prev_base: None,
             spring_err: [Vector::zeros(); MAX_TIPS],
             spring_vel: [Vector::zeros(); MAX_TIPS],
             stick: [false; MAX_TIPS],
             tangential_damping: [params.surface_damping; MAX_TIPS],
+            ramp_stiffness: [0.0; MAX_TIPS],
             twist: [0.0; MAX_TIPS],
             passive_world: [Vector::zeros(); MAX_TIPS],
             frames: [ContactFrame::from_normal(Vector::zeros(), Vector::z()); MAX_CONTACTS],
@@ -828,6 +893,9 @@ impl Dfs {
             self.q[..n].copy_from_slice(s.q);
             self.initialised = true;
         }
+        self.q_measured[..n].copy_from_slice(s.q);
+        self.prev_base = self.base.or(Some(s.base));
+        self.base = Some(s.base);
         self.hand
             .forward_kinematics_planned(&self.fk_plan, &s.base, s.q, &mut self.kin);
         self.hand.tip_jacobians(&mut self.kin);
@@ -870,7 +938,8 @@ impl Dfs {
         }
     }
 
-    /// Stage 3: fingertip forces from joint torques (eq. 14), intensities, friction (eq. 15-18).
+    /// Stage 3: fingertip forces from joint torques (eq. 14), intensities, friction (eq. 15-18)
+    /// for the fingertips pressed into the object; a fingertip across a gap transmits nothing.
     pub fn stage_forces(&mut self, tau: &[Real]) {
         let lam2 = self.params.tip_force_damping * self.params.tip_force_damping;
         for g in &self.hand.finger_groups {
@@ -912,6 +981,15 @@ impl Dfs {
             *r = o.state.pose.rotation.to_rotation_matrix();
         }
         let dt = self.params.dt;
+        // How fast the hand base turns (world), from the arm tracker's poses: a soft pad's
+        // spin about the normal is its base's and its joints'.
+        let soft = self.params.contact_model == ContactModel::SoftFinger;
+        let w_base = match (soft, self.prev_base, self.base) {
+            (true, Some(prev), Some(now)) => {
+                (now.rotation * prev.rotation.inverse()).scaled_axis() / dt
+            }
+            _ => Vector::zeros(),
+        };
         let mut touching = [0usize; MAX_OBJECTS];
         for t in self.out.tips[..self.hand.fingertips.len()]
             .iter()
@@ -924,6 +1002,7 @@ impl Dfs {
         for k in 0..self.hand.fingertips.len() {
             self.passive_world[k] = Vector::zeros();
             self.stick[k] = false;
+            self.ramp_stiffness[k] = 0.0;
             let Some(frame) = self.out.tips[k].frame else {
                 self.anchors_b[k] = None;
                 self.prev_tip_points[k] = None;
@@ -950,21 +1029,60 @@ impl Dfs {
             // touching it ([`STABLE_DAMPING`]): per tip, `c / m_eff` may not exceed this.
             let damping_budget = STABLE_DAMPING / (touching[o].max(1) as Real * dt);
             let c = frame.intensities_of_force_b(&(rot_inv * self.out.tips[k].tip_force_world));
+            // The contact acts on the fingertip of the finger dynamics: the measured one moved
+            // by J (θ − θ_measured) (first order), θ the joint angles the glove's motors are
+            // commanded to, with its own closest point and normal on the object. The measured
+            // angles differ from θ by the sensors' noise, which the stiff springs would pass on
+            // to the object as force (and a curved surface's normal turns with it).
+            let j = &self.kin.tip_jacobians[k];
+            let dofs = self.tip_dofs[k].as_slice();
+            let mut shift = Vector::zeros();
+            for &d in dofs {
+                shift +=
+                    Vector::new(j[(0, d)], j[(1, d)], j[(2, d)]) * (self.q[d] - self.q_measured[d]);
+            }
+            let centre = self.out.tip_centres[k].coords + shift;
+            let radius = self.hand.fingertips[k].radius;
+            let (distance, _, n_out_b) = self.objects[o]
+                .object
+                .shape
+                .closest(&(rot_inv * (centre - pos)));
+            let z_world = -(rot * n_out_b);
+            let penetration = radius - distance;
+            // The pad passes on the operator's intensities in proportion to how far the
+            // measured fingertip presses into the object, up to the contact ramp's depth (all of
+            // them beyond): nothing across a gap, and continuously so (module documentation).
+            let pressed = self.out.tips[k].penetration;
+            let ramp = self.params.contact_ramp;
+            let share = if pressed <= 0.0 {
+                0.0
+            } else if pressed < ramp {
+                pressed / ramp
+            } else {
+                1.0
+            };
+            let passed = c * share;
+            self.ramp_stiffness[k] = if share > 0.0 && share < 1.0 && c[2] > 0.0 {
+                c[2] / ramp
+            } else {
+                0.0
+            };
             // Contact spring: the fingertip's deflection from where it stuck on the object.
-            let z_world = rot * frame.normal_b();
-            let tip_point =
-                self.out.tip_centres[k].coords + z_world * self.hand.fingertips[k].radius;
+            let tip_point = centre + z_world * radius;
             let tip_b = rot_inv * (tip_point - pos);
             let anchor_b = self.anchors_b[k].unwrap_or(tip_b);
             let mut err = tip_point - (rot * anchor_b + pos);
             err -= z_world * err.dot(&z_world);
-            let v_obj = v_lin + rot * w_b.cross(&tip_b);
+            let w_obj = rot * w_b;
+            let v_obj = v_lin + w_obj.cross(&(tip_point - pos));
+            // The stick damper's velocity: how fast that contact point moves relative to the
+            // object, the rate of the spring's deflection. Of the finger dynamics' fingertip, it
+            // follows the joint velocities and the base, never a difference of measured angles,
+            // whose sensor noise the damper would amplify.
             let v_rel = self.prev_tip_points[k]
                 .map(|prev| (tip_point - prev) / dt - v_obj)
                 .unwrap_or_else(Vector::zeros);
             self.prev_tip_points[k] = Some(tip_point);
-            let j = &self.kin.tip_jacobians[k];
-            let dofs = self.tip_dofs[k].as_slice();
             let mut v_joint = Vector::zeros();
             for &d in dofs {
                 v_joint += Vector::new(j[(0, d)], j[(1, d)], j[(2, d)]) * self.qd[d];
@@ -980,26 +1098,38 @@ impl Dfs {
             }
             self.tangential_damping[k] = damping;
             // Passive friction: a sticking fingertip drags the object along with it (tangential
-            // spring-damper to the anchor), within the Coulomb cone together with the operator's
-            // own tangential force.
+            // spring-damper to the anchor), within the friction cone together with the
+            // operator's own tangential force.
             let passive_w = err * self.params.surface_stiffness
                 + (v_rel - z_world * v_rel.dot(&z_world)) * damping;
             let passive_c = frame.intensities_of_force_b(&(rot_inv * passive_w));
-            // Torsion (soft finger): the fingertip pad drags the object's spin about the normal
-            // along, a torsional spring-damper from where it stuck.
-            let mut w_tip = Vector::zeros();
-            for &d in dofs {
-                w_tip += Vector::new(j[(3, d)], j[(4, d)], j[(5, d)]) * self.qd[d];
-            }
-            let w_obj = rot * w_b;
-            let spin = (w_tip - w_obj).dot(&z_world);
-            let twist = self.twist[k] + spin * dt;
-            let torsion =
-                twist * self.params.torsion_stiffness + spin * self.params.torsion_damping;
-            let with_passive = if c[2] > 0.0 {
-                c + Intensity::new(passive_c[0], passive_c[1], 0.0, torsion)
+            // Torsion (soft finger; a point contact transmits none): the fingertip pad drags the
+            // object's spin about the normal along, a torsional spring-damper from where it
+            // stuck. Its damping is limited to what the object's explicit step can carry, shared
+            // as the tangential damping is: `c_τ nᵀ I⁻¹ n` within the same budget per contact. A
+            // light object's spin would otherwise ring from tick to tick at the torsional
+            // cone's limit (a 10 g, 2 cm sphere: c_τ dt nᵀ I⁻¹ n = 3), which the elliptic cone
+            // takes out of the pad's tangential friction.
+            let (spin, twist, torsion_damping) = if soft {
+                let mut w_tip = w_base;
+                for &d in dofs {
+                    w_tip += Vector::new(j[(3, d)], j[(4, d)], j[(5, d)]) * self.qd[d];
+                }
+                let spin = (w_tip - w_obj).dot(&z_world);
+                let mut c_t = self.params.torsion_damping;
+                let inv_inertia = n_out_b.dot(&(self.objects[o].object.inertia_inv * n_out_b));
+                if c_t * inv_inertia > damping_budget {
+                    c_t = damping_budget / inv_inertia;
+                }
+                (spin, self.twist[k] + spin * dt, c_t)
             } else {
-                c
+                (0.0, 0.0, 0.0)
+            };
+            let torsion = twist * self.params.torsion_stiffness + spin * torsion_damping;
+            let with_passive = if passed[2] > 0.0 {
+                passed + Intensity::new(passive_c[0], passive_c[1], 0.0, torsion)
+            } else {
+                passed
             };
             let split = apply_friction(self.params.contact_model, &friction, &with_passive);
             let t = &mut self.out.tips[k];
@@ -1007,31 +1137,38 @@ impl Dfs {
             t.transmitted = split.transmitted;
             t.slip = split.slip;
             t.in_contact = !split.separating;
-            // The pad sticks unless it slides: a pad that only spins on the surface (torsional
-            // slip of the soft finger) keeps its tangential anchor.
-            let limit = friction.mu.max(0.0) * with_passive[2];
-            let slides = limit < 0.0
-                || with_passive[0] * with_passive[0] + with_passive[1] * with_passive[1]
-                    > limit * limit;
+            // The pad sticks unless it slides: the cone limits its tangential force. A pad that
+            // only spins on the surface (torsional slip of the soft finger, with no tangential
+            // force) keeps its tangential anchor.
+            let tangential = |c: &Intensity| c[0] * c[0] + c[1] * c[1];
+            let slides = split.slip && tangential(&split.transmitted) < tangential(&with_passive);
             let stick = t.in_contact && !slides;
             self.stick[k] = stick;
             // Beyond the torsional cone the pad turns on the surface and keeps only the twist
             // the cone allows.
-            let soft = self.params.contact_model == ContactModel::SoftFinger;
             self.twist[k] = if !soft || !t.in_contact || c[2] <= 0.0 {
                 0.0
             } else if self.params.torsion_stiffness > 0.0 && split.transmitted[3] != torsion {
-                (split.transmitted[3] - spin * self.params.torsion_damping)
-                    / self.params.torsion_stiffness
+                (split.transmitted[3] - spin * torsion_damping) / self.params.torsion_stiffness
             } else {
                 twist
             };
             self.anchors_b[k] = if stick { Some(anchor_b) } else { None };
-            self.spring_err[k] =
-                if stick { err } else { Vector::zeros() } + z_world * t.penetration;
+            // The normal spring (on the finger only) holds a detected fingertip on the surface,
+            // across the contact margin's gap too, and one that pushes at the preload depth.
+            let depth = if c[2] > 0.0 {
+                penetration - self.params.contact_preload
+            } else {
+                penetration
+            };
+            self.spring_err[k] = if stick {
+                err + z_world * depth
+            } else {
+                z_world * depth
+            };
             if t.in_contact {
                 let tangential =
-                    split.transmitted - c.component_mul(&self.params.contact_model.mask());
+                    split.transmitted - passed.component_mul(&self.params.contact_model.mask());
                 self.passive_world[k] =
                     rot * (frame.rot_b * Vector::new(tangential[0], tangential[1], 0.0));
             }
@@ -1086,7 +1223,11 @@ impl Dfs {
             self.grasp_active[i] = n > 0;
             let (f_hand, rank) = if n > 0 {
                 let g = &mut self.grasps[i];
-                g.rebuild(&self.frames[start..start + n], self.params.contact_model);
+                g.rebuild(
+                    &self.frames[start..start + n],
+                    self.params.contact_model,
+                    &self.objects[i].friction,
+                );
                 (g.wrench(&self.transmitted[start..start + n]), g.rank)
             } else {
                 (Wrench::zeros(), 0)
@@ -1235,6 +1376,11 @@ impl Dfs {
                 };
             let c = dt * p.surface_damping + dt * dt * p.surface_stiffness;
             let c_stick = dt * damping + dt * dt * p.surface_stiffness;
+            // A pad on the contact ramp: the operator's push it does not pass on draws the
+            // fingertip in, stiffly (its normal intensity over the ramp's depth), so that
+            // stiffness is in the implicit step too (its force is already in `f`, the feedback
+            // holding only what was passed on).
+            let ramp = dt * dt * self.ramp_stiffness[k];
             // The tip's linear Jacobian column of DOF d (column-major storage).
             let js = j.as_slice();
             let col = |d: usize| Vector::new(js[6 * d], js[6 * d + 1], js[6 * d + 2]);
@@ -1247,13 +1393,16 @@ impl Dfs {
                     continue;
                 }
                 rhs[d1] += dt * col1.dot(&f);
-                let pc1 = match spring {
+                let mut pc1 = match spring {
                     Spring::Normal => z_world * z_world.dot(&col1) * c,
                     Spring::Isotropic => col1 * c_stick,
                     Spring::StiffNormal => {
                         col1 * c_stick + z_world * (z_world.dot(&col1) * (dt * extra_normal))
                     }
                 };
+                if ramp != 0.0 {
+                    pc1 += z_world * (z_world.dot(&col1) * ramp);
+                }
                 for &d2 in &dofs[..=p1] {
                     a[(d1, d2)] += pc1.dot(&col(d2));
                 }
@@ -1540,6 +1689,106 @@ mod tests {
             assert!(limit < c);
             assert!((light.tangential_damping[k] - limit).abs() < 1e-9 * c);
         }
+    }
+
+    #[test]
+    fn a_fingertip_across_a_gap_pushes_nothing_however_hard_it_is_commanded() {
+        // The paper sphere's four fingertips, each commanded to push 30 N (ten times the
+        // fixture's squeeze), with the sphere shrunk about its centre so that every fingertip
+        // is 0.1 mm or 0.8 mm or more off its surface: within the contact margin (the
+        // fixture's 5 mm, or the default 1 mm), detected, and transmitting nothing.
+        let (dfs, q, tau, base) = glove10_holding_paper_sphere().unwrap();
+        let strong: Vec<Real> = tau.iter().map(|t| 10.0 * t).collect();
+        let params = DfsParams {
+            torque_range: 100.0,
+            ..*dfs.params()
+        };
+        let radius = match dfs.object().shape {
+            crate::object::Shape::Sphere { radius } => radius,
+            _ => unreachable!("the fixture holds a sphere"),
+        };
+        // The fixture's fingertips press 0.1 mm or more into the sphere: shrunk by the deepest
+        // of them and the gap, every fingertip is the gap or more off its surface.
+        let deepest = dfs.output().tips[..dfs.output().n_tips]
+            .iter()
+            .filter(|t| t.touching)
+            .map(|t| t.penetration)
+            .fold(0.0, Real::max);
+        let sample = GloveSample {
+            q: &q,
+            tau: &strong,
+            base,
+        };
+        for gap in [1e-4, 8e-4] {
+            for margin in [params.contact_margin, 1e-3] {
+                let object = RigidObject::new(
+                    crate::object::Shape::Sphere {
+                        radius: radius - deepest - gap,
+                    },
+                    dfs.object().mass,
+                )
+                .unwrap();
+                let p = DfsParams {
+                    contact_margin: margin,
+                    ..params
+                };
+                let mut d = Dfs::new(dfs.hand().clone(), object, *dfs.object_state(), p).unwrap();
+                let out = *d.step(&sample).unwrap();
+                let touching: Vec<&TipContact> = out.tips[..out.n_tips]
+                    .iter()
+                    .filter(|t| t.touching)
+                    .collect();
+                // The deepest fingertip is the gap off, the others further (beyond the default
+                // margin, some of them).
+                let expected = if margin > 2e-3 { 4 } else { 1 };
+                assert!(touching.len() >= expected, "gap {gap}, margin {margin}");
+                for t in touching {
+                    assert!(t.penetration <= -gap + 1e-9, "{}", t.penetration);
+                    assert!(t.intensity[2] > 10.0, "commanded {}", t.intensity[2]);
+                    assert!(!t.in_contact && t.transmitted == Intensity::zeros());
+                    assert_eq!(t.feedback, Intensity::zeros());
+                }
+                assert_eq!(out.n_contacts, 0);
+                assert_eq!(out.object_force_b, Wrench::zeros(), "gap {gap}");
+                // The sphere falls freely: the fingertips hold nothing across the gap.
+                let f = force_of(&out.f_ext_b);
+                assert!(
+                    (f - d.object().mass * params.gravity).norm() < 1e-9,
+                    "{f:?}"
+                );
+                // A glove that follows its motors closes the gap under that push within a few
+                // ticks, and then the pads push.
+                let mut pushed = false;
+                for _ in 0..50 {
+                    d.set_object_state(*dfs.object_state());
+                    let q_motor = d.output().motor_q;
+                    let n = q.len();
+                    let o = *d
+                        .step(&GloveSample {
+                            q: &q_motor[..n],
+                            tau: &strong,
+                            base,
+                        })
+                        .unwrap();
+                    for t in o.tips[..o.n_tips].iter().filter(|t| t.touching) {
+                        assert!(t.penetration > 0.0 || t.transmitted == Intensity::zeros());
+                    }
+                    pushed |= o.n_contacts > 0;
+                }
+                assert!(pushed, "gap {gap}, margin {margin}");
+            }
+        }
+        // Closed, the same command pushes the sphere.
+        let mut closed = Dfs::new(
+            dfs.hand().clone(),
+            *dfs.object(),
+            *dfs.object_state(),
+            params,
+        )
+        .unwrap();
+        let out = closed.step(&sample).unwrap();
+        assert_eq!(out.n_contacts, 4);
+        assert!(force_of(&out.object_force_b).norm() > 50.0);
     }
 
     #[test]

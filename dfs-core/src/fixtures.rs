@@ -16,7 +16,8 @@ use crate::object::{ObjectState, RigidObject, Shape};
 /// object's state each tick to measure the same four-contact tick.
 ///
 /// The fingers are curled to a fixed pose and the sphere is placed, by least squares, where it
-/// touches all four fingertips; the hand base is at the world origin, palm up.
+/// touches all four fingertips, its radius (0.1 m within half a millimetre) such that each
+/// presses at least 0.1 mm into it; the hand base is at the world origin, palm up.
 pub fn glove10_holding_paper_sphere() -> Result<(Dfs, Vec<Real>, Vec<Real>, Isometry)> {
     let hand = HandModel::glove10();
     let n = hand.dof();
@@ -70,6 +71,15 @@ pub fn glove10_holding_paper_sphere() -> Result<(Dfs, Vec<Real>, Vec<Real>, Isom
             break;
         }
     }
+    // Four fingertips do not lie on one sphere: the least-squares centre leaves some a fraction
+    // of a millimetre off the surface. The radius is set so that every fingertip presses in by
+    // at least the contact preload (0.1 mm), past the contact ramp: a fingertip across a gap
+    // transmits nothing.
+    let radius = tips
+        .iter()
+        .map(|&k| (kin.tip_centres[k].coords - c).norm() - hand.fingertips[k].radius)
+        .fold(0.0, Real::max)
+        + DfsParams::default().contact_preload;
     let object = RigidObject::new(Shape::Sphere { radius }, 1.0)?;
     let pose = Isometry::translation(c.x, c.y, c.z);
     let params = DfsParams {

@@ -576,7 +576,7 @@ fn analyse_resolved(
 ) -> Result<StaticAnalysis> {
     let friction = *friction;
     let n = frames.len();
-    let g = GraspMatrix::new(frames, model);
+    let g = GraspMatrix::new(frames, model, &friction);
     let gravity_b = gravity_wrench_b(object, &Rotation::identity(), gravity);
     let load = object.spatial_inertia_times(acc) - gravity_b;
     let tol = FORCE_TOLERANCE * (1.0 + load.norm());
@@ -989,7 +989,11 @@ mod tests {
     fn a_distribution_that_does_not_balance_the_load_is_no_solution() {
         let spec = GraspSpec::paper_sphere();
         let (_, frames) = spec.resolve().unwrap();
-        let g = GraspMatrix::new(&frames, ContactModel::PointWithFriction);
+        let g = GraspMatrix::new(
+            &frames,
+            ContactModel::PointWithFriction,
+            &spec.friction().unwrap(),
+        );
         let load = Wrench::new(0.0, 0.0, 9.81, 0.0, 0.0, 0.0);
         let zeros = vec![Intensity::zeros(); 4];
         assert!(unbalanced(&g, &zeros, &load)

@@ -3,13 +3,23 @@
 //!
 //! `W` has a fixed capacity of four columns per contact (layout of
 //! [`Intensity`](crate::contact::Intensity)); columns a contact model does not transmit are
-//! zero, so they carry no intensity. `W⁺ f = Wᵀ (W Wᵀ)⁺ f` with a tolerance on the 6x6
-//! `W Wᵀ`: finite for one contact or collinear contacts, allocation-free.
+//! zero, so they carry no intensity. `W⁺ f = D² Wᵀ (W D² Wᵀ)⁺ f` with a tolerance on the 6x6
+//! `W D² Wᵀ`: finite for one contact or collinear contacts, allocation-free.
+//!
+//! **Torsion weight.** `D = diag(1, 1, 1, ℓ)` per contact: the distribution is the one of least
+//! `Σ ‖c_t‖² + c_z² + (c_τ / ℓ)²`, a torsion measured against forces through a length, so it
+//! does not depend on the unit of length (with `D = 1` it weighed N·m against N, and a grasp
+//! described in millimetres got another distribution than the same grasp in metres). `ℓ` is
+//! the soft-finger cone's characteristic length `μ_t / μ`
+//! ([`Friction::torsion_length`](crate::contact::Friction::torsion_length)), the metric in
+//! which that cone is round, as in the grasp force optimiser ([`optimise`]); with `μ_t = 0` the
+//! torsion gets no share (the cone transmits none), with `μ = 0 < μ_t` the largest distance of
+//! a contact from B's origin.
 
 pub mod optimise;
 pub mod quality;
 
-use crate::contact::{ContactFrame, ContactModel, Intensity};
+use crate::contact::{ContactFrame, ContactModel, Friction, Intensity};
 use crate::hand::MAX_TIPS;
 use crate::math::{wrench, Mat6, Real, SymPinv6, Vector, Wrench};
 use nalgebra::SMatrix;
@@ -28,29 +38,35 @@ pub struct GraspMatrix {
     pub w: SMatrix<Real, 6, MAX_COLUMNS>,
     /// Number of contacts.
     pub n: usize,
-    /// `(W Wᵀ)⁺`.
+    /// `(W D² Wᵀ)⁺`.
     wwt_pinv: SymPinv6,
+    /// `ℓ²`, the weight of the torsion columns in `W D² Wᵀ` (module documentation).
+    torsion_weight: Real,
     /// Rank of `W`.
     pub rank: usize,
 }
 
 impl GraspMatrix {
-    /// Builds `ᴮW` for the contacts (at most [`MAX_CONTACTS`]; extra contacts are ignored).
-    pub fn new(contacts: &[ContactFrame], model: ContactModel) -> Self {
+    /// Builds `ᴮW` for the contacts (at most [`MAX_CONTACTS`]; extra contacts are ignored),
+    /// with the torsion weight of `friction` (module documentation).
+    pub fn new(contacts: &[ContactFrame], model: ContactModel, friction: &Friction) -> Self {
         let mut g = GraspMatrix {
             w: SMatrix::zeros(),
             n: 0,
             wwt_pinv: SymPinv6::Explicit(Mat6::zeros()),
+            torsion_weight: 1.0,
             rank: 0,
         };
-        g.rebuild(contacts, model);
+        g.rebuild(contacts, model, friction);
         g
     }
 
     /// [`new`](Self::new) in place: the DFS rebuilds its grasp matrix every tick, and moving
     /// a new one (1.5 kB) into place cost more than some of its arithmetic.
-    pub fn rebuild(&mut self, contacts: &[ContactFrame], model: ContactModel) {
+    pub fn rebuild(&mut self, contacts: &[ContactFrame], model: ContactModel, friction: &Friction) {
         let n = contacts.len().min(MAX_CONTACTS);
+        let ell = torsion_scale(&contacts[..n], friction);
+        let torsion_weight = ell * ell;
         let w = &mut self.w;
         // The columns of the contacts, and any a larger grasp left before: the rest are zero.
         let used = n.max(self.n).min(MAX_CONTACTS);
@@ -79,9 +95,10 @@ impl GraspMatrix {
                 if k < 3 && all_forces {
                     continue;
                 }
+                let weight = if k == 3 { torsion_weight } else { 1.0 };
                 for a in 0..6 {
                     for b in a..6 {
-                        wwt[(a, b)] += col[a] * col[b];
+                        wwt[(a, b)] += weight * col[a] * col[b];
                     }
                 }
             }
@@ -114,6 +131,7 @@ impl GraspMatrix {
         let (wwt_pinv, rank) = SymPinv6::new(&wwt, PINV_TOLERANCE);
         self.n = n;
         self.wwt_pinv = wwt_pinv;
+        self.torsion_weight = torsion_weight;
         self.rank = rank;
     }
 
@@ -126,17 +144,38 @@ impl GraspMatrix {
         f
     }
 
-    /// The minimum-norm intensities `W⁺ f` (eq. 27), written into `out[..n]`.
+    /// The minimum-norm intensities `W⁺ f` (eq. 27), written into `out[..n]`: the least
+    /// `Σ ‖c_t‖² + c_z² + (c_τ / ℓ)²` among those that reproduce `f`'s part in the range of
+    /// `W` (module documentation).
     pub fn distribute(&self, f: &Wrench, out: &mut [Intensity]) {
         let y = self.wwt_pinv.apply(f);
         for (i, o) in out.iter_mut().take(self.n).enumerate() {
             *o = self.w.fixed_view::<6, 4>(0, 4 * i).transpose() * y;
+            o[3] *= self.torsion_weight;
         }
     }
 
     /// True when `W` spans all six wrench directions (necessary for force closure).
     pub fn full_rank(&self) -> bool {
         self.rank == 6
+    }
+}
+
+/// The length `ℓ` (m) that weighs the torsion against forces for `contacts` with `friction`
+/// (module documentation): the soft-finger cone's `μ_t / μ`; 0 when `μ_t = 0`; with `μ = 0 <
+/// μ_t`, the largest distance of a contact from B's origin (1 m when they all sit at it).
+pub fn torsion_scale(contacts: &[ContactFrame], friction: &Friction) -> Real {
+    if let Some(e) = friction.torsion_length() {
+        return e;
+    }
+    if friction.mu_torsion.is_nan() || friction.mu_torsion <= 0.0 {
+        return 0.0;
+    }
+    let r = contacts.iter().fold(0.0_f64, |m, c| m.max(c.p_b.norm()));
+    if r > 0.0 && r.is_finite() {
+        r
+    } else {
+        1.0
     }
 }
 
@@ -151,10 +190,18 @@ mod tests {
         crate::fixtures::paper_sphere_contacts()
     }
 
+    /// Friction of the tests' soft fingers: μ = 0.8, μ_t = 5 mm.
+    fn soft() -> Friction {
+        Friction {
+            mu: 0.8,
+            mu_torsion: 0.005,
+        }
+    }
+
     #[test]
     fn the_paper_sphere_example_reproduces_the_notes_table() {
         let contacts = paper_contacts();
-        let g = GraspMatrix::new(&contacts, ContactModel::PointWithFriction);
+        let g = GraspMatrix::new(&contacts, ContactModel::PointWithFriction, &soft());
         let mut c = [Intensity::zeros(); 4];
         g.distribute(&Wrench::new(0.0, 0.0, 9.81, 0.0, 0.0, 0.0), &mut c);
         let expected = [
@@ -176,8 +223,13 @@ mod tests {
     fn the_closed_form_of_w_wt_equals_the_sum_over_the_columns() {
         let contacts = paper_contacts();
         for model in [ContactModel::PointWithFriction, ContactModel::SoftFinger] {
-            let g = GraspMatrix::new(&contacts, model);
-            let wwt = g.w * g.w.transpose();
+            let g = GraspMatrix::new(&contacts, model, &soft());
+            // W D² Wᵀ, the torsion columns weighted by ℓ² = (μ_t / μ)².
+            let mut wd = g.w;
+            for i in 0..contacts.len() {
+                wd.column_mut(4 * i + 3).scale_mut(0.005 / 0.8);
+            }
+            let wwt = wd * wd.transpose();
             // (W Wᵀ)⁺ W Wᵀ = 1 for the paper's full-rank grasp: the factor is of W Wᵀ itself.
             let back = Mat6::from_columns(
                 &(0..6)
@@ -194,7 +246,7 @@ mod tests {
             Vector::new(0.0, 0.0, -0.1),
             Vector::z(),
         )];
-        let g = GraspMatrix::new(&one, ContactModel::PointWithFriction);
+        let g = GraspMatrix::new(&one, ContactModel::PointWithFriction, &soft());
         assert_eq!(g.rank, 3);
         let mut c = [Intensity::zeros(); 1];
         g.distribute(&Wrench::new(0.0, 0.0, 9.81, 0.3, 0.0, 0.0), &mut c);
@@ -204,9 +256,51 @@ mod tests {
             ContactFrame::from_normal(Vector::new(-0.1, 0.0, 0.0), Vector::x()),
             ContactFrame::from_normal(Vector::new(0.1, 0.0, 0.0), -Vector::x()),
         ];
-        let g = GraspMatrix::new(&line, ContactModel::PointWithFriction);
+        let g = GraspMatrix::new(&line, ContactModel::PointWithFriction, &soft());
         assert_eq!(g.rank, 5);
         assert!(!g.full_rank());
+    }
+
+    #[test]
+    fn the_minimum_norm_distribution_does_not_depend_on_the_unit_of_length() {
+        // The paper's sphere with soft fingers, and the same grasp described in millimetres:
+        // positions and μ_t a thousand times larger, moments too. The forces must come out the
+        // same and the torsions a thousand times larger.
+        let load = Wrench::new(0.4, -0.3, 9.81, 0.05, -0.02, 0.03);
+        let mut by_unit = Vec::new();
+        for s in [1.0, 1000.0] {
+            let contacts: Vec<_> = paper_contacts()
+                .iter()
+                .map(|c| ContactFrame {
+                    p_b: c.p_b * s,
+                    rot_b: c.rot_b,
+                })
+                .collect();
+            let friction = Friction {
+                mu: 0.8,
+                mu_torsion: 0.005 * s,
+            };
+            let g = GraspMatrix::new(&contacts, ContactModel::SoftFinger, &friction);
+            let mut l = load;
+            for k in 3..6 {
+                l[k] *= s;
+            }
+            let mut c = [Intensity::zeros(); 4];
+            g.distribute(&l, &mut c);
+            assert!((g.wrench(&c) - l).norm() < 1e-9 * (1.0 + l.norm()));
+            by_unit.push((s, c));
+        }
+        let (_, m) = by_unit[0];
+        let (s, mm) = by_unit[1];
+        for (a, b) in m.iter().zip(&mm) {
+            let back = Intensity::new(b[0], b[1], b[2], b[3] / s);
+            assert!(
+                (a - back).norm() < 1e-9 * (1.0 + a.norm()),
+                "{a:?} vs {back:?}"
+            );
+        }
+        // The torsion is used, but weighed as what it costs the pad's cone.
+        assert!(m.iter().any(|c| c[3].abs() > 1e-6), "{m:?}");
     }
 
     proptest! {
@@ -217,7 +311,7 @@ mod tests {
         ) {
             let contacts: Vec<_> = pts.iter().filter(|p| Vector::from(**p).norm() > 0.1)
                 .map(|p| { let p = Vector::from(*p).normalize() * 0.1; ContactFrame::from_normal(p, -p) }).collect();
-            let g = GraspMatrix::new(&contacts, ContactModel::SoftFinger);
+            let g = GraspMatrix::new(&contacts, ContactModel::SoftFinger, &soft());
             let f = Wrench::from_row_slice(&f);
             let mut c = [Intensity::zeros(); MAX_CONTACTS];
             g.distribute(&f, &mut c);

@@ -7,15 +7,23 @@
 //! ```text
 //! minimise    Σ_i (c_x² + c_y² + c_z² + (c_τ / ℓ)²)
 //! subject to  W c = load                          (equality, W of the model's components)
-//!             sqrt(c_x² + c_y²) ≤ μ (1 − margin) c_z      (point with friction, soft finger)
-//!             |c_τ| ≤ μ_t (1 − margin) c_z                  (soft finger)
-//!             c_z ≥ min_normal                             (every model)
+//!             sqrt(c_x² + c_y²) ≤ μ' c_z                              (point with friction)
+//!             sqrt(c_x² + c_y² + (c_τ / e)²) ≤ μ' c_z                 (soft finger)
+//!             c_z ≥ min_normal                                        (every model)
 //! ```
 //!
-//! Only the components the contact model transmits are variables. The torsion is weighted by
-//! `1/ℓ²` with `ℓ` the largest distance of a contact from B's origin (1 m when all contacts sit
-//! at the origin), so that a torsional moment of `ℓ · 1 N` costs as much as a force of 1 N:
-//! the objective is then independent of the unit of length.
+//! with `μ' = μ (1 − margin)`. The soft finger's cone is the elliptic one of
+//! [`apply_friction`](crate::contact::apply_friction), `‖c_t‖²/μ'² + c_τ²/μ_t'² ≤ c_z²` with
+//! `μ_t' = μ_t (1 − margin)`: a second-order cone once the torsion is measured by the
+//! characteristic length `e = μ_t / μ` ([`Friction::torsion_length`]), a 4-dimensional one per
+//! contact. Only the components the contact model transmits are variables. The torsion is
+//! weighted by `1/ℓ²` with `ℓ = e` as well, so that the objective is the plain squared norm in
+//! the variables where every cone is round: a torsion costs what it costs the pad's friction,
+//! and the objective, the cones and so the result are independent of the unit of length (a
+//! grasp in millimetres has the same forces and a thousand times the torsions). When `μ = 0` or
+//! `μ_t = 0` the elliptic cone degenerates to the two limits apart, `‖c_t‖ ≤ μ' c_z` and `|c_τ| ≤
+//! μ_t' c_z` (one of them zero), and `ℓ` is the largest distance of a contact from B's origin
+//! (1 m when all contacts sit at the origin), a length as well.
 //!
 //! The equality is imposed on the range of `W` only (rows `U_rᵀ W c = U_rᵀ load` from a thin
 //! SVD), after checking that the load lies in that range: a load the contacts cannot produce at
@@ -49,8 +57,9 @@ pub const CHECK_TOLERANCE: Real = 1e-6;
 /// Parameters of the optimisation.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct OptimiseParams {
-    /// Friction margin: contacts must lie inside the cone of `μ (1 − margin)` (and the torsion
-    /// cone of `μ_t (1 − margin)`). Range [0, 1). Default 0.1.
+    /// Friction margin: contacts must lie inside the cone of `μ (1 − margin)` (the soft
+    /// finger's elliptic cone of `μ (1 − margin)` and `μ_t (1 − margin)`). Range [0, 1).
+    /// Default 0.1.
     pub margin: Real,
     /// Least normal force per contact (N), ≥ 0. Default 0.
     pub min_normal: Real,
@@ -253,6 +262,9 @@ pub struct ForceSolver {
     a_s: DMatrix<Real>,
     /// Torsion scale ℓ (see the module documentation).
     ell: Real,
+    /// The soft finger's cone is elliptic (`μ > 0` and `μ_t > 0`): with the torsion scaled
+    /// by ℓ = e, the round cone `‖(c_x, c_y, c_τ / ℓ)‖ ≤ μ' c_z`.
+    elliptic: bool,
     /// Torque rows on the model's components and their limits, for checking a fast solution.
     torque: Option<(DMatrix<Real>, Vec<Real>)>,
     /// Dual variables of the equality rows from the last fast solve (its warm start).
@@ -331,9 +343,17 @@ impl ForceSolver {
         let a_eq = ur.transpose() * &w;
         let m_eq = range.len();
 
-        // Torsion weight.
-        let ell = contacts.iter().fold(0.0_f64, |m, c| m.max(c.p_b.norm()));
-        let ell = if ell > 0.0 { ell } else { 1.0 };
+        // Torsion weight and the soft finger's cone (module documentation).
+        let elliptic_length = friction.torsion_length().filter(|_| has_torsion);
+        let elliptic = elliptic_length.is_some();
+        let ell = elliptic_length.unwrap_or_else(|| {
+            let r = contacts.iter().fold(0.0_f64, |m, c| m.max(c.p_b.norm()));
+            if r > 0.0 {
+                r
+            } else {
+                1.0
+            }
+        });
 
         // Objective ½ xᵀ P x with P = 2 diag(weights): upper triangle of a diagonal matrix.
         let mut pdiag = Vec::with_capacity(n);
@@ -347,8 +367,12 @@ impl ForceSolver {
 
         // Constraints A x + s = b, s in the cones, block by block.
         let n_torque = torque.map_or(0, |t| 2 * t.limits.len());
-        let n_nonneg = n_contacts * if has_torsion { 3 } else { 1 } + n_torque;
-        let n_soc = if has_tangent { 3 * n_contacts } else { 0 };
+        // The degenerate soft finger bounds its torsion by two inequalities; the elliptic one
+        // in its 4-dimensional second-order cone.
+        let box_torsion = has_torsion && !elliptic;
+        let soc = if elliptic { 4 } else { 3 };
+        let n_nonneg = n_contacts * if box_torsion { 3 } else { 1 } + n_torque;
+        let n_soc = if has_tangent { soc * n_contacts } else { 0 };
         let m = m_eq + n_nonneg + n_soc;
         let mut a = DMatrix::<Real>::zeros(m, n);
         let b = vec![0.0; m];
@@ -362,7 +386,7 @@ impl ForceSolver {
             a[(row, z)] = -1.0;
             b[row] = -params.min_normal;
             row += 1;
-            if has_torsion {
+            if box_torsion {
                 let t = k * i + 3;
                 // μ_t' c_z − c_τ ≥ 0 and μ_t' c_z + c_τ ≥ 0.
                 a[(row, z)] = -mu_t;
@@ -393,12 +417,16 @@ impl ForceSolver {
         ];
         if has_tangent {
             for i in 0..n_contacts {
-                // s = (μ' c_z, c_x, c_y) in the second-order cone.
+                // s = (μ' c_z, c_x, c_y) in the second-order cone; the elliptic soft finger's
+                // s = (μ' c_z, c_x, c_y, c_τ / e) (module documentation).
                 a[(row, k * i + 2)] = -mu;
                 a[(row + 1, k * i)] = -1.0;
                 a[(row + 2, k * i + 1)] = -1.0;
-                row += 3;
-                cones.push(SupportedConeT::SecondOrderConeT(3));
+                if elliptic {
+                    a[(row + 3, k * i + 3)] = -1.0 / ell;
+                }
+                row += soc;
+                cones.push(SupportedConeT::SecondOrderConeT(soc));
             }
         }
         if m_eq == 0 {
@@ -439,6 +467,7 @@ impl ForceSolver {
             solver,
             a_s,
             ell,
+            elliptic,
             torque,
             lambda: [0.0; 6],
             y: vec![0.0; n],
@@ -550,11 +579,7 @@ impl ForceSolver {
         }
         let scale = CHECK_TOLERANCE * (1.0 + x.iter().fold(0.0_f64, |m, v| m.max(v.abs())));
         for (i, c) in out.iter().enumerate() {
-            let tan = (c[0] * c[0] + c[1] * c[1]).sqrt();
-            let ok = c[2] >= self.min_normal - scale
-                && tan <= self.mu * c[2] + scale
-                && c[3].abs() <= self.mu_t * c[2] + scale;
-            if !ok {
+            if !self.in_cone(c, scale) {
                 return Err(Infeasible::new(
                     InfeasibleKind::Solver,
                     format!("solver returned a distribution outside the cone of contact {i} (status {status:?})"),
@@ -562,6 +587,20 @@ impl ForceSolver {
             }
         }
         Ok(residual)
+    }
+
+    /// Whether intensities `c` lie within `scale` of their cone (with the margin) and above
+    /// the least normal force.
+    fn in_cone(&self, c: &Intensity, scale: Real) -> bool {
+        let (tx, ty) = (c[0], c[1]);
+        let n = c[2] >= self.min_normal - scale;
+        if self.elliptic {
+            let t = c[3] / self.ell;
+            n && (tx * tx + ty * ty + t * t).sqrt() <= self.mu * c[2] + scale
+        } else {
+            n && (tx * tx + ty * ty).sqrt() <= self.mu * c[2] + scale
+                && c[3].abs() <= self.mu_t * c[2] + scale
+        }
     }
 
     /// How many solves the dual Newton method answered, and how many Clarabel did.
@@ -588,7 +627,9 @@ impl ForceSolver {
     /// for Clarabel to answer.
     ///
     /// With the torsion scaled by ℓ the problem is `min ½‖x‖²` over `x` in the product `K` of
-    /// the per-contact sets `{c_z ≥ c_min, ‖c_t‖ ≤ μ' c_z, |c_τ| ≤ μ_t' c_z}` with `A x = b`
+    /// the per-contact sets `{c_z ≥ c_min, ‖(c_t, c_τ / ℓ)‖ ≤ μ' c_z}` (the elliptic soft
+    /// finger's cone, round in these variables; `{c_z ≥ c_min, ‖c_t‖ ≤ μ' c_z, |c_τ| ≤ μ_t'
+    /// c_z}` for a degenerate one, `c_τ` absent for a point contact) with `A x = b`
     /// (`b = U_rᵀ load`, `A` of full row rank ≤ 6). Its dual, `max_λ λᵀb − (yᵀΠ(y) −
     /// ½‖Π(y)‖²)` with `y = Aᵀλ` and `Π` the projection onto `K` (closed form per contact), is
     /// concave and smooth in at most six variables, with gradient `b − A Π(Aᵀλ)`; at its
@@ -636,6 +677,7 @@ impl ForceSolver {
                     self.mu,
                     self.mu_t / self.ell,
                     self.min_normal,
+                    self.elliptic,
                 );
                 for i in 0..m {
                     h[(i, j)] = (0..n)
@@ -736,6 +778,7 @@ impl ForceSolver {
             self.mu,
             self.mu_t / self.ell,
             self.min_normal,
+            self.elliptic,
         );
         let (mut yx, mut xx) = (0.0, 0.0);
         for v in 0..n {
@@ -747,17 +790,35 @@ impl ForceSolver {
 }
 
 /// Projects every contact's block of `y` onto its set `{c_z ≥ c_min, ‖c_t‖ ≤ μ c_z, |c_τ| ≤
-/// μ_τ c_z}` (the components present in `comps`), into `x`. Per contact the nearest point
-/// keeps the tangential direction and the torsion's sign: for a normal force `z` the tangential
-/// part is clipped to `μ z` and the torsion to `μ_τ z`, which leaves a convex piecewise
-/// quadratic in `z` whose minimiser on `[c_min, ∞)` is found interval by interval.
-fn project_all(y: &[Real], x: &mut [Real], comps: &[usize], mu: Real, mu_tau: Real, c_min: Real) {
+/// μ_τ c_z}` (the components present in `comps`), into `x`; with `elliptic`, onto `{c_z ≥
+/// c_min, ‖(c_t, c_τ)‖ ≤ μ c_z}` (the torsion, already scaled, is a third tangential
+/// component and `μ_τ` is not used). Per contact the nearest point keeps the tangential
+/// direction and the torsion's sign: for a normal force `z` the tangential part is clipped to
+/// `μ z` and the torsion to `μ_τ z`, which leaves a convex piecewise quadratic in `z` whose
+/// minimiser on `[c_min, ∞)` is found interval by interval.
+fn project_all(
+    y: &[Real],
+    x: &mut [Real],
+    comps: &[usize],
+    mu: Real,
+    mu_tau: Real,
+    c_min: Real,
+    elliptic: bool,
+) {
     let k = comps.len();
     let pos = |c: usize| comps.iter().position(|&x| x == c);
     let (iz, it, itau) = (pos(2).unwrap_or(0), pos(0), pos(3));
+    // The elliptic cone's torsion is clipped with the tangential force, not on its own.
+    let (with_tangent, itau, mu_tau) = match (elliptic, itau) {
+        (true, Some(i)) => (Some(i), None, 0.0),
+        (_, itau) => (None, itau, mu_tau),
+    };
     for (yc, xc) in y.chunks_exact(k).zip(x.chunks_exact_mut(k)) {
         let z0 = yc[iz];
-        let a = it.map_or(0.0, |i| (yc[i] * yc[i] + yc[i + 1] * yc[i + 1]).sqrt());
+        let extra = with_tangent.map_or(0.0, |i| yc[i] * yc[i]);
+        let a = it.map_or(0.0, |i| {
+            (yc[i] * yc[i] + yc[i + 1] * yc[i + 1] + extra).sqrt()
+        });
         let tau = itau.map_or(0.0, |i| yc[i].abs());
         // φ'(z)/2 = z − z0 − μ max(0, a − μz) − μ_τ max(0, τ − μ_τ z), increasing in z.
         let bp1 = if mu > 0.0 { a / mu } else { Real::INFINITY };
@@ -801,6 +862,9 @@ fn project_all(y: &[Real], x: &mut [Real], comps: &[usize], mu: Real, mu_tau: Re
                 let f = if a > 0.0 { limit / a } else { 0.0 };
                 xc[i] *= f;
                 xc[i + 1] *= f;
+                if let Some(j) = with_tangent {
+                    xc[j] *= f;
+                }
             }
         }
         if let Some(i) = itau {
@@ -830,10 +894,17 @@ mod tests {
         }
     }
 
+    /// Inside the cone of `μ` (and, with `μ_t`, the elliptic soft-finger cone: the old box
+    /// `‖c_t‖ ≤ μ c_z`, `|c_τ| ≤ μ_t c_z` let a pad carry both at once, √2 too much).
     fn inside(c: &Intensity, mu: Real, mu_t: Real, min_normal: Real) -> bool {
         let (n, t) = normal_and_tangential(c);
         let tol = 1e-6 * (1.0 + c.norm());
-        n >= min_normal - tol && t <= mu * n + tol && c[3].abs() <= mu_t * n + tol
+        let cone = if mu > 0.0 && mu_t > 0.0 {
+            ((t / mu).powi(2) + (c[3] / mu_t).powi(2)).sqrt() <= n + tol / mu
+        } else {
+            t <= mu * n + tol && c[3].abs() <= mu_t * n + tol
+        };
+        n >= min_normal - tol && cone
     }
 
     /// Loads along a lift: gravity plus accelerations up to 6 m/s² and moments up to 0.05 N·m,
@@ -954,6 +1025,107 @@ mod tests {
     }
 
     #[test]
+    fn the_optimised_distribution_does_not_depend_on_the_unit_of_length() {
+        // The paper's sphere held by soft fingers against gravity and a twist, in metres and in
+        // millimetres (positions, μ_t and moments a thousand times larger): the same forces and
+        // a thousand times the torsions, from Clarabel and from the dual Newton method alike.
+        let load = Wrench::new(0.3, -0.2, STANDARD_GRAVITY, 0.05, -0.03, 0.04);
+        let params = OptimiseParams {
+            margin: 0.2,
+            min_normal: 0.5,
+        };
+        let mut answers = Vec::new();
+        for s in [1.0, 1000.0] {
+            let contacts: Vec<_> = paper_contacts()
+                .iter()
+                .map(|c| ContactFrame {
+                    p_b: c.p_b * s,
+                    rot_b: c.rot_b,
+                })
+                .collect();
+            let friction = Friction {
+                mu: 0.6,
+                mu_torsion: 0.005 * s,
+            };
+            let mut l = load;
+            for k in 3..6 {
+                l[k] *= s;
+            }
+            let model = ContactModel::SoftFinger;
+            let mut solver = ForceSolver::new(&contacts, model, &friction, &params, None).unwrap();
+            let mut fast = vec![Intensity::zeros(); 4];
+            let mut reference = vec![Intensity::zeros(); 4];
+            solver.solve_into(&l, &mut fast).unwrap();
+            assert_eq!(
+                solver.solve_counts(),
+                (1, 0),
+                "the dual Newton method answers"
+            );
+            solver.solve_clarabel(&l, &mut reference).unwrap();
+            for c in fast.iter().chain(&reference) {
+                assert!(inside(c, 0.6 * 0.8, 0.005 * s * 0.8, 0.5), "{c:?}");
+            }
+            answers.push((s, fast, reference));
+        }
+        let (_, fast_m, clarabel_m) = &answers[0];
+        let (s, fast_mm, clarabel_mm) = &answers[1];
+        assert!(fast_m.iter().any(|c| c[3].abs() > 1e-4), "{fast_m:?}");
+        for (m, mm, tol) in [(fast_m, fast_mm, 1e-7), (clarabel_m, clarabel_mm, 1e-5)] {
+            for (a, b) in m.iter().zip(mm.iter()) {
+                let back = Intensity::new(b[0], b[1], b[2], b[3] / s);
+                assert!(
+                    (a - back).amax() < tol * (1.0 + a.amax()),
+                    "{a:?} vs {back:?}"
+                );
+            }
+        }
+        for (a, b) in fast_m.iter().zip(clarabel_m.iter()) {
+            assert!((a - b).amax() < 1e-5 * (1.0 + b.amax()), "{a:?} vs {b:?}");
+        }
+    }
+
+    #[test]
+    fn a_soft_pad_is_not_given_its_whole_friction_and_torsion_at_once() {
+        // Two pads pinching a sphere at its equator against its weight and a twist about the
+        // pinch axis: the torsion each pad carries leaves it less tangential friction (the
+        // elliptic cone), so they squeeze harder than the weight alone needs, and each sits
+        // on its cone.
+        let r = 0.04;
+        let contacts = [
+            ContactFrame::from_normal(Vector::new(-r, 0.0, 0.0), Vector::x()),
+            ContactFrame::from_normal(Vector::new(r, 0.0, 0.0), -Vector::x()),
+        ];
+        let friction = Friction {
+            mu: 0.8,
+            mu_torsion: 0.005,
+        };
+        let params = OptimiseParams {
+            margin: 0.0,
+            min_normal: 0.0,
+        };
+        let (weight, twist) = (3.0, 0.01);
+        let load = Wrench::new(0.0, 0.0, weight, twist, 0.0, 0.0);
+        let d = optimise(
+            &contacts,
+            ContactModel::SoftFinger,
+            &friction,
+            &load,
+            &params,
+        )
+        .unwrap();
+        assert_balances(&contacts, ContactModel::SoftFinger, &d, &load);
+        // By symmetry each pad carries half the weight and half the twist: the least normal
+        // force with (w/2 / μ)² + (m/2 / μ_t)² = c_z².
+        let least = ((weight / 2.0 / 0.8).powi(2) + (twist / 2.0 / 0.005).powi(2)).sqrt();
+        for c in &d.intensities {
+            assert!((c[2] - least).abs() < 1e-4 * least, "{c:?}, least {least}");
+            assert!(inside(c, 0.8, 0.005, 0.0), "{c:?}");
+        }
+        // The box would have let each pad push only max(w/2/μ, m/2/μ_t) = 1.875 N.
+        assert!(least > 2.0);
+    }
+
+    #[test]
     fn a_distribution_that_breaks_a_torque_limit_is_left_to_clarabel() {
         let contacts = paper_contacts();
         let params = OptimiseParams {
@@ -1022,7 +1194,7 @@ mod tests {
         }
         // With μ' = 1.35 ≥ 1.3 the minimum-norm W⁺ distribution of the paper already fits, and it
         // is the least-norm solution of the equality, so the optimiser must return it.
-        let g = GraspMatrix::new(&contacts, ContactModel::PointWithFriction);
+        let g = GraspMatrix::new(&contacts, ContactModel::PointWithFriction, &fr(1.5));
         let mut c0 = [Intensity::zeros(); 4];
         g.distribute(&gravity_load(), &mut c0);
         for (a, b) in d.intensities.iter().zip(&c0) {
@@ -1039,7 +1211,7 @@ mod tests {
         // here, and a distribution inside any cone (even μ = 0) must exist, although the W⁺
         // distribution is outside the cone (ratio ≈ 1.3 > 0.3).
         let contacts = paper_contacts();
-        let g = GraspMatrix::new(&contacts, ContactModel::PointWithFriction);
+        let g = GraspMatrix::new(&contacts, ContactModel::PointWithFriction, &fr(1.5));
         let mut c0 = [Intensity::zeros(); 4];
         g.distribute(&gravity_load(), &mut c0);
         let (n, t) = normal_and_tangential(&c0[0]);

@@ -8,9 +8,15 @@
 //! radius) so that ε does not depend on the unit of length. By contact model:
 //! - frictionless: one primitive, the unit normal force (`edges` is ignored);
 //! - point with friction: the `edges` cone edges;
-//! - soft finger: each cone edge twice, with the torsional moment `± μ_t` about the normal added
-//!   (the vertices of the product of the tangential polygon and the torsion interval, which is
-//!   exactly the linearisation of [`apply_friction`](crate::contact::apply_friction)'s cone).
+//! - soft finger: points of the elliptic soft-finger cone of
+//!   [`apply_friction`](crate::contact::apply_friction), `‖c_t‖²/μ² + c_τ²/μ_t² ≤ c_z²`, at unit
+//!   normal force, sampled as GraspIt!'s soft contact samples its friction ellipsoid
+//!   (`SoftContact::setUpFrictionEdges`): latitudes 0, ±45° and ±90° with `edges`,
+//!   [`soft_latitude_edges`]`(edges)` (5 for 8) and 1 directions, the force
+//!   `n + μ cos λ (cos φ t_x + sin φ t_y)` with the torsion `μ_t sin λ` about the normal.
+//!   The latitudes are taken in the normalised coordinates `(c_t/μ, c_τ/μ_t)`, where the cone is
+//!   round, so that the primitives do not depend on the unit of length. With `μ_t = 0` the
+//!   primitives are the point contact's, with `μ = 0` the two pure torsions `± μ_t`.
 //!
 //! **Metrics** (GraspIt!'s `QualEpsilon` and `QualVolume` on the L1 grasp wrench space, the
 //! convex hull of all primitive wrenches, not including the origin):
@@ -32,9 +38,10 @@
 //! with exactly one other facet, and every primitive is inside every facet (within `1e3` times
 //! the tolerance, for the merged near-coplanar facets). The volume is the sum over facets of
 //! the simplices they span with an interior point, each facet's 5-volume from the Householder
-//! QR factorisation of its edges. For the replay planner's typical input, four soft fingers (64
-//! primitives, ~4k facets), `grasp_quality` takes ~2.6 ms on the project's machine
-//! (`cargo bench -p dfs-core --bench grasp_quality`).
+//! QR factorisation of its edges. For the replay planner's typical input, four soft fingers (80
+//! primitives of the elliptic cone), `grasp_quality` runs 6.6 M instructions (valgrind), 0.42 of
+//! what the 64 corners of the box cone they replaced took (15.6 M instructions, ~2.6 ms on the
+//! project's machine then; `cargo bench -p dfs-core --bench grasp_quality`).
 //! Allocates (a thread keeps its last hull's arrays for the next); meant for planning and
 //! analysis, not the 1 kHz tick.
 
@@ -114,23 +121,51 @@ pub fn primitive_wrenches(
             ContactModel::Frictionless => {
                 out.push(scale(c.wrench_b(&Intensity::new(0.0, 0.0, 1.0, 0.0))))
             }
+            ContactModel::SoftFinger if friction.mu_torsion > 0.0 => {
+                let (mu, mu_t) = (friction.mu, friction.mu_torsion);
+                let latitudes: &[(Real, usize)] = if mu > 0.0 {
+                    let fourth = std::f64::consts::FRAC_PI_4;
+                    let side = soft_latitude_edges(edges);
+                    &[
+                        (2.0 * fourth, 1),
+                        (fourth, side),
+                        (0.0, edges),
+                        (-fourth, side),
+                        (-2.0 * fourth, 1),
+                    ]
+                } else {
+                    &[
+                        (std::f64::consts::FRAC_PI_2, 1),
+                        (-std::f64::consts::FRAC_PI_2, 1),
+                    ]
+                };
+                for &(lat, dirs) in latitudes {
+                    let (sl, cl) = lat.sin_cos();
+                    for k in 0..dirs {
+                        let phi = 2.0 * std::f64::consts::PI * k as Real / dirs as Real;
+                        let (s, co) = phi.sin_cos();
+                        let (tx, ty) = (mu * cl * co, mu * cl * s);
+                        out.push(scale(c.wrench_b(&Intensity::new(tx, ty, 1.0, mu_t * sl))));
+                    }
+                }
+            }
             ContactModel::PointWithFriction | ContactModel::SoftFinger => {
                 for k in 0..edges {
                     let phi = 2.0 * std::f64::consts::PI * k as Real / edges as Real;
                     let (s, co) = phi.sin_cos();
                     let (tx, ty) = (friction.mu * co, friction.mu * s);
-                    if model == ContactModel::SoftFinger {
-                        for t in [friction.mu_torsion, -friction.mu_torsion] {
-                            out.push(scale(c.wrench_b(&Intensity::new(tx, ty, 1.0, t))));
-                        }
-                    } else {
-                        out.push(scale(c.wrench_b(&Intensity::new(tx, ty, 1.0, 0.0))));
-                    }
+                    out.push(scale(c.wrench_b(&Intensity::new(tx, ty, 1.0, 0.0))));
                 }
             }
         }
     }
     out
+}
+
+/// Directions of the soft-finger cone's ±45° latitudes for `edges` on its equator: GraspIt!'s
+/// 5 for 8, in proportion (at least 3).
+pub fn soft_latitude_edges(edges: usize) -> usize {
+    (5 * edges).div_ceil(8).max(3)
 }
 
 fn validate(contacts: &[ContactFrame], friction: &Friction, params: &QualityParams) -> Result<()> {
@@ -1429,7 +1464,8 @@ mod tests {
     }
 
     /// What `grasp_quality` gave for the paper's sphere before its hull was rewritten (printed
-    /// with `{:.17e}`); the 64 soft-finger primitives are the replay planner's typical input.
+    /// with `{:.17e}`), and what the previous hull gives now; the 80 soft-finger primitives are
+    /// the replay planner's typical input.
     #[test]
     fn the_paper_sphere_grasp_keeps_the_quality_the_previous_hull_gave() {
         let c = crate::fixtures::paper_sphere_contacts();
@@ -1437,18 +1473,22 @@ mod tests {
         let point = ContactModel::PointWithFriction;
         #[allow(clippy::excessive_precision)]
         let cases = [
+            // The soft finger's primitives sample the elliptic cone since issue 21 (20 per
+            // contact, 80 in all; they were the 64 corners of the box cone, ε 2.087e-1 and
+            // 1.484e-2, volume 7.527 and 0.392): its values were taken with the new primitives,
+            // which the previous hull gives alike.
             (
                 soft,
                 1.5,
-                2.08710838445038016e-1,
-                7.52653361620829209e0,
+                1.94274245656713918e-1,
+                6.41644077360261544e0,
                 true,
             ),
             (
                 soft,
                 0.8,
-                1.48370329956183100e-2,
-                3.92025186505562173e-1,
+                5.74708197993849517e-3,
+                3.11981282049349107e-1,
                 true,
             ),
             (
@@ -1462,11 +1502,14 @@ mod tests {
         ];
         for (m, mu, eps, vol, fc) in cases {
             let g = q(&c, m, mu, &QualityParams::default());
+            let r = reference::grasp_quality(&c, m, &fr(mu), &QualityParams::default()).unwrap();
             eprintln!(
-                "{m:?} μ = {mu}: ε {:.17e} volume {:.17e}",
-                g.epsilon, g.volume
+                "{m:?} μ = {mu}: ε {:.17e} volume {:.17e}; previous hull: ε {:.17e} volume {:.17e}",
+                g.epsilon, g.volume, r.epsilon, r.volume
             );
             assert_eq!(g.force_closure, fc, "{m:?} μ = {mu}");
+            assert!((g.epsilon - r.epsilon).abs() <= 1e-12 * g.epsilon.max(1e-3));
+            assert!((g.volume - r.volume).abs() <= 1e-12 * vol);
             assert!(
                 (g.epsilon - eps).abs() <= 1e-12 * eps,
                 "{m:?} μ = {mu}: ε {}",

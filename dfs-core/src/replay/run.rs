@@ -3,6 +3,7 @@
 
 use super::plan::{actuation_map, plan_with_stop, Plan};
 use super::{FailureReason, ReplayParams, ReplayQuality, ReplayReport, SkillSpec, Timeline};
+use crate::contact::cone_usage;
 use crate::dfs::{Dfs, DfsParams, GloveSample, TickOutput};
 use crate::error::Result;
 use crate::hand::{DofMatrix, HandModel, JointKind, Kinematics, MAX_DOF, MAX_TIPS};
@@ -462,7 +463,8 @@ impl Replay {
             s.max_slip = s.max_slip.max((frame.p_b - anchor).norm());
             let c = tip.transmitted;
             if c[2] > 0.05 && mu > 0.0 {
-                let margin = 1.0 - (c[0] * c[0] + c[1] * c[1]).sqrt() / (mu * c[2]);
+                let model = self.dfs.params().contact_model;
+                let margin = 1.0 - cone_usage(model, &self.skill.friction, &c);
                 s.min_margin = Some(s.min_margin.map_or(margin, |m: Real| m.min(margin)));
             }
         }
