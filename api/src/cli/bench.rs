@@ -6,6 +6,7 @@ use serde::Serialize;
 use std::hint::black_box;
 use std::time::Instant;
 
+pub mod store;
 pub mod tick;
 
 /// Benchmarks.
@@ -130,6 +131,25 @@ pub enum BenchCommand {
         /// scenario (seeds 100-102).
         #[arg(long)]
         assist: bool,
+    },
+    /// The skill data base alone on synthetic data in a fresh data directory: storing 50
+    /// sessions of 200 KiB and of 2 MiB, generating `--skills` skills, random filtered queries
+    /// and k-nearest searches over them, opening the store again.
+    Store {
+        /// Print JSON: `{"ingest", "filtered_query": {"p50_ms", "p99_ms", ...}, "nearest", ...}`.
+        #[arg(long)]
+        json: bool,
+        /// Synthetic skills in the store, 1 000 to 10 000 000 (the filtered-query target is set
+        /// at 1 000 000).
+        #[arg(long, default_value_t = 100_000, value_parser = clap::value_parser!(u64).range(1000..=10_000_000))]
+        skills: u64,
+        /// Where the temporary data directory goes (default: the system's temporary
+        /// directory; a million skills take about 2 GB).
+        #[arg(long)]
+        dir: Option<std::path::PathBuf>,
+        /// Keep the data directory afterwards (its path is printed on stderr).
+        #[arg(long)]
+        keep: bool,
     },
     /// Uploads of simulated session files (`POST /api/v1/sessions`, each a distinct file) over
     /// HTTP on loopback to the real server, started in-process on an ephemeral port with a
@@ -302,6 +322,20 @@ pub fn run(c: BenchCommand) -> Result<(), CliError> {
                     r.in_flight, r.sessions_per_second_one_at_a_time,
                     r.analyse_ms, r.store_ms, r.store_ms_synchronous_normal
                 );
+                Ok(())
+            }
+        }
+        BenchCommand::Store {
+            json,
+            skills,
+            dir,
+            keep,
+        } => {
+            let r = store::bench_store(skills as usize, dir, keep)?;
+            if json {
+                print_json(&r)
+            } else {
+                store::print(&r);
                 Ok(())
             }
         }

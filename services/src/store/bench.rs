@@ -1,5 +1,5 @@
-//! Benchmark helpers for `icms bench`: a synthetic skill generator and latency measurements of
-//! filtered queries and k-nearest search.
+//! Benchmark helpers for `icms bench store`: synthetic blobs and skills, and latency
+//! measurements of filtered queries and k-nearest search.
 
 use std::time::{Duration, Instant};
 
@@ -99,6 +99,19 @@ pub fn synthetic_skill(rng: &mut SplitMix64) -> NewSkill {
         approach: None,
         matched_skill_id: None,
     }
+}
+
+/// Deterministic bytes standing for session file number `i`, `len` bytes long (at least 16;
+/// distinct for distinct `i`): what store benchmarks and tests ingest when the file's content
+/// does not matter (the store does not read a blob).
+pub fn synthetic_blob(i: u64, len: usize) -> Vec<u8> {
+    let mut rng = SplitMix64::new(i.wrapping_mul(0x1234_5678_9ABC_DEF1) ^ 0xC0FFEE);
+    let mut out = format!("fake mcap {i}\n").into_bytes();
+    while out.len() < len {
+        out.extend_from_slice(&rng.next_u64().to_le_bytes());
+    }
+    out.truncate(len.max(16));
+    out
 }
 
 /// What [`generate_synthetic`] did.

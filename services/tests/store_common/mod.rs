@@ -5,18 +5,12 @@ use std::path::Path;
 
 use dfs_core::replay::{ReplayParams, ReplayReport};
 use services::replay::{load_builtin_hand, replay_skill, skill_spec_from_json, ReplaySource};
-use services::store::bench::{synthetic_skill, SplitMix64};
+use services::store::bench::{synthetic_blob, synthetic_skill, SplitMix64};
 use services::store::{NewSkill, SessionMeta};
 
 /// Deterministic pseudo-MCAP bytes number `i` of `len` bytes (distinct for distinct `i`).
 pub fn fake_mcap(i: u64, len: usize) -> Vec<u8> {
-    let mut rng = SplitMix64::new(i.wrapping_mul(0x1234_5678_9ABC_DEF1) ^ 0xC0FFEE);
-    let mut out = format!("fake mcap {i}\n").into_bytes();
-    while out.len() < len {
-        out.extend_from_slice(&rng.next_u64().to_le_bytes());
-    }
-    out.truncate(len.max(16));
-    out
+    synthetic_blob(i, len)
 }
 
 /// Metadata of a test session; `extra` records `i` and the number of skills.
