@@ -223,6 +223,29 @@ async fn with_a_token_configured_the_document_requires_it_on_writes_only() {
         let secured = op["security"] == serde_json::json!([{"bearer": []}]);
         assert_eq!(secured, writes, "{m} {p}: {}", op["security"]);
         assert_eq!(op["responses"].get("401").is_some(), writes, "{m} {p}");
+        // The responses every operation with a body shares: declared once, on every one.
+        let responses = &op["responses"];
+        assert_eq!(
+            responses.get("413").is_some(),
+            op.get("requestBody").is_some(),
+            "{m} {p}"
+        );
+        if let Some(body) = op.get("requestBody") {
+            let types: Vec<&String> = body["content"].as_object().unwrap().keys().collect();
+            let d415 = responses["415"]["description"].as_str().unwrap();
+            assert!(
+                types.iter().all(|t| d415.contains(t.as_str())),
+                "{m} {p}: {d415}"
+            );
+        }
+        for status in ["401", "413", "415", "503"] {
+            if let Some(r) = responses.get(status) {
+                assert!(
+                    r["content"].get("application/problem+json").is_some(),
+                    "{m} {p} {status}: {r}"
+                );
+            }
+        }
     }
     app.stop().await;
 }

@@ -211,9 +211,10 @@ impl From<IngestError> for Problem {
     }
 }
 
-/// Middleware: a response with an error status that is not already a problem (axum's 404 and
-/// 405, a plain-text rejection, a layer's bare status) becomes one, keeping its status and
-/// headers; a short plain-text body becomes the detail.
+/// Middleware: a response with an error status that is not already a problem (a plain-text
+/// rejection of one of axum's extractors, a layer's bare status) becomes one, keeping its
+/// status and headers; a short plain-text body becomes the detail. Unknown routes and methods
+/// are problems already, from the router's fallbacks.
 pub async fn problem_for_bare_errors(response: Response) -> Response {
     let status = response.status();
     if !(status.is_client_error() || status.is_server_error()) {
@@ -247,10 +248,6 @@ pub async fn problem_for_bare_errors(response: Response) -> Response {
     };
     let detail = if !text.is_empty() {
         text
-    } else if status == StatusCode::METHOD_NOT_ALLOWED {
-        "this path does not accept this method; the Allow header lists the ones it does".into()
-    } else if status == StatusCode::NOT_FOUND {
-        "no such route; the API is described at /api/v1/openapi.json".into()
     } else {
         status.canonical_reason().unwrap_or("error").to_string()
     };

@@ -223,10 +223,7 @@ async fn get_hand_urdf(State(st): State<AppState>, Name(name): Name) -> Result<R
         (status = 201, description = "Stored; `Location` names the new hand", body = HandBody,
             headers(("Location" = String, description = "URL of the hand"))),
         (status = 400, description = "Malformed JSON (a key twice in one object included, named), or a body that could not be read", body = ProblemBody, content_type = "application/problem+json"),
-        (status = 401, description = "A token is configured and was not sent, or a wrong one", body = ProblemBody, content_type = "application/problem+json"),
         (status = 409, description = "The name is a built-in hand's or a stored hand's", body = ProblemBody, content_type = "application/problem+json"),
-        (status = 413, description = "The body is over the server's limit", body = ProblemBody, content_type = "application/problem+json"),
-        (status = 415, description = "Content-Type is not application/json", body = ProblemBody, content_type = "application/problem+json"),
         (status = 422, description = "The URDF or spec is invalid, naming the problem (does not parse, a kinematic loop, several roots, an unknown fingertip link, a negative mass or radius, a bad field); nothing was stored", body = ProblemBody, content_type = "application/problem+json"),
     ))]
 async fn upload_hand(

@@ -241,7 +241,6 @@ impl LiveHub {
     responses(
         (status = 101, description = "Switching to the WebSocket protocol: the live session begins"),
         (status = 400, description = "Not a WebSocket upgrade request", body = ProblemBody, content_type = "application/problem+json"),
-        (status = 401, description = "A token is configured and was not sent, or a wrong one", body = ProblemBody, content_type = "application/problem+json"),
         (status = 503, description = "Every live session slot is taken, or the server is stopping", body = ProblemBody, content_type = "application/problem+json"),
     ))]
 async fn live(

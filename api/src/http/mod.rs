@@ -27,7 +27,6 @@ pub mod extract;
 pub mod forces;
 pub mod frames;
 pub mod hands;
-pub mod hyper_errors;
 mod linger;
 pub mod live;
 pub mod meta;
@@ -106,8 +105,8 @@ fn finish_openapi(mut api: OpenApi, writes_need_token: bool) -> OpenApi {
         .description(Some(
             "Record grasp sessions (MCAP), simulate scenarios server-side, query and browse the \
              skill data base, upload robot hands (URDF + hand spec) and replay skills on them. \
-             Errors are application/problem+json (RFC 9457), also those for requests that do \
-             not parse as HTTP. A request over the server's time limit is answered 503. \
+             Errors are application/problem+json (RFC 9457); a request that does not parse as \
+             HTTP is refused by the HTTP layer with its status and no body. A request over the server's time limit is answered 503. \
              Operations that take query parameters refuse unknown ones (400, naming them); \
              the others ignore a query string. A JSON body with a key twice in one object is \
              refused (400, naming the key). Live glove sessions are a WebSocket, \
@@ -151,15 +150,27 @@ fn finish_openapi(mut api: OpenApi, writes_need_token: bool) -> OpenApi {
         ];
         for (op, writes) in ops {
             let Some(op) = op else { continue };
+            let responses = &mut op.responses.responses;
             // The time limit applies to every route, and a stopping server answers 503 too.
-            op.responses
-                .responses
-                .entry("503".into())
-                .or_insert_with(unavailable_response);
+            responses.entry("503".into()).or_insert_with(|| {
+                problem_response("Over the server's time limit, or the server is stopping")
+            });
+            if let Some(body) = &op.request_body {
+                let types: Vec<&str> = body.content.keys().map(String::as_str).collect();
+                responses
+                    .entry("413".into())
+                    .or_insert_with(|| problem_response("The body is over the server's limit"));
+                responses.entry("415".into()).or_insert_with(|| {
+                    problem_response(&format!("Content-Type is not {}", types.join(" or ")))
+                });
+            }
             if !writes {
                 continue;
             }
             if writes_need_token {
+                responses.entry("401".into()).or_insert_with(|| {
+                    problem_response("A token is configured and was not sent, or a wrong one")
+                });
                 // Drop the empty (anonymous) alternative: a token is required.
                 if let Some(sec) = op.security.as_mut() {
                     sec.retain(|s| {
@@ -168,17 +179,18 @@ fn finish_openapi(mut api: OpenApi, writes_need_token: bool) -> OpenApi {
                 }
             } else {
                 op.security = None;
-                op.responses.responses.remove("401");
             }
         }
     }
     api
 }
 
-/// The 503 problem every operation may answer.
-fn unavailable_response() -> RefOr<utoipa::openapi::Response> {
+/// A problem+json response with `description`. The responses every operation of a kind
+/// shares (503 all of them, 413 and 415 those with a body, 401 writes when a token is
+/// configured) are declared here once, not on each route.
+fn problem_response(description: &str) -> RefOr<utoipa::openapi::Response> {
     ResponseBuilder::new()
-        .description("Over the server's time limit, or the server is stopping")
+        .description(description)
         .content(
             error::PROBLEM_JSON,
             ContentBuilder::new()
@@ -228,6 +240,7 @@ pub fn app(state: AppState, layers: &LayerConfig) -> Router {
     let mut router = router
         .merge(web::router())
         .fallback(web::not_found)
+        .method_not_allowed_fallback(method_not_allowed)
         .with_state(state)
         .layer(DefaultBodyLimit::max(max_body))
         .layer(middleware::from_fn_with_state(max_body, linger::linger))
@@ -261,6 +274,14 @@ pub fn app(state: AppState, layers: &LayerConfig) -> Router {
     router
         .layer(middleware::map_response(error::problem_for_bare_errors))
         .layer(TraceLayer::new_for_http())
+}
+
+/// 405 for a method the path does not take (axum adds the `Allow` header listing those it does).
+async fn method_not_allowed() -> Problem {
+    Problem::new(
+        axum::http::StatusCode::METHOD_NOT_ALLOWED,
+        "this path does not accept this method; the Allow header lists the ones it does",
+    )
 }
 
 /// 201 Created with `body` as JSON and a `Location` header naming the new resource.

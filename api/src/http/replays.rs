@@ -145,10 +145,7 @@ fn replay_blocking(
         (status = 201, description = "Replayed and stored (successful or not: see `success`); `Location` names the replay", body = ReplayBody,
             headers(("Location" = String, description = "URL of the replay"))),
         (status = 400, description = "The id is not an integer, malformed JSON (a key twice in one object included, named), or a body that could not be read", body = ProblemBody, content_type = "application/problem+json"),
-        (status = 401, description = "A token is configured and was not sent, or a wrong one", body = ProblemBody, content_type = "application/problem+json"),
         (status = 404, description = "No skill with this id", body = ProblemBody, content_type = "application/problem+json"),
-        (status = 413, description = "The body is over the server's limit", body = ProblemBody, content_type = "application/problem+json"),
-        (status = 415, description = "Content-Type is not application/json", body = ProblemBody, content_type = "application/problem+json"),
         (status = 422, description = "No hand with this name (named), a bad field, or a skill that does not describe a replayable grasp", body = ProblemBody, content_type = "application/problem+json"),
         (status = 503, description = "Over the server's time limit (the replay is stopped and not stored), every simulation turn is taken (with `Retry-After`), or the server is stopping", body = ProblemBody, content_type = "application/problem+json"),
     ))]

@@ -39,8 +39,6 @@ use tokio_util::sync::CancellationToken;
 use tokio_util::task::TaskTracker;
 use tower::ServiceExt;
 
-use super::hyper_errors::ProblemIo;
-
 /// Limits on connections (see the module's documentation).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct ConnectionLimits {
@@ -136,7 +134,7 @@ pub async fn serve(
         };
         let _ = stream.set_nodelay(true);
         let activity = Arc::new(Activity::default());
-        let io = TimedIo::new(ProblemIo::new(stream), Arc::clone(&activity), limits);
+        let io = TimedIo::new(stream, Arc::clone(&activity), limits);
         let router = router.clone();
         let service = hyper::service::service_fn(move |req: Request<Incoming>| {
             let busy = activity.begin();

@@ -206,9 +206,6 @@ fn is_mcap(headers: &HeaderMap) -> bool {
             headers(("Location" = String, description = "URL of the session"))),
         (status = 200, description = "The same bytes were already stored: that session", body = StoredSession),
         (status = 400, description = "The body could not be read (e.g. broken chunked encoding); nothing was stored", body = ProblemBody, content_type = "application/problem+json"),
-        (status = 401, description = "A token is configured and was not sent, or a wrong one", body = ProblemBody, content_type = "application/problem+json"),
-        (status = 413, description = "The body is over the server's limit", body = ProblemBody, content_type = "application/problem+json"),
-        (status = 415, description = "Content-Type is not application/x-mcap", body = ProblemBody, content_type = "application/problem+json"),
         (status = 422, description = "Not a valid session file, with the reason (a replay recording, as `icms replay --out` or a replay's MCAP download writes, is not a session); nothing was stored", body = ProblemBody, content_type = "application/problem+json"),
         (status = 503, description = "Over the server's time limit, the data base is busy, or every upload turn is taken (with `Retry-After`)", body = ProblemBody, content_type = "application/problem+json"),
     ))]
@@ -539,7 +536,6 @@ mod range_tests {
     responses(
         (status = 204, description = "Deleted, with its skills, their replays and the MCAP files"),
         (status = 400, description = "The id is not an integer", body = ProblemBody, content_type = "application/problem+json"),
-        (status = 401, description = "A token is configured and was not sent, or a wrong one", body = ProblemBody, content_type = "application/problem+json"),
         (status = 404, description = "No session with this id", body = ProblemBody, content_type = "application/problem+json"),
     ))]
 async fn delete_session(

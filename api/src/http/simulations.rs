@@ -174,9 +174,6 @@ pub async fn simulate_and_store(
             headers(("Location" = String, description = "URL of the session"))),
         (status = 200, description = "An identical session was already stored: that session", body = StoredSession),
         (status = 400, description = "Malformed JSON (a key twice in one object included, named), or a body that could not be read", body = ProblemBody, content_type = "application/problem+json"),
-        (status = 401, description = "A token is configured and was not sent, or a wrong one", body = ProblemBody, content_type = "application/problem+json"),
-        (status = 413, description = "The body is over the server's limit", body = ProblemBody, content_type = "application/problem+json"),
-        (status = 415, description = "Content-Type is not application/json", body = ProblemBody, content_type = "application/problem+json"),
         (status = 422, description = "An unknown scenario, an invalid field (named) or duration, or the simulation failed", body = ProblemBody, content_type = "application/problem+json"),
         (status = 503, description = "Over the server's time limit (the simulation is stopped and not stored), every simulation turn is taken (with `Retry-After`), or the server is stopping", body = ProblemBody, content_type = "application/problem+json"),
     ))]

@@ -342,7 +342,6 @@ async fn get_skill(State(st): State<AppState>, Id(id): Id) -> Result<Response, P
     responses(
         (status = 204, description = "Deleted, with its replays and their MCAP files"),
         (status = 400, description = "The id is not an integer", body = ProblemBody, content_type = "application/problem+json"),
-        (status = 401, description = "A token is configured and was not sent, or a wrong one", body = ProblemBody, content_type = "application/problem+json"),
         (status = 404, description = "No skill with this id", body = ProblemBody, content_type = "application/problem+json"),
     ))]
 async fn delete_skill(
