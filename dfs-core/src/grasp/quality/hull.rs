@@ -1,0 +1,982 @@
+//! A Quickhull in six dimensions with simplicial facets: the grasp wrench space's convex hull
+//! behind ε and the volume (the parent module's documentation says how and why).
+
+use nalgebra::SVector;
+use std::collections::BinaryHeap;
+
+const D: usize = 6;
+type P = SVector<f64, D>;
+/// No facet, no point.
+const NONE: u32 = u32::MAX;
+/// In `Topo::back` of a facet that the current round removes: the neighbour across this
+/// ridge is the round's new facet on it.
+const NEW: u8 = u8::MAX;
+
+/// A facet's place in the hull, in one cache line: `nb[k]` is the neighbour across the
+/// ridge opposite vertex `v[k]`, and this facet is its neighbour `back[k]`.
+#[derive(Clone, Copy)]
+#[repr(align(64))]
+struct Topo {
+    nb: [u32; D],
+    v: [u32; D],
+    back: [u8; D],
+    alive: bool,
+    /// The last round whose visibility search looked at the facet.
+    seen: u32,
+}
+
+/// A facet's hyperplane `n · x = d` (`n` the outward unit normal) and, once the hull is
+/// built, 5! times the facet's 5-dimensional volume; one cache line.
+#[derive(Clone, Copy)]
+#[repr(align(64))]
+pub(super) struct Plane {
+    pub n: P,
+    pub d: f64,
+    measure: f64,
+}
+
+/// A facet's outside set: the first point of a list threaded through `Build::next` (or
+/// NONE), and the farthest point with its distance above the facet.
+#[derive(Clone, Copy)]
+struct Outside {
+    first: u32,
+    far: u32,
+    far_dist: f64,
+}
+
+const NO_OUTSIDE: Outside = Outside {
+    first: NONE,
+    far: NONE,
+    far_dist: 0.0,
+};
+
+/// The hull: its facets (live and removed), and a point strictly inside. When dropped, it
+/// leaves its buffers to the next build on the same thread.
+pub(super) struct Hull {
+    buffers: Buffers,
+    interior: P,
+}
+
+/// The arrays of a build. A thread keeps those of its last hull, so that the next build
+/// reuses them instead of allocating (and faulting in) a few hundred fresh kB.
+#[derive(Default)]
+struct Buffers {
+    topo: Vec<Topo>,
+    planes: Vec<Plane>,
+    outside: Vec<Outside>,
+    above: Vec<f64>,
+    next: Vec<u32>,
+    work: BinaryHeap<(u64, u32)>,
+    free: Vec<u32>,
+}
+
+/// Buffers larger than this many facets are not kept.
+const KEEP: usize = 1 << 15;
+
+thread_local! {
+    static SPARE: std::cell::Cell<Option<Buffers>> = const { std::cell::Cell::new(None) };
+}
+
+impl Drop for Hull {
+    fn drop(&mut self) {
+        if self.buffers.topo.capacity() <= KEEP {
+            let buffers = std::mem::take(&mut self.buffers);
+            // Not during the thread's teardown, when the slot may be gone.
+            let _ = SPARE.try_with(|s| s.set(Some(buffers)));
+        }
+    }
+}
+
+/// Why no hull was built.
+#[derive(Debug)]
+pub(super) enum HullError {
+    /// The points do not span six dimensions.
+    Flat,
+    /// Rounding broke an invariant.
+    Numerical(&'static str),
+}
+
+impl Hull {
+    /// The facets' hyperplanes.
+    pub fn facets(&self) -> impl Iterator<Item = &Plane> {
+        self.buffers
+            .topo
+            .iter()
+            .zip(&self.buffers.planes)
+            .filter(|(t, _)| t.alive)
+            .map(|(_, p)| p)
+    }
+
+    /// Volume: the simplices spanned by each facet and the interior point, each the facet's
+    /// 5-volume times its height above the interior point over 6.
+    pub fn volume(&self) -> f64 {
+        let mut vol = 0.0;
+        for f in self.facets() {
+            vol += f.measure * (f.d - f.n.dot(&self.interior));
+        }
+        vol / 720.0
+    }
+}
+
+/// Step `K` of the QR factorisation in [`plane`]: the Householder reflection that maps
+/// edge `K`'s components `K..D` onto coordinate `K`, stored in place of them and applied to
+/// the edges after it. Returns `|r_KK|`, the distance of edge `K` from the span of the
+/// edges before it, and the reflection's factor `2 / |v|²`.
+#[inline(always)]
+fn reflect<const K: usize>(a: &mut [[f64; D]; D - 1]) -> (f64, f64) {
+    let (top, rest) = a.split_at_mut(K + 1);
+    let x = &mut top[K];
+    let mut sq = 0.0;
+    for i in K..D {
+        sq += x[i] * x[i];
+    }
+    let r = sq.sqrt();
+    // v = x − α e_K with α = −sign(x_K) r, so that |v|² = 2 r (r + |x_K|) loses nothing.
+    let tau = 1.0 / (r * (r + x[K].abs()));
+    x[K] += if x[K] > 0.0 { r } else { -r };
+    for y in rest.iter_mut() {
+        let mut s = 0.0;
+        for i in K..D {
+            s += x[i] * y[i];
+        }
+        let s = s * tau;
+        for i in K..D {
+            y[i] -= s * x[i];
+        }
+    }
+    (r, tau)
+}
+
+/// Applies reflection `K` of [`reflect`] to `z`.
+#[inline(always)]
+fn apply<const K: usize>(a: &[[f64; D]; D - 1], tau: f64, z: &mut [f64; D]) {
+    let v = &a[K];
+    let mut s = 0.0;
+    for i in K..D {
+        s += v[i] * z[i];
+    }
+    let s = s * tau;
+    for i in K..D {
+        z[i] -= s * v[i];
+    }
+}
+
+/// The hyperplane through the facet's vertices, oriented away from `inside`. The normal is
+/// the last column of Q in the Householder QR factorisation `[e_1 … e_5] = Q R` of the
+/// edges `e_i = p_i − p_0` (backward stable without pivoting, and the same test for
+/// degenerate facets as Gram-Schmidt: `|r_ii|` is edge i's distance from the span of the
+/// edges before it, which must exceed `1e-12 |e_i|`). `None` for a degenerate facet.
+pub(super) fn plane(pts: &[P], v: &[u32; D], inside: &P) -> Option<Plane> {
+    let o: [f64; D] = pts[v[0] as usize].into();
+    let mut sum = o;
+    let mut a = [[0.0; D]; D - 1];
+    let mut scale = [0.0; D - 1];
+    for i in 0..D - 1 {
+        let p: [f64; D] = pts[v[i + 1] as usize].into();
+        for c in 0..D {
+            a[i][c] = p[c] - o[c];
+            sum[c] += p[c];
+            scale[i] += a[i][c] * a[i][c];
+        }
+    }
+    let r = [
+        reflect::<0>(&mut a),
+        reflect::<1>(&mut a),
+        reflect::<2>(&mut a),
+        reflect::<3>(&mut a),
+        reflect::<4>(&mut a),
+    ];
+    for i in 0..D - 1 {
+        // |r_ii| ≤ 1e-12 |e_i| (or NaN): the edge is (numerically) in the span of the edges
+        // before it, no hyperplane.
+        let independent = r[i].0 * r[i].0 > 1e-24 * scale[i];
+        if !independent {
+            return None;
+        }
+    }
+    let mut z = [0.0; D];
+    z[D - 1] = 1.0;
+    apply::<4>(&a, r[4].1, &mut z);
+    apply::<3>(&a, r[3].1, &mut z);
+    apply::<2>(&a, r[2].1, &mut z);
+    apply::<1>(&a, r[1].1, &mut z);
+    apply::<0>(&a, r[0].1, &mut z);
+    // Q is orthogonal: z is a unit vector up to rounding.
+    let mut sq = 0.0;
+    for c in 0..D {
+        sq += z[c] * z[c];
+    }
+    let norm = sq.sqrt();
+    if !(norm > 0.5 && norm.is_finite()) {
+        return None;
+    }
+    let mut n = P::from(z) / norm;
+    // Offset from the mean of the vertices (less rounding than one vertex).
+    let mut d = n.dot(&P::from(sum)) / D as f64;
+    if n.dot(inside) > d {
+        n = -n;
+        d = -d;
+    }
+    Some(Plane {
+        n,
+        d,
+        measure: f64::NAN,
+    })
+}
+
+/// The hyperplane through a horizon ridge and the new point, turned about the ridge from
+/// the hyperplanes of its visible and hidden facets: `a n_g − b n_f` with `a`, `b` the
+/// new point's heights above them. Accepted only if every vertex is within `exact` of
+/// it (the backward error of a direct computation), else `None`.
+fn turn(
+    pts: &[P],
+    v: &[u32; D],
+    (pf, a): (&Plane, f64),
+    (pg, b): (&Plane, f64),
+    inside: &P,
+    exact: f64,
+) -> Option<Plane> {
+    let m = pg.n * a - pf.n * b;
+    // Heights along m (not yet normalised, so that the square root is off the path).
+    let mut at = [0.0; D];
+    let mut mean = 0.0;
+    for i in 0..D {
+        at[i] = m.dot(&pts[v[i] as usize]);
+        mean += at[i];
+    }
+    mean /= D as f64;
+    let mut worst = 0.0;
+    for x in at {
+        let e = (x - mean).abs();
+        if e > worst {
+            worst = e;
+        }
+    }
+    let norm = m.norm();
+    let ok = worst <= exact * norm && norm > 0.0 && norm.is_finite();
+    if !ok {
+        return None;
+    }
+    let mut n = m / norm;
+    let mut d = mean / norm;
+    if n.dot(inside) > d {
+        n = -n;
+        d = -d;
+    }
+    Some(Plane {
+        n,
+        d,
+        measure: f64::NAN,
+    })
+}
+
+/// How many facets [`measures`] takes side by side.
+const LANES: usize = 4;
+
+/// `LANES` facets' edges, coordinate by coordinate, facet by facet.
+type Edges = [[[f64; LANES]; D]; D - 1];
+
+/// Step `K` of the QR factorisations in [`measures`]: the Householder reflection that maps
+/// edge `K`'s components `K..D` onto coordinate `K`, applied to the edges after it, for each
+/// facet; `|r_KK|`, the distance of edge `K` from the span of the edges before it.
+#[inline(always)]
+fn reflect_lanes<const K: usize>(a: &mut Edges) -> [f64; LANES] {
+    let (top, rest) = a.split_at_mut(K + 1);
+    let x = &mut top[K];
+    let mut r = [0.0; LANES];
+    for i in K..D {
+        for l in 0..LANES {
+            r[l] += x[i][l] * x[i][l];
+        }
+    }
+    let mut tau = [0.0; LANES];
+    for l in 0..LANES {
+        r[l] = r[l].sqrt();
+        // v = x + sign(x_K) r e_K, so that |v|² = 2 r (r + |x_K|) loses nothing.
+        tau[l] = 1.0 / (r[l] * (r[l] + x[K][l].abs()));
+        x[K][l] += r[l].copysign(x[K][l]);
+    }
+    for y in rest.iter_mut() {
+        let mut s = [0.0; LANES];
+        for i in K..D {
+            for l in 0..LANES {
+                s[l] += x[i][l] * y[i][l];
+            }
+        }
+        for l in 0..LANES {
+            s[l] *= tau[l];
+        }
+        for i in K..D {
+            for l in 0..LANES {
+                y[i][l] -= s[l] * x[i][l];
+            }
+        }
+    }
+    r
+}
+
+/// 5! times the 5-volumes of `LANES` facets with vertices `vs[l]`: `|det R|` in the
+/// Householder QR factorisation of the edges `e_i = p_i − p_0` (backward stable), the
+/// product of each edge's distance from the span of the edges before it.
+fn measures(pts: &[P], vs: &[[u32; D]; LANES]) -> [f64; LANES] {
+    let mut a: Edges = [[[0.0; LANES]; D]; D - 1];
+    for l in 0..LANES {
+        let o = &pts[vs[l][0] as usize];
+        for i in 0..D - 1 {
+            let p = &pts[vs[l][i + 1] as usize];
+            for c in 0..D {
+                a[i][c][l] = p[c] - o[c];
+            }
+        }
+    }
+    let r = [
+        reflect_lanes::<0>(&mut a),
+        reflect_lanes::<1>(&mut a),
+        reflect_lanes::<2>(&mut a),
+        reflect_lanes::<3>(&mut a),
+        reflect_lanes::<4>(&mut a),
+    ];
+    let mut out = [1.0; LANES];
+    for ri in r {
+        for l in 0..LANES {
+            out[l] *= ri[l];
+        }
+    }
+    out
+}
+
+fn dist(f: &Plane, p: &P) -> f64 {
+    f.n.dot(p) - f.d
+}
+
+/// The state of a build.
+struct Build<'a> {
+    pts: &'a [P],
+    tol: f64,
+    interior: P,
+    topo: Vec<Topo>,
+    planes: Vec<Plane>,
+    outside: Vec<Outside>,
+    /// How far the current round's point is above the facets its visibility search met.
+    above: Vec<f64>,
+    /// The next point in the same outside set, or NONE.
+    next: Vec<u32>,
+    /// Facets with outside points by the distance of the farthest (as bits, which order
+    /// like the non-negative distances); stale entries are skipped when taken.
+    work: BinaryHeap<(u64, u32)>,
+    /// Slots of facets removed in earlier rounds, for new facets.
+    free: Vec<u32>,
+}
+
+impl Build<'_> {
+    /// Puts point `i`, `dist` above facet `f`, into `f`'s outside set.
+    fn add_outside(&mut self, f: usize, i: usize, dist: f64) {
+        let o = &mut self.outside[f];
+        if o.first == NONE || dist > o.far_dist {
+            o.far = i as u32;
+            o.far_dist = dist;
+            self.work.push((dist.to_bits(), f as u32));
+        }
+        self.next[i] = o.first;
+        o.first = i as u32;
+    }
+
+    /// Stores a new facet, in a free slot if there is one; its index.
+    fn add_facet(&mut self, topo: Topo, plane: Plane) -> Result<usize, HullError> {
+        Ok(match self.free.pop() {
+            Some(id) => {
+                let id = id as usize;
+                self.topo[id] = topo;
+                self.planes[id] = plane;
+                self.outside[id] = NO_OUTSIDE;
+                id
+            }
+            None => {
+                if self.topo.len() >= NONE as usize {
+                    return Err(HullError::Numerical("too many facets"));
+                }
+                self.topo.push(topo);
+                self.planes.push(plane);
+                self.outside.push(NO_OUTSIDE);
+                self.above.push(0.0);
+                self.topo.len() - 1
+            }
+        })
+    }
+}
+
+/// A horizon ridge: the visible facet, the index of the ridge in it, and the hidden
+/// neighbour with the ridge's index there.
+#[derive(Clone, Copy)]
+struct Ridge {
+    f: usize,
+    j: usize,
+    g: usize,
+    slot: u8,
+}
+
+/// Builds the convex hull of `pts` (tolerance `tol` for "outside").
+pub(super) fn build(pts: &[P], tol: f64) -> Result<Hull, HullError> {
+    let npts = pts.len();
+    if npts < D + 1 {
+        return Err(HullError::Flat);
+    }
+    if npts >= NONE as usize {
+        return Err(HullError::Numerical("too many points"));
+    }
+    // Initial simplex: greedily the points farthest from the affine hull of those chosen.
+    let centroid = pts.iter().sum::<P>() / npts as f64;
+    let i0 = (0..npts)
+        .max_by(|&a, &b| {
+            (pts[a] - centroid)
+                .norm()
+                .total_cmp(&(pts[b] - centroid).norm())
+        })
+        .ok_or(HullError::Flat)?;
+    let mut chosen = vec![i0];
+    let mut basis: Vec<P> = Vec::new();
+    let residual = |p: &P, basis: &[P]| {
+        let mut r = p - pts[i0];
+        for _ in 0..2 {
+            for b in basis {
+                r -= b * b.dot(&r);
+            }
+        }
+        r
+    };
+    for _ in 0..D {
+        let (best, r) = (0..npts)
+            .map(|i| (i, residual(&pts[i], &basis)))
+            .max_by(|a, b| a.1.norm().total_cmp(&b.1.norm()))
+            .ok_or(HullError::Flat)?;
+        let rn = r.norm();
+        if rn <= tol {
+            return Err(HullError::Flat);
+        }
+        basis.push(r / rn);
+        chosen.push(best);
+    }
+    let interior = chosen.iter().map(|&i| pts[i]).sum::<P>() / (D + 1) as f64;
+    let size = pts.iter().fold(0.0_f64, |m, p| m.max(p.norm()));
+    // What a backward-stable computation of a hyperplane may leave at its vertices.
+    let exact = 16.0 * f64::EPSILON * size;
+    let Buffers {
+        mut topo,
+        mut planes,
+        mut outside,
+        mut above,
+        mut next,
+        mut work,
+        mut free,
+    } = SPARE
+        .try_with(|s| s.take())
+        .ok()
+        .flatten()
+        .unwrap_or_default();
+    topo.clear();
+    planes.clear();
+    outside.clear();
+    above.clear();
+    next.clear();
+    next.resize(npts, NONE);
+    work.clear();
+    free.clear();
+    let mut b = Build {
+        pts,
+        tol,
+        interior,
+        topo,
+        planes,
+        outside,
+        above,
+        next,
+        work,
+        free,
+    };
+    for k in 0..=D {
+        let mut t = Topo {
+            nb: [0; D],
+            v: [0; D],
+            back: [0; D],
+            alive: true,
+            seen: 0,
+        };
+        let mut j = 0;
+        for (m, &c) in chosen.iter().enumerate() {
+            if m != k {
+                // The facet omitting chosen[m] shares all but chosen[m]; in it, chosen[k]
+                // comes at k or, after the omitted chosen[m], at k − 1.
+                t.v[j] = c as u32;
+                t.nb[j] = m as u32;
+                t.back[j] = if k < m { k as u8 } else { (k - 1) as u8 };
+                j += 1;
+            }
+        }
+        let pl =
+            plane(pts, &t.v, &interior).ok_or(HullError::Numerical("degenerate simplex facet"))?;
+        b.add_facet(t, pl)?;
+    }
+    for (i, p) in pts.iter().enumerate() {
+        if chosen.contains(&i) {
+            continue;
+        }
+        if let Some((f, d)) = (0..=D)
+            .map(|f| (f, dist(&b.planes[f], p)))
+            .find(|&(_, d)| d > tol)
+        {
+            b.add_outside(f, i, d);
+        }
+    }
+
+    let mut visible: Vec<usize> = Vec::new();
+    let mut horizon: Vec<Ridge> = Vec::new();
+    // The new facets, in the order of the horizon ridges they were built on.
+    let mut new: Vec<usize> = Vec::new();
+    // Each round turns one outside point, the farthest above any facet, into a vertex: at
+    // most npts rounds.
+    for round in 1..=npts as u32 + 1 {
+        let fi = loop {
+            match b.work.pop() {
+                None => return finish(b),
+                Some((key, f)) => {
+                    let f = f as usize;
+                    let o = &b.outside[f];
+                    if b.topo[f].alive && o.first != NONE && o.far_dist.to_bits() == key {
+                        break f;
+                    }
+                }
+            }
+        };
+        let pi = b.outside[fi].far as usize;
+        let p = pts[pi];
+        // Visible facets: connected to fi, with p strictly outside; and the horizon ridges
+        // between them and the hidden ones.
+        visible.clear();
+        horizon.clear();
+        visible.push(fi);
+        b.topo[fi].alive = false;
+        b.topo[fi].seen = round;
+        b.above[fi] = dist(&b.planes[fi], &p);
+        let mut s = 0;
+        while s < visible.len() {
+            let f = visible[s];
+            s += 1;
+            for j in 0..D {
+                let g = b.topo[f].nb[j] as usize;
+                let tg = &mut b.topo[g];
+                if tg.seen != round {
+                    tg.seen = round;
+                    let above = dist(&b.planes[g], &p);
+                    b.above[g] = above;
+                    if above > tol {
+                        tg.alive = false;
+                        visible.push(g);
+                    }
+                }
+                if tg.alive {
+                    let slot = b.topo[f].back[j];
+                    if b.topo[g].nb[slot as usize] as usize != f {
+                        return Err(HullError::Numerical("broken adjacency"));
+                    }
+                    horizon.push(Ridge { f, j, g, slot });
+                }
+            }
+        }
+        if horizon.is_empty() {
+            return Err(HullError::Numerical("horizon is not closed"));
+        }
+        new.clear();
+        for r in &horizon {
+            let mut t = Topo {
+                nb: [NONE; D],
+                v: b.topo[r.f].v,
+                back: [0; D],
+                alive: true,
+                seen: 0,
+            };
+            t.v[r.j] = pi as u32;
+            t.nb[r.j] = r.g as u32;
+            t.back[r.j] = r.slot;
+            let (pf, pg) = (&b.planes[r.f], &b.planes[r.g]);
+            let (af, ag) = (b.above[r.f], b.above[r.g]);
+            let pl = match turn(pts, &t.v, (pf, af), (pg, ag), &interior, exact) {
+                Some(pl) => pl,
+                None => plane(pts, &t.v, &interior)
+                    .ok_or(HullError::Numerical("degenerate new facet"))?,
+            };
+            if pl.d - pl.n.dot(&interior) <= 0.0 {
+                return Err(HullError::Numerical("interior point on a facet"));
+            }
+            let id = b.add_facet(t, pl)?;
+            let tg = &mut b.topo[r.g];
+            tg.nb[r.slot as usize] = id as u32;
+            tg.back[r.slot as usize] = r.j as u8;
+            // The removed facet's side of the ridge points at the new facet too.
+            let tf = &mut b.topo[r.f];
+            tf.nb[r.j] = id as u32;
+            tf.back[r.j] = NEW;
+            new.push(id);
+        }
+        // The new facets pair up across the ridges through p. The new facet on ridge (f, j)
+        // shares with its neighbour opposite v[k] the 4 vertices S of f other than v[j]
+        // and v[k]: turning about S through the visible facets from f, across the ridge
+        // opposite v[k], leads to the next horizon ridge about S, whose new facet it is.
+        let topo = &mut b.topo;
+        for (r, &id) in horizon.iter().zip(&new) {
+            for k in 0..D {
+                if k == r.j || topo[id].nb[k] != NONE {
+                    continue;
+                }
+                // h holds S and two more vertices, at ia and ic: cross the ridge opposite ia.
+                let (mut h, mut ia, mut ic) = (r.f, k, r.j);
+                let mut steps = 0;
+                let (m, slot) = loop {
+                    let th = &topo[h];
+                    let across = th.nb[ia] as usize;
+                    if th.back[ia] == NEW {
+                        // Built on h's ridge opposite ia: its vertices are h's, in order.
+                        break (across, ic);
+                    }
+                    steps += 1;
+                    let ta = &topo[across];
+                    if steps > visible.len() || ta.alive || ta.seen != round {
+                        return Err(HullError::Numerical("horizon is not closed"));
+                    }
+                    // Where h's vertex c is in across, without branches.
+                    let c = th.v[ic];
+                    let (mut ic_across, mut found) = (0, 0);
+                    for (i, &x) in ta.v.iter().enumerate() {
+                        let here = usize::from(x == c);
+                        ic_across += i * here;
+                        found += here;
+                    }
+                    if found != 1 {
+                        return Err(HullError::Numerical("broken adjacency"));
+                    }
+                    (h, ia, ic) = (across, ic_across, th.back[ia] as usize);
+                };
+                let taken = topo[m].nb[slot];
+                if m == id || (taken != NONE && taken as usize != id) {
+                    return Err(HullError::Numerical("horizon is not closed"));
+                }
+                topo[id].nb[k] = m as u32;
+                topo[id].back[k] = slot as u8;
+                topo[m].nb[slot] = id as u32;
+                topo[m].back[slot] = k as u8;
+            }
+        }
+        // The visible facets' outside points go to the first new facet they are above
+        // (those on their own horizon ridges first), or are inside.
+        for &f in &visible {
+            let mut q = b.outside[f].first;
+            b.outside[f].first = NONE;
+            while q != NONE {
+                let qi = q as usize;
+                q = b.next[qi];
+                if qi == pi {
+                    continue;
+                }
+                let pq = &pts[qi];
+                let tf = &b.topo[f];
+                let planes = &b.planes;
+                let above = |g: usize| {
+                    let d = dist(&planes[g], pq);
+                    (d > tol).then_some((g, d))
+                };
+                let to = (0..D)
+                    .filter(|&j| tf.back[j] == NEW)
+                    .find_map(|j| above(tf.nb[j] as usize))
+                    .or_else(|| new.iter().copied().find_map(above));
+                if let Some((g, d)) = to {
+                    b.add_outside(g, qi, d);
+                }
+            }
+        }
+        b.free.extend(visible.iter().map(|&f| f as u32));
+    }
+    Err(HullError::Numerical("too many rounds"))
+}
+
+/// Checks the result: each ridge of a live facet is shared with a live facet, and every
+/// point is inside every facet (with a margin of `1e3 tol` for the merged near-coplanar
+/// facets).
+fn finish(b: Build) -> Result<Hull, HullError> {
+    let Build {
+        pts,
+        tol,
+        interior,
+        topo,
+        mut planes,
+        outside,
+        above,
+        next,
+        work,
+        free,
+    } = b;
+    for (i, t) in topo.iter().enumerate() {
+        if !t.alive {
+            continue;
+        }
+        for k in 0..D {
+            let Some(g) = topo.get(t.nb[k] as usize) else {
+                return Err(HullError::Numerical("a live facet borders a removed one"));
+            };
+            let s = t.back[k] as usize;
+            if !g.alive {
+                return Err(HullError::Numerical("a live facet borders a removed one"));
+            }
+            if s >= D || g.nb[s] as usize != i || g.back[s] as usize != k {
+                return Err(HullError::Numerical("adjacency is not symmetric"));
+            }
+        }
+    }
+    // The points by coordinate, so that the products vectorise, in f64 and in f32 (four to
+    // a vector register). In f32, n · x is within 9 u r of its value (u = 2⁻²⁴, r the
+    // largest point norm: the rounding of n, x, the products and their sum), so a facet all
+    // of whose points are below its limit less that in f32 passes; any other is checked
+    // again in f64.
+    let npts = pts.len();
+    let r = pts.iter().fold(0.0_f64, |m, p| m.max(p.norm()));
+    let slack = 9.0 * 2f64.powi(-24) * r;
+    let mut cols = vec![0.0; D * npts];
+    for (i, p) in pts.iter().enumerate() {
+        for c in 0..D {
+            cols[c * npts + i] = p[c];
+        }
+    }
+    let cols32: Vec<f32> = cols.iter().map(|&x| x as f32).collect();
+    fn split<T>(cols: &[T], n: usize) -> [&[T]; D] {
+        let (x0, rest) = cols.split_at(n);
+        let (x1, rest) = rest.split_at(n);
+        let (x2, rest) = rest.split_at(n);
+        let (x3, rest) = rest.split_at(n);
+        let (x4, x5) = rest.split_at(n);
+        [x0, x1, x2, x3, x4, x5]
+    }
+    let [x0, x1, x2, x3, x4, x5] = split(&cols, npts);
+    let [y0, y1, y2, y3, y4, y5] = split(&cols32, npts);
+    for (t, f) in topo.iter().zip(&planes) {
+        if !t.alive {
+            continue;
+        }
+        let n = &f.n;
+        let limit = f.d + 1e3 * tol;
+        // Below limit − slack, rounded down.
+        let below = limit - slack;
+        let limit32 = (below - below.abs() * 2f64.powi(-23)) as f32;
+        // Only well inside f32's normal range (where its rounding is relative); else
+        // straight to f64.
+        if (1e-30..1e30).contains(&r) && limit.abs() < 1e30 {
+            let m: [f32; D] = std::array::from_fn(|c| n[c] as f32);
+            // Counted in u32, the width of an f32 comparison, so that the loop vectorises.
+            let mut inside32 = 0_u32;
+            for i in 0..npts {
+                let s = m[0] * y0[i]
+                    + m[1] * y1[i]
+                    + m[2] * y2[i]
+                    + m[3] * y3[i]
+                    + m[4] * y4[i]
+                    + m[5] * y5[i];
+                inside32 += u32::from(s <= limit32);
+            }
+            if inside32 as usize == npts {
+                continue;
+            }
+        }
+        let mut inside = 0;
+        for i in 0..npts {
+            let s = n[0] * x0[i]
+                + n[1] * x1[i]
+                + n[2] * x2[i]
+                + n[3] * x3[i]
+                + n[4] * x4[i]
+                + n[5] * x5[i];
+            inside += usize::from(s <= limit);
+        }
+        if inside != npts {
+            return Err(HullError::Numerical("a point is outside the hull"));
+        }
+    }
+    let live: Vec<usize> = (0..topo.len()).filter(|&i| topo[i].alive).collect();
+    for chunk in live.chunks(LANES) {
+        let mut vs = [topo[chunk[0]].v; LANES];
+        for (l, &i) in chunk.iter().enumerate() {
+            vs[l] = topo[i].v;
+        }
+        let m = measures(pts, &vs);
+        for (l, &i) in chunk.iter().enumerate() {
+            planes[i].measure = m[l];
+        }
+    }
+    Ok(Hull {
+        buffers: Buffers {
+            topo,
+            planes,
+            outside,
+            above,
+            next,
+            work,
+            free,
+        },
+        interior,
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_hull_of_a_cross_polytope_has_its_facets_and_volume() {
+        // ±e_i: 2^6 facets at distance 1/sqrt(6), volume 2^6 / 6!.
+        let mut pts = Vec::new();
+        for i in 0..D {
+            for s in [1.0, -1.0] {
+                let mut p = P::zeros();
+                p[i] = s;
+                pts.push(p);
+            }
+        }
+        pts.push(P::zeros());
+        pts.push(P::from_element(0.1));
+        let h = build(&pts, 1e-9).unwrap();
+        assert_eq!(h.facets().count(), 64);
+        for f in h.facets() {
+            assert!((f.d - 1.0 / 6f64.sqrt()).abs() < 1e-12);
+        }
+        assert!((h.volume() - 64.0 / 720.0).abs() < 1e-12);
+    }
+
+    #[test]
+    fn tiny_and_huge_hulls_pass_their_checks() {
+        // The final check runs in f32 only well inside its range: here partly or not at all.
+        for s in [1e-35, 1e-20, 1.0, 1e20, 1e35] {
+            let mut pts = Vec::new();
+            for i in 0..D {
+                for sign in [1.0, -1.0] {
+                    let mut p = P::zeros();
+                    p[i] = sign * s;
+                    pts.push(p);
+                }
+            }
+            pts.push(P::from_element(0.1 * s));
+            let h = build(&pts, 1e-9 * s).unwrap();
+            assert_eq!(h.facets().count(), 64);
+            let v = h.volume() / s.powi(6);
+            assert!((v - 64.0 / 720.0).abs() < 1e-12, "{s}: {v}");
+        }
+    }
+
+    #[test]
+    fn the_hull_of_a_hypercube_with_coplanar_points_has_its_volume() {
+        let mut pts = Vec::new();
+        for m in 0..64u32 {
+            pts.push(P::from_fn(|i, _| if m >> i & 1 == 1 { 1.0 } else { -1.0 }));
+        }
+        // Points on faces and inside.
+        pts.push(P::from_fn(|i, _| if i == 0 { 1.0 } else { 0.0 }));
+        pts.push(P::from_fn(|i, _| if i == 0 { 1.0 } else { 0.3 }));
+        pts.push(P::zeros());
+        let h = build(&pts, 1e-9).unwrap();
+        assert!((h.volume() - 64.0).abs() < 1e-9, "{}", h.volume());
+        for f in h.facets() {
+            assert!((f.d - 1.0).abs() < 1e-9);
+        }
+    }
+
+    proptest::proptest! {
+        #![proptest_config(proptest::prelude::ProptestConfig::with_cases(64))]
+        #[test]
+        fn the_hull_has_exactly_the_facets_a_brute_force_search_finds(
+            raw in proptest::collection::vec(proptest::array::uniform6(-1.0..1.0f64), 7..11)
+        ) {
+            let pts: Vec<P> = raw.iter().map(|a| P::from_row_slice(a)).collect();
+            let h = build(&pts, 1e-9).unwrap();
+            let centroid = pts.iter().sum::<P>() / pts.len() as f64;
+            // Every 6-subset whose hyperplane has all points on one side is a facet.
+            let mut brute = Vec::new();
+            let n = pts.len();
+            let mut idx = [0usize, 1, 2, 3, 4, 5];
+            loop {
+                if let Some(Plane { n: nn, d, .. }) = plane(&pts, &idx.map(|x| x as u32), &centroid) {
+                    if pts.iter().all(|p| nn.dot(p) - d <= 1e-9) {
+                        brute.push(d);
+                    }
+                }
+                // Next combination.
+                let mut i = D;
+                while i > 0 && idx[i - 1] == n - D + i - 1 {
+                    i -= 1;
+                }
+                if i == 0 {
+                    break;
+                }
+                idx[i - 1] += 1;
+                for j in i..D {
+                    idx[j] = idx[j - 1] + 1;
+                }
+            }
+            let mut mine: Vec<f64> = h.facets().map(|f| f.d).collect();
+            mine.sort_by(f64::total_cmp);
+            brute.sort_by(f64::total_cmp);
+            proptest::prop_assert_eq!(mine.len(), brute.len());
+            for (a, b) in mine.iter().zip(&brute) {
+                proptest::prop_assert!((a - b).abs() < 1e-9);
+            }
+        }
+    }
+
+    /// Point sets for the comparison with the previous hull: uniform, on the lattice
+    /// {-1, 0, 1}⁶ (many coplanar points), doubled, or in a hyperplane.
+    fn point_sets() -> impl proptest::strategy::Strategy<Value = Vec<P>> {
+        use proptest::prelude::*;
+        let raw = proptest::collection::vec(proptest::array::uniform6(-1.0..1.0f64), 7..40);
+        (raw, 0usize..4).prop_map(|(raw, shape)| {
+            let mut pts: Vec<P> = raw.iter().map(|a| P::from_row_slice(a)).collect();
+            match shape {
+                1 => pts.iter_mut().for_each(|p| p.apply(|x| *x = x.round())),
+                2 => pts.extend(pts.clone()),
+                3 => pts.iter_mut().for_each(|p| p[5] = 0.5 * p[0] - p[1]),
+                _ => {}
+            }
+            pts
+        })
+    }
+
+    proptest::proptest! {
+        #![proptest_config(proptest::prelude::ProptestConfig::with_cases(256))]
+        #[test]
+        fn the_hull_has_the_volume_and_offsets_of_the_previous_one(pts in point_sets()) {
+            use super::super::reference;
+            let new = build(&pts, 1e-9);
+            let old = reference::build(&pts, 1e-9);
+            match (new, old) {
+                (Ok(a), Ok(b)) => {
+                    let (va, vb) = (a.volume(), b.volume(&pts));
+                    proptest::prop_assert!((va - vb).abs() <= 1e-11 * vb, "{} vs {}", va, vb);
+                    let min = |it: &mut dyn Iterator<Item = f64>| it.fold(f64::INFINITY, f64::min);
+                    let (ea, eb) = (min(&mut a.facets().map(|f| f.d)), min(&mut b.facets.iter().map(|f| f.d)));
+                    proptest::prop_assert!((ea - eb).abs() <= 1e-12, "{} vs {}", ea, eb);
+                }
+                (Err(HullError::Flat), Err(reference::HullError::Flat)) => {}
+                (a, b) => proptest::prop_assert!(false, "{:?} vs {:?}", a.err(), b.err()),
+            }
+        }
+    }
+
+    #[test]
+    fn flat_point_sets_have_no_hull() {
+        let pts: Vec<P> = (0..20)
+            .map(|k| {
+                P::from_fn(|i, _| {
+                    if i == 5 {
+                        0.0
+                    } else {
+                        ((k * (i + 3)) % 7) as f64
+                    }
+                })
+            })
+            .collect();
+        assert!(matches!(build(&pts, 1e-9), Err(HullError::Flat)));
+    }
+}
