@@ -12,6 +12,7 @@ pub mod contact;
 pub mod coupling;
 pub mod dfs;
 pub mod error;
+#[cfg(any(test, feature = "fixtures"))]
 pub mod fixtures;
 pub mod frames;
 pub mod grasp;
