@@ -13,7 +13,7 @@ use dfs_core::scenario::Scenario;
 use services::ingest::{analyse, ingest_bytes};
 use services::reprocess::{reprocess, ReprocessEvent, ReprocessReport};
 use services::segmentation::SEGMENTATION_VERSION;
-use services::store::{Skill, Store, StoreError, DB_FILE};
+use services::store::{SkillRecord, Store, StoreError, DB_FILE};
 use sqlx::{Connection, SqliteConnection};
 use store_common::{blob_count, fake_mcap, meta, skills, unreachable_report};
 
@@ -77,15 +77,15 @@ async fn run(store: &Store) -> (ReprocessReport, Vec<String>) {
 }
 
 /// A skill without what the store gives it (id, insertion time): what segmentation made.
-fn content(s: &Skill) -> Skill {
-    Skill {
+fn content(s: &SkillRecord) -> SkillRecord {
+    SkillRecord {
         id: 0,
         created_at: String::new(),
         ..s.clone()
     }
 }
 
-async fn skills_of(store: &Store, session_id: i64) -> Vec<Skill> {
+async fn skills_of(store: &Store, session_id: i64) -> Vec<SkillRecord> {
     let ids = store.get_session(session_id).await.unwrap().skill_ids;
     let mut out = Vec::new();
     for id in ids {

@@ -8,11 +8,11 @@ use dfs_core::contact::ContactModel;
 use dfs_core::scenario::Phase;
 use services::store::bench::generate_synthetic;
 use services::store::{
-    ObjectShape, Skill, SkillQuery, SortField, SortKey, SortOrder, Store, StoreError,
+    ObjectShape, SkillRecord, SkillQuery, SortField, SortKey, SortOrder, Store, StoreError,
 };
 
 /// Every skill of the store, read one page at a time.
-async fn walk(store: &Store, q: &SkillQuery) -> Vec<Skill> {
+async fn walk(store: &Store, q: &SkillQuery) -> Vec<SkillRecord> {
     let mut q = q.clone();
     let mut out = Vec::new();
     loop {
@@ -26,7 +26,7 @@ async fn walk(store: &Store, q: &SkillQuery) -> Vec<Skill> {
     }
 }
 
-fn matches(q: &SkillQuery, s: &Skill) -> bool {
+fn matches(q: &SkillQuery, s: &SkillRecord) -> bool {
     let ge = |v: f64, b: Option<f64>| b.is_none_or(|b| v >= b);
     let le = |v: f64, b: Option<f64>| b.is_none_or(|b| v <= b);
     q.object_shape.as_ref().is_none_or(|x| *x == s.object_shape)
@@ -50,7 +50,7 @@ fn matches(q: &SkillQuery, s: &Skill) -> bool {
         })
 }
 
-fn sort_value(sort: SortKey, s: &Skill) -> f64 {
+fn sort_value(sort: SortKey, s: &SkillRecord) -> f64 {
     match sort.field {
         SortField::Id => s.id as f64,
         SortField::Quality => s.quality,

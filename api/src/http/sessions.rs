@@ -7,7 +7,7 @@ use axum::http::{header, HeaderMap, HeaderValue, StatusCode};
 use axum::response::{IntoResponse, Response};
 use serde::{Deserialize, Serialize};
 use services::ingest::ingest_staged;
-use services::store::{IngestOutcome, ObjectShape, Session, SessionMeta, DEFAULT_LIMIT};
+use services::store::{IngestOutcome, ObjectShape, SessionMeta, SessionRecord, DEFAULT_LIMIT};
 use utoipa::{IntoParams, ToSchema};
 use utoipa_axum::router::OpenApiRouter;
 use utoipa_axum::routes;
@@ -107,8 +107,8 @@ pub struct SessionBody {
     pub mcap_url: String,
 }
 
-impl From<Session> for SessionBody {
-    fn from(s: Session) -> Self {
+impl From<SessionRecord> for SessionBody {
+    fn from(s: SessionRecord) -> Self {
         SessionBody {
             mcap_url: format!("/api/v1/sessions/{}/mcap", s.id),
             id: s.id,

@@ -10,7 +10,7 @@ use dfs_core::contact::ContactModel;
 use dfs_core::names::Named;
 use dfs_core::scenario::Phase;
 use serde::{Deserialize, Serialize};
-use services::store::{ObjectShape, Skill, FEATURE_DIM};
+use services::store::{ObjectShape, SkillRecord, FEATURE_DIM};
 use utoipa::openapi::schema::{ObjectBuilder, Schema, Type};
 use utoipa::openapi::RefOr;
 use utoipa::{IntoParams, ToSchema};
@@ -32,7 +32,7 @@ pub(crate) fn object_shape_schema() -> impl Into<RefOr<Schema>> {
 
 /// A stored skill: the hand-independent parameters of one grasp, in the object frame B.
 ///
-/// The store's [`Skill`] with its schema: services' types have none, so the API keeps this
+/// The store's [`SkillRecord`] with its schema: services' types have none, so the API keeps this
 /// body type beside it (fields typed alike, [`From`] between them).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize, ToSchema)]
 pub struct SkillBody {
@@ -126,8 +126,8 @@ impl PhaseDuration {
     }
 }
 
-impl From<Skill> for SkillBody {
-    fn from(s: Skill) -> Self {
+impl From<SkillRecord> for SkillBody {
+    fn from(s: SkillRecord) -> Self {
         debug_assert_eq!(s.feature.len(), FEATURE_DIM);
         SkillBody {
             id: s.id,
@@ -201,8 +201,8 @@ pub struct SkillSummary {
     pub created_at: String,
 }
 
-impl From<Skill> for SkillSummary {
-    fn from(s: Skill) -> Self {
+impl From<SkillRecord> for SkillSummary {
+    fn from(s: SkillRecord) -> Self {
         SkillSummary {
             id: s.id,
             session_id: s.session_id,

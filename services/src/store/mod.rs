@@ -70,8 +70,8 @@ pub struct SweepReport {
 pub use hands::MAX_HAND_NAME;
 pub use query::{SkillQuery, SortField, SortKey, SortOrder, DEFAULT_LIMIT, MAX_LIMIT};
 pub use types::{
-    Hand, HandSummary, IngestOutcome, NewSkill, ObjectShape, Page, ReplacedSkills, Replay, Session,
-    SessionMeta, Skill, StaleSession, FEATURE_DIM,
+    Hand, HandSummary, IngestOutcome, NewSkill, ObjectShape, Page, ReplacedSkills, Replay,
+    SessionMeta, SessionRecord, SkillRecord, StaleSession, FEATURE_DIM,
 };
 
 use knn::FeatureIndex;
@@ -322,12 +322,12 @@ fn named_column<T: Named>(row: &SqliteRow, id: i64, column: &str) -> Result<T, S
     T::from_name(text).map_err(|e| StoreError::Corrupt(format!("skill {id}: {column}: {e}")))
 }
 
-fn row_to_skill(row: &SqliteRow) -> Result<Skill, StoreError> {
+fn row_to_skill(row: &SqliteRow) -> Result<SkillRecord, StoreError> {
     let id: i64 = row.try_get("id")?;
     let feature: Vec<u8> = row.try_get("feature")?;
     let phases: String = row.try_get("phase_durations")?;
     let params: String = row.try_get("params")?;
-    Ok(Skill {
+    Ok(SkillRecord {
         id,
         session_id: row.try_get("session_id")?,
         object_shape: named_column(row, id, "object_shape")?,
@@ -961,12 +961,12 @@ impl Store {
         Ok(n)
     }
 
-    fn row_to_session(row: &SqliteRow) -> Result<Session, StoreError> {
+    fn row_to_session(row: &SqliteRow) -> Result<SessionRecord, StoreError> {
         let id: i64 = row.try_get("id")?;
         let meta: String = row.try_get("meta")?;
         let skill_ids: String = row.try_get("skill_ids")?;
         let matched: String = row.try_get("matched_skill_ids")?;
-        Ok(Session {
+        Ok(SessionRecord {
             id,
             sha256: row.try_get("sha256")?,
             size_bytes: row.try_get("size_bytes")?,
@@ -985,7 +985,7 @@ impl Store {
         &self,
         limit: u32,
         cursor: Option<&str>,
-    ) -> Result<Page<Session>, StoreError> {
+    ) -> Result<Page<SessionRecord>, StoreError> {
         if limit == 0 || limit > MAX_SESSION_LIMIT {
             return Err(StoreError::InvalidQuery(format!(
                 "limit {limit} is outside 1..={MAX_SESSION_LIMIT}"
@@ -1021,7 +1021,7 @@ impl Store {
     }
 
     /// One session with its skill ids.
-    pub async fn get_session(&self, id: i64) -> Result<Session, StoreError> {
+    pub async fn get_session(&self, id: i64) -> Result<SessionRecord, StoreError> {
         let row = sqlx::query(&format!(
             "SELECT {SESSION_COLUMNS} FROM sessions s WHERE id = ?"
         ))
@@ -1128,7 +1128,7 @@ impl Store {
     }
 
     /// One skill.
-    pub async fn get_skill(&self, id: i64) -> Result<Skill, StoreError> {
+    pub async fn get_skill(&self, id: i64) -> Result<SkillRecord, StoreError> {
         let row = sqlx::query(&format!(
             "SELECT {} FROM skills WHERE id = ?",
             query::SKILL_COLUMNS
@@ -1143,7 +1143,7 @@ impl Store {
     /// The skills of `ids` in one query, in the order of `ids`; ids with no skill (deleted
     /// meanwhile) are left out. What `similar` answers its neighbours with, instead of one
     /// query per neighbour.
-    pub async fn get_skills(&self, ids: &[i64]) -> Result<Vec<Skill>, StoreError> {
+    pub async fn get_skills(&self, ids: &[i64]) -> Result<Vec<SkillRecord>, StoreError> {
         if ids.is_empty() {
             return Ok(Vec::new());
         }
@@ -1193,7 +1193,7 @@ impl Store {
     }
 
     /// Skills matching the filters of `q`, sorted by `q.sort`, one page after `q.cursor`.
-    pub async fn query_skills(&self, q: &SkillQuery) -> Result<Page<Skill>, StoreError> {
+    pub async fn query_skills(&self, q: &SkillQuery) -> Result<Page<SkillRecord>, StoreError> {
         let mut b = query::build(q)?;
         let rows = b.build().fetch_all(&self.inner.pool).await?;
         let limit = q.limit as usize;

@@ -433,7 +433,7 @@ pub(crate) fn build(q: &SkillQuery) -> Result<QueryBuilder<'_, Sqlite>, StoreErr
 }
 
 /// The cursor pointing after `skill` under `sort`.
-pub(crate) fn cursor_after(sort: SortKey, skill: &super::types::Skill) -> String {
+pub(crate) fn cursor_after(sort: SortKey, skill: &super::types::SkillRecord) -> String {
     let after = match sort.field {
         SortField::Id => After::Int(skill.id),
         SortField::Quality => After::Real(skill.quality, skill.id),

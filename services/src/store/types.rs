@@ -129,7 +129,7 @@ pub struct NewSkill {
 
 /// A stored skill.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-pub struct Skill {
+pub struct SkillRecord {
     /// Skill id.
     pub id: i64,
     /// Id of the session the skill was found in.
@@ -184,7 +184,7 @@ pub struct Skill {
 
 /// A stored session.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-pub struct Session {
+pub struct SessionRecord {
     /// Session id.
     pub id: i64,
     /// Hex SHA-256 of the MCAP bytes.
