@@ -179,7 +179,9 @@ async function skillView(idText) {
         ['friction margin', `${fmt(p.friction_margin_n, 2)} N (${fmt(p.friction_margin_ratio, 2)})`],
         ['object', `${skill.object_shape}, ${fmt(skill.object_mass, 3)} kg, μ ${fmt(skill.mu, 2)}`],
         ['duration', `${fmt(skill.duration_s, 3)} s`],
-        ['phases', skill.phase_durations.map(d => `${d.phase} ${fmt(d.seconds, 3)} s`).join(', ')],
+        // The API lists them alphabetically; a grasp's phases read in their order.
+        ['phases', [...skill.phase_durations].sort((a, b) => PHASES.indexOf(a.phase) - PHASES.indexOf(b.phase))
+          .map(d => `${d.phase} ${fmt(d.seconds, 3)} s`).join(', ')],
         ['segmentation version', String(skill.segmentation_version)],
       ])),
       h('section', { class: 'card' }, h('h2', {}, 'Source session'), facts([
@@ -360,30 +362,87 @@ async function showReplay(box, skill, replay) {
 
 // ---------------------------------------------------------------- sessions
 
+const SESSION_FILTERS = ['scenario', 'hand', 'shape', 'sort', 'limit'];
+
+function sessionFilterForm(params) {
+  const text = (name, label, placeholder) => h('label', {}, label,
+    h('input', { name, value: params.get(name) ?? '', placeholder }));
+  const select = (name, label, options, dflt) => h('label', {}, label, h('select', { name },
+    options.map(([v, t]) => h('option', { value: v, selected: (params.get(name) ?? dflt) === v }, t))));
+  const form = h('form', { class: 'filters', id: 'session-filters' },
+    text('scenario', 'scenario', 'sphere-lift'), text('hand', 'hand', 'glove10'),
+    select('shape', 'object', [['', 'any'], ...SHAPES.map(v => [v, v])], ''),
+    select('sort', 'order', [['-id', 'newest first'], ['id', 'oldest first']], '-id'),
+    select('limit', 'per page', ['25', '50', '100', '200'].map(v => [v, v]), '50'),
+    h('button', { type: 'submit', id: 'sessions-apply' }, 'Apply'),
+    h('button', { type: 'reset', id: 'sessions-reset' }, 'Clear'));
+  form.addEventListener('submit', e => {
+    e.preventDefault();
+    const q = {};
+    for (const name of SESSION_FILTERS) {
+      const v = form.elements[name].value.trim();
+      if (v !== '' && !(name === 'sort' && v === '-id') && !(name === 'limit' && v === '50')) q[name] = v;
+    }
+    location.hash = `#/sessions${query(q)}`;
+  });
+  form.addEventListener('reset', e => { e.preventDefault(); location.hash = '#/sessions'; });
+  return form;
+}
+
 async function sessionsView(params) {
+  // Newest first unless the address asks otherwise; every filter of GET /api/v1/sessions.
+  const filters = { sort: '-id' };
+  for (const name of SESSION_FILTERS) if (params.get(name)) filters[name] = params.get(name);
   const cursors = (params.get('after') ?? '').split(',').filter(Boolean);
-  const page = await api(`/api/v1/sessions${query({ limit: 50, cursor: cursors.at(-1) })}`);
+  const tbody = h('tbody', { id: 'session-rows' });
+  const status = h('span', { id: 'sessions-status' }, 'Loading…');
+  const prev = h('button', { type: 'button', id: 'sessions-prev', disabled: cursors.length === 0 }, '← Previous');
+  const next = h('button', { type: 'button', id: 'sessions-next', disabled: true }, 'Next →');
+  replace(main, h('h1', {}, 'Sessions'), sessionFilterForm(params),
+    h('p', {}, 'Foxglove opens a file by URL only when this server allows its origin (icms serve --cors-origin https://app.foxglove.dev) and the browser can reach the server.'),
+    h('table', { id: 'sessions' }, h('thead', {}, h('tr', {},
+      ['id', 'stored', 'scenario', 'hand', 'object', 'duration (s)', 'skills', 'first skills', 'file'].map(t => h('th', {}, t)))),
+    tbody),
+    h('div', { class: 'pager' }, prev, next, status));
+  const page = await api(`/api/v1/sessions${query({ ...filters, cursor: cursors.at(-1) })}`);
   const focus = params.get('focus');
-  const rows = page.items.map(s => {
+  replace(tbody, page.items.map(s => {
     const m = s.meta ?? {};
     return h('tr', { dataset: { id: s.id }, class: String(s.id) === focus ? 'focus' : null },
       h('td', { class: 'num' }, h('a', { href: `#/sessions/${s.id}` }, String(s.id))),
+      h('td', { class: 'stored' }, s.created_at.replace('T', ' ').replace(/\.\d+Z$/, 'Z')),
       h('td', { class: 'scenario' }, m.scenario ?? '—'),
-      h('td', {}, m.hand ?? '—'),
-      h('td', {}, m.object_shape ?? '—'),
+      h('td', { class: 'hand' }, m.hand ?? '—'),
+      h('td', { class: 'object' }, m.object_shape ?? '—'),
       h('td', { class: 'num' }, fmt((m.duration_ns ?? 0) / 1e9, 3)),
       h('td', { class: 'num' }, String((s.skill_ids ?? []).length)),
-      h('td', {}, (s.skill_ids ?? []).map((k, i) => [i ? ' ' : '', h('a', { href: `#/skills/${k}` }, `#${k}`)])),
+      h('td', { class: 'skills' }, skillLinks(s)),
       h('td', {}, h('a', { href: s.mcap_url, download: '' }, 'MCAP'), ' · ', foxgloveLink(s.mcap_url)));
-  });
-  const next = h('button', { type: 'button', id: 'sessions-next', disabled: !page.next_cursor }, 'Next →');
-  next.addEventListener('click', () => { location.hash = `#/sessions${query({ after: [...cursors, page.next_cursor].join(',') })}`; });
-  replace(main, h('h1', {}, 'Sessions'),
-    h('p', {}, 'Foxglove opens a file by URL only when this server allows its origin (icms serve --cors-origin https://app.foxglove.dev) and the browser can reach the server.'),
-    h('table', { id: 'sessions' }, h('thead', {}, h('tr', {}, ['id', 'scenario', 'hand', 'object', 'duration (s)', 'skills', '', 'file'].map(t => h('th', {}, t)))),
-      h('tbody', {}, rows)),
-    h('div', { class: 'pager' }, next, page.items.length ? '' : 'No session stored.'));
+  }));
+  const filtered = SESSION_FILTERS.some(n => n !== 'sort' && n !== 'limit' && filters[n]);
+  status.textContent = page.items.length
+    ? `page ${cursors.length + 1}: ${page.items.length} sessions${page.next_cursor ? '' : ' (last page)'}`
+    : (filtered ? 'No session matches these filters.' : 'No session stored.');
+  const go = list => {
+    const q = { ...filters };
+    if (q.sort === '-id') delete q.sort;
+    if (list.length) q.after = list.join(',');
+    location.hash = `#/sessions${query(q)}`;
+  };
+  if (page.next_cursor) {
+    next.disabled = false;
+    next.addEventListener('click', () => go([...cursors, page.next_cursor]));
+  }
+  prev.addEventListener('click', () => go(cursors.slice(0, -1)));
   setReady('sessions');
+}
+
+/** Links to a session's first skills; the rest (a session may hold thousands) on its page. */
+function skillLinks(s, shown = 5) {
+  const ids = s.skill_ids ?? [];
+  const links = ids.slice(0, shown).map((k, i) => [i ? ' ' : '', h('a', { href: `#/skills/${k}` }, `#${k}`)]);
+  if (ids.length > shown) links.push(' ', h('a', { href: `#/sessions/${s.id}`, class: 'more' }, `… ${ids.length - shown} more`));
+  return links;
 }
 
 /** The link that opens a session's MCAP file in app.foxglove.dev (by URL: see the README). */
@@ -471,18 +530,16 @@ async function drawHand(box, name) {
   const { View, primitiveMesh, setPose, THREE } = await import('./scene.js');
   const view = new View(box, 0.08);
   cleanup.push(() => view.dispose());
-  const c = geometry.centre ?? [0, 0, 0];
-  view.target.set(c[0], c[1], c[2]);
-  // Far enough to see every link: three times the farthest link origin from the centre.
-  const reach = Math.max(0.04, ...geometry.links.map(l => Math.hypot(l.pose[0] - c[0], l.pose[1] - c[1], l.pose[2] - c[2])));
-  view.orbit.r = 3.2 * (reach + 0.03);
-  view.placeCamera();
+  const hand = new THREE.Group();
   for (const link of geometry.links) {
     const g = new THREE.Group();
     setPose(g, link.pose);
     for (const s of link.shapes) g.add(primitiveMesh(s, s.fingertip ? 0x2ca02c : 0x8c8c8c));
-    view.scene.add(g);
+    hand.add(g);
   }
+  view.scene.add(hand);
+  // Every link in view, whatever the hand's size (a gripper's long fingers too).
+  view.frame(hand);
   view.render();
 }
 

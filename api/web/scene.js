@@ -57,6 +57,18 @@ export class View {
     this.camera.lookAt(this.target);
   }
 
+  /** Aims at `object`'s bounding sphere and backs off until all of it is in view. */
+  frame(object, margin = 1.1) {
+    const box = new THREE.Box3().setFromObject(object);
+    if (box.isEmpty()) return;
+    const sphere = box.getBoundingSphere(new THREE.Sphere());
+    this.target.copy(sphere.center);
+    const halfFov = THREE.MathUtils.degToRad(this.camera.fov) / 2;
+    const half = Math.min(halfFov, Math.atan(Math.tan(halfFov) * this.camera.aspect));
+    this.orbit.r = Math.max(0.05, (margin * sphere.radius) / Math.sin(half));
+    this.placeCamera();
+  }
+
   resize() {
     const w = this.canvas.clientWidth || 400;
     const hgt = this.canvas.clientHeight || 300;

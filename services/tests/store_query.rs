@@ -8,7 +8,7 @@ use dfs_core::contact::ContactModel;
 use dfs_core::scenario::Phase;
 use services::store::bench::generate_synthetic;
 use services::store::{
-    ObjectShape, SkillRecord, SkillQuery, SortField, SortKey, SortOrder, Store, StoreError,
+    ObjectShape, SkillQuery, SkillRecord, SortField, SortKey, SortOrder, Store, StoreError,
 };
 
 /// Every skill of the store, read one page at a time.

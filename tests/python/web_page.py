@@ -1,47 +1,138 @@
-"""Drives the web page of a running `icms serve` in headless Chromium (Debian's chromium and
-chromium-driver, through selenium) and prints one JSON object of what it saw and measured.
+"""Drives the web page of a running `icms serve` in a real browser and prints one JSON object of
+what it saw and measured. One flow, two browsers:
 
-Usage: web_page.py BASE_URL SKILL_ID XSS_SKILL_ID SCREENSHOT_DIR
+- chromium: Debian's chromium, headless, through chromium-driver (its console read from the
+  driver's browser log);
+- firefox: Debian's firefox-esr through geckodriver (Mozilla's Rust crate, which
+  scripts/test installs with cargo), with WebDriver BiDi for its console and JavaScript errors.
+  Firefox's own -headless mode has no WebGL on a machine without a GPU ("WebGL creation
+  failed: tryNativeGL, Exhausted GL driver options"), so Firefox runs on a private Xvfb display
+  (Debian's xvfb) where Mesa's llvmpipe gives it WebGL 2, as CI's Chromium has SwiftShader.
+
+Usage: web_page.py BROWSER BASE_URL SKILL_ID XSS_SKILL_ID SCREENSHOT_DIR
+  BROWSER       chromium or firefox
   SKILL_ID      a skill of a real (simulated) session: its forces are plotted and it is replayed
   XSS_SKILL_ID  a skill whose session's scenario is named <script>alert(1)</script>
 """
 import json
 import os
 import shutil
+import subprocess
 import sys
 import time
 
 from selenium import webdriver
 from selenium.common.exceptions import NoAlertPresentException, TimeoutException
-from selenium.webdriver.chrome.service import Service
 from selenium.webdriver.common.by import By
 from selenium.webdriver.support.ui import Select, WebDriverWait
 
-base, skill_id, xss_skill_id, shots = sys.argv[1], sys.argv[2], sys.argv[3], sys.argv[4]
+browser, base, skill_id, xss_skill_id, shots = sys.argv[1:6]
 os.makedirs(shots, exist_ok=True)
 XSS = "<script>alert(1)</script>"
+WIDTH, HEIGHT = 1400, 1100
 
-options = webdriver.ChromeOptions()
-options.binary_location = shutil.which("chromium") or "/usr/bin/chromium"
-for arg in ("--headless=new", "--no-sandbox", "--disable-dev-shm-usage", "--window-size=1400,1100",
-            "--use-angle=swiftshader", "--enable-unsafe-swiftshader", "--disable-gpu-vsync"):
-    options.add_argument(arg)
-options.set_capability("goog:loggingPrefs", {"browser": "ALL"})
-driver = webdriver.Chrome(options=options,
-                          service=Service(shutil.which("chromedriver") or "/usr/bin/chromedriver"))
+
+class Chromium:
+    """Headless Chromium; its console errors from the driver's browser log (SEVERE)."""
+
+    def __init__(self):
+        from selenium.webdriver.chrome.service import Service
+        options = webdriver.ChromeOptions()
+        options.binary_location = shutil.which("chromium") or "/usr/bin/chromium"
+        for arg in ("--headless=new", "--no-sandbox", "--disable-dev-shm-usage",
+                    f"--window-size={WIDTH},{HEIGHT}", "--use-angle=swiftshader",
+                    "--enable-unsafe-swiftshader", "--disable-gpu-vsync"):
+            options.add_argument(arg)
+        options.set_capability("goog:loggingPrefs", {"browser": "ALL"})
+        self.driver = webdriver.Chrome(
+            options=options,
+            service=Service(shutil.which("chromedriver") or "/usr/bin/chromedriver"))
+
+    def console_errors(self):
+        return [e["message"] for e in self.driver.get_log("browser") if e["level"] == "SEVERE"]
+
+    def quit(self):
+        self.driver.quit()
+
+
+class Firefox:
+    """Firefox ESR on a private Xvfb display; console errors (console.error) and uncaught
+    exceptions and promise rejections from WebDriver BiDi's log events."""
+
+    def __init__(self):
+        # Xvfb picks a free display number and writes it to the pipe.
+        read, write = os.pipe()
+        self.xvfb = subprocess.Popen(
+            ["Xvfb", "-displayfd", str(write), "-screen", "0", f"{WIDTH}x{HEIGHT}x24",
+             "-nolisten", "tcp"],
+            pass_fds=(write,), stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+        os.close(write)
+        with os.fdopen(read) as f:
+            display = f.readline().strip()
+        if not display:
+            raise SystemExit("Xvfb did not start")
+        try:
+            self._start(display)
+        except BaseException:
+            self.xvfb.terminate()
+            raise
+
+    def _start(self, display):
+        from selenium.webdriver.firefox.service import Service
+        env = dict(os.environ, DISPLAY=f":{display}")
+        env.pop("WAYLAND_DISPLAY", None)
+        options = webdriver.FirefoxOptions()
+        options.binary_location = shutil.which("firefox-esr") or shutil.which("firefox")
+        options.add_argument(f"--width={WIDTH}")
+        options.add_argument(f"--height={HEIGHT}")
+        options.enable_bidi = True
+        self.driver = webdriver.Firefox(
+            options=options,
+            service=Service(shutil.which("geckodriver") or "geckodriver", env=env))
+        self.driver.set_window_rect(0, 0, WIDTH, HEIGHT)
+        self.errors = []
+        self.driver.script.add_console_message_handler(
+            lambda m: self.errors.append(f"console.{m.level}: {m.text}")
+            if m.level == "error" else None)
+        self.driver.script.add_javascript_error_handler(
+            lambda e: self.errors.append(f"uncaught: {e.text}"))
+
+    def console_errors(self):
+        # BiDi events arrive on their own thread: give the last ones a moment.
+        time.sleep(0.2)
+        out, self.errors[:] = list(self.errors), []
+        return out
+
+    def quit(self):
+        try:
+            self.driver.quit()
+        finally:
+            self.xvfb.terminate()
+            self.xvfb.wait(10)
+
+
+started = time.monotonic()
+if browser == "chromium":
+    session = Chromium()
+elif browser == "firefox":
+    session = Firefox()
+else:
+    raise SystemExit(f"unknown browser {browser!r}: chromium or firefox")
+driver = session.driver
 driver.set_page_load_timeout(60)
-out = {"console_errors": [], "steps": []}
-# Network errors the test provokes on purpose (the invalid hand upload answers 422).
+out = {"browser": browser, "console_errors": [], "steps": [],
+       "browser_version": driver.capabilities.get("browserVersion"),
+       "browser_start_s": time.monotonic() - started}
+# Network errors the test provokes on purpose (the invalid hand upload answers 422); Chromium
+# logs them as errors.
 expected = []
 
 
 def logs(step):
-    for entry in driver.get_log("browser"):
-        if entry["level"] != "SEVERE":
+    for message in session.console_errors():
+        if any(e in message for e in expected):
             continue
-        if any(e in entry["message"] for e in expected):
-            continue
-        out["console_errors"].append({"step": step, "message": entry["message"]})
+        out["console_errors"].append({"step": step, "message": message})
     out["steps"].append(step)
 
 
@@ -55,7 +146,7 @@ def wait_ready(name, timeout=60):
         err = driver.execute_script("return document.getElementById('error').textContent")
         shot("failure")
         raise SystemExit(f"the page showed an error instead of {name} after steps {out['steps']} "
-                         f"at {driver.current_url}: {err.split()}; console: {driver.get_log('browser')}")
+                         f"at {driver.current_url}: {err.split()}; console: {session.console_errors()}")
 
 
 def unready():
@@ -80,6 +171,14 @@ def alert_open():
         return False
 
 
+def row_ids(css):
+    return [int(tr.get_attribute("data-id")) for tr in driver.find_elements(By.CSS_SELECTOR, css)]
+
+
+def texts(css):
+    return [td.text for td in driver.find_elements(By.CSS_SELECTOR, css)]
+
+
 try:
     # 1. The list: how long after navigation starts the first page of skills is on screen.
     driver.get(base + "/")
@@ -97,16 +196,16 @@ try:
     unready()
     driver.find_element(By.ID, "apply").click()
     wait_ready("skills")
-    objects = [td.text for td in driver.find_elements(By.CSS_SELECTOR, "#skill-rows td.object")]
+    objects = texts("#skill-rows td.object")
     out["filtered_rows"] = len(objects)
     out["filtered_all_box"] = bool(objects) and all(o.startswith("box") for o in objects)
-    ids = [int(tr.get_attribute("data-id")) for tr in driver.find_elements(By.CSS_SELECTOR, "#skill-rows tr")]
+    ids = row_ids("#skill-rows tr")
     out["filtered_sorted_desc"] = ids == sorted(ids, reverse=True)
     out["hash_after_filter"] = driver.execute_script("return location.hash")
     unready()
     driver.find_element(By.ID, "next").click()
     wait_ready("skills")
-    ids2 = [int(tr.get_attribute("data-id")) for tr in driver.find_elements(By.CSS_SELECTOR, "#skill-rows tr")]
+    ids2 = row_ids("#skill-rows tr")
     out["next_page_continues"] = bool(ids2) and max(ids2) < min(ids)
     shot("skills-filtered")
     logs("filter")
@@ -115,6 +214,15 @@ try:
     go(f"{base}/#/skills/{skill_id}")
     wait_ready("skill")
     out["timeline_phases"] = len(driver.find_elements(By.CSS_SELECTOR, "#timeline div"))
+    # The phase durations read in the grasp's order (the timeline's), not the API's alphabetical.
+    timeline = list(dict.fromkeys(driver.execute_script(
+        "return [...document.querySelectorAll('#timeline div')].map(d => d.textContent)")))
+    facts = driver.execute_script("""
+        const dt = [...document.querySelectorAll('dl.facts dt')].find(d => d.textContent === 'phases');
+        return dt ? dt.nextElementSibling.textContent : '';""")
+    out["phase_facts"] = facts
+    out["phase_facts_in_time_order"] = bool(timeline) and [
+        p.strip().split(" ")[0] for p in facts.split(",")] == timeline
     out["plot_pixels"] = driver.execute_script("""
         const c = document.querySelector('#plot-normal canvas');
         if (!c) return 0;
@@ -164,13 +272,48 @@ try:
     out["xss_text_on_session"] = XSS in driver.find_element(By.ID, "session-scenario").text
     out["xss_alert_session"] = alert_open()
     shot("session")
+    # The session list: newest first (the <script> session is among the newest), pages, filters.
     go(f"{base}/#/sessions")
     wait_ready("sessions")
     out["xss_alert"] = alert_open()
     out["xss_script_elements"] = driver.execute_script(
         "return [...document.querySelectorAll('main script')].length")
     out["foxglove_links"] = len(driver.find_elements(By.PARTIAL_LINK_TEXT, "open in Foxglove"))
+    ids = row_ids("#session-rows tr")
+    scenarios = texts("#session-rows td.scenario")
+    out["sessions_rows"] = len(ids)
+    out["sessions_newest_first"] = bool(ids) and ids == sorted(ids, reverse=True)
+    out["sessions_first_scenario"] = scenarios[0] if scenarios else None
+    out["xss_text_on_sessions"] = XSS in scenarios
     shot("sessions")
+    unready()
+    driver.find_element(By.ID, "sessions-next").click()
+    wait_ready("sessions")
+    ids2 = row_ids("#session-rows tr")
+    out["sessions_next_continues"] = bool(ids2) and max(ids2) < min(ids)
+    unready()
+    driver.find_element(By.ID, "sessions-prev").click()
+    wait_ready("sessions")
+    out["sessions_prev_returns"] = row_ids("#session-rows tr") == ids
+    form = driver.find_element(By.ID, "session-filters")
+    form.find_element(By.NAME, "scenario").send_keys("sphere-lift")
+    unready()
+    driver.find_element(By.ID, "sessions-apply").click()
+    wait_ready("sessions")
+    scenarios = texts("#session-rows td.scenario")
+    out["sessions_by_scenario"] = scenarios
+    out["sessions_hash_after_filter"] = driver.execute_script("return location.hash")
+    driver.find_element(By.NAME, "scenario").clear()
+    Select(driver.find_element(By.CSS_SELECTOR, "#session-filters select[name=shape]")).select_by_value("box")
+    unready()
+    driver.find_element(By.ID, "sessions-apply").click()
+    wait_ready("sessions")
+    objects = texts("#session-rows td.object")
+    ids = row_ids("#session-rows tr")
+    out["sessions_by_shape_rows"] = len(objects)
+    out["sessions_by_shape_all_box"] = bool(objects) and all(o == "box" for o in objects)
+    out["sessions_by_shape_newest_first"] = ids == sorted(ids, reverse=True)
+    shot("sessions-filtered")
     logs("sessions")
 
     # 6. Hands: each drawn; an invalid upload shows the problem's title and detail.
@@ -207,6 +350,7 @@ except TimeoutException as e:
     out["failure"] = f"timed out after steps {out['steps']}: {e.msg}"
     shot("failure")
 finally:
-    driver.quit()
+    out["total_s"] = time.monotonic() - started
+    session.quit()
 
 print(json.dumps(out))

@@ -238,3 +238,124 @@ async fn pages_of_sessions_and_skills_follow_their_cursors_to_the_end() {
     assert_eq!(paged, all, "pages add up to the whole list, in order");
     app.stop().await;
 }
+
+/// The ids of a page of `GET /api/v1/sessions...` and its cursor.
+async fn session_ids(c: &tests::Client, url: &str) -> (Vec<i64>, Option<String>) {
+    let r = c.get(url).await;
+    assert_eq!(r.status, 200, "{url}: {}", String::from_utf8_lossy(&r.body));
+    let page = r.json();
+    let ids = page["items"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|s| s["id"].as_i64().unwrap())
+        .collect();
+    (ids, page["next_cursor"].as_str().map(str::to_owned))
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn sessions_filter_by_scenario_hand_and_shape_newest_first_in_pages() {
+    let app = TestApp::spawn().await;
+    let c = &app.client;
+    let mut stored = Vec::new();
+    for (scenario, seed) in [
+        ("sphere-lift", 1),
+        ("box-pinch-lift", 1),
+        ("sphere-lift", 2),
+        ("box-pinch-lift", 2),
+    ] {
+        let r = c
+            .upload(&tests::session_bytes(scenario, seed, None), None)
+            .await;
+        assert_eq!(r.status, 201, "{}", String::from_utf8_lossy(&r.body));
+        stored.push(r.json()["session_id"].as_i64().unwrap());
+    }
+    let [s1, b1, s2, b2] = stored[..] else {
+        unreachable!()
+    };
+    let hand = c.get(&format!("/api/v1/sessions/{s1}")).await.json()["meta"]["hand"]
+        .as_str()
+        .unwrap()
+        .to_owned();
+
+    // Oldest first by default (as before), newest first with sort=-id or id:desc.
+    assert_eq!(session_ids(c, "/api/v1/sessions").await.0, [s1, b1, s2, b2]);
+    assert_eq!(
+        session_ids(c, "/api/v1/sessions?sort=-id").await.0,
+        [b2, s2, b1, s1]
+    );
+    assert_eq!(
+        session_ids(c, "/api/v1/sessions?sort=id:desc").await.0,
+        [b2, s2, b1, s1]
+    );
+    // Newest first, one per page, follows its cursors to the end.
+    let mut paged = Vec::new();
+    let mut url = "/api/v1/sessions?sort=-id&limit=1".to_owned();
+    loop {
+        let (ids, next) = session_ids(c, &url).await;
+        assert_eq!(ids.len(), 1, "{url}");
+        paged.extend(ids);
+        match next {
+            Some(cur) => url = format!("/api/v1/sessions?sort=-id&limit=1&cursor={cur}"),
+            None => break,
+        }
+    }
+    assert_eq!(paged, [b2, s2, b1, s1]);
+
+    // Filters, alone and together, in either order and across pages.
+    assert_eq!(
+        session_ids(c, "/api/v1/sessions?scenario=sphere-lift&sort=-id")
+            .await
+            .0,
+        [s2, s1]
+    );
+    assert_eq!(
+        session_ids(c, "/api/v1/sessions?shape=box").await.0,
+        [b1, b2]
+    );
+    assert_eq!(
+        session_ids(c, &format!("/api/v1/sessions?hand={hand}&sort=-id"))
+            .await
+            .0,
+        [b2, s2, b1, s1]
+    );
+    assert_eq!(
+        session_ids(c, "/api/v1/sessions?scenario=box-pinch-lift&shape=sphere")
+            .await
+            .0,
+        Vec::<i64>::new()
+    );
+    assert_eq!(
+        session_ids(c, "/api/v1/sessions?hand=no-such-hand").await,
+        (vec![], None)
+    );
+    let (first, cursor) = session_ids(
+        c,
+        "/api/v1/sessions?scenario=box-pinch-lift&sort=-id&limit=1",
+    )
+    .await;
+    assert_eq!(first, [b2]);
+    let cursor = cursor.expect("a second page");
+    assert_eq!(
+        session_ids(
+            c,
+            &format!("/api/v1/sessions?scenario=box-pinch-lift&sort=-id&limit=1&cursor={cursor}")
+        )
+        .await,
+        (vec![b1], None)
+    );
+
+    // Refused: another sort, an unknown shape, and a cursor of the other order.
+    let detail = c.get("/api/v1/sessions?sort=quality").await.problem(400);
+    assert!(detail.contains("\"quality\""), "{detail}");
+    let detail = c.get("/api/v1/sessions?shape=torus").await.problem(400);
+    assert!(detail.contains("torus"), "{detail}");
+    let (_, ascending) = session_ids(c, "/api/v1/sessions?limit=1").await;
+    c.get(&format!(
+        "/api/v1/sessions?sort=-id&limit=1&cursor={}",
+        ascending.unwrap()
+    ))
+    .await
+    .problem(400);
+    app.stop().await;
+}

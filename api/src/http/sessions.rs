@@ -7,7 +7,9 @@ use axum::http::{header, HeaderMap, HeaderValue, StatusCode};
 use axum::response::{IntoResponse, Response};
 use serde::{Deserialize, Serialize};
 use services::ingest::ingest_staged;
-use services::store::{IngestOutcome, ObjectShape, SessionMeta, SessionRecord, DEFAULT_LIMIT};
+use services::store::{
+    IngestOutcome, ObjectShape, SessionMeta, SessionQuery, SessionRecord, StoreError, DEFAULT_LIMIT,
+};
 use utoipa::{IntoParams, ToSchema};
 use utoipa_axum::router::OpenApiRouter;
 use utoipa_axum::routes;
@@ -126,22 +128,56 @@ impl From<SessionRecord> for SessionBody {
 /// One page of sessions.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize, ToSchema)]
 pub struct SessionPage {
-    /// Sessions by ascending id.
+    /// Sessions by id, in the order asked for (ascending by default).
     pub items: Vec<SessionBody>,
     /// Pass as `cursor` for the next page; `null` on the last.
     pub next_cursor: Option<String>,
 }
 
-/// Page parameters of `GET /sessions`.
+/// Filters, order and page of `GET /sessions`. Every filter is optional and matches exactly.
 #[derive(Debug, Clone, Default, Deserialize, IntoParams)]
 #[serde(default, deny_unknown_fields)]
 #[into_params(parameter_in = Query)]
-pub struct PageParams {
+pub struct SessionParams {
+    /// Scenario name, e.g. sphere-lift (simulated sessions; a recorded one has none).
+    pub scenario: Option<String>,
+    /// Hand (glove) that performed the session, e.g. glove10.
+    pub hand: Option<String>,
+    /// Object shape: sphere, box, cylinder, or unknown.
+    #[param(value_type = Option<String>)]
+    pub shape: Option<ObjectShape>,
+    /// Order by id: `id` (oldest first, the default) or `-id` (newest first; also `id:asc`,
+    /// `id:desc`).
+    pub sort: Option<String>,
     /// Page size, 1 to 1000. Default 50.
     #[param(minimum = 1, maximum = 1000)]
     pub limit: Option<u32>,
-    /// `next_cursor` of the previous page.
+    /// `next_cursor` of the previous page, passed back with the same filters and sort.
     pub cursor: Option<String>,
+}
+
+impl SessionParams {
+    /// The store query these parameters ask for; a sort other than by id is
+    /// [`StoreError::InvalidQuery`] (the store checks limit and cursor).
+    pub fn to_query(&self) -> Result<SessionQuery, StoreError> {
+        let newest_first = match self.sort.as_deref() {
+            None | Some("id" | "id:asc") => false,
+            Some("-id" | "id:desc") => true,
+            Some(other) => {
+                return Err(StoreError::InvalidQuery(format!(
+                    "sort {other:?} is not one of id, -id, id:asc, id:desc (sessions sort by id)"
+                )))
+            }
+        };
+        Ok(SessionQuery {
+            scenario: self.scenario.clone(),
+            hand: self.hand.clone(),
+            object_shape: self.shape,
+            newest_first,
+            limit: self.limit.unwrap_or(DEFAULT_LIMIT),
+            cursor: self.cursor.clone(),
+        })
+    }
 }
 
 /// A session stored (or found already stored) with its skills.
@@ -248,21 +284,19 @@ async fn upload_session(
     StoredSession::reply(&st, out).await
 }
 
-/// Sessions by ascending id, one page at a time.
+/// Sessions matching every given filter, by id (ascending, or newest first with
+/// `sort=-id`), one page at a time.
 #[utoipa::path(get, path = "/sessions", tag = "sessions",
-    params(PageParams),
+    params(SessionParams),
     responses(
         (status = 200, description = "One page of sessions", body = SessionPage),
-        (status = 400, description = "An invalid limit or cursor, or an unknown parameter", body = ProblemBody, content_type = "application/problem+json"),
+        (status = 400, description = "An invalid shape, sort, limit or cursor, or an unknown parameter", body = ProblemBody, content_type = "application/problem+json"),
     ))]
 async fn list_sessions(
     State(st): State<AppState>,
-    Query(p): Query<PageParams>,
+    Query(p): Query<SessionParams>,
 ) -> Result<axum::Json<SessionPage>, Problem> {
-    let page = st
-        .store()
-        .list_sessions(p.limit.unwrap_or(DEFAULT_LIMIT), p.cursor.as_deref())
-        .await?;
+    let page = st.store().query_sessions(&p.to_query()?).await?;
     Ok(axum::Json(SessionPage {
         items: page.items.into_iter().map(SessionBody::from).collect(),
         next_cursor: page.next_cursor,

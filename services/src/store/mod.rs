@@ -68,7 +68,9 @@ pub struct SweepReport {
     pub removed_bytes: u64,
 }
 pub use hands::MAX_HAND_NAME;
-pub use query::{SkillQuery, SortField, SortKey, SortOrder, DEFAULT_LIMIT, MAX_LIMIT};
+pub use query::{
+    SessionQuery, SkillQuery, SortField, SortKey, SortOrder, DEFAULT_LIMIT, MAX_LIMIT,
+};
 pub use types::{
     Hand, HandSummary, IngestOutcome, NewSkill, ObjectShape, Page, ReplacedSkills, Replay,
     SessionMeta, SessionRecord, SkillRecord, StaleSession, FEATURE_DIM,
@@ -986,25 +988,79 @@ impl Store {
         limit: u32,
         cursor: Option<&str>,
     ) -> Result<Page<SessionRecord>, StoreError> {
+        self.query_sessions(&SessionQuery {
+            limit,
+            cursor: cursor.map(str::to_owned),
+            ..SessionQuery::default()
+        })
+        .await
+    }
+
+    /// Sessions matching every filter of `q`, by id (ascending, or newest first), `q.limit`
+    /// (1..=1000) per page, after `q.cursor`. A cursor belongs to its order: one of the other
+    /// order is [`StoreError::BadCursor`].
+    pub async fn query_sessions(
+        &self,
+        q: &SessionQuery,
+    ) -> Result<Page<SessionRecord>, StoreError> {
+        let limit = q.limit;
         if limit == 0 || limit > MAX_SESSION_LIMIT {
             return Err(StoreError::InvalidQuery(format!(
                 "limit {limit} is outside 1..={MAX_SESSION_LIMIT}"
             )));
         }
-        let after = match cursor {
-            Some(c) => match query::decode_cursor("sessions", false, c)? {
-                query::After::Int(id) => id,
+        // Ascending pages keep the tag they always had, so their cursors stay valid.
+        let tag = if q.newest_first {
+            "sessions-desc"
+        } else {
+            "sessions"
+        };
+        let after = match &q.cursor {
+            Some(c) => match query::decode_cursor(tag, false, c)? {
+                query::After::Int(id) => Some(id),
                 query::After::Real(..) => return Err(StoreError::BadCursor),
             },
-            None => 0,
+            None => None,
         };
-        let rows = sqlx::query(&format!(
-            "SELECT {SESSION_COLUMNS} FROM sessions s WHERE id > ? ORDER BY id LIMIT ?"
-        ))
-        .bind(after)
-        .bind(i64::from(limit) + 1)
-        .fetch_all(&self.inner.pool)
-        .await?;
+        let mut sql = format!("SELECT {SESSION_COLUMNS} FROM sessions s WHERE 1");
+        if after.is_some() {
+            sql.push_str(if q.newest_first {
+                " AND id < ?"
+            } else {
+                " AND id > ?"
+            });
+        }
+        if q.scenario.is_some() {
+            sql.push_str(" AND scenario = ?");
+        }
+        if q.hand.is_some() {
+            sql.push_str(" AND hand = ?");
+        }
+        if q.object_shape.is_some() {
+            sql.push_str(" AND object_shape = ?");
+        }
+        sql.push_str(if q.newest_first {
+            " ORDER BY id DESC LIMIT ?"
+        } else {
+            " ORDER BY id LIMIT ?"
+        });
+        let mut stmt = sqlx::query(&sql);
+        if let Some(id) = after {
+            stmt = stmt.bind(id);
+        }
+        if let Some(s) = &q.scenario {
+            stmt = stmt.bind(s);
+        }
+        if let Some(h) = &q.hand {
+            stmt = stmt.bind(h);
+        }
+        if let Some(shape) = q.object_shape {
+            stmt = stmt.bind(shape.name());
+        }
+        let rows = stmt
+            .bind(i64::from(limit) + 1)
+            .fetch_all(&self.inner.pool)
+            .await?;
         let more = rows.len() > limit as usize;
         let items = rows
             .iter()
@@ -1012,9 +1068,7 @@ impl Store {
             .map(Self::row_to_session)
             .collect::<Result<Vec<_>, _>>()?;
         let next_cursor = match (more, items.last()) {
-            (true, Some(last)) => {
-                Some(query::encode_cursor("sessions", query::After::Int(last.id)))
-            }
+            (true, Some(last)) => Some(query::encode_cursor(tag, query::After::Int(last.id))),
             _ => None,
         };
         Ok(Page { items, next_cursor })

@@ -158,6 +158,38 @@ pub struct SkillQuery {
     pub cursor: Option<String>,
 }
 
+/// Filters, order and page of a session query ([`crate::store::Store::query_sessions`]). Every
+/// filter is optional and matches exactly.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default)]
+pub struct SessionQuery {
+    /// Scenario name equals (simulated sessions; a recorded one has none).
+    pub scenario: Option<String>,
+    /// Hand (glove) name equals.
+    pub hand: Option<String>,
+    /// Object shape equals.
+    pub object_shape: Option<ObjectShape>,
+    /// Newest (highest id) first; default oldest first.
+    pub newest_first: bool,
+    /// Page size, 1..=1000 (default 50).
+    pub limit: u32,
+    /// `next_cursor` of the previous page (same order), or `None` for the first page.
+    pub cursor: Option<String>,
+}
+
+impl Default for SessionQuery {
+    fn default() -> Self {
+        SessionQuery {
+            scenario: None,
+            hand: None,
+            object_shape: None,
+            newest_first: false,
+            limit: DEFAULT_LIMIT,
+            cursor: None,
+        }
+    }
+}
+
 impl Default for SkillQuery {
     fn default() -> Self {
         SkillQuery {
