@@ -8,10 +8,11 @@ glove10 (ring and little MCP/PIP copy the middle finger's, every coupled DIP fol
 2/3, the thumb IP follows its MCP) are joint equality constraints here (MuJoCo has no mimic
 joints), stiff ones (`solref` 0.002 s: with MuJoCo's default 0.02 s the coupled joints give
 way under a held ball's weight). MJCF angles are degrees unless `<compiler angle="radian"/>`:
-the models using these bodies must say radian. Only the fingertip spheres collide, and only
-with the object: the DFS has no other contact geometry (palm and phalanx contact is issue 21
-item 5), so the links' capsules and the palm box are visual only (`whole_hand` makes them
-collide, for that future scene).
+the models using these bodies must say radian. The fingertip spheres collide with the object;
+with `whole_hand` the palm box and the phalanx capsules do too: glove10's whole-hand contact
+geometry (glove10.rs `add_contact_geometry`: the palm box, a capsule along each phalanx with its
+radius, a distal one stopping a fingertip diameter short of the finger's end). Without it they
+are visual only, as for the `fingertips` scene, where only fingertips touch in the DFS.
 """
 
 import math
@@ -88,9 +89,10 @@ def _finger(name, mcp, ratios, radii, tip_radius, limits, primary, contact_tips,
         out.append(f'<body name="{name}_{segs[s]}" pos="{_f(*pos)}" gravcomp="1">')
         out.append(_inertial(m, com, diag))
         out.append(_joint(f"{name}_{joints[s]}", limits[s], primary[s]))
+        end = lengths[s] - 2.0 * tip_radius if s == 2 else lengths[s]
         out.append(
-            f'<geom type="capsule" fromto="0 0 0 {lengths[s]:.9g} 0 0" size="{radii[s]:.9g}" '
-            f'{_flags(links_collide)} group="1"/>'
+            f'<geom name="{name}_{segs[s]}" type="capsule" fromto="0 0 0 {end:.9g} 0 0" size="{radii[s]:.9g}" '
+            f'{_flags(links_collide)} condim="3" group="1"/>'
         )
         pos = (lengths[s], 0.0, 0.0)
     out.append(_tip(name, lengths[2], tip_radius, name in contact_tips))
@@ -137,8 +139,8 @@ def glove10_body(contact_tips, whole_hand=False):
             f'armature="{ARMATURE}" damping="{JOINT_DAMPING}"/>'
         )
     x.append(
-        f'<geom type="box" pos="{_f(0.5 * a, 0, 0)}" size="{_f(0.5 * a, 0.5 * b, 0.5 * c)}" '
-        f'{_flags(whole_hand)} group="1"/>'
+        f'<geom name="palm" type="box" pos="{_f(0.5 * a, 0, 0)}" size="{_f(0.5 * a, 0.5 * b, 0.5 * c)}" '
+        f'{_flags(whole_hand)} condim="3" group="1"/>'
     )
     # Index: three DOFs.
     name, mcp, ratios, radii, tr = FINGERS[0]
@@ -157,9 +159,10 @@ def glove10_body(contact_tips, whole_hand=False):
         x.append(f'<body name="thumb_{segs[s]}" pos="{_f(*pos)}"{q} gravcomp="1">')
         x.append(_inertial(m, com, diag))
         x.append(_joint(jn[s], tlim[s], s < 2))
+        end = lengths[s] - 2.0 * THUMB_TIP_RADIUS if s == 2 else lengths[s]
         x.append(
-            f'<geom type="capsule" fromto="0 0 0 {lengths[s]:.9g} 0 0" size="{THUMB_RADII[s]:.9g}" '
-            f'{_flags(whole_hand)} group="1"/>'
+            f'<geom name="thumb_{segs[s]}" type="capsule" fromto="0 0 0 {end:.9g} 0 0" size="{THUMB_RADII[s]:.9g}" '
+            f'{_flags(whole_hand)} condim="3" group="1"/>'
         )
     x.append(_tip("thumb", lengths[2], THUMB_TIP_RADIUS, "thumb" in contact_tips))
     x.extend(["</body>"] * 3)

@@ -39,9 +39,14 @@ whole one; batches much shorter than a slice (100 steps: 1.5-2 ms here, the DFS'
 the ball is still held (at least three fingertip contacts, moved less than 10 mm in the hand)
 and fails otherwise.
 
-`--scene power-grasp` (a cylinder pressed into the palm by the wrapped fingers, the palm and
-every phalanx colliding) waits for the DFS's scene, which needs palm and phalanx contact (issue
-21 item 5): like `icms bench tick --scene power-grasp`, it refuses until then.
+`--scene power-grasp` is the DFS's power grasp (`power_grasp_scene.json` beside this file,
+written by `icms bench tick --scene power-grasp --describe`): glove10 palm up with whole-hand
+contact geometry (the palm box, the phalanx capsules and the fingertip spheres all collide with
+the object, `condim` 3, the object's friction), the cylinder where the DFS's grasp settled, the
+hand in the posture its fingers came to rest in, the operator's law `g(t) τ_close + K_p (θ_set −
+θ) − K_d θ̇` as position actuators as above; the same solver options. After the run it checks
+that the palm or a phalanx still touches the cylinder and that it moved less than 10 mm in the
+hand.
 """
 
 import argparse
@@ -134,6 +139,65 @@ def fingertips_model(scene):
     return model, data, controls
 
 
+def power_grasp_model(scene):
+    dofs = scene["dofs"]
+    kp, kd = scene["kp"], scene["kd"]
+    actuators = "\n".join(
+        f'<position name="{d}" joint="{d}" kp="{kp[i]:.17g}" kv="{kd[i]:.17g}" ctrllimited="false"/>'
+        for i, d in enumerate(dofs)
+    )
+    mu = scene["cylinder_mu"]
+    xml = f"""<mujoco model="glove10_power_grasp">
+  <compiler angle="radian"/>
+  <option timestep="{scene['dt']}" gravity="{f(*scene['gravity'])}" cone="elliptic"
+          impratio="{IMPRATIO}" integrator="implicitfast"/>
+  <worldbody>
+    <body name="object" pos="{f(*scene['cylinder_position'])}" quat="{f(*scene['cylinder_quaternion'])}">
+      <freejoint/>
+      <geom name="object" type="cylinder" size="{scene['cylinder_radius']:.17g} {scene['cylinder_half_height']:.17g}"
+            mass="{scene['cylinder_mass']:.17g}" friction="{mu:.17g} 0 0" condim="3" contype="0"
+            conaffinity="1" solref="0.004 1"/>
+    </body>
+    <body name="forearm" mocap="true" pos="{f(*scene['base_position'])}" quat="{f(*scene['base_quaternion'])}">
+      {glove10.glove10_body(["thumb", "index", "middle", "ring", "little"], whole_hand=True)}
+    </body>
+  </worldbody>
+  <equality>
+    {glove10.glove10_equalities()}
+  </equality>
+  <actuator>
+    {actuators}
+  </actuator>
+</mujoco>"""
+    model = mujoco.MjModel.from_xml_string(xml)
+    data = mujoco.MjData(model)
+    for name, value in joint_values(dofs, scene["q"]).items():
+        data.qpos[model.joint(name).qposadr[0]] = value
+    mujoco.mj_forward(model, data)
+    # The MJCF hand is glove10's whole-hand geometry: at the start the DFS's pressing contacts
+    # touch the cylinder here too (within 1 mm: the DFS's contacts are springs pressed in).
+    touching = set()
+    obj = model.geom("object").id
+    for i in range(data.ncon):
+        c = data.contact[i]
+        if obj in (c.geom[0], c.geom[1]) and c.dist <= 1e-3:
+            other = c.geom[1] if c.geom[0] == obj else c.geom[0]
+            touching.add(model.geom(other).name)
+    missing = [c for c in scene["contacts"] if c not in touching]
+    if missing:
+        sys.exit(f"mujoco_peer.py: power-grasp: {missing} do not touch the cylinder at the start")
+    q = np.array(scene["q"])
+    tau = np.array(scene["tau_ff"])
+    kp = np.array(kp)
+
+    def controls(step0, nstep):
+        t = (step0 + np.arange(nstep)) * scene["dt"]
+        grip = 1.0 + scene["grip_swing"] * np.sin(2.0 * math.pi * t / scene["grip_period_s"])
+        return q[None, :] + grip[:, None] * (tau / kp)[None, :]
+
+    return model, data, controls
+
+
 def held(model, data, start_in_hand):
     """(the hand's contacts on the object, distance the object moved in the hand (m))."""
     obj = model.geom("object").id
@@ -167,12 +231,13 @@ def main():
         model, data, controls = fingertips_model(scene)
         min_contacts = len(scene["contact_tips"]) - 1
     else:
-        sys.exit(
-            "mujoco_peer.py: scene power-grasp: not written yet. It is the peer of the DFS's "
-            "power-grasp scene (a cylinder pressed into the palm by the wrapped fingers), which "
-            "needs palm and phalanx contact (issue 21 item 5); glove10_mjcf.glove10_body("
-            "..., whole_hand=True) gives the MJCF hand that contact geometry for it."
-        )
+        path = a.scene_file
+        if path == os.path.join(HERE, "fingertips_scene.json"):
+            path = os.path.join(HERE, "power_grasp_scene.json")
+        with open(path) as fh:
+            scene = json.load(fh)
+        model, data, controls = power_grasp_model(scene)
+        min_contacts = 1
 
     spec = mujoco.mjtState.mjSTATE_FULLPHYSICS
     nstate = mujoco.mj_stateSize(model, spec)
@@ -216,13 +281,13 @@ def main():
     contacts, shift = held(model, data, start)
     print(
         f"MuJoCo {mujoco.__version__}, scene {a.scene}: {model.nv} DOFs, {model.neq} equality constraints, "
-        f"{contacts} fingertip contacts at the end, ball moved {shift * 1e3:.2f} mm in the hand; "
+        f"{contacts} contacts at the end, object moved {shift * 1e3:.2f} mm in the hand; "
         f"{a.batches} batches of {a.batch_steps} steps after {a.warmup}: per step "
         f"min {min(per_step_us):.3f} us, mean {statistics.fmean(per_step_us):.3f} us"
     )
     if contacts < min_contacts or shift >= 0.010:
         sys.exit(
-            f"mujoco_peer.py: the ball is no longer held ({contacts} contacts, moved "
+            f"mujoco_peer.py: the object is no longer held ({contacts} contacts, moved "
             f"{shift * 1e3:.1f} mm in the hand): the timing is not of a held-object scene"
         )
     print(f"{statistics.median(per_step_us):.3f}")

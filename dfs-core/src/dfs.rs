@@ -89,6 +89,10 @@ use crate::math::{
 use crate::object::{external_wrench_b, integrate, shapes_overlap, ObjectState, RigidObject};
 use crate::table::{Table, TableSupport};
 
+mod body;
+use crate::hand::MAX_CONTACT_SHAPES;
+pub use body::{BodyContact, BODY_STIFFNESS_BUDGET};
+
 /// Most objects a DFS scene holds: 8.
 pub const MAX_OBJECTS: usize = 8;
 
@@ -217,6 +221,19 @@ pub struct DfsParams {
     /// `table_rolling × N` (a box or a standing cylinder has none: its corners or rim resist).
     /// Default 0.001 (a 4 cm ball bumped at 0.1 m/s rolls about 1.5 cm).
     pub table_rolling: Real,
+    /// Whole-hand contact: the hand's palm and phalanges
+    /// ([`HandModel::contact_shapes`](crate::hand::HandModel)) touch objects too, each a
+    /// spring-damper contact with stick friction and its own frame and cone in `W` (see
+    /// [`body`](self) and the module documentation of `dfs::body`). Default false: the
+    /// fingertips alone, as before issue 21 item 5.
+    pub whole_hand: bool,
+    /// Stiffness (N/m) of a whole-hand contact, along the normal and of its stick spring,
+    /// limited per contact by [`BODY_STIFFNESS_BUDGET`]. Default 20 000 (a 5 N push presses a
+    /// palm 0.25 mm in).
+    pub body_stiffness: Real,
+    /// Damping (N·s/m) of a whole-hand contact, along the normal and of its stick spring, limited
+    /// per contact by [`STABLE_DAMPING`]. Default 30.
+    pub body_damping: Real,
 }
 
 impl Default for DfsParams {
@@ -240,6 +257,9 @@ impl Default for DfsParams {
             table_height: None,
             table_mu: 0.5,
             table_rolling: 1e-3,
+            whole_hand: false,
+            body_stiffness: 2e4,
+            body_damping: 30.0,
         }
     }
 }
@@ -286,6 +306,8 @@ impl DfsParams {
         pos("torque_range", self.torque_range)?;
         nonneg("table_mu", self.table_mu)?;
         nonneg("table_rolling", self.table_rolling)?;
+        nonneg("body_stiffness", self.body_stiffness)?;
+        nonneg("body_damping", self.body_damping)?;
         if let Some(h) = self.table_height {
             if !h.is_finite() {
                 return Err(DfsError::invalid("table_height", "must be finite"));
@@ -378,6 +400,10 @@ pub struct TickOutput {
     pub feedback_torque: [Real; MAX_DOF],
     /// Fingertip centres in the world (m).
     pub tip_centres: [Point; MAX_TIPS],
+    /// Number of contact shapes taking part (0 unless [`DfsParams::whole_hand`]); their state
+    /// is [`Dfs::body_contacts`], kept out of this output so that copying a tick's output (a
+    /// recorder does, every tick) does not copy 24 contact states.
+    pub n_body: usize,
 }
 
 impl Default for TickOutput {
@@ -399,6 +425,7 @@ impl Default for TickOutput {
             motor_qd: [0.0; MAX_DOF],
             feedback_torque: [0.0; MAX_DOF],
             tip_centres: [Point::origin(); MAX_TIPS],
+            n_body: 0,
         }
     }
 }
@@ -459,6 +486,7 @@ pub struct Dfs {
     passive_world: [Vector; MAX_TIPS],
     frames: [ContactFrame; MAX_CONTACTS],
     transmitted: [Intensity; MAX_CONTACTS],
+    /// Per transmitting contact: its fingertip, or `MAX_TIPS + s` for contact shape `s`.
     contact_tip: [usize; MAX_CONTACTS],
     /// Per tip: the DOFs that move it (the wrist's and its finger's), ascending. Every other
     /// column of its Jacobian is zero, so the per-tip joint-space sums skip them.
@@ -475,6 +503,10 @@ pub struct Dfs {
     /// The hand's per-joint constants for forward kinematics, made once.
     fk_plan: FkPlan,
     factor: DofMatrix,
+    /// The whole-hand contacts' state ([`DfsParams::whole_hand`]).
+    body: body::BodyState,
+    /// Per contact shape, what the last tick found ([`Dfs::body_contacts`]).
+    body_out: [BodyContact; MAX_CONTACT_SHAPES],
     out: TickOutput,
 }
 
@@ -507,10 +539,24 @@ impl BodyConstants {
 fn finger_step_envelope(
     hand: &HandModel,
     tip_dofs: &[TipDofs; MAX_TIPS],
+    whole_hand: bool,
 ) -> ([usize; MAX_DOF], [usize; MAX_DOF]) {
     let n = hand.dof().min(MAX_DOF);
     let mut pattern = hand.inertia_coupling();
-    for t in tip_dofs.iter().take(hand.fingertips.len()) {
+    let n_shapes = if whole_hand {
+        hand.contact_shapes.len().min(MAX_CONTACT_SHAPES)
+    } else {
+        0
+    };
+    let shape_dofs = hand.contact_shapes[..n_shapes]
+        .iter()
+        .map(|s| TipDofs::of_link(hand, s.link));
+    for t in tip_dofs
+        .iter()
+        .take(hand.fingertips.len())
+        .copied()
+        .chain(shape_dofs)
+    {
         let set = t.as_slice().iter().fold(0 as DofSet, |s, &d| s | 1 << d);
         for &d in t.as_slice() {
             pattern[d] |= set;
@@ -590,7 +636,12 @@ struct TipDofs {
 
 impl TipDofs {
     fn of(hand: &HandModel, tip: usize) -> TipDofs {
-        let set = hand.dofs_moving_link(hand.fingertips[tip].link);
+        Self::of_link(hand, hand.fingertips[tip].link)
+    }
+
+    /// The DOFs moving `link`, ascending.
+    fn of_link(hand: &HandModel, link: usize) -> TipDofs {
+        let set = hand.dofs_moving_link(link);
         let mut t = TipDofs {
             dofs: [0; MAX_DOF],
             len: 0,
@@ -689,7 +740,7 @@ impl Dfs {
         for (k, t) in tip_dofs.iter_mut().enumerate().take(hand.fingertips.len()) {
             *t = TipDofs::of(&hand, k);
         }
-        let (solve_order, solve_first) = finger_step_envelope(&hand, &tip_dofs);
+        let (solve_order, solve_first) = finger_step_envelope(&hand, &tip_dofs, params.whole_hand);
         let mut solve_position = [0; MAX_DOF];
         for (i, &d) in solve_order.iter().enumerate().take(hand.dof().min(MAX_DOF)) {
             solve_position[d] = i;
@@ -701,6 +752,8 @@ impl Dfs {
         }
         let mass_plan = hand.mass_plan();
         let fk_plan = hand.fk_plan();
+        let body = body::BodyState::new(&hand, params.whole_hand, &solve_position);
+        out.n_body = body.n;
         let grasp = GraspMatrix::new(&[], params.contact_model, &first.friction);
         Ok(Dfs {
             hand,
@@ -742,6 +795,8 @@ impl Dfs {
             mass_plan,
             fk_plan,
             factor: DofMatrix::zeros(),
+            body,
+            body_out: [BodyContact::default(); MAX_CONTACT_SHAPES],
             out,
         })
     }
@@ -784,6 +839,13 @@ impl Dfs {
     /// The last tick's output.
     pub fn output(&self) -> &TickOutput {
         &self.out
+    }
+
+    /// What the last tick found at each of the hand's contact shapes (palm, phalanges), in
+    /// [`HandModel::contact_shapes`](crate::hand::HandModel) order: empty unless
+    /// [`DfsParams::whole_hand`].
+    pub fn body_contacts(&self) -> &[BodyContact] {
+        &self.body_out[..self.out.n_body]
     }
 
     /// Kinematics of the last tick (link poses, tip centres, Jacobians).
@@ -936,6 +998,9 @@ impl Dfs {
                 }
             }
         }
+        if self.body.n > 0 {
+            self.detect_body_contacts();
+        }
     }
 
     /// Stage 3: fingertip forces from joint torques (eq. 14), intensities, friction (eq. 15-18)
@@ -996,6 +1061,12 @@ impl Dfs {
             .filter(|t| t.frame.is_some())
         {
             touching[t.object] += 1;
+        }
+        for b in self.body_out[..self.body.n]
+            .iter()
+            .filter(|b| b.frame.is_some())
+        {
+            touching[b.object] += 1;
         }
         let mut n = 0;
         let mut contact_object = [0usize; MAX_CONTACTS];
@@ -1180,6 +1251,9 @@ impl Dfs {
                 n += 1;
             }
         }
+        if self.body.n > 0 {
+            n = self.body_forces(n, &mut contact_object, &touching, &rots);
+        }
         self.out.n_contacts = n;
         self.group_contacts_by_object(&contact_object[..n]);
     }
@@ -1304,6 +1378,11 @@ impl Dfs {
             g.distribute(&f_fingers, &mut c_o);
             for (c, ci) in c_o.iter().enumerate().take(n) {
                 let k = self.contact_tip[start + c];
+                if k >= MAX_TIPS {
+                    self.body_out[k - MAX_TIPS].reaction =
+                        apply_friction(self.params.contact_model, &friction, ci).transmitted;
+                    continue;
+                }
                 let t = &mut self.out.tips[k];
                 t.reaction = apply_friction(self.params.contact_model, &friction, ci).transmitted;
                 t.feedback = t.transmitted - t.reaction;
@@ -1407,6 +1486,10 @@ impl Dfs {
                     a[(d1, d2)] += pc1.dot(&col(d2));
                 }
             }
+        }
+        if self.body.n > 0 {
+            self.body
+                .add_to_finger_step(dt, &self.qd, a, &mut rhs, &mut fb_torque);
         }
         for d in 0..ndof {
             rhs[d] += dt * fb_torque[d];

@@ -1,6 +1,9 @@
 //! Ready-made set-ups shared by the tick and grasp-quality benchmarks, the allocation test and
 //! `icms bench tick`.
 
+mod power_grasp;
+pub use power_grasp::*;
+
 use crate::contact::{ContactFrame, ContactModel, Friction, Intensity};
 use crate::dfs::{Dfs, DfsParams, GloveSample};
 use crate::error::Result;

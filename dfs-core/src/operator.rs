@@ -167,6 +167,7 @@ pub fn with_free_base(hand: &HandModel, rotation: Rotation) -> HandModel {
             })
             .collect(),
         finger_groups: Vec::new(),
+        contact_shapes: Vec::new(),
     };
     out.compute_finger_groups();
     out

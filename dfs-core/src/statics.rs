@@ -277,7 +277,7 @@ pub struct GraspSpec {
     /// Torsional coefficient μ_t (m) in [`MU_TORSION_RANGE`], for the soft finger. Default 0.
     #[serde(default)]
     pub mu_torsion: Real,
-    /// Contacts, 1 to 6.
+    /// Contacts, 1 to 30 ([`MAX_CONTACTS`]: fingertips and whole-hand contacts).
     pub contacts: Vec<ContactSpec>,
     /// Requested object acceleration in B: (linear m/s², angular rad/s²). Default zero.
     #[serde(default)]

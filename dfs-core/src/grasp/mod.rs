@@ -20,12 +20,13 @@ pub mod optimise;
 pub mod quality;
 
 use crate::contact::{ContactFrame, ContactModel, Friction, Intensity};
-use crate::hand::MAX_TIPS;
+use crate::hand::{MAX_CONTACT_SHAPES, MAX_TIPS};
 use crate::math::{wrench, Mat6, Real, SymPinv6, Vector, Wrench};
 use nalgebra::SMatrix;
 
-/// Most contacts a grasp can have (one per fingertip).
-pub const MAX_CONTACTS: usize = MAX_TIPS;
+/// Most contacts a grasp can have: one per fingertip and one per whole-hand contact shape (palm,
+/// phalanges), 6 + 24 = 30.
+pub const MAX_CONTACTS: usize = MAX_TIPS + MAX_CONTACT_SHAPES;
 /// Columns of `W` at capacity.
 pub const MAX_COLUMNS: usize = 4 * MAX_CONTACTS;
 /// Relative eigenvalue tolerance of the pseudo-inverse.

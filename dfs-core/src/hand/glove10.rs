@@ -256,6 +256,7 @@ impl HandModel {
                 armature: Vec::new(),
                 fingertips: Vec::new(),
                 finger_groups: Vec::<FingerGroup>::new(),
+                contact_shapes: Vec::new(),
             },
         };
         let palm = add_wrist(&mut b);
@@ -277,8 +278,72 @@ impl HandModel {
             );
         }
         b.hand.compute_finger_groups();
+        add_contact_geometry(&mut b.hand);
         b.hand
     }
+}
+
+/// The palm and phalanx contact shapes (whole-hand contact, issue 21 item 5) from the same
+/// anthropometry as the links' masses: the palm box ([`PALM_BOX`], from the wrist centre along
+/// +x, as its inertial) and a capsule along each phalanx with the phalanx's radius (the thumb's
+/// metacarpal included). A distal phalanx's capsule stops one fingertip diameter short of the
+/// finger's end, where the fingertip sphere is the contact: the two overlap by the capsule's end
+/// ball only. 16 shapes (at most [`super::MAX_CONTACT_SHAPES`]).
+fn add_contact_geometry(hand: &mut HandModel) {
+    use super::contact_geometry::{body_part_of, ContactPrimitive, ContactShape};
+    let link = |hand: &HandModel, name: &str| hand.links.iter().position(|l| l.name == name);
+    let mut shapes = Vec::new();
+    if let Some(palm) = link(hand, "palm") {
+        let [a, b, c] = PALM_BOX;
+        shapes.push(ContactShape {
+            name: "palm".to_owned(),
+            link: palm,
+            part: body_part_of(hand, palm),
+            primitive: ContactPrimitive::Box {
+                pose: Isometry::translation(0.5 * a, 0.0, 0.0),
+                half_extents: Vector::new(0.5 * a, 0.5 * b, 0.5 * c),
+            },
+        });
+    }
+    let thumb = (
+        "thumb",
+        ["metacarpal", "proximal", "distal"],
+        THUMB_RATIOS,
+        THUMB_RADII,
+        THUMB_TIP_RADIUS,
+    );
+    let fingers = FINGERS.iter().map(|f| {
+        (
+            f.name,
+            ["proximal", "middle", "distal"],
+            f.ratios,
+            f.radii,
+            f.tip_radius,
+        )
+    });
+    for (finger, segments, ratios, radii, tip_radius) in std::iter::once(thumb).chain(fingers) {
+        for s in 0..3 {
+            let name = format!("{finger}_{}", segments[s]);
+            let Some(l) = link(hand, &name) else { continue };
+            let length = ratios[s] * HAND_LENGTH;
+            let end = if s == 2 {
+                length - 2.0 * tip_radius
+            } else {
+                length
+            };
+            shapes.push(ContactShape {
+                part: body_part_of(hand, l),
+                name,
+                link: l,
+                primitive: ContactPrimitive::Capsule {
+                    a: Vector::zeros(),
+                    b: Vector::new(end, 0.0, 0.0),
+                    radius: radii[s],
+                },
+            });
+        }
+    }
+    hand.contact_shapes = shapes;
 }
 
 /// Forearm, wrist roll/pitch/yaw and the palm; returns the palm link.
@@ -547,6 +612,46 @@ mod tests {
         assert!(
             tips(&hand, &[0.0; 10])[0].z < 0.0,
             "the thumb rests on the palmar side"
+        );
+    }
+
+    #[test]
+    fn glove10_has_a_palm_box_and_a_capsule_per_phalanx_within_the_limits() {
+        use crate::hand::{BodyPart, ContactPrimitive, MAX_CONTACT_SHAPES};
+        let hand = HandModel::glove10();
+        assert_eq!(hand.contact_shapes.len(), 16);
+        assert!(hand.contact_shapes.len() <= MAX_CONTACT_SHAPES);
+        let palms: Vec<_> = hand
+            .contact_shapes
+            .iter()
+            .filter(|s| s.part == BodyPart::Palm)
+            .collect();
+        assert_eq!(palms.len(), 1);
+        assert_eq!(hand.links[palms[0].link].name, "palm");
+        assert!(matches!(palms[0].primitive, ContactPrimitive::Box { .. }));
+        // Every phalanx belongs to the finger of its fingertip (thumb 0 ... little 4), three
+        // each.
+        for k in 0..5 {
+            let n = hand
+                .contact_shapes
+                .iter()
+                .filter(|s| s.part == BodyPart::Phalanx { finger: Some(k) })
+                .count();
+            assert_eq!(n, 3, "finger {k}");
+        }
+        // The capsules' radii are the links' (the same anthropometry as their masses).
+        let c = hand
+            .contact_shapes
+            .iter()
+            .find(|s| s.name == "index_proximal")
+            .unwrap();
+        assert_eq!(
+            c.primitive,
+            ContactPrimitive::Capsule {
+                a: Vector::zeros(),
+                b: Vector::new(0.265 * HAND_LENGTH, 0.0, 0.0),
+                radius: 0.0100
+            }
         );
     }
 

@@ -12,6 +12,7 @@
 //! solids that draw a hand and [`hand_urdf`] writes a hand back as URDF with them.
 
 pub mod builtin;
+pub mod contact_geometry;
 mod glove10;
 pub mod ik;
 mod model;
@@ -20,6 +21,9 @@ pub mod urdf;
 pub mod urdf_write;
 
 pub use builtin::{builtin_hand, builtin_spec, thumb_of, BUILTIN_HANDS};
+pub use contact_geometry::{
+    BodyPart, ContactPrimitive, ContactShape, MAX_CONTACT_SHAPES, MAX_CONTACT_SHAPES_PER_LINK,
+};
 pub use model::*;
 pub use shapes::{link_shapes, LinkShape, Primitive, ShapeSource};
 pub use urdf::{

@@ -187,6 +187,10 @@ pub struct HandModel {
     pub fingertips: Vec<Fingertip>,
     /// Finger groups for resolving joint torques into tip forces.
     pub finger_groups: Vec<FingerGroup>,
+    /// Whole-hand contact geometry: the palm and the phalanges as link-fixed solids
+    /// ([`super::contact_geometry`]), at most [`super::MAX_CONTACT_SHAPES`]; empty for a hand
+    /// that touches with its fingertips only.
+    pub contact_shapes: Vec<super::ContactShape>,
 }
 
 /// Marks a link without a parent joint (the root) in [`Kinematics::parent_joint`].
@@ -582,7 +586,8 @@ impl HandModel {
         self.validate_tree()?;
         self.validate_joints()?;
         self.validate_tips()?;
-        self.validate_groups()
+        self.validate_groups()?;
+        super::contact_geometry::validate_contact_shapes(self, &self.contact_shapes)
     }
 
     /// Capacities and the lengths of the per-DOF vectors.
@@ -898,6 +903,11 @@ impl HandModel {
             path.push(current);
         }
         path
+    }
+
+    /// True when `ancestor` is `link` or on its path to the root. Needs a valid tree.
+    pub fn is_ancestor_or_self(&self, ancestor: usize, link: usize) -> bool {
+        self.ancestors(link).contains(&ancestor)
     }
 
     /// The deepest link that is an ancestor (or equal) of every link in `links`; `None` for
@@ -1658,6 +1668,7 @@ pub(crate) mod tests {
                 },
             ],
             finger_groups: Vec::new(),
+            contact_shapes: Vec::new(),
         };
         hand.compute_finger_groups();
         hand
@@ -2051,6 +2062,7 @@ pub(crate) mod tests {
                 radius: 0.01,
             }],
             finger_groups: Vec::new(),
+            contact_shapes: Vec::new(),
         };
         hand.validate().unwrap();
         for angle in [-1.0, 0.0, 0.7] {

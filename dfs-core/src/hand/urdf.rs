@@ -754,6 +754,7 @@ impl HandModel {
             armature,
             fingertips,
             finger_groups: Vec::new(),
+            contact_shapes: Vec::new(),
         };
         hand.compute_finger_groups();
         hand.validate()?;

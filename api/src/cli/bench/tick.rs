@@ -30,6 +30,16 @@
 //! fingers'. After every batch the bench checks (untimed) that at least three fingertips still
 //! hold the ball and that it has not moved 10 mm in the hand, and fails otherwise.
 //!
+//! # The `power-grasp` scene
+//!
+//! glove10's power grasp of a cylinder (`dfs_core::fixtures::glove10_power_grasp`: a 4.4 cm,
+//! 0.3 kg cylinder across the palm, μ = 1, the fingers closed on it by constant flexion torques
+//! and settled for 1.5 s, whole-hand contact on). The operator then holds it with
+//! `τ = g(t) τ_close + K_p (θ_set − θ) − K_d θ̇` about where the fingers came to rest, with the same
+//! swinging grip as the `fingertips` scene; samples made by the closed loop beforehand and
+//! replayed as there. After every batch the bench checks that the palm or a phalanx still
+//! presses the cylinder and that it has not moved 10 mm in the hand.
+//!
 //! # Timing
 //!
 //! Batches of [`BATCH_TICKS`] ticks, alternately timed as a whole (two clock reads per batch:
@@ -57,8 +67,10 @@ pub enum TickScene {
     /// ring) with a slowly swinging grip: an evolving held-object scene, the same as the MuJoCo
     /// peer's `--scene fingertips`.
     Fingertips,
-    /// A cylinder pressed into the palm by the wrapped fingers and thumb: needs the palm and
-    /// the phalanges as contact geometry (issue 21 item 5), which the DFS does not have yet.
+    /// glove10, palm up, its fingers closed around a cylinder lying across the palm and pressing
+    /// it into the palm and the thumb's base, with a swinging grip: whole-hand contact (palm,
+    /// phalanges and fingertips; issue 21 item 5). `dfs_core::fixtures::glove10_power_grasp`
+    /// builds it; the same as the MuJoCo peer's `--scene power-grasp`.
     PowerGrasp,
     /// The benchmark before issue 21: one frozen glove sample of the paper's sphere on four
     /// long fingertips, the object reset every tick (kept so that issue 2's figures can be
@@ -451,24 +463,123 @@ fn fingertips() -> Result<Held, CliError> {
     Ok(Held { scene, dfs, base })
 }
 
-/// The `fingertips` scene's description (`--describe`).
-pub fn describe(scene: TickScene) -> Result<HeldScene, CliError> {
+/// The `power-grasp` scene: where everything is once the grasp has settled and how the operator
+/// holds the cylinder. Printed by `icms bench tick --scene power-grasp --describe` for the MuJoCo
+/// peer.
+#[derive(Debug, Clone, Serialize)]
+pub struct PowerGraspScene {
+    /// Scene name.
+    pub scene: &'static str,
+    /// Tick (s).
+    pub dt: Real,
+    /// Gravity (world, m/s²).
+    pub gravity: [Real; 3],
+    /// The hand model.
+    pub hand: &'static str,
+    /// Hand base (forearm) position in the world (m).
+    pub base_position: [Real; 3],
+    /// Orientation of the hand base (w, x, y, z).
+    pub base_quaternion: [Real; 4],
+    /// The cylinder's radius (m).
+    pub cylinder_radius: Real,
+    /// Half its length (m), along its z axis.
+    pub cylinder_half_height: Real,
+    /// Its mass (kg).
+    pub cylinder_mass: Real,
+    /// Coulomb friction, hand on the cylinder (every contact: palm, phalanges, fingertips).
+    pub cylinder_mu: Real,
+    /// Its centre once the grasp settled (world, m).
+    pub cylinder_position: [Real; 3],
+    /// Its orientation then (w, x, y, z).
+    pub cylinder_quaternion: [Real; 4],
+    /// Whole-hand contact stiffness (N/m) and damping (N·s/m) of the DFS.
+    pub body_stiffness: Real,
+    /// See `body_stiffness`.
+    pub body_damping: Real,
+    /// The contacts (shape names, fingertips as `tip_<name>`) pressing once settled.
+    pub contacts: Vec<String>,
+    /// DOF names, in θ order.
+    pub dofs: Vec<String>,
+    /// The set posture θ_set (rad): where the fingers came to rest; also the start.
+    pub q: Vec<Real>,
+    /// The closing torques τ_close (N·m), scaled by the grip.
+    pub tau_ff: Vec<Real>,
+    /// Joint stiffness K_p (N·m/rad).
+    pub kp: Vec<Real>,
+    /// Joint damping K_d (N·m·s/rad).
+    pub kd: Vec<Real>,
+    /// Relative swing of the grip.
+    pub grip_swing: Real,
+    /// Period of the grip's swing (s).
+    pub grip_period_s: Real,
+}
+
+/// A scene's description for the MuJoCo peer (`--describe`).
+#[derive(Debug, Clone, Serialize)]
+#[serde(untagged)]
+pub enum SceneDescription {
+    /// `fingertips`.
+    Fingertips(HeldScene),
+    /// `power-grasp`.
+    PowerGrasp(PowerGraspScene),
+}
+
+/// The scene's description (`--describe`).
+pub fn describe(scene: TickScene) -> Result<SceneDescription, CliError> {
     match scene {
-        TickScene::Fingertips => Ok(fingertips()?.scene),
+        TickScene::Fingertips => Ok(SceneDescription::Fingertips(fingertips()?.scene)),
+        TickScene::PowerGrasp => Ok(SceneDescription::PowerGrasp(power_grasp_scene()?)),
         other => Err(not_held(other)),
     }
 }
 
+/// The settled power grasp as [`PowerGraspScene`].
+fn power_grasp_scene() -> Result<PowerGraspScene, CliError> {
+    let g = dfs_core::fixtures::glove10_power_grasp()?;
+    let p = *g.dfs.params();
+    let hand = g.dfs.hand();
+    let out = g.dfs.output();
+    let mut contacts: Vec<String> = (0..out.n_body)
+        .filter(|&s| g.dfs.body_contacts()[s].in_contact)
+        .map(|s| hand.contact_shapes[s].name.clone())
+        .collect();
+    contacts.extend(
+        (0..out.n_tips)
+            .filter(|&k| out.tips[k].in_contact)
+            .map(|k| format!("tip_{}", hand.fingertips[k].name)),
+    );
+    let cyl = out.object.pose;
+    let (bq, cq) = (g.base.rotation.quaternion(), cyl.rotation.quaternion());
+    Ok(PowerGraspScene {
+        scene: "power-grasp",
+        dt: p.dt,
+        gravity: p.gravity.into(),
+        hand: "glove10",
+        base_position: g.base.translation.vector.into(),
+        base_quaternion: [bq.w, bq.i, bq.j, bq.k],
+        cylinder_radius: dfs_core::fixtures::CYLINDER_RADIUS,
+        cylinder_half_height: dfs_core::fixtures::CYLINDER_HALF_HEIGHT,
+        cylinder_mass: dfs_core::fixtures::CYLINDER_MASS,
+        cylinder_mu: dfs_core::fixtures::CYLINDER_MU,
+        cylinder_position: cyl.translation.vector.into(),
+        cylinder_quaternion: [cq.w, cq.i, cq.j, cq.k],
+        body_stiffness: p.body_stiffness,
+        body_damping: p.body_damping,
+        contacts,
+        dofs: hand.dof_names.clone(),
+        q: g.set_posture.clone(),
+        tau_ff: g.close_torques.clone(),
+        kp: g.kp.clone(),
+        kd: g.kd.clone(),
+        grip_swing: GRIP_SWING,
+        grip_period_s: GRIP_PERIOD_S,
+    })
+}
+
 fn not_held(scene: TickScene) -> CliError {
-    match scene {
-        TickScene::PowerGrasp => CliError(
-            "scene power-grasp: the DFS has no palm or phalanx contact yet (issue 21 item 5): \
-             only fingertip spheres touch objects, so a cylinder pressed into the palm cannot \
-             be simulated; `--scene fingertips` is the held-object scene that exists"
-                .into(),
-        ),
-        _ => CliError("only the fingertips scene can be described".into()),
-    }
+    CliError(format!(
+        "scene {scene:?}: only the fingertips and power-grasp scenes can be described"
+    ))
 }
 
 /// Glove samples of a held scene, made by the closed loop, and the DFS state they end in.
@@ -526,7 +637,14 @@ pub fn bench_tick(scene: TickScene, iterations: usize) -> Result<TickBench, CliE
     let batches = (iterations / batch / 2).max(1) * 2;
     let timed = batches * batch;
     match scene {
-        TickScene::PowerGrasp => Err(not_held(scene)),
+        TickScene::PowerGrasp => {
+            if timed > MAX_HELD_TICKS {
+                return Err(CliError(format!(
+                    "--iterations: at most {MAX_HELD_TICKS} for a held scene (its glove samples are kept in memory)"
+                )));
+            }
+            bench_power_grasp(batch, batches, timed)
+        }
         TickScene::Frozen => bench_frozen(batch, batches),
         TickScene::Fingertips => {
             if timed > MAX_HELD_TICKS {
@@ -705,5 +823,87 @@ fn bench_frozen(batch: usize, batches: usize) -> Result<TickBench, CliError> {
     r.warmup_ticks = warmup;
     r.contacts = contacts;
     r.min_contacts = contacts;
+    Ok(r)
+}
+
+/// The `power-grasp` scene (module documentation).
+fn bench_power_grasp(batch: usize, batches: usize, timed: usize) -> Result<TickBench, CliError> {
+    use dfs_core::fixtures::{glove10_power_grasp, operator_torques};
+    let g = glove10_power_grasp()?;
+    let hand = g.dfs.hand().clone();
+    let n = hand.dof();
+    let base = g.base;
+    // The glove samples, made by the closed loop.
+    let ticks = WARMUP_TICKS + timed;
+    let (mut qs, mut taus) = (Vec::with_capacity(n * ticks), Vec::with_capacity(n * ticks));
+    let mut dfs = g.dfs.clone();
+    let (mut q, mut qd, mut tau) = (g.set_posture.clone(), vec![0.0; n], vec![0.0; n]);
+    for t in 0..ticks {
+        let time = t as Real * dfs.params().dt;
+        let grip = 1.0 + GRIP_SWING * (std::f64::consts::TAU * time / GRIP_PERIOD_S).sin();
+        operator_torques(&g, &hand, grip, &q, &qd, &mut tau);
+        qs.extend_from_slice(&q);
+        taus.extend_from_slice(&tau);
+        let o = dfs
+            .step(&GloveSample {
+                q: &q,
+                tau: &tau,
+                base,
+            })
+            .map_err(|e| CliError(format!("power-grasp scene, closed loop, tick {t}: {e}")))?;
+        q.copy_from_slice(&o.motor_q[..n]);
+        qd.copy_from_slice(&o.motor_qd[..n]);
+    }
+    let end = *dfs.object_state();
+    let sample = |i: usize| GloveSample {
+        q: &qs[i * n..(i + 1) * n],
+        tau: &taus[i * n..(i + 1) * n],
+        base,
+    };
+    let in_hand = |s: &ObjectState| base.inverse_transform_vector(&s.pose.translation.vector);
+    let mut state = (g.dfs.clone(), 0usize);
+    let start = in_hand(state.0.object_state());
+    for _ in 0..WARMUP_TICKS {
+        state.0.step(&sample(state.1))?;
+        state.1 += 1;
+    }
+    let (mut min_contacts, mut max_shift) = (usize::MAX, 0.0 as Real);
+    let timings = time_alternating(
+        &mut state,
+        batch,
+        batches,
+        |(dfs, i)| {
+            black_box(dfs.step(black_box(&sample(*i)))?);
+            *i += 1;
+            Ok(())
+        },
+        // Still pressed into the hand by the palm or a phalanx.
+        |(dfs, _), b| {
+            let out = dfs.output();
+            let shift = (in_hand(&out.object) - start).norm();
+            let body = dfs.body_contacts().iter().filter(|c| c.in_contact).count();
+            min_contacts = min_contacts.min(out.n_contacts);
+            max_shift = max_shift.max(shift);
+            if body == 0 || shift > 0.010 {
+                return Err(CliError(format!(
+                    "power-grasp scene: the cylinder is no longer held after {} timed ticks ({body} palm or phalanx contacts, moved {:.1} mm in the hand)",
+                    (b + 1) * batch,
+                    shift * 1e3
+                )));
+            }
+            Ok(())
+        },
+    )?;
+    let dfs = &state.0;
+    if *dfs.object_state() != end {
+        return Err(CliError(
+            "power-grasp scene: the replayed ticks ended elsewhere than the closed loop that made their samples".into(),
+        ));
+    }
+    let mut r = summary(TickScene::PowerGrasp, timings, batch);
+    r.warmup_ticks = WARMUP_TICKS;
+    r.contacts = dfs.output().n_contacts;
+    r.min_contacts = min_contacts;
+    r.max_object_shift_mm = max_shift * 1e3;
     Ok(r)
 }
