@@ -106,18 +106,18 @@ fn finish_openapi(mut api: OpenApi, writes_need_token: bool) -> OpenApi {
             "Record grasp sessions (MCAP), simulate scenarios server-side, query and browse the \
              skill data base, upload robot hands (URDF + hand spec) and replay skills on them. \
              Errors are application/problem+json (RFC 9457); a request that does not parse as \
-             HTTP is refused by the HTTP layer with its status and no body. A request over the server's time limit is answered 503. \
-             Operations that take query parameters refuse unknown ones (400, naming them); \
-             the others ignore a query string. A JSON body with a key twice in one object is \
-             refused (400, naming the key). Live glove sessions are a WebSocket, \
-             GET /api/v1/live: a JSON start message, then binary icms.live.Sample protobuf \
-             frames (schema at GET /api/v1/live/schema) each answered by an icms.live.Feedback \
-             frame, JSON events, and end; the DFS steps at 1 kHz of the samples' time, \
-             interpolating between samples; the session is recorded and stored as it ends. \
-             With assist suggest or apply (and a robot hand) in the start message, the \
-             assistant recognises the stored skill being performed early (recognised / \
-             unknown events) and applies it on the robot hand (applying, robot, robot_report \
-             events) (docs/live.md in the repository).",
+             HTTP is refused by the HTTP layer with its status and no body. A request over the \
+             server's time limit is answered 503. Operations that take query parameters refuse \
+             unknown ones (400, naming them); the others ignore a query string. A JSON body \
+             with a key twice in one object is refused (400, naming the key). Live glove \
+             sessions are a WebSocket, GET /api/v1/live: a JSON start message, then binary \
+             icms.live.Sample protobuf frames (schema at GET /api/v1/live/schema) each answered \
+             by an icms.live.Feedback frame, JSON events, and end; the DFS steps at 1 kHz of \
+             the samples' time, interpolating between samples; the session is recorded and \
+             stored as it ends. With assist suggest or apply (and a robot hand) in the start \
+             message, the assistant recognises the stored skill being performed early \
+             (recognised / unknown events) and applies it on the robot hand (applying, robot, \
+             robot_report events) (docs/live.md in the repository).",
         ))
         .build();
     let components = api.components.get_or_insert_with(Default::default);
