@@ -78,6 +78,17 @@ pub enum TickScene {
     Frozen,
 }
 
+impl TickScene {
+    /// Its name on the command line (`power-grasp`).
+    fn name(self) -> &'static str {
+        match self {
+            TickScene::Fingertips => "fingertips",
+            TickScene::PowerGrasp => "power-grasp",
+            TickScene::Frozen => "frozen",
+        }
+    }
+}
+
 /// Result of `icms bench tick`.
 #[derive(Debug, Serialize)]
 pub struct TickBench {
@@ -636,25 +647,30 @@ pub fn bench_tick(scene: TickScene, iterations: usize) -> Result<TickBench, CliE
     // An even number of batches: as many timed whole as tick by tick.
     let batches = (iterations / batch / 2).max(1) * 2;
     let timed = batches * batch;
+    if scene != TickScene::Frozen && timed > MAX_HELD_TICKS {
+        return Err(CliError(format!(
+            "--iterations: at most {MAX_HELD_TICKS} for a held scene (its glove samples are kept in memory)"
+        )));
+    }
     match scene {
-        TickScene::PowerGrasp => {
-            if timed > MAX_HELD_TICKS {
-                return Err(CliError(format!(
-                    "--iterations: at most {MAX_HELD_TICKS} for a held scene (its glove samples are kept in memory)"
-                )));
-            }
-            bench_power_grasp(batch, batches, timed)
-        }
+        TickScene::PowerGrasp => bench_power_grasp(batch, batches, timed),
         TickScene::Frozen => bench_frozen(batch, batches),
         TickScene::Fingertips => {
-            if timed > MAX_HELD_TICKS {
-                return Err(CliError(format!(
-                    "--iterations: at most {MAX_HELD_TICKS} for a held scene (its glove samples are kept in memory)"
-                )));
-            }
             let held = fingertips()?;
             let samples = closed_loop(&held, WARMUP_TICKS + timed)?;
-            bench_held(&held, &samples, batch, batches)
+            // The ball is still held.
+            bench_replay(
+                TickScene::Fingertips,
+                &held.dfs,
+                held.base,
+                &samples,
+                batch,
+                batches,
+                |dfs, shift| {
+                    let n = dfs.output().n_contacts;
+                    (n < 3 || shift > 0.010).then(|| format!("{n} contacts"))
+                },
+            )
         }
     }
 }
@@ -735,14 +751,19 @@ fn summary(scene: TickScene, timings: Timings, batch: usize) -> TickBench {
     }
 }
 
-fn bench_held(
-    held: &Held,
+/// Times `dfs` replaying the closed loop's `samples` (the first [`WARMUP_TICKS`] untimed),
+/// failing once the object is no longer held: `lost` gets the DFS after a batch and the
+/// object's shift in the hand (m), and answers why it is not held, if it is not.
+fn bench_replay(
+    scene: TickScene,
+    dfs: &Dfs,
+    base: Isometry,
     samples: &Samples,
     batch: usize,
     batches: usize,
+    lost: impl Fn(&Dfs, Real) -> Option<String>,
 ) -> Result<TickBench, CliError> {
     let n = samples.n;
-    let base = held.base;
     let sample = |i: usize| GloveSample {
         q: &samples.q[i * n..(i + 1) * n],
         tau: &samples.tau[i * n..(i + 1) * n],
@@ -750,7 +771,7 @@ fn bench_held(
     };
     let in_hand = |s: &ObjectState| base.inverse_transform_vector(&s.pose.translation.vector);
     // The DFS and the index of its next sample.
-    let mut state = (held.dfs.clone(), 0usize);
+    let mut state = (dfs.clone(), 0usize);
     let start = in_hand(state.0.object_state());
     for _ in 0..WARMUP_TICKS {
         state.0.step(&sample(state.1))?;
@@ -766,31 +787,31 @@ fn bench_held(
             *i += 1;
             Ok(())
         },
-        // The ball is still held.
         |(dfs, _), b| {
             let out = dfs.output();
             let shift = (in_hand(&out.object) - start).norm();
             min_contacts = min_contacts.min(out.n_contacts);
             max_shift = max_shift.max(shift);
-            if out.n_contacts < 3 || shift > 0.010 {
-                return Err(CliError(format!(
-                    "fingertips scene: the ball is no longer held after {} timed ticks ({} contacts, moved {:.1} mm in the hand)",
+            match lost(dfs, shift) {
+                Some(why) => Err(CliError(format!(
+                    "{} scene: the object is no longer held after {} timed ticks ({why}, moved {:.1} mm in the hand)",
+                    scene.name(),
                     (b + 1) * batch,
-                    out.n_contacts,
                     shift * 1e3
-                )));
+                ))),
+                None => Ok(()),
             }
-            Ok(())
         },
     )?;
     let dfs = &state.0;
     // The replay is the closed loop, tick for tick.
     if *dfs.object_state() != samples.end {
-        return Err(CliError(
-            "fingertips scene: the replayed ticks ended elsewhere than the closed loop that made their samples".into(),
-        ));
+        return Err(CliError(format!(
+            "{} scene: the replayed ticks ended elsewhere than the closed loop that made their samples",
+            scene.name()
+        )));
     }
-    let mut r = summary(TickScene::Fingertips, timings, batch);
+    let mut r = summary(scene, timings, batch);
     r.warmup_ticks = WARMUP_TICKS;
     r.contacts = dfs.output().n_contacts;
     r.min_contacts = min_contacts;
@@ -854,56 +875,23 @@ fn bench_power_grasp(batch: usize, batches: usize, timed: usize) -> Result<TickB
         q.copy_from_slice(&o.motor_q[..n]);
         qd.copy_from_slice(&o.motor_qd[..n]);
     }
-    let end = *dfs.object_state();
-    let sample = |i: usize| GloveSample {
-        q: &qs[i * n..(i + 1) * n],
-        tau: &taus[i * n..(i + 1) * n],
-        base,
+    let samples = Samples {
+        n,
+        q: qs,
+        tau: taus,
+        end: *dfs.object_state(),
     };
-    let in_hand = |s: &ObjectState| base.inverse_transform_vector(&s.pose.translation.vector);
-    let mut state = (g.dfs.clone(), 0usize);
-    let start = in_hand(state.0.object_state());
-    for _ in 0..WARMUP_TICKS {
-        state.0.step(&sample(state.1))?;
-        state.1 += 1;
-    }
-    let (mut min_contacts, mut max_shift) = (usize::MAX, 0.0 as Real);
-    let timings = time_alternating(
-        &mut state,
+    // Still pressed into the hand by the palm or a phalanx.
+    bench_replay(
+        TickScene::PowerGrasp,
+        &g.dfs,
+        base,
+        &samples,
         batch,
         batches,
-        |(dfs, i)| {
-            black_box(dfs.step(black_box(&sample(*i)))?);
-            *i += 1;
-            Ok(())
-        },
-        // Still pressed into the hand by the palm or a phalanx.
-        |(dfs, _), b| {
-            let out = dfs.output();
-            let shift = (in_hand(&out.object) - start).norm();
+        |dfs, shift| {
             let body = dfs.body_contacts().iter().filter(|c| c.in_contact).count();
-            min_contacts = min_contacts.min(out.n_contacts);
-            max_shift = max_shift.max(shift);
-            if body == 0 || shift > 0.010 {
-                return Err(CliError(format!(
-                    "power-grasp scene: the cylinder is no longer held after {} timed ticks ({body} palm or phalanx contacts, moved {:.1} mm in the hand)",
-                    (b + 1) * batch,
-                    shift * 1e3
-                )));
-            }
-            Ok(())
+            (body == 0 || shift > 0.010).then(|| format!("{body} palm or phalanx contacts"))
         },
-    )?;
-    let dfs = &state.0;
-    if *dfs.object_state() != end {
-        return Err(CliError(
-            "power-grasp scene: the replayed ticks ended elsewhere than the closed loop that made their samples".into(),
-        ));
-    }
-    let mut r = summary(TickScene::PowerGrasp, timings, batch);
-    r.warmup_ticks = WARMUP_TICKS;
-    r.contacts = dfs.output().n_contacts;
-    r.min_contacts = min_contacts;
-    r.max_object_shift_mm = max_shift * 1e3;
-    Ok(r)
+    )
 }
