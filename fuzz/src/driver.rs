@@ -49,8 +49,7 @@ pub struct Args {
     /// Run a saved input file in this process (a finding's `.bin`).
     #[arg(long)]
     pub input: Option<PathBuf>,
-    /// Directory of the shared robot hands (URDF seeds); default `../shared/hands` beside
-    /// the workspace.
+    /// Directory of the robot hands' URDFs (seeds); default the repository's `dfs-core/hands`.
     #[arg(long)]
     pub hands: Option<PathBuf>,
     /// Where findings are saved.
@@ -106,12 +105,12 @@ pub struct Totals {
 }
 
 fn default_hands() -> PathBuf {
-    // The workspace is the fuzz crate's parent; shared/ is beside the workspace.
+    // The workspace is the fuzz crate's parent; the hands' URDFs live in dfs-core.
     let ws = Path::new(env!("CARGO_MANIFEST_DIR"))
         .parent()
         .unwrap_or(Path::new("."))
         .to_path_buf();
-    ws.join("../shared/hands")
+    ws.join("dfs-core/hands")
 }
 
 fn default_batch(target: &str) -> u64 {

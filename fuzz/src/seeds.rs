@@ -1,6 +1,6 @@
 //! Seed inputs, made at start-up from what the project itself writes: simulated sessions
 //! (zstd as recorded, and recompressed lz4 and uncompressed, without chunks, truncated,
-//! salvaged), the built-in hands (URDFs read from the shared hands directory), scenarios and
+//! salvaged), the built-in hands (URDFs read from the hands directory, `dfs-core/hands`), scenarios and
 //! the paper's grasp serialised, and the skills segmentation finds in a simulated session.
 //!
 //! Everything is deterministic: a session's `started_at` (the only wall-clock value the
@@ -179,7 +179,7 @@ fn urdf_files(dir: &Path, out: &mut Vec<PathBuf>) {
 }
 
 /// The built-in URDF hands' specs, each with its URDF read from `hands_dir` when a file of
-/// the spec's `urdf` name is there (the shared hands directory), else the embedded text.
+/// the spec's `urdf` name is there (`dfs-core/hands` by default), else the embedded text.
 pub fn hands(hands_dir: &Path) -> Result<Vec<HandSeed>, SeedError> {
     let mut files = Vec::new();
     urdf_files(hands_dir, &mut files);
