@@ -140,7 +140,7 @@ impl Default for ObjectOutput {
 
 /// How much of the explicit object step's damping limit the contacts' tangential dampers may
 /// use: `Σ_k c_k dt / m_k ≤ STABLE_DAMPING`, with `m_k` the object's least effective mass at
-/// contact `k` for a push across the normal ([`inverse_mass_across`]), shared equally. An
+/// contact `k` for a push across the normal (`inverse_mass_across`), shared equally. An
 /// explicit (symplectic Euler) step of a damper `c` on a mass `m` is stable for
 /// `c dt / m < 2`; beyond it a light object rattles between the fingertips from tick to tick
 /// (a 50 g solid sphere of 4 cm radius pinched by two pads at 30 N·s/m: 4.2) and is

@@ -55,7 +55,7 @@ pub enum DfsError {
     /// finite and in range (the guard that keeps NaN out of every output).
     #[error("{what} is not a finite number: the computation overflowed")]
     Overflow {
-        /// The output that overflowed (for example "contacts[2].feedback").
+        /// The output that overflowed (for example `contacts[2].feedback`).
         what: String,
     },
     /// The work was stopped before it finished (see [`crate::Stop`]).

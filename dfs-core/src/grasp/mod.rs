@@ -2,7 +2,7 @@
 //! distribution `c_o = W⁺ f` (eq. 27), grasp force optimisation and grasp quality.
 //!
 //! `W` has a fixed capacity of four columns per contact (layout of
-//! [`Intensity`](crate::contact::Intensity)); columns a contact model does not transmit are
+//! [`Intensity`]); columns a contact model does not transmit are
 //! zero, so they carry no intensity. `W⁺ f = D² Wᵀ (W D² Wᵀ)⁺ f` with a tolerance on the 6x6
 //! `W D² Wᵀ`: finite for one contact or collinear contacts, allocation-free.
 //!
