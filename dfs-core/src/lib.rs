@@ -25,6 +25,7 @@ pub mod object;
 pub mod operator;
 pub mod replay;
 pub mod scenario;
+pub mod spec;
 pub mod statics;
 pub mod stop;
 pub mod table;

@@ -37,7 +37,7 @@ use crate::error::{DfsError, Result};
 use crate::math::{Isometry, Real, Rotation, Vector};
 use crate::names::Named;
 use crate::object::{shapes_overlap, ObjectState, RigidObject, Shape, ShapeKind};
-use crate::statics::ObjectSpec;
+use crate::spec::ObjectSpec;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use serde::{Deserialize, Serialize};
@@ -247,17 +247,17 @@ impl ScenarioObject {
     /// The rigid object, validated with its friction: shape, sizes and mass as
     /// [`ObjectSpec::to_object`] checks them and within a grasp file's ranges
     /// ([`ObjectSpec::check_ranges`]), `mu` and `mu_torsion` within a grasp file's ranges
-    /// ([`MU_RANGE`](crate::statics::MU_RANGE), [`MU_TORSION_RANGE`](crate::statics::MU_TORSION_RANGE)).
+    /// ([`MU_RANGE`](crate::spec::MU_RANGE), [`MU_TORSION_RANGE`](crate::spec::MU_TORSION_RANGE)).
     pub fn to_object(&self) -> Result<RigidObject> {
         let spec = self.spec();
         let object = spec.to_object()?;
         spec.check_ranges()?;
         for (field, v, (lo, hi), unit) in [
-            ("object.mu", self.mu, crate::statics::MU_RANGE, ""),
+            ("object.mu", self.mu, crate::spec::MU_RANGE, ""),
             (
                 "object.mu_torsion",
                 self.mu_torsion,
-                crate::statics::MU_TORSION_RANGE,
+                crate::spec::MU_TORSION_RANGE,
                 " m",
             ),
         ] {

@@ -11,7 +11,7 @@ use std::path::{Path, PathBuf};
 
 use dfs_core::hand::builtin_spec;
 use dfs_core::scenario::Scenario;
-use dfs_core::statics::GraspSpec;
+use dfs_core::spec::GraspSpec;
 use serde_json::{json, Value};
 
 use crate::mcap::McapFile;

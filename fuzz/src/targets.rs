@@ -312,7 +312,7 @@ fn serde_path_to_value<T: serde::de::DeserializeOwned>(v: Value) -> Option<T> {
 /// Grasp files (`icms dfs-static --grasp FILE`): parsed as the CLI does, then analysed.
 fn run_grasp(input: &[u8]) -> Result<(), String> {
     let text = String::from_utf8_lossy(input);
-    if let Ok(g) = api::cli::parse_json::<dfs_core::statics::GraspSpec>(&text) {
+    if let Ok(g) = api::cli::parse_json::<dfs_core::spec::GraspSpec>(&text) {
         let _ = dfs_core::statics::analyse(&g, 1.0);
         let _ = dfs_core::statics::analyse(&g, 2.5);
     }

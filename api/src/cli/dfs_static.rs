@@ -1,7 +1,8 @@
 //! `icms dfs-static`: static force analysis of a grasp file or a built-in grasp.
 
 use super::{print_json, CliError};
-use dfs_core::statics::{analyse, GraspSpec};
+use dfs_core::spec::GraspSpec;
+use dfs_core::statics::analyse;
 use std::path::Path;
 
 /// Arguments of `icms dfs-static`.

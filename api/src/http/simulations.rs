@@ -246,10 +246,10 @@ mod tests {
                 }
             }
         }
-        let (lo, hi) = dfs_core::statics::MU_RANGE;
+        let (lo, hi) = dfs_core::spec::MU_RANGE;
         assert_eq!(object["properties"]["mu"]["minimum"], lo);
         assert_eq!(object["properties"]["mu"]["maximum"], hi);
-        let (lo, hi) = dfs_core::statics::MU_TORSION_RANGE;
+        let (lo, hi) = dfs_core::spec::MU_TORSION_RANGE;
         assert_eq!(object["properties"]["mu_torsion"]["minimum"], lo);
         assert_eq!(object["properties"]["mu_torsion"]["maximum"], hi);
         let duration = &task["properties"]["duration"];

@@ -337,7 +337,7 @@ fn inertial(link: &urdf_rs::Link) -> Result<Inertial> {
     let field = || format!("urdf link {:?} inertial", link.name);
     let m = link.inertial.mass.value;
     // A hand's link, not a building: the grasp file's object bound (10⁴ kg) is far above any.
-    let max = crate::statics::MASS_RANGE.1;
+    let max = crate::spec::MASS_RANGE.1;
     if !(m.is_finite() && (0.0..=max).contains(&m)) {
         return Err(DfsError::invalid(
             field(),
