@@ -369,16 +369,22 @@ pub fn run(c: BenchCommand) -> Result<(), CliError> {
             } else {
                 let c = r.cost.as_ref();
                 println!(
-                    "recognition over {} held-out sessions ({:?} stored): target and kind named 200 ms before first contact {:.0} %, median decision at {:.0} % of the reach ({:.0} ms before contact); nearest stored skill named by 1 s after contact {:.0} % (exact knowledge of what is known then: {:.0} %); kind left out: unknown {:.0} %, stored as new {:.0} %; cost per observation with {} skills: mean {:.2} µs, p99 {:.2} µs, max {:.0} µs; an approach decision mean {:.0} µs (max {:.0} µs), a grasp-stage one {:.0} µs",
+                    "recognition over {} held-out sessions ({:?} stored): target and kind named 200 ms before first contact {:.0} %, median decision at {:.0} % of the reach ({:.0} ms before contact); nearest stored skill named by 1 s after contact {:.0} % (exact knowledge of what is known then: {:.0} %); kind left out: unknown {:.0} %, stored as new {:.0} %; cost per observation with {} skills: mean {:.2} µs, p99 {:.2} µs, max {:.0} µs (least of {} runs per observation: mean {:.2} µs, p99 {:.2} µs, max {:.0} µs); an approach decision mean {:.0} µs (max {:.0} µs); a grasp-stage step mean {:.0} µs (max {:.0} µs), {:.1} observations per grasp-stage decision",
                     r.sessions.len(), r.stored_per_kind, 100.0 * r.anticipated_fraction,
                     100.0 * r.median_decided_fraction, r.median_lead_ms,
                     100.0 * r.nearest_fraction, 100.0 * r.nearest_bound_fraction,
                     100.0 * r.unknown_fraction,
                     100.0 * r.stored_as_new_fraction, c.map_or(0, |c| c.stored_skills),
                     c.map_or(0.0, |c| c.mean_us), c.map_or(0.0, |c| c.p99_us),
-                    c.map_or(0.0, |c| c.max_us), c.map_or(0.0, |c| c.approach_decision_mean_us),
+                    c.map_or(0.0, |c| c.max_us),
+                    services::assist::evaluate::COST_REPEATS,
+                    c.map_or(0.0, |c| c.least_mean_us), c.map_or(0.0, |c| c.least_p99_us),
+                    c.map_or(0.0, |c| c.least_max_us),
+                    c.map_or(0.0, |c| c.approach_decision_mean_us),
                     c.map_or(0.0, |c| c.approach_decision_max_us),
-                    c.map_or(0.0, |c| c.grasp_decision_mean_us)
+                    c.map_or(0.0, |c| c.grasp_step_mean_us),
+                    c.map_or(0.0, |c| c.grasp_step_max_us),
+                    c.map_or(0.0, |c| c.grasp_steps_per_decision)
                 );
                 Ok(())
             }

@@ -44,6 +44,12 @@
 //! project's machine then; `cargo bench -p dfs-core --bench grasp_quality`).
 //! Allocates (a thread keeps its last hull's arrays for the next); meant for planning and
 //! analysis, not the 1 kHz tick.
+//!
+//! **In parts.** [`QualityJob`] computes the same quality a part at a time (the Quickhull's
+//! rounds, a budget of work per call, then its checks and metrics), bit for bit as
+//! [`grasp_quality`] does (which is a job run in one call): for a caller that must not spend
+//! more than some tens of µs at once, as the assistant's grasp stage between two observations
+//! (`services::assist::recognise`).
 
 use crate::contact::{ContactFrame, ContactModel, Friction, Intensity};
 use crate::error::{DfsError, Result};
@@ -216,39 +222,162 @@ pub fn grasp_quality(
     friction: &Friction,
     params: &QualityParams,
 ) -> Result<GraspQuality> {
-    validate(contacts, friction, params)?;
-    let rho = torque_scale(contacts, params);
-    let prims = primitive_wrenches(contacts, model, friction, params.edges, rho);
-    let not_closure = GraspQuality {
-        epsilon: 0.0,
-        volume: 0.0,
-        force_closure: false,
-        torque_scale: rho,
-    };
-    if prims.len() < 7 {
-        return Ok(not_closure);
+    QualityJob::new(contacts, model, friction, params)?
+        .advance(usize::MAX)?
+        .ok_or_else(|| DfsError::invalid("grasp wrench space", "convex hull did not finish"))
+}
+
+/// [`grasp_quality`] computed a part at a time, for a caller with a time budget per call (the
+/// assistant, deciding between two observations 10 ms apart): each [`QualityJob::advance`]
+/// goes on with the convex hull for about `budget` units of work (facets removed and made in
+/// its rounds, then facets checked and measured). The result is bit for bit
+/// [`grasp_quality`]'s: the same operations in the same order.
+pub struct QualityJob {
+    prims: Vec<Wrench>,
+    tol: Real,
+    rho: Real,
+    state: JobState,
+}
+
+/// Where a [`QualityJob`] is.
+enum JobState {
+    /// The primitives are known, the hull not started.
+    Start,
+    /// The hull's rounds are under way.
+    Rounds(Box<hull::Build>),
+    /// The rounds are done: the hull is being checked and measured.
+    Built(Box<hull::Build>),
+    /// Done.
+    Done(GraspQuality),
+}
+
+impl std::fmt::Debug for QualityJob {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        let state = match &self.state {
+            JobState::Start => "start",
+            JobState::Rounds(_) => "rounds",
+            JobState::Built(_) => "built",
+            JobState::Done(_) => "done",
+        };
+        f.debug_struct("QualityJob")
+            .field("primitives", &self.prims.len())
+            .field("state", &state)
+            .finish()
     }
-    let size = prims.iter().fold(0.0_f64, |m, w| m.max(w.norm()));
-    let tol = 1e-9 * size;
-    let h = match hull::build(&prims, tol) {
-        Ok(h) => h,
-        Err(hull::HullError::Flat) => return Ok(not_closure),
-        Err(hull::HullError::Numerical(why)) => {
-            return Err(DfsError::invalid(
-                "grasp wrench space",
-                format!("convex hull failed: {why}"),
-            ))
+}
+
+impl QualityJob {
+    /// The quality of `contacts` to compute (arguments and errors as [`grasp_quality`]'s;
+    /// the parameters are checked here, the hull's failures reported by
+    /// [`QualityJob::advance`]). Computes the primitive wrenches only.
+    pub fn new(
+        contacts: &[ContactFrame],
+        model: ContactModel,
+        friction: &Friction,
+        params: &QualityParams,
+    ) -> Result<QualityJob> {
+        validate(contacts, friction, params)?;
+        let rho = torque_scale(contacts, params);
+        let prims = primitive_wrenches(contacts, model, friction, params.edges, rho);
+        let size = prims.iter().fold(0.0_f64, |m, w| m.max(w.norm()));
+        Ok(QualityJob {
+            prims,
+            tol: 1e-9 * size,
+            rho,
+            state: JobState::Start,
+        })
+    }
+
+    /// The primitive wrenches whose hull is computed.
+    pub fn primitives(&self) -> usize {
+        self.prims.len()
+    }
+
+    /// Goes on for about `budget` units of work (the hull's initial simplex alone, then facets
+    /// removed and made in its rounds, then facets checked and measured; at least one unit
+    /// per call; the rounds and the checks are never in one call); the quality once it is done (then again on every
+    /// later call), `None` while it is not. With `usize::MAX` it finishes in this call. A unit
+    /// takes about 0.1-0.2 µs on the project's machine (see `icms bench recognition`).
+    ///
+    /// Errors: a convex hull that fails its checks, as [`grasp_quality`].
+    pub fn advance(&mut self, budget: usize) -> Result<Option<GraspQuality>> {
+        let not_closure = GraspQuality {
+            epsilon: 0.0,
+            volume: 0.0,
+            force_closure: false,
+            torque_scale: self.rho,
+        };
+        let numerical = |why: &str| {
+            DfsError::invalid("grasp wrench space", format!("convex hull failed: {why}"))
+        };
+        loop {
+            match std::mem::replace(&mut self.state, JobState::Start) {
+                JobState::Done(q) => {
+                    self.state = JobState::Done(q);
+                    return Ok(Some(q));
+                }
+                JobState::Start => {
+                    if self.prims.len() < 7 {
+                        self.state = JobState::Done(not_closure);
+                        continue;
+                    }
+                    self.state = match hull::start(&self.prims, self.tol) {
+                        Ok(b) => JobState::Rounds(Box::new(b)),
+                        Err(hull::HullError::Flat) => JobState::Done(not_closure),
+                        Err(hull::HullError::Numerical(why)) => return Err(numerical(why)),
+                    };
+                    // The initial simplex is a part of its own.
+                    if budget != usize::MAX && matches!(self.state, JobState::Rounds(_)) {
+                        return Ok(None);
+                    }
+                }
+                JobState::Rounds(mut b) => {
+                    let done = match b.advance(&self.prims, budget) {
+                        Ok(done) => done,
+                        Err(hull::HullError::Flat) => {
+                            self.state = JobState::Done(not_closure);
+                            continue;
+                        }
+                        Err(hull::HullError::Numerical(why)) => return Err(numerical(why)),
+                    };
+                    if !done {
+                        self.state = JobState::Rounds(b);
+                        return Ok(None);
+                    }
+                    self.state = JobState::Built(b);
+                    if budget != usize::MAX {
+                        return Ok(None);
+                    }
+                }
+                JobState::Built(mut b) => {
+                    let done = match b.check(&self.prims, budget) {
+                        Ok(done) => done,
+                        Err(hull::HullError::Flat) => {
+                            self.state = JobState::Done(not_closure);
+                            continue;
+                        }
+                        Err(hull::HullError::Numerical(why)) => return Err(numerical(why)),
+                    };
+                    if !done {
+                        self.state = JobState::Built(b);
+                        return Ok(None);
+                    }
+                    let Some((volume, min_offset)) = b.metrics() else {
+                        return Err(numerical("the checks did not finish"));
+                    };
+                    // Its arrays go to the next hull built on this thread.
+                    drop(b.into_hull());
+                    let force_closure = min_offset > self.tol;
+                    self.state = JobState::Done(GraspQuality {
+                        epsilon: if force_closure { min_offset } else { 0.0 },
+                        volume,
+                        force_closure,
+                        torque_scale: self.rho,
+                    });
+                }
+            }
         }
-    };
-    let volume = h.volume();
-    let min_offset = h.facets().map(|f| f.d).fold(Real::INFINITY, Real::min);
-    let force_closure = min_offset > tol;
-    Ok(GraspQuality {
-        epsilon: if force_closure { min_offset } else { 0.0 },
-        volume,
-        force_closure,
-        torque_scale: rho,
-    })
+    }
 }
 
 #[cfg(test)]
@@ -596,6 +725,71 @@ mod tests {
             _ => prop_assert!(false, "{:?} vs {:?}", new, old),
         }
         Ok(())
+    }
+
+    /// Advances `job` by `budget` a call until it is done; the quality and the calls taken.
+    fn in_parts(mut job: QualityJob, budget: usize) -> (Result<GraspQuality>, usize) {
+        let mut calls = 0;
+        loop {
+            calls += 1;
+            match job.advance(budget) {
+                Ok(Some(q)) => return (Ok(q), calls),
+                Ok(None) => assert!(calls < 100_000, "no progress"),
+                Err(e) => return (Err(e), calls),
+            }
+        }
+    }
+
+    #[test]
+    fn a_quality_computed_in_parts_is_the_one_computed_at_once_and_takes_several_calls() {
+        let c = crate::fixtures::paper_sphere_contacts();
+        let p = QualityParams::default();
+        for (m, mu) in [
+            (ContactModel::SoftFinger, 1.5),
+            (ContactModel::PointWithFriction, 0.3),
+        ] {
+            let whole = q(&c, m, mu, &p);
+            let job = QualityJob::new(&c, m, &fr(mu), &p).unwrap();
+            let (parts, calls) = in_parts(job, 50);
+            let parts = parts.unwrap();
+            assert_eq!(parts.epsilon.to_bits(), whole.epsilon.to_bits());
+            assert_eq!(parts.volume.to_bits(), whole.volume.to_bits());
+            assert_eq!(parts.force_closure, whole.force_closure);
+            assert!(calls > 3, "{m:?}: {calls} calls");
+        }
+        // Once done, a job says its result again.
+        let mut job = QualityJob::new(&c, ContactModel::SoftFinger, &fr(1.5), &p).unwrap();
+        let first = job.advance(usize::MAX).unwrap();
+        assert!(first.is_some());
+        assert_eq!(job.advance(1).unwrap(), first);
+    }
+
+    proptest! {
+        #![proptest_config(ProptestConfig::with_cases(64))]
+        #[test]
+        fn a_quality_computed_in_parts_of_any_size_is_bit_for_bit_the_one_computed_at_once(
+            c in any_contacts(),
+            model in 0usize..3,
+            mu in prop_oneof![Just(0.0), 0.0..2.0f64],
+            mu_torsion in prop_oneof![Just(0.0), 0.0..0.02f64],
+            budget in 1usize..400,
+        ) {
+            let model = [ContactModel::Frictionless, ContactModel::PointWithFriction, ContactModel::SoftFinger][model];
+            let friction = Friction { mu, mu_torsion };
+            let p = QualityParams::default();
+            let whole = grasp_quality(&c, model, &friction, &p);
+            let (parts, _) = in_parts(QualityJob::new(&c, model, &friction, &p).unwrap(), budget);
+            match (whole, parts) {
+                (Ok(a), Ok(b)) => {
+                    prop_assert_eq!(a.epsilon.to_bits(), b.epsilon.to_bits());
+                    prop_assert_eq!(a.volume.to_bits(), b.volume.to_bits());
+                    prop_assert_eq!(a.force_closure, b.force_closure);
+                    prop_assert_eq!(a.torque_scale.to_bits(), b.torque_scale.to_bits());
+                }
+                (Err(_), Err(_)) => {}
+                (a, b) => prop_assert!(false, "{:?} vs {:?}", a, b),
+            }
+        }
     }
 
     proptest! {

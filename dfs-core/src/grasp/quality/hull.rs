@@ -54,6 +54,8 @@ const NO_OUTSIDE: Outside = Outside {
 /// leaves its buffers to the next build on the same thread.
 pub(super) struct Hull {
     buffers: Buffers,
+    /// Read by the tests' [`Hull::volume`]; [`Build::metrics`] measures the same as it checks.
+    #[cfg_attr(not(test), allow(dead_code))]
     interior: P,
 }
 
@@ -98,6 +100,7 @@ pub(super) enum HullError {
 
 impl Hull {
     /// The facets' hyperplanes.
+    #[cfg(test)]
     pub fn facets(&self) -> impl Iterator<Item = &Plane> {
         self.buffers
             .topo
@@ -109,6 +112,7 @@ impl Hull {
 
     /// Volume: the simplices spanned by each facet and the interior point, each the facet's
     /// 5-volume times its height above the interior point over 6.
+    #[cfg(test)]
     pub fn volume(&self) -> f64 {
         let mut vol = 0.0;
         for f in self.facets() {
@@ -349,11 +353,15 @@ fn dist(f: &Plane, p: &P) -> f64 {
     f.n.dot(p) - f.d
 }
 
-/// The state of a build.
-struct Build<'a> {
-    pts: &'a [P],
+/// A hull being built: the state between two rounds, so that a build can be done a part at
+/// a time ([`Build::advance`]) with the same operations in the same order as in one go.
+pub(super) struct Build {
     tol: f64,
     interior: P,
+    /// What a backward-stable computation of a hyperplane may leave at its vertices.
+    exact: f64,
+    /// Rounds done.
+    round: u32,
     topo: Vec<Topo>,
     planes: Vec<Plane>,
     outside: Vec<Outside>,
@@ -366,9 +374,16 @@ struct Build<'a> {
     work: BinaryHeap<(u64, u32)>,
     /// Slots of facets removed in earlier rounds, for new facets.
     free: Vec<u32>,
+    /// A round's visible facets, horizon ridges and new facets (in the order of the horizon
+    /// ridges they were built on): kept to reuse their memory.
+    visible: Vec<usize>,
+    horizon: Vec<Ridge>,
+    new: Vec<usize>,
+    /// The checks of the built hull, once begun.
+    checks: Option<Checks>,
 }
 
-impl Build<'_> {
+impl Build {
     /// Puts point `i`, `dist` above facet `f`, into `f`'s outside set.
     fn add_outside(&mut self, f: usize, i: usize, dist: f64) {
         let o = &mut self.outside[f];
@@ -415,8 +430,18 @@ struct Ridge {
     slot: u8,
 }
 
-/// Builds the convex hull of `pts` (tolerance `tol` for "outside").
+/// Builds the convex hull of `pts` (tolerance `tol` for "outside") in one go.
+#[cfg(test)]
 pub(super) fn build(pts: &[P], tol: f64) -> Result<Hull, HullError> {
+    let mut b = start(pts, tol)?;
+    while !b.advance(pts, usize::MAX)? {}
+    finish(b, pts)
+}
+
+/// Starts the convex hull of `pts` (tolerance `tol` for "outside"): the initial simplex, and
+/// the other points in its facets' outside sets. [`Build::advance`] goes on from there,
+/// [`finish`] ends it.
+pub(super) fn start(pts: &[P], tol: f64) -> Result<Build, HullError> {
     let npts = pts.len();
     if npts < D + 1 {
         return Err(HullError::Flat);
@@ -482,9 +507,14 @@ pub(super) fn build(pts: &[P], tol: f64) -> Result<Hull, HullError> {
     work.clear();
     free.clear();
     let mut b = Build {
-        pts,
         tol,
         interior,
+        exact,
+        round: 0,
+        visible: Vec::new(),
+        horizon: Vec::new(),
+        new: Vec::new(),
+        checks: None,
         topo,
         planes,
         outside,
@@ -527,289 +557,408 @@ pub(super) fn build(pts: &[P], tol: f64) -> Result<Hull, HullError> {
             b.add_outside(f, i, d);
         }
     }
-
-    let mut visible: Vec<usize> = Vec::new();
-    let mut horizon: Vec<Ridge> = Vec::new();
-    // The new facets, in the order of the horizon ridges they were built on.
-    let mut new: Vec<usize> = Vec::new();
-    // Each round turns one outside point, the farthest above any facet, into a vertex: at
-    // most npts rounds.
-    for round in 1..=npts as u32 + 1 {
-        let fi = loop {
-            match b.work.pop() {
-                None => return finish(b),
-                Some((key, f)) => {
-                    let f = f as usize;
-                    let o = &b.outside[f];
-                    if b.topo[f].alive && o.first != NONE && o.far_dist.to_bits() == key {
-                        break f;
-                    }
-                }
-            }
-        };
-        let pi = b.outside[fi].far as usize;
-        let p = pts[pi];
-        // Visible facets: connected to fi, with p strictly outside; and the horizon ridges
-        // between them and the hidden ones.
-        visible.clear();
-        horizon.clear();
-        visible.push(fi);
-        b.topo[fi].alive = false;
-        b.topo[fi].seen = round;
-        b.above[fi] = dist(&b.planes[fi], &p);
-        let mut s = 0;
-        while s < visible.len() {
-            let f = visible[s];
-            s += 1;
-            for j in 0..D {
-                let g = b.topo[f].nb[j] as usize;
-                let tg = &mut b.topo[g];
-                if tg.seen != round {
-                    tg.seen = round;
-                    let above = dist(&b.planes[g], &p);
-                    b.above[g] = above;
-                    if above > tol {
-                        tg.alive = false;
-                        visible.push(g);
-                    }
-                }
-                if tg.alive {
-                    let slot = b.topo[f].back[j];
-                    if b.topo[g].nb[slot as usize] as usize != f {
-                        return Err(HullError::Numerical("broken adjacency"));
-                    }
-                    horizon.push(Ridge { f, j, g, slot });
-                }
-            }
-        }
-        if horizon.is_empty() {
-            return Err(HullError::Numerical("horizon is not closed"));
-        }
-        new.clear();
-        for r in &horizon {
-            let mut t = Topo {
-                nb: [NONE; D],
-                v: b.topo[r.f].v,
-                back: [0; D],
-                alive: true,
-                seen: 0,
-            };
-            t.v[r.j] = pi as u32;
-            t.nb[r.j] = r.g as u32;
-            t.back[r.j] = r.slot;
-            let (pf, pg) = (&b.planes[r.f], &b.planes[r.g]);
-            let (af, ag) = (b.above[r.f], b.above[r.g]);
-            let pl = match turn(pts, &t.v, (pf, af), (pg, ag), &interior, exact) {
-                Some(pl) => pl,
-                None => plane(pts, &t.v, &interior)
-                    .ok_or(HullError::Numerical("degenerate new facet"))?,
-            };
-            if pl.d - pl.n.dot(&interior) <= 0.0 {
-                return Err(HullError::Numerical("interior point on a facet"));
-            }
-            let id = b.add_facet(t, pl)?;
-            let tg = &mut b.topo[r.g];
-            tg.nb[r.slot as usize] = id as u32;
-            tg.back[r.slot as usize] = r.j as u8;
-            // The removed facet's side of the ridge points at the new facet too.
-            let tf = &mut b.topo[r.f];
-            tf.nb[r.j] = id as u32;
-            tf.back[r.j] = NEW;
-            new.push(id);
-        }
-        // The new facets pair up across the ridges through p. The new facet on ridge (f, j)
-        // shares with its neighbour opposite v[k] the 4 vertices S of f other than v[j]
-        // and v[k]: turning about S through the visible facets from f, across the ridge
-        // opposite v[k], leads to the next horizon ridge about S, whose new facet it is.
-        let topo = &mut b.topo;
-        for (r, &id) in horizon.iter().zip(&new) {
-            for k in 0..D {
-                if k == r.j || topo[id].nb[k] != NONE {
-                    continue;
-                }
-                // h holds S and two more vertices, at ia and ic: cross the ridge opposite ia.
-                let (mut h, mut ia, mut ic) = (r.f, k, r.j);
-                let mut steps = 0;
-                let (m, slot) = loop {
-                    let th = &topo[h];
-                    let across = th.nb[ia] as usize;
-                    if th.back[ia] == NEW {
-                        // Built on h's ridge opposite ia: its vertices are h's, in order.
-                        break (across, ic);
-                    }
-                    steps += 1;
-                    let ta = &topo[across];
-                    if steps > visible.len() || ta.alive || ta.seen != round {
-                        return Err(HullError::Numerical("horizon is not closed"));
-                    }
-                    // Where h's vertex c is in across, without branches.
-                    let c = th.v[ic];
-                    let (mut ic_across, mut found) = (0, 0);
-                    for (i, &x) in ta.v.iter().enumerate() {
-                        let here = usize::from(x == c);
-                        ic_across += i * here;
-                        found += here;
-                    }
-                    if found != 1 {
-                        return Err(HullError::Numerical("broken adjacency"));
-                    }
-                    (h, ia, ic) = (across, ic_across, th.back[ia] as usize);
-                };
-                let taken = topo[m].nb[slot];
-                if m == id || (taken != NONE && taken as usize != id) {
-                    return Err(HullError::Numerical("horizon is not closed"));
-                }
-                topo[id].nb[k] = m as u32;
-                topo[id].back[k] = slot as u8;
-                topo[m].nb[slot] = id as u32;
-                topo[m].back[slot] = k as u8;
-            }
-        }
-        // The visible facets' outside points go to the first new facet they are above
-        // (those on their own horizon ridges first), or are inside.
-        for &f in &visible {
-            let mut q = b.outside[f].first;
-            b.outside[f].first = NONE;
-            while q != NONE {
-                let qi = q as usize;
-                q = b.next[qi];
-                if qi == pi {
-                    continue;
-                }
-                let pq = &pts[qi];
-                let tf = &b.topo[f];
-                let planes = &b.planes;
-                let above = |g: usize| {
-                    let d = dist(&planes[g], pq);
-                    (d > tol).then_some((g, d))
-                };
-                let to = (0..D)
-                    .filter(|&j| tf.back[j] == NEW)
-                    .find_map(|j| above(tf.nb[j] as usize))
-                    .or_else(|| new.iter().copied().find_map(above));
-                if let Some((g, d)) = to {
-                    b.add_outside(g, qi, d);
-                }
-            }
-        }
-        b.free.extend(visible.iter().map(|&f| f as u32));
-    }
-    Err(HullError::Numerical("too many rounds"))
+    Ok(b)
 }
 
-/// Checks the result: each ridge of a live facet is shared with a live facet, and every
-/// point is inside every facet (with a margin of `1e3 tol` for the merged near-coplanar
-/// facets).
-fn finish(b: Build) -> Result<Hull, HullError> {
-    let Build {
-        pts,
-        tol,
-        interior,
-        topo,
-        mut planes,
-        outside,
-        above,
-        next,
-        work,
-        free,
-    } = b;
-    for (i, t) in topo.iter().enumerate() {
-        if !t.alive {
-            continue;
-        }
-        for k in 0..D {
-            let Some(g) = topo.get(t.nb[k] as usize) else {
-                return Err(HullError::Numerical("a live facet borders a removed one"));
+impl Build {
+    /// Goes on with the build, a round (a point made a vertex) at a time, until rounds
+    /// costing `budget` or more units are done (two per facet removed or made, one per
+    /// outside point moved, and so on: see the code; at least one round, and the call may end
+    /// among the stale entries of the work heap before a round); whether the hull is complete
+    /// ([`Build::check`] it then). The rounds are those of a build in one go.
+    pub(super) fn advance(&mut self, pts: &[P], budget: usize) -> Result<bool, HullError> {
+        let b = self;
+        let npts = pts.len();
+        let (tol, interior, exact) = (b.tol, b.interior, b.exact);
+        let mut spent = 0usize;
+        // Each round turns one outside point, the farthest above any facet, into a vertex:
+        // at most npts rounds.
+        loop {
+            if spent > 0 && spent >= budget {
+                return Ok(false);
+            }
+            let round = b.round + 1;
+            if round > npts as u32 + 1 {
+                return Err(HullError::Numerical("too many rounds"));
+            }
+            // The facet with the farthest outside point; entries of removed facets or of
+            // outside sets that changed are skipped (a unit each, so that a call may stop
+            // among them: taking them changes nothing else).
+            let fi = loop {
+                match b.work.pop() {
+                    None => return Ok(true),
+                    Some((key, f)) => {
+                        let f = f as usize;
+                        let o = &b.outside[f];
+                        if b.topo[f].alive && o.first != NONE && o.far_dist.to_bits() == key {
+                            break f;
+                        }
+                        spent += 3;
+                        if spent >= budget {
+                            return Ok(false);
+                        }
+                    }
+                }
             };
-            let s = t.back[k] as usize;
-            if !g.alive {
-                return Err(HullError::Numerical("a live facet borders a removed one"));
+            b.round = round;
+            let mut visible = std::mem::take(&mut b.visible);
+            let mut horizon = std::mem::take(&mut b.horizon);
+            let mut new = std::mem::take(&mut b.new);
+            let pi = b.outside[fi].far as usize;
+            let p = pts[pi];
+            // Visible facets: connected to fi, with p strictly outside; and the horizon ridges
+            // between them and the hidden ones.
+            visible.clear();
+            horizon.clear();
+            visible.push(fi);
+            b.topo[fi].alive = false;
+            b.topo[fi].seen = round;
+            b.above[fi] = dist(&b.planes[fi], &p);
+            let mut s = 0;
+            while s < visible.len() {
+                let f = visible[s];
+                s += 1;
+                for j in 0..D {
+                    let g = b.topo[f].nb[j] as usize;
+                    let tg = &mut b.topo[g];
+                    if tg.seen != round {
+                        tg.seen = round;
+                        let above = dist(&b.planes[g], &p);
+                        b.above[g] = above;
+                        if above > tol {
+                            tg.alive = false;
+                            visible.push(g);
+                        }
+                    }
+                    if tg.alive {
+                        let slot = b.topo[f].back[j];
+                        if b.topo[g].nb[slot as usize] as usize != f {
+                            return Err(HullError::Numerical("broken adjacency"));
+                        }
+                        horizon.push(Ridge { f, j, g, slot });
+                    }
+                }
             }
-            if s >= D || g.nb[s] as usize != i || g.back[s] as usize != k {
-                return Err(HullError::Numerical("adjacency is not symmetric"));
+            if horizon.is_empty() {
+                return Err(HullError::Numerical("horizon is not closed"));
+            }
+            new.clear();
+            for r in &horizon {
+                let mut t = Topo {
+                    nb: [NONE; D],
+                    v: b.topo[r.f].v,
+                    back: [0; D],
+                    alive: true,
+                    seen: 0,
+                };
+                t.v[r.j] = pi as u32;
+                t.nb[r.j] = r.g as u32;
+                t.back[r.j] = r.slot;
+                let (pf, pg) = (&b.planes[r.f], &b.planes[r.g]);
+                let (af, ag) = (b.above[r.f], b.above[r.g]);
+                let pl = match turn(pts, &t.v, (pf, af), (pg, ag), &interior, exact) {
+                    Some(pl) => pl,
+                    None => plane(pts, &t.v, &interior)
+                        .ok_or(HullError::Numerical("degenerate new facet"))?,
+                };
+                if pl.d - pl.n.dot(&interior) <= 0.0 {
+                    return Err(HullError::Numerical("interior point on a facet"));
+                }
+                let id = b.add_facet(t, pl)?;
+                let tg = &mut b.topo[r.g];
+                tg.nb[r.slot as usize] = id as u32;
+                tg.back[r.slot as usize] = r.j as u8;
+                // The removed facet's side of the ridge points at the new facet too.
+                let tf = &mut b.topo[r.f];
+                tf.nb[r.j] = id as u32;
+                tf.back[r.j] = NEW;
+                new.push(id);
+            }
+            // The new facets pair up across the ridges through p. The new facet on ridge (f, j)
+            // shares with its neighbour opposite v[k] the 4 vertices S of f other than v[j]
+            // and v[k]: turning about S through the visible facets from f, across the ridge
+            // opposite v[k], leads to the next horizon ridge about S, whose new facet it is.
+            let topo = &mut b.topo;
+            let mut walked = 0usize;
+            for (r, &id) in horizon.iter().zip(&new) {
+                for k in 0..D {
+                    if k == r.j || topo[id].nb[k] != NONE {
+                        continue;
+                    }
+                    // h holds S and two more vertices, at ia and ic: cross the ridge opposite ia.
+                    let (mut h, mut ia, mut ic) = (r.f, k, r.j);
+                    let mut steps = 0;
+                    let (m, slot) = loop {
+                        let th = &topo[h];
+                        let across = th.nb[ia] as usize;
+                        if th.back[ia] == NEW {
+                            // Built on h's ridge opposite ia: its vertices are h's, in order.
+                            break (across, ic);
+                        }
+                        steps += 1;
+                        let ta = &topo[across];
+                        if steps > visible.len() || ta.alive || ta.seen != round {
+                            return Err(HullError::Numerical("horizon is not closed"));
+                        }
+                        // Where h's vertex c is in across, without branches.
+                        let c = th.v[ic];
+                        let (mut ic_across, mut found) = (0, 0);
+                        for (i, &x) in ta.v.iter().enumerate() {
+                            let here = usize::from(x == c);
+                            ic_across += i * here;
+                            found += here;
+                        }
+                        if found != 1 {
+                            return Err(HullError::Numerical("broken adjacency"));
+                        }
+                        (h, ia, ic) = (across, ic_across, th.back[ia] as usize);
+                    };
+                    let taken = topo[m].nb[slot];
+                    if m == id || (taken != NONE && taken as usize != id) {
+                        return Err(HullError::Numerical("horizon is not closed"));
+                    }
+                    walked += steps;
+                    topo[id].nb[k] = m as u32;
+                    topo[id].back[k] = slot as u8;
+                    topo[m].nb[slot] = id as u32;
+                    topo[m].back[slot] = k as u8;
+                }
+            }
+            // The visible facets' outside points go to the first new facet they are above
+            // (those on their own horizon ridges first), or are inside.
+            let mut moved = 0usize;
+            for &f in &visible {
+                let mut q = b.outside[f].first;
+                b.outside[f].first = NONE;
+                while q != NONE {
+                    let qi = q as usize;
+                    q = b.next[qi];
+                    moved += 1;
+                    if qi == pi {
+                        continue;
+                    }
+                    let pq = &pts[qi];
+                    let tf = &b.topo[f];
+                    let planes = &b.planes;
+                    let above = |g: usize| {
+                        let d = dist(&planes[g], pq);
+                        (d > tol).then_some((g, d))
+                    };
+                    let to = (0..D)
+                        .filter(|&j| tf.back[j] == NEW)
+                        .find_map(|j| above(tf.nb[j] as usize))
+                        .or_else(|| new.iter().copied().find_map(above));
+                    if let Some((g, d)) = to {
+                        b.add_outside(g, qi, d);
+                    }
+                }
+            }
+            b.free.extend(visible.iter().map(|&f| f as u32));
+            // Units of about 0.1 µs on the project's machine: a facet removed or made (a new
+            // hyperplane, its adjacency) costs two, an outside point moved one, as do four steps
+            // of the walks that pair the new facets (and, above, a stale entry of the work heap
+            // three).
+            spent += 2 * (visible.len() + new.len()) + moved + walked / 4;
+            b.visible = visible;
+            b.horizon = horizon;
+            b.new = new;
+        }
+    }
+}
+
+/// Checks the result and measures the facets in one go ([`Build::check`], then
+/// [`Build::into_hull`]).
+#[cfg(test)]
+pub(super) fn finish(mut b: Build, pts: &[P]) -> Result<Hull, HullError> {
+    while !b.check(pts, usize::MAX)? {}
+    Ok(b.into_hull())
+}
+
+/// Where the checks of a built hull are ([`Build::check`]).
+struct Checks {
+    /// The points by coordinate, in f64 and in f32.
+    cols: Vec<f64>,
+    cols32: Vec<f32>,
+    /// The largest point norm, and what f32 rounding may leave of n · x.
+    r: f64,
+    slack: f64,
+    /// The live facets, in the order of their slots.
+    live: Vec<usize>,
+    /// Of them, how many have their adjacency checked, their points checked, and are
+    /// measured.
+    adjacent: usize,
+    checked: usize,
+    measured: usize,
+    /// Over the facets measured: the sum of their simplices' volumes with the interior point
+    /// (times 6!), and the least offset.
+    volume: f64,
+    min_offset: f64,
+}
+
+impl Build {
+    /// Checks the result: each ridge of a live facet is shared with a live facet, and every
+    /// point is inside every facet (with a margin of `1e3 tol` for the merged near-coplanar
+    /// facets); then measures the facets. A part at a time: about `budget` units of work
+    /// (like [`Build::advance`]'s, about 0.1 µs: a facet measured, two of their points
+    /// checked, four of their adjacencies; at least one), whether all is done
+    /// ([`Build::into_hull`], [`Build::metrics`] then). The same operations in the same
+    /// order as in one go.
+    pub(super) fn check(&mut self, pts: &[P], budget: usize) -> Result<bool, HullError> {
+        let npts = pts.len();
+        // In quarter units.
+        let budget = budget.saturating_mul(4);
+        let mut spent = 0usize;
+        let checks = match &mut self.checks {
+            Some(c) => c,
+            None => {
+                // The points by coordinate, so that the products vectorise, in f64 and in f32
+                // (four to a vector register). In f32, n · x is within 9 u r of its value
+                // (u = 2⁻²⁴, r the largest point norm: the rounding of n, x, the products and
+                // their sum), so a facet all of whose points are below its limit less that in
+                // f32 passes; any other is checked again in f64.
+                let r = pts.iter().fold(0.0_f64, |m, p| m.max(p.norm()));
+                let slack = 9.0 * 2f64.powi(-24) * r;
+                let mut cols = vec![0.0; D * npts];
+                for (i, p) in pts.iter().enumerate() {
+                    for c in 0..D {
+                        cols[c * npts + i] = p[c];
+                    }
+                }
+                let cols32: Vec<f32> = cols.iter().map(|&x| x as f32).collect();
+                let topo = &self.topo;
+                let live: Vec<usize> = (0..topo.len()).filter(|&i| topo[i].alive).collect();
+                spent += topo.len() / 16 + npts / 4;
+                self.checks.insert(Checks {
+                    cols,
+                    cols32,
+                    r,
+                    slack,
+                    live,
+                    adjacent: 0,
+                    checked: 0,
+                    measured: 0,
+                    volume: 0.0,
+                    min_offset: f64::INFINITY,
+                })
+            }
+        };
+        let topo = &self.topo;
+        while checks.adjacent < checks.live.len() {
+            if spent > 0 && spent >= budget {
+                return Ok(false);
+            }
+            let i = checks.live[checks.adjacent];
+            checks.adjacent += 1;
+            spent += 1;
+            let t = &topo[i];
+            for k in 0..D {
+                let Some(g) = topo.get(t.nb[k] as usize) else {
+                    return Err(HullError::Numerical("a live facet borders a removed one"));
+                };
+                let s = t.back[k] as usize;
+                if !g.alive {
+                    return Err(HullError::Numerical("a live facet borders a removed one"));
+                }
+                if s >= D || g.nb[s] as usize != i || g.back[s] as usize != k {
+                    return Err(HullError::Numerical("adjacency is not symmetric"));
+                }
             }
         }
-    }
-    // The points by coordinate, so that the products vectorise, in f64 and in f32 (four to
-    // a vector register). In f32, n · x is within 9 u r of its value (u = 2⁻²⁴, r the
-    // largest point norm: the rounding of n, x, the products and their sum), so a facet all
-    // of whose points are below its limit less that in f32 passes; any other is checked
-    // again in f64.
-    let npts = pts.len();
-    let r = pts.iter().fold(0.0_f64, |m, p| m.max(p.norm()));
-    let slack = 9.0 * 2f64.powi(-24) * r;
-    let mut cols = vec![0.0; D * npts];
-    for (i, p) in pts.iter().enumerate() {
-        for c in 0..D {
-            cols[c * npts + i] = p[c];
+        fn split<T>(cols: &[T], n: usize) -> [&[T]; D] {
+            let (x0, rest) = cols.split_at(n);
+            let (x1, rest) = rest.split_at(n);
+            let (x2, rest) = rest.split_at(n);
+            let (x3, rest) = rest.split_at(n);
+            let (x4, x5) = rest.split_at(n);
+            [x0, x1, x2, x3, x4, x5]
         }
-    }
-    let cols32: Vec<f32> = cols.iter().map(|&x| x as f32).collect();
-    fn split<T>(cols: &[T], n: usize) -> [&[T]; D] {
-        let (x0, rest) = cols.split_at(n);
-        let (x1, rest) = rest.split_at(n);
-        let (x2, rest) = rest.split_at(n);
-        let (x3, rest) = rest.split_at(n);
-        let (x4, x5) = rest.split_at(n);
-        [x0, x1, x2, x3, x4, x5]
-    }
-    let [x0, x1, x2, x3, x4, x5] = split(&cols, npts);
-    let [y0, y1, y2, y3, y4, y5] = split(&cols32, npts);
-    for (t, f) in topo.iter().zip(&planes) {
-        if !t.alive {
-            continue;
-        }
-        let n = &f.n;
-        let limit = f.d + 1e3 * tol;
-        // Below limit − slack, rounded down.
-        let below = limit - slack;
-        let limit32 = (below - below.abs() * 2f64.powi(-23)) as f32;
-        // Only well inside f32's normal range (where its rounding is relative); else
-        // straight to f64.
-        if (1e-30..1e30).contains(&r) && limit.abs() < 1e30 {
-            let m: [f32; D] = std::array::from_fn(|c| n[c] as f32);
-            // Counted in u32, the width of an f32 comparison, so that the loop vectorises.
-            let mut inside32 = 0_u32;
+        let [x0, x1, x2, x3, x4, x5] = split(&checks.cols, npts);
+        let [y0, y1, y2, y3, y4, y5] = split(&checks.cols32, npts);
+        let (r, slack, tol) = (checks.r, checks.slack, self.tol);
+        // A facet's points: two per unit at 64 of them.
+        let per_facet = (npts / 32).max(1);
+        while checks.checked < checks.live.len() {
+            if spent > 0 && spent >= budget {
+                return Ok(false);
+            }
+            let f = &self.planes[checks.live[checks.checked]];
+            checks.checked += 1;
+            spent += per_facet;
+            let n = &f.n;
+            let limit = f.d + 1e3 * tol;
+            // Below limit − slack, rounded down.
+            let below = limit - slack;
+            let limit32 = (below - below.abs() * 2f64.powi(-23)) as f32;
+            // Only well inside f32's normal range (where its rounding is relative); else
+            // straight to f64.
+            if (1e-30..1e30).contains(&r) && limit.abs() < 1e30 {
+                let m: [f32; D] = std::array::from_fn(|c| n[c] as f32);
+                // Counted in u32, the width of an f32 comparison, so that the loop vectorises.
+                let mut inside32 = 0_u32;
+                for i in 0..npts {
+                    let s = m[0] * y0[i]
+                        + m[1] * y1[i]
+                        + m[2] * y2[i]
+                        + m[3] * y3[i]
+                        + m[4] * y4[i]
+                        + m[5] * y5[i];
+                    inside32 += u32::from(s <= limit32);
+                }
+                if inside32 as usize == npts {
+                    continue;
+                }
+            }
+            let mut inside = 0;
             for i in 0..npts {
-                let s = m[0] * y0[i]
-                    + m[1] * y1[i]
-                    + m[2] * y2[i]
-                    + m[3] * y3[i]
-                    + m[4] * y4[i]
-                    + m[5] * y5[i];
-                inside32 += u32::from(s <= limit32);
+                let s = n[0] * x0[i]
+                    + n[1] * x1[i]
+                    + n[2] * x2[i]
+                    + n[3] * x3[i]
+                    + n[4] * x4[i]
+                    + n[5] * x5[i];
+                inside += usize::from(s <= limit);
             }
-            if inside32 as usize == npts {
-                continue;
+            if inside != npts {
+                return Err(HullError::Numerical("a point is outside the hull"));
             }
         }
-        let mut inside = 0;
-        for i in 0..npts {
-            let s = n[0] * x0[i]
-                + n[1] * x1[i]
-                + n[2] * x2[i]
-                + n[3] * x3[i]
-                + n[4] * x4[i]
-                + n[5] * x5[i];
-            inside += usize::from(s <= limit);
+        while checks.measured < checks.live.len() {
+            if spent > 0 && spent >= budget {
+                return Ok(false);
+            }
+            let end = (checks.measured + LANES).min(checks.live.len());
+            let chunk = &checks.live[checks.measured..end];
+            checks.measured = end;
+            spent += 4 * chunk.len();
+            let mut vs = [topo[chunk[0]].v; LANES];
+            for (l, &i) in chunk.iter().enumerate() {
+                vs[l] = topo[i].v;
+            }
+            let m = measures(pts, &vs);
+            for (l, &i) in chunk.iter().enumerate() {
+                let f = &mut self.planes[i];
+                f.measure = m[l];
+                // As `Hull::volume` and a fold over `Hull::facets` sum them: in slot order.
+                checks.volume += f.measure * (f.d - f.n.dot(&self.interior));
+                checks.min_offset = checks.min_offset.min(f.d);
+            }
         }
-        if inside != npts {
-            return Err(HullError::Numerical("a point is outside the hull"));
-        }
+        Ok(true)
     }
-    let live: Vec<usize> = (0..topo.len()).filter(|&i| topo[i].alive).collect();
-    for chunk in live.chunks(LANES) {
-        let mut vs = [topo[chunk[0]].v; LANES];
-        for (l, &i) in chunk.iter().enumerate() {
-            vs[l] = topo[i].v;
-        }
-        let m = measures(pts, &vs);
-        for (l, &i) in chunk.iter().enumerate() {
-            planes[i].measure = m[l];
-        }
+
+    /// The hull's volume and the least offset of a facet's hyperplane, once [`Build::check`]
+    /// is done (what [`Hull::volume`] and the least of [`Hull::facets`]' offsets say).
+    pub(super) fn metrics(&self) -> Option<(f64, f64)> {
+        self.checks
+            .as_ref()
+            .filter(|c| c.measured >= c.live.len())
+            .map(|c| (c.volume / 720.0, c.min_offset))
     }
-    Ok(Hull {
-        buffers: Buffers {
+
+    /// The hull, once [`Build::check`] is done.
+    pub(super) fn into_hull(self) -> Hull {
+        let Build {
+            interior,
             topo,
             planes,
             outside,
@@ -817,9 +966,21 @@ fn finish(b: Build) -> Result<Hull, HullError> {
             next,
             work,
             free,
-        },
-        interior,
-    })
+            ..
+        } = self;
+        Hull {
+            buffers: Buffers {
+                topo,
+                planes,
+                outside,
+                above,
+                next,
+                work,
+                free,
+            },
+            interior,
+        }
+    }
 }
 
 #[cfg(test)]
