@@ -10,6 +10,13 @@ use std::path::{Path, PathBuf};
 fn main() {
     // sqlx::migrate! embeds ../migrations at compile time: a new migration must rebuild.
     println!("cargo:rerun-if-changed=../migrations");
+    // The store's checked queries (sqlx's `query!` macros) read the schema from the data base
+    // at DATABASE_URL, or from the query data in ../.sqlx without one or with SQLX_OFFLINE:
+    // a change to any of these must expand them again.
+    println!("cargo:rerun-if-changed=../.sqlx");
+    println!("cargo:rerun-if-env-changed=DATABASE_URL");
+    println!("cargo:rerun-if-env-changed=SQLX_OFFLINE");
+    println!("cargo:rerun-if-env-changed=SQLX_OFFLINE_DIR");
     let out = PathBuf::from(std::env::var_os("OUT_DIR").expect("cargo sets OUT_DIR"));
     compile("proto/icms/session.proto", &out, "icms_session.fds");
     compile("proto/icms/live.proto", &out, "icms_live.fds");

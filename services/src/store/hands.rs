@@ -11,11 +11,9 @@ use std::path::PathBuf;
 use std::sync::OnceLock;
 
 use dfs_core::hand::{HandModel, HandSpec, BUILTIN_HANDS};
-use dfs_core::names::Named;
-use dfs_core::replay::{FailureReason, ReplayReport};
-use sqlx::sqlite::SqliteRow;
-use sqlx::{Row as _, Sqlite};
+use dfs_core::replay::ReplayReport;
 
+use super::catalog::{BlobRef, NewHand, NewReplay};
 use super::error::StoreError;
 use super::types::{Hand, HandSummary, Replay};
 use super::{blob, StagedBlob, Store};
@@ -23,9 +21,6 @@ use crate::replay::{load_builtin_hand, LoadedHand};
 
 /// Longest hand name.
 pub const MAX_HAND_NAME: usize = 64;
-
-const REPLAY_COLUMNS: &str = "id, skill_id, hand, success, failure_reason, report, sha256, \
-     size_bytes, blob_path, created_at";
 
 impl HandSummary {
     /// The summary of a loaded hand.
@@ -116,54 +111,6 @@ fn check_hand_name(name: &str) -> Result<(), StoreError> {
     }
 }
 
-fn row_to_summary(row: &SqliteRow) -> Result<HandSummary, StoreError> {
-    let fingers: String = row.try_get("fingers")?;
-    let dof_names: String = row.try_get("dof_names")?;
-    let dof: i64 = row.try_get("dof")?;
-    Ok(HandSummary {
-        name: row.try_get("name")?,
-        builtin: false,
-        fingers: serde_json::from_str(&fingers)?,
-        dof: usize::try_from(dof).map_err(|_| StoreError::Corrupt(format!("dof {dof}")))?,
-        dof_names: serde_json::from_str(&dof_names)?,
-        torque_limit: [
-            row.try_get("torque_limit_min")?,
-            row.try_get("torque_limit_max")?,
-        ],
-        created_at: Some(row.try_get("created_at")?),
-    })
-}
-
-fn row_to_replay(row: &SqliteRow) -> Result<Replay, StoreError> {
-    let id: i64 = row.try_get("id")?;
-    let report: String = row.try_get("report")?;
-    let mut report: serde_json::Value = serde_json::from_str(&report)?;
-    // Replays stored before the report took the torque the joints applied (clamped at the
-    // limit) hold the peak of the torque asked for, which could exceed it. The applied torque's
-    // peak is that, at most 1: the same number the report gives today.
-    if let Some(ratio) = report.get_mut("peak_torque_ratio") {
-        if ratio.as_f64().is_some_and(|r| r > 1.0) {
-            *ratio = 1.0.into();
-        }
-    }
-    Ok(Replay {
-        id,
-        skill_id: row.try_get("skill_id")?,
-        hand: row.try_get("hand")?,
-        success: row.try_get("success")?,
-        failure_reason: row
-            .try_get::<Option<&str>, _>("failure_reason")?
-            .map(FailureReason::from_name)
-            .transpose()
-            .map_err(|e| StoreError::Corrupt(format!("replay {id}: failure_reason: {e}")))?,
-        report,
-        sha256: row.try_get("sha256")?,
-        size_bytes: row.try_get("size_bytes")?,
-        blob_path: row.try_get("blob_path")?,
-        created_at: row.try_get("created_at")?,
-    })
-}
-
 impl Store {
     /// Stores an uploaded hand after building its model from `urdf` and `spec` (the hand's name
     /// is the spec's). Refused, storing nothing: an invalid URDF or spec
@@ -195,21 +142,17 @@ impl Store {
         let (Some(spec), Some(urdf)) = (hand.spec, hand.urdf) else {
             return Err(StoreError::Corrupt("a built hand lost its spec".into()));
         };
-        let created_at: Option<String> = sqlx::query_scalar(
-            "INSERT INTO hands (name, spec, urdf, dof, fingers, dof_names, torque_limit_min, \
-             torque_limit_max) VALUES (?, ?, ?, ?, ?, ?, ?, ?) \
-             ON CONFLICT (name) DO NOTHING RETURNING created_at",
-        )
-        .bind(&name)
-        .bind(serde_json::to_string(&spec)?)
-        .bind(&urdf)
-        .bind(summary.dof as i64)
-        .bind(serde_json::to_string(&summary.fingers)?)
-        .bind(serde_json::to_string(&summary.dof_names)?)
-        .bind(summary.torque_limit[0])
-        .bind(summary.torque_limit[1])
-        .fetch_optional(&self.inner.pool)
-        .await?;
+        let spec_json = serde_json::to_string(&spec)?;
+        let created_at = self
+            .inner
+            .catalog
+            .insert_hand(NewHand {
+                name: &name,
+                spec_json: &spec_json,
+                urdf: &urdf,
+                summary: &summary,
+            })
+            .await?;
         let Some(created_at) = created_at else {
             return Err(StoreError::Conflict(format!(
                 "a hand named {name:?} is already stored; choose another name"
@@ -228,16 +171,8 @@ impl Store {
 
     /// Every hand: the built-in ones in their fixed order, then the uploaded ones by upload.
     pub async fn list_hands(&self) -> Result<Vec<HandSummary>, StoreError> {
-        let rows = sqlx::query(
-            "SELECT name, dof, fingers, dof_names, torque_limit_min, torque_limit_max, \
-             created_at FROM hands ORDER BY id",
-        )
-        .fetch_all(&self.inner.pool)
-        .await?;
         let mut out = builtin_summaries().to_vec();
-        for row in &rows {
-            out.push(row_to_summary(row)?);
-        }
+        out.extend(self.inner.catalog.hands().await?);
         Ok(out)
     }
 
@@ -254,20 +189,11 @@ impl Store {
                 urdf,
             });
         }
-        let row = sqlx::query(
-            "SELECT name, spec, urdf, dof, fingers, dof_names, torque_limit_min, \
-             torque_limit_max, created_at FROM hands WHERE name = ?",
-        )
-        .bind(name)
-        .fetch_optional(&self.inner.pool)
-        .await?
-        .ok_or_else(|| StoreError::HandNotFound(name.to_owned()))?;
-        let spec: String = row.try_get("spec")?;
-        Ok(Hand {
-            summary: row_to_summary(&row)?,
-            spec: Some(serde_json::from_str(&spec)?),
-            urdf: Some(row.try_get("urdf")?),
-        })
+        self.inner
+            .catalog
+            .hand(name)
+            .await?
+            .ok_or_else(|| StoreError::HandNotFound(name.to_owned()))
     }
 
     /// Stores a replay of skill `skill_id` on `hand`: its MCAP bytes as a content-addressed blob
@@ -324,122 +250,81 @@ impl Store {
         guard: tokio::sync::RwLockReadGuard<'_, ()>,
     ) -> Result<Replay, StoreError> {
         let report_json = serde_json::to_string(report)?;
-        let row = sqlx::query(&format!(
-            "INSERT INTO replays (skill_id, hand, success, failure_reason, report, sha256, \
-             size_bytes, blob_path) SELECT ?, ?, ?, ?, ?, ?, ?, ? \
-             WHERE EXISTS (SELECT 1 FROM skills WHERE id = ?) RETURNING {REPLAY_COLUMNS}"
-        ))
-        .bind(skill_id)
-        .bind(hand)
-        .bind(report.success)
-        .bind(report.failure_reason.map(|r| r.name()))
-        .bind(&report_json)
-        .bind(&sha256)
-        .bind(size)
-        .bind(&rel)
-        .bind(skill_id)
-        .fetch_optional(&self.inner.pool)
-        .await?;
-        let Some(row) = row else {
+        let blob = BlobRef { sha256, rel };
+        let replay = self
+            .inner
+            .catalog
+            .insert_replay(NewReplay {
+                skill_id,
+                hand,
+                success: report.success,
+                failure_reason: report.failure_reason.map(|r| r.name()),
+                report_json: &report_json,
+                blob: &blob,
+                size_bytes: size,
+            })
+            .await?;
+        let Some(replay) = replay else {
             // The skill was deleted while the replay ran: remove the blob unless a row names
             // the same bytes. Under the exclusive lock no writer of the same bytes is between
             // writing its blob and inserting its row.
             drop(guard);
             let _exclusive = self.inner.blob_lock.write().await;
-            self.remove_unreferenced_blobs(&[(sha256, rel)]).await;
+            self.remove_unreferenced_blobs(&[blob]).await;
             return Err(StoreError::SkillNotFound(skill_id));
         };
-        let replay = row_to_replay(&row)?;
         tracing::debug!(replay_id = replay.id, skill_id, hand, "stored replay");
         Ok(replay)
     }
 
     /// One replay.
     pub async fn get_replay(&self, id: i64) -> Result<Replay, StoreError> {
-        let row = sqlx::query(&format!(
-            "SELECT {REPLAY_COLUMNS} FROM replays WHERE id = ?"
-        ))
-        .bind(id)
-        .fetch_optional(&self.inner.pool)
-        .await?
-        .ok_or(StoreError::ReplayNotFound(id))?;
-        row_to_replay(&row)
+        self.inner
+            .catalog
+            .replay(id)
+            .await?
+            .ok_or(StoreError::ReplayNotFound(id))
     }
 
     /// The replays of one skill, by ascending id; [`StoreError::SkillNotFound`] if no such
     /// skill.
     pub async fn list_replays(&self, skill_id: i64) -> Result<Vec<Replay>, StoreError> {
-        let mut tx = self.inner.pool.begin().await?;
-        let exists: Option<i64> = sqlx::query_scalar("SELECT id FROM skills WHERE id = ?")
-            .bind(skill_id)
-            .fetch_optional(&mut *tx)
-            .await?;
-        if exists.is_none() {
-            return Err(StoreError::SkillNotFound(skill_id));
-        }
-        let rows = sqlx::query(&format!(
-            "SELECT {REPLAY_COLUMNS} FROM replays WHERE skill_id = ? ORDER BY id"
-        ))
-        .bind(skill_id)
-        .fetch_all(&mut *tx)
-        .await?;
-        tx.commit().await?;
-        rows.iter().map(row_to_replay).collect()
+        self.inner
+            .catalog
+            .replays_of(skill_id)
+            .await?
+            .ok_or(StoreError::SkillNotFound(skill_id))
     }
 
     /// Absolute path of a replay's MCAP blob.
     pub async fn replay_blob_path(&self, id: i64) -> Result<PathBuf, StoreError> {
-        let rel: String = sqlx::query_scalar("SELECT blob_path FROM replays WHERE id = ?")
-            .bind(id)
-            .fetch_optional(&self.inner.pool)
+        let rel = self
+            .inner
+            .catalog
+            .replay_blob_path(id)
             .await?
             .ok_or(StoreError::ReplayNotFound(id))?;
         Ok(self.inner.dir.join(rel))
     }
 
-    /// Unlinks the blobs of `deleted` (sha256, relative path) that no session or replay row
-    /// names any more. Call with the blob lock held exclusively, after the rows' deletion
-    /// committed. Best effort: a leftover blob is harmless garbage.
-    pub(super) async fn remove_unreferenced_blobs(&self, deleted: &[(String, String)]) {
+    /// Unlinks the blobs of `deleted` that no session or replay row names any more. Call with
+    /// the blob lock held exclusively, after the rows' deletion committed. Best effort: a
+    /// leftover blob is harmless garbage.
+    pub(super) async fn remove_unreferenced_blobs(&self, deleted: &[BlobRef]) {
         let mut seen = std::collections::BTreeSet::new();
-        for (sha256, rel) in deleted {
+        for BlobRef { sha256, rel } in deleted {
             if !seen.insert(sha256.as_str()) {
                 continue;
             }
-            let referenced: Result<Option<i64>, sqlx::Error> = sqlx::query_scalar(
-                "SELECT 1 FROM sessions WHERE sha256 = ?1 \
-                 UNION ALL SELECT 1 FROM replays WHERE sha256 = ?1 LIMIT 1",
-            )
-            .bind(sha256)
-            .fetch_optional(&self.inner.pool)
-            .await;
-            match referenced {
-                Ok(None) => {
+            match self.inner.catalog.blob_is_referenced(sha256).await {
+                Ok(false) => {
                     if let Err(e) = blob::remove(&self.inner.dir, rel) {
                         tracing::warn!(error = %e, "could not remove a deleted row's blob");
                     }
                 }
-                Ok(Some(_)) => {}
+                Ok(true) => {}
                 Err(e) => tracing::warn!(error = %e, "could not check a blob's references"),
             }
         }
     }
-}
-
-/// Deletes the replays of the skills `skill_ids_sql` selects (a subquery binding one value)
-/// inside `tx`; returns their blobs as (sha256, relative path).
-pub(super) async fn delete_replays_of(
-    tx: &mut sqlx::Transaction<'_, Sqlite>,
-    skill_ids_sql: &str,
-    bound: i64,
-) -> Result<Vec<(String, String)>, StoreError> {
-    let rows = sqlx::query(&format!(
-        "DELETE FROM replays WHERE skill_id IN ({skill_ids_sql}) RETURNING sha256, blob_path"
-    ))
-    .bind(bound)
-    .fetch_all(&mut **tx)
-    .await?;
-    rows.iter()
-        .map(|r| Ok((r.try_get(0)?, r.try_get(1)?)))
-        .collect()
 }

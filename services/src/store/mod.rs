@@ -1,5 +1,8 @@
 //! The skill data base: recorded sessions (content-addressed MCAP blobs plus metadata) and the
-//! skills found in them, in SQLite through sqlx. The only SQL of the project lives here.
+//! skills found in them, in SQLite through sqlx. The only SQL of the project lives here, in
+//! the backend [`sqlite`] behind the [`catalog::Catalog`] trait; the blob files, the
+//! in-memory indexes and the locks that order deletes after ingests are [`Store`]'s, the
+//! same for every backend.
 //!
 //! Layout of a data directory: `DIR/icms.sqlite3` (WAL mode) and `DIR/blobs/sha256/ab/cdef….mcap`.
 //! A blob is written and fsynced before the row that names it commits, and a session's row, its
@@ -15,30 +18,28 @@
 
 pub mod bench;
 mod blob;
+mod catalog;
 mod error;
 mod hands;
 mod knn;
 mod query;
 mod reprocess;
+mod rows;
+mod sqlite;
 mod types;
 
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 use std::time::Duration;
 
-use sqlx::migrate::Migrator;
-use sqlx::sqlite::{
-    SqliteConnectOptions, SqliteJournalMode, SqlitePool, SqlitePoolOptions, SqliteRow,
-    SqliteSynchronous,
-};
-use sqlx::{Connection as _, QueryBuilder, Row as _, Sqlite, SqliteConnection};
-
 pub use blob::{StagedBlob, StagedWriter};
 pub use error::StoreError;
+pub use sqlite::{APPLICATION_ID, DB_FILE, MAX_CONNECTIONS, PAGE_CACHE_KIB};
 
 use crate::assist::features::TEMPLATE_DIM;
 use crate::assist::index::{RecognitionIndex, StoredTemplate};
 use crate::segmentation::SEGMENTATION_VERSION;
+use catalog::{BlobRef, Catalog, CheckedSkill, IndexedSkill, NewSession};
 use dfs_core::names::Named;
 
 /// Youngest unreferenced blob the server's sweep removes (see [`Store::sweep_orphan_blobs`]):
@@ -78,31 +79,8 @@ pub use types::{
 
 use knn::FeatureIndex;
 
-/// Connections the store's pool opens at most.
-pub const MAX_CONNECTIONS: u32 = 8;
-
-/// Page cache of one connection, KiB: 8 MiB, so [`MAX_CONNECTIONS`] hold at most 64 MiB. The
-/// caches fill as the data base is read, so their bound is the server's memory growth as the
-/// data base grows (the soak of issue 17 saw 32 MiB each keep the resident set rising for its
-/// ten minutes).
-pub const PAGE_CACHE_KIB: u32 = 8192;
-
-/// `PRAGMA application_id` of an ICMS database: ASCII `ICMS`.
-pub const APPLICATION_ID: i32 = 0x4943_4D53;
-/// File name of the database inside the data directory.
-pub const DB_FILE: &str = "icms.sqlite3";
 /// Largest number of sessions [`Store::list_sessions`] returns per page.
 pub const MAX_SESSION_LIMIT: u32 = 1000;
-
-/// Columns of a session row (`FROM sessions s`), its skill ids as a JSON array.
-const SESSION_COLUMNS: &str = "id, sha256, size_bytes, blob_path, meta, segmentation_version, \
-     created_at, \
-     (SELECT json_group_array(id) FROM (SELECT id FROM skills WHERE session_id = s.id \
-     ORDER BY id)) AS skill_ids, \
-     (SELECT json_group_array(matched_skill_id) FROM (SELECT matched_skill_id FROM skills \
-     WHERE session_id = s.id ORDER BY id)) AS matched_skill_ids";
-
-static MIGRATOR: Migrator = sqlx::migrate!("../migrations");
 
 /// Handle to a data directory's database and blobs. Cheap to clone (shared state).
 #[derive(Clone)]
@@ -112,7 +90,8 @@ pub struct Store {
 
 struct Inner {
     dir: PathBuf,
-    pool: SqlitePool,
+    /// The rows, in the data base backend the store was opened on.
+    catalog: Box<dyn Catalog>,
     index: std::sync::RwLock<FeatureIndex>,
     /// The skills as recognition sees them; a snapshot is shared by the live sessions that
     /// recognise (copied on the next change while one holds it).
@@ -180,113 +159,9 @@ impl std::fmt::Debug for Store {
     }
 }
 
-fn newest_known_version() -> i64 {
-    MIGRATOR.iter().map(|m| m.version).max().unwrap_or(0)
-}
-
-fn is_not_a_database(e: &sqlx::Error) -> bool {
-    match e {
-        // SQLITE_NOTADB = 26
-        sqlx::Error::Database(d) => {
-            d.code().as_deref() == Some("26") || d.message().contains("not a database")
-        }
-        _ => false,
-    }
-}
-
-/// Refuses a database that is not ours, or that a newer binary migrated.
-async fn check_existing(db_path: &Path) -> Result<(), StoreError> {
-    let opts = SqliteConnectOptions::new()
-        .filename(db_path)
-        .create_if_missing(false)
-        .busy_timeout(Duration::from_secs(5));
-    let not_ours = || StoreError::NotOurs(db_path.to_path_buf());
-    let mut conn = match SqliteConnection::connect_with(&opts).await {
-        Ok(c) => c,
-        Err(e) if is_not_a_database(&e) => return Err(not_ours()),
-        Err(e) => return Err(e.into()),
-    };
-    let result = async {
-        let app_id: i32 = match sqlx::query_scalar("PRAGMA application_id")
-            .fetch_one(&mut conn)
-            .await
-        {
-            Ok(v) => v,
-            Err(e) if is_not_a_database(&e) => return Err(not_ours()),
-            Err(e) => return Err(e.into()),
-        };
-        let tables: Vec<String> = sqlx::query_scalar(
-            "SELECT name FROM sqlite_master WHERE type = 'table' AND name NOT LIKE 'sqlite_%'",
-        )
-        .fetch_all(&mut conn)
-        .await?;
-        if app_id != APPLICATION_ID {
-            // A fresh file, or one that sqlx began to migrate before a crash (it creates
-            // `_sqlx_migrations` outside the first migration's transaction), is fine.
-            if app_id != 0 || tables.iter().any(|t| t != "_sqlx_migrations") {
-                return Err(not_ours());
-            }
-        }
-        if tables.iter().any(|t| t == "_sqlx_migrations") {
-            let found: Option<i64> =
-                sqlx::query_scalar("SELECT MAX(version) FROM _sqlx_migrations")
-                    .fetch_one(&mut conn)
-                    .await?;
-            let supported = newest_known_version();
-            if let Some(found) = found {
-                if found > supported {
-                    return Err(StoreError::SchemaTooNew { found, supported });
-                }
-            }
-        }
-        Ok(())
-    }
-    .await;
-    let _ = conn.close().await;
-    result
-}
-
-fn feature_from_blob(id: i64, bytes: &[u8]) -> Result<[f32; FEATURE_DIM], StoreError> {
-    if bytes.len() != FEATURE_DIM * 4 {
-        return Err(StoreError::Corrupt(format!(
-            "skill {id}: feature has {} bytes, expected {}",
-            bytes.len(),
-            FEATURE_DIM * 4
-        )));
-    }
-    let mut f = [0.0f32; FEATURE_DIM];
-    for (i, c) in bytes.chunks_exact(4).enumerate() {
-        f[i] = f32::from_le_bytes([c[0], c[1], c[2], c[3]]);
-    }
-    Ok(f)
-}
-
-fn feature_to_blob(f: &[f32; FEATURE_DIM]) -> Vec<u8> {
-    f.iter().flat_map(|x| x.to_le_bytes()).collect()
-}
-
-/// An approach template from its column (`None` for NULL).
-fn approach_from_blob(
-    id: i64,
-    bytes: Option<&[u8]>,
-) -> Result<Option<[f32; TEMPLATE_DIM]>, StoreError> {
-    let Some(bytes) = bytes else { return Ok(None) };
-    if bytes.len() != TEMPLATE_DIM * 4 {
-        return Err(StoreError::Corrupt(format!(
-            "skill {id}: approach has {} bytes, expected {}",
-            bytes.len(),
-            TEMPLATE_DIM * 4
-        )));
-    }
-    let mut f = [0.0f32; TEMPLATE_DIM];
-    for (i, c) in bytes.chunks_exact(4).enumerate() {
-        f[i] = f32::from_le_bytes([c[0], c[1], c[2], c[3]]);
-    }
-    Ok(Some(f))
-}
-
 /// A new skill stored as `id`, as recognition sees it.
-fn new_template(id: i64, s: &NewSkill, feature: &[f32; FEATURE_DIM]) -> StoredTemplate {
+fn new_template(id: i64, c: &CheckedSkill) -> StoredTemplate {
+    let s = &c.skill;
     stored_template(
         id,
         s.object_shape.name(),
@@ -295,7 +170,7 @@ fn new_template(id: i64, s: &NewSkill, feature: &[f32; FEATURE_DIM]) -> StoredTe
         s.approach
             .as_deref()
             .and_then(|a| <[f32; TEMPLATE_DIM]>::try_from(a).ok()),
-        *feature,
+        c.feature,
     )
 }
 
@@ -317,52 +192,6 @@ fn stored_template(
     }
 }
 
-/// The name in the TEXT column `column` of skill `id`'s row as a value of `T` (a shape, a
-/// contact model): a name `T` does not know is a corrupt row, named.
-fn named_column<T: Named>(row: &SqliteRow, id: i64, column: &str) -> Result<T, StoreError> {
-    let text: &str = row.try_get(column)?;
-    T::from_name(text).map_err(|e| StoreError::Corrupt(format!("skill {id}: {column}: {e}")))
-}
-
-fn row_to_skill(row: &SqliteRow) -> Result<SkillRecord, StoreError> {
-    let id: i64 = row.try_get("id")?;
-    let feature: Vec<u8> = row.try_get("feature")?;
-    let phases: String = row.try_get("phase_durations")?;
-    let params: String = row.try_get("params")?;
-    Ok(SkillRecord {
-        id,
-        session_id: row.try_get("session_id")?,
-        object_shape: named_column(row, id, "object_shape")?,
-        object_name: row.try_get("object_name")?,
-        object_mass: row.try_get("object_mass")?,
-        mu: row.try_get("mu")?,
-        contact_count: row.try_get("contact_count")?,
-        contact_model: named_column(row, id, "contact_model")?,
-        grasp_type: row.try_get("grasp_type")?,
-        quality: row.try_get("quality")?,
-        volume: row.try_get("volume")?,
-        duration_s: row.try_get("duration_s")?,
-        start_ns: row.try_get("start_ns")?,
-        end_ns: row.try_get("end_ns")?,
-        phase_durations: serde_json::from_str(&phases)
-            .map_err(|e| StoreError::Corrupt(format!("skill {id}: phase_durations: {e}")))?,
-        feature: feature_from_blob(id, &feature)?.to_vec(),
-        params: serde_json::from_str(&params)?,
-        approach: approach_from_blob(id, row.try_get("approach")?)?
-            .map(|a| a.iter().map(|v| v.is_finite().then_some(*v)).collect()),
-        matched_skill_id: row.try_get("matched_skill_id")?,
-        segmentation_version: segmentation_version(row)?,
-        created_at: row.try_get("created_at")?,
-    })
-}
-
-/// The `segmentation_version` column of a row (a session's, or a skill's from its session).
-fn segmentation_version(row: &SqliteRow) -> Result<u32, StoreError> {
-    let v: i64 = row.try_get("segmentation_version")?;
-    u32::try_from(v)
-        .map_err(|_| StoreError::Corrupt(format!("segmentation version {v} is out of range")))
-}
-
 fn finite(what: &str, v: f64) -> Result<(), StoreError> {
     if v.is_finite() {
         Ok(())
@@ -373,19 +202,22 @@ fn finite(what: &str, v: f64) -> Result<(), StoreError> {
     }
 }
 
-/// Checks a skill before insertion; returns its feature as a fixed array.
+/// Checks each skill before insertion ([`validate_skill`]).
+fn checked_skills(skills: Vec<NewSkill>) -> Result<Vec<CheckedSkill>, StoreError> {
+    skills
+        .into_iter()
+        .enumerate()
+        .map(|(i, skill)| validate_skill(i, &skill).map(|feature| CheckedSkill { skill, feature }))
+        .collect()
+}
+
 /// A session's skills with their checked feature vectors, and its duration as the store's
 /// signed column: what every ingest checks before it writes anything.
-#[allow(clippy::type_complexity)]
 fn checked_input(
     meta: &SessionMeta,
     skills: Vec<NewSkill>,
-) -> Result<(Vec<(NewSkill, [f32; FEATURE_DIM])>, i64), StoreError> {
-    let checked = skills
-        .into_iter()
-        .enumerate()
-        .map(|(i, s)| validate_skill(i, &s).map(|f| (s, f)))
-        .collect::<Result<Vec<_>, _>>()?;
+) -> Result<(Vec<CheckedSkill>, i64), StoreError> {
+    let checked = checked_skills(skills)?;
     finite("object_mass", meta.object_mass)?;
     finite("mu", meta.mu)?;
     let duration_ns = i64::try_from(meta.duration_ns)
@@ -393,6 +225,7 @@ fn checked_input(
     Ok((checked, duration_ns))
 }
 
+/// Checks skill number `i` before insertion; returns its feature as a fixed array.
 fn validate_skill(i: usize, s: &NewSkill) -> Result<[f32; FEATURE_DIM], StoreError> {
     let ctx = |field: &str| format!("skill {i}: {field}");
     if let Some(name) = &s.object_name {
@@ -435,88 +268,6 @@ fn validate_skill(i: usize, s: &NewSkill) -> Result<[f32; FEATURE_DIM], StoreErr
         }
     }
     Ok(feature)
-}
-
-/// Inserts validated skills of `session_id` and their phase rows inside `tx`; returns their ids.
-async fn insert_skills(
-    tx: &mut sqlx::Transaction<'_, Sqlite>,
-    session_id: i64,
-    skills: &[(NewSkill, [f32; FEATURE_DIM])],
-) -> Result<Vec<i64>, StoreError> {
-    let mut ids = Vec::with_capacity(skills.len());
-    // Multi-row INSERTs: 17 bound values per skill stay far below SQLite's variable limit.
-    for chunk in skills.chunks(500) {
-        let mut rows = Vec::with_capacity(chunk.len());
-        for (s, f) in chunk {
-            rows.push((
-                s,
-                feature_to_blob(f),
-                serde_json::to_string(&s.phase_durations)?,
-                serde_json::to_string(&s.params)?,
-            ));
-        }
-        let mut b: QueryBuilder<Sqlite> = QueryBuilder::new(
-            "INSERT INTO skills (session_id, object_shape, object_name, object_mass, mu, \
-             contact_count, contact_model, grasp_type, quality, volume, duration_s, start_ns, \
-             end_ns, phase_durations, feature, params, approach, matched_skill_id) ",
-        );
-        b.push_values(&rows, |mut r, (s, f, ph, p)| {
-            r.push_bind(session_id)
-                .push_bind(s.object_shape.name())
-                .push_bind(s.object_name.as_deref())
-                .push_bind(s.object_mass)
-                .push_bind(s.mu)
-                .push_bind(s.contact_count)
-                .push_bind(s.contact_model.name())
-                .push_bind(s.grasp_type.as_str())
-                .push_bind(s.quality)
-                .push_bind(s.volume)
-                .push_bind(s.duration_s)
-                .push_bind(s.start_ns)
-                .push_bind(s.end_ns)
-                .push_bind(ph.as_str())
-                .push_bind(f.as_slice())
-                .push_bind(p.as_str())
-                .push_bind(
-                    s.approach
-                        .as_ref()
-                        .map(|a| a.iter().flat_map(|x| x.to_le_bytes()).collect::<Vec<u8>>()),
-                )
-                .push_bind(s.matched_skill_id);
-        });
-        b.push(" RETURNING id");
-        let mut chunk_ids: Vec<i64> = b.build_query_scalar().fetch_all(&mut **tx).await?;
-        // RETURNING order is unspecified; AUTOINCREMENT ids of one statement are consecutive.
-        chunk_ids.sort_unstable();
-        if chunk_ids.len() != chunk.len() {
-            return Err(StoreError::Corrupt(
-                "skill insert returned a wrong row count".into(),
-            ));
-        }
-        let phases: Vec<(i64, i64, &str, f64)> = chunk
-            .iter()
-            .zip(&chunk_ids)
-            .flat_map(|((s, _), id)| {
-                s.phase_durations
-                    .iter()
-                    .enumerate()
-                    .map(move |(ord, (phase, d))| (*id, ord as i64, phase.name(), *d))
-            })
-            .collect();
-        for pchunk in phases.chunks(2000) {
-            let mut b: QueryBuilder<Sqlite> =
-                QueryBuilder::new("INSERT INTO skill_phases (skill_id, ord, name, duration_s) ");
-            b.push_values(pchunk, |mut r, (id, ord, name, d)| {
-                r.push_bind(*id)
-                    .push_bind(*ord)
-                    .push_bind(*name)
-                    .push_bind(*d);
-            });
-            b.build().execute(&mut **tx).await?;
-        }
-        ids.extend(chunk_ids);
-    }
-    Ok(ids)
 }
 
 impl Store {
@@ -587,19 +338,7 @@ impl Store {
                 .await
                 .map_err(|e| StoreError::io(data_dir, e))?;
         }
-        let db_path = data_dir.join(DB_FILE);
-        let exists = match tokio::fs::metadata(&db_path).await {
-            Ok(md) => md.len() > 0,
-            Err(e) if e.kind() == std::io::ErrorKind::NotFound => false,
-            // A missing directory, or a file where the directory should be.
-            Err(e) if !create && e.kind() == std::io::ErrorKind::NotADirectory => false,
-            Err(e) => return Err(StoreError::io(&db_path, e)),
-        };
-        if exists {
-            check_existing(&db_path).await?;
-        } else if !create {
-            return Err(StoreError::NoDataBase(data_dir.to_path_buf()));
-        }
+        let db_path = sqlite::locate(data_dir, create).await?;
         let writer = if write {
             let dir = data_dir.to_path_buf();
             Some(
@@ -610,22 +349,7 @@ impl Store {
         } else {
             None
         };
-        let opts = SqliteConnectOptions::new()
-            .filename(&db_path)
-            .create_if_missing(create)
-            .journal_mode(SqliteJournalMode::Wal)
-            .foreign_keys(true)
-            .busy_timeout(Duration::from_secs(5))
-            .synchronous(match durability {
-                Durability::Full => SqliteSynchronous::Full,
-                Durability::Normal => SqliteSynchronous::Normal,
-            })
-            .pragma("cache_size", format!("-{PAGE_CACHE_KIB}"));
-        let pool = SqlitePoolOptions::new()
-            .max_connections(MAX_CONNECTIONS)
-            .connect_with(opts)
-            .await?;
-        MIGRATOR.run(&pool).await?;
+        let catalog = sqlite::SqliteCatalog::open(&db_path, create, durability).await?;
         let dir = data_dir.to_path_buf();
         let swept = tokio::task::spawn_blocking(move || blob::sweep_temp_files(&dir))
             .await
@@ -637,32 +361,32 @@ impl Store {
             );
         }
 
-        let rows = sqlx::query(
-            "SELECT id, feature, object_shape, grasp_type, object_name, approach FROM skills",
-        )
-        .fetch_all(&pool)
-        .await?;
-        let mut entries = Vec::with_capacity(rows.len());
-        let mut templates = Vec::with_capacity(rows.len());
-        for row in &rows {
-            let id: i64 = row.try_get(0)?;
-            let bytes: &[u8] = row.try_get(1)?;
-            let feature = feature_from_blob(id, bytes)?;
+        let skills = catalog.indexed_skills().await?;
+        let mut entries = Vec::with_capacity(skills.len());
+        let mut templates = Vec::with_capacity(skills.len());
+        for s in skills {
+            let IndexedSkill {
+                id,
+                feature,
+                object_shape,
+                grasp_type,
+                object_name,
+                approach,
+            } = s;
             entries.push((id, feature));
             templates.push(stored_template(
                 id,
-                row.try_get(2)?,
-                row.try_get(3)?,
-                row.try_get(4)?,
-                approach_from_blob(id, row.try_get(5)?)?,
+                &object_shape,
+                &grasp_type,
+                object_name,
+                approach,
                 feature,
             ));
         }
-        drop(rows);
         Ok(Store {
             inner: Arc::new(Inner {
                 dir: data_dir.to_path_buf(),
-                pool,
+                catalog: Box::new(catalog),
                 index: std::sync::RwLock::new(FeatureIndex::from_entries(entries)),
                 recognition: std::sync::RwLock::new(Arc::new(RecognitionIndex::new(templates))),
                 blob_lock: tokio::sync::RwLock::new(()),
@@ -699,7 +423,7 @@ impl Store {
     /// Closes the connection pool (waits for in-flight queries; later calls fail) and releases
     /// the data directory's writer lock.
     pub async fn close(&self) {
-        self.inner.pool.close().await;
+        self.inner.catalog.close().await;
         // The next writer may come in now, even while clones of this store live on.
         if let Ok(mut writer) = self.inner.writer.lock() {
             writer.take();
@@ -712,36 +436,7 @@ impl Store {
     }
 
     async fn existing(&self, sha256: &str) -> Result<Option<IngestOutcome>, StoreError> {
-        let id: Option<i64> = sqlx::query_scalar("SELECT id FROM sessions WHERE sha256 = ?")
-            .bind(sha256)
-            .fetch_optional(&self.inner.pool)
-            .await?;
-        match id {
-            None => Ok(None),
-            Some(session_id) => {
-                let (skill_ids, matched_skill_ids) = self.skill_ids_of(session_id).await?;
-                Ok(Some(IngestOutcome {
-                    session_id,
-                    created: false,
-                    skill_ids,
-                    matched_skill_ids,
-                }))
-            }
-        }
-    }
-
-    /// A session's skill ids, ascending, and the skills they were recognised as.
-    async fn skill_ids_of(
-        &self,
-        session_id: i64,
-    ) -> Result<(Vec<i64>, Vec<Option<i64>>), StoreError> {
-        let rows: Vec<(i64, Option<i64>)> = sqlx::query_as(
-            "SELECT id, matched_skill_id FROM skills WHERE session_id = ? ORDER BY id",
-        )
-        .bind(session_id)
-        .fetch_all(&self.inner.pool)
-        .await?;
-        Ok(rows.into_iter().unzip())
+        self.inner.catalog.stored_session(sha256).await
     }
 
     /// Stores a session: its MCAP bytes as a content-addressed blob, its metadata and skills.
@@ -814,15 +509,14 @@ impl Store {
         size: i64,
         rel: &str,
         meta: SessionMeta,
-        mut checked: Vec<(NewSkill, [f32; FEATURE_DIM])>,
+        mut checked: Vec<CheckedSkill>,
         duration_ns: i64,
     ) -> Result<IngestOutcome, StoreError> {
-        let meta_json = serde_json::to_string(&meta)?;
         // On-line learning: each grasp is linked to the stored skill it matches, or stored as
         // new (against the skills stored before it).
         let recognition = self.recognition_index();
         let mut scratch = crate::assist::index::Scratch::default();
-        for (s, f) in &mut checked {
+        for CheckedSkill { skill: s, feature } in &mut checked {
             if s.matched_skill_id.is_none() {
                 let approach = s
                     .approach
@@ -831,43 +525,36 @@ impl Store {
                 s.matched_skill_id = crate::assist::recognise::link_completed(
                     &recognition,
                     approach.as_ref(),
-                    f,
+                    feature,
                     &crate::assist::recognise::RecogniserParams::default(),
                     &mut scratch,
                 );
             }
         }
-        let mut tx = self.inner.pool.begin().await?;
-        let session_id: Option<i64> = sqlx::query_scalar(
-            "INSERT INTO sessions (sha256, size_bytes, blob_path, scenario, hand, object_shape, \
-             duration_ns, meta, segmentation_version) VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?) \
-             ON CONFLICT (sha256) DO NOTHING RETURNING id",
-        )
-        .bind(sha256)
-        .bind(size)
-        .bind(rel)
-        .bind(meta.scenario.as_deref())
-        .bind(&meta.hand)
-        .bind(meta.object_shape.name())
-        .bind(duration_ns)
-        .bind(&meta_json)
-        .bind(i64::from(SEGMENTATION_VERSION))
-        .fetch_optional(&mut *tx)
-        .await?;
-        let Some(session_id) = session_id else {
+        let inserted = self
+            .inner
+            .catalog
+            .insert_session(NewSession {
+                sha256,
+                size_bytes: size,
+                blob_path: rel,
+                meta: &meta,
+                duration_ns,
+                segmentation_version: SEGMENTATION_VERSION,
+                skills: &checked,
+            })
+            .await?;
+        let Some((session_id, skill_ids)) = inserted else {
             // A concurrent ingest of the same bytes committed first.
-            tx.rollback().await?;
             return self
                 .existing(sha256)
                 .await?
                 .ok_or_else(|| StoreError::Corrupt("session vanished during ingest".into()));
         };
-        let skill_ids = insert_skills(&mut tx, session_id, &checked).await?;
-        tx.commit().await?;
 
         let mut index = self.inner.index.write().expect("index lock");
-        for (id, (_, f)) in skill_ids.iter().zip(&checked) {
-            index.insert(*id, *f);
+        for (id, c) in skill_ids.iter().zip(&checked) {
+            index.insert(*id, c.feature);
         }
         drop(index);
         self.update_recognition(
@@ -875,21 +562,20 @@ impl Store {
             skill_ids
                 .iter()
                 .zip(&checked)
-                .map(|(id, (s, f))| new_template(*id, s, f)),
+                .map(|(id, c)| new_template(*id, c)),
         );
         tracing::debug!(session_id, skills = skill_ids.len(), "ingested session");
         Ok(IngestOutcome {
             session_id,
             created: true,
-            matched_skill_ids: checked.iter().map(|(s, _)| s.matched_skill_id).collect(),
+            matched_skill_ids: checked.iter().map(|c| c.skill.matched_skill_id).collect(),
             skill_ids,
         })
     }
 
     /// Bulk path of the synthetic generator: writes the blobs, then stores every session of
-    /// `batch` in ONE transaction on a connection with a large page cache (random-order inserts
-    /// into the filter indexes dirty one page per row and index; bigger transactions and cache
-    /// write each page fewer times). Sessions whose bytes are already stored are skipped.
+    /// `batch` in ONE transaction, as fast as the backend can. Sessions whose bytes are already
+    /// stored are skipped.
     pub(crate) async fn bulk_ingest(
         &self,
         batch: Vec<(Vec<u8>, SessionMeta, Vec<NewSkill>)>,
@@ -897,11 +583,7 @@ impl Store {
         let _guard = self.inner.blob_lock.read().await;
         let mut prepared = Vec::with_capacity(batch.len());
         for (bytes, meta, skills) in batch {
-            let checked = skills
-                .into_iter()
-                .enumerate()
-                .map(|(i, s)| validate_skill(i, &s).map(|f| (s, f)))
-                .collect::<Result<Vec<_>, _>>()?;
+            let checked = checked_skills(skills)?;
             let sha256 = blob::sha256_hex(&bytes);
             let dir = self.inner.dir.clone();
             let sha = sha256.clone();
@@ -909,77 +591,37 @@ impl Store {
             let rel = tokio::task::spawn_blocking(move || blob::write_atomic(&dir, &sha, &bytes))
                 .await
                 .map_err(|e| StoreError::Corrupt(format!("blob writer task failed: {e}")))??;
-            prepared.push((sha256, size, rel, meta, checked));
+            let duration_ns = i64::try_from(meta.duration_ns).unwrap_or(i64::MAX);
+            prepared.push((sha256, size, rel, meta, checked, duration_ns));
         }
-        let mut conn = self.inner.pool.acquire().await?;
-        sqlx::query("PRAGMA cache_size = -1048576")
-            .execute(&mut *conn)
-            .await?;
-        let result = async {
-            let mut tx = conn.begin().await?;
-            let mut inserted = Vec::new();
-            for (sha256, size, rel, meta, checked) in &prepared {
-                let session_id: Option<i64> = sqlx::query_scalar(
-                    "INSERT INTO sessions (sha256, size_bytes, blob_path, scenario, hand, \
-                     object_shape, duration_ns, meta, segmentation_version) \
-                     VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?) \
-                     ON CONFLICT (sha256) DO NOTHING RETURNING id",
-                )
-                .bind(sha256)
-                .bind(size)
-                .bind(rel)
-                .bind(meta.scenario.as_deref())
-                .bind(&meta.hand)
-                .bind(meta.object_shape.name())
-                .bind(i64::try_from(meta.duration_ns).unwrap_or(i64::MAX))
-                .bind(serde_json::to_string(meta)?)
-                .bind(i64::from(SEGMENTATION_VERSION))
-                .fetch_optional(&mut *tx)
-                .await?;
-                if let Some(session_id) = session_id {
-                    let ids = insert_skills(&mut tx, session_id, checked).await?;
-                    inserted.extend(
-                        ids.into_iter()
-                            .zip(checked)
-                            .map(|(id, (s, f))| (id, *f, new_template(id, s, f))),
-                    );
-                }
-            }
-            tx.commit().await?;
-            Ok::<_, StoreError>(inserted)
-        }
-        .await;
-        sqlx::query(&format!("PRAGMA cache_size = -{PAGE_CACHE_KIB}"))
-            .execute(&mut *conn)
-            .await?;
-        let inserted = result?;
+        let sessions: Vec<NewSession<'_>> = prepared
+            .iter()
+            .map(
+                |(sha256, size, rel, meta, checked, duration_ns)| NewSession {
+                    sha256,
+                    size_bytes: *size,
+                    blob_path: rel,
+                    meta,
+                    duration_ns: *duration_ns,
+                    segmentation_version: SEGMENTATION_VERSION,
+                    skills: checked,
+                },
+            )
+            .collect();
+        let inserted = self.inner.catalog.bulk_insert_sessions(&sessions).await?;
+        let stored = || {
+            inserted
+                .iter()
+                .zip(&sessions)
+                .flat_map(|(ids, new)| ids.iter().flatten().zip(new.skills))
+        };
         let mut index = self.inner.index.write().expect("index lock");
-        for (id, f, _) in &inserted {
-            index.insert(*id, *f);
+        for (id, c) in stored() {
+            index.insert(*id, c.feature);
         }
         drop(index);
-        let n = inserted.len();
-        self.update_recognition(&[], inserted.into_iter().map(|(_, _, t)| t));
-        Ok(n)
-    }
-
-    fn row_to_session(row: &SqliteRow) -> Result<SessionRecord, StoreError> {
-        let id: i64 = row.try_get("id")?;
-        let meta: String = row.try_get("meta")?;
-        let skill_ids: String = row.try_get("skill_ids")?;
-        let matched: String = row.try_get("matched_skill_ids")?;
-        Ok(SessionRecord {
-            id,
-            sha256: row.try_get("sha256")?,
-            size_bytes: row.try_get("size_bytes")?,
-            blob_path: row.try_get("blob_path")?,
-            meta: serde_json::from_str(&meta)
-                .map_err(|e| StoreError::Corrupt(format!("session {id}: meta: {e}")))?,
-            skill_ids: serde_json::from_str(&skill_ids)?,
-            matched_skill_ids: serde_json::from_str(&matched)?,
-            segmentation_version: segmentation_version(row)?,
-            created_at: row.try_get("created_at")?,
-        })
+        self.update_recognition(&[], stored().map(|(id, c)| new_template(*id, c)));
+        Ok(stored().count())
     }
 
     /// Sessions by ascending id, `limit` (1..=1000) per page, after `cursor`.
@@ -1003,72 +645,15 @@ impl Store {
         &self,
         q: &SessionQuery,
     ) -> Result<Page<SessionRecord>, StoreError> {
-        let limit = q.limit;
-        if limit == 0 || limit > MAX_SESSION_LIMIT {
-            return Err(StoreError::InvalidQuery(format!(
-                "limit {limit} is outside 1..={MAX_SESSION_LIMIT}"
-            )));
-        }
-        // Ascending pages keep the tag they always had, so their cursors stay valid.
-        let tag = if q.newest_first {
-            "sessions-desc"
-        } else {
-            "sessions"
-        };
-        let after = match &q.cursor {
-            Some(c) => match query::decode_cursor(tag, false, c)? {
-                query::After::Int(id) => Some(id),
-                query::After::Real(..) => return Err(StoreError::BadCursor),
-            },
-            None => None,
-        };
-        let mut sql = format!("SELECT {SESSION_COLUMNS} FROM sessions s WHERE 1");
-        if after.is_some() {
-            sql.push_str(if q.newest_first {
-                " AND id < ?"
-            } else {
-                " AND id > ?"
-            });
-        }
-        if q.scenario.is_some() {
-            sql.push_str(" AND scenario = ?");
-        }
-        if q.hand.is_some() {
-            sql.push_str(" AND hand = ?");
-        }
-        if q.object_shape.is_some() {
-            sql.push_str(" AND object_shape = ?");
-        }
-        sql.push_str(if q.newest_first {
-            " ORDER BY id DESC LIMIT ?"
-        } else {
-            " ORDER BY id LIMIT ?"
-        });
-        let mut stmt = sqlx::query(&sql);
-        if let Some(id) = after {
-            stmt = stmt.bind(id);
-        }
-        if let Some(s) = &q.scenario {
-            stmt = stmt.bind(s);
-        }
-        if let Some(h) = &q.hand {
-            stmt = stmt.bind(h);
-        }
-        if let Some(shape) = q.object_shape {
-            stmt = stmt.bind(shape.name());
-        }
-        let rows = stmt
-            .bind(i64::from(limit) + 1)
-            .fetch_all(&self.inner.pool)
-            .await?;
-        let more = rows.len() > limit as usize;
-        let items = rows
-            .iter()
-            .take(limit as usize)
-            .map(Self::row_to_session)
-            .collect::<Result<Vec<_>, _>>()?;
+        let filter = query::session_filter(q, MAX_SESSION_LIMIT)?;
+        let mut items = self.inner.catalog.sessions(&filter).await?;
+        let more = items.len() > q.limit as usize;
+        items.truncate(q.limit as usize);
         let next_cursor = match (more, items.last()) {
-            (true, Some(last)) => Some(query::encode_cursor(tag, query::After::Int(last.id))),
+            (true, Some(last)) => Some(query::encode_cursor(
+                query::session_tag(q.newest_first),
+                query::After::Int(last.id),
+            )),
             _ => None,
         };
         Ok(Page { items, next_cursor })
@@ -1076,21 +661,19 @@ impl Store {
 
     /// One session with its skill ids.
     pub async fn get_session(&self, id: i64) -> Result<SessionRecord, StoreError> {
-        let row = sqlx::query(&format!(
-            "SELECT {SESSION_COLUMNS} FROM sessions s WHERE id = ?"
-        ))
-        .bind(id)
-        .fetch_optional(&self.inner.pool)
-        .await?
-        .ok_or(StoreError::SessionNotFound(id))?;
-        Self::row_to_session(&row)
+        self.inner
+            .catalog
+            .session(id)
+            .await?
+            .ok_or(StoreError::SessionNotFound(id))
     }
 
     /// Absolute path of a session's MCAP blob.
     pub async fn session_blob_path(&self, id: i64) -> Result<PathBuf, StoreError> {
-        let rel: String = sqlx::query_scalar("SELECT blob_path FROM sessions WHERE id = ?")
-            .bind(id)
-            .fetch_optional(&self.inner.pool)
+        let BlobRef { rel, .. } = self
+            .inner
+            .catalog
+            .session_blob(id)
             .await?
             .ok_or(StoreError::SessionNotFound(id))?;
         Ok(self.inner.dir.join(rel))
@@ -1099,9 +682,7 @@ impl Store {
     /// SQLite's `synchronous` setting on the store's connections (2 = `FULL`, 1 = `NORMAL`),
     /// as the data base reports it: what [`Durability`] became.
     pub async fn synchronous_setting(&self) -> Result<i64, StoreError> {
-        Ok(sqlx::query_scalar("PRAGMA synchronous")
-            .fetch_one(&self.inner.pool)
-            .await?)
+        self.inner.catalog.synchronous_setting().await
     }
 
     /// Removes blob files that no session or replay references (a blob written by an ingest
@@ -1128,13 +709,7 @@ impl Store {
             return Ok(report);
         }
         let _guard = self.inner.blob_lock.write().await;
-        let referenced: std::collections::HashSet<String> = sqlx::query_scalar(
-            "SELECT blob_path FROM sessions UNION SELECT blob_path FROM replays",
-        )
-        .fetch_all(&self.inner.pool)
-        .await?
-        .into_iter()
-        .collect();
+        let referenced = self.inner.catalog.referenced_blob_paths().await?;
         let orphans: Vec<blob::BlobFile> = listed
             .into_iter()
             .filter(|b| !referenced.contains(&b.rel))
@@ -1157,41 +732,23 @@ impl Store {
     /// blob and its replays' blobs.
     pub async fn delete_session(&self, id: i64) -> Result<(), StoreError> {
         let _guard = self.inner.blob_lock.write().await;
-        let mut tx = self.inner.pool.begin().await?;
-        let mut blobs =
-            hands::delete_replays_of(&mut tx, "SELECT id FROM skills WHERE session_id = ?", id)
-                .await?;
-        let skill_ids: Vec<i64> =
-            sqlx::query_scalar("DELETE FROM skills WHERE session_id = ? RETURNING id")
-                .bind(id)
-                .fetch_all(&mut *tx)
-                .await?;
-        let row: Option<(String, String)> =
-            sqlx::query_as("DELETE FROM sessions WHERE id = ? RETURNING sha256, blob_path")
-                .bind(id)
-                .fetch_optional(&mut *tx)
-                .await?;
-        let Some(session_blob) = row else {
-            tx.rollback().await?;
-            return Err(StoreError::SessionNotFound(id));
-        };
-        tx.commit().await?;
-        blobs.push(session_blob);
-        self.forget(&skill_ids, &blobs).await;
+        let deleted = self
+            .inner
+            .catalog
+            .delete_session(id)
+            .await?
+            .ok_or(StoreError::SessionNotFound(id))?;
+        self.forget(&deleted.skill_ids, &deleted.blobs).await;
         Ok(())
     }
 
     /// One skill.
     pub async fn get_skill(&self, id: i64) -> Result<SkillRecord, StoreError> {
-        let row = sqlx::query(&format!(
-            "SELECT {} FROM skills WHERE id = ?",
-            query::SKILL_COLUMNS
-        ))
-        .bind(id)
-        .fetch_optional(&self.inner.pool)
-        .await?
-        .ok_or(StoreError::SkillNotFound(id))?;
-        row_to_skill(&row)
+        self.inner
+            .catalog
+            .skill(id)
+            .await?
+            .ok_or(StoreError::SkillNotFound(id))
     }
 
     /// The skills of `ids` in one query, in the order of `ids`; ids with no skill (deleted
@@ -1201,17 +758,14 @@ impl Store {
         if ids.is_empty() {
             return Ok(Vec::new());
         }
-        let rows = sqlx::query(&format!(
-            "SELECT {} FROM skills WHERE id IN (SELECT value FROM json_each(?))",
-            query::SKILL_COLUMNS
-        ))
-        .bind(serde_json::to_string(ids)?)
-        .fetch_all(&self.inner.pool)
-        .await?;
-        let mut by_id = rows
-            .iter()
-            .map(|row| row_to_skill(row).map(|s| (s.id, s)))
-            .collect::<Result<std::collections::HashMap<_, _>, _>>()?;
+        let mut by_id = self
+            .inner
+            .catalog
+            .skills_by_id(ids)
+            .await?
+            .into_iter()
+            .map(|s| (s.id, s))
+            .collect::<std::collections::HashMap<_, _>>();
         Ok(ids.iter().filter_map(|id| by_id.remove(id)).collect())
     }
 
@@ -1219,24 +773,19 @@ impl Store {
     /// then the replays' blobs.
     pub async fn delete_skill(&self, id: i64) -> Result<(), StoreError> {
         let _guard = self.inner.blob_lock.write().await;
-        let mut tx = self.inner.pool.begin().await?;
-        let blobs = hands::delete_replays_of(&mut tx, "?", id).await?;
-        let done = sqlx::query("DELETE FROM skills WHERE id = ?")
-            .bind(id)
-            .execute(&mut *tx)
-            .await?;
-        if done.rows_affected() == 0 {
-            tx.rollback().await?;
-            return Err(StoreError::SkillNotFound(id));
-        }
-        tx.commit().await?;
+        let blobs = self
+            .inner
+            .catalog
+            .delete_skill(id)
+            .await?
+            .ok_or(StoreError::SkillNotFound(id))?;
         self.forget(&[id], &blobs).await;
         Ok(())
     }
 
     /// After a delete committed: drops the skills from the similarity index and removes the
     /// blobs no row names any more (a leftover blob is harmless garbage).
-    async fn forget(&self, skill_ids: &[i64], blobs: &[(String, String)]) {
+    async fn forget(&self, skill_ids: &[i64], blobs: &[BlobRef]) {
         self.inner
             .index
             .write()
@@ -1248,15 +797,11 @@ impl Store {
 
     /// Skills matching the filters of `q`, sorted by `q.sort`, one page after `q.cursor`.
     pub async fn query_skills(&self, q: &SkillQuery) -> Result<Page<SkillRecord>, StoreError> {
-        let mut b = query::build(q)?;
-        let rows = b.build().fetch_all(&self.inner.pool).await?;
+        let filter = query::skill_filter(q)?;
+        let mut items = self.inner.catalog.skills(&filter).await?;
         let limit = q.limit as usize;
-        let more = rows.len() > limit;
-        let items = rows
-            .iter()
-            .take(limit)
-            .map(row_to_skill)
-            .collect::<Result<Vec<_>, _>>()?;
+        let more = items.len() > limit;
+        items.truncate(limit);
         let next_cursor = match (more, items.last()) {
             (true, Some(last)) => Some(query::cursor_after(q.sort, last)),
             _ => None,
@@ -1293,31 +838,11 @@ impl Store {
 
     /// Runs SQLite's `integrity_check` and `foreign_key_check`; `Corrupt` if either complains.
     pub async fn integrity_check(&self) -> Result<(), StoreError> {
-        let msgs: Vec<String> = sqlx::query_scalar("PRAGMA integrity_check")
-            .fetch_all(&self.inner.pool)
-            .await?;
-        if msgs != ["ok"] {
-            return Err(StoreError::Corrupt(msgs.join("; ")));
-        }
-        let fk = sqlx::query("PRAGMA foreign_key_check")
-            .fetch_all(&self.inner.pool)
-            .await?;
-        if !fk.is_empty() {
-            return Err(StoreError::Corrupt(format!(
-                "{} dangling foreign keys",
-                fk.len()
-            )));
-        }
-        Ok(())
+        self.inner.catalog.integrity_check().await
     }
 
     /// Updates SQLite's planner statistics (`PRAGMA optimize`); worth it after bulk inserts.
     pub async fn optimize(&self) -> Result<(), StoreError> {
-        let mut conn = self.inner.pool.acquire().await?;
-        sqlx::query("PRAGMA analysis_limit = 1000")
-            .execute(&mut *conn)
-            .await?;
-        sqlx::query("ANALYZE").execute(&mut *conn).await?;
-        Ok(())
+        self.inner.catalog.optimize().await
     }
 }

@@ -3,12 +3,10 @@
 use std::str::FromStr;
 
 use serde::{Deserialize, Serialize};
-use sqlx::{QueryBuilder, Sqlite};
 
 use super::error::StoreError;
 use super::types::ObjectShape;
 use dfs_core::contact::ContactModel;
-use dfs_core::names::Named;
 use dfs_core::scenario::Phase;
 
 /// Largest page size.
@@ -55,15 +53,6 @@ impl SortKey {
     /// A sort by `field` in `order`.
     pub fn new(field: SortField, order: SortOrder) -> Self {
         SortKey { field, order }
-    }
-
-    fn column(self) -> &'static str {
-        match self.field {
-            SortField::Id => "id",
-            SortField::Quality => "quality",
-            SortField::Mass => "object_mass",
-            SortField::Duration => "duration_s",
-        }
     }
 
     fn tag(self) -> String {
@@ -270,8 +259,11 @@ const GRASP_FAMILIES: [&str; 2] = ["precision", "power"];
 
 /// The `grasp_type` filter: a family (`precision`, `power`: every label of it) or a whole
 /// label (`precision-2vf`).
-enum GraspFilter<'a> {
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(crate) enum GraspFilter<'a> {
+    /// One whole label.
     Label(&'a str),
+    /// Every label of a family: the bare family name and `<family>-<n>vf`.
     Family(&'a str),
 }
 
@@ -322,17 +314,51 @@ fn check_range(name: &str, min: Option<f64>, max: Option<f64>) -> Result<(), Sto
     Ok(())
 }
 
-/// Columns of a skill row (`FROM skills`, not aliased), in the order `row_to_skill` reads
-/// them. The segmentation version is the session's (a primary-key lookup per row returned).
-pub(crate) const SKILL_COLUMNS: &str =
-    "id, session_id, object_shape, object_name, object_mass, mu, \
-     contact_count, contact_model, grasp_type, quality, volume, duration_s, start_ns, end_ns, \
-     phase_durations, feature, params, approach, matched_skill_id, created_at, \
-     (SELECT segmentation_version FROM sessions WHERE sessions.id = skills.session_id) \
-     AS segmentation_version";
+/// A validated skill query: the typed parts a backend builds its one run-time query from
+/// (every value bound, no SQL text from outside).
+#[derive(Debug, Clone, PartialEq)]
+pub(crate) struct SkillFilter<'a> {
+    /// Object shape equals.
+    pub object_shape: Option<ObjectShape>,
+    /// Object mass at least, kg.
+    pub mass_min: Option<f64>,
+    /// Object mass at most, kg.
+    pub mass_max: Option<f64>,
+    /// Friction coefficient at least.
+    pub mu_min: Option<f64>,
+    /// Friction coefficient at most.
+    pub mu_max: Option<f64>,
+    /// Number of contacts equals.
+    pub contact_count: Option<i64>,
+    /// Contact model equals.
+    pub contact_model: Option<ContactModel>,
+    /// Grasp type: a whole label or a family.
+    pub grasp: Option<GraspFilter<'a>>,
+    /// Ferrari-Canny ε at least.
+    pub min_quality: Option<f64>,
+    /// The skill has this phase, of a duration in this range.
+    pub phase: Option<PhaseFilter>,
+    /// Sort order.
+    pub sort: SortKey,
+    /// Keyset position after the previous page's last row.
+    pub after: Option<After>,
+    /// Rows to fetch: the page size plus one, to see whether more follow.
+    pub fetch: i64,
+}
 
-/// Validates `q` and builds its SQL (fetching `limit + 1` rows to see whether more follow).
-pub(crate) fn build(q: &SkillQuery) -> Result<QueryBuilder<'_, Sqlite>, StoreError> {
+/// The phase filter of a skill query.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub(crate) struct PhaseFilter {
+    /// The phase the skill has.
+    pub phase: Phase,
+    /// Its duration at least, s.
+    pub min_s: Option<f64>,
+    /// Its duration at most, s.
+    pub max_s: Option<f64>,
+}
+
+/// Validates `q` into the typed parts of its query.
+pub(crate) fn skill_filter(q: &SkillQuery) -> Result<SkillFilter<'_>, StoreError> {
     if q.limit == 0 || q.limit > MAX_LIMIT {
         return Err(StoreError::InvalidQuery(format!(
             "limit {} is outside 1..={MAX_LIMIT}",
@@ -358,110 +384,86 @@ pub(crate) fn build(q: &SkillQuery) -> Result<QueryBuilder<'_, Sqlite>, StoreErr
             "phase_min_s and phase_max_s need phase (the phase name)".into(),
         ));
     }
-    let sort = q.sort;
-    let col = sort.column();
-    let real = sort.field != SortField::Id;
+    let real = q.sort.field != SortField::Id;
     let after = match &q.cursor {
-        Some(c) => Some(decode_cursor(&sort.tag(), real, c)?),
+        Some(c) => Some(decode_cursor(&q.sort.tag(), real, c)?),
         None => None,
     };
+    Ok(SkillFilter {
+        object_shape: q.object_shape,
+        mass_min: q.mass_min,
+        mass_max: q.mass_max,
+        mu_min: q.mu_min,
+        mu_max: q.mu_max,
+        contact_count: q.contact_count,
+        contact_model: q.contact_model,
+        grasp,
+        min_quality: q.min_quality,
+        phase: q.phase.map(|phase| PhaseFilter {
+            phase,
+            min_s: q.phase_min_s,
+            max_s: q.phase_max_s,
+        }),
+        sort: q.sort,
+        after,
+        fetch: i64::from(q.limit) + 1,
+    })
+}
 
-    // Plan: walk the index that yields the sort order (with an equality prefix where a
-    // composite index has one) and test the other filters row by row, so that a page costs
-    // about `limit / selectivity` index steps whatever the table size, instead of sorting every
-    // match of a range filter. A unary `+` keeps SQLite from driving the scan by that column.
-    let shape_leads =
-        q.object_shape.is_some() && matches!(sort.field, SortField::Quality | SortField::Mass);
-    let grasp_leads = !shape_leads
-        && matches!(grasp, Some(GraspFilter::Label(_)))
-        && sort.field == SortField::Quality;
-    let plus = |driving: bool| if driving { "" } else { "+" };
-    let mut b = QueryBuilder::new(format!("SELECT {SKILL_COLUMNS} FROM skills WHERE 1 = 1"));
-    if let Some(v) = &q.object_shape {
-        b.push(format!(" AND {}object_shape = ", plus(shape_leads)))
-            .push_bind(v.name());
-    }
-    let by_mass = sort.field == SortField::Mass;
-    if let Some(v) = q.mass_min {
-        b.push(format!(" AND {}object_mass >= ", plus(by_mass)))
-            .push_bind(v);
-    }
-    if let Some(v) = q.mass_max {
-        b.push(format!(" AND {}object_mass <= ", plus(by_mass)))
-            .push_bind(v);
-    }
-    if let Some(v) = q.mu_min {
-        b.push(" AND +mu >= ").push_bind(v);
-    }
-    if let Some(v) = q.mu_max {
-        b.push(" AND +mu <= ").push_bind(v);
-    }
-    if let Some(v) = q.contact_count {
-        b.push(" AND +contact_count = ").push_bind(v);
-    }
-    if let Some(v) = &q.contact_model {
-        b.push(" AND +contact_model = ").push_bind(v.name());
-    }
-    match grasp {
-        Some(GraspFilter::Label(v)) => {
-            b.push(format!(" AND {}grasp_type = ", plus(grasp_leads)))
-                .push_bind(v);
-        }
-        // The family's bare label and every `<family>-<n>vf` label: `precision` ≤ label <
-        // `precision.` ('.' follows '-').
-        Some(GraspFilter::Family(f)) => {
-            b.push(" AND +grasp_type >= ")
-                .push_bind(f)
-                .push(" AND +grasp_type < ")
-                .push_bind(format!("{f}."));
-        }
-        None => {}
-    }
-    if let Some(v) = q.min_quality {
-        let by_quality = sort.field == SortField::Quality;
-        b.push(format!(" AND {}quality >= ", plus(by_quality)))
-            .push_bind(v);
-    }
-    if let Some(name) = &q.phase {
-        b.push(
-            " AND EXISTS (SELECT 1 FROM skill_phases p WHERE p.skill_id = skills.id AND p.name = ",
-        )
-        .push_bind(name.name());
-        if let Some(v) = q.phase_min_s {
-            b.push(" AND p.duration_s >= ").push_bind(v);
-        }
-        if let Some(v) = q.phase_max_s {
-            b.push(" AND p.duration_s <= ").push_bind(v);
-        }
-        b.push(")");
-    }
-    let (cmp, dir) = match sort.order {
-        SortOrder::Asc => (">", "ASC"),
-        SortOrder::Desc => ("<", "DESC"),
-    };
-    match after {
-        Some(After::Int(id)) => {
-            b.push(format!(" AND id {cmp} ")).push_bind(id);
-        }
-        Some(After::Real(v, id)) => {
-            // `col >= v` (or `<=`) lets SQLite range-scan the index; the OR breaks ties by id.
-            b.push(format!(" AND {col} {cmp}= "))
-                .push_bind(v)
-                .push(format!(" AND ({col} {cmp} "))
-                .push_bind(v)
-                .push(format!(" OR id {cmp} "))
-                .push_bind(id)
-                .push(")");
-        }
-        None => {}
-    }
-    if real {
-        b.push(format!(" ORDER BY {col} {dir}, id {dir}"));
+/// A validated session query.
+#[derive(Debug, Clone, PartialEq)]
+pub(crate) struct SessionFilter<'a> {
+    /// Scenario name equals.
+    pub scenario: Option<&'a str>,
+    /// Hand name equals.
+    pub hand: Option<&'a str>,
+    /// Object shape equals.
+    pub object_shape: Option<ObjectShape>,
+    /// Newest (highest id) first.
+    pub newest_first: bool,
+    /// Only ids after this one (in the query's order).
+    pub after: Option<i64>,
+    /// Rows to fetch: the page size plus one, to see whether more follow.
+    pub fetch: i64,
+}
+
+/// The cursor tag of a session query's order. Ascending pages keep the tag they always had,
+/// so their cursors stay valid.
+pub(crate) fn session_tag(newest_first: bool) -> &'static str {
+    if newest_first {
+        "sessions-desc"
     } else {
-        b.push(format!(" ORDER BY id {dir}"));
+        "sessions"
     }
-    b.push(" LIMIT ").push_bind(i64::from(q.limit) + 1);
-    Ok(b)
+}
+
+/// Validates `q` into the typed parts of its query: `limit` in `1..=max_limit`, a cursor of
+/// the same order.
+pub(crate) fn session_filter(
+    q: &SessionQuery,
+    max_limit: u32,
+) -> Result<SessionFilter<'_>, StoreError> {
+    let limit = q.limit;
+    if limit == 0 || limit > max_limit {
+        return Err(StoreError::InvalidQuery(format!(
+            "limit {limit} is outside 1..={max_limit}"
+        )));
+    }
+    let after = match &q.cursor {
+        Some(c) => match decode_cursor(session_tag(q.newest_first), false, c)? {
+            After::Int(id) => Some(id),
+            After::Real(..) => return Err(StoreError::BadCursor),
+        },
+        None => None,
+    };
+    Ok(SessionFilter {
+        scenario: q.scenario.as_deref(),
+        hand: q.hand.as_deref(),
+        object_shape: q.object_shape,
+        newest_first: q.newest_first,
+        after,
+        fetch: i64::from(limit) + 1,
+    })
 }
 
 /// The cursor pointing after `skill` under `sort`.

@@ -1,0 +1,257 @@
+//! The metadata half of the store as a trait, [`Catalog`]: every row the store reads or writes
+//! goes through it, one implementation per data base backend (today SQLite,
+//! [`super::sqlite::SqliteCatalog`]), each with its own compile-time-checked queries.
+//!
+//! What stays the same whatever the backend lives in [`super::Store`] around it: the blob
+//! files, the in-memory k-nearest and recognition indexes, the blob lock that orders deletes
+//! after ingests, and the input checks. A catalog method is one unit of work (one transaction
+//! where it writes several rows) and answers `None` where a row it needs is missing, which the
+//! store turns into the matching not-found error.
+//!
+//! `dyn Catalog` through `async-trait`, not `async fn` in the trait with the store generic
+//! over it: the backend is chosen at run time (a data directory or, with the scale-out
+//! issue, a `postgres://` URL), and [`super::Store`] stays one type that the HTTP state, the
+//! CLI and the tests hold. The boxed future per call costs far less than the query behind it.
+
+use std::collections::HashSet;
+
+use super::error::StoreError;
+use super::query::{SessionFilter, SkillFilter};
+use super::types::{
+    Hand, HandSummary, IngestOutcome, NewSkill, Replay, SessionMeta, SessionRecord, SkillRecord,
+    StaleSession, FEATURE_DIM,
+};
+use crate::assist::features::TEMPLATE_DIM;
+
+/// A skill checked for storing ([`super::validate_skill`]): the skill and its feature vector.
+#[derive(Debug, Clone, PartialEq)]
+pub(crate) struct CheckedSkill {
+    /// The skill as given.
+    pub skill: NewSkill,
+    /// Its feature vector, [`FEATURE_DIM`] finite values.
+    pub feature: [f32; FEATURE_DIM],
+}
+
+/// A content-addressed blob a row names: its hex SHA-256 and its path relative to the data
+/// directory.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub(crate) struct BlobRef {
+    /// Hex SHA-256 of the bytes.
+    pub sha256: String,
+    /// Path relative to the data directory.
+    pub rel: String,
+}
+
+/// A session to store whose blob is written: the rows [`Catalog::insert_session`] writes.
+#[derive(Debug, Clone, Copy)]
+pub(crate) struct NewSession<'a> {
+    /// Hex SHA-256 of the session's bytes.
+    pub sha256: &'a str,
+    /// Size of the blob, bytes.
+    pub size_bytes: i64,
+    /// Path of the blob relative to the data directory.
+    pub blob_path: &'a str,
+    /// The session's metadata.
+    pub meta: &'a SessionMeta,
+    /// The session's length as the signed column holds it, ns.
+    pub duration_ns: i64,
+    /// Version of the segmentation that made its skills.
+    pub segmentation_version: u32,
+    /// Its checked skills, in the order their ids are given back.
+    pub skills: &'a [CheckedSkill],
+}
+
+/// What deleting a session removed: its skills' ids and the blobs of its rows (its own and
+/// its skills' replays'), for the store to drop from its indexes and the disk.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub(crate) struct DeletedSession {
+    /// Ids of the deleted skills.
+    pub skill_ids: Vec<i64>,
+    /// Blobs of the deleted session and replays.
+    pub blobs: Vec<BlobRef>,
+}
+
+/// A stored skill as the in-memory indexes need it (loaded when the store opens).
+#[derive(Debug, Clone, PartialEq)]
+pub(crate) struct IndexedSkill {
+    /// Skill id.
+    pub id: i64,
+    /// Its feature vector.
+    pub feature: [f32; FEATURE_DIM],
+    /// Its object shape's name.
+    pub object_shape: String,
+    /// Its grasp type label.
+    pub grasp_type: String,
+    /// The object's name in its scene, if named.
+    pub object_name: Option<String>,
+    /// Its approach template, if computed.
+    pub approach: Option<[f32; TEMPLATE_DIM]>,
+}
+
+/// An uploaded hand whose model was built: the row [`Catalog::insert_hand`] writes.
+#[derive(Debug, Clone, Copy)]
+pub(crate) struct NewHand<'a> {
+    /// The hand's name (its spec's).
+    pub name: &'a str,
+    /// The hand spec as JSON.
+    pub spec_json: &'a str,
+    /// The URDF text.
+    pub urdf: &'a str,
+    /// What lists show of it.
+    pub summary: &'a HandSummary,
+}
+
+/// A replay whose blob is written: the row [`Catalog::insert_replay`] writes.
+#[derive(Debug, Clone, Copy)]
+pub(crate) struct NewReplay<'a> {
+    /// The replayed skill.
+    pub skill_id: i64,
+    /// The hand's name.
+    pub hand: &'a str,
+    /// Whether the object was held.
+    pub success: bool,
+    /// Why not, by name.
+    pub failure_reason: Option<&'static str>,
+    /// The report as JSON.
+    pub report_json: &'a str,
+    /// The replay's blob.
+    pub blob: &'a BlobRef,
+    /// Size of the blob, bytes.
+    pub size_bytes: i64,
+}
+
+/// What [`Catalog::replace_session_skills`] did.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub(crate) enum Replacement {
+    /// No session with this id.
+    SessionNotFound,
+    /// The session's version is already the one asked for or newer: nothing changed.
+    UpToDate,
+    /// The skills were replaced.
+    Done(ReplacedRows),
+}
+
+/// The rows a replacement of a session's skills kept, removed and added.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub(crate) struct ReplacedRows {
+    /// The segmentation version the session had.
+    pub from_version: u32,
+    /// Kept stored skills: (stored id, index of the identical new skill).
+    pub kept: Vec<(i64, usize)>,
+    /// Removed stored skills' ids, ascending.
+    pub removed: Vec<i64>,
+    /// Added skills: (new id, index of the new skill), in the new skills' order.
+    pub added: Vec<(i64, usize)>,
+    /// Blobs of the replays removed with the removed skills.
+    pub replay_blobs: Vec<BlobRef>,
+}
+
+/// The store's rows in one data base backend. See the module documentation.
+#[async_trait::async_trait]
+pub(crate) trait Catalog: Send + Sync + std::fmt::Debug {
+    /// The stored session of these bytes, with its skill ids, if any.
+    async fn stored_session(&self, sha256: &str) -> Result<Option<IngestOutcome>, StoreError>;
+
+    /// Inserts a session, its skills and their phase rows in one transaction; returns the
+    /// session's id and its skills' ids (in the order of `new.skills`), or `None` when a
+    /// session of the same bytes is stored already (nothing written).
+    async fn insert_session(
+        &self,
+        new: NewSession<'_>,
+    ) -> Result<Option<(i64, Vec<i64>)>, StoreError>;
+
+    /// Inserts many sessions in one transaction, as fast as the backend can (the synthetic
+    /// generator's path); per session, its skills' ids, or `None` when its bytes were stored
+    /// already.
+    async fn bulk_insert_sessions(
+        &self,
+        sessions: &[NewSession<'_>],
+    ) -> Result<Vec<Option<Vec<i64>>>, StoreError>;
+
+    /// One session.
+    async fn session(&self, id: i64) -> Result<Option<SessionRecord>, StoreError>;
+
+    /// The sessions `filter` selects, in its order, at most its `fetch` of them.
+    async fn sessions(&self, filter: &SessionFilter<'_>) -> Result<Vec<SessionRecord>, StoreError>;
+
+    /// The blob of session `id`.
+    async fn session_blob(&self, id: i64) -> Result<Option<BlobRef>, StoreError>;
+
+    /// Deletes a session, its skills, their phase rows and replays in one transaction.
+    async fn delete_session(&self, id: i64) -> Result<Option<DeletedSession>, StoreError>;
+
+    /// The blob paths some session or replay names.
+    async fn referenced_blob_paths(&self) -> Result<HashSet<String>, StoreError>;
+
+    /// Whether a session or a replay names the blob of these bytes.
+    async fn blob_is_referenced(&self, sha256: &str) -> Result<bool, StoreError>;
+
+    /// One skill.
+    async fn skill(&self, id: i64) -> Result<Option<SkillRecord>, StoreError>;
+
+    /// The skills of `ids` (in any order; missing ids left out).
+    async fn skills_by_id(&self, ids: &[i64]) -> Result<Vec<SkillRecord>, StoreError>;
+
+    /// The skills `filter` selects, in its order, at most its `fetch` of them.
+    async fn skills(&self, filter: &SkillFilter<'_>) -> Result<Vec<SkillRecord>, StoreError>;
+
+    /// Every skill as the in-memory indexes need it.
+    async fn indexed_skills(&self) -> Result<Vec<IndexedSkill>, StoreError>;
+
+    /// Deletes one skill, its phase rows and its replays in one transaction; returns the
+    /// replays' blobs.
+    async fn delete_skill(&self, id: i64) -> Result<Option<Vec<BlobRef>>, StoreError>;
+
+    /// Stores an uploaded hand; returns its creation time, or `None` when the name is taken.
+    async fn insert_hand(&self, hand: NewHand<'_>) -> Result<Option<String>, StoreError>;
+
+    /// The uploaded hands, by upload.
+    async fn hands(&self) -> Result<Vec<HandSummary>, StoreError>;
+
+    /// One uploaded hand with its spec and URDF.
+    async fn hand(&self, name: &str) -> Result<Option<Hand>, StoreError>;
+
+    /// Stores a replay of an existing skill; `None` when the skill is gone.
+    async fn insert_replay(&self, replay: NewReplay<'_>) -> Result<Option<Replay>, StoreError>;
+
+    /// One replay.
+    async fn replay(&self, id: i64) -> Result<Option<Replay>, StoreError>;
+
+    /// The replays of one skill, by ascending id; `None` when there is no such skill.
+    async fn replays_of(&self, skill_id: i64) -> Result<Option<Vec<Replay>>, StoreError>;
+
+    /// The blob path of replay `id`.
+    async fn replay_blob_path(&self, id: i64) -> Result<Option<String>, StoreError>;
+
+    /// The sessions segmented by a version below `version`, by ascending id.
+    async fn sessions_segmented_before(
+        &self,
+        version: u32,
+    ) -> Result<Vec<StaleSession>, StoreError>;
+
+    /// Number of sessions segmented by a version above `version`.
+    async fn sessions_segmented_after(&self, version: u32) -> Result<u64, StoreError>;
+
+    /// Replaces the skills of a session segmented again with `version` in one transaction
+    /// that reads what it replaces (see [`super::Store::replace_session_skills`];
+    /// [`super::reprocess::plan`] decides what is kept).
+    async fn replace_session_skills(
+        &self,
+        session_id: i64,
+        version: u32,
+        skills: &[CheckedSkill],
+    ) -> Result<Replacement, StoreError>;
+
+    /// How durable a commit is, as the data base reports it (SQLite's `synchronous`: 2 for
+    /// `FULL`, 1 for `NORMAL`).
+    async fn synchronous_setting(&self) -> Result<i64, StoreError>;
+
+    /// The backend's consistency checks; [`StoreError::Corrupt`] naming what failed.
+    async fn integrity_check(&self) -> Result<(), StoreError>;
+
+    /// Refreshes the query planner's statistics.
+    async fn optimize(&self) -> Result<(), StoreError>;
+
+    /// Closes the connections (waits for queries in flight; later calls fail).
+    async fn close(&self);
+}

@@ -1,0 +1,306 @@
+//! The store's rows as the data base gives them (`sqlx::FromRow`, plain column types), and
+//! their conversion into the records callers get: JSON columns parsed, names checked against
+//! dfs-core's types, feature vectors decoded. A row that does not convert is
+//! [`StoreError::Corrupt`], naming the row and the column.
+//!
+//! The columns hold the same representation in every backend (TEXT for names and JSON, a
+//! little-endian `f32` BLOB for vectors), so these conversions are shared.
+
+use dfs_core::names::Named;
+use dfs_core::replay::FailureReason;
+
+use super::catalog::IndexedSkill;
+use super::error::StoreError;
+use super::types::{HandSummary, Replay, SessionRecord, SkillRecord, FEATURE_DIM};
+use crate::assist::features::TEMPLATE_DIM;
+
+/// A row of `skills`, with its session's segmentation version.
+#[derive(Debug, Clone, sqlx::FromRow)]
+pub(crate) struct SkillRow {
+    pub id: i64,
+    pub session_id: i64,
+    pub object_shape: String,
+    pub object_name: Option<String>,
+    pub object_mass: f64,
+    pub mu: f64,
+    pub contact_count: i64,
+    pub contact_model: String,
+    pub grasp_type: String,
+    pub quality: f64,
+    pub volume: f64,
+    pub duration_s: f64,
+    pub start_ns: i64,
+    pub end_ns: i64,
+    pub phase_durations: String,
+    pub feature: Vec<u8>,
+    pub params: String,
+    pub approach: Option<Vec<u8>>,
+    pub matched_skill_id: Option<i64>,
+    pub created_at: String,
+    pub segmentation_version: i64,
+}
+
+/// A row of `sessions`, with its skills' ids and matches as JSON arrays.
+#[derive(Debug, Clone, sqlx::FromRow)]
+pub(crate) struct SessionRow {
+    pub id: i64,
+    pub sha256: String,
+    pub size_bytes: i64,
+    pub blob_path: String,
+    pub meta: String,
+    pub segmentation_version: i64,
+    pub created_at: String,
+    pub skill_ids: String,
+    pub matched_skill_ids: String,
+}
+
+/// A row of `replays`.
+#[derive(Debug, Clone, sqlx::FromRow)]
+pub(crate) struct ReplayRow {
+    pub id: i64,
+    pub skill_id: i64,
+    pub hand: String,
+    pub success: bool,
+    pub failure_reason: Option<String>,
+    pub report: String,
+    pub sha256: String,
+    pub size_bytes: i64,
+    pub blob_path: String,
+    pub created_at: String,
+}
+
+/// The listed columns of a row of `hands`.
+#[derive(Debug, Clone, sqlx::FromRow)]
+pub(crate) struct HandSummaryRow {
+    pub name: String,
+    pub dof: i64,
+    pub fingers: String,
+    pub dof_names: String,
+    pub torque_limit_min: f64,
+    pub torque_limit_max: f64,
+    pub created_at: String,
+}
+
+/// A whole row of `hands`.
+#[derive(Debug, Clone, sqlx::FromRow)]
+pub(crate) struct HandRow {
+    pub name: String,
+    pub spec: String,
+    pub urdf: String,
+    pub dof: i64,
+    pub fingers: String,
+    pub dof_names: String,
+    pub torque_limit_min: f64,
+    pub torque_limit_max: f64,
+    pub created_at: String,
+}
+
+/// The columns of `skills` the in-memory indexes are loaded from.
+#[derive(Debug, Clone, sqlx::FromRow)]
+pub(crate) struct IndexedSkillRow {
+    pub id: i64,
+    pub feature: Vec<u8>,
+    pub object_shape: String,
+    pub grasp_type: String,
+    pub object_name: Option<String>,
+    pub approach: Option<Vec<u8>>,
+}
+
+/// A feature vector as its column holds it.
+pub(crate) fn feature_to_blob(f: &[f32; FEATURE_DIM]) -> Vec<u8> {
+    f.iter().flat_map(|x| x.to_le_bytes()).collect()
+}
+
+/// An approach template as its column holds it.
+pub(crate) fn approach_to_blob(a: &[f32]) -> Vec<u8> {
+    a.iter().flat_map(|x| x.to_le_bytes()).collect()
+}
+
+/// `N` little-endian `f32` from the column `what` of skill `id`.
+fn floats<const N: usize>(id: i64, what: &str, bytes: &[u8]) -> Result<[f32; N], StoreError> {
+    if bytes.len() != N * 4 {
+        return Err(StoreError::Corrupt(format!(
+            "skill {id}: {what} has {} bytes, expected {}",
+            bytes.len(),
+            N * 4
+        )));
+    }
+    let mut f = [0.0f32; N];
+    for (v, c) in f.iter_mut().zip(bytes.chunks_exact(4)) {
+        *v = f32::from_le_bytes([c[0], c[1], c[2], c[3]]);
+    }
+    Ok(f)
+}
+
+/// The feature vector of skill `id` from its column.
+pub(crate) fn feature_from_blob(id: i64, bytes: &[u8]) -> Result<[f32; FEATURE_DIM], StoreError> {
+    floats(id, "feature", bytes)
+}
+
+/// The approach template of skill `id` from its column (`None` for NULL).
+pub(crate) fn approach_from_blob(
+    id: i64,
+    bytes: Option<&[u8]>,
+) -> Result<Option<[f32; TEMPLATE_DIM]>, StoreError> {
+    bytes.map(|b| floats(id, "approach", b)).transpose()
+}
+
+/// The name in the TEXT column `column` of skill `id`'s row as a value of `T` (a shape, a
+/// contact model): a name `T` does not know is a corrupt row, named.
+fn named<T: Named>(id: i64, column: &str, text: &str) -> Result<T, StoreError> {
+    T::from_name(text).map_err(|e| StoreError::Corrupt(format!("skill {id}: {column}: {e}")))
+}
+
+/// A segmentation version from its signed column.
+fn segmentation_version(v: i64) -> Result<u32, StoreError> {
+    u32::try_from(v)
+        .map_err(|_| StoreError::Corrupt(format!("segmentation version {v} is out of range")))
+}
+
+impl TryFrom<SkillRow> for SkillRecord {
+    type Error = StoreError;
+
+    fn try_from(r: SkillRow) -> Result<Self, StoreError> {
+        let id = r.id;
+        Ok(SkillRecord {
+            id,
+            session_id: r.session_id,
+            object_shape: named(id, "object_shape", &r.object_shape)?,
+            object_name: r.object_name,
+            object_mass: r.object_mass,
+            mu: r.mu,
+            contact_count: r.contact_count,
+            contact_model: named(id, "contact_model", &r.contact_model)?,
+            grasp_type: r.grasp_type,
+            quality: r.quality,
+            volume: r.volume,
+            duration_s: r.duration_s,
+            start_ns: r.start_ns,
+            end_ns: r.end_ns,
+            phase_durations: serde_json::from_str(&r.phase_durations)
+                .map_err(|e| StoreError::Corrupt(format!("skill {id}: phase_durations: {e}")))?,
+            feature: feature_from_blob(id, &r.feature)?.to_vec(),
+            params: serde_json::from_str(&r.params)?,
+            approach: approach_from_blob(id, r.approach.as_deref())?
+                .map(|a| a.iter().map(|v| v.is_finite().then_some(*v)).collect()),
+            matched_skill_id: r.matched_skill_id,
+            segmentation_version: segmentation_version(r.segmentation_version)?,
+            created_at: r.created_at,
+        })
+    }
+}
+
+impl TryFrom<SessionRow> for SessionRecord {
+    type Error = StoreError;
+
+    fn try_from(r: SessionRow) -> Result<Self, StoreError> {
+        let id = r.id;
+        Ok(SessionRecord {
+            id,
+            sha256: r.sha256,
+            size_bytes: r.size_bytes,
+            blob_path: r.blob_path,
+            meta: serde_json::from_str(&r.meta)
+                .map_err(|e| StoreError::Corrupt(format!("session {id}: meta: {e}")))?,
+            skill_ids: serde_json::from_str(&r.skill_ids)?,
+            matched_skill_ids: serde_json::from_str(&r.matched_skill_ids)?,
+            segmentation_version: segmentation_version(r.segmentation_version)?,
+            created_at: r.created_at,
+        })
+    }
+}
+
+impl TryFrom<ReplayRow> for Replay {
+    type Error = StoreError;
+
+    fn try_from(r: ReplayRow) -> Result<Self, StoreError> {
+        let id = r.id;
+        let mut report: serde_json::Value = serde_json::from_str(&r.report)?;
+        // Replays stored before the report took the torque the joints applied (clamped at the
+        // limit) hold the peak of the torque asked for, which could exceed it. The applied
+        // torque's peak is that, at most 1: the same number the report gives today.
+        if let Some(ratio) = report.get_mut("peak_torque_ratio") {
+            if ratio.as_f64().is_some_and(|r| r > 1.0) {
+                *ratio = 1.0.into();
+            }
+        }
+        Ok(Replay {
+            id,
+            skill_id: r.skill_id,
+            hand: r.hand,
+            success: r.success,
+            failure_reason: r
+                .failure_reason
+                .as_deref()
+                .map(FailureReason::from_name)
+                .transpose()
+                .map_err(|e| StoreError::Corrupt(format!("replay {id}: failure_reason: {e}")))?,
+            report,
+            sha256: r.sha256,
+            size_bytes: r.size_bytes,
+            blob_path: r.blob_path,
+            created_at: r.created_at,
+        })
+    }
+}
+
+impl TryFrom<HandSummaryRow> for HandSummary {
+    type Error = StoreError;
+
+    fn try_from(r: HandSummaryRow) -> Result<Self, StoreError> {
+        Ok(HandSummary {
+            name: r.name,
+            builtin: false,
+            fingers: serde_json::from_str(&r.fingers)?,
+            dof: usize::try_from(r.dof)
+                .map_err(|_| StoreError::Corrupt(format!("dof {}", r.dof)))?,
+            dof_names: serde_json::from_str(&r.dof_names)?,
+            torque_limit: [r.torque_limit_min, r.torque_limit_max],
+            created_at: Some(r.created_at),
+        })
+    }
+}
+
+impl TryFrom<HandRow> for super::types::Hand {
+    type Error = StoreError;
+
+    fn try_from(r: HandRow) -> Result<Self, StoreError> {
+        let spec = serde_json::from_str(&r.spec)?;
+        Ok(super::types::Hand {
+            summary: HandSummaryRow {
+                name: r.name,
+                dof: r.dof,
+                fingers: r.fingers,
+                dof_names: r.dof_names,
+                torque_limit_min: r.torque_limit_min,
+                torque_limit_max: r.torque_limit_max,
+                created_at: r.created_at,
+            }
+            .try_into()?,
+            spec: Some(spec),
+            urdf: Some(r.urdf),
+        })
+    }
+}
+
+impl TryFrom<IndexedSkillRow> for IndexedSkill {
+    type Error = StoreError;
+
+    fn try_from(r: IndexedSkillRow) -> Result<Self, StoreError> {
+        Ok(IndexedSkill {
+            id: r.id,
+            feature: feature_from_blob(r.id, &r.feature)?,
+            approach: approach_from_blob(r.id, r.approach.as_deref())?,
+            object_shape: r.object_shape,
+            grasp_type: r.grasp_type,
+            object_name: r.object_name,
+        })
+    }
+}
+
+/// Converts every row of `rows`, stopping at the first that fails.
+pub(crate) fn convert<R, T: TryFrom<R, Error = StoreError>>(
+    rows: Vec<R>,
+) -> Result<Vec<T>, StoreError> {
+    rows.into_iter().map(T::try_from).collect()
+}
