@@ -54,8 +54,9 @@ const NO_OUTSIDE: Outside = Outside {
 /// leaves its buffers to the next build on the same thread.
 pub(super) struct Hull {
     buffers: Buffers,
-    /// Read by the tests' [`Hull::volume`]; [`Build::metrics`] measures the same as it checks.
-    #[cfg_attr(not(test), allow(dead_code))]
+    /// Read by the tests' [`Hull::volume`] only; [`Build::metrics`] measures the same as it
+    /// checks.
+    #[cfg(test)]
     interior: P,
 }
 
@@ -957,8 +958,9 @@ impl Build {
 
     /// The hull, once [`Build::check`] is done.
     pub(super) fn into_hull(self) -> Hull {
+        #[cfg(test)]
+        let interior = self.interior;
         let Build {
-            interior,
             topo,
             planes,
             outside,
@@ -978,6 +980,7 @@ impl Build {
                 work,
                 free,
             },
+            #[cfg(test)]
             interior,
         }
     }
