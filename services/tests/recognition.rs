@@ -73,3 +73,68 @@ fn templates_from_kept_messages_equal_those_of_a_second_read() {
         assert_eq!(bits(&from_kept), bits(&from_file), "budget {budget}");
     }
 }
+
+/// The grasp stage computes its grasp quality a part at a time (`grasp_budget` per
+/// observation): the grasp-stage verdicts name the same objects, skills and distances as when
+/// the quality is computed in one observation; only when they are said differs.
+#[test]
+fn a_grasp_stage_decided_a_part_at_a_time_names_what_one_decided_at_once_names() {
+    use services::assist::recognise::{Stage, Verdict};
+    let scen = |seeds: std::ops::RangeInclusive<u64>| {
+        KINDS
+            .iter()
+            .flat_map(|k| seeds.clone().map(move |s| Scenario::variant(k, s).unwrap()))
+            .collect::<Vec<_>>()
+    };
+    let grasp_verdicts = |grasp_budget: usize| {
+        let dir = tempfile::tempdir().unwrap();
+        let e = evaluate(EvalSetup {
+            train: scen(1..=2),
+            test: scen(201..=201),
+            dir: dir.path(),
+            params: RecogniserParams {
+                grasp_budget,
+                ..RecogniserParams::default()
+            },
+            cost_skills: None,
+            progress: &mut |_, _| {},
+        })
+        .unwrap();
+        e.sessions
+            .iter()
+            .map(|s| {
+                s.verdicts
+                    .iter()
+                    .filter(|v| v.stage() == Stage::Grasp)
+                    .map(|v| match v {
+                        Verdict::Recognised {
+                            object,
+                            skill,
+                            runners_up,
+                            ..
+                        } => (
+                            object.clone(),
+                            Some((skill.skill_id, skill.distance)),
+                            runners_up.iter().map(|c| c.skill_id).collect::<Vec<_>>(),
+                        ),
+                        Verdict::Unknown {
+                            object, nearest, ..
+                        } => (
+                            object.clone(),
+                            nearest.as_ref().map(|c| (c.skill_id, c.distance)),
+                            Vec::new(),
+                        ),
+                    })
+                    .collect::<Vec<_>>()
+            })
+            .collect::<Vec<_>>()
+    };
+    let sliced = grasp_verdicts(RecogniserParams::default().grasp_budget);
+    let at_once = grasp_verdicts(usize::MAX);
+    assert_eq!(sliced.len(), KINDS.len());
+    assert!(
+        sliced.iter().filter(|v| !v.is_empty()).count() >= 2,
+        "too few grasp-stage verdicts to compare: {sliced:?}"
+    );
+    assert_eq!(sliced, at_once);
+}
