@@ -9,9 +9,10 @@ glove10 (ring and little MCP/PIP copy the middle finger's, every coupled DIP fol
 joints), stiff ones (`solref` 0.002 s: with MuJoCo's default 0.02 s the coupled joints give
 way under a held ball's weight). MJCF angles are degrees unless `<compiler angle="radian"/>`:
 the models using these bodies must say radian. The fingertip spheres collide with the object;
-with `whole_hand` the palm box and the phalanx capsules do too: glove10's whole-hand contact
-geometry (glove10.rs `add_contact_geometry`: the palm box, a capsule along each phalanx with its
-radius, a distal one stopping a fingertip diameter short of the finger's end). Without it they
+with `whole_hand` the palm box, the eminences and the phalanx capsules do too: glove10's
+whole-hand contact geometry (glove10.rs `add_contact_geometry`: the palm box, the thenar and
+hypothenar eminence boxes beside it, a capsule along each phalanx with its radius, a distal one
+stopping a fingertip diameter short of the finger's end). Without it they
 are visual only, as for the `fingertips` scene, where only fingertips touch in the DFS.
 """
 
@@ -35,6 +36,10 @@ THUMB_RATIOS = (0.251, 0.196, 0.158)
 THUMB_RADII = (0.0110, 0.0105, 0.0095)
 THUMB_TIP_RADIUS = 0.010
 PALM_BOX = (0.075, 0.085, 0.030)
+# The thenar and hypothenar eminences (glove10.rs EMINENCE_BOX, EMINENCE_RISE): contact boxes
+# on the palm's radial and ulnar sides from the wrist, standing proud of its grasping face.
+EMINENCE_BOX = (0.03, 0.029, 0.022)
+EMINENCE_RISE = 0.0085
 FINGER_LIMITS = [(-0.35, 1.57), (0.0, 1.75), (0.0, 1.40)]
 DIP_PIP_RATIO = 2.0 / 3.0
 
@@ -142,6 +147,13 @@ def glove10_body(contact_tips, whole_hand=False):
         f'<geom name="palm" type="box" pos="{_f(0.5 * a, 0, 0)}" size="{_f(0.5 * a, 0.5 * b, 0.5 * c)}" '
         f'{_flags(whole_hand)} condim="3" group="1"/>'
     )
+    ea, eb, ec = EMINENCE_BOX
+    for ename, side in (("thenar", 1.0), ("hypothenar", -1.0)):
+        epos = (0.5 * ea, side * 0.5 * (b - eb), -0.5 * c - EMINENCE_RISE + 0.5 * ec)
+        x.append(
+            f'<geom name="{ename}" type="box" pos="{_f(*epos)}" size="{_f(0.5 * ea, 0.5 * eb, 0.5 * ec)}" '
+            f'{_flags(whole_hand)} condim="3" group="1"/>'
+        )
     # Index: three DOFs.
     name, mcp, ratios, radii, tr = FINGERS[0]
     x += _finger(name, mcp, ratios, radii, tr, FINGER_LIMITS, [True, True, True], contact_tips, whole_hand)

@@ -69,6 +69,9 @@ use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use rand_distr::{Distribution, Normal};
 
+pub mod power;
+use power::{plan_wrap, PowerGrip, Wrap};
+
 /// A hand whose base can translate freely: three prismatic joints (world x, y, z) carry the
 /// hand's root at the fixed orientation `rotation`. DOFs 0-2 are the base position, the
 /// hand's DOFs follow. Used to plan grasps with the base position as unknown.
@@ -198,6 +201,12 @@ pub struct GraspPlan {
     /// the cosine of the angle between the inward normal and the nearest direction the
     /// fingertip can push in (1 = straight along the normal).
     pub normal_alignment: [Real; MAX_TIPS],
+    /// A power grasp that wraps the hand around the object ([`power::plan_wrap`]): the palm,
+    /// phalanges and fingertips hold it (whole-hand contact), the fingers close by torque
+    /// rather than to spots, so `q_grasp`, `q_pre` and `q_open` are all the open hand and the
+    /// per-fingertip `contacts_b`, `normals_b` and `normal_alignment` are zero. `None`: a
+    /// fingertip grasp.
+    pub wrap: Option<Wrap>,
 }
 
 /// Index of a fingertip by name.
@@ -226,16 +235,7 @@ pub fn plan_grasp(
 ) -> Result<GraspPlan> {
     // Within capacity, with room for the free base the search adds.
     hand.validate()?;
-    let style = match style {
-        GraspStyle::Auto => {
-            if object.shape.width_x() < 0.06 {
-                GraspStyle::Pinch
-            } else {
-                GraspStyle::Power
-            }
-        }
-        s => s,
-    };
+    let style = resolve_style(style, object);
     let thumb = tip_index(hand, "thumb").ok_or_else(|| {
         DfsError::invalid("hand", "the operator needs a fingertip named \"thumb\"")
     })?;
@@ -572,7 +572,54 @@ pub fn plan_grasp(
         contacts_b,
         normals_b,
         normal_alignment,
+        wrap: None,
     })
+}
+
+/// The style `style` takes for `object`: `auto` is a pinch for objects narrower than 6 cm
+/// along x, else a power grasp.
+fn resolve_style(style: GraspStyle, object: &RigidObject) -> GraspStyle {
+    match style {
+        GraspStyle::Auto if object.shape.width_x() < 0.06 => GraspStyle::Pinch,
+        GraspStyle::Auto => GraspStyle::Power,
+        s => s,
+    }
+}
+
+/// The operator's grasp of `object` at `pose` in `style`, clear of `obstacles`: a power grasp
+/// of a standing cylinder by a hand with a palm contact shape wraps the hand around it
+/// ([`power::plan_wrap`], whole-hand contact); any other grasp is a fingertip grasp
+/// ([`plan_grasp`]).
+pub fn plan_operator_grasp(
+    hand: &HandModel,
+    object: &RigidObject,
+    pose: &Isometry,
+    style: GraspStyle,
+    obstacles: &[(RigidObject, Isometry)],
+) -> Result<GraspPlan> {
+    if resolve_style(style, object) == GraspStyle::Power {
+        let mut q_open = [0.0; MAX_DOF];
+        if let Some((base, wrap)) = plan_wrap(hand, object, pose, obstacles, &mut q_open) {
+            let mut tips = [false; MAX_TIPS];
+            for (k, t) in tips.iter_mut().enumerate().take(hand.fingertips.len()) {
+                *t = hand.fingertips[k].name != "thumb";
+            }
+            return Ok(GraspPlan {
+                base,
+                q_grasp: q_open,
+                q_pre: q_open,
+                q_open,
+                tips,
+                ik_error: 0.0,
+                style: GraspStyle::Power,
+                contacts_b: [Vector::zeros(); MAX_TIPS],
+                normals_b: [Vector::zeros(); MAX_TIPS],
+                normal_alignment: [0.0; MAX_TIPS],
+                wrap: Some(wrap),
+            });
+        }
+    }
+    plan_grasp(hand, object, pose, style)
 }
 
 /// How well fingertip `tip` can push along `dir` (unit, world): the length of the direction's
@@ -1125,6 +1172,12 @@ pub struct Simulation {
     /// the open hand's posture to reaching for their spots on the object (0-1,
     /// [`REACH_SHAPE_FROM`]).
     reach_shaping: Real,
+    /// In a wrap ([`GraspPlan::wrap`]), how far the fingers have gone over from the open
+    /// hand's posture to closing by torque (0-1).
+    wrap_close: Real,
+    /// In a wrap, where the fingers came to rest on the object at the end of `grasp`: held
+    /// there from then on (with the closing torques) until they open.
+    wrap_set: Option<[Real; MAX_DOF]>,
 }
 
 impl Simulation {
@@ -1201,14 +1254,25 @@ impl Simulation {
                 last.end_ns = end;
             }
         }
+        let obstacles: Vec<(RigidObject, Isometry)> = scene
+            .objects
+            .iter()
+            .enumerate()
+            .filter(|(i, _)| *i != target)
+            .map(|(_, o)| (o.object, o.pose))
+            .collect();
+        let plan = plan_operator_grasp(&hand, &object, &pose, scenario.grasp, &obstacles)?;
         let params = DfsParams {
             // Fingertip pads are soft: they resist spin about the normal (Table 1, soft finger).
             contact_model: ContactModel::SoftFinger,
             friction,
             table_height: Some(table_height),
+            // A grasp that wraps the hand around the object holds it with the palm and the
+            // phalanges too: whole-hand contact is the plan's, not a default of the physics
+            // (fingertip sessions stay as they were, bit for bit, and their ticks as cheap).
+            whole_hand: plan.wrap.is_some(),
             ..DfsParams::default()
         };
-        let plan = plan_grasp(&hand, &object, &pose, scenario.grasp)?;
         let approach = approach_pose(&plan.base, &object.shape);
         let start_base = match reach_rng.as_mut() {
             Some(rng) => draw_home(
@@ -1289,6 +1353,8 @@ impl Simulation {
             reach_rng,
             reach_path: None,
             reach_shaping: 1.0,
+            wrap_close: 0.0,
+            wrap_set: None,
         };
         sim.begin_phase()?;
         Ok(sim)
@@ -1414,9 +1480,13 @@ impl Simulation {
     fn end_phase(&mut self) {
         if self.span_now().phase == Phase::Grasp {
             self.object_held = true;
+            if self.plan.wrap.is_some() {
+                self.wrap_set = Some(self.dfs.output().motor_q);
+            }
         }
         if self.span_now().phase == Phase::Release {
             self.object_held = false;
+            self.wrap_set = None;
         }
     }
 
@@ -1433,7 +1503,21 @@ impl Simulation {
         match task.phase {
             Phase::Approach => {
                 let pose = self.target_state().pose;
-                self.plan = plan_grasp(self.dfs.hand(), self.target_object(), &pose, self.style)?;
+                let obstacles: Vec<(RigidObject, Isometry)> = self
+                    .dfs
+                    .objects()
+                    .iter()
+                    .enumerate()
+                    .filter(|(i, _)| *i != self.target)
+                    .map(|(_, o)| (o.object, o.state.pose))
+                    .collect();
+                self.plan = plan_operator_grasp(
+                    self.dfs.hand(),
+                    self.target_object(),
+                    &pose,
+                    self.style,
+                    &obstacles,
+                )?;
                 self.resting = resting_tips(
                     &self.plan,
                     self.dfs.hand(),
@@ -1466,6 +1550,10 @@ impl Simulation {
                 self.to_grip = 1.0;
                 // Aim a little inside the surface, as a person presses on what they hold.
                 self.to_offset = -0.002;
+                // A wrap brings the palm onto the object first.
+                if let Some(wrap) = self.plan.wrap {
+                    self.to_base = wrap.base;
+                }
             }
             Phase::Lift => {
                 self.to_base = raise(&self.from_base, task.height);
@@ -1503,7 +1591,16 @@ impl Simulation {
                 }
             }
             Phase::Retreat => {
-                self.to_base = raise(&self.from_base, 0.10);
+                self.to_base = match self.plan.wrap {
+                    // The open hand backs off the object and slides up off it, the way it came.
+                    Some(wrap) => {
+                        let rise = self.target_object().shape.bounding_radius() + 0.06;
+                        let mut x = raise(&self.from_base, rise);
+                        x.translation.vector += wrap.out * (2.0 * power::WRAP_STANDOFF);
+                        x
+                    }
+                    None => raise(&self.from_base, 0.10),
+                };
                 self.to_q = self.plan.q_open;
                 self.to_grip = 0.0;
                 self.to_offset = 0.03;
@@ -1561,6 +1658,21 @@ impl Simulation {
         };
         let (mut mq, _) = min_jerk(sq);
         let (mg, _) = min_jerk(sg);
+        // A wrap: the palm comes onto the object over the first 40 % of `grasp`, the fingers
+        // close from 20 % to 50 %, and in `release` open after the grip has gone (40 % on).
+        let (m, m2) = match (self.plan.wrap, span.phase) {
+            (Some(_), Phase::Grasp) => {
+                let (a, b) = min_jerk(s / 0.4);
+                (a, b / (0.4 * 0.4))
+            }
+            _ => (m, m2),
+        };
+        self.wrap_close = match span.phase {
+            Phase::Grasp => min_jerk((s - 0.2) / 0.3).0,
+            Phase::Lift | Phase::Hold | Phase::Transport | Phase::Place => 1.0,
+            Phase::Release => 1.0 - min_jerk((s - 0.4) / 0.6).0,
+            _ => 0.0,
+        };
         let dp = self.to_base.translation.vector - self.from_base.translation.vector;
         let (p, r, acceleration) = match &self.reach_path {
             None => (
@@ -1641,6 +1753,10 @@ impl Simulation {
     /// palm rather than the forearm keep the fingers' impedance out of a loop through the
     /// wrist (fingertip forces turn the palm, which would move a forearm-fixed set-point).
     fn compute_torques(&mut self) {
+        if let Some(wrap) = self.plan.wrap {
+            self.compute_wrap_torques(&wrap);
+            return;
+        }
         let (mags, units, lift) = self.grip_forces();
         let hand = self.dfs.hand();
         let n = hand.dof();
@@ -1767,6 +1883,52 @@ impl Simulation {
             let lim = 1.9 * hand.torque_limit[d];
             self.tau[d] = tau[d].clamp(-lim, lim);
         }
+    }
+
+    /// The operator's joint torques in a wrap ([`power`]): the power grip's law
+    /// ([`PowerGrip::torques`]) about the intended angles, the fingers going over from their
+    /// posture impedance to closing by torque as [`wrap_close`](Self::wrap_close) rises. The
+    /// closing torques are scaled to the squeeze friction needs for the load the operator
+    /// expects (weight plus the arm's planned acceleration) with its safety margin, for the
+    /// friction it expects, through the whole hand's contacts
+    /// ([`power::WRAP_NORMAL_PER_GRIP`]): `grip` ramps from the closing level
+    /// ([`power::WRAP_CLOSE`]) to that squeeze, with the lift-off peak
+    /// ([`OperatorParams::lift_grip_peak`]).
+    fn compute_wrap_torques(&mut self, wrap: &Wrap) {
+        let hand = self.dfs.hand();
+        let n = hand.dof();
+        let out = self.dfs.output();
+        let p = &self.params;
+        let mut grip = PowerGrip::closing(hand, &[], &self.q_intent[..n]);
+        let w = self.wrap_close;
+        for d in 0..n {
+            let lim = hand.torque_limit[d];
+            grip.limit[d] = 1.9 * lim;
+            if wrap.closes[d] {
+                grip.close[d] = power::WRAP_CLOSE * lim;
+                // Going over from the posture impedance to where the fingers came to rest on
+                // the object (once they have: the fixture's grip), one set-point between them.
+                let open = (1.0 - w) * p.stiffness * lim;
+                let (held, set) = match self.wrap_set {
+                    Some(set) => (w * power::WRAP_KP_PER_LIMIT * lim, set[d]),
+                    None => (0.0, 0.0),
+                };
+                grip.kp[d] = open + held;
+                if grip.kp[d] > 0.0 {
+                    grip.set[d] = (open * self.q_intent[d] + held * set) / grip.kp[d];
+                }
+            }
+        }
+        let load = ((self.base_acceleration - self.dfs.params().gravity)
+            * self.target_object().mass)
+            .norm();
+        let squeeze = (p.grip_safety * load / (self.operator_mu * power::WRAP_NORMAL_PER_GRIP))
+            .clamp(power::WRAP_CLOSE, power::WRAP_MAX_GRIP)
+            * (1.0 + self.grip_boost);
+        let level = w + self.grip * (squeeze / power::WRAP_CLOSE - 1.0);
+        let mut tau = [0.0; MAX_DOF];
+        grip.torques(level, &out.motor_q[..n], &out.motor_qd[..n], &mut tau[..n]);
+        self.tau[..n].copy_from_slice(&tau[..n]);
     }
 
     /// The squeeze: per fingertip of the grasp, the normal force `N_k` the operator presses
@@ -2318,6 +2480,92 @@ mod tests {
                 "r {radius} m {mass}: {} contacts",
                 o.hold_contacts
             );
+        }
+    }
+
+    /// The operator's power grasp of `cylinder-power-grasp` wraps the hand around the cylinder:
+    /// whole-hand contact on, and through `hold` the palm (its eminences) presses it, with at
+    /// least two long fingers wrapped around it (touching by a phalanx or the fingertip).
+    #[test]
+    fn the_power_grasp_presses_the_cylinder_into_the_palm_with_the_fingers_wrapped_around_it() {
+        use crate::hand::BodyPart;
+        let s = Scenario::builtin("cylinder-power-grasp", 0).unwrap();
+        let mut sim = Simulation::new(&s, HandModel::glove10(), None).unwrap();
+        assert!(sim.plan.wrap.is_some() && sim.dfs().params().whole_hand);
+        let shapes = sim.dfs().hand().contact_shapes.clone();
+        let (mut hold_ticks, mut palm_ticks, mut wrapped_ticks) = (0, 0, 0);
+        while sim.step().unwrap() {
+            if sim.phase() != Phase::Hold {
+                continue;
+            }
+            hold_ticks += 1;
+            let pressing: Vec<usize> = (0..sim.output().n_body)
+                .filter(|&i| sim.dfs().body_contacts()[i].in_contact)
+                .collect();
+            palm_ticks += usize::from(pressing.iter().any(|&i| shapes[i].part == BodyPart::Palm));
+            let out = sim.output();
+            let thumb = tip_index(sim.dfs().hand(), "thumb");
+            let fingers: std::collections::BTreeSet<usize> = pressing
+                .iter()
+                .filter_map(|&i| match shapes[i].part {
+                    BodyPart::Phalanx { finger } => finger,
+                    BodyPart::Palm => None,
+                })
+                .chain((0..out.n_tips).filter(|&k| out.tips[k].in_contact))
+                .filter(|&k| Some(k) != thumb)
+                .collect();
+            wrapped_ticks += usize::from(fingers.len() >= 2);
+        }
+        assert!(hold_ticks > 500);
+        assert_eq!(palm_ticks, hold_ticks, "the palm let go");
+        assert_eq!(wrapped_ticks, hold_ticks, "fewer than two fingers wrapped");
+    }
+
+    /// Pinches and fingertip grasps keep fingertip contact alone; a wrap is planned for a
+    /// standing cylinder in a power grasp, its open hand clear of the cylinder above it and at
+    /// the preshape, its palm on the cylinder at the grasp.
+    #[test]
+    fn a_wrap_is_planned_for_a_standing_cylinder_with_the_open_hand_clear_of_it() {
+        let hand = HandModel::glove10();
+        let s = Scenario::builtin("cylinder-power-grasp", 0).unwrap();
+        let (object, _) = s.resolve().unwrap();
+        let pose = Isometry::translation(0.0, 0.0, 0.09);
+        let plan = plan_operator_grasp(&hand, &object, &pose, GraspStyle::Power, &[]).unwrap();
+        let wrap = plan.wrap.expect("a wrap");
+        let n = hand.dof();
+        let mut kin = Kinematics::default();
+        let gap = |base: &Isometry, kin: &mut Kinematics| {
+            hand.forward_kinematics(base, &plan.q_open[..n], kin);
+            let inv = pose.inverse();
+            hand.contact_shapes
+                .iter()
+                .map(|c| {
+                    crate::hand::contact_geometry::closest_to_object(
+                        &c.primitive,
+                        &(inv * kin.link_poses[c.link]),
+                        &object.shape,
+                    )
+                    .gap
+                })
+                .fold(Real::INFINITY, Real::min)
+        };
+        let pre = gap(&plan.base, &mut kin);
+        assert!((pre - power::WRAP_STANDOFF).abs() < 1e-4, "{pre}");
+        // The grasp is the standoff nearer along the palm's normal: the nearest shape (an
+        // eminence's edge) within it.
+        let at = gap(&wrap.base, &mut kin);
+        assert!((-1e-4..pre - 1e-3).contains(&at), "{at}");
+        let above = approach_pose(&plan.base, &object.shape);
+        assert!(gap(&above, &mut kin) > 0.02);
+        // The palm's y (the thumb's side) up, its grasping side towards the cylinder.
+        assert!((plan.base.rotation * Vector::y()).z > 0.999);
+        let towards = pose.translation.vector - wrap.base.translation.vector;
+        assert!((wrap.base.rotation * -Vector::z()).dot(&towards) > 0.0);
+        // A pinch, and a power grasp of a sphere, stay fingertip grasps.
+        let sphere = RigidObject::new(Shape::Sphere { radius: 0.04 }, 0.3).unwrap();
+        for (o, style) in [(&object, GraspStyle::Pinch), (&sphere, GraspStyle::Power)] {
+            let p = plan_operator_grasp(&hand, o, &pose, style, &[]).unwrap();
+            assert!(p.wrap.is_none());
         }
     }
 

@@ -24,28 +24,15 @@ fn dfs_ticks_allocate_nothing() {
 /// glove10's power grasp of a cylinder with whole-hand contact: the palm, phalanges and
 /// fingertips on it, every tick detecting the shapes, their forces and the implicit finger step.
 fn whole_hand_ticks_of_a_power_grasp_allocate_nothing() {
-    use dfs_core::fixtures::{glove10_power_grasp, operator_torques};
+    use dfs_core::fixtures::glove10_power_grasp;
     let g = glove10_power_grasp().unwrap();
     let mut dfs = g.dfs.clone();
-    let hand = dfs.hand().clone();
-    let n = hand.dof();
-    let mut q = g.set_posture.clone();
-    let mut qd = vec![0.0; n];
-    let mut tau = vec![0.0; n];
+    let mut glove = g.glove();
     let mut body_contacts = 0;
     let region = Region::new(GLOBAL);
     for t in 0..1000 {
         let grip = 1.0 + 0.2 * (t as f64 * 0.003).sin();
-        operator_torques(&g, &hand, grip, &q, &qd, &mut tau);
-        let o = dfs
-            .step(&GloveSample {
-                q: &q,
-                tau: &tau,
-                base: g.base,
-            })
-            .unwrap();
-        q.copy_from_slice(&o.motor_q[..n]);
-        qd.copy_from_slice(&o.motor_qd[..n]);
+        g.tick(&mut dfs, &mut glove, grip).unwrap();
         body_contacts += dfs.body_contacts().iter().filter(|b| b.in_contact).count();
     }
     let allocations = region.change().allocations;

@@ -948,6 +948,7 @@ impl LiveSession {
                     tau: &tau_rec[..n],
                     base: &base,
                     output: out,
+                    body: self.dfs.body_contacts(),
                     kinematics: self.dfs.kinematics(),
                 };
                 if let Err(e) = recorder.record(&tick) {

@@ -138,6 +138,24 @@ pub fn skill_spec_from_json(value: &serde_json::Value, location: &str) -> Result
         .to_shape()
         .map_err(|e| invalid(location, format!("skill.object: {e}")))?;
     let contacts = parameters.contacts;
+    // A power grasp held by the palm or the phalanges: the replay retargets fingertip
+    // contacts only, so it says so rather than replaying part of the grasp.
+    if let Some((i, c)) = contacts
+        .iter()
+        .enumerate()
+        .find(|(_, c)| !c.part.is_fingertip())
+    {
+        return Err(invalid(
+            location,
+            format!(
+                "skill.parameters.contacts[{i}]: a {} contact (`{}`) of a whole-hand grasp; \
+                 replaying palm and phalanx contacts on a robot hand is not supported yet, \
+                 only fingertip skills replay",
+                c.part.name(),
+                c.finger
+            ),
+        ));
+    }
     // When the recording lost the object: the grip profiles span grasp start → release end.
     let find = |phase: Phase| phases.iter().find(|p| p.name == phase);
     let held_until_s = match (find(Phase::Grasp), phases.last()) {
@@ -326,6 +344,7 @@ pub fn replay_tick_data<'a>(tick: &ReplayTick<'a>) -> TickData<'a> {
         tau: tick.tau,
         base: tick.base,
         output: tick.output,
+        body: tick.body,
         kinematics: tick.kinematics,
     }
 }

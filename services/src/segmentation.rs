@@ -54,8 +54,8 @@ use crate::error::RecordingError;
 use crate::foxglove::Pose;
 use crate::mcap_io::ReadLimits;
 use crate::session::{
-    Contacts, DecodeTopics, GroundTruthPhase, KeptMessages, ObjectState, Session, SessionHead,
-    SessionSource, SessionVisitor, KEPT_MESSAGES_BUDGET, MAX_SESSION_OBJECTS,
+    ContactPart, Contacts, DecodeTopics, GroundTruthPhase, KeptMessages, ObjectState, Session,
+    SessionHead, SessionSource, SessionVisitor, KEPT_MESSAGES_BUDGET, MAX_SESSION_OBJECTS,
 };
 
 /// Version of the segmentation: what the store records beside every session's skills, so
@@ -233,9 +233,14 @@ impl ObjectParams {
 /// One contact of a skill, in the object frame B.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct ContactParams {
-    /// Fingertip of the recording hand (provenance only; the skill does not depend on it).
+    /// Fingertip of the recording hand, or its palm or phalanx contact shape (provenance
+    /// only; the skill does not depend on it).
     #[serde(default)]
     pub finger: String,
+    /// Which part of the hand held the object there: a fingertip (absent: as every skill
+    /// before whole-hand contact), the palm or a phalanx.
+    #[serde(default, skip_serializing_if = "ContactPart::is_fingertip")]
+    pub part: ContactPart,
     /// Mean contact point in B over the held part of the grasp (m).
     pub position_b: [f64; 3],
     /// Mean unit normal in B, pointing into the object.
@@ -288,10 +293,11 @@ pub struct QualityParamsOut {
 /// Grasp type label.
 #[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
 pub struct GraspType {
-    /// `precision` (≤ 3 contacts) or `power`.
+    /// `power` when the palm holds the object (whole-hand contact); otherwise, as for every
+    /// fingertip grasp, `precision` with ≤ 3 contacts and `power` with more.
     pub label: String,
-    /// Number of virtual fingers: groups of contacts with similar normals (within 60°);
-    /// 2 for a pinch. 0 without contacts.
+    /// Number of virtual fingers: the palm's contacts as one, and the other contacts in groups
+    /// of similar normals (within 60°); 2 for a pinch. 0 without contacts.
     pub opposing_virtual_fingers: usize,
 }
 
@@ -1261,6 +1267,8 @@ fn contacts_on(c: &Contacts, index: u32) -> std::borrow::Cow<'_, Contacts> {
     {
         *f = crate::session::FingerContact {
             name: std::mem::take(&mut f.name),
+            part: f.part,
+            link: std::mem::take(&mut f.link),
             ..Default::default()
         };
     }
@@ -1519,9 +1527,35 @@ fn arr(v: &Vector) -> [f64; 3] {
 
 const HELD: [Phase; 4] = [Phase::Lift, Phase::Hold, Phase::Transport, Phase::Place];
 
+/// The grasp type of a skill's `contacts` ([`GraspType`]): virtual fingers are the palm's
+/// contacts as one and greedy groups of the others' normals within 60° of the group's first; a
+/// grasp the palm takes part in is a power grasp (Cutkosky's taxonomy: the object pressed into
+/// the palm by the fingers), any other `precision` with ≤ 3 contacts and `power` with more.
+pub fn grasp_type(contacts: &[ContactParams]) -> GraspType {
+    let palm = contacts.iter().any(|c| c.part == ContactPart::Palm);
+    let mut groups: Vec<Vector> = Vec::new();
+    for c in contacts.iter().filter(|c| c.part != ContactPart::Palm) {
+        let nv = Vector::from(c.normal_b);
+        if !groups.iter().any(|g| g.dot(&nv) > 0.5) {
+            groups.push(nv);
+        }
+    }
+    GraspType {
+        label: if palm || contacts.len() > 3 {
+            "power"
+        } else {
+            "precision"
+        }
+        .into(),
+        opposing_virtual_fingers: groups.len() + usize::from(palm),
+    }
+}
+
 /// A finger's accumulators over a skill.
 struct FingerAcc {
     name: String,
+    /// The part of the hand (a fingertip, or a palm or phalanx contact shape).
+    part: ContactPart,
     steady_n: usize,
     pos: Vector,
     nrm: Vector,
@@ -1714,6 +1748,7 @@ impl SkillAcc {
                 None => {
                     self.fingers.push(FingerAcc {
                         name: f.name.clone(),
+                        part: f.part,
                         steady_n: 0,
                         pos: Vector::zeros(),
                         nrm: Vector::zeros(),
@@ -1842,6 +1877,7 @@ impl SkillAcc {
                 let grip_profile = a.profile.clone();
                 ContactParams {
                     finger: a.name.clone(),
+                    part: a.part,
                     position_b: arr(&pos),
                     normal_b: arr(&nrm),
                     mean_intensity: {
@@ -1887,23 +1923,7 @@ impl SkillAcc {
             }
             _ => None,
         };
-        // Virtual fingers: greedy groups of normals within 60° of the group's first.
-        let mut groups: Vec<Vector> = Vec::new();
-        for c in &contacts {
-            let nv = Vector::from(c.normal_b);
-            if !groups.iter().any(|g| g.dot(&nv) > 0.5) {
-                groups.push(nv);
-            }
-        }
-        let grasp_type = GraspType {
-            label: if contacts.len() <= 3 {
-                "precision"
-            } else {
-                "power"
-            }
-            .into(),
-            opposing_virtual_fingers: groups.len(),
-        };
+        let grasp_type = grasp_type(&contacts);
         // Object motion relative to B at grasp start: the first object sample at or after each
         // key time (the last sample for a key time after it).
         let last_object = self.last_object;

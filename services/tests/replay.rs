@@ -306,13 +306,73 @@ fn a_sphere_heavier_than_the_torque_limits_allow_fails_with_torque_limit() {
 fn the_peak_torque_ratio_is_of_the_torque_applied() {
     // Allegro carrying the 0.5 kg cylinder asks more than its 0.7 N·m at a joint: the report
     // said 1.21 "of the limit", a torque no joint applied. The demand is clamped at the limit.
-    let skill = recorded_skill("cylinder-power-grasp");
+    // The operator's cylinder skill is now a whole-hand power grasp, which replays refuse:
+    // its motion with the fingertip grasp the operator used before the wrap (thumb, index and
+    // middle, `operator::plan_grasp`).
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("session.mcap");
+    let s = Scenario::builtin("cylinder-power-grasp", 0).unwrap();
+    record_simulation(&s, None, &path, |_, _| {}).unwrap();
+    let seg = segment(&read_session(&path).unwrap(), &SegmentParams::default());
+    let mut json = serde_json::to_value(&seg.skills[0]).unwrap();
+    let (object, _) = s.resolve().unwrap();
+    let glove = dfs_core::hand::HandModel::glove10();
+    let pose = dfs_core::math::Isometry::translation(0.0, 0.0, 0.09);
+    let plan = dfs_core::operator::plan_grasp(
+        &glove,
+        &object,
+        &pose,
+        dfs_core::scenario::GraspStyle::Power,
+    )
+    .unwrap();
+    let contacts: Vec<serde_json::Value> = (0..glove.fingertips.len())
+        .filter(|&k| plan.tips[k])
+        .map(|k| {
+            let r = glove.fingertips[k].radius;
+            let p = plan.contacts_b[k] - plan.normals_b[k] * r;
+            let n = -plan.normals_b[k];
+            serde_json::json!({
+                "finger": glove.fingertips[k].name,
+                "position_b": [p.x, p.y, p.z],
+                "normal_b": [n.x, n.y, n.z],
+            })
+        })
+        .collect();
+    // (A skill's JSON holds its parameters at the top level.)
+    let at = if json.get("contacts").is_some() {
+        &mut json
+    } else {
+        &mut json["parameters"]
+    };
+    at["contact_count"] = contacts.len().into();
+    at["contacts"] = contacts.into();
+    let skill = skill_spec_from_json(&json, "fingertips.json").unwrap();
     let r = replay(&load_builtin_hand("allegro").unwrap(), &skill);
     assert!(r.ticks > 0, "{}", r.detail);
     assert!(
         r.peak_torque_ratio > 0.5 && r.peak_torque_ratio <= 1.0,
         "{}",
         r.peak_torque_ratio
+    );
+}
+
+/// The operator's power grasp is held by the palm and the phalanges too; a replay retargets
+/// fingertip contacts only, so it refuses the skill naming the first palm or phalanx contact
+/// rather than replaying part of the grasp.
+#[test]
+fn a_whole_hand_skill_is_refused_for_replay_naming_its_palm_or_phalanx_contact() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("session.mcap");
+    let s = Scenario::builtin("cylinder-power-grasp", 0).unwrap();
+    record_simulation(&s, None, &path, |_, _| {}).unwrap();
+    let seg = segment(&read_session(&path).unwrap(), &SegmentParams::default());
+    let json = serde_json::to_value(&seg.skills[0]).unwrap();
+    let e = skill_spec_from_json(&json, "power.json")
+        .unwrap_err()
+        .to_string();
+    assert!(
+        e.contains("skill.parameters.contacts[") && e.contains("not supported yet"),
+        "{e}"
     );
 }
 

@@ -184,13 +184,21 @@ fn skill_parameters_are_finite_in_the_object_frame_with_a_16_dim_feature() {
     assert!(json["skills"][0]["feature"].as_array().unwrap().len() == 16);
 }
 
+/// The operator's power grasp wraps the hand around the cylinder: its skill is a power grasp
+/// whose contacts (in B, hand-independent) include the palm's (an eminence) and phalanges'.
 #[test]
-fn the_cylinder_power_grasp_skill_holds_the_cylinder_on_three_contacts_in_force_closure() {
+fn the_cylinder_power_grasp_skill_is_a_power_grasp_with_palm_contact_in_force_closure() {
+    use services::session::ContactPart;
     let s = session("cylinder-power-grasp", 0, None);
     let seg = segment(&s, &SegmentParams::default());
     assert_eq!(seg.skills.len(), 1, "{}", describe(&seg, &s));
     let p = &seg.skills[0].parameters;
     assert!(p.contact_count >= 3, "{:?}", p.contacts);
+    let parts: Vec<ContactPart> = p.contacts.iter().map(|c| c.part).collect();
+    assert!(parts.contains(&ContactPart::Palm), "{parts:?}");
+    assert!(parts.contains(&ContactPart::Phalanx), "{parts:?}");
+    assert_eq!(p.grasp_type.label, "power", "{:?}", p.grasp_type);
+    assert!(p.grasp_type.opposing_virtual_fingers >= 2);
     let q = p.quality.as_ref().expect("a grasp quality");
     assert!(q.force_closure && q.epsilon > 0.0, "{q:?}");
     // The object goes up with the hand and is carried sideways (B at the grasp's start).
@@ -346,5 +354,28 @@ fn a_session_logged_in_epoch_time_gives_the_same_skills() {
         assert_eq!(a.skills.len(), b.skills.len(), "{name}");
         // Times are since the session's start: the same numbers.
         assert_eq!(a, b, "{name}");
+    }
+}
+
+/// Ingest labels the operator's power grasp as a power skill (`power-Nvf`, the palm one
+/// virtual finger) and a fingertip pinch as before (`precision-2vf`).
+#[test]
+fn ingest_stores_the_operators_power_grasp_as_a_power_skill_and_a_pinch_as_precision() {
+    let dir = tempfile::tempdir().unwrap();
+    for (name, label) in [
+        ("cylinder-power-grasp", "power-"),
+        ("sphere-lift", "precision-2vf"),
+    ] {
+        let path = dir.path().join(format!("{name}.mcap"));
+        let scenario = Scenario::builtin(name, 1).unwrap();
+        record_simulation(&scenario, None, &path, |_, _| {}).unwrap();
+        let bytes = std::fs::read(&path).unwrap();
+        let (_, skills) = services::ingest::analyse(&bytes, name).unwrap();
+        assert_eq!(skills.len(), 1, "{name}");
+        assert!(
+            skills[0].grasp_type.starts_with(label),
+            "{name}: {}",
+            skills[0].grasp_type
+        );
     }
 }

@@ -658,6 +658,7 @@ fn a_tick_with_a_nan_is_refused_and_the_rest_of_the_session_still_reads() {
             tau: &tau,
             base,
             output: sim.output(),
+            body: sim.dfs().body_contacts(),
             kinematics: sim.dfs().kinematics(),
         };
         match rec.record(&tick) {

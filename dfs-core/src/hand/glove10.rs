@@ -94,6 +94,14 @@ const THUMB_TIP_RADIUS: f64 = 0.010;
 
 /// Palm box: length along x, breadth along y, thickness along z (m).
 const PALM_BOX: [f64; 3] = [0.075, 0.085, 0.030];
+/// The thenar and hypothenar eminences (contact geometry only): boxes on the palm's radial and
+/// ulnar sides from the wrist, `[length, breadth, thickness]` (m), standing proud of the palm's
+/// grasping face by `EMINENCE_RISE`: flush with the palmar side of the thumb's metacarpal
+/// capsule at its base (the CMC joint 12 mm palmar, the capsule 11 mm in radius), which the
+/// thenar eminence covers in a hand. The hollow of the palm lies between them.
+const EMINENCE_BOX: [f64; 3] = [0.03, 0.029, 0.022];
+/// How far the eminences stand proud of the palm box's grasping face (m).
+const EMINENCE_RISE: f64 = 0.0085;
 
 /// Flexion limits (rad) of the MCP, PIP and DIP joints of the long fingers
 /// (hyperextension 20°, flexion 90°, 100°, 80°).
@@ -288,7 +296,9 @@ impl HandModel {
 /// +x, as its inertial) and a capsule along each phalanx with the phalanx's radius (the thumb's
 /// metacarpal included). A distal phalanx's capsule stops one fingertip diameter short of the
 /// finger's end, where the fingertip sphere is the contact: the two overlap by the capsule's end
-/// ball only. 16 shapes (at most [`super::MAX_CONTACT_SHAPES`]).
+/// ball only. And the thenar and hypothenar eminences ([`EMINENCE_BOX`]), palm shapes beside the
+/// palm box's face: in a power grasp the object presses into them, the palm's hollow between.
+/// 18 shapes (at most [`super::MAX_CONTACT_SHAPES`]).
 fn add_contact_geometry(hand: &mut HandModel) {
     use super::contact_geometry::{body_part_of, ContactPrimitive, ContactShape};
     let link = |hand: &HandModel, name: &str| hand.links.iter().position(|l| l.name == name);
@@ -304,6 +314,22 @@ fn add_contact_geometry(hand: &mut HandModel) {
                 half_extents: Vector::new(0.5 * a, 0.5 * b, 0.5 * c),
             },
         });
+        let [ea, eb, ec] = EMINENCE_BOX;
+        for (name, side) in [("thenar", 1.0), ("hypothenar", -1.0)] {
+            shapes.push(ContactShape {
+                name: name.to_owned(),
+                link: palm,
+                part: body_part_of(hand, palm),
+                primitive: ContactPrimitive::Box {
+                    pose: Isometry::translation(
+                        0.5 * ea,
+                        side * 0.5 * (b - eb),
+                        -0.5 * c - EMINENCE_RISE + 0.5 * ec,
+                    ),
+                    half_extents: Vector::new(0.5 * ea, 0.5 * eb, 0.5 * ec),
+                },
+            });
+        }
     }
     let thumb = (
         "thumb",
@@ -619,16 +645,41 @@ mod tests {
     fn glove10_has_a_palm_box_and_a_capsule_per_phalanx_within_the_limits() {
         use crate::hand::{BodyPart, ContactPrimitive, MAX_CONTACT_SHAPES};
         let hand = HandModel::glove10();
-        assert_eq!(hand.contact_shapes.len(), 16);
+        assert_eq!(hand.contact_shapes.len(), 18);
         assert!(hand.contact_shapes.len() <= MAX_CONTACT_SHAPES);
         let palms: Vec<_> = hand
             .contact_shapes
             .iter()
             .filter(|s| s.part == BodyPart::Palm)
             .collect();
-        assert_eq!(palms.len(), 1);
-        assert_eq!(hand.links[palms[0].link].name, "palm");
-        assert!(matches!(palms[0].primitive, ContactPrimitive::Box { .. }));
+        // The palm box and the two eminences, boxes on the palm link.
+        assert_eq!(palms.len(), 3);
+        let names: Vec<&str> = palms.iter().map(|s| s.name.as_str()).collect();
+        assert_eq!(names, ["palm", "thenar", "hypothenar"]);
+        for p in &palms {
+            assert_eq!(hand.links[p.link].name, "palm");
+            assert!(matches!(p.primitive, ContactPrimitive::Box { .. }));
+        }
+        // The eminences stand as proud of the palm's face as the thumb's metacarpal at its
+        // base: its lowest point at the CMC joint.
+        let lowest = |p: &ContactPrimitive| match *p {
+            ContactPrimitive::Box { pose, half_extents } => {
+                pose.translation.vector.z - half_extents.z
+            }
+            _ => f64::NAN,
+        };
+        let metacarpal = hand
+            .contact_shapes
+            .iter()
+            .find(|s| s.name == "thumb_metacarpal")
+            .unwrap();
+        let ContactPrimitive::Capsule { radius, .. } = metacarpal.primitive else {
+            panic!("a capsule");
+        };
+        let cmc_z = THUMB_CMC_IN_PALM[2];
+        for p in &palms[1..] {
+            assert!((lowest(&p.primitive) - (cmc_z - radius)).abs() < 1e-3);
+        }
         // Every phalanx belongs to the finger of its fingertip (thumb 0 ... little 4), three
         // each.
         for k in 0..5 {

@@ -28,6 +28,9 @@ pub struct ReplayTick<'a> {
     pub base: &'a Isometry,
     /// The DFS output of the tick.
     pub output: &'a TickOutput,
+    /// The tick's whole-hand contacts ([`Dfs::body_contacts`]; empty without whole-hand
+    /// contact).
+    pub body: &'a [crate::dfs::BodyContact],
     /// The DFS kinematics of the tick.
     pub kinematics: &'a Kinematics,
     /// The object's reference pose at this tick.
@@ -559,6 +562,7 @@ impl Replay {
             tau: &self.tau[..n],
             base: &self.base,
             output: self.dfs.output(),
+            body: self.dfs.body_contacts(),
             kinematics: self.dfs.kinematics(),
             reference: &self.reference,
         }

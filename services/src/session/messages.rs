@@ -114,13 +114,52 @@ impl Intensity4 {
     }
 }
 
-/// One fingertip of [`Contacts`]. A fingertip away from the object (most of them, most of
-/// the time) has zero point, normal, penetration and intensities; those zero fields are left
+/// Which part of the hand a contact of [`Contacts`] is.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Hash, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum ContactPart {
+    /// A fingertip: what every contact of a session without whole-hand contact is, and what a
+    /// file written before the field existed reads as.
+    #[default]
+    Fingertip,
+    /// The palm (whole-hand contact).
+    Palm,
+    /// A phalanx or metacarpal (whole-hand contact).
+    Phalanx,
+}
+
+impl ContactPart {
+    /// Whether this is a fingertip.
+    pub fn is_fingertip(&self) -> bool {
+        *self == ContactPart::Fingertip
+    }
+
+    /// The part of a hand's contact shape.
+    pub fn of_body(part: dfs_core::hand::BodyPart) -> ContactPart {
+        match part {
+            dfs_core::hand::BodyPart::Palm => ContactPart::Palm,
+            dfs_core::hand::BodyPart::Phalanx { .. } => ContactPart::Phalanx,
+        }
+    }
+
+    /// `"fingertip"`, `"palm"` or `"phalanx"`.
+    pub fn name(self) -> &'static str {
+        match self {
+            ContactPart::Fingertip => "fingertip",
+            ContactPart::Palm => "palm",
+            ContactPart::Phalanx => "phalanx",
+        }
+    }
+}
+
+/// One contact of [`Contacts`]: a fingertip or, with whole-hand contact, a palm or phalanx
+/// contact shape ([`part`](Self::part)). A fingertip away from the object (most of them, most
+/// of the time) has zero point, normal, penetration and intensities; those zero fields are left
 /// out of the message (a third of the session's size otherwise) and read back as zero.
 #[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct FingerContact {
-    /// Fingertip name.
+    /// Fingertip name, or the contact shape's (`palm`, `index_proximal`).
     pub name: String,
     /// Within the contact margin of the object's surface.
     pub touching: bool,
@@ -153,21 +192,47 @@ pub struct FingerContact {
     /// `normal_b` are in that object's frame.
     #[serde(default, skip_serializing_if = "is_zero_u32")]
     pub object: u32,
+    /// Which part of the hand this is (absent: a fingertip, as in every file written before
+    /// whole-hand contact). A palm or phalanx has no operator intensities of its own: its
+    /// `intensity` and `feedback` are zero, `transmitted` is its spring's force.
+    #[serde(default, skip_serializing_if = "ContactPart::is_fingertip")]
+    pub part: ContactPart,
+    /// A palm or phalanx: the name of the hand's link it is fixed to; empty for a fingertip.
+    #[serde(default, skip_serializing_if = "String::is_empty")]
+    pub link: String,
 }
 
 fn is_zero_u32(x: &u32) -> bool {
     *x == 0
 }
 
-/// `icms.Contacts`: per-fingertip contact state at one tick.
+/// `icms.Contacts`: per-fingertip contact state at one tick, and the palm and phalanges that
+/// touch an object (whole-hand contact).
 #[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct Contacts {
     /// Number of transmitting contacts.
     pub n_contacts: u32,
-    /// Per fingertip, in the hand's fingertip order.
+    /// Per fingertip, in the hand's fingertip order; then each palm or phalanx contact shape
+    /// that touches an object, in the hand's contact shape order (at most
+    /// [`MAX_SESSION_BODY_CONTACTS`]).
     pub fingers: Vec<FingerContact>,
 }
+
+impl Contacts {
+    /// How many of [`fingers`](Self::fingers) are fingertips: those before the first palm or
+    /// phalanx.
+    pub fn n_tips(&self) -> usize {
+        self.fingers
+            .iter()
+            .position(|f| !f.part.is_fingertip())
+            .unwrap_or(self.fingers.len())
+    }
+}
+
+/// Most palm and phalanx contacts a `/dfs/contacts` message may list: a hand's contact shapes
+/// ([`dfs_core::hand::MAX_CONTACT_SHAPES`]).
+pub const MAX_SESSION_BODY_CONTACTS: usize = dfs_core::hand::MAX_CONTACT_SHAPES;
 
 /// `icms.ObjectState`: the object after one tick.
 #[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
@@ -519,7 +584,35 @@ impl TickContent for GloveFeedback {
 
 impl TickContent for Contacts {
     fn check(&self, reference: &TickReference) -> Result<(), String> {
-        check_fingers(self.fingers.iter().map(|f| f.name.as_str()), reference)?;
+        let tips = self.n_tips();
+        check_fingers(
+            self.fingers[..tips].iter().map(|f| f.name.as_str()),
+            reference,
+        )?;
+        let body = &self.fingers[tips..];
+        if body.len() > MAX_SESSION_BODY_CONTACTS {
+            return Err(format!(
+                "fingers has {} palm or phalanx contacts; a hand has at most \
+                 {MAX_SESSION_BODY_CONTACTS} contact shapes",
+                body.len()
+            ));
+        }
+        for (i, f) in body.iter().enumerate() {
+            if f.part.is_fingertip() {
+                return Err(format!(
+                    "fingers[{}] is a fingertip after a palm or phalanx contact; the \
+                     fingertips come first",
+                    tips + i
+                ));
+            }
+            if f.name.is_empty() || f.link.is_empty() {
+                return Err(format!(
+                    "fingers[{}] is a {} contact without a name or link",
+                    tips + i,
+                    f.part.name()
+                ));
+            }
+        }
         for (i, f) in self.fingers.iter().enumerate() {
             if f.touching {
                 check_normal(&f.normal_b, i)?;

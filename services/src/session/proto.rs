@@ -159,6 +159,8 @@ struct Keys {
     fc_in_cone: u64,
     fc_slip: u64,
     fc_object: u64,
+    fc_part: u64,
+    fc_link: u64,
     /// Of `ObjectState`: pose, linear and angular velocity, the three wrenches, pose in hand.
     object: [u64; 7],
     /// Of `ObjectState`: `index` and `objects`.
@@ -244,6 +246,8 @@ impl Keys {
             fc_in_cone: key_of(|m: &mut FingerContactProto| m.in_cone = true),
             fc_slip: key_of(|m: &mut FingerContactProto| m.slip = true),
             fc_object: key_of(|m: &mut FingerContactProto| m.object = 1),
+            fc_part: key_of(|m: &mut FingerContactProto| m.part = 1),
+            fc_link: key_of(|m: &mut FingerContactProto| m.link = name()),
             object: [
                 key_of(|m: &mut ObjectStateProto| m.pose = Some(Posei::default())),
                 key_of(|m: &mut ObjectStateProto| m.linear_velocity_e6 = v3()),
@@ -613,7 +617,12 @@ impl Quantiser {
         let mut w = Wire::new(self);
         let k = w.keys;
         w.uint32(k.c_n_contacts, m.n_contacts);
-        for f in &m.fingers {
+        // A palm or phalanx contact shape is written only while it touches (fingertips always).
+        for f in m
+            .fingers
+            .iter()
+            .filter(|f| f.part.is_fingertip() || f.touching)
+        {
             let at = w.begin(k.c_fingers);
             if !f.name.is_empty() {
                 w.string(k.fc_name, &f.name);
@@ -631,6 +640,10 @@ impl Quantiser {
             w.bool(k.fc_in_cone, f.in_cone);
             w.bool(k.fc_slip, f.slip);
             w.uint32(k.fc_object, f.object);
+            w.uint32(k.fc_part, part_number(f.part));
+            if !f.link.is_empty() {
+                w.string(k.fc_link, &f.link);
+            }
             w.end(at);
         }
         w.finish(out);
@@ -700,12 +713,34 @@ fn decode_own<M: prost::Message + Default>(bytes: &[u8]) -> M {
 /// Fields added to format 2 since its first files (message, field number): a file's schema
 /// may lack them (a file written before them), and its messages then read them as protobuf's
 /// default (0, empty). For scenes of several objects: `FingerContact.object`,
-/// `ObjectState.index` and `ObjectState.objects`.
-pub const ADDED_FIELDS: [(&str, i32); 3] = [
+/// `ObjectState.index` and `ObjectState.objects`; for whole-hand contact `FingerContact.part`
+/// and `FingerContact.link` (a file without them holds fingertips alone).
+pub const ADDED_FIELDS: [(&str, i32); 5] = [
     (".icms.FingerContact", 12),
     (".icms.ObjectState", 8),
     (".icms.ObjectState", 9),
+    (".icms.FingerContact", 13),
+    (".icms.FingerContact", 14),
 ];
+
+/// The protobuf number of a contact's part (`icms.ContactPart`).
+pub(crate) fn part_number(p: ContactPart) -> u32 {
+    match p {
+        ContactPart::Fingertip => 0,
+        ContactPart::Palm => 1,
+        ContactPart::Phalanx => 2,
+    }
+}
+
+/// A contact's part from its protobuf number; a number this version does not know (a later
+/// part) reads as a phalanx: some part of the hand other than a fingertip.
+pub(crate) fn part_of_number(n: u32) -> ContactPart {
+    match n {
+        0 => ContactPart::Fingertip,
+        1 => ContactPart::Palm,
+        _ => ContactPart::Phalanx,
+    }
+}
 
 /// Where the protobuf schema `theirs` (a serialised `FileDescriptorSet`, as a file's schema
 /// record holds it) defines message `name` (e.g. `icms.Contacts`) differently from ours:
@@ -923,6 +958,8 @@ pub fn contacts_from_proto(m: ContactsProto) -> Contacts {
                 in_cone: f.in_cone,
                 slip: f.slip,
                 object: f.object,
+                part: part_of_number(f.part as u32),
+                link: f.link,
                 name: f.name,
             })
             .collect(),
@@ -1013,6 +1050,73 @@ mod tests {
         let d = schema_difference(&bytes, "icms.ObjectState").unwrap();
         assert!(d.contains("does not define message icms.Posei"), "{d}");
         assert!(schema_difference(b"\xff\xff", "icms.Contacts").is_some());
+    }
+
+    /// Whole-hand contacts on `/dfs/contacts`: a palm or phalanx entry is written only while it
+    /// touches, with its part and link, after the fingertips; a fingertip carries neither
+    /// field, so a message from before them (a file without the fields) reads as fingertips.
+    #[test]
+    fn palm_and_phalanx_contacts_are_written_while_touching_with_their_part_and_link() {
+        let mut q = Quantiser::default();
+        let tip = FingerContact {
+            name: "index".into(),
+            ..FingerContact::default()
+        };
+        let body = |name: &str, part, touching| FingerContact {
+            name: name.into(),
+            part,
+            link: format!("{name}_link"),
+            touching,
+            in_contact: touching,
+            normal_b: if touching {
+                Vector3::new(0.0, 0.0, -1.0)
+            } else {
+                Vector3::default()
+            },
+            transmitted: Intensity4 {
+                z: if touching { 2.5 } else { 0.0 },
+                ..Intensity4::default()
+            },
+            ..FingerContact::default()
+        };
+        let m = Contacts {
+            n_contacts: 2,
+            fingers: vec![
+                tip.clone(),
+                body("thenar", ContactPart::Palm, true),
+                body("index_proximal", ContactPart::Phalanx, false),
+                body("little_middle", ContactPart::Phalanx, true),
+            ],
+        };
+        let mut out = Vec::new();
+        q.encode_contacts(&m, &mut out);
+        let back = contacts_from_proto(canonical(&out));
+        let names: Vec<&str> = back.fingers.iter().map(|f| f.name.as_str()).collect();
+        assert_eq!(names, ["index", "thenar", "little_middle"]);
+        assert_eq!(back.n_tips(), 1);
+        assert_eq!(back.fingers[0], tip);
+        assert_eq!(back.fingers[1].part, ContactPart::Palm);
+        assert_eq!(back.fingers[1].link, "thenar_link");
+        assert_eq!(back.fingers[1].transmitted.z, 2.5);
+        assert_eq!(back.fingers[2].part, ContactPart::Phalanx);
+        // Our decoder reads the same.
+        let mut ours = Contacts::default();
+        super::super::wire::contacts(&out, &mut ours).unwrap();
+        assert_eq!(ours, back);
+        // Fingertips write neither field: the bytes are those of a file from before them.
+        let mut old = Vec::new();
+        q.encode_contacts(
+            &Contacts {
+                n_contacts: 0,
+                fingers: vec![tip.clone()],
+            },
+            &mut old,
+        );
+        let proto: ContactsProto = canonical(&old);
+        assert_eq!(
+            (proto.fingers[0].part, proto.fingers[0].link.as_str()),
+            (0, "")
+        );
     }
 
     /// A v2 file written before scenes of several objects: its schema has no
@@ -1134,6 +1238,8 @@ mod tests {
             in_cone: false,
             slip: true,
             object: 3,
+            part: ContactPart::Fingertip,
+            link: String::new(),
         };
         for n_contacts in [0, 1] {
             let contacts = Contacts {

@@ -7,7 +7,7 @@ use std::sync::mpsc::{sync_channel, Receiver, SyncSender};
 use std::sync::Arc;
 use std::thread::JoinHandle;
 
-use dfs_core::dfs::TickOutput;
+use dfs_core::dfs::{BodyContact, TickOutput};
 use dfs_core::hand::{HandModel, Kinematics};
 use dfs_core::math::{Isometry, Point, Rotation, Vector};
 use dfs_core::object::{RigidObject, Shape};
@@ -94,6 +94,9 @@ struct TickInput {
     q_len: usize,
     tau_len: usize,
     base: Isometry,
+    /// How many whole-hand contacts the tick gave ([`TickData::body`]; at most the hand's
+    /// contact shapes).
+    body_len: usize,
 }
 
 /// The inputs of several ticks, copied on the simulation thread: nothing is computed from them
@@ -106,6 +109,8 @@ struct Inputs {
     outputs: Vec<TickOutput>,
     /// Per tick, `dof` slots of q then `dof` of τ.
     joints: Vec<f64>,
+    /// The whole-hand contacts of each tick ([`TickInput::body_len`] each), in tick order.
+    bodies: Vec<BodyContact>,
     /// The link poses of the Foxglove ticks (`links` per such tick), in tick order.
     link_poses: Vec<Isometry>,
     /// Metadata records to write after the ticks.
@@ -120,6 +125,7 @@ impl Inputs {
             ticks: Vec::with_capacity(BATCH_TICKS),
             outputs: Vec::with_capacity(BATCH_TICKS),
             joints: Vec::with_capacity(BATCH_TICKS * 2 * hand.dof),
+            bodies: Vec::with_capacity(BATCH_TICKS * hand.n_shapes),
             link_poses: Vec::with_capacity(
                 BATCH_TICKS.div_ceil(FOXGLOVE_DECIMATION as usize) * hand.links,
             ),
@@ -136,6 +142,7 @@ impl Inputs {
         self.ticks.clear();
         self.outputs.clear();
         self.joints.clear();
+        self.bodies.clear();
         self.link_poses.clear();
         self.metadata.clear();
         self.extras.clear();
@@ -151,6 +158,8 @@ struct Tick<'a> {
     tau: &'a [f64],
     base: &'a Isometry,
     output: &'a TickOutput,
+    /// The whole-hand contacts (empty without).
+    body: &'a [BodyContact],
     /// Pose of every link (only read on Foxglove ticks; may be empty on others).
     link_poses: &'a [Isometry],
 }
@@ -228,6 +237,10 @@ pub struct TickData<'a> {
     pub base: &'a Isometry,
     /// The DFS output of the tick.
     pub output: &'a TickOutput,
+    /// The tick's whole-hand contacts, one per contact shape of the hand
+    /// ([`Dfs::body_contacts`](dfs_core::dfs::Dfs::body_contacts)): empty without whole-hand
+    /// contact. Those touching an object are recorded on `/dfs/contacts` after the fingertips.
+    pub body: &'a [BodyContact],
     /// The DFS kinematics of the tick (link poses for `/tf`).
     pub kinematics: &'a Kinematics,
 }
@@ -248,6 +261,8 @@ pub struct RecordSummary {
 struct HandFrames {
     dof: usize,
     n_tips: usize,
+    /// Number of contact shapes (whole-hand contacts recorded per tick, at most).
+    n_shapes: usize,
     /// Number of links (link poses copied per Foxglove tick).
     links: usize,
     root: usize,
@@ -725,6 +740,7 @@ impl SessionRecorder {
         let frames = HandFrames {
             dof: hand.dof(),
             n_tips: hand.fingertips.len(),
+            n_shapes: hand.contact_shapes.len(),
             links: hand.links.len(),
             root: hand.root,
             joints: hand.joints.iter().map(|j| (j.parent, j.child)).collect(),
@@ -820,6 +836,7 @@ impl SessionRecorder {
             tau,
             base: tick.base,
             output: tick.output,
+            body: &tick.body[..tick.body.len().min(self.hand.n_shapes)],
             link_poses: &tick.kinematics.link_poses[..self.hand.links],
         };
         if !inputs_finite(&self.hand, tick) {
@@ -840,7 +857,9 @@ impl SessionRecorder {
             q_len: q.len(),
             tau_len: tau.len(),
             base: *tick.base,
+            body_len: view.body.len(),
         });
+        inputs.bodies.extend_from_slice(view.body);
         inputs
             .outputs
             .extend_from_slice(std::slice::from_ref(tick.output));
@@ -988,7 +1007,7 @@ impl Serialiser {
                 items: Vec::with_capacity(BATCH_TICKS * (RAW_TOPICS.len() + 1)),
                 metadata: Vec::new(),
             });
-            let mut poses = 0;
+            let (mut poses, mut bodies) = (0, 0);
             for (k, (input, output)) in inputs.ticks.iter().zip(&inputs.outputs).enumerate() {
                 let joints = &inputs.joints[2 * n * k..2 * n * (k + 1)];
                 let mut tick = Tick {
@@ -998,8 +1017,10 @@ impl Serialiser {
                     tau: &joints[n..n + input.tau_len],
                     base: &input.base,
                     output,
+                    body: &inputs.bodies[bodies..bodies + input.body_len],
                     link_poses: &[],
                 };
+                bodies += input.body_len;
                 if tick.is_foxglove() {
                     tick.link_poses = &inputs.link_poses[poses..poses + links];
                     poses += links;
@@ -1134,6 +1155,7 @@ impl Messages {
                 })
                 .collect(),
         };
+        // The fingertips, then one entry per contact shape (encoded only while it touches).
         let contacts = Contacts {
             n_contacts: 0,
             fingers: tip_names
@@ -1142,6 +1164,18 @@ impl Messages {
                     name: name.clone(),
                     ..FingerContact::default()
                 })
+                .chain(hand.contact_shapes.iter().map(|s| {
+                    FingerContact {
+                        name: s.name.clone(),
+                        part: ContactPart::of_body(s.part),
+                        link: hand
+                            .links
+                            .get(s.link)
+                            .map(|l| l.name.clone())
+                            .unwrap_or_default(),
+                        ..FingerContact::default()
+                    }
+                }))
                 .collect(),
         };
         let root_name = hand.links[hand.root].name.clone();
@@ -1316,6 +1350,32 @@ impl Messages {
             c.slip = tip.slip;
             c.in_cone = !tip.slip;
             c.object = if tip.touching { tip.object as u32 } else { 0 };
+        }
+        // Whole-hand contacts: a palm or phalanx pushes with its spring, so its intensity is
+        // what it transmits; it has no feedback of its own (the hand feels it through Jᵀ).
+        let none = BodyContact::default();
+        for s in 0..hand.n_shapes {
+            let b = tick.body.get(s).unwrap_or(&none);
+            let c = &mut self.contacts.fingers[hand.n_tips + s];
+            c.touching = b.touching;
+            c.in_contact = b.in_contact;
+            match (&b.frame, b.touching) {
+                (Some(frame), true) => {
+                    c.point_b = v3(&frame.p_b);
+                    c.normal_b = v3(&frame.normal_b());
+                    c.penetration = b.penetration;
+                }
+                _ => {
+                    c.point_b = Vector3::default();
+                    c.normal_b = Vector3::default();
+                    c.penetration = 0.0;
+                }
+            }
+            c.intensity = intensity(&b.transmitted);
+            c.transmitted = intensity(&b.transmitted);
+            c.slip = b.slip;
+            c.in_cone = !b.slip;
+            c.object = if b.touching { b.object as u32 } else { 0 };
         }
         let o = &mut self.object;
         let main = &out.objects[self.primary];
@@ -1680,6 +1740,7 @@ pub fn record_ticks_until(
             tau,
             base,
             output: sim.output(),
+            body: sim.dfs().body_contacts(),
             kinematics: sim.dfs().kinematics(),
         };
         if let Err(e) = recorder.record(&tick) {
@@ -1759,6 +1820,7 @@ mod tests {
                 tau: &tau,
                 base,
                 output: sim.output(),
+                body: sim.dfs().body_contacts(),
                 kinematics: sim.dfs().kinematics(),
             };
             results.push(rec.record(&tick));
@@ -1864,6 +1926,7 @@ mod tests {
         let frames = HandFrames {
             dof: hand.dof(),
             n_tips: hand.fingertips.len(),
+            n_shapes: hand.contact_shapes.len(),
             links: hand.links.len(),
             root: hand.root,
             joints: hand.joints.iter().map(|j| (j.parent, j.child)).collect(),
@@ -1880,6 +1943,7 @@ mod tests {
                 tau,
                 base,
                 output: sim.output(),
+                body: sim.dfs().body_contacts(),
                 link_poses: &[],
             };
             batch.data.clear();

@@ -552,9 +552,9 @@ pub(crate) fn contacts(buf: &[u8], out: &mut Contacts) -> Result<()> {
 }
 
 /// [`contacts`] of bytes that decoded before, only the fields segmentation reads: each
-/// fingertip's name, `touching`, `in_contact`, `slip`, point, normal and intensity; the others
-/// (`n_contacts`, `penetration`, the transmitted and feedback intensities, `in_cone`) are
-/// skipped as unknown fields are, and stay zero.
+/// contact's name, part, link, `touching`, `in_contact`, `slip`, point, normal and intensity;
+/// the others (`n_contacts`, `penetration`, the transmitted and feedback intensities,
+/// `in_cone`) are skipped as unknown fields are, and stay zero.
 pub(crate) fn contacts_lean(buf: &[u8], out: &mut Contacts) -> Result<()> {
     contacts_with(buf, out, true)
 }
@@ -576,9 +576,11 @@ fn contacts_with(buf: &[u8], out: &mut Contacts, lean: bool) -> Result<()> {
                 let f = &mut out.fingers[fingers];
                 fingers += 1;
                 let name = std::mem::take(&mut f.name);
+                let link = std::mem::take(&mut f.link);
                 *f = FingerContact::default();
                 f.name = name;
-                let mut named = false;
+                f.link = link;
+                let (mut named, mut linked) = (false, false);
                 message(r, wire, |r, tag, wire| {
                     match tag {
                         1 => {
@@ -600,10 +602,21 @@ fn contacts_with(buf: &[u8], out: &mut Contacts, lean: bool) -> Result<()> {
                             expect(wire, VARINT)?;
                             f.object = r.varint()? as u32;
                         }
+                        13 => {
+                            expect(wire, VARINT)?;
+                            f.part = super::proto::part_of_number(r.varint()? as u32);
+                        }
+                        14 => {
+                            let _ = string_into(r, wire, &mut f.link)?;
+                            linked = true;
+                        }
                         _ => return Ok(false),
                     }
                     Ok(true)
                 })?;
+                if !linked {
+                    f.link.clear();
+                }
                 if !named {
                     f.name.clear();
                 }
@@ -928,7 +941,6 @@ mod tests {
         )
             .prop_map(|(name, b, point_b_e6, normal_b_e6, pen, i, t, f)| {
                 FingerContactProto {
-                    name,
                     touching: b[0],
                     in_contact: b[1],
                     point_b_e6,
@@ -940,6 +952,14 @@ mod tests {
                     in_cone: b[2],
                     slip: b[3],
                     object: u32::from(b[0]) * u32::from(pen as u8 % 9),
+                    // Fingertips, palms, phalanges and a part this version does not know (3).
+                    part: i32::from((pen >> 8) as u8 % 4),
+                    link: if (pen >> 8) as u8 % 4 == 0 {
+                        String::new()
+                    } else {
+                        format!("{name}_link")
+                    },
+                    name,
                 }
             });
         (any::<u32>(), proptest::collection::vec(finger, 0..5)).prop_map(|(n_contacts, fingers)| {

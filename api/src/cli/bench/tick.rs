@@ -578,10 +578,10 @@ fn power_grasp_scene() -> Result<PowerGraspScene, CliError> {
         body_damping: p.body_damping,
         contacts,
         dofs: hand.dof_names.clone(),
-        q: g.set_posture.clone(),
-        tau_ff: g.close_torques.clone(),
-        kp: g.kp.clone(),
-        kd: g.kd.clone(),
+        q: g.grip.set[..g.grip.n].to_vec(),
+        tau_ff: g.grip.close[..g.grip.n].to_vec(),
+        kp: g.grip.kp[..g.grip.n].to_vec(),
+        kd: g.grip.kd[..g.grip.n].to_vec(),
         grip_swing: GRIP_SWING,
         grip_period_s: GRIP_PERIOD_S,
     })
@@ -849,31 +849,23 @@ fn bench_frozen(batch: usize, batches: usize) -> Result<TickBench, CliError> {
 
 /// The `power-grasp` scene (module documentation).
 fn bench_power_grasp(batch: usize, batches: usize, timed: usize) -> Result<TickBench, CliError> {
-    use dfs_core::fixtures::{glove10_power_grasp, operator_torques};
+    use dfs_core::fixtures::glove10_power_grasp;
     let g = glove10_power_grasp()?;
-    let hand = g.dfs.hand().clone();
-    let n = hand.dof();
+    let n = g.dfs.hand().dof();
     let base = g.base;
     // The glove samples, made by the closed loop.
     let ticks = WARMUP_TICKS + timed;
     let (mut qs, mut taus) = (Vec::with_capacity(n * ticks), Vec::with_capacity(n * ticks));
     let mut dfs = g.dfs.clone();
-    let (mut q, mut qd, mut tau) = (g.set_posture.clone(), vec![0.0; n], vec![0.0; n]);
+    let mut glove = g.glove();
     for t in 0..ticks {
         let time = t as Real * dfs.params().dt;
         let grip = 1.0 + GRIP_SWING * (std::f64::consts::TAU * time / GRIP_PERIOD_S).sin();
-        operator_torques(&g, &hand, grip, &q, &qd, &mut tau);
-        qs.extend_from_slice(&q);
-        taus.extend_from_slice(&tau);
-        let o = dfs
-            .step(&GloveSample {
-                q: &q,
-                tau: &tau,
-                base,
-            })
+        // The sample the tick is given: the glove's state before it, the torques for it.
+        qs.extend_from_slice(&glove.q);
+        g.tick(&mut dfs, &mut glove, grip)
             .map_err(|e| CliError(format!("power-grasp scene, closed loop, tick {t}: {e}")))?;
-        q.copy_from_slice(&o.motor_q[..n]);
-        qd.copy_from_slice(&o.motor_qd[..n]);
+        taus.extend_from_slice(&glove.tau);
     }
     let samples = Samples {
         n,

@@ -623,6 +623,7 @@ pub fn replay_glove(
             tau: tau_rec,
             base: &base,
             output: dfs.output(),
+            body: dfs.body_contacts(),
             kinematics: dfs.kinematics(),
         };
         if let Err(e) = recorder.record(&tick) {
