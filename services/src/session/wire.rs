@@ -954,7 +954,7 @@ mod tests {
                     object: u32::from(b[0]) * u32::from(pen as u8 % 9),
                     // Fingertips, palms, phalanges and a part this version does not know (3).
                     part: i32::from((pen >> 8) as u8 % 4),
-                    link: if (pen >> 8) as u8 % 4 == 0 {
+                    link: if ((pen >> 8) as u8).is_multiple_of(4) {
                         String::new()
                     } else {
                         format!("{name}_link")
