@@ -1534,7 +1534,9 @@ impl Simulation {
                 }
             }
             Phase::Preshape => {
-                self.to_base = self.plan.base;
+                // A wrap slides the open hand down beside the object and onto it: the palm
+                // touches as the preshape ends, and the grasp only closes the fingers.
+                self.to_base = self.plan.wrap.map_or(self.plan.base, |w| w.base);
                 self.to_q = self.plan.q_pre;
                 self.to_offset = 0.015;
             }
@@ -1550,10 +1552,6 @@ impl Simulation {
                 self.to_grip = 1.0;
                 // Aim a little inside the surface, as a person presses on what they hold.
                 self.to_offset = -0.002;
-                // A wrap brings the palm onto the object first.
-                if let Some(wrap) = self.plan.wrap {
-                    self.to_base = wrap.base;
-                }
             }
             Phase::Lift => {
                 self.to_base = raise(&self.from_base, task.height);
@@ -1658,15 +1656,8 @@ impl Simulation {
         };
         let (mut mq, _) = min_jerk(sq);
         let (mg, _) = min_jerk(sg);
-        // A wrap: the palm comes onto the object over the first 40 % of `grasp`, the fingers
-        // close from 20 % to 50 %, and in `release` open after the grip has gone (40 % on).
-        let (m, m2) = match (self.plan.wrap, span.phase) {
-            (Some(_), Phase::Grasp) => {
-                let (a, b) = min_jerk(s / 0.4);
-                (a, b / (0.4 * 0.4))
-            }
-            _ => (m, m2),
-        };
+        // A wrap: the fingers close from 20 % to 50 % of `grasp`, and in `release` open after
+        // the grip has gone (40 % on).
         self.wrap_close = match span.phase {
             Phase::Grasp => min_jerk((s - 0.2) / 0.3).0,
             Phase::Lift | Phase::Hold | Phase::Transport | Phase::Place => 1.0,

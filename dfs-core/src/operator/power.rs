@@ -51,8 +51,8 @@ pub const WRAP_NORMAL_PER_GRIP: Real = 30.0;
 /// The most the operator squeezes a wrap with, as a fraction of each finger DOF's torque limit.
 pub const WRAP_MAX_GRIP: Real = 0.6;
 
-/// Gap (m) between the hand and the cylinder at the approach and the preshape: the open hand
-/// slides down over the cylinder this far from it.
+/// Gap (m) between the hand and the cylinder where the open hand slides down over it; the
+/// preshape then brings the palm this much nearer, onto it ([`Wrap::base`]).
 pub const WRAP_STANDOFF: Real = 0.003;
 
 /// Finger joint angles of the open hand of a wrap (rad): MCP, PIP, DIP of each long finger,
@@ -272,7 +272,7 @@ pub fn plan_wrap(
         }
     }
     let (_, pre, out) = best?;
-    // At the grasp the palm comes the standoff nearer, along its normal.
+    // The palm onto the cylinder: the standoff nearer, along its normal.
     let grasp = Isometry::from_parts(
         (pre.translation.vector - out * WRAP_STANDOFF).into(),
         pre.rotation,
