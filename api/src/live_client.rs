@@ -308,12 +308,33 @@ pub fn simulated_frames(
     duration: Option<f64>,
     every: u64,
 ) -> Result<Vec<Frame>, ClientError> {
+    simulated_glove(scenario, duration, every).map(|g| g.frames)
+}
+
+/// What the simulated operator's glove sends ([`simulated_glove`]).
+#[derive(Debug)]
+pub struct SimulatedGlove {
+    /// The samples, as [`simulated_frames`] gives them.
+    pub frames: Vec<Frame>,
+    /// Whether the operator's grasp is a power grasp with whole-hand contact
+    /// ([`dfs_core::dfs::DfsParams::whole_hand`]): a live session of it needs the start
+    /// message's `whole_hand` for the same contacts.
+    pub whole_hand: bool,
+}
+
+/// [`simulated_frames`] and whether the simulated grasp uses the whole hand.
+pub fn simulated_glove(
+    scenario: &dfs_core::scenario::Scenario,
+    duration: Option<f64>,
+    every: u64,
+) -> Result<SimulatedGlove, ClientError> {
     let mut sim = dfs_core::operator::Simulation::new(
         scenario,
         dfs_core::hand::HandModel::glove10(),
         duration,
     )
     .map_err(|e| err(&format!("scenario {:?}", scenario.name), e))?;
+    let whole_hand = sim.dfs().params().whole_hand;
     let mut frames = Vec::with_capacity(sim.total_ticks() as usize / every.max(1) as usize + 1);
     let mut sample = proto::Sample::default();
     loop {
@@ -334,7 +355,7 @@ pub fn simulated_frames(
         sample.wrist = Some(pose(base));
         frames.push(Frame::of(&sample));
     }
-    Ok(frames)
+    Ok(SimulatedGlove { frames, whole_hand })
 }
 
 /// The samples of a glove recording, at its own times: its angles, its torques when it has

@@ -136,6 +136,10 @@ pub struct StartMessage {
     /// applied to every sample's angles (`q = scale · q_raw + offset`). Default: none.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub calibration: Option<Calibration>,
+    /// Whole-hand contact: the palm and phalanges of a hand with contact shapes touch the
+    /// objects too ([`DfsParams::whole_hand`]). Default false: the fingertips alone.
+    #[serde(default, skip_serializing_if = "std::ops::Not::not")]
+    pub whole_hand: bool,
 }
 
 fn default_hand() -> String {
@@ -322,6 +326,8 @@ pub struct LiveConfig {
     pub calibration_given: Option<Calibration>,
     /// The assistant's mode (its set-up is given to [`LiveSession::start_assisted`]).
     pub assist: AssistMode,
+    /// Whole-hand contact ([`DfsParams::whole_hand`]), as the start asked.
+    pub whole_hand: bool,
 }
 
 impl LiveConfig {
@@ -383,6 +389,7 @@ impl LiveConfig {
             calibration,
             calibration_given: start.calibration.clone().filter(|c| !c.is_empty()),
             assist: start.assist.mode,
+            whole_hand: start.whole_hand,
         })
     }
 }
@@ -538,11 +545,21 @@ impl LiveSession {
             contact_model: ContactModel::SoftFinger,
             friction: scene.target().friction,
             table_height: Some(table_height),
+            whole_hand: config.whole_hand,
             ..DfsParams::default()
         };
         let dfs = Dfs::with_objects(config.hand.clone(), &scene.dfs_objects(), params)
             .map_err(|e| invalid("hand", e.to_string()))?;
         let mut extra = BTreeMap::new();
+        extra.insert(
+            "contacts".to_owned(),
+            if config.whole_hand {
+                "whole_hand"
+            } else {
+                "fingertips"
+            }
+            .to_owned(),
+        );
         if let Some(c) = &config.calibration_given {
             extra.insert(
                 "calibration".to_owned(),

@@ -22,6 +22,7 @@ fn start(s: &dfs_core::scenario::Scenario, assist: AssistSettings) -> StartMessa
         wrist: None,
         assist,
         calibration: None,
+        whole_hand: false,
     }
 }
 

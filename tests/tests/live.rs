@@ -40,6 +40,7 @@ fn start_for(s: &dfs_core::scenario::Scenario) -> StartMessage {
         wrist: None,
         assist: AssistSettings::default(),
         calibration: None,
+        whole_hand: false,
     }
 }
 

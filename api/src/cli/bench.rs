@@ -618,6 +618,7 @@ fn bench_live(
                 robot: None,
             },
             calibration: None,
+            whole_hand: false,
         };
         streams.push((start, frames));
     }

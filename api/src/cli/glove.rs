@@ -51,6 +51,11 @@ pub struct GloveArgs {
     /// sent in the `start` message: the server applies it to every sample.
     #[arg(long)]
     calibration: Option<PathBuf>,
+    /// Whole-hand contact: the palm and phalanges of a hand with contact shapes touch the
+    /// objects too (sent as the `start` message's `whole_hand`). Default: the fingertips alone.
+    /// With `--scenario`, the scenario's own grasp decides (a power grasp wraps the hand).
+    #[arg(long)]
+    whole_hand: bool,
     /// The assistant: off, suggest or apply.
     #[arg(long, value_enum, default_value_t = Assist::Off)]
     assist: Assist,
@@ -83,7 +88,7 @@ pub fn run_glove(a: GloveArgs) -> Result<(), CliError> {
         (Some(name), _) => {
             let scenario = super::simulate::load_scenario(name, a.seed)?;
             let every = (1000 / a.rate).max(1) as u64;
-            let frames = live_client::simulated_frames(&scenario, a.duration, every)
+            let glove = live_client::simulated_glove(&scenario, a.duration, every)
                 .map_err(|e| CliError(e.0))?;
             let start = StartMessage {
                 hand: "glove10".to_owned(),
@@ -94,8 +99,9 @@ pub fn run_glove(a: GloveArgs) -> Result<(), CliError> {
                 wrist: None,
                 assist: AssistSettings::default(),
                 calibration: None,
+                whole_hand: a.whole_hand || glove.whole_hand,
             };
-            (start, frames)
+            (start, glove.frames)
         }
         (None, Some(path)) => {
             let object = a.object.as_deref().ok_or_else(|| {
@@ -120,6 +126,7 @@ pub fn run_glove(a: GloveArgs) -> Result<(), CliError> {
                 wrist: Some([t.x, t.y, t.z, r.i, r.j, r.k, r.w]),
                 assist: AssistSettings::default(),
                 calibration: None,
+                whole_hand: a.whole_hand,
             };
             (start, live_client::recording_frames(&recording))
         }

@@ -114,6 +114,11 @@ pub struct ImportArgs {
     /// `point_with_friction` or `frictionless`.
     #[arg(long, default_value = "soft_finger")]
     contact_model: ContactModel,
+    /// Whole-hand contact: the palm and phalanges of a hand with contact shapes (glove10 has
+    /// them) touch the objects too, as in a simulated power grasp. Default: the fingertips
+    /// alone, as in every other simulated session.
+    #[arg(long)]
+    whole_hand: bool,
     /// The session file to write. Default: the input's name with `.session.mcap`.
     #[arg(long)]
     out: Option<PathBuf>,
@@ -319,6 +324,7 @@ pub fn run_import(a: ImportArgs) -> Result<(), CliError> {
         coupling: None,
         torque_coupling: None,
         contact_model: a.contact_model,
+        whole_hand: a.whole_hand,
     };
     let start = Instant::now();
     let summary =
@@ -349,6 +355,7 @@ pub fn run_import(a: ImportArgs) -> Result<(), CliError> {
         "glove_input": glove_input,
         "wrist": wrist_source,
         "contact_model": a.contact_model.to_string(),
+        "whole_hand": a.whole_hand,
         "ticks": summary.ticks,
         "duration_s": summary.ticks as f64 * 1e-3,
         "messages": summary.write.messages,

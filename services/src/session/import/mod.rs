@@ -83,7 +83,8 @@
 //!
 //! The `session` metadata record of an import holds, besides the usual keys, `glove_input`
 //! (`torques` or `positions`), `wrist` (`fixed`, `csv` or the MCAP topic), `base_pose` for a
-//! fixed base, `contact_model`, `calibration` (JSON) when one was given, and
+//! fixed base, `contact_model`, `contacts` (`fingertips`, or `whole_hand` for an import with
+//! [`ImportOptions::whole_hand`]), `calibration` (JSON) when one was given, and
 //! `coupling_stiffness` / `coupling_damping` (JSON arrays per DOF, the coupling in use).
 
 mod csv;
@@ -394,6 +395,12 @@ pub struct ImportOptions {
     pub torque_coupling: Option<VirtualCoupling>,
     /// Contact model of the fingertips. Default soft finger (pads, as in simulated sessions).
     pub contact_model: ContactModel,
+    /// Whole-hand contact: the hand's palm and phalanges
+    /// ([`HandModel::contact_shapes`]) touch the objects too ([`DfsParams::whole_hand`]), as
+    /// in a simulated power grasp. Default false: the fingertips alone, as in every other
+    /// simulated session, whose planned fingertip grasps let the phalanges pass through the
+    /// object (imported with the whole hand, their phalanges would push it).
+    pub whole_hand: bool,
 }
 
 impl Default for ImportOptions {
@@ -407,6 +414,7 @@ impl Default for ImportOptions {
             coupling: None,
             torque_coupling: None,
             contact_model: ContactModel::SoftFinger,
+            whole_hand: false,
         }
     }
 }
@@ -519,6 +527,7 @@ pub fn replay_glove(
             mu_torsion: object.mu_torsion,
         },
         table_height: Some(position.z - depth),
+        whole_hand: options.whole_hand,
         ..DfsParams::default()
     };
     let given = if recording.has_torques() {
@@ -564,6 +573,15 @@ pub fn replay_glove(
             serde_json::to_string(c).unwrap_or_default(),
         );
     }
+    extra.insert(
+        "contacts".to_owned(),
+        if options.whole_hand {
+            "whole_hand"
+        } else {
+            "fingertips"
+        }
+        .to_owned(),
+    );
     let json = |v: &[f64]| serde_json::to_string(v).unwrap_or_default();
     extra.insert("coupling_stiffness".to_owned(), json(coupling.stiffness()));
     extra.insert("coupling_damping".to_owned(), json(coupling.damping()));
