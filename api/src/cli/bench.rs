@@ -20,7 +20,9 @@ pub enum BenchCommand {
         /// Print JSON: `{"median_ns", "p99_ns", "allocations_per_tick", "median_tick_ns", ...}`.
         #[arg(long)]
         json: bool,
-        /// The scene (`power-grasp` needs palm and phalanx contact, not built yet).
+        /// The scene: `fingertips` (four fingertips hold a ball), `power-grasp` (whole-hand
+        /// contact: the fingers press a cylinder into the palm) or `frozen` (the benchmark before
+        /// issue 21).
         #[arg(long, value_enum, default_value_t = tick::TickScene::Fingertips)]
         scene: tick::TickScene,
         /// Number of timed ticks, at least 1000 (a percentile of fewer says little); at most
