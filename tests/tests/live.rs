@@ -158,6 +158,63 @@ async fn a_simulated_operator_streamed_live_is_stored_with_the_skills_of_its_upl
     app.stop().await;
 }
 
+/// The simulated operator's power grasp streamed live with `whole_hand` (as `icms glove
+/// --scenario` sends it) is the upload's power grasp, palm and all; streamed with the
+/// fingertips alone, the same glove data makes no power grasp: the cylinder the palm held
+/// passes through it.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_power_grasp_streamed_with_whole_hand_contact_is_stored_as_its_upload_is() {
+    let app = TestApp::spawn().await;
+    let s = scenario("cylinder-power-grasp", 1);
+    let glove = live_client::simulated_glove(&s, None, 1).unwrap();
+    assert!(glove.whole_hand, "the scenario's grasp is a wrap");
+    let mut ids = Vec::new();
+    for whole_hand in [true, false] {
+        let start = StartMessage {
+            whole_hand,
+            ..start_for(&s)
+        };
+        let summary = live_client::run(
+            &url(&app),
+            &start,
+            glove.frames.clone(),
+            &ClientOptions::default(),
+            |_| {},
+        )
+        .await
+        .unwrap();
+        assert_eq!(summary.refused, 0);
+        ids.push(summary.session_id.unwrap());
+    }
+    let meta = session(&app, ids[0]).await;
+    assert_eq!(meta["meta"]["extra"]["contacts"], "whole_hand");
+    let r = app
+        .client
+        .upload(&session_bytes("cylinder-power-grasp", 1, None), None)
+        .await;
+    assert_eq!(r.status, 201);
+    let uploaded = skills_of(&app, r.json()["session_id"].as_i64().unwrap()).await;
+    assert!(
+        uploaded[0]["grasp_type"]
+            .as_str()
+            .unwrap()
+            .starts_with("power"),
+        "{uploaded:?}"
+    );
+    let live = skills_of(&app, ids[0]).await;
+    assert_same_skills(&live, &uploaded, 1);
+    let meta = session(&app, ids[1]).await;
+    assert_eq!(meta["meta"]["extra"]["contacts"], "fingertips");
+    let fingertips = skills_of(&app, ids[1]).await;
+    assert!(
+        fingertips
+            .iter()
+            .all(|k| !k["grasp_type"].as_str().unwrap().starts_with("power")),
+        "{fingertips:?}"
+    );
+    app.stop().await;
+}
+
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn a_glove_at_60_hz_drives_the_1_khz_dfs_through_the_grasp() {
     let app = TestApp::spawn().await;
