@@ -369,9 +369,77 @@ pub fn envelope_cholesky_solve<const N: usize>(
     true
 }
 
+/// Unit vector of `v` with its component along unit `a` removed; `fallback`'s if that is ~0,
+/// and if that is ~0 too (both along `a`), the coordinate axis most nearly square to `a`'s.
+pub(crate) fn perpendicular(v: &Vector, a: &Vector, fallback: &Vector) -> Vector {
+    let off = |u: &Vector| u - a * a.dot(u);
+    let p = off(v);
+    if p.norm() > 1e-9 {
+        return p.normalize();
+    }
+    let f = off(fallback);
+    if f.norm() > 1e-15 {
+        return f.normalize();
+    }
+    let axis = [Vector::x(), Vector::y(), Vector::z()]
+        .into_iter()
+        .min_by(|x, y| a.dot(x).abs().total_cmp(&a.dot(y).abs()))
+        .unwrap_or_else(Vector::x);
+    off(&axis).try_normalize(1e-12).unwrap_or_else(Vector::x)
+}
+
+/// Rotation taking the orthonormal pair (a, d) of one frame onto (a', d') of another; the
+/// identity when the pairs are not orthonormal (or not finite).
+///
+/// nalgebra's `from_matrix` iterates until it converges, without bound: on a matrix that is
+/// not a rotation (NaN from a degenerate pair) it never returns. Here the matrix is checked
+/// first and the iterations bounded ([`ALIGN_ITERATIONS`]; a rotation converges in a few).
+pub(crate) fn align(a_from: &Vector, d_from: &Vector, a_to: &Vector, d_to: &Vector) -> Rotation {
+    let from = Matrix3::from_columns(&[*a_from, *d_from, a_from.cross(d_from)]);
+    let to = Matrix3::from_columns(&[*a_to, *d_to, a_to.cross(d_to)]);
+    let m = to * from.transpose();
+    let rotation = m.iter().all(|v| v.is_finite())
+        && (m.transpose() * m - Matrix3::identity()).amax() < 1e-6
+        && m.determinant() > 0.0;
+    if !rotation {
+        return Rotation::identity();
+    }
+    Rotation::from_matrix_eps(&m, Real::EPSILON, ALIGN_ITERATIONS, Rotation::identity())
+}
+
+/// Most iterations of the rotation extraction in [`align`] (its input is a rotation matrix up
+/// to rounding, which takes a handful).
+const ALIGN_ITERATIONS: usize = 1000;
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A serial chain's fingertips all lie on its axis at mid-range angles: the grasp axis and
+    /// the fallback direction coincided, the rotation's matrix was NaN, and nalgebra's
+    /// unbounded rotation extraction never returned.
+    #[test]
+    fn a_degenerate_grasp_axis_gives_a_rotation_at_once() {
+        let z = Vector::z();
+        let d = perpendicular(&(z * 0.1), &z, &Vector::z());
+        assert!(
+            (d.norm() - 1.0).abs() < 1e-12 && d.dot(&z).abs() < 1e-12,
+            "{d}"
+        );
+        let nan = Vector::new(Real::NAN, 0.0, 0.0);
+        assert_eq!(
+            align(&z, &nan, &Vector::x(), &Vector::y()),
+            Rotation::identity()
+        );
+        assert_eq!(
+            align(&z, &Vector::zeros(), &Vector::x(), &Vector::y()),
+            Rotation::identity()
+        );
+        // Orthonormal pairs: the rotation between them.
+        let r = align(&Vector::x(), &Vector::y(), &Vector::y(), &-Vector::x());
+        assert!((r * Vector::x() - Vector::y()).norm() < 1e-12);
+        assert!((r * Vector::y() + Vector::x()).norm() < 1e-12);
+    }
 
     #[test]
     fn the_envelope_solve_equals_the_dense_one_for_an_arrowhead_matrix() {

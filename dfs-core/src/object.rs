@@ -10,6 +10,8 @@ use crate::math::{force_of, moment_of, wrench, Isometry, Mat3, Real, Rotation, V
 use crate::names::Named;
 use serde::{Deserialize, Serialize};
 
+mod surface;
+
 /// The kind of an object's shape, without its sizes: `sphere`, `box` or `cylinder` in files,
 /// the API and the data base.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord, Serialize)]

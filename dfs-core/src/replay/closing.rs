@@ -45,16 +45,13 @@
 //! The planned forces then carry the load with the normal components the fingers push and the
 //! tangential rest from stick friction ([`super::plan::actuation_map`]).
 
-use super::plan::{
-    align, curl_onto, grasp_axis, mid_angles, on_surface, perpendicular, surface_along, Candidate,
-    ROLLS,
-};
+use super::base_pose::{curl_onto, grasp_axis, mid_angles, Candidate, ROLLS};
 use super::{ReplayParams, SkillSpec};
 use crate::contact::ContactFrame;
 use crate::error::Result;
 use crate::grasp::quality::{grasp_quality, QualityParams};
 use crate::hand::{HandModel, Kinematics, MAX_DOF, MAX_TIPS};
-use crate::math::{Isometry, Point, Real, Rotation, Vector};
+use crate::math::{align, perpendicular, Isometry, Point, Real, Rotation, Vector};
 use crate::object::Shape;
 use crate::operator::{push_alignment, push_basis, with_free_base};
 use crate::stop::Stop;
@@ -387,7 +384,7 @@ fn hand_grasps(
             };
             for dir in [m, -m] {
                 let dir_b = probe.orient.inverse_transform_vector(&-dir);
-                let depth = surface_along(probe.shape, &dir_b).0.norm();
+                let depth = probe.shape.surface_along(&dir_b).0.norm();
                 h.push(path.p[i] + dir * (radius[path.tip] + depth));
             }
         }
@@ -568,7 +565,7 @@ pub(super) fn closing_candidates(
             ok &= c.z >= radius[k] - 0.002;
             if active[k] {
                 let c_b = (inv_start * c).coords;
-                let (p, n_in) = on_surface(skill, &c_b);
+                let (p, n_in) = skill.shape.on_surface(&c_b);
                 let n_world = start.rotation * n_in;
                 normals[contacts.len()] = n_in;
                 contacts.push(ContactFrame::from_normal(p, n_in));

@@ -84,6 +84,7 @@
 //! when the operator moves on early), and [`DrivenReplay`] steps its [`Replay`] to that time
 //! ([`Replay::step_to`]) every tick, exposing the robot's state ([`DrivenTick`]).
 
+mod base_pose;
 mod clock;
 mod closing;
 mod driven;
