@@ -1,36 +1,45 @@
-//! A zstd chunk decompressor whose window is capped, so a crafted frame header cannot make the
-//! decoder allocate more than [`MAX_WINDOW_LOG`] bytes (zstd's own default cap is 128 MiB).
-//!
-//! Same behaviour as the `mcap` crate's built-in decoder otherwise.
+//! zstd decoding with a capped window, so a crafted frame header cannot make the decoder
+//! allocate more than 2^[`MAX_WINDOW_LOG`] bytes (zstd's own default cap is 128 MiB). The one
+//! way the crate decodes zstd: every context comes from [`bounded_dctx`], used as a streaming
+//! decompressor for the `mcap` crate's reader ([`BoundedZstd`], otherwise the same as its
+//! built-in one) and single-pass into a buffer of a chunk's declared size by the reader's own
+//! chunk decoding (`reader/chunk.rs`).
 
 use mcap::sans_io::decompressor::{DecompressResult, Decompressor};
 use mcap::{McapError, McapResult};
-use zstd::zstd_safe::{get_error_name, DParameter, DStream, InBuffer, OutBuffer, ResetDirective};
+use zstd::zstd_safe::{get_error_name, DCtx, DParameter, InBuffer, OutBuffer, ResetDirective};
 
 /// log2 of the largest zstd window accepted: 16 MiB. Our writer's chunks are 1 MiB (zstd level 3
 /// uses a 2 MiB window at most); other writers' defaults stay well below this too.
 pub(crate) const MAX_WINDOW_LOG: u32 = 24;
 
+/// The window-capped decompression context in `slot`, made there on first use (the cap is a
+/// sticky parameter: it survives the session resets between frames, so a context is made once
+/// and reused); the error is zstd's name for what failed.
+pub(crate) fn bounded_dctx<'a>(
+    slot: &'a mut Option<DCtx<'static>>,
+) -> Result<&'a mut DCtx<'static>, &'static str> {
+    match slot {
+        Some(d) => Ok(d),
+        None => {
+            let mut d = DCtx::create();
+            d.set_parameter(DParameter::WindowLogMax(MAX_WINDOW_LOG))
+                .map_err(get_error_name)?;
+            Ok(slot.insert(d))
+        }
+    }
+}
+
+/// A streaming zstd decompressor for the `mcap` crate's reader, with the window cap of
+/// [`bounded_dctx`].
 #[derive(Default)]
 pub(crate) struct BoundedZstd {
-    stream: Option<DStream<'static>>,
+    stream: Option<DCtx<'static>>,
     need: usize,
 }
 
 fn check(res: zstd::zstd_safe::SafeResult) -> McapResult<usize> {
     res.map_err(|code| McapError::DecompressionError(get_error_name(code).into()))
-}
-
-impl BoundedZstd {
-    fn stream(&mut self) -> McapResult<&mut DStream<'static>> {
-        if self.stream.is_none() {
-            let mut stream = DStream::create();
-            check(stream.init())?;
-            check(stream.set_parameter(DParameter::WindowLogMax(MAX_WINDOW_LOG)))?;
-            self.stream = Some(stream);
-        }
-        Ok(self.stream.as_mut().expect("stream was just created"))
-    }
 }
 
 impl Decompressor for BoundedZstd {
@@ -39,7 +48,9 @@ impl Decompressor for BoundedZstd {
     }
 
     fn decompress(&mut self, src: &[u8], dst: &mut [u8]) -> McapResult<DecompressResult> {
-        let stream = self.stream()?;
+        // A fresh context decodes a stream as it is (no `init` needed since zstd 1.4).
+        let stream = bounded_dctx(&mut self.stream)
+            .map_err(|name| McapError::DecompressionError(name.into()))?;
         let mut input = InBuffer::around(src);
         let mut output = OutBuffer::around(dst);
         self.need = check(stream.decompress_stream(&mut output, &mut input))?;

@@ -79,17 +79,7 @@ pub(super) fn unpack_chunk(
                 }
                 None => CHUNK_BUFFERS.take(size),
             };
-            let dctx = match dctx {
-                Some(d) => d,
-                None => {
-                    let mut d = zstd::zstd_safe::DCtx::create();
-                    d.set_parameter(zstd::zstd_safe::DParameter::WindowLogMax(MAX_WINDOW_LOG))
-                        .map_err(|code| {
-                            corrupt(format!("zstd: {}", zstd::zstd_safe::get_error_name(code)))
-                        })?;
-                    dctx.insert(d)
-                }
-            };
+            let dctx = bounded_dctx(dctx).map_err(|name| corrupt(format!("zstd: {name}")))?;
             let written = if out.capacity() == size {
                 // Into its spare capacity, exactly the declared size: nothing to zero first.
                 out.clear();

@@ -31,7 +31,7 @@ use mcap::McapError;
 use serde::de::DeserializeOwned;
 use serde::Deserialize;
 
-use super::bounded_zstd::{BoundedZstd, MAX_WINDOW_LOG};
+use super::bounded_zstd::{bounded_dctx, BoundedZstd};
 use super::json_check;
 use super::par::{par_map, MESSAGES_PER_JOB};
 use super::pool::CHUNK_BUFFERS;
