@@ -165,6 +165,14 @@ impl std::ops::AddAssign for SpatialInertia {
 /// in-place Cholesky factorisation (entries of `x` from `n` on are zero). Allocation-free;
 /// `None` when the block is not positive definite (or not finite) or `n > MAX_DOF`. Use it
 /// for M(θ)⁻¹ τ.
+///
+/// Why not the tick's solver ([`crate::math::cholesky_solve_in_place`], square-root-free
+/// `L D Lᵀ` over the upper triangle): the two factorisations round differently in the last
+/// bits, and the inverse kinematics iterates on this solve (up to 150 steps, with accept/reject
+/// decisions on the error), so replacing it changes the simulated operator's sessions bit for
+/// bit — `operator::tests::without_vary_reach_a_session_is_the_one_it_was_before` pins their
+/// hash, and recorded sessions and skills would no longer reproduce. Swap it only together with
+/// a new pinned hash (a behaviour change of its own).
 pub fn solve_dof_spd(a: &DofMatrix, b: &DofVector, n: usize) -> Option<DofVector> {
     if n > MAX_DOF {
         return None;
