@@ -6,6 +6,7 @@ use std::path::PathBuf;
 use std::time::Duration;
 
 use axum::http::HeaderValue;
+use services::store::{Database, StoreError};
 
 use crate::http::server::{default_max_connections, ConnectionLimits};
 use crate::http::{LayerConfig, StateConfig};
@@ -25,8 +26,14 @@ pub struct ServeArgs {
     #[arg(long, default_value = "127.0.0.1:8080", value_parser = listen_address)]
     pub addr: SocketAddr,
     /// Data directory: SQLite database and MCAP blobs, created and migrated on first start.
+    /// With --database-url, it holds the MCAP blobs only.
     #[arg(long, default_value = "icms-data")]
     pub data: PathBuf,
+    /// PostgreSQL data base to keep the rows in instead of the data directory's SQLite file
+    /// (postgres://user:password@host:port/dbname), migrated on start. It must answer within
+    /// 5 s. Default: none, SQLite. See docs/backends.md.
+    #[arg(long, env = "DATABASE_URL", hide_env_values = true, value_name = "URL")]
+    pub database_url: Option<String>,
     /// Bearer token that write requests (uploads, simulations, deletes) must send; reads stay
     /// open. Without one, writes are open too (allowed on a loopback address only).
     #[arg(long, env = "ICMS_TOKEN", hide_env_values = true)]
@@ -144,6 +151,7 @@ impl Default for ServeArgs {
         ServeArgs {
             addr: SocketAddr::from(([127, 0, 0, 1], 8080)),
             data: PathBuf::from("icms-data"),
+            database_url: None,
             token: None,
             no_demo: false,
             max_body: DEFAULT_MAX_BODY,
@@ -172,6 +180,8 @@ pub struct ServeConfig {
     pub addr: SocketAddr,
     /// Data directory.
     pub data: PathBuf,
+    /// Where the rows are: the data directory's SQLite file or a PostgreSQL data base.
+    pub database: Database,
     /// Seed an empty data base with simulated sessions.
     pub demo: bool,
     /// Handler state settings (token, body limit, simulations, cache).
@@ -205,6 +215,9 @@ pub enum ConfigError {
     /// A setting out of range.
     #[error("{0}")]
     OutOfRange(String),
+    /// A --database-url (or DATABASE_URL) that names no backend this binary has.
+    #[error("{0}")]
+    DatabaseUrl(String),
 }
 
 impl ServeArgs {
@@ -218,6 +231,10 @@ impl ServeArgs {
         if token.is_none() && !self.addr.ip().is_loopback() {
             return Err(ConfigError::OpenNonLoopback(self.addr));
         }
+        let database = Database::from_url(self.database_url.as_deref()).map_err(|e| match e {
+            StoreError::InvalidInput(m) => ConfigError::DatabaseUrl(m),
+            other => ConfigError::DatabaseUrl(other.to_string()),
+        })?;
         let request_timeout = seconds("--request-timeout", self.request_timeout)?;
         let queue_wait = seconds("--queue-wait", self.queue_wait)?;
         let header_timeout = seconds("--header-timeout", self.header_timeout)?;
@@ -250,6 +267,7 @@ impl ServeArgs {
         Ok(ServeConfig {
             addr: self.addr,
             data: self.data,
+            database,
             demo: !self.no_demo,
             foxglove: self.foxglove,
             state: StateConfig {

@@ -6,6 +6,8 @@
 
 mod store_common;
 
+use store_common::Backend;
+
 use std::path::Path;
 use std::sync::atomic::{AtomicBool, Ordering};
 
@@ -25,33 +27,14 @@ fn simulate(dir: &Path, name: &str, seed: u64, duration: Option<f64>) -> Vec<u8>
     std::fs::read(&path).unwrap()
 }
 
-async fn raw_conn(data: &Path) -> SqliteConnection {
-    let opts = sqlx::sqlite::SqliteConnectOptions::new()
-        .filename(data.join(DB_FILE))
-        .foreign_keys(true);
-    SqliteConnection::connect_with(&opts).await.unwrap()
-}
-
-/// Runs SQL on the data base behind the store's back (the store must be closed).
-async fn sql(data: &Path, statements: &[(&str, Option<i64>)]) {
-    let mut conn = raw_conn(data).await;
-    for (q, bind) in statements {
-        let mut q = sqlx::query(q);
-        if let Some(b) = bind {
-            q = q.bind(*b);
-        }
-        q.execute(&mut conn).await.unwrap();
-    }
-    conn.close().await.unwrap();
-}
-
 /// Marks every session as segmented by version 0, as an older segmentation left them.
-async fn mark_all_stale(data: &Path) {
-    sql(
-        data,
-        &[("UPDATE sessions SET segmentation_version = 0", None)],
-    )
-    .await;
+async fn mark_all_stale(backend: Backend, data: &Path) {
+    backend
+        .sql(
+            data,
+            &[("UPDATE sessions SET segmentation_version = 0", None)],
+        )
+        .await;
 }
 
 /// Runs a reprocessing to the end; returns its report and the events' kinds in order.
@@ -104,13 +87,12 @@ async fn versions(store: &Store, ids: &[i64]) -> Vec<u32> {
     v
 }
 
-#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
-async fn reprocessing_keeps_unchanged_skills_replaces_changed_ones_and_runs_once() {
+async fn reprocessing_keeps_unchanged_skills_replaces_changed_ones_and_runs_once(backend: Backend) {
     let tmp = tempfile::tempdir().unwrap();
     let data = tmp.path().join("data");
     let two = simulate(tmp.path(), "two-grasps", 4, None);
     let sphere = simulate(tmp.path(), "sphere-lift", 3, None);
-    let store = Store::open(&data).await.unwrap();
+    let store = backend.open(&data).await;
     let a = ingest_bytes(&store, two.clone(), "two.mcap".into())
         .await
         .unwrap();
@@ -147,15 +129,17 @@ async fn reprocessing_keeps_unchanged_skills_replaces_changed_ones_and_runs_once
 
     // What an older segmentation could have left: every session at version 0, one skill with
     // other parameters, and a session with a skill too many (a grasp split in two).
-    mark_all_stale(&data).await;
-    sql(
+    mark_all_stale(backend, &data).await;
+    let set_old = match backend {
+        Backend::Sqlite => "json_set(params, '$.old', 1)",
+        Backend::Postgres => "jsonb_set(params::jsonb, '{old}', '1')::text",
+    };
+    let change =
+        format!("UPDATE skills SET quality = quality + 1.0, params = {set_old} WHERE id = ?");
+    backend.sql(
         &data,
         &[
-            (
-                "UPDATE skills SET quality = quality + 1.0, \
-                 params = json_set(params, '$.old', 1) WHERE id = ?",
-                Some(changed),
-            ),
+            (change.as_str(), Some(changed)),
             (
                 "INSERT INTO skills (session_id, object_shape, object_mass, mu, contact_count, \
                  contact_model, grasp_type, quality, volume, duration_s, start_ns, end_ns, \
@@ -168,7 +152,7 @@ async fn reprocessing_keeps_unchanged_skills_replaces_changed_ones_and_runs_once
         ],
     )
     .await;
-    let store = Store::open(&data).await.unwrap();
+    let store = backend.open(&data).await;
     assert_eq!(store.skill_count(), 4);
     let duplicate = *store
         .get_session(b.session_id)
@@ -229,7 +213,7 @@ async fn reprocessing_keeps_unchanged_skills_replaces_changed_ones_and_runs_once
     );
     assert_eq!(after_a[1], originals_a[1]);
     assert_eq!(after_b, originals_b);
-    let fresh = Store::open(&tmp.path().join("fresh")).await.unwrap();
+    let fresh = backend.open(&tmp.path().join("fresh")).await;
     let f = ingest_bytes(&fresh, two, "two.mcap".into()).await.unwrap();
     assert_eq!(
         skills_of(&fresh, f.session_id)
@@ -283,16 +267,15 @@ async fn reprocessing_keeps_unchanged_skills_replaces_changed_ones_and_runs_once
     assert_eq!(skills_of(&store, b.session_id).await, after_b);
     store.close().await;
     // Nor does one after a restart (the index reloads the same skills).
-    let store = Store::open(&data).await.unwrap();
+    let store = backend.open(&data).await;
     assert_eq!(store.skill_count(), 3);
     assert_eq!(run(&store).await.0.sessions_stale, 0);
 }
 
-#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
-async fn a_session_that_fails_is_reported_keeps_its_skills_and_the_others_go_on() {
+async fn a_session_that_fails_is_reported_keeps_its_skills_and_the_others_go_on(backend: Backend) {
     let tmp = tempfile::tempdir().unwrap();
     let data = tmp.path().join("data");
-    let store = Store::open(&data).await.unwrap();
+    let store = backend.open(&data).await;
     // Not an MCAP file at all, stored with synthetic skills.
     let junk = store
         .ingest(&fake_mcap(1, 5000), meta(1, 2), skills(1, 2))
@@ -327,9 +310,9 @@ async fn a_session_that_fails_is_reported_keeps_its_skills_and_the_others_go_on(
     bytes[mid] ^= 0x20;
     std::fs::write(&path, bytes).unwrap();
     store.close().await;
-    mark_all_stale(&data).await;
+    mark_all_stale(backend, &data).await;
 
-    let store = Store::open(&data).await.unwrap();
+    let store = backend.open(&data).await;
     let (r, events) = run(&store).await;
     assert_eq!(
         events.iter().filter(|e| e.starts_with("failed")).count(),
@@ -375,11 +358,10 @@ async fn a_session_that_fails_is_reported_keeps_its_skills_and_the_others_go_on(
     store.integrity_check().await.unwrap();
 }
 
-#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
-async fn a_stopped_run_leaves_whole_sessions_and_the_next_run_finishes() {
+async fn a_stopped_run_leaves_whole_sessions_and_the_next_run_finishes(backend: Backend) {
     let tmp = tempfile::tempdir().unwrap();
     let data = tmp.path().join("data");
-    let store = Store::open(&data).await.unwrap();
+    let store = backend.open(&data).await;
     let mut ids = Vec::new();
     for seed in 0..3 {
         let bytes = simulate(tmp.path(), "sphere-lift", seed, Some(3.0));
@@ -389,15 +371,16 @@ async fn a_stopped_run_leaves_whole_sessions_and_the_next_run_finishes() {
         ids.push(o.session_id);
     }
     store.close().await;
-    mark_all_stale(&data).await;
+    mark_all_stale(backend, &data).await;
     // Skills as an older segmentation left them: all different, so all are replaced.
-    sql(
-        &data,
-        &[("UPDATE skills SET quality = quality + 1.0", None)],
-    )
-    .await;
+    backend
+        .sql(
+            &data,
+            &[("UPDATE skills SET quality = quality + 1.0", None)],
+        )
+        .await;
 
-    let store = Store::open(&data).await.unwrap();
+    let store = backend.open(&data).await;
     let stop = AtomicBool::new(false);
     let r = reprocess(&store, &stop, |e| {
         if let ReprocessEvent::Reprocessed(_) = e {
@@ -416,10 +399,9 @@ async fn a_stopped_run_leaves_whole_sessions_and_the_next_run_finishes() {
     store.integrity_check().await.unwrap();
 }
 
-#[tokio::test]
-async fn replacing_skills_is_all_or_nothing_and_only_for_older_versions() {
+async fn replacing_skills_is_all_or_nothing_and_only_for_older_versions(backend: Backend) {
     let tmp = tempfile::tempdir().unwrap();
-    let store = Store::open(tmp.path()).await.unwrap();
+    let store = backend.open(tmp.path()).await;
     let old = skills(7, 3);
     let o = store
         .ingest(&fake_mcap(7, 1000), meta(7, 3), old.clone())
@@ -477,17 +459,15 @@ async fn replacing_skills_is_all_or_nothing_and_only_for_older_versions() {
     ));
     // The phase rows follow the skills (the phase filter finds exactly the stored ones).
     let phases: i64 = {
-        let mut conn = raw_conn(tmp.path()).await;
-        let n = sqlx::query_scalar(
-            "SELECT count(*) FROM skill_phases p JOIN skills s ON s.id = p.skill_id",
-        )
-        .fetch_one(&mut conn)
-        .await
-        .unwrap();
-        let all: i64 = sqlx::query_scalar("SELECT count(*) FROM skill_phases")
-            .fetch_one(&mut conn)
-            .await
-            .unwrap();
+        let n = backend
+            .count(
+                tmp.path(),
+                "SELECT count(*) FROM skill_phases p JOIN skills s ON s.id = p.skill_id",
+            )
+            .await;
+        let all = backend
+            .count(tmp.path(), "SELECT count(*) FROM skill_phases")
+            .await;
         assert_eq!(n, all, "no phase rows of removed skills");
         n
     };
@@ -594,11 +574,12 @@ async fn a_data_base_from_before_versions_is_migrated_to_version_0_and_brought_u
 /// Issue 20: skills stored before approach templates existed (version 1, `approach` NULL, as
 /// migration 0005 leaves them) get theirs from a reprocessing, keeping their ids; until then
 /// they take no part in approach recognition.
-#[tokio::test]
-async fn skills_stored_before_templates_get_them_from_reprocessing_and_keep_their_ids() {
+async fn skills_stored_before_templates_get_them_from_reprocessing_and_keep_their_ids(
+    backend: Backend,
+) {
     let tmp = tempfile::tempdir().unwrap();
     let data = tmp.path().join("data");
-    let store = Store::open(&data).await.unwrap();
+    let store = backend.open(&data).await;
     let bytes = simulate(tmp.path(), "box-pinch-lift", 2, None);
     let o = ingest_bytes(&store, bytes, "box.mcap".into())
         .await
@@ -609,16 +590,17 @@ async fn skills_stored_before_templates_get_them_from_reprocessing_and_keep_thei
     assert_eq!(fresh.len(), services::assist::features::TEMPLATE_DIM);
     assert!(fresh.iter().flatten().count() > 10, "{fresh:?}");
     store.close().await;
-    sql(
-        &data,
-        &[
-            ("UPDATE skills SET approach = NULL", None),
-            ("UPDATE sessions SET segmentation_version = 1", None),
-        ],
-    )
-    .await;
+    backend
+        .sql(
+            &data,
+            &[
+                ("UPDATE skills SET approach = NULL", None),
+                ("UPDATE sessions SET segmentation_version = 1", None),
+            ],
+        )
+        .await;
 
-    let store = Store::open(&data).await.unwrap();
+    let store = backend.open(&data).await;
     assert!(store.get_skill(id).await.unwrap().approach.is_none());
     let index = store.recognition_index();
     let mut scratch = services::assist::index::Scratch::default();
@@ -653,3 +635,11 @@ async fn skills_stored_before_templates_get_them_from_reprocessing_and_keep_thei
     assert_eq!(index.skill_id(ranked[0].row), id);
     store.integrity_check().await.unwrap();
 }
+
+backend_tests!(
+    reprocessing_keeps_unchanged_skills_replaces_changed_ones_and_runs_once,
+    a_session_that_fails_is_reported_keeps_its_skills_and_the_others_go_on,
+    a_stopped_run_leaves_whole_sessions_and_the_next_run_finishes,
+    replacing_skills_is_all_or_nothing_and_only_for_older_versions,
+    skills_stored_before_templates_get_them_from_reprocessing_and_keep_their_ids,
+);

@@ -3,9 +3,11 @@
 
 mod store_common;
 
+use store_common::Backend;
+
 use dfs_core::hand::builtin::GRIPPER_URDF;
 use dfs_core::hand::{builtin_spec, HandSpec};
-use services::store::{Store, StoreError};
+use services::store::StoreError;
 use store_common::{blob_count, fake_mcap, meta, skills, unreachable_report};
 
 fn gripper_spec(name: &str) -> HandSpec {
@@ -14,10 +16,11 @@ fn gripper_spec(name: &str) -> HandSpec {
     spec
 }
 
-#[tokio::test]
-async fn the_migration_lists_built_in_hands_and_stores_an_uploaded_one_beside_them() {
+async fn the_migration_lists_built_in_hands_and_stores_an_uploaded_one_beside_them(
+    backend: Backend,
+) {
     let tmp = tempfile::tempdir().unwrap();
-    let store = Store::open(tmp.path()).await.unwrap();
+    let store = backend.open(tmp.path()).await;
     let hands = store.list_hands().await.unwrap();
     let names: Vec<&str> = hands.iter().map(|h| h.name.as_str()).collect();
     assert_eq!(
@@ -56,15 +59,14 @@ async fn the_migration_lists_built_in_hands_and_stores_an_uploaded_one_beside_th
 
     // Survives a restart.
     store.close().await;
-    let store = Store::open(tmp.path()).await.unwrap();
+    let store = backend.open(tmp.path()).await;
     assert_eq!(store.list_hands().await.unwrap().len(), 6);
     store.integrity_check().await.unwrap();
 }
 
-#[tokio::test]
-async fn hands_with_a_taken_name_or_a_bad_urdf_are_refused_and_nothing_is_stored() {
+async fn hands_with_a_taken_name_or_a_bad_urdf_are_refused_and_nothing_is_stored(backend: Backend) {
     let tmp = tempfile::tempdir().unwrap();
-    let store = Store::open(tmp.path()).await.unwrap();
+    let store = backend.open(tmp.path()).await;
     store
         .put_hand(gripper_spec("mine"), GRIPPER_URDF.into())
         .await
@@ -94,10 +96,9 @@ async fn hands_with_a_taken_name_or_a_bad_urdf_are_refused_and_nothing_is_stored
     assert_eq!(store.list_hands().await.unwrap().len(), 6);
 }
 
-#[tokio::test]
-async fn replays_are_stored_with_their_blob_and_go_with_their_skill_or_session() {
+async fn replays_are_stored_with_their_blob_and_go_with_their_skill_or_session(backend: Backend) {
     let tmp = tempfile::tempdir().unwrap();
-    let store = Store::open(tmp.path()).await.unwrap();
+    let store = backend.open(tmp.path()).await;
     let out = store
         .ingest(&fake_mcap(1, 1000), meta(1, 2), skills(1, 2))
         .await
@@ -175,3 +176,9 @@ async fn replays_are_stored_with_their_blob_and_go_with_their_skill_or_session()
     assert!(!path.exists());
     store.integrity_check().await.unwrap();
 }
+
+backend_tests!(
+    the_migration_lists_built_in_hands_and_stores_an_uploaded_one_beside_them,
+    hands_with_a_taken_name_or_a_bad_urdf_are_refused_and_nothing_is_stored,
+    replays_are_stored_with_their_blob_and_go_with_their_skill_or_session,
+);

@@ -3,6 +3,8 @@
 
 mod store_common;
 
+use store_common::Backend;
+
 use std::collections::HashSet;
 use std::path::Path;
 
@@ -19,10 +21,9 @@ async fn raw_conn(path: &Path) -> SqliteConnection {
     SqliteConnection::connect_with(&opts).await.unwrap()
 }
 
-#[tokio::test]
-async fn ingesting_the_same_bytes_twice_gives_the_same_session_and_one_blob() {
+async fn ingesting_the_same_bytes_twice_gives_the_same_session_and_one_blob(backend: Backend) {
     let tmp = tempfile::tempdir().unwrap();
-    let store = Store::open(tmp.path()).await.unwrap();
+    let store = backend.open(tmp.path()).await;
     let bytes = fake_mcap(1, 10_000);
     let a = store
         .ingest(&bytes, meta(1, 3), skills(1, 3))
@@ -56,10 +57,9 @@ async fn ingesting_the_same_bytes_twice_gives_the_same_session_and_one_blob() {
     assert_eq!(skill.quality, expected.quality);
 }
 
-#[tokio::test(flavor = "multi_thread", worker_threads = 4)]
-async fn concurrent_ingests_store_every_file_once() {
+async fn concurrent_ingests_store_every_file_once(backend: Backend) {
     let tmp = tempfile::tempdir().unwrap();
-    let store = Store::open(tmp.path()).await.unwrap();
+    let store = backend.open(tmp.path()).await;
     let mut tasks = Vec::new();
     for i in 0..16u64 {
         let store = store.clone();
@@ -100,10 +100,9 @@ async fn concurrent_ingests_store_every_file_once() {
     store.integrity_check().await.unwrap();
 }
 
-#[tokio::test]
-async fn deleting_a_session_removes_its_rows_skills_and_blob() {
+async fn deleting_a_session_removes_its_rows_skills_and_blob(backend: Backend) {
     let tmp = tempfile::tempdir().unwrap();
-    let store = Store::open(tmp.path()).await.unwrap();
+    let store = backend.open(tmp.path()).await;
     let keep = store
         .ingest(&fake_mcap(1, 1000), meta(1, 2), skills(1, 2))
         .await
@@ -135,11 +134,9 @@ async fn deleting_a_session_removes_its_rows_skills_and_blob() {
         .collect();
     assert_eq!(near.len(), 2);
     assert!(near.iter().all(|id| keep.skill_ids.contains(id)));
-    let mut conn = raw_conn(&tmp.path().join(DB_FILE)).await;
-    let phases: i64 = sqlx::query_scalar("SELECT count(*) FROM skill_phases")
-        .fetch_one(&mut conn)
-        .await
-        .unwrap();
+    let phases = backend
+        .count(tmp.path(), "SELECT count(*) FROM skill_phases")
+        .await;
     assert_eq!(phases, 2 * 5);
     assert!(matches!(
         store.delete_session(gone.session_id).await,
@@ -158,10 +155,9 @@ async fn deleting_a_session_removes_its_rows_skills_and_blob() {
         .exists());
 }
 
-#[tokio::test]
-async fn deleting_a_skill_keeps_its_session() {
+async fn deleting_a_skill_keeps_its_session(backend: Backend) {
     let tmp = tempfile::tempdir().unwrap();
-    let store = Store::open(tmp.path()).await.unwrap();
+    let store = backend.open(tmp.path()).await;
     let s = store
         .ingest(&fake_mcap(1, 1000), meta(1, 3), skills(1, 3))
         .await
@@ -187,10 +183,9 @@ async fn deleting_a_skill_keeps_its_session() {
     assert!(store.get_skills(&[]).await.unwrap().is_empty());
 }
 
-#[tokio::test]
-async fn invalid_skills_are_refused_and_store_nothing() {
+async fn invalid_skills_are_refused_and_store_nothing(backend: Backend) {
     let tmp = tempfile::tempdir().unwrap();
-    let store = Store::open(tmp.path()).await.unwrap();
+    let store = backend.open(tmp.path()).await;
     let mut bad = skills(1, 2);
     bad[1].feature.pop();
     let err = store
@@ -214,10 +209,9 @@ async fn invalid_skills_are_refused_and_store_nothing() {
     assert_eq!(store.skill_count(), 0);
 }
 
-#[tokio::test]
-async fn a_session_without_skills_is_stored() {
+async fn a_session_without_skills_is_stored(backend: Backend) {
     let tmp = tempfile::tempdir().unwrap();
-    let store = Store::open(tmp.path()).await.unwrap();
+    let store = backend.open(tmp.path()).await;
     let s = store
         .ingest(&fake_mcap(1, 100), meta(1, 0), vec![])
         .await
@@ -232,12 +226,11 @@ async fn a_session_without_skills_is_stored() {
         .is_empty());
 }
 
-#[tokio::test]
-async fn reopening_the_store_finds_everything_again() {
+async fn reopening_the_store_finds_everything_again(backend: Backend) {
     let tmp = tempfile::tempdir().unwrap();
     let mut outcomes = Vec::new();
     {
-        let store = Store::open(tmp.path()).await.unwrap();
+        let store = backend.open(tmp.path()).await;
         for i in 0..3 {
             outcomes.push(
                 store
@@ -248,7 +241,7 @@ async fn reopening_the_store_finds_everything_again() {
         }
         store.close().await;
     }
-    let store = Store::open(tmp.path()).await.unwrap();
+    let store = backend.open(tmp.path()).await;
     assert_eq!(store.skill_count(), 12);
     let page = store.list_sessions(10, None).await.unwrap();
     assert_eq!(page.items.len(), 3);
@@ -400,10 +393,9 @@ async fn a_schema_newer_than_the_binary_is_refused() {
     assert!(err.to_string().contains("newer than this binary"), "{err}");
 }
 
-#[tokio::test]
-async fn nearest_returns_the_exact_neighbours_of_a_small_set() {
+async fn nearest_returns_the_exact_neighbours_of_a_small_set(backend: Backend) {
     let tmp = tempfile::tempdir().unwrap();
-    let store = Store::open(tmp.path()).await.unwrap();
+    let store = backend.open(tmp.path()).await;
     let mut all = Vec::new();
     for i in 0..5u64 {
         let new = skills(100 + i, 40);
@@ -461,8 +453,7 @@ async fn nearest_returns_the_exact_neighbours_of_a_small_set() {
     ));
 }
 
-#[tokio::test]
-async fn an_ingested_skill_is_labelled_and_found_by_its_whole_grasp_type() {
+async fn an_ingested_skill_is_labelled_and_found_by_its_whole_grasp_type(backend: Backend) {
     // The store documents labels such as `precision-2vf` and filters by them, but stored only
     // the family (`precision`): a filter by the whole label never found a real skill.
     let tmp = tempfile::tempdir().unwrap();
@@ -482,7 +473,7 @@ async fn an_ingested_skill_is_labelled_and_found_by_its_whole_grasp_type() {
             params["opposing_virtual_fingers"]
         )
     );
-    let store = Store::open(&tmp.path().join("data")).await.unwrap();
+    let store = backend.open(&tmp.path().join("data")).await;
     let s = store.ingest(&bytes, meta, skills).await.unwrap();
     for filter in [label.as_str(), label.split('-').next().unwrap()] {
         let q = services::store::SkillQuery {
@@ -524,3 +515,15 @@ async fn a_second_writer_of_a_data_directory_is_refused_naming_the_first() {
     let next = Store::open(tmp.path()).await.unwrap();
     next.close().await;
 }
+
+backend_tests!(
+    ingesting_the_same_bytes_twice_gives_the_same_session_and_one_blob,
+    concurrent_ingests_store_every_file_once,
+    deleting_a_session_removes_its_rows_skills_and_blob,
+    deleting_a_skill_keeps_its_session,
+    invalid_skills_are_refused_and_store_nothing,
+    a_session_without_skills_is_stored,
+    reopening_the_store_finds_everything_again,
+    nearest_returns_the_exact_neighbours_of_a_small_set,
+    an_ingested_skill_is_labelled_and_found_by_its_whole_grasp_type,
+);

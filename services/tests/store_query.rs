@@ -2,6 +2,8 @@
 
 mod store_common;
 
+use store_common::Backend;
+
 use std::collections::HashSet;
 
 use dfs_core::contact::ContactModel;
@@ -59,10 +61,9 @@ fn sort_value(sort: SortKey, s: &SkillRecord) -> f64 {
     }
 }
 
-#[tokio::test]
-async fn filters_sorts_and_cursors_walk_every_matching_skill_exactly_once() {
+async fn filters_sorts_and_cursors_walk_every_matching_skill_exactly_once(backend: Backend) {
     let tmp = tempfile::tempdir().unwrap();
-    let store = Store::open(tmp.path()).await.unwrap();
+    let store = backend.open(tmp.path()).await;
     generate_synthetic(&store, 2500, 11).await.unwrap();
     let all = walk(
         &store,
@@ -153,10 +154,9 @@ async fn filters_sorts_and_cursors_walk_every_matching_skill_exactly_once() {
     }
 }
 
-#[tokio::test]
-async fn ties_in_the_sort_value_are_paged_through_by_id() {
+async fn ties_in_the_sort_value_are_paged_through_by_id(backend: Backend) {
     let tmp = tempfile::tempdir().unwrap();
-    let store = Store::open(tmp.path()).await.unwrap();
+    let store = backend.open(tmp.path()).await;
     let mut same = store_common::skills(5, 30);
     for s in &mut same {
         s.quality = 0.25;
@@ -182,10 +182,9 @@ async fn ties_in_the_sort_value_are_paged_through_by_id() {
     assert_eq!(got.len(), 30);
 }
 
-#[tokio::test]
-async fn a_malformed_or_foreign_cursor_is_a_bad_cursor() {
+async fn a_malformed_or_foreign_cursor_is_a_bad_cursor(backend: Backend) {
     let tmp = tempfile::tempdir().unwrap();
-    let store = Store::open(tmp.path()).await.unwrap();
+    let store = backend.open(tmp.path()).await;
     generate_synthetic(&store, 30, 3).await.unwrap();
     for bad in [
         "",
@@ -228,10 +227,9 @@ async fn a_malformed_or_foreign_cursor_is_a_bad_cursor() {
     ));
 }
 
-#[tokio::test]
-async fn out_of_range_queries_are_invalid() {
+async fn out_of_range_queries_are_invalid(backend: Backend) {
     let tmp = tempfile::tempdir().unwrap();
-    let store = Store::open(tmp.path()).await.unwrap();
+    let store = backend.open(tmp.path()).await;
     let bad = [
         SkillQuery {
             limit: 0,
@@ -302,10 +300,9 @@ async fn out_of_range_queries_are_invalid() {
     assert!("-colour".parse::<SortKey>().is_err());
 }
 
-#[tokio::test]
-async fn sessions_page_through_in_id_order() {
+async fn sessions_page_through_in_id_order(backend: Backend) {
     let tmp = tempfile::tempdir().unwrap();
-    let store = Store::open(tmp.path()).await.unwrap();
+    let store = backend.open(tmp.path()).await;
     for i in 0..7 {
         store
             .ingest(
@@ -400,3 +397,11 @@ async fn a_stored_row_with_an_unknown_shape_contact_model_or_phase_is_refused_na
     }
     store.close().await;
 }
+
+backend_tests!(
+    filters_sorts_and_cursors_walk_every_matching_skill_exactly_once,
+    ties_in_the_sort_value_are_paged_through_by_id,
+    a_malformed_or_foreign_cursor_is_a_bad_cursor,
+    out_of_range_queries_are_invalid,
+    sessions_page_through_in_id_order,
+);

@@ -4,6 +4,8 @@
 
 mod store_common;
 
+use store_common::Backend;
+
 use std::path::Path;
 use std::time::{Duration, SystemTime};
 
@@ -75,10 +77,9 @@ async fn an_ingest_that_meets_a_locked_data_base_is_busy_and_its_blob_is_swept()
     assert_eq!(std::fs::read(path).unwrap(), fake_mcap(1, 5_000));
 }
 
-#[tokio::test(flavor = "multi_thread", worker_threads = 4)]
-async fn sweeping_beside_running_ingests_never_takes_a_blob_they_store() {
+async fn sweeping_beside_running_ingests_never_takes_a_blob_they_store(backend: Backend) {
     let tmp = tempfile::tempdir().unwrap();
-    let store = Store::open(tmp.path()).await.unwrap();
+    let store = backend.open(tmp.path()).await;
     let ingests = (0..40u64).map(|i| {
         let store = store.clone();
         tokio::spawn(async move {
@@ -114,3 +115,5 @@ async fn sweeping_beside_running_ingests_never_takes_a_blob_they_store() {
         assert!(path.exists(), "session {id}'s blob was swept");
     }
 }
+
+backend_tests!(sweeping_beside_running_ingests_never_takes_a_blob_they_store,);

@@ -152,6 +152,10 @@ pub enum BenchCommand {
         /// Keep the data directory afterwards (its path is printed on stderr).
         #[arg(long)]
         keep: bool,
+        /// An empty PostgreSQL data base to bench instead of SQLite (postgres://…); the bench
+        /// fills it. See docs/backends.md.
+        #[arg(long, value_name = "URL")]
+        database_url: Option<String>,
     },
     /// Uploads of simulated session files (`POST /api/v1/sessions`, each a distinct file) over
     /// HTTP on loopback to the real server, started in-process on an ephemeral port with a
@@ -332,8 +336,10 @@ pub fn run(c: BenchCommand) -> Result<(), CliError> {
             skills,
             dir,
             keep,
+            database_url,
         } => {
-            let r = store::bench_store(skills as usize, dir, keep)?;
+            let database = services::store::Database::from_url(database_url.as_deref())?;
+            let r = store::bench_store(skills as usize, dir, keep, &database)?;
             if json {
                 print_json(&r)
             } else {

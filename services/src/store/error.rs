@@ -41,6 +41,18 @@ pub enum StoreError {
         /// Newest migration version this binary knows.
         supported: i64,
     },
+    /// The PostgreSQL data base of `--database-url` could not be reached or refused the
+    /// connection (wrong address, server down, wrong password, no such data base).
+    #[error(
+        "cannot connect to the PostgreSQL data base {url}: {reason} (check --database-url or \
+         DATABASE_URL, and that the server runs and accepts this user)"
+    )]
+    Unreachable {
+        /// The data base URL, its password hidden.
+        url: String,
+        /// What failed.
+        reason: String,
+    },
     /// A pagination cursor that this store did not produce, or one from another sort order.
     #[error("malformed pagination cursor (pass back next_cursor unchanged, with the same sort)")]
     BadCursor,
@@ -99,6 +111,13 @@ impl StoreError {
     pub fn is_busy(&self) -> bool {
         match self {
             StoreError::Db(sqlx::Error::PoolTimedOut) => true,
+            // PostgreSQL: serialization failure, deadlock, lock not available.
+            StoreError::Db(sqlx::Error::Database(d))
+                if d.try_downcast_ref::<sqlx::postgres::PgDatabaseError>()
+                    .is_some() =>
+            {
+                matches!(d.code().as_deref(), Some("40001" | "40P01" | "55P03"))
+            }
             StoreError::Db(sqlx::Error::Database(d)) => d
                 .code()
                 .and_then(|c| c.parse::<i32>().ok())

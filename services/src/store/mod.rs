@@ -22,6 +22,7 @@ mod catalog;
 mod error;
 mod hands;
 mod knn;
+mod postgres;
 mod query;
 mod reprocess;
 mod rows;
@@ -34,6 +35,7 @@ use std::time::Duration;
 
 pub use blob::{StagedBlob, StagedWriter};
 pub use error::StoreError;
+pub use postgres::{is_postgres_url, redact_url, PG_CONNECT_TIMEOUT, PG_MAX_CONNECTIONS};
 pub use sqlite::{APPLICATION_ID, DB_FILE, MAX_CONNECTIONS, PAGE_CACHE_KIB};
 
 use crate::assist::features::TEMPLATE_DIM;
@@ -56,6 +58,49 @@ pub enum Durability {
     /// `synchronous=NORMAL`: fsync only at checkpoints; a power cut may roll back the last
     /// commits (never corrupts). For benchmarks and throwaway data bases.
     Normal,
+}
+
+/// Where a store keeps its rows (its blobs are files in the data directory either way).
+#[derive(Clone, Default, PartialEq, Eq)]
+pub enum Database {
+    /// The SQLite file `DIR/icms.sqlite3` in the data directory: the default, nothing to set
+    /// up.
+    #[default]
+    Sqlite,
+    /// A PostgreSQL data base, by its `postgres://` URL (`icms serve --database-url`).
+    Postgres(String),
+}
+
+impl Database {
+    /// The backend a `--database-url` (or `DATABASE_URL`) names: none or an empty one is the
+    /// data directory's SQLite file, a `postgres://` (or `postgresql://`) URL is PostgreSQL,
+    /// anything else is refused naming what is accepted.
+    pub fn from_url(url: Option<&str>) -> Result<Database, StoreError> {
+        match url.map(str::trim) {
+            None | Some("") => Ok(Database::Sqlite),
+            Some(u) if is_postgres_url(u) => Ok(Database::Postgres(u.to_owned())),
+            Some(u) => Err(StoreError::InvalidInput(format!(
+                "database URL {} is not a postgres:// URL: --database-url (or DATABASE_URL) \
+                 names a PostgreSQL data base; without it the store is the SQLite file in the \
+                 data directory",
+                redact_url(u)
+            ))),
+        }
+    }
+
+    /// What logs and messages show of it (a URL's password hidden).
+    pub fn describe(&self) -> String {
+        match self {
+            Database::Sqlite => format!("SQLite ({DB_FILE} in the data directory)"),
+            Database::Postgres(url) => format!("PostgreSQL at {}", redact_url(url)),
+        }
+    }
+}
+
+impl std::fmt::Debug for Database {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(&self.describe())
+    }
 }
 
 /// What [`Store::sweep_orphan_blobs`] did.
@@ -320,36 +365,69 @@ impl Store {
         write: bool,
     ) -> Result<Store, StoreError> {
         if create {
-            // create_dir_all on a file says only "File exists".
-            if tokio::fs::metadata(data_dir)
-                .await
-                .is_ok_and(|m| !m.is_dir())
-            {
-                return Err(StoreError::io(
-                    data_dir,
-                    std::io::Error::new(
-                        std::io::ErrorKind::NotADirectory,
-                        "it is a file, not a directory (the data directory holds the data base \
-                         and the session files)",
-                    ),
-                ));
-            }
-            tokio::fs::create_dir_all(data_dir)
-                .await
-                .map_err(|e| StoreError::io(data_dir, e))?;
+            Self::create_data_dir(data_dir).await?;
         }
         let db_path = sqlite::locate(data_dir, create).await?;
         let writer = if write {
-            let dir = data_dir.to_path_buf();
-            Some(
-                tokio::task::spawn_blocking(move || lock_for_writing(&dir))
-                    .await
-                    .map_err(|e| StoreError::io(data_dir, std::io::Error::other(e)))??,
-            )
+            Some(Self::take_writer_lock(data_dir).await?)
         } else {
             None
         };
         let catalog = sqlite::SqliteCatalog::open(&db_path, create, durability).await?;
+        Self::assemble(data_dir, Box::new(catalog), writer).await
+    }
+
+    /// Opens the store of `data_dir` with its rows in `database`: [`Store::open`] for
+    /// [`Database::Sqlite`]; for [`Database::Postgres`], the data directory (created if
+    /// missing) holds the blobs and its writer lock is taken as [`Store::open`] takes it,
+    /// and the data base is connected to (within [`PG_CONNECT_TIMEOUT`], else
+    /// [`StoreError::Unreachable`] naming it) and migrated.
+    pub async fn open_in(data_dir: &Path, database: &Database) -> Result<Store, StoreError> {
+        let url = match database {
+            Database::Sqlite => return Self::open(data_dir).await,
+            Database::Postgres(url) => url,
+        };
+        Self::create_data_dir(data_dir).await?;
+        let writer = Self::take_writer_lock(data_dir).await?;
+        let catalog = postgres::PgCatalog::connect(url, PG_CONNECT_TIMEOUT).await?;
+        Self::assemble(data_dir, Box::new(catalog), Some(writer)).await
+    }
+
+    /// Creates the data directory if missing, refusing a file in its place.
+    async fn create_data_dir(data_dir: &Path) -> Result<(), StoreError> {
+        // create_dir_all on a file says only "File exists".
+        if tokio::fs::metadata(data_dir)
+            .await
+            .is_ok_and(|m| !m.is_dir())
+        {
+            return Err(StoreError::io(
+                data_dir,
+                std::io::Error::new(
+                    std::io::ErrorKind::NotADirectory,
+                    "it is a file, not a directory (the data directory holds the data base \
+                     and the session files)",
+                ),
+            ));
+        }
+        tokio::fs::create_dir_all(data_dir)
+            .await
+            .map_err(|e| StoreError::io(data_dir, e))
+    }
+
+    async fn take_writer_lock(data_dir: &Path) -> Result<std::fs::File, StoreError> {
+        let dir = data_dir.to_path_buf();
+        tokio::task::spawn_blocking(move || lock_for_writing(&dir))
+            .await
+            .map_err(|e| StoreError::io(data_dir, std::io::Error::other(e)))?
+    }
+
+    /// The store around an opened catalog: leftover temporary blobs removed, the in-memory
+    /// indexes loaded.
+    async fn assemble(
+        data_dir: &Path,
+        catalog: Box<dyn Catalog>,
+        writer: Option<std::fs::File>,
+    ) -> Result<Store, StoreError> {
         let dir = data_dir.to_path_buf();
         let swept = tokio::task::spawn_blocking(move || blob::sweep_temp_files(&dir))
             .await
@@ -386,7 +464,7 @@ impl Store {
         Ok(Store {
             inner: Arc::new(Inner {
                 dir: data_dir.to_path_buf(),
-                catalog: Box::new(catalog),
+                catalog,
                 index: std::sync::RwLock::new(FeatureIndex::from_entries(entries)),
                 recognition: std::sync::RwLock::new(Arc::new(RecognitionIndex::new(templates))),
                 blob_lock: tokio::sync::RwLock::new(()),

@@ -1,7 +1,13 @@
-//! Helpers shared by the store tests: deterministic fake MCAP bytes, metadata and skills.
+//! Helpers shared by the store tests: deterministic fake MCAP bytes, metadata and skills, and
+//! the backends every behavioural test runs against ([`Backend`], [`backend_tests!`]).
 #![allow(dead_code)]
 
+use std::io::Write as _;
 use std::path::Path;
+
+use services::store::{Database, Store, StoreError, DB_FILE};
+use sha2::{Digest, Sha256};
+use sqlx::Connection as _;
 
 use dfs_core::replay::{ReplayParams, ReplayReport};
 use services::replay::{load_builtin_hand, replay_skill, skill_spec_from_json, ReplaySource};
@@ -80,4 +86,172 @@ pub fn unreachable_report() -> ReplayReport {
         None,
     )
     .unwrap()
+}
+
+/// The variable naming the PostgreSQL data base the store's tests also run against
+/// (`postgres://user:password@host:port/db`; scripts/test sets it, to the server
+/// scripts/test-postgres starts). Each test works in a schema of its own in that data base.
+pub const POSTGRES_URL_VAR: &str = "ICMS_TEST_POSTGRES_URL";
+
+/// A store backend a test runs against.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Backend {
+    /// The data directory's SQLite file.
+    Sqlite,
+    /// A schema of its own in the data base of [`POSTGRES_URL_VAR`].
+    Postgres,
+}
+
+impl Backend {
+    /// [`Backend::Postgres`] if [`POSTGRES_URL_VAR`] is set; otherwise `None`, after a line on
+    /// the test's standard error that says the test was skipped and why (written past the
+    /// harness's capture, so that it shows in every run).
+    pub fn postgres_or_skip(test: &str) -> Option<Backend> {
+        if std::env::var(POSTGRES_URL_VAR).is_ok_and(|v| !v.is_empty()) {
+            return Some(Backend::Postgres);
+        }
+        let _ = writeln!(
+            std::io::stderr(),
+            "SKIPPED {test} on PostgreSQL: {POSTGRES_URL_VAR} is not set (scripts/test sets it)"
+        );
+        None
+    }
+
+    /// The schema of the store of `dir`: named after the directory, so that reopening the
+    /// same directory finds the same rows, and tests in parallel never share one.
+    fn schema(dir: &Path) -> String {
+        let hash = Sha256::digest(dir.to_string_lossy().as_bytes());
+        format!("t_{}", hex::encode(&hash[..12]))
+    }
+
+    /// The URL of the test data base with `dir`'s schema as its search path.
+    fn url(dir: &Path) -> String {
+        let base = std::env::var(POSTGRES_URL_VAR).expect("ICMS_TEST_POSTGRES_URL is set");
+        let sep = if base.contains('?') { '&' } else { '?' };
+        format!(
+            "{base}{sep}options=-c%20search_path%3D{}",
+            Self::schema(dir)
+        )
+    }
+
+    /// Where the store of `dir` keeps its rows on this backend (its schema made if missing).
+    pub async fn database(self, dir: &Path) -> Database {
+        match self {
+            Backend::Sqlite => Database::Sqlite,
+            Backend::Postgres => {
+                let base = std::env::var(POSTGRES_URL_VAR).expect("ICMS_TEST_POSTGRES_URL is set");
+                let mut conn = sqlx::PgConnection::connect(&base)
+                    .await
+                    .unwrap_or_else(|e| panic!("{POSTGRES_URL_VAR}: cannot connect: {e}"));
+                sqlx::query(&format!(
+                    "CREATE SCHEMA IF NOT EXISTS {}",
+                    Self::schema(dir)
+                ))
+                .execute(&mut conn)
+                .await
+                .unwrap();
+                conn.close().await.unwrap();
+                Database::Postgres(Self::url(dir))
+            }
+        }
+    }
+
+    /// Opens (creating) the store of data directory `dir` on this backend.
+    pub async fn try_open(self, dir: &Path) -> Result<Store, StoreError> {
+        let database = self.database(dir).await;
+        Store::open_in(dir, &database).await
+    }
+
+    /// [`Backend::try_open`], which must succeed.
+    pub async fn open(self, dir: &Path) -> Store {
+        self.try_open(dir)
+            .await
+            .unwrap_or_else(|e| panic!("opening a store on {self:?} in {}: {e}", dir.display()))
+    }
+
+    /// Runs SQL on the store of `dir` behind its back, each statement with its one bound
+    /// integer if any (written `?`, as SQLite takes it; `$1` on PostgreSQL).
+    pub async fn sql(self, dir: &Path, statements: &[(&str, Option<i64>)]) {
+        match self {
+            Backend::Sqlite => {
+                let opts = sqlx::sqlite::SqliteConnectOptions::new()
+                    .filename(dir.join(DB_FILE))
+                    .foreign_keys(true);
+                let mut conn = sqlx::SqliteConnection::connect_with(&opts).await.unwrap();
+                for (q, bind) in statements {
+                    let mut q = sqlx::query(q);
+                    if let Some(b) = bind {
+                        q = q.bind(*b);
+                    }
+                    q.execute(&mut conn).await.unwrap();
+                }
+                conn.close().await.unwrap();
+            }
+            Backend::Postgres => {
+                let mut conn = sqlx::PgConnection::connect(&Self::url(dir)).await.unwrap();
+                for (q, bind) in statements {
+                    let text = q.replace('?', "$1");
+                    let mut q = sqlx::query(&text);
+                    if let Some(b) = bind {
+                        q = q.bind(*b);
+                    }
+                    q.execute(&mut conn).await.unwrap();
+                }
+                conn.close().await.unwrap();
+            }
+        }
+    }
+
+    /// The one integer `query` answers on the store of `dir`.
+    pub async fn count(self, dir: &Path, query: &str) -> i64 {
+        match self {
+            Backend::Sqlite => {
+                let opts = sqlx::sqlite::SqliteConnectOptions::new().filename(dir.join(DB_FILE));
+                let mut conn = sqlx::SqliteConnection::connect_with(&opts).await.unwrap();
+                let n = sqlx::query_scalar(query)
+                    .fetch_one(&mut conn)
+                    .await
+                    .unwrap();
+                conn.close().await.unwrap();
+                n
+            }
+            Backend::Postgres => {
+                let mut conn = sqlx::PgConnection::connect(&Self::url(dir)).await.unwrap();
+                let n = sqlx::query_scalar(query)
+                    .fetch_one(&mut conn)
+                    .await
+                    .unwrap();
+                conn.close().await.unwrap();
+                n
+            }
+        }
+    }
+}
+
+/// Test functions `async fn name(backend: Backend)` run as tests `sqlite::name` and
+/// `postgres::name` (the latter skipped, saying so, without [`POSTGRES_URL_VAR`]).
+#[macro_export]
+macro_rules! backend_tests {
+    ($($name:ident),* $(,)?) => {
+        mod sqlite {
+            $(
+                #[tokio::test(flavor = "multi_thread", worker_threads = 4)]
+                async fn $name() {
+                    super::$name(super::store_common::Backend::Sqlite).await
+                }
+            )*
+        }
+        mod postgres {
+            $(
+                #[tokio::test(flavor = "multi_thread", worker_threads = 4)]
+                async fn $name() {
+                    if let Some(b) =
+                        super::store_common::Backend::postgres_or_skip(stringify!($name))
+                    {
+                        super::$name(b).await
+                    }
+                }
+            )*
+        }
+    };
 }

@@ -10,7 +10,7 @@ use services::store::bench::{
     generate_synthetic, synthetic_blob, synthetic_skill, time_filtered_queries, time_nearest,
     SplitMix64, Timing,
 };
-use services::store::{NewSkill, SessionMeta, Store};
+use services::store::{Database, NewSkill, SessionMeta, Store};
 
 use crate::cli::CliError;
 
@@ -37,6 +37,8 @@ pub struct IngestFigure {
 /// Result of `icms bench store`.
 #[derive(Debug, Serialize)]
 pub struct StoreBench {
+    /// Where the rows were (`SQLite (...)` or `PostgreSQL at postgres://...`, password hidden).
+    pub database: String,
     /// Storing 50 sessions of 2 skills, for each blob size (the store's part of an ingest:
     /// blob written and synced, rows committed; no reading or segmentation).
     pub ingest: Vec<IngestFigure>,
@@ -54,11 +56,13 @@ pub struct StoreBench {
 }
 
 /// Runs the benchmark with `skills` synthetic skills in a temporary directory under `dir`
-/// (the system's temporary directory by default), kept afterwards when `keep`.
+/// (the system's temporary directory by default), kept afterwards when `keep`, with the rows
+/// in `database` (a PostgreSQL data base must be empty: the bench fills it).
 pub fn bench_store(
     skills: usize,
     dir: Option<PathBuf>,
     keep: bool,
+    database: &Database,
 ) -> Result<StoreBench, CliError> {
     let parent = dir.unwrap_or_else(std::env::temp_dir);
     let tmp = tempfile::tempdir_in(&parent).map_err(|e| {
@@ -73,7 +77,15 @@ pub fn bench_store(
         .build()
         .map_err(|e| CliError(format!("starting the async runtime: {e}")))?;
     let result = rt.block_on(async {
-        let store = Store::open(tmp.path()).await?;
+        let store = Store::open_in(tmp.path(), database).await?;
+        if store.skill_count() > 0 {
+            store.close().await;
+            return Err(CliError(format!(
+                "{} already holds {} skills: the bench needs an empty data base",
+                database.describe(),
+                store.skill_count()
+            )));
+        }
         let mut ingest = Vec::new();
         for (k, &(label, size)) in BLOB_SIZES.iter().enumerate() {
             let files: Vec<Vec<u8>> = (0..INGESTED_SESSIONS)
@@ -97,10 +109,11 @@ pub fn bench_store(
         let nearest = time_nearest(&store, NEAREST.0, NEAREST.1, 3)?;
         drop(store);
         let t = Instant::now();
-        let store = Store::open(tmp.path()).await?;
+        let store = Store::open_in(tmp.path(), database).await?;
         let reopen_seconds = t.elapsed().as_secs_f64();
         store.close().await;
         Ok::<_, CliError>(StoreBench {
+            database: database.describe(),
             ingest,
             skills: generated.skills,
             generate_seconds: generated.elapsed_s,
@@ -118,6 +131,7 @@ pub fn bench_store(
 
 /// Prints `r` for people.
 pub fn print(r: &StoreBench) {
+    println!("store: {}", r.database);
     for i in &r.ingest {
         println!(
             "store ingest: {INGESTED_SESSIONS} sessions of {} with 2 skills each: {:.0} sessions/s",
