@@ -105,11 +105,18 @@ pub enum Backend {
 impl Backend {
     /// [`Backend::Postgres`] if [`POSTGRES_URL_VAR`] is set; otherwise `None`, after a line on
     /// the test's standard error that says the test was skipped and why (written past the
-    /// harness's capture, so that it shows in every run).
+    /// harness's capture, so that it shows in every run). Panics instead under
+    /// `ICMS_REQUIRE_TOOLS` (scripts/test), so a run that should test PostgreSQL cannot pass
+    /// without it.
     pub fn postgres_or_skip(test: &str) -> Option<Backend> {
         if std::env::var(POSTGRES_URL_VAR).is_ok_and(|v| !v.is_empty()) {
             return Some(Backend::Postgres);
         }
+        // scripts/test sets both: there a missing server fails the test instead of skipping it.
+        assert!(
+            std::env::var_os("ICMS_REQUIRE_TOOLS").is_none_or(|v| v.is_empty()),
+            "{test} on PostgreSQL: {POSTGRES_URL_VAR} is not set but ICMS_REQUIRE_TOOLS is"
+        );
         let _ = writeln!(
             std::io::stderr(),
             "SKIPPED {test} on PostgreSQL: {POSTGRES_URL_VAR} is not set (scripts/test sets it)"
