@@ -6,7 +6,7 @@ use std::path::PathBuf;
 use std::time::Duration;
 
 use axum::http::HeaderValue;
-use services::store::{Database, StoreError};
+use services::store::{Blobs, Database, StoreError};
 
 use crate::http::server::{default_max_connections, ConnectionLimits};
 use crate::http::{LayerConfig, StateConfig};
@@ -26,7 +26,7 @@ pub struct ServeArgs {
     #[arg(long, default_value = "127.0.0.1:8080", value_parser = listen_address)]
     pub addr: SocketAddr,
     /// Data directory: SQLite database and MCAP blobs, created and migrated on first start.
-    /// With --database-url, it holds the MCAP blobs only.
+    /// With --database-url, it holds the MCAP blobs only; with --blobs, copies of them.
     #[arg(long, default_value = "icms-data")]
     pub data: PathBuf,
     /// PostgreSQL data base to keep the rows in instead of the data directory's SQLite file
@@ -34,6 +34,12 @@ pub struct ServeArgs {
     /// 5 s. Default: none, SQLite. See docs/backends.md.
     #[arg(long, env = "DATABASE_URL", hide_env_values = true, value_name = "URL")]
     pub database_url: Option<String>,
+    /// S3-compatible bucket to keep the session and replay files in instead of the data
+    /// directory (s3://bucket or s3://bucket/prefix). Endpoint and credentials come from
+    /// AWS_ENDPOINT_URL, AWS_REGION, AWS_ACCESS_KEY_ID and AWS_SECRET_ACCESS_KEY; the bucket must
+    /// answer within 10 s. Default: none, files in the data directory. See docs/backends.md.
+    #[arg(long, env = "ICMS_BLOBS", value_name = "URL")]
+    pub blobs: Option<String>,
     /// Bearer token that write requests (uploads, simulations, deletes) must send; reads stay
     /// open. Without one, writes are open too (allowed on a loopback address only).
     #[arg(long, env = "ICMS_TOKEN", hide_env_values = true)]
@@ -152,6 +158,7 @@ impl Default for ServeArgs {
             addr: SocketAddr::from(([127, 0, 0, 1], 8080)),
             data: PathBuf::from("icms-data"),
             database_url: None,
+            blobs: None,
             token: None,
             no_demo: false,
             max_body: DEFAULT_MAX_BODY,
@@ -182,6 +189,8 @@ pub struct ServeConfig {
     pub data: PathBuf,
     /// Where the rows are: the data directory's SQLite file or a PostgreSQL data base.
     pub database: Database,
+    /// Where the blobs are: the data directory or a bucket.
+    pub blobs: Blobs,
     /// Seed an empty data base with simulated sessions.
     pub demo: bool,
     /// Handler state settings (token, body limit, simulations, cache).
@@ -218,6 +227,9 @@ pub enum ConfigError {
     /// A --database-url (or DATABASE_URL) that names no backend this binary has.
     #[error("{0}")]
     DatabaseUrl(String),
+    /// A --blobs (or ICMS_BLOBS) that names no object store this binary has.
+    #[error("{0}")]
+    Blobs(String),
 }
 
 impl ServeArgs {
@@ -234,6 +246,10 @@ impl ServeArgs {
         let database = Database::from_url(self.database_url.as_deref()).map_err(|e| match e {
             StoreError::InvalidInput(m) => ConfigError::DatabaseUrl(m),
             other => ConfigError::DatabaseUrl(other.to_string()),
+        })?;
+        let blobs = Blobs::from_arg(self.blobs.as_deref()).map_err(|e| match e {
+            StoreError::InvalidInput(m) => ConfigError::Blobs(m),
+            other => ConfigError::Blobs(other.to_string()),
         })?;
         let request_timeout = seconds("--request-timeout", self.request_timeout)?;
         let queue_wait = seconds("--queue-wait", self.queue_wait)?;
@@ -268,6 +284,7 @@ impl ServeArgs {
             addr: self.addr,
             data: self.data,
             database,
+            blobs,
             demo: !self.no_demo,
             foxglove: self.foxglove,
             state: StateConfig {

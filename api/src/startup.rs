@@ -68,13 +68,14 @@ impl Application {
     /// Opens the store in `config.data` (creating and migrating it), builds the router and
     /// binds `config.addr` (port 0: a free port, see [`Application::local_addr`]).
     pub async fn build(config: ServeConfig) -> Result<Application, StartupError> {
-        let store = Store::open_in(&config.data, &config.database)
+        let store = Store::open_on(&config.data, &config.database, &config.blobs)
             .await
             .map_err(|source| StartupError::Store {
                 path: config.data.display().to_string(),
                 source,
             })?;
-        tracing::info!(database = %config.database.describe(), "store opened");
+        tracing::info!(database = %config.database.describe(), blobs = %config.blobs.describe(),
+            "store opened");
         let state = AppState::new(store, &config.state).map_err(|source| StartupError::Io {
             context: "starting the live stepping threads".into(),
             source,

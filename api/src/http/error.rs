@@ -188,6 +188,10 @@ impl From<StoreError> for Problem {
             | StoreError::HandNotFound(_)
             | StoreError::ReplayNotFound(_) => Problem::not_found(e.to_string()),
             StoreError::Conflict(_) => Problem::conflict(e.to_string()),
+            StoreError::ObjectStore { .. } => Problem::busy(
+                format!("{e}; nothing was stored or changed, try again"),
+                BUSY_RETRY_AFTER_S,
+            ),
             StoreError::Db(sqlx::Error::PoolClosed) => {
                 Problem::unavailable("the server is shutting down")
             }

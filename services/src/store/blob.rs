@@ -21,6 +21,22 @@ pub(crate) fn relative_path(sha256: &str) -> String {
     format!("blobs/sha256/{}/{}.mcap", &sha256[..2], &sha256[2..])
 }
 
+/// Whether `rel` is a blob's relative path as [`relative_path`] makes them
+/// (`blobs/sha256/ab/` and the other 62 hex digits, `.mcap`).
+pub(crate) fn is_blob_path(rel: &str) -> bool {
+    sha256_of(rel).is_some()
+}
+
+/// The SHA-256 a blob's relative path names, `None` if `rel` is not one.
+pub(crate) fn sha256_of(rel: &str) -> Option<String> {
+    let rest = rel.strip_prefix("blobs/sha256/")?;
+    let (shard, name) = rest.split_once('/')?;
+    let tail = name.strip_suffix(".mcap")?;
+    let hex = |s: &str| s.bytes().all(|b| matches!(b, b'0'..=b'9' | b'a'..=b'f'));
+    (shard.len() == 2 && tail.len() == 62 && hex(shard) && hex(tail))
+        .then(|| format!("{shard}{tail}"))
+}
+
 fn sync_dir(dir: &Path) -> Result<(), StoreError> {
     File::open(dir)
         .and_then(|d| d.sync_all())
@@ -352,6 +368,25 @@ pub(crate) fn blobs_older_than(data_dir: &Path, min_age: std::time::Duration) ->
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_blob_path_names_its_hash_and_nothing_else_is_one() {
+        let sha = sha256_hex(b"a session");
+        assert_eq!(
+            sha256_of(&relative_path(&sha)).as_deref(),
+            Some(sha.as_str())
+        );
+        for not_one in [
+            "blobs/sha256/staging/.upload.1.2.tmp",
+            "blobs/sha256/ab/cd.mcap",
+            "blobs/sha256/AB/cdef.mcap",
+            "other/blobs/sha256/ab/cdef.mcap",
+            &relative_path(&sha).replace(".mcap", ".tmp"),
+            &relative_path(&sha).replacen('/', "//", 1),
+        ] {
+            assert!(!is_blob_path(not_one), "{not_one}");
+        }
+    }
 
     #[test]
     fn a_staged_writer_on_another_thread_hashes_what_it_writes() {

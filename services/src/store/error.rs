@@ -53,6 +53,18 @@ pub enum StoreError {
         /// What failed.
         reason: String,
     },
+    /// The bucket of `--blobs` could not be reached, refused a request, or failed one (wrong
+    /// endpoint, no such bucket, wrong credentials, a server that does not answer).
+    #[error(
+        "the object store {bucket} failed: {reason} (check --blobs, AWS_ENDPOINT_URL and the \
+         credentials in AWS_ACCESS_KEY_ID / AWS_SECRET_ACCESS_KEY)"
+    )]
+    ObjectStore {
+        /// The bucket, its prefix and endpoint.
+        bucket: String,
+        /// What failed.
+        reason: String,
+    },
     /// A pagination cursor that this store did not produce, or one from another sort order.
     #[error("malformed pagination cursor (pass back next_cursor unchanged, with the same sort)")]
     BadCursor,

@@ -215,6 +215,7 @@ impl Store {
         })
         .await
         .map_err(|e| StoreError::Corrupt(format!("blob writer task failed: {e}")))??;
+        self.publish(&rel).await?;
         self.insert_replay_row(skill_id, hand, report, (sha256, size, rel), guard)
             .await
     }
@@ -235,6 +236,7 @@ impl Store {
         let rel = tokio::task::spawn_blocking(move || mcap.commit(&dir))
             .await
             .map_err(|e| StoreError::Corrupt(format!("blob writer task failed: {e}")))??;
+        self.publish(&rel).await?;
         self.insert_replay_row(skill_id, hand, report, (sha256, size, rel), guard)
             .await
     }
@@ -304,7 +306,7 @@ impl Store {
             .replay_blob_path(id)
             .await?
             .ok_or(StoreError::ReplayNotFound(id))?;
-        Ok(self.inner.dir.join(rel))
+        self.local_blob(&rel).await
     }
 
     /// Unlinks the blobs of `deleted` that no session or replay row names any more. Call with
@@ -318,7 +320,7 @@ impl Store {
             }
             match self.inner.catalog.blob_is_referenced(sha256).await {
                 Ok(false) => {
-                    if let Err(e) = blob::remove(&self.inner.dir, rel) {
+                    if let Err(e) = self.remove_blob(rel).await {
                         tracing::warn!(error = %e, "could not remove a deleted row's blob");
                     }
                 }

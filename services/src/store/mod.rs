@@ -24,6 +24,7 @@ mod hands;
 mod knn;
 mod postgres;
 mod query;
+mod remote;
 mod reprocess;
 mod rows;
 mod sqlite;
@@ -36,6 +37,7 @@ use std::time::Duration;
 pub use blob::{StagedBlob, StagedWriter};
 pub use error::StoreError;
 pub use postgres::{is_postgres_url, redact_url, PG_CONNECT_TIMEOUT, PG_MAX_CONNECTIONS};
+pub use remote::{Blobs, S3Bucket, BUCKET_CONNECT_TIMEOUT};
 pub use sqlite::{APPLICATION_ID, DB_FILE, MAX_CONNECTIONS, PAGE_CACHE_KIB};
 
 use crate::assist::features::TEMPLATE_DIM;
@@ -137,6 +139,9 @@ struct Inner {
     dir: PathBuf,
     /// The rows, in the data base backend the store was opened on.
     catalog: Box<dyn Catalog>,
+    /// The bucket the blobs live in (`--blobs s3://…`), the data directory then keeping
+    /// copies; `None`: the data directory's files are the blobs.
+    remote: Option<remote::RemoteBlobs>,
     index: std::sync::RwLock<FeatureIndex>,
     /// The skills as recognition sees them; a snapshot is shared by the live sessions that
     /// recognise (copied on the next change while one holds it).
@@ -364,6 +369,16 @@ impl Store {
         durability: Durability,
         write: bool,
     ) -> Result<Store, StoreError> {
+        Self::open_sqlite(data_dir, create, durability, write, None).await
+    }
+
+    async fn open_sqlite(
+        data_dir: &Path,
+        create: bool,
+        durability: Durability,
+        write: bool,
+        remote: Option<remote::RemoteBlobs>,
+    ) -> Result<Store, StoreError> {
         if create {
             Self::create_data_dir(data_dir).await?;
         }
@@ -374,7 +389,7 @@ impl Store {
             None
         };
         let catalog = sqlite::SqliteCatalog::open(&db_path, create, durability).await?;
-        Self::assemble(data_dir, Box::new(catalog), writer).await
+        Self::assemble(data_dir, Box::new(catalog), writer, remote).await
     }
 
     /// Opens the store of `data_dir` with its rows in `database`: [`Store::open`] for
@@ -383,14 +398,34 @@ impl Store {
     /// and the data base is connected to (within [`PG_CONNECT_TIMEOUT`], else
     /// [`StoreError::Unreachable`] naming it) and migrated.
     pub async fn open_in(data_dir: &Path, database: &Database) -> Result<Store, StoreError> {
+        Self::open_on(data_dir, database, &Blobs::Local).await
+    }
+
+    /// [`Store::open_in`] with the blobs in `blobs`: for [`Blobs::S3`], the bucket is
+    /// connected to first (configured from the environment, see [`Blobs`]) and must answer a
+    /// listing within [`BUCKET_CONNECT_TIMEOUT`], else [`StoreError::ObjectStore`] naming it;
+    /// the data directory then keeps copies of the blobs this process writes or reads.
+    pub async fn open_on(
+        data_dir: &Path,
+        database: &Database,
+        blobs: &Blobs,
+    ) -> Result<Store, StoreError> {
+        let remote = match blobs {
+            Blobs::Local => None,
+            Blobs::S3(bucket) => {
+                Some(remote::RemoteBlobs::connect(bucket, BUCKET_CONNECT_TIMEOUT).await?)
+            }
+        };
         let url = match database {
-            Database::Sqlite => return Self::open(data_dir).await,
+            Database::Sqlite => {
+                return Self::open_sqlite(data_dir, true, Durability::Full, true, remote).await
+            }
             Database::Postgres(url) => url,
         };
         Self::create_data_dir(data_dir).await?;
         let writer = Self::take_writer_lock(data_dir).await?;
         let catalog = postgres::PgCatalog::connect(url, PG_CONNECT_TIMEOUT).await?;
-        Self::assemble(data_dir, Box::new(catalog), Some(writer)).await
+        Self::assemble(data_dir, Box::new(catalog), Some(writer), remote).await
     }
 
     /// Creates the data directory if missing, refusing a file in its place.
@@ -427,6 +462,7 @@ impl Store {
         data_dir: &Path,
         catalog: Box<dyn Catalog>,
         writer: Option<std::fs::File>,
+        remote: Option<remote::RemoteBlobs>,
     ) -> Result<Store, StoreError> {
         let dir = data_dir.to_path_buf();
         let swept = tokio::task::spawn_blocking(move || blob::sweep_temp_files(&dir))
@@ -465,6 +501,7 @@ impl Store {
             inner: Arc::new(Inner {
                 dir: data_dir.to_path_buf(),
                 catalog,
+                remote,
                 index: std::sync::RwLock::new(FeatureIndex::from_entries(entries)),
                 recognition: std::sync::RwLock::new(Arc::new(RecognitionIndex::new(templates))),
                 blob_lock: tokio::sync::RwLock::new(()),
@@ -547,6 +584,7 @@ impl Store {
         let rel = tokio::task::spawn_blocking(move || blob::write_atomic(&dir, &sha, &bytes))
             .await
             .map_err(|e| StoreError::Corrupt(format!("blob writer task failed: {e}")))??;
+        self.publish(&rel).await?;
         self.insert_session(&sha256, size, &rel, meta, checked, duration_ns)
             .await
     }
@@ -576,6 +614,7 @@ impl Store {
         let rel = tokio::task::spawn_blocking(move || staged.commit(&dir))
             .await
             .map_err(|e| StoreError::Corrupt(format!("blob writer task failed: {e}")))??;
+        self.publish(&rel).await?;
         self.insert_session(&sha256, size, &rel, meta, checked, duration_ns)
             .await
     }
@@ -669,6 +708,7 @@ impl Store {
             let rel = tokio::task::spawn_blocking(move || blob::write_atomic(&dir, &sha, &bytes))
                 .await
                 .map_err(|e| StoreError::Corrupt(format!("blob writer task failed: {e}")))??;
+            self.publish(&rel).await?;
             let duration_ns = i64::try_from(meta.duration_ns).unwrap_or(i64::MAX);
             prepared.push((sha256, size, rel, meta, checked, duration_ns));
         }
@@ -746,7 +786,8 @@ impl Store {
             .ok_or(StoreError::SessionNotFound(id))
     }
 
-    /// Absolute path of a session's MCAP blob.
+    /// Absolute path of a session's MCAP blob (downloaded first from the bucket, if the store
+    /// has one and the data directory has no copy).
     pub async fn session_blob_path(&self, id: i64) -> Result<PathBuf, StoreError> {
         let BlobRef { rel, .. } = self
             .inner
@@ -754,7 +795,46 @@ impl Store {
             .session_blob(id)
             .await?
             .ok_or(StoreError::SessionNotFound(id))?;
-        Ok(self.inner.dir.join(rel))
+        self.local_blob(&rel).await
+    }
+
+    /// Uploads the blob at `rel`, just written to the data directory, to the store's bucket
+    /// (if it has one), before any row names it.
+    async fn publish(&self, rel: &str) -> Result<(), StoreError> {
+        match &self.inner.remote {
+            Some(remote) => remote.upload(&self.inner.dir.join(rel), rel).await,
+            None => Ok(()),
+        }
+    }
+
+    /// The path of the blob at `rel` in the data directory; with a bucket, a missing copy is
+    /// downloaded first (checked against the hash its path names).
+    pub(crate) async fn local_blob(&self, rel: &str) -> Result<PathBuf, StoreError> {
+        let path = self.inner.dir.join(rel);
+        let Some(remote) = &self.inner.remote else {
+            return Ok(path);
+        };
+        if tokio::fs::metadata(&path).await.is_ok_and(|m| m.is_file()) {
+            return Ok(path);
+        }
+        let sha256 = blob::sha256_of(rel)
+            .ok_or_else(|| StoreError::Corrupt(format!("{rel:?} is not a blob path")))?;
+        remote.download(rel, &sha256, &path).await?;
+        Ok(path)
+    }
+
+    /// Removes the blob at `rel`: its file, and its object if the store has a bucket. Call
+    /// once no row names it.
+    pub(crate) async fn remove_blob(&self, rel: &str) -> Result<(), StoreError> {
+        let dir = self.inner.dir.clone();
+        let owned = rel.to_owned();
+        tokio::task::spawn_blocking(move || blob::remove(&dir, &owned))
+            .await
+            .map_err(|e| StoreError::Corrupt(format!("blob removal task failed: {e}")))??;
+        match &self.inner.remote {
+            Some(remote) => remote.delete(rel).await,
+            None => Ok(()),
+        }
     }
 
     /// SQLite's `synchronous` setting on the store's connections (2 = `FULL`, 1 = `NORMAL`),
@@ -765,7 +845,7 @@ impl Store {
 
     /// Removes blob files that no session or replay references (a blob written by an ingest
     /// whose transaction then failed, a kill between a delete's commit and its file removal)
-    /// and that were last modified at least `min_age` ago.
+    /// and that were last modified at least `min_age` ago; with a bucket, its objects too.
     ///
     /// Safe beside ingests in this process: the files are listed first, then, holding the
     /// blob lock every ingest holds from its blob write to its commit, the referenced paths are
@@ -774,11 +854,25 @@ impl Store {
     /// another process on the same directory (`icms ingest --data` beside a server), which
     /// commit within seconds of their blob write: the server sweeps with
     /// [`ORPHAN_BLOB_MIN_AGE`].
+    ///
+    /// With a bucket shared by several servers, another server's ingest is not under this
+    /// lock: it uploads its blob again (renewing the object's modification time) before its
+    /// row commits, and each candidate's object is looked up again just before its removal,
+    /// so an object written since the listing, or within `min_age`, is left alone. What is
+    /// left is a window of one request: another server uploading the same bytes again, and
+    /// committing its row, between that look-up and the removal (docs/backends.md).
     pub async fn sweep_orphan_blobs(&self, min_age: Duration) -> Result<SweepReport, StoreError> {
         let dir = self.inner.dir.clone();
-        let listed = tokio::task::spawn_blocking(move || blob::blobs_older_than(&dir, min_age))
+        let mut listed = tokio::task::spawn_blocking(move || blob::blobs_older_than(&dir, min_age))
             .await
             .map_err(|e| StoreError::Corrupt(format!("blob listing task failed: {e}")))?;
+        if let Some(remote) = &self.inner.remote {
+            // A copy in the data directory and its object are one blob.
+            let local: std::collections::HashSet<String> =
+                listed.iter().map(|b| b.rel.clone()).collect();
+            let objects = remote.blobs_older_than(min_age).await?;
+            listed.extend(objects.into_iter().filter(|b| !local.contains(&b.rel)));
+        }
         let mut report = SweepReport {
             examined: listed.len(),
             ..SweepReport::default()
@@ -788,21 +882,26 @@ impl Store {
         }
         let _guard = self.inner.blob_lock.write().await;
         let referenced = self.inner.catalog.referenced_blob_paths().await?;
-        let orphans: Vec<blob::BlobFile> = listed
-            .into_iter()
-            .filter(|b| !referenced.contains(&b.rel))
-            .collect();
-        let dir = self.inner.dir.clone();
-        let removed = tokio::task::spawn_blocking(move || {
-            orphans
-                .into_iter()
-                .filter(|b| blob::remove(&dir, &b.rel).is_ok())
-                .collect::<Vec<_>>()
-        })
-        .await
-        .map_err(|e| StoreError::Corrupt(format!("blob sweeping task failed: {e}")))?;
-        report.removed = removed.len();
-        report.removed_bytes = removed.iter().map(|b| b.bytes).sum();
+        for orphan in listed.into_iter().filter(|b| !referenced.contains(&b.rel)) {
+            if let Some(remote) = &self.inner.remote {
+                let young = remote
+                    .modified(&orphan.rel)
+                    .await?
+                    .is_some_and(|t| t.elapsed().map_or(true, |age| age < min_age));
+                if young {
+                    continue;
+                }
+            }
+            match self.remove_blob(&orphan.rel).await {
+                Ok(()) => {
+                    report.removed += 1;
+                    report.removed_bytes += orphan.bytes;
+                }
+                Err(e) => {
+                    tracing::warn!(error = %e, blob = %orphan.rel, "could not remove an orphan blob")
+                }
+            }
+        }
         Ok(report)
     }
 

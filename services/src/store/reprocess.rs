@@ -120,7 +120,7 @@ impl Store {
             .session_blob(id)
             .await?
             .ok_or(StoreError::SessionNotFound(id))?;
-        let path = self.inner.dir.join(&rel);
+        let path = self.local_blob(&rel).await?;
         tokio::task::spawn_blocking(move || {
             let bytes = std::fs::read(&path).map_err(|e| StoreError::io(&path, e))?;
             let found = blob::sha256_hex(&bytes);
