@@ -235,6 +235,7 @@ fn export_glove_then_import_glove_finds_the_same_skills() {
     let (code, text, _) = icms(&["export-glove", p(&session), "--out", p(&csv)]);
     assert_eq!(code, 0);
     assert!(text.contains("import it with: icms import-glove"), "{text}");
+    assert!(!text.contains("--whole-hand"), "a fingertip grasp: {text}");
 
     let again = dir.path().join("again.mcap");
     let import = |extra: &[&str]| {
@@ -342,6 +343,64 @@ fn export_glove_then_import_glove_finds_the_same_skills() {
             assert!(help.contains(w), "{cmd} --help lacks {w}: {help}");
         }
     }
+}
+
+/// The grasp type of each skill in `icms segment --json` of `path`.
+fn skill_types(path: &Path) -> Vec<String> {
+    let (code, out, err) = icms(&["segment", p(path), "--json"]);
+    assert_eq!(code, 0, "{err}");
+    let v: Value = serde_json::from_str(&out).unwrap();
+    v["skills"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|s| {
+            let t = &s["grasp_type"];
+            format!(
+                "{}-{}vf",
+                t["label"].as_str().unwrap(),
+                t["opposing_virtual_fingers"]
+            )
+        })
+        .collect()
+}
+
+#[test]
+fn a_power_grasp_exported_says_to_import_it_with_the_whole_hand_and_that_gives_its_skill() {
+    let dir = tempfile::tempdir().unwrap();
+    let session = dir.path().join("power.mcap");
+    let (code, _, err) = icms(&[
+        "simulate",
+        "--scenario",
+        "cylinder-power-grasp",
+        "--out",
+        p(&session),
+    ]);
+    assert_eq!(code, 0, "{err}");
+    let types = skill_types(&session);
+    assert!(
+        types.iter().any(|t| t.starts_with("power")),
+        "the simulated wrap is a power grasp: {types:?}"
+    );
+    let csv = dir.path().join("power.csv");
+    let (code, text, err) = icms(&["export-glove", p(&session), "--out", p(&csv)]);
+    assert_eq!(code, 0, "{err}");
+    let hint = text
+        .lines()
+        .find_map(|l| l.strip_prefix("import it with: icms "))
+        .unwrap_or_else(|| panic!("no import hint: {text}"));
+    assert!(hint.ends_with(" --whole-hand"), "{hint}");
+    // The hint as a user would paste it: the object between its quotes, the rest words.
+    let (before, rest) = hint.split_once(" '").unwrap();
+    let (object, after) = rest.split_once('\'').unwrap();
+    let again = dir.path().join("again.mcap");
+    let mut args: Vec<&str> = before.split_whitespace().collect();
+    args.push(object);
+    args.extend(after.split_whitespace());
+    args.extend(["--out", p(&again)]);
+    let (code, _, err) = icms(&args);
+    assert_eq!(code, 0, "{args:?}: {err}");
+    assert_eq!(skill_types(&again), types);
 }
 
 #[test]

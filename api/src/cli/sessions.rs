@@ -167,6 +167,7 @@ pub fn run_export(a: ExportArgs) -> Result<(), CliError> {
                 .object_json
                 .as_deref()
                 .and_then(|o| serde_json::from_str::<serde_json::Value>(o).ok()),
+            "whole_hand": summary.whole_hand,
         }));
     }
     println!(
@@ -180,8 +181,13 @@ pub fn run_export(a: ExportArgs) -> Result<(), CliError> {
     );
     if let (Some(hand), Some(object)) = (&summary.hand, &summary.object_json) {
         println!(
-            "import it with: icms import-glove --input {} --hand {hand} --object '{object}'",
-            a.out.display()
+            "import it with: icms import-glove --input {} --hand {hand} --object '{object}'{}",
+            a.out.display(),
+            if summary.whole_hand {
+                " --whole-hand"
+            } else {
+                ""
+            }
         );
     }
     Ok(())

@@ -52,6 +52,9 @@ pub struct ExportSummary {
     pub hand: Option<String>,
     /// The session's object as JSON (`session` metadata `object`), if recorded.
     pub object_json: Option<String>,
+    /// Whether the session's DFS let the whole hand touch the object (`session` metadata
+    /// `contacts` = `whole_hand`): import it with `--whole-hand` to get the same skills.
+    pub whole_hand: bool,
 }
 
 /// The hand base's pose of a tick: `pose ∘ pose_in_hand⁻¹`.
@@ -219,6 +222,10 @@ pub fn export_glove_csv(session: &Path, out: &Path) -> Result<ExportSummary> {
                 .get("object")
                 .filter(|o| !o.trim().is_empty())
                 .cloned();
+            let whole_hand = head
+                .metadata
+                .get("contacts")
+                .is_some_and(|c| c == "whole_hand");
             // A comment (ignored by the importer) on what to import it with.
             let mut trailer = format!(
                 "# exported by icms export-glove from {}",
@@ -233,15 +240,18 @@ pub fn export_glove_csv(session: &Path, out: &Path) -> Result<ExportSummary> {
             if let Some(o) = &object_json {
                 let _ = write!(trailer, "; object {}", o.replace(['\n', '\r'], " "));
             }
+            if whole_hand {
+                let _ = write!(trailer, "; contacts whole_hand");
+            }
             trailer.push('\n');
             export
                 .out
                 .write_all(trailer.as_bytes())
                 .and_then(|()| export.out.flush())
                 .map_err(|e| export.io(e))?;
-            Ok((hand, object_json))
+            Ok((hand, object_json, whole_hand))
         });
-    let finished = result.and_then(|(hand, object_json)| {
+    let finished = result.and_then(|(hand, object_json, whole_hand)| {
         let file = export.out.into_inner().map_err(|e| {
             RecordingError::io(format!("writing {}", out.display()), e.into_error())
         })?;
@@ -259,6 +269,7 @@ pub fn export_glove_csv(session: &Path, out: &Path) -> Result<ExportSummary> {
             file_bytes,
             hand,
             object_json,
+            whole_hand,
         })
     });
     if finished.is_err() {

@@ -1670,6 +1670,17 @@ pub fn record_simulation_until<'a>(
                 "grasp_style".to_owned(),
                 dfs_core::names::Named::name(sim.style()).to_owned(),
             ),
+            // What touches the object, as imports and live sessions record it: a power
+            // grasp's session is exported for import with the whole hand.
+            (
+                "contacts".to_owned(),
+                if sim.dfs().params().whole_hand {
+                    "whole_hand"
+                } else {
+                    "fingertips"
+                }
+                .to_owned(),
+            ),
         ]),
         phases: sim
             .phases()
