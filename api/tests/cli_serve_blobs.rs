@@ -3,16 +3,16 @@
 //! data directory has no copy; the bucket down while serving is a 503 naming it that recovers
 //! when it is back; an unreachable bucket at start-up is an error naming it within seconds.
 
+mod common;
 #[path = "../../services/tests/s3_server/mod.rs"]
 mod s3_server;
 
-use std::io::{BufRead, BufReader, Read, Write};
-use std::net::TcpStream;
+use std::io::Read;
 use std::path::Path;
-use std::process::{Child, Command, Stdio};
-use std::sync::mpsc;
+use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
 
+use common::server::{unchunk, Running};
 use s3_server::{S3Server, BUCKET};
 
 const ICMS: &str = env!("CARGO_BIN_EXE_icms");
@@ -28,98 +28,6 @@ fn serve(data: &Path, blobs: &str, s3: &S3Server) -> Command {
         .stdout(Stdio::null())
         .stderr(Stdio::piped());
     cmd
-}
-
-/// A running server and its address, once it said it serves.
-struct Running {
-    child: Child,
-    addr: String,
-}
-
-impl Drop for Running {
-    fn drop(&mut self) {
-        let _ = self.child.kill();
-        let _ = self.child.wait();
-    }
-}
-
-impl Running {
-    fn start(mut cmd: Command) -> Running {
-        let mut child = cmd.spawn().unwrap();
-        let stderr = child.stderr.take().unwrap();
-        let (tx, rx) = mpsc::channel();
-        std::thread::spawn(move || {
-            for line in BufReader::new(stderr).lines().map_while(Result::ok) {
-                let addr = line
-                    .strip_prefix("icms: serving on http://")
-                    .map(|rest| rest.split('/').next().unwrap_or_default().to_owned());
-                let _ = tx.send(addr.ok_or(line));
-            }
-        });
-        let deadline = Instant::now() + Duration::from_secs(60);
-        let mut log = Vec::new();
-        while Instant::now() < deadline {
-            match rx.recv_timeout(Duration::from_millis(200)) {
-                Ok(Ok(addr)) => return Running { child, addr },
-                Ok(Err(line)) => log.push(line),
-                Err(mpsc::RecvTimeoutError::Timeout) => {}
-                Err(mpsc::RecvTimeoutError::Disconnected) => break,
-            }
-        }
-        let _ = child.kill();
-        let _ = child.wait();
-        panic!("icms serve did not start:\n{}", log.join("\n"));
-    }
-
-    /// `METHOD path` with a JSON body: the status code, the headers and the body.
-    fn request(&self, method: &str, path: &str, json: &str) -> (u16, String, Vec<u8>) {
-        let mut s = TcpStream::connect(&self.addr).unwrap();
-        s.set_read_timeout(Some(Duration::from_secs(120))).unwrap();
-        write!(
-            s,
-            "{method} {path} HTTP/1.1\r\nHost: {}\r\nConnection: close\r\n\
-             Content-Type: application/json\r\nContent-Length: {}\r\n\r\n{json}",
-            self.addr,
-            json.len()
-        )
-        .unwrap();
-        let mut reply = Vec::new();
-        s.read_to_end(&mut reply).unwrap();
-        let split = reply
-            .windows(4)
-            .position(|w| w == b"\r\n\r\n")
-            .expect("a response head");
-        let head = String::from_utf8_lossy(&reply[..split]).into_owned();
-        let status = head
-            .split(' ')
-            .nth(1)
-            .and_then(|c| c.parse().ok())
-            .unwrap_or(0);
-        (status, head, reply[split + 4..].to_vec())
-    }
-}
-
-/// The body of a chunked response, unchunked (the MCAP download streams).
-fn unchunk(head: &str, body: Vec<u8>) -> Vec<u8> {
-    if !head
-        .to_ascii_lowercase()
-        .contains("transfer-encoding: chunked")
-    {
-        return body;
-    }
-    let mut out = Vec::new();
-    let mut rest = &body[..];
-    loop {
-        let line_end = rest.windows(2).position(|w| w == b"\r\n").unwrap();
-        let size =
-            usize::from_str_radix(std::str::from_utf8(&rest[..line_end]).unwrap().trim(), 16)
-                .unwrap();
-        if size == 0 {
-            return out;
-        }
-        out.extend_from_slice(&rest[line_end + 2..line_end + 2 + size]);
-        rest = &rest[line_end + 2 + size + 2..];
-    }
 }
 
 fn sha256_hex(bytes: &[u8]) -> String {

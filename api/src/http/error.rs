@@ -195,6 +195,17 @@ impl From<StoreError> for Problem {
             StoreError::Db(sqlx::Error::PoolClosed) => {
                 Problem::unavailable("the server is shutting down")
             }
+            ref down if down.is_unreachable() => Problem::busy(
+                "the data base cannot be reached; nothing was stored or changed, try again",
+                BUSY_RETRY_AFTER_S,
+            ),
+            // Every pooled connection in use past the acquire timeout, or none could be made
+            // (sqlx does not say which).
+            StoreError::Db(sqlx::Error::PoolTimedOut) => Problem::busy(
+                "the data base did not answer in time: busy with other work, or unreachable; \
+                 nothing was stored or changed, try again",
+                BUSY_RETRY_AFTER_S,
+            ),
             ref busy if busy.is_busy() => Problem::busy(
                 "the data base is busy with other writes; nothing was stored, try again",
                 BUSY_RETRY_AFTER_S,

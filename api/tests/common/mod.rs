@@ -2,6 +2,8 @@
 
 #![allow(dead_code)] // each test file uses some of these
 
+pub mod server;
+
 use std::path::Path;
 use std::process::Command;
 

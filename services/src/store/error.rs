@@ -139,6 +139,25 @@ impl StoreError {
         }
     }
 
+    /// Whether the data base could not be reached: its connection broke or could not be made
+    /// (the server down, restarting or unreachable; PostgreSQL's connection-exception and
+    /// shutdown codes). Nothing was written by the call; the pool connects again by itself, so
+    /// the same call succeeds once the data base is back.
+    pub fn is_unreachable(&self) -> bool {
+        match self {
+            StoreError::Db(sqlx::Error::Io(_) | sqlx::Error::Tls(_)) => true,
+            StoreError::Db(sqlx::Error::Database(d))
+                if d.try_downcast_ref::<sqlx::postgres::PgDatabaseError>()
+                    .is_some() =>
+            {
+                d.code().is_some_and(|c| {
+                    c.starts_with("08") || matches!(c.as_ref(), "57P01" | "57P02" | "57P03")
+                })
+            }
+            _ => false,
+        }
+    }
+
     /// Wraps an I/O error with the path it happened on.
     pub(crate) fn io(path: impl Into<PathBuf>, source: std::io::Error) -> Self {
         StoreError::Io {
