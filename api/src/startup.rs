@@ -80,6 +80,9 @@ impl Application {
             context: "starting the live stepping threads".into(),
             source,
         })?;
+        // Skills changed through any server on the same data base leave the cache (a
+        // PostgreSQL store tells them; see SkillCache::follow).
+        state.cache().follow(state.store().skill_changes());
         clear_scratch(state.scratch_dir()).await;
         let foxglove = match config.foxglove {
             None => None,

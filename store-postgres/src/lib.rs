@@ -24,6 +24,11 @@ use rows::{
 /// `migrations/`, one for one).
 pub static MIGRATOR: Migrator = sqlx::migrate!("../migrations/postgres");
 
+/// The channel every change to `skills` is notified on (migrations/postgres/0006_skill_notify.sql:
+/// a trigger sends `{"schema": …, "op": "INSERT" | "UPDATE" | "DELETE" | "TRUNCATE", "ids":
+/// […]}` at the commit of each statement that changes skills, at most 300 ids a message).
+pub const SKILLS_CHANNEL: &str = "icms_skills";
+
 /// A query's result.
 pub type Result<T> = std::result::Result<T, sqlx::Error>;
 
@@ -284,6 +289,34 @@ pub async fn indexed_skills<'e>(e: impl PgExecutor<'e>) -> Result<Vec<IndexedSki
         "SELECT id, feature, object_shape, grasp_type, object_name, approach FROM skills"
     )
     .fetch_all(e)
+    .await
+}
+
+/// The skills of `ids` as the in-memory indexes need them (missing ids left out): what a
+/// server loads of the skills another server stored or changed.
+pub async fn indexed_skills_by_id<'e>(
+    e: impl PgExecutor<'e>,
+    ids: &[i64],
+) -> Result<Vec<IndexedSkillRow>> {
+    sqlx::query_as!(
+        IndexedSkillRow,
+        "SELECT id, feature, object_shape, grasp_type, object_name, approach FROM skills
+         WHERE id = ANY($1)",
+        ids
+    )
+    .fetch_all(e)
+    .await
+}
+
+/// The schema of the `skills` table the connection's search path finds: the one the change
+/// notifications of migrations/postgres/0006_skill_notify.sql name.
+pub async fn skills_schema<'e>(e: impl PgExecutor<'e>) -> Result<String> {
+    sqlx::query_scalar!(
+        r#"SELECT n.nspname::text AS "schema!" FROM pg_class c
+           JOIN pg_namespace n ON n.oid = c.relnamespace
+           WHERE c.oid = 'skills'::regclass"#
+    )
+    .fetch_one(e)
     .await
 }
 

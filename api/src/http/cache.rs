@@ -1,12 +1,14 @@
 //! A bounded cache of hot skills' JSON: `GET /skills/{id}` serialises a skill once and then
-//! answers from memory. Skills never change after ingest, only disappear, so deletes remove
-//! their entries; an epoch counter keeps a read that raced a delete from re-inserting what
-//! the delete just removed.
+//! answers from memory. Deletes remove their entries, and so do the changes the store tells of
+//! ([`services::store::Store::skill_changes`]: writes through any server on one PostgreSQL
+//! data base, or everything when notifications were lost); an epoch counter keeps a read that
+//! raced a removal from re-inserting what the removal just dropped.
 
 use std::collections::HashMap;
-use std::sync::RwLock;
+use std::sync::{Arc, RwLock};
 
 use bytes::Bytes;
+use services::store::SkillsChanged;
 
 /// Skill id → its JSON, at most `max_bytes` of JSON in all (arbitrary entries make room when
 /// full). Bounded in bytes rather than entries: a skill's JSON is 2-40 kB by its hand and
@@ -79,6 +81,34 @@ impl SkillCache {
         }
     }
 
+    /// Forgets every skill (anything may have changed: see [`SkillCache::follow`]).
+    pub fn clear(&self) {
+        let mut inner = self.inner.write().unwrap_or_else(|e| e.into_inner());
+        inner.epoch += 1;
+        inner.map.clear();
+        inner.bytes = 0;
+    }
+
+    /// Drops what `changes` tells of until their store is gone: the skills named, or
+    /// everything when the store reloaded or this fell behind. Spawned on the current
+    /// runtime; holds the cache, not the store.
+    pub fn follow(
+        self: &Arc<Self>,
+        mut changes: tokio::sync::broadcast::Receiver<SkillsChanged>,
+    ) -> tokio::task::JoinHandle<()> {
+        use tokio::sync::broadcast::error::RecvError;
+        let cache = Arc::clone(self);
+        tokio::spawn(async move {
+            loop {
+                match changes.recv().await {
+                    Ok(SkillsChanged::Skills(ids)) => cache.remove(&ids),
+                    Ok(SkillsChanged::All) | Err(RecvError::Lagged(_)) => cache.clear(),
+                    Err(RecvError::Closed) => return,
+                }
+            }
+        })
+    }
+
     /// Bytes of JSON cached.
     pub fn bytes(&self) -> usize {
         self.inner.read().unwrap_or_else(|e| e.into_inner()).bytes
@@ -115,6 +145,60 @@ mod tests {
         assert_eq!(c.get(1).unwrap(), Bytes::from_static(b"{}"));
         c.remove(&[1]);
         assert!(c.get(1).is_err(), "deleted skills leave the cache");
+    }
+
+    #[test]
+    fn clearing_forgets_everything_and_a_read_that_raced_it_stays_out() {
+        let c = SkillCache::new(1000);
+        for id in 0..3 {
+            c.insert(id, Bytes::from_static(b"{}"), c.get(id).unwrap_err());
+        }
+        let epoch = c.get(9).unwrap_err();
+        c.clear();
+        assert!(c.is_empty());
+        assert_eq!(c.bytes(), 0);
+        c.insert(9, Bytes::from_static(b"{}"), epoch);
+        assert!(c.get(9).is_err(), "the stale read stays out");
+    }
+
+    /// Waits (at most 5 s) until `ok`, letting the follower run.
+    async fn eventually(what: &str, ok: impl Fn() -> bool) {
+        let deadline = std::time::Instant::now() + std::time::Duration::from_secs(5);
+        while !ok() {
+            assert!(
+                std::time::Instant::now() < deadline,
+                "not within 5 s: {what}"
+            );
+            tokio::time::sleep(std::time::Duration::from_millis(1)).await;
+        }
+    }
+
+    #[tokio::test]
+    async fn following_drops_the_changed_skills_and_everything_on_a_reload_or_a_lag() {
+        let c = Arc::new(SkillCache::new(1000));
+        let fill = |ids: &[i64]| {
+            for &id in ids {
+                if let Err(epoch) = c.get(id) {
+                    c.insert(id, Bytes::from_static(b"{}"), epoch);
+                }
+            }
+        };
+        let (tx, rx) = tokio::sync::broadcast::channel(2);
+        let task = c.follow(rx);
+        fill(&[1, 2, 3]);
+        tx.send(SkillsChanged::Skills(vec![2].into())).unwrap();
+        eventually("skill 2 dropped", || c.get(2).is_err()).await;
+        assert!(c.get(1).is_ok() && c.get(3).is_ok(), "only skill 2 dropped");
+        tx.send(SkillsChanged::All).unwrap();
+        eventually("everything dropped on a reload", || c.is_empty()).await;
+        fill(&[1, 2, 3]);
+        // More changes than the channel keeps, before the follower runs: it lagged.
+        for id in [7, 8, 9] {
+            tx.send(SkillsChanged::Skills(vec![id].into())).unwrap();
+        }
+        eventually("everything dropped on a lag", || c.is_empty()).await;
+        drop(tx);
+        task.await.unwrap();
     }
 
     #[test]

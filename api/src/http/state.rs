@@ -31,7 +31,7 @@ struct Inner {
     ingests: Arc<Semaphore>,
     queue_wait: Duration,
     shutdown: CancellationToken,
-    cache: SkillCache,
+    cache: Arc<SkillCache>,
     scratch: PathBuf,
     openapi: OnceLock<Bytes>,
     live: LiveHub,
@@ -88,7 +88,7 @@ impl AppState {
                 ingests: Arc::new(Semaphore::new(config.max_ingests.max(1))),
                 queue_wait: config.queue_wait,
                 shutdown: CancellationToken::new(),
-                cache: SkillCache::new(config.cache_bytes),
+                cache: Arc::new(SkillCache::new(config.cache_bytes)),
                 scratch,
                 openapi: OnceLock::new(),
                 live,
@@ -209,7 +209,7 @@ impl AppState {
     }
 
     /// The hot-skill cache.
-    pub fn cache(&self) -> &SkillCache {
+    pub fn cache(&self) -> &Arc<SkillCache> {
         &self.inner.cache
     }
 

@@ -36,7 +36,9 @@ use std::time::Duration;
 
 pub use blob::{StagedBlob, StagedWriter};
 pub use error::StoreError;
-pub use postgres::{is_postgres_url, redact_url, PG_CONNECT_TIMEOUT, PG_MAX_CONNECTIONS};
+pub use postgres::{
+    is_postgres_url, redact_url, SkillsChanged, PG_CONNECT_TIMEOUT, PG_MAX_CONNECTIONS,
+};
 pub use remote::{Blobs, S3Bucket, BUCKET_CONNECT_TIMEOUT};
 pub use sqlite::{APPLICATION_ID, DB_FILE, MAX_CONNECTIONS, PAGE_CACHE_KIB};
 
@@ -151,6 +153,8 @@ struct Inner {
     /// The data directory's writer lock ([`WRITER_LOCK_FILE`]), held until [`Store::close`]
     /// or the last clone is dropped; `None` for a store opened to read only.
     writer: std::sync::Mutex<Option<std::fs::File>>,
+    /// Following other servers' writes (PostgreSQL) and telling [`Store::skill_changes`].
+    follow: postgres::follow::Follow,
 }
 
 /// The file in the data directory whose lock says a process writes it (`flock`, released by
@@ -397,6 +401,13 @@ impl Store {
     /// missing) holds the blobs and its writer lock is taken as [`Store::open`] takes it,
     /// and the data base is connected to (within [`PG_CONNECT_TIMEOUT`], else
     /// [`StoreError::Unreachable`] naming it) and migrated.
+    ///
+    /// A PostgreSQL store follows the writes made through every other server on the same
+    /// data base (`LISTEN/NOTIFY`): its k-nearest and recognition indexes take them in as
+    /// their notifications arrive, and [`Store::skill_changes`] tells whoever caches skills.
+    /// A lost listening connection is made again and both indexes reloaded, so staleness is
+    /// bounded by how long the data base is out of reach, plus one reload (details in
+    /// `postgres/follow.rs` and docs/backends.md).
     pub async fn open_in(data_dir: &Path, database: &Database) -> Result<Store, StoreError> {
         Self::open_on(data_dir, database, &Blobs::Local).await
     }
@@ -425,7 +436,11 @@ impl Store {
         Self::create_data_dir(data_dir).await?;
         let writer = Self::take_writer_lock(data_dir).await?;
         let catalog = postgres::PgCatalog::connect(url, PG_CONNECT_TIMEOUT).await?;
-        Self::assemble(data_dir, Box::new(catalog), Some(writer), remote).await
+        // Listening before the indexes load: no write committed after the load is missed.
+        let listener = postgres::follow::Listener::connect(&catalog, url).await?;
+        let store = Self::assemble(data_dir, Box::new(catalog), Some(writer), remote).await?;
+        listener.follow(&store);
+        Ok(store)
     }
 
     /// Creates the data directory if missing, refusing a file in its place.
@@ -506,6 +521,7 @@ impl Store {
                 recognition: std::sync::RwLock::new(Arc::new(RecognitionIndex::new(templates))),
                 blob_lock: tokio::sync::RwLock::new(()),
                 writer: std::sync::Mutex::new(writer),
+                follow: postgres::follow::Follow::new(),
             }),
         })
     }
@@ -538,6 +554,7 @@ impl Store {
     /// Closes the connection pool (waits for in-flight queries; later calls fail) and releases
     /// the data directory's writer lock.
     pub async fn close(&self) {
+        self.inner.follow.stop();
         self.inner.catalog.close().await;
         // The next writer may come in now, even while clones of this store live on.
         if let Ok(mut writer) = self.inner.writer.lock() {

@@ -9,10 +9,12 @@
 //! as the SQLite backend does. Behaviour is the SQLite backend's: the store's tests run
 //! against both (`services/tests/store_common`).
 //!
-//! Blobs stay files in the data directory; the in-memory indexes are loaded at start, so a
-//! second server on the same data base does not see the first's writes until it restarts
-//! (following writes through `LISTEN/NOTIFY` is the scale-out issue's next step).
+//! Blobs stay files in the data directory. The in-memory indexes are loaded at start and then
+//! follow the writes of every server on the same data base through `LISTEN/NOTIFY`
+//! ([`follow`]: a trigger on `skills` notifies, each store listens, and a lost connection is
+//! made again and answered with a reload).
 
+pub(crate) mod follow;
 mod skill_filter;
 
 use std::collections::HashSet;
@@ -35,6 +37,8 @@ use super::types::{
     Hand, HandSummary, IngestOutcome, Replay, SessionRecord, SkillRecord, StaleSession,
 };
 use super::StoreError;
+
+pub use follow::SkillsChanged;
 
 /// Connections the pool opens at most.
 pub const PG_MAX_CONNECTIONS: u32 = 16;
@@ -74,6 +78,13 @@ pub fn redact_url(url: &str) -> String {
 #[derive(Debug, Clone)]
 pub(crate) struct PgCatalog {
     pool: PgPool,
+}
+
+impl PgCatalog {
+    /// The connection pool.
+    pub(crate) fn pool(&self) -> &PgPool {
+        &self.pool
+    }
 }
 
 fn blob(r: BlobRow) -> BlobRef {

@@ -1,0 +1,346 @@
+//! Two `icms serve` on one PostgreSQL data base (each with its own data directory) answer the
+//! same (issue 24): a skill deleted through one is 404 through the other within seconds, though
+//! the other had it in its cache; and when the other's listening connection was lost while the
+//! delete happened, it drops its cache once it listens again.
+//!
+//! Skipped, saying so, without ICMS_TEST_POSTGRES_URL (failing instead under
+//! ICMS_REQUIRE_TOOLS), as cli_serve_database.rs.
+
+use std::io::{BufRead, BufReader, Read, Write};
+use std::net::{Shutdown, TcpListener, TcpStream};
+use std::path::Path;
+use std::process::{Child, Command, Stdio};
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::{mpsc, Arc};
+use std::time::{Duration, Instant};
+
+use services::store::bench::{synthetic_blob, synthetic_skill, SplitMix64};
+use services::store::{Database, SessionMeta, Store};
+use sqlx::Connection as _;
+
+const ICMS: &str = env!("CARGO_BIN_EXE_icms");
+
+/// How long a change through one server may take to show through the other.
+const DEADLINE: Duration = Duration::from_secs(5);
+
+/// The test data base's URL, or `None` (after saying so) to skip.
+fn postgres_or_skip(test: &str) -> Option<String> {
+    match std::env::var("ICMS_TEST_POSTGRES_URL") {
+        Ok(url) if !url.is_empty() => Some(url),
+        _ => {
+            // scripts/test sets both: there a missing server fails the test instead of
+            // skipping it.
+            assert!(
+                std::env::var_os("ICMS_REQUIRE_TOOLS").is_none_or(|v| v.is_empty()),
+                "ICMS_TEST_POSTGRES_URL is not set but ICMS_REQUIRE_TOOLS is"
+            );
+            let _ = writeln!(
+                std::io::stderr(),
+                "SKIPPED {test}: ICMS_TEST_POSTGRES_URL is not set (scripts/test sets it)"
+            );
+            None
+        }
+    }
+}
+
+fn runtime() -> tokio::runtime::Runtime {
+    tokio::runtime::Builder::new_multi_thread()
+        .worker_threads(2)
+        .enable_all()
+        .build()
+        .unwrap()
+}
+
+/// A fresh schema `schema` in the test data base at `base`; the URL that works in it.
+fn fresh_schema(rt: &tokio::runtime::Runtime, base: &str, schema: &str) -> String {
+    rt.block_on(async {
+        let mut conn = sqlx::PgConnection::connect(base).await.unwrap();
+        for q in [
+            format!("DROP SCHEMA IF EXISTS {schema} CASCADE"),
+            format!("CREATE SCHEMA {schema}"),
+        ] {
+            sqlx::query(&q).execute(&mut conn).await.unwrap();
+        }
+        conn.close().await.unwrap();
+    });
+    let sep = if base.contains('?') { '&' } else { '?' };
+    format!("{base}{sep}options=-c%20search_path%3D{schema}")
+}
+
+/// Stores a session of `n` synthetic skills in the data base at `url` (through a store of its
+/// own, in `dir`); their ids.
+fn store_skills(rt: &tokio::runtime::Runtime, dir: &Path, url: &str, n: usize) -> Vec<i64> {
+    rt.block_on(async {
+        let store = Store::open_in(dir, &Database::Postgres(url.to_owned()))
+            .await
+            .unwrap();
+        let mut rng = SplitMix64::new(7);
+        let skills = (0..n).map(|_| synthetic_skill(&mut rng)).collect();
+        let meta = SessionMeta {
+            scenario: Some("test".into()),
+            seed: Some(1),
+            hand: "glove10".into(),
+            object_shape: "sphere".parse().unwrap(),
+            object_mass: 0.5,
+            mu: 0.8,
+            duration_ns: 10_000_000_000,
+            started_at: None,
+            extra: serde_json::Value::Null,
+        };
+        let o = store
+            .ingest(&synthetic_blob(1, 600), meta, skills)
+            .await
+            .unwrap();
+        store.close().await;
+        o.skill_ids
+    })
+}
+
+/// A running `icms serve`: the child and its address, once it said it serves.
+struct Running {
+    child: Child,
+    addr: String,
+}
+
+impl Running {
+    fn start(data: &Path, url: &str) -> Running {
+        let mut child = Command::new(ICMS)
+            .args(["serve", "--no-demo", "--addr", "127.0.0.1:0", "--data"])
+            .arg(data)
+            .args(["--database-url", url])
+            .env_remove("DATABASE_URL")
+            .env_remove("ICMS_TOKEN")
+            .stdin(Stdio::null())
+            .stdout(Stdio::null())
+            .stderr(Stdio::piped())
+            .spawn()
+            .unwrap();
+        let stderr = child.stderr.take().unwrap();
+        let (tx, rx) = mpsc::channel();
+        std::thread::spawn(move || {
+            for line in BufReader::new(stderr).lines() {
+                let Ok(line) = line else { break };
+                if let Some(rest) = line.strip_prefix("icms: serving on http://") {
+                    let addr = rest.split('/').next().unwrap_or_default().to_owned();
+                    let _ = tx.send(Ok(addr));
+                } else {
+                    let _ = tx.send(Err(line));
+                }
+            }
+        });
+        let deadline = Instant::now() + Duration::from_secs(60);
+        let mut log = Vec::new();
+        while Instant::now() < deadline {
+            match rx.recv_timeout(Duration::from_millis(200)) {
+                Ok(Ok(addr)) => return Running { child, addr },
+                Ok(Err(line)) => log.push(line),
+                Err(mpsc::RecvTimeoutError::Timeout) => {}
+                Err(mpsc::RecvTimeoutError::Disconnected) => break,
+            }
+        }
+        let _ = child.kill();
+        let _ = child.wait();
+        panic!("icms serve did not start:\n{}", log.join("\n"));
+    }
+
+    /// `METHOD path`: the status code and the body.
+    fn call(&self, method: &str, path: &str) -> (u16, String) {
+        let mut s = TcpStream::connect(&self.addr).unwrap();
+        s.set_read_timeout(Some(Duration::from_secs(30))).unwrap();
+        write!(
+            s,
+            "{method} {path} HTTP/1.1\r\nHost: {}\r\nContent-Length: 0\r\nConnection: close\r\n\r\n",
+            self.addr
+        )
+        .unwrap();
+        let mut reply = String::new();
+        s.read_to_string(&mut reply).unwrap();
+        let status = reply
+            .split(' ')
+            .nth(1)
+            .and_then(|c| c.parse().ok())
+            .unwrap_or(0);
+        let body = reply
+            .split("\r\n\r\n")
+            .nth(1)
+            .unwrap_or_default()
+            .to_owned();
+        (status, body)
+    }
+
+    /// Waits until the server has taken in the insert of the skill at `path` (its k-nearest
+    /// index answers for it) and its cache has dropped what that insert names: a read cached
+    /// after this stays cached until the next change.
+    fn settle(&self, path: &str) {
+        self.eventually(
+            &format!("{path}/similar"),
+            200,
+            "the stored skill in the server's index",
+        );
+        // The cache follows a moment after the index (another task).
+        std::thread::sleep(Duration::from_millis(200));
+    }
+
+    /// Asks `GET path` until it answers `status`, at most [`DEADLINE`].
+    fn eventually(&self, path: &str, status: u16, what: &str) {
+        let start = Instant::now();
+        loop {
+            let (got, body) = self.call("GET", path);
+            if got == status {
+                return;
+            }
+            assert!(
+                start.elapsed() < DEADLINE,
+                "not within {DEADLINE:?}: {what} (GET {path} answers {got}: {body})"
+            );
+            std::thread::sleep(Duration::from_millis(20));
+        }
+    }
+}
+
+impl Drop for Running {
+    fn drop(&mut self) {
+        let _ = self.child.kill();
+        let _ = self.child.wait();
+    }
+}
+
+#[test]
+fn a_skill_deleted_through_one_server_is_gone_from_the_others_cache() {
+    let Some(base) =
+        postgres_or_skip("a_skill_deleted_through_one_server_is_gone_from_the_others_cache")
+    else {
+        return;
+    };
+    let tmp = tempfile::tempdir().unwrap();
+    let rt = runtime();
+    let url = fresh_schema(&rt, &base, &format!("api_follow_{}", std::process::id()));
+    let a = Running::start(&tmp.path().join("a"), &url);
+    let b = Running::start(&tmp.path().join("b"), &url);
+    let ids = store_skills(&rt, &tmp.path().join("c"), &url, 2);
+    let path = format!("/api/v1/skills/{}", ids[0]);
+    for server in [&a, &b] {
+        server.settle(&path);
+    }
+    // Read through both: each caches it.
+    for server in [&a, &b] {
+        let (status, body) = server.call("GET", &path);
+        assert_eq!(status, 200, "{body}");
+    }
+    let (status, body) = a.call("DELETE", &path);
+    assert_eq!(status, 204, "{body}");
+    assert_eq!(a.call("GET", &path).0, 404);
+    b.eventually(&path, 404, "the skill deleted through A is gone through B");
+    // The other skill is untouched.
+    assert_eq!(b.call("GET", &format!("/api/v1/skills/{}", ids[1])).0, 200);
+}
+
+/// A TCP relay to the test data base whose new connections can be held back: what cuts a
+/// server off from PostgreSQL for as long as the test says.
+struct Relay {
+    addr: std::net::SocketAddr,
+    held: Arc<AtomicBool>,
+}
+
+impl Relay {
+    fn to(upstream: String) -> Relay {
+        let listener = TcpListener::bind("127.0.0.1:0").unwrap();
+        let addr = listener.local_addr().unwrap();
+        let held = Arc::new(AtomicBool::new(false));
+        let hold = Arc::clone(&held);
+        std::thread::spawn(move || {
+            for client in listener.incoming() {
+                let Ok(client) = client else { continue };
+                let hold = Arc::clone(&hold);
+                let upstream = upstream.clone();
+                std::thread::spawn(move || {
+                    while hold.load(Ordering::SeqCst) {
+                        std::thread::sleep(Duration::from_millis(5));
+                    }
+                    if let Ok(server) = TcpStream::connect(&upstream) {
+                        pipe(client, server);
+                    }
+                });
+            }
+        });
+        Relay { addr, held }
+    }
+}
+
+/// Copies both ways between `a` and `b` until either side ends.
+fn pipe(a: TcpStream, b: TcpStream) {
+    let copy = |mut from: TcpStream, mut to: TcpStream| {
+        move || {
+            let mut buf = [0u8; 16 * 1024];
+            while let Ok(n @ 1..) = from.read(&mut buf) {
+                if to.write_all(&buf[..n]).is_err() {
+                    break;
+                }
+            }
+            let _ = to.shutdown(Shutdown::Both);
+            let _ = from.shutdown(Shutdown::Both);
+        }
+    };
+    let (a2, b2) = (a.try_clone().unwrap(), b.try_clone().unwrap());
+    std::thread::spawn(copy(a, b));
+    std::thread::spawn(copy(b2, a2));
+}
+
+#[test]
+fn a_server_whose_listening_connection_was_lost_drops_its_cache_when_it_listens_again() {
+    let Some(base) = postgres_or_skip(
+        "a_server_whose_listening_connection_was_lost_drops_its_cache_when_it_listens_again",
+    ) else {
+        return;
+    };
+    let tmp = tempfile::tempdir().unwrap();
+    let rt = runtime();
+    let url = fresh_schema(
+        &rt,
+        &base,
+        &format!("api_follow_lost_{}", std::process::id()),
+    );
+    // B reaches PostgreSQL through the relay; A directly.
+    let host_start = url.find('@').unwrap() + 1;
+    let host_end = host_start + url[host_start..].find('/').unwrap();
+    let relay = Relay::to(url[host_start..host_end].to_owned());
+    let relay_url = format!("{}{}{}", &url[..host_start], relay.addr, &url[host_end..]);
+    let a = Running::start(&tmp.path().join("a"), &url);
+    let b = Running::start(&tmp.path().join("b"), &relay_url);
+    let ids = store_skills(&rt, &tmp.path().join("c"), &url, 2);
+    let path = format!("/api/v1/skills/{}", ids[0]);
+    b.settle(&path);
+    let (status, body) = b.call("GET", &path);
+    assert_eq!(status, 200, "{body}");
+
+    // B's listening connection ends, and cannot come back while A deletes.
+    let name = format!("icms-follow {} #0", b.child.id());
+    relay.held.store(true, Ordering::SeqCst);
+    let ended: Vec<bool> = rt.block_on(async {
+        let mut conn = sqlx::PgConnection::connect(&url).await.unwrap();
+        let ended = sqlx::query_scalar(
+            "SELECT pg_terminate_backend(pid, 5000) FROM pg_stat_activity \
+             WHERE application_name = $1",
+        )
+        .bind(&name)
+        .fetch_all(&mut conn)
+        .await
+        .unwrap();
+        conn.close().await.unwrap();
+        ended
+    });
+    assert_eq!(ended, [true], "B's listening connection {name:?}");
+    let (status, body) = a.call("DELETE", &path);
+    assert_eq!(status, 204, "{body}");
+    std::thread::sleep(Duration::from_millis(300));
+    assert_eq!(
+        b.call("GET", &path).0,
+        200,
+        "B dropped the skill while cut off: the test does not test the reconnection"
+    );
+
+    // Back: B listens again, reloads, and drops its cache.
+    relay.held.store(false, Ordering::SeqCst);
+    b.eventually(&path, 404, "B drops its cache once it listens again");
+    assert_eq!(b.call("GET", &format!("/api/v1/skills/{}", ids[1])).0, 200);
+}
