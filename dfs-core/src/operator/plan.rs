@@ -172,54 +172,231 @@ pub fn plan_grasp(
     // Within capacity, with room for the free base the search adds.
     hand.validate()?;
     let style = resolve_style(style, object);
+    let (thumb, fingers) = grasp_tips(hand, style)?;
+    let n_hand = hand.dof();
+    let posture = StartPosture::new(hand, style);
+    let mut kin = Kinematics::default();
+    let best = best_candidate(
+        hand, object, pose, style, thumb, &fingers, &posture, &mut kin,
+    )?;
+    let q = best.q;
+    let base = Isometry::from_parts(Vector::new(q[0], q[1], q[2]).into(), best.rotation);
+    let mut q_grasp = [0.0; MAX_DOF];
+    q_grasp[..n_hand].copy_from_slice(&q[3..n_hand + 3]);
+    let mut tips = [false; MAX_TIPS];
+    for &f in fingers.iter().chain(std::iter::once(&thumb)) {
+        tips[f] = true;
+    }
+    let opening = Opening {
+        hand,
+        object,
+        inv_obj: pose.inverse(),
+        base_pose: base,
+        q_grasp,
+        posture: &posture,
+    };
+    let (fallback_pre, q_open) = (
+        opening.opened(0.015, &mut kin),
+        opening.opened(0.03, &mut kin),
+    );
+    let q_pre = preshape(hand, object, pose, &opening, &tips, &mut kin).unwrap_or(fallback_pre);
+    let mut contacts_b = [Vector::zeros(); MAX_TIPS];
+    let mut normals_b = [Vector::zeros(); MAX_TIPS];
+    let mut normal_alignment = [0.0; MAX_TIPS];
+    hand.forward_kinematics(&base, &q_grasp[..n_hand], &mut kin);
+    hand.tip_jacobians(&mut kin);
+    let inv_obj = pose.inverse();
+    for (k, _) in tips.iter().enumerate().filter(|(_, &t)| t) {
+        let c_b = (inv_obj * kin.tip_centres[k]).coords;
+        let (_, _, n_out) = object.shape.closest(&c_b);
+        contacts_b[k] = c_b;
+        normals_b[k] = n_out;
+        normal_alignment[k] = push_alignment(hand, &kin, k, &-(pose.rotation * n_out));
+    }
+    Ok(GraspPlan {
+        base,
+        q_grasp,
+        q_pre,
+        q_open,
+        tips,
+        ik_error: best.ik_error,
+        style,
+        contacts_b,
+        normals_b,
+        normal_alignment,
+        wrap: None,
+    })
+}
+
+/// The fingertips a grasp of `style` targets: the thumb, and the index (a pinch) or the index
+/// and middle (otherwise: ring and little follow the middle finger on glove10's coupled DOFs,
+/// so only the independent fingers are targeted and the others close until they touch).
+fn grasp_tips(hand: &HandModel, style: GraspStyle) -> Result<(usize, Vec<usize>)> {
     let thumb = tip_index(hand, "thumb").ok_or_else(|| {
         DfsError::invalid("hand", "the operator needs a fingertip named \"thumb\"")
     })?;
-    let fingers: Vec<usize> = match style {
-        GraspStyle::Pinch => ["index"]
-            .iter()
-            .filter_map(|n| tip_index(hand, n))
-            .collect(),
-        // Ring and little follow the middle finger on glove10's coupled DOFs: target only the
-        // independent fingers and let the others close until they touch.
-        _ => ["index", "middle"]
-            .iter()
-            .filter_map(|n| tip_index(hand, n))
-            .collect(),
+    let names: &[&str] = match style {
+        GraspStyle::Pinch => &["index"],
+        _ => &["index", "middle"],
     };
+    let fingers: Vec<usize> = names.iter().filter_map(|n| tip_index(hand, n)).collect();
     if fingers.is_empty() {
         return Err(DfsError::invalid(
             "hand",
             "the operator needs an \"index\" fingertip",
         ));
     }
-    let obj_yaw = pose.rotation.euler_angles().2;
-    let centre = pose.translation.vector;
-    let n_hand = hand.dof();
-    let wrist: Vec<usize> = (0..n_hand)
-        .filter(|&d| hand.dof_names[d].starts_with("wrist"))
-        .collect();
-    // The fingers not used curl into the palm and stay there.
-    let mut frozen: Vec<usize> = Vec::new();
-    let mut q_hand0 = [0.0; MAX_DOF];
-    for d in 0..n_hand {
-        if !wrist.contains(&d) {
-            // Start from bent fingers: a stretched finger cannot push along its length.
-            let (lo, hi) = hand.sweep_range(d);
-            q_hand0[d] = lo + 0.6 * (hi - lo);
-        }
-    }
-    if style == GraspStyle::Pinch {
-        for (d, name) in hand.dof_names.iter().enumerate() {
-            if ["middle", "ring", "little"]
-                .iter()
-                .any(|f| name.starts_with(f))
-            {
-                q_hand0[d] = hand.dof_lower[d].max(0.0);
-                frozen.push(d);
+    Ok((thumb, fingers))
+}
+
+/// The hand's posture the search starts from, and the DOFs it leaves alone.
+struct StartPosture {
+    /// Bent fingers (a stretched finger cannot push along its length); a pinch's unused
+    /// fingers curled into the palm.
+    q: [Real; MAX_DOF],
+    /// The wrist's DOFs.
+    wrist: Vec<usize>,
+    /// The DOFs of the fingers a pinch does not use: they stay curled.
+    frozen: Vec<usize>,
+}
+
+impl StartPosture {
+    fn new(hand: &HandModel, style: GraspStyle) -> StartPosture {
+        let n_hand = hand.dof();
+        let wrist: Vec<usize> = (0..n_hand)
+            .filter(|&d| hand.dof_names[d].starts_with("wrist"))
+            .collect();
+        let mut frozen: Vec<usize> = Vec::new();
+        let mut q = [0.0; MAX_DOF];
+        for d in 0..n_hand {
+            if !wrist.contains(&d) {
+                let (lo, hi) = hand.sweep_range(d);
+                q[d] = lo + 0.6 * (hi - lo);
             }
         }
+        if style == GraspStyle::Pinch {
+            for (d, name) in hand.dof_names.iter().enumerate() {
+                if ["middle", "ring", "little"]
+                    .iter()
+                    .any(|f| name.starts_with(f))
+                {
+                    q[d] = hand.dof_lower[d].max(0.0);
+                    frozen.push(d);
+                }
+            }
+        }
+        StartPosture { q, wrist, frozen }
     }
+}
+
+/// The best grasp the search found: the free-base hand's configuration (base position, then
+/// the hand's DOFs) and the hand's orientation.
+struct Candidate {
+    score: Real,
+    ik_error: Real,
+    q: [Real; MAX_DOF],
+    rotation: Rotation,
+}
+
+/// What the fingertip targets of every candidate of one search share.
+struct TargetSearch<'a> {
+    hand: &'a HandModel,
+    object: &'a RigidObject,
+    /// The object's centre (world).
+    centre: Vector,
+    power: bool,
+    /// [`flexion_offsets`] (power grasps; zeros otherwise).
+    lateral: &'a [Real; MAX_TIPS],
+    thumb: usize,
+    fingers: &'a [usize],
+}
+
+/// Where one candidate puts the fingertips.
+struct Placement {
+    /// The grasp axis (horizontal, world) and the horizontal across it.
+    a: Vector,
+    side: Vector,
+    /// Height above the centre.
+    h: Real,
+    /// The object's half width along the axis.
+    half: Real,
+    /// Which way the fingers' and the thumb's distal joint axes point.
+    sign: Real,
+    thumb_sign: Real,
+    /// The fingers' spread across the axis (pinch with two fingers).
+    spread: Real,
+}
+
+impl TargetSearch<'_> {
+    /// The IK targets: each real fingertip on the surface (the thumb on the near side of the
+    /// axis, the fingers on the far side), then each one's virtual tip 2 cm across (`n_real`
+    /// and on), as [`planning_model`] numbers them.
+    fn targets(&self, p: &Placement, n_real: usize) -> Vec<(usize, Point)> {
+        let (hand, object, power, centre) = (self.hand, self.object, self.power, self.centre);
+        let Placement {
+            a,
+            side,
+            h,
+            half,
+            sign,
+            thumb_sign,
+            spread,
+        } = *p;
+        let (thumb, lateral) = (self.thumb, self.lateral);
+        let across = |y: Real| match object.shape {
+            Shape::Sphere { radius } => (radius * radius - h * h - y * y).max(0.0).sqrt(),
+            Shape::Cylinder { radius, .. } => (radius * radius - y * y).max(0.0).sqrt(),
+            Shape::Box { .. } => half,
+        };
+        // Where fingertip `k` of radius `r` meets the surface at `y` across the grasp
+        // axis, along the axis from the centre: a power grasp puts the fingertip's
+        // centre on the cylinder's surface grown by its radius, off the axis line too.
+        let reach = |y: Real, r: Real| match object.shape {
+            Shape::Cylinder { radius, .. } if power => {
+                ((radius + r) * (radius + r) - y * y).max(0.0).sqrt()
+            }
+            _ => across(y) + r,
+        };
+        let mut targets: Vec<(usize, Point)> = Vec::new();
+        let up = Vector::z() * h;
+        let thumb_y = sign * lateral[thumb];
+        let thumb_p =
+            centre - a * reach(thumb_y, hand.fingertips[thumb].radius) + side * thumb_y + up;
+        targets.push((0, Point::from(thumb_p)));
+        targets.push((n_real, Point::from(thumb_p + side * (0.02 * thumb_sign))));
+        for (i, &f) in self.fingers.iter().enumerate() {
+            // Pinch: the fingertip opposite the thumb. Power: each fingertip in its
+            // own flexion plane.
+            let y = if power {
+                sign * lateral[f]
+            } else {
+                (spread * (0.5 - i as Real)).clamp(-0.7 * half, 0.7 * half)
+            };
+            let r = hand.fingertips[f].radius;
+            let p = centre + a * reach(y, r) + side * y + up;
+            targets.push((1 + i, Point::from(p)));
+            targets.push((n_real + 1 + i, Point::from(p + side * (0.02 * sign))));
+        }
+        targets
+    }
+}
+
+/// Searches grasp axes × hand orientations (yaw of the palm about the vertical) × heights ×
+/// sides for the grasp whose fingertips reach their spots and push best along their normals
+/// and the vertical; an error naming how far the fingertips stayed if none reaches.
+#[allow(clippy::too_many_arguments)]
+fn best_candidate(
+    hand: &HandModel,
+    object: &RigidObject,
+    pose: &Isometry,
+    style: GraspStyle,
+    thumb: usize,
+    fingers: &[usize],
+    posture: &StartPosture,
+    kin: &mut Kinematics,
+) -> Result<Candidate> {
+    let obj_yaw = pose.rotation.euler_angles().2;
+    let centre = pose.translation.vector;
     // Grasp axes (object frame, horizontal) and the half width of the object along them.
     let axes: &[(Real, Real)] = match object.shape {
         Shape::Box { half_extents } => &[
@@ -236,31 +413,13 @@ pub fn plan_grasp(
         Shape::Box { half_extents } => &[0.4 * half_extents[2], 0.25 * half_extents[2]][..],
         Shape::Cylinder { half_height, .. } => &[0.3 * half_height, 0.0][..],
     };
-    let mut kin = Kinematics::default();
-    // Power: where each fingertip's flexion plane lies across the hand (m, along the index's
-    // distal joint axis in the hand's base frame at the start posture), relative to the middle
-    // between the thumb's and the index's planes.
     let power = style == GraspStyle::Power;
-    let mut lateral = [0.0; MAX_TIPS];
-    if power {
-        hand.forward_kinematics(&Isometry::identity(), &q_hand0[..n_hand], &mut kin);
-        let index = fingers[0];
-        let axis = hand
-            .joints
-            .iter()
-            .find(|j| j.child == hand.fingertips[index].link)
-            .map(|j| kin.link_poses[j.child].rotation * j.axis.into_inner())
-            .unwrap_or(Vector::y());
-        for &k in std::iter::once(&thumb).chain(&fingers) {
-            lateral[k] = kin.tip_centres[k].coords.dot(&axis);
-        }
-        let mid = 0.5 * (lateral[thumb] + lateral[index]);
-        for v in lateral.iter_mut() {
-            *v -= mid;
-        }
-    }
-    // Best candidate: (score, ik error, q, rotation, axis, height).
-    let mut best: Option<(Real, Real, [Real; MAX_DOF], Rotation, Vector, Real)> = None;
+    let lateral = if power {
+        flexion_offsets(hand, posture, thumb, fingers, kin)
+    } else {
+        [0.0; MAX_TIPS]
+    };
+    let mut best: Option<Candidate> = None;
     let mut best_err = Real::INFINITY;
     // Try grasp axes × hand orientations (yaw of the palm about the vertical) × heights.
     let spreads: &[Real] = if fingers.len() > 1 && !power {
@@ -272,33 +431,7 @@ pub fn plan_grasp(
         for (k, &spread) in (0..12).flat_map(|k| spreads.iter().map(move |s| (k, s))) {
             let psi = k as Real * std::f64::consts::PI / 6.0;
             let rot = Rotation::from_euler_angles(0.0, 0.0, obj_yaw + axis_angle + psi);
-            // The planning model: the hand on a free base, its fingertips reduced to the ones
-            // the grasp uses plus, per finger, a virtual tip 2 cm along the distal joint's axis.
-            // Targeting that virtual tip beside the real one turns the finger's flexion plane
-            // to contain the grasp axis: a planar finger pushes only within that plane.
-            let mut free = with_free_base(hand, rot);
-            let real: Vec<usize> = std::iter::once(thumb)
-                .chain(fingers.iter().copied())
-                .collect();
-            let mut tips_free: Vec<crate::hand::Fingertip> =
-                real.iter().map(|&k| free.fingertips[k].clone()).collect();
-            for &f in &real {
-                let tip = &hand.fingertips[f];
-                let axis = hand
-                    .joints
-                    .iter()
-                    .find(|j| j.child == tip.link)
-                    .map(|j| j.axis.into_inner())
-                    .unwrap_or(Vector::y());
-                tips_free.push(crate::hand::Fingertip {
-                    name: format!("{}__axis", tip.name),
-                    link: tip.link + 3,
-                    offset: tip.offset + axis * 0.02,
-                    radius: tip.radius,
-                });
-            }
-            free.fingertips = tips_free;
-            free.compute_finger_groups();
+            let (free, real) = planning_model(hand, rot, thumb, fingers);
             let n = free.dof();
             let a = Rotation::from_euler_angles(0.0, 0.0, obj_yaw + axis_angle) * Vector::x();
             let side = Vector::z().cross(&a);
@@ -307,7 +440,7 @@ pub fn plan_grasp(
                 tolerance: 2e-4,
                 ..IkParams::default()
             }
-            .with_frozen(frozen.iter().map(|d| d + 3));
+            .with_frozen(posture.frozen.iter().map(|d| d + 3));
             let signs = [(1.0, 1.0), (1.0, -1.0), (-1.0, 1.0), (-1.0, -1.0)];
             for (&h, (sign, thumb_sign)) in heights
                 .iter()
@@ -318,46 +451,29 @@ pub fn plan_grasp(
                 if power && sign != thumb_sign {
                     continue;
                 }
-                let across = |y: Real| match object.shape {
-                    Shape::Sphere { radius } => (radius * radius - h * h - y * y).max(0.0).sqrt(),
-                    Shape::Cylinder { radius, .. } => (radius * radius - y * y).max(0.0).sqrt(),
-                    Shape::Box { .. } => half,
-                };
-                // Where fingertip `k` of radius `r` meets the surface at `y` across the grasp
-                // axis, along the axis from the centre: a power grasp puts the fingertip's
-                // centre on the cylinder's surface grown by its radius, off the axis line too.
-                let reach = |y: Real, r: Real| match object.shape {
-                    Shape::Cylinder { radius, .. } if power => {
-                        ((radius + r) * (radius + r) - y * y).max(0.0).sqrt()
-                    }
-                    _ => across(y) + r,
-                };
-                let mut targets: Vec<(usize, Point)> = Vec::new();
-                let up = Vector::z() * h;
-                let thumb_y = sign * lateral[thumb];
-                let thumb_p = centre - a * reach(thumb_y, hand.fingertips[thumb].radius)
-                    + side * thumb_y
-                    + up;
-                targets.push((0, Point::from(thumb_p)));
-                targets.push((
-                    real.len(),
-                    Point::from(thumb_p + side * (0.02 * thumb_sign)),
-                ));
-                for (i, &f) in fingers.iter().enumerate() {
-                    // Pinch: the fingertip opposite the thumb. Power: each fingertip in its
-                    // own flexion plane.
-                    let y = if power {
-                        sign * lateral[f]
-                    } else {
-                        (spread * (0.5 - i as Real)).clamp(-0.7 * half, 0.7 * half)
-                    };
-                    let r = hand.fingertips[f].radius;
-                    let p = centre + a * reach(y, r) + side * y + up;
-                    targets.push((1 + i, Point::from(p)));
-                    targets.push((real.len() + 1 + i, Point::from(p + side * (0.02 * sign))));
+                let targets = TargetSearch {
+                    hand,
+                    object,
+                    centre,
+                    power,
+                    lateral: &lateral,
+                    thumb,
+                    fingers,
                 }
+                .targets(
+                    &Placement {
+                        a,
+                        side,
+                        h,
+                        half,
+                        sign,
+                        thumb_sign,
+                        spread,
+                    },
+                    real.len(),
+                );
                 let mut q_start = [0.0; MAX_DOF];
-                q_start[3..n].copy_from_slice(&q_hand0[..n - 3]);
+                q_start[3..n].copy_from_slice(&posture.q[..n - 3]);
                 let back = rot * Vector::x() * -0.12;
                 q_start[0] = centre.x + back.x;
                 q_start[1] = centre.y + back.y;
@@ -369,72 +485,163 @@ pub fn plan_grasp(
                     &targets,
                     &q_start[..n],
                     &params,
-                    &mut kin,
+                    kin,
                     &mut q[..n],
                 );
                 best_err = best_err.min(r.max_error);
                 if r.max_error > 0.008 {
                     continue;
                 }
-                // Prefer grasps whose fingertips can push along their contact normals: a
-                // finger with few joints only pushes within the range of its Jacobian.
-                free.tip_jacobians(&mut kin);
-                // The thumb and the finger opposite it squeeze: they must push along their
-                // normals. To lift by friction, the thumb must push along the vertical, and so
-                // must a finger on the other side (a pinch: both).
-                let (mut along_normal, mut thumb_up, mut finger_up): (Real, Real, Real) =
-                    (1.0, 1.0, 0.0);
-                for &(tip, target) in targets.iter().filter(|(t, _)| *t < real.len()) {
-                    let normal = {
-                        let mut v = centre + Vector::z() * h - target.coords;
-                        v.z = 0.0;
-                        v.normalize()
-                    };
-                    let up = push_alignment(&free, &kin, tip, &Vector::z());
-                    if tip <= 1 {
-                        along_normal = along_normal.min(push_alignment(&free, &kin, tip, &normal));
-                    }
-                    if tip == 0 {
-                        thumb_up = up;
-                    } else {
-                        finger_up = finger_up.max(up);
-                    }
-                }
-                let align = along_normal.min(thumb_up).min(finger_up);
+                free.tip_jacobians(kin);
+                let align = push_score(
+                    &free,
+                    kin,
+                    &targets,
+                    real.len(),
+                    &(centre + Vector::z() * h),
+                );
                 let score = align - r.max_error * 20.0;
-                if best.as_ref().is_none_or(|b| score > b.0 + 1e-9) {
-                    best = Some((score, r.max_error, q, rot, a, h));
+                if best.as_ref().is_none_or(|b| score > b.score + 1e-9) {
+                    best = Some(Candidate {
+                        score,
+                        ik_error: r.max_error,
+                        q,
+                        rotation: rot,
+                    });
                 }
             }
         }
     }
-    let Some((_, err, q, rot, _axis, _h)) = best else {
-        return Err(DfsError::invalid(
+    best.ok_or_else(|| {
+        DfsError::invalid(
             "object",
             format!("no grasp of this object is reachable for the hand (fingertips {:.1} mm from the surface)", best_err * 1e3),
-        ));
-    };
-    let n = n_hand + 3;
-    let base = Isometry::from_parts(Vector::new(q[0], q[1], q[2]).into(), rot);
-    let mut q_grasp = [0.0; MAX_DOF];
-    q_grasp[..n - 3].copy_from_slice(&q[3..n]);
-    // Preshape and open hand: the grasp pose with each finger group opened (less flexion)
-    // until its fingertips are at least 1.5 cm (preshape) and 3 cm (open) off the object's
-    // surface; the wrist and the fingers a pinch does not use stay as they are.
-    let mut tips = [false; MAX_TIPS];
-    for &f in fingers.iter().chain(std::iter::once(&thumb)) {
-        tips[f] = true;
+        )
+    })
+}
+
+/// Power grasp: where each fingertip's flexion plane lies across the hand (m, along the
+/// index's distal joint axis in the hand's base frame at the start posture), relative to the
+/// middle between the thumb's and the index's planes.
+fn flexion_offsets(
+    hand: &HandModel,
+    posture: &StartPosture,
+    thumb: usize,
+    fingers: &[usize],
+    kin: &mut Kinematics,
+) -> [Real; MAX_TIPS] {
+    let mut lateral = [0.0; MAX_TIPS];
+    hand.forward_kinematics(&Isometry::identity(), &posture.q[..hand.dof()], kin);
+    let index = fingers[0];
+    let axis = hand
+        .joints
+        .iter()
+        .find(|j| j.child == hand.fingertips[index].link)
+        .map(|j| kin.link_poses[j.child].rotation * j.axis.into_inner())
+        .unwrap_or(Vector::y());
+    for &k in std::iter::once(&thumb).chain(fingers) {
+        lateral[k] = kin.tip_centres[k].coords.dot(&axis);
     }
-    let base_pose = Isometry::from_parts(Vector::new(q[0], q[1], q[2]).into(), rot);
-    let inv_obj = pose.inverse();
-    let mut opened = |clearance: Real| {
-        let mut out = q_grasp;
+    let mid = 0.5 * (lateral[thumb] + lateral[index]);
+    for v in lateral.iter_mut() {
+        *v -= mid;
+    }
+    lateral
+}
+
+/// The planning model: the hand on a free base at orientation `rot`, its fingertips reduced
+/// to the ones the grasp uses (`real`, the thumb first) plus, per finger, a virtual tip 2 cm
+/// along the distal joint's axis. Targeting that virtual tip beside the real one turns the
+/// finger's flexion plane to contain the grasp axis: a planar finger pushes only within that
+/// plane.
+fn planning_model(
+    hand: &HandModel,
+    rot: Rotation,
+    thumb: usize,
+    fingers: &[usize],
+) -> (HandModel, Vec<usize>) {
+    let mut free = with_free_base(hand, rot);
+    let real: Vec<usize> = std::iter::once(thumb)
+        .chain(fingers.iter().copied())
+        .collect();
+    let mut tips_free: Vec<crate::hand::Fingertip> =
+        real.iter().map(|&k| free.fingertips[k].clone()).collect();
+    for &f in &real {
+        let tip = &hand.fingertips[f];
+        let axis = hand
+            .joints
+            .iter()
+            .find(|j| j.child == tip.link)
+            .map(|j| j.axis.into_inner())
+            .unwrap_or(Vector::y());
+        tips_free.push(crate::hand::Fingertip {
+            name: format!("{}__axis", tip.name),
+            link: tip.link + 3,
+            offset: tip.offset + axis * 0.02,
+            radius: tip.radius,
+        });
+    }
+    free.fingertips = tips_free;
+    free.compute_finger_groups();
+    (free, real)
+}
+
+/// How well a candidate's fingertips can push (the least of three alignments): a finger with
+/// few joints only pushes within the range of its Jacobian. The thumb and the finger opposite
+/// it squeeze, so they must push along their normals (horizontal, from the grasp's `centre`
+/// at its height); to lift by friction the thumb must push along the vertical, and so must a
+/// finger on the other side (a pinch: both). `targets` below `n_real` are real fingertips,
+/// the thumb's index 0; the tip Jacobians of `kin` must be current.
+fn push_score(
+    free: &HandModel,
+    kin: &Kinematics,
+    targets: &[(usize, Point)],
+    n_real: usize,
+    centre: &Vector,
+) -> Real {
+    let (mut along_normal, mut thumb_up, mut finger_up): (Real, Real, Real) = (1.0, 1.0, 0.0);
+    for &(tip, target) in targets.iter().filter(|(t, _)| *t < n_real) {
+        let normal = {
+            let mut v = centre - target.coords;
+            v.z = 0.0;
+            v.normalize()
+        };
+        let up = push_alignment(free, kin, tip, &Vector::z());
+        if tip <= 1 {
+            along_normal = along_normal.min(push_alignment(free, kin, tip, &normal));
+        }
+        if tip == 0 {
+            thumb_up = up;
+        } else {
+            finger_up = finger_up.max(up);
+        }
+    }
+    along_normal.min(thumb_up).min(finger_up)
+}
+
+/// Opening the grasp's fingers: each finger group opened (less flexion) from the grasp pose
+/// until its fingertips are `clearance` off the object's surface; the wrist and the fingers a
+/// pinch does not use stay as they are.
+struct Opening<'a> {
+    hand: &'a HandModel,
+    object: &'a RigidObject,
+    inv_obj: Isometry,
+    base_pose: Isometry,
+    q_grasp: [Real; MAX_DOF],
+    posture: &'a StartPosture,
+}
+
+impl Opening<'_> {
+    fn opened(&self, clearance: Real, kin: &mut Kinematics) -> [Real; MAX_DOF] {
+        let (hand, q_grasp) = (self.hand, &self.q_grasp);
+        let n_hand = hand.dof();
+        let mut out = *q_grasp;
         for g in &hand.finger_groups {
             let dofs: Vec<usize> = g
                 .dofs
                 .iter()
                 .copied()
-                .filter(|d| !wrist.contains(d) && !frozen.contains(d))
+                .filter(|d| !self.posture.wrist.contains(d) && !self.posture.frozen.contains(d))
                 .collect();
             let mut by = 0.1;
             loop {
@@ -442,9 +649,12 @@ pub fn plan_grasp(
                 for &d in &dofs {
                     trial[d] = (q_grasp[d] - by).clamp(hand.dof_lower[d], hand.dof_upper[d]);
                 }
-                hand.forward_kinematics(&base_pose, &trial[..n_hand], &mut kin);
+                hand.forward_kinematics(&self.base_pose, &trial[..n_hand], kin);
                 let clear = g.tips.iter().all(|&k| {
-                    let (d, _, _) = object.shape.closest(&(inv_obj * kin.tip_centres[k]).coords);
+                    let (d, _, _) = self
+                        .object
+                        .shape
+                        .closest(&(self.inv_obj * kin.tip_centres[k]).coords);
                     d - hand.fingertips[k].radius >= clearance
                 });
                 out = trial;
@@ -455,15 +665,27 @@ pub fn plan_grasp(
             }
         }
         out
-    };
-    let (fallback_pre, q_open) = (opened(0.015), opened(0.03));
-    // Preshape proper: each fingertip 1.5 cm straight out from its contact along the normal,
-    // wrist and base fixed, so that closing approaches every face head-on.
-    hand.forward_kinematics(&base_pose, &q_grasp[..n_hand], &mut kin);
+    }
+}
+
+/// The preshape proper: each fingertip 1.5 cm straight out from its contact along the normal,
+/// wrist and base fixed, so that closing approaches every face head-on; `None` if the fingers
+/// cannot get within 3 mm of that (the caller then opens the fingers instead).
+fn preshape(
+    hand: &HandModel,
+    object: &RigidObject,
+    pose: &Isometry,
+    opening: &Opening<'_>,
+    tips: &[bool; MAX_TIPS],
+    kin: &mut Kinematics,
+) -> Option<[Real; MAX_DOF]> {
+    let n_hand = hand.dof();
+    let (base_pose, q_grasp) = (&opening.base_pose, &opening.q_grasp);
+    hand.forward_kinematics(base_pose, &q_grasp[..n_hand], kin);
     let mut pre_targets: Vec<(usize, Point)> = Vec::new();
     for (k, _) in tips.iter().enumerate().filter(|(_, &t)| t) {
         let c = kin.tip_centres[k];
-        let (_, _, n_out) = object.shape.closest(&(inv_obj * c).coords);
+        let (_, _, n_out) = object.shape.closest(&(opening.inv_obj * c).coords);
         pre_targets.push((k, Point::from(c.coords + (pose.rotation * n_out) * 0.015)));
     }
     let pre_params = IkParams {
@@ -471,45 +693,29 @@ pub fn plan_grasp(
         tolerance: 5e-4,
         ..IkParams::default()
     }
-    .with_frozen(wrist.iter().chain(frozen.iter()).copied());
+    .with_frozen(
+        opening
+            .posture
+            .wrist
+            .iter()
+            .chain(opening.posture.frozen.iter())
+            .copied(),
+    );
     let mut q_pre = [0.0; MAX_DOF];
     let r = solve_tips(
         hand,
-        &base_pose,
+        base_pose,
         &pre_targets,
         &q_grasp[..n_hand],
         &pre_params,
-        &mut kin,
+        kin,
         &mut q_pre[..n_hand],
     );
     if r.max_error > 0.003 {
-        q_pre = fallback_pre;
+        None
+    } else {
+        Some(q_pre)
     }
-    let mut contacts_b = [Vector::zeros(); MAX_TIPS];
-    let mut normals_b = [Vector::zeros(); MAX_TIPS];
-    let mut normal_alignment = [0.0; MAX_TIPS];
-    hand.forward_kinematics(&base_pose, &q_grasp[..n_hand], &mut kin);
-    hand.tip_jacobians(&mut kin);
-    for (k, _) in tips.iter().enumerate().filter(|(_, &t)| t) {
-        let c_b = (inv_obj * kin.tip_centres[k]).coords;
-        let (_, _, n_out) = object.shape.closest(&c_b);
-        contacts_b[k] = c_b;
-        normals_b[k] = n_out;
-        normal_alignment[k] = push_alignment(hand, &kin, k, &-(pose.rotation * n_out));
-    }
-    Ok(GraspPlan {
-        base,
-        q_grasp,
-        q_pre,
-        q_open,
-        tips,
-        ik_error: err,
-        style,
-        contacts_b,
-        normals_b,
-        normal_alignment,
-        wrap: None,
-    })
 }
 
 /// The style `style` takes for `object`: `auto` is a pinch for objects narrower than 6 cm
