@@ -9,7 +9,7 @@ mod s3_server;
 
 use std::io::Read;
 use std::path::Path;
-use std::process::{Command, Stdio};
+use std::process::Command;
 use std::time::{Duration, Instant};
 
 use common::server::{unchunk, Running};
@@ -18,15 +18,8 @@ use s3_server::{S3Server, BUCKET};
 const ICMS: &str = env!("CARGO_BIN_EXE_icms");
 
 fn serve(data: &Path, blobs: &str, s3: &S3Server) -> Command {
-    let mut cmd = Command::new(ICMS);
-    cmd.args(["serve", "--no-demo", "--addr", "127.0.0.1:0", "--data"])
-        .arg(data)
-        .args(["--blobs", blobs])
-        .env_remove("DATABASE_URL")
-        .envs(s3.env())
-        .stdin(Stdio::null())
-        .stdout(Stdio::null())
-        .stderr(Stdio::piped());
+    let mut cmd = Running::command(data, &["--blobs", blobs]);
+    cmd.envs(s3.env());
     cmd
 }
 

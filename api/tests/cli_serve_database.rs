@@ -2,12 +2,14 @@
 //! naming it within seconds, a second server on one SQLite data directory is refused naming
 //! the first, and with ICMS_TEST_POSTGRES_URL set a server really serves from PostgreSQL.
 
-use std::io::{BufRead, BufReader, Read, Write};
-use std::net::TcpStream;
+mod common;
+
+use std::io::{Read, Write};
 use std::path::Path;
-use std::process::{Child, Command, Stdio};
-use std::sync::mpsc;
+use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
+
+use common::server::Running;
 
 const ICMS: &str = env!("CARGO_BIN_EXE_icms");
 
@@ -42,81 +44,6 @@ fn serve_to_the_end(data: &Path, args: &[&str], limit: Duration) -> (i32, String
             panic!("icms serve {args:?} still ran after {limit:?}");
         }
         std::thread::sleep(Duration::from_millis(50));
-    }
-}
-
-/// A running `icms serve`: the child and its address, once it said it serves.
-struct Running {
-    child: Child,
-    addr: String,
-}
-
-impl Running {
-    fn start(data: &Path, args: &[&str]) -> Running {
-        let mut child = Command::new(ICMS)
-            .args(["serve", "--no-demo", "--addr", "127.0.0.1:0", "--data"])
-            .arg(data)
-            .args(args)
-            .env_remove("DATABASE_URL")
-            .stdin(Stdio::null())
-            .stdout(Stdio::null())
-            .stderr(Stdio::piped())
-            .spawn()
-            .unwrap();
-        let stderr = child.stderr.take().unwrap();
-        let (tx, rx) = mpsc::channel();
-        std::thread::spawn(move || {
-            for line in BufReader::new(stderr).lines() {
-                let Ok(line) = line else { break };
-                if let Some(rest) = line.strip_prefix("icms: serving on http://") {
-                    let addr = rest.split('/').next().unwrap_or_default().to_owned();
-                    let _ = tx.send(Ok(addr));
-                } else {
-                    let _ = tx.send(Err(line));
-                }
-            }
-        });
-        let deadline = Instant::now() + Duration::from_secs(60);
-        let mut log = Vec::new();
-        while Instant::now() < deadline {
-            match rx.recv_timeout(Duration::from_millis(200)) {
-                Ok(Ok(addr)) => return Running { child, addr },
-                Ok(Err(line)) => log.push(line),
-                Err(mpsc::RecvTimeoutError::Timeout) => {}
-                Err(mpsc::RecvTimeoutError::Disconnected) => break,
-            }
-        }
-        let _ = child.kill();
-        let _ = child.wait();
-        panic!("icms serve did not start:\n{}", log.join("\n"));
-    }
-
-    /// `GET path`: the status line and the body.
-    fn get(&self, path: &str) -> (String, String) {
-        let mut s = TcpStream::connect(&self.addr).unwrap();
-        s.set_read_timeout(Some(Duration::from_secs(30))).unwrap();
-        write!(
-            s,
-            "GET {path} HTTP/1.1\r\nHost: {}\r\nConnection: close\r\n\r\n",
-            self.addr
-        )
-        .unwrap();
-        let mut reply = String::new();
-        s.read_to_string(&mut reply).unwrap();
-        let status = reply.lines().next().unwrap_or_default().to_owned();
-        let body = reply
-            .split("\r\n\r\n")
-            .nth(1)
-            .unwrap_or_default()
-            .to_owned();
-        (status, body)
-    }
-}
-
-impl Drop for Running {
-    fn drop(&mut self) {
-        let _ = self.child.kill();
-        let _ = self.child.wait();
     }
 }
 
@@ -180,15 +107,14 @@ fn a_database_url_of_another_kind_is_refused_naming_what_is_accepted() {
 fn a_second_server_on_one_sqlite_data_directory_is_refused_naming_the_first() {
     let tmp = tempfile::tempdir().unwrap();
     let data = tmp.path().join("data");
-    let first = Running::start(&data, &[]);
+    let first = Running::serve(&data, &[]);
     let (code, err, took) = serve_to_the_end(&data, &[], Duration::from_secs(30));
     assert_ne!(code, 0, "{err}");
     assert!(err.contains("is in use by another icms process"), "{err}");
     assert!(err.contains(&format!("pid {}", first.child.id())), "{err}");
     assert!(took < Duration::from_secs(10), "took {took:?}");
     // The first still answers.
-    let (status, _) = first.get("/healthz");
-    assert!(status.contains(" 200 "), "{status}");
+    assert_eq!(first.call("GET", "/healthz").0, 200);
 }
 
 #[test]
@@ -277,9 +203,9 @@ fn a_server_on_postgres_stores_in_it_and_a_restart_finds_the_same_rows() {
     };
     // No SQLite file: the rows are in PostgreSQL.
     assert!(!data.join("icms.sqlite3").exists());
-    let server = Running::start(&data, &["--database-url", &url]);
-    let (status, body) = server.get("/api/v1/skills?limit=1000");
-    assert!(status.contains(" 200 "), "{status}: {body}");
+    let server = Running::serve(&data, &["--database-url", &url]);
+    let (status, body) = server.call("GET", "/api/v1/skills?limit=1000");
+    assert_eq!(status, 200, "{body}");
     let page: serde_json::Value = serde_json::from_str(&body).unwrap();
     let items = page["items"].as_array().unwrap();
     assert!(
@@ -287,6 +213,6 @@ fn a_server_on_postgres_stores_in_it_and_a_restart_finds_the_same_rows() {
         "{body}"
     );
     let id = items[0]["id"].as_i64().unwrap();
-    let (status, body) = server.get(&format!("/api/v1/skills/{id}"));
-    assert!(status.contains(" 200 "), "{status}: {body}");
+    let (status, body) = server.call("GET", &format!("/api/v1/skills/{id}"));
+    assert_eq!(status, 200, "{body}");
 }

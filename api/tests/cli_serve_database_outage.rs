@@ -8,7 +8,6 @@ mod common;
 
 use std::io::Write;
 use std::net::{Shutdown, TcpListener, TcpStream};
-use std::process::{Command, Stdio};
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
@@ -141,14 +140,7 @@ fn losing_the_data_base_gives_503_and_the_server_recovers_when_it_is_back() {
         relay.port
     );
     let tmp = tempfile::tempdir().unwrap();
-    let mut cmd = Command::new(env!("CARGO_BIN_EXE_icms"));
-    cmd.args(["serve", "--no-demo", "--addr", "127.0.0.1:0", "--data"])
-        .arg(tmp.path().join("data"))
-        .args(["--database-url", &url])
-        .stdin(Stdio::null())
-        .stdout(Stdio::null())
-        .stderr(Stdio::piped());
-    let server = Running::start(cmd);
+    let server = Running::serve(&tmp.path().join("data"), &["--database-url", &url]);
     let simulate = r#"{"scenario": "sphere-lift", "duration": 2}"#;
     let (status, _, body) = server.request("POST", "/api/v1/simulations", simulate);
     assert_eq!(status, 201, "{}", String::from_utf8_lossy(&body));

@@ -6,19 +6,19 @@
 //! Skipped, saying so, without ICMS_TEST_POSTGRES_URL (failing instead under
 //! ICMS_REQUIRE_TOOLS), as cli_serve_database.rs.
 
-use std::io::{BufRead, BufReader, Read, Write};
+mod common;
+
+use std::io::{Read, Write};
 use std::net::{Shutdown, TcpListener, TcpStream};
 use std::path::Path;
-use std::process::{Child, Command, Stdio};
 use std::sync::atomic::{AtomicBool, Ordering};
-use std::sync::{mpsc, Arc};
-use std::time::{Duration, Instant};
+use std::sync::Arc;
+use std::time::Duration;
 
+use common::server::Running;
 use services::store::bench::{synthetic_blob, synthetic_skill, SplitMix64};
 use services::store::{Database, SessionMeta, Store};
 use sqlx::Connection as _;
-
-const ICMS: &str = env!("CARGO_BIN_EXE_icms");
 
 /// How long a change through one server may take to show through the other.
 const DEADLINE: Duration = Duration::from_secs(5);
@@ -96,113 +96,18 @@ fn store_skills(rt: &tokio::runtime::Runtime, dir: &Path, url: &str, n: usize) -
     })
 }
 
-/// A running `icms serve`: the child and its address, once it said it serves.
-struct Running {
-    child: Child,
-    addr: String,
-}
-
-impl Running {
-    fn start(data: &Path, url: &str) -> Running {
-        let mut child = Command::new(ICMS)
-            .args(["serve", "--no-demo", "--addr", "127.0.0.1:0", "--data"])
-            .arg(data)
-            .args(["--database-url", url])
-            .env_remove("DATABASE_URL")
-            .env_remove("ICMS_TOKEN")
-            .stdin(Stdio::null())
-            .stdout(Stdio::null())
-            .stderr(Stdio::piped())
-            .spawn()
-            .unwrap();
-        let stderr = child.stderr.take().unwrap();
-        let (tx, rx) = mpsc::channel();
-        std::thread::spawn(move || {
-            for line in BufReader::new(stderr).lines() {
-                let Ok(line) = line else { break };
-                if let Some(rest) = line.strip_prefix("icms: serving on http://") {
-                    let addr = rest.split('/').next().unwrap_or_default().to_owned();
-                    let _ = tx.send(Ok(addr));
-                } else {
-                    let _ = tx.send(Err(line));
-                }
-            }
-        });
-        let deadline = Instant::now() + Duration::from_secs(60);
-        let mut log = Vec::new();
-        while Instant::now() < deadline {
-            match rx.recv_timeout(Duration::from_millis(200)) {
-                Ok(Ok(addr)) => return Running { child, addr },
-                Ok(Err(line)) => log.push(line),
-                Err(mpsc::RecvTimeoutError::Timeout) => {}
-                Err(mpsc::RecvTimeoutError::Disconnected) => break,
-            }
-        }
-        let _ = child.kill();
-        let _ = child.wait();
-        panic!("icms serve did not start:\n{}", log.join("\n"));
-    }
-
-    /// `METHOD path`: the status code and the body.
-    fn call(&self, method: &str, path: &str) -> (u16, String) {
-        let mut s = TcpStream::connect(&self.addr).unwrap();
-        s.set_read_timeout(Some(Duration::from_secs(30))).unwrap();
-        write!(
-            s,
-            "{method} {path} HTTP/1.1\r\nHost: {}\r\nContent-Length: 0\r\nConnection: close\r\n\r\n",
-            self.addr
-        )
-        .unwrap();
-        let mut reply = String::new();
-        s.read_to_string(&mut reply).unwrap();
-        let status = reply
-            .split(' ')
-            .nth(1)
-            .and_then(|c| c.parse().ok())
-            .unwrap_or(0);
-        let body = reply
-            .split("\r\n\r\n")
-            .nth(1)
-            .unwrap_or_default()
-            .to_owned();
-        (status, body)
-    }
-
-    /// Waits until the server has taken in the insert of the skill at `path` (its k-nearest
-    /// index answers for it) and its cache has dropped what that insert names: a read cached
-    /// after this stays cached until the next change.
-    fn settle(&self, path: &str) {
-        self.eventually(
-            &format!("{path}/similar"),
-            200,
-            "the stored skill in the server's index",
-        );
-        // The cache follows a moment after the index (another task).
-        std::thread::sleep(Duration::from_millis(200));
-    }
-
-    /// Asks `GET path` until it answers `status`, at most [`DEADLINE`].
-    fn eventually(&self, path: &str, status: u16, what: &str) {
-        let start = Instant::now();
-        loop {
-            let (got, body) = self.call("GET", path);
-            if got == status {
-                return;
-            }
-            assert!(
-                start.elapsed() < DEADLINE,
-                "not within {DEADLINE:?}: {what} (GET {path} answers {got}: {body})"
-            );
-            std::thread::sleep(Duration::from_millis(20));
-        }
-    }
-}
-
-impl Drop for Running {
-    fn drop(&mut self) {
-        let _ = self.child.kill();
-        let _ = self.child.wait();
-    }
+/// Waits until `server` has taken in the insert of the skill at `path` (its k-nearest index
+/// answers for it) and its cache has dropped what that insert names: a read cached after this
+/// stays cached until the next change.
+fn settle(server: &Running, path: &str) {
+    server.eventually(
+        &format!("{path}/similar"),
+        200,
+        DEADLINE,
+        "the stored skill in the server's index",
+    );
+    // The cache follows a moment after the index (another task).
+    std::thread::sleep(Duration::from_millis(200));
 }
 
 #[test]
@@ -215,12 +120,12 @@ fn a_skill_deleted_through_one_server_is_gone_from_the_others_cache() {
     let tmp = tempfile::tempdir().unwrap();
     let rt = runtime();
     let url = fresh_schema(&rt, &base, &format!("api_follow_{}", std::process::id()));
-    let a = Running::start(&tmp.path().join("a"), &url);
-    let b = Running::start(&tmp.path().join("b"), &url);
+    let a = Running::serve(&tmp.path().join("a"), &["--database-url", &url]);
+    let b = Running::serve(&tmp.path().join("b"), &["--database-url", &url]);
     let ids = store_skills(&rt, &tmp.path().join("c"), &url, 2);
     let path = format!("/api/v1/skills/{}", ids[0]);
     for server in [&a, &b] {
-        server.settle(&path);
+        settle(server, &path);
     }
     // Read through both: each caches it.
     for server in [&a, &b] {
@@ -230,7 +135,12 @@ fn a_skill_deleted_through_one_server_is_gone_from_the_others_cache() {
     let (status, body) = a.call("DELETE", &path);
     assert_eq!(status, 204, "{body}");
     assert_eq!(a.call("GET", &path).0, 404);
-    b.eventually(&path, 404, "the skill deleted through A is gone through B");
+    b.eventually(
+        &path,
+        404,
+        DEADLINE,
+        "the skill deleted through A is gone through B",
+    );
     // The other skill is untouched.
     assert_eq!(b.call("GET", &format!("/api/v1/skills/{}", ids[1])).0, 200);
 }
@@ -305,11 +215,11 @@ fn a_server_whose_listening_connection_was_lost_drops_its_cache_when_it_listens_
     let host_end = host_start + url[host_start..].find('/').unwrap();
     let relay = Relay::to(url[host_start..host_end].to_owned());
     let relay_url = format!("{}{}{}", &url[..host_start], relay.addr, &url[host_end..]);
-    let a = Running::start(&tmp.path().join("a"), &url);
-    let b = Running::start(&tmp.path().join("b"), &relay_url);
+    let a = Running::serve(&tmp.path().join("a"), &["--database-url", &url]);
+    let b = Running::serve(&tmp.path().join("b"), &["--database-url", &relay_url]);
     let ids = store_skills(&rt, &tmp.path().join("c"), &url, 2);
     let path = format!("/api/v1/skills/{}", ids[0]);
-    b.settle(&path);
+    settle(&b, &path);
     let (status, body) = b.call("GET", &path);
     assert_eq!(status, 200, "{body}");
 
@@ -341,6 +251,11 @@ fn a_server_whose_listening_connection_was_lost_drops_its_cache_when_it_listens_
 
     // Back: B listens again, reloads, and drops its cache.
     relay.held.store(false, Ordering::SeqCst);
-    b.eventually(&path, 404, "B drops its cache once it listens again");
+    b.eventually(
+        &path,
+        404,
+        DEADLINE,
+        "B drops its cache once it listens again",
+    );
     assert_eq!(b.call("GET", &format!("/api/v1/skills/{}", ids[1])).0, 200);
 }

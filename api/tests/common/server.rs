@@ -3,7 +3,8 @@
 
 use std::io::{BufRead, BufReader, Read, Write};
 use std::net::TcpStream;
-use std::process::{Child, Command};
+use std::path::Path;
+use std::process::{Child, Command, Stdio};
 use std::sync::mpsc;
 use std::time::{Duration, Instant};
 
@@ -23,6 +24,48 @@ impl Drop for Running {
 }
 
 impl Running {
+    /// `icms serve --no-demo` on any free loopback port with data directory `data` and the
+    /// extra `args`, without the caller's DATABASE_URL or ICMS_TOKEN, its stderr piped.
+    pub fn command(data: &Path, args: &[&str]) -> Command {
+        let mut cmd = Command::new(env!("CARGO_BIN_EXE_icms"));
+        cmd.args(["serve", "--no-demo", "--addr", "127.0.0.1:0", "--data"])
+            .arg(data)
+            .args(args)
+            .env_remove("DATABASE_URL")
+            .env_remove("ICMS_TOKEN")
+            .stdin(Stdio::null())
+            .stdout(Stdio::null())
+            .stderr(Stdio::piped());
+        cmd
+    }
+
+    /// [`Running::start`] of [`Running::command`].
+    pub fn serve(data: &Path, args: &[&str]) -> Running {
+        Running::start(Running::command(data, args))
+    }
+
+    /// `METHOD path` without a body: the status code and the body as text.
+    pub fn call(&self, method: &str, path: &str) -> (u16, String) {
+        let (status, _, body) = self.request(method, path, "");
+        (status, String::from_utf8_lossy(&body).into_owned())
+    }
+
+    /// Asks `GET path` until it answers `status`, at most `deadline`; fails naming `what`.
+    pub fn eventually(&self, path: &str, status: u16, deadline: Duration, what: &str) {
+        let start = Instant::now();
+        loop {
+            let (got, body) = self.call("GET", path);
+            if got == status {
+                return;
+            }
+            assert!(
+                start.elapsed() < deadline,
+                "not within {deadline:?}: {what} (GET {path} answers {got}: {body})"
+            );
+            std::thread::sleep(Duration::from_millis(20));
+        }
+    }
+
     /// Starts `cmd` (an `icms serve` with its stderr piped) and waits up to a minute for it
     /// to say it serves.
     pub fn start(mut cmd: Command) -> Running {
