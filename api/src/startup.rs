@@ -252,6 +252,11 @@ async fn sweep_blobs(state: &AppState, stop: &CancellationToken) {
                 removed_bytes = r.removed_bytes,
                 "removed blobs that no session or replay references"
             ),
+            Ok(r) if r.skipped_busy => tracing::info!(
+                examined = r.examined,
+                "another server was ingesting into the bucket: unreferenced blobs are left \
+                 for the next sweep"
+            ),
             Ok(r) => tracing::debug!(examined = r.examined, "no unreferenced blobs"),
             Err(e) => tracing::warn!(error = %e, "sweeping unreferenced blobs failed"),
         }

@@ -182,7 +182,68 @@ async fn the_sweep_removes_orphan_objects_and_keeps_referenced_and_young_ones(ba
     assert_eq!(blob_files(s3.root.path().join(BUCKET).as_path()).len(), 1);
 }
 
+/// Two servers on one PostgreSQL schema and one bucket: while one is ingesting (it holds the
+/// cross-server blob lock shared, from its upload to its row's commit), the other's sweep
+/// removes nothing and says it skipped; once the lock is let go, the sweep removes an orphan.
+async fn a_sweep_skips_while_another_server_ingests_and_removes_after(backend: Backend) {
+    let Some(s3) = S3Server::start("a_sweep_skips_while_another_server_ingests") else {
+        return;
+    };
+    let (dir_a, dir_b) = (tempfile::tempdir().unwrap(), tempfile::tempdir().unwrap());
+    let database = backend.database(dir_a.path()).await;
+    let a = open(dir_a.path(), &database, s3.bucket("")).await;
+    let kept = a
+        .ingest(&fake_mcap(21, 5_000), meta(21, 1), skills(21, 1))
+        .await
+        .unwrap();
+    let orphan = format!("blobs/sha256/dd/{}.mcap", "d".repeat(62));
+    std::fs::create_dir_all(s3.object("blobs/sha256/dd")).unwrap();
+    std::fs::write(s3.object(&orphan), b"orphan!").unwrap();
+    let hold = a.hold_shared_blob_lock().await.unwrap();
+    if backend == Backend::Sqlite {
+        // One server per SQLite file: nothing to order across servers.
+        assert!(!hold.is_held());
+        hold.release().await;
+        let r = a.sweep_orphan_blobs(Duration::ZERO).await.unwrap();
+        assert_eq!((r.removed, r.skipped_busy), (1, false), "{r:?}");
+        return;
+    }
+    assert!(hold.is_held());
+    let b = open(dir_b.path(), &database, s3.bucket("")).await;
+
+    let r = b.sweep_orphan_blobs(Duration::ZERO).await.unwrap();
+    assert!(r.skipped_busy, "A is ingesting: {r:?}");
+    assert_eq!(r.removed, 0, "{r:?}");
+    assert!(s3.object(&orphan).exists());
+    // A delete through B leaves its blob to a later sweep rather than wait or race.
+    b.delete_session(kept.session_id).await.unwrap();
+    assert_eq!(blob_files(s3.root.path().join(BUCKET).as_path()).len(), 2);
+    // A's own ingests go on meanwhile (the lock is shared).
+    let more = a
+        .ingest(&fake_mcap(22, 5_000), meta(22, 1), skills(22, 1))
+        .await
+        .unwrap();
+
+    hold.release().await;
+    let r = b.sweep_orphan_blobs(Duration::ZERO).await.unwrap();
+    assert!(!r.skipped_busy, "{r:?}");
+    assert_eq!(
+        r.removed, 2,
+        "the orphan and the deleted session's blob: {r:?}"
+    );
+    assert!(!s3.object(&orphan).exists());
+    let left = blob_files(s3.root.path().join(BUCKET).as_path());
+    assert_eq!(left.len(), 1, "{left:?}");
+    assert_eq!(
+        b.read_session_blob(more.session_id).await.unwrap(),
+        fake_mcap(22, 5_000)
+    );
+    a.close().await;
+    b.close().await;
+}
+
 backend_tests!(
+    a_sweep_skips_while_another_server_ingests_and_removes_after,
     blobs_are_objects_in_the_bucket_and_come_back_from_it,
     a_second_store_on_the_same_rows_and_bucket_reads_what_the_first_wrote,
     an_object_changed_in_the_bucket_is_refused_not_served,

@@ -146,6 +146,29 @@ pub(crate) struct ReplacedRows {
     pub replay_blobs: Vec<BlobRef>,
 }
 
+/// A hold on the blobs that reaches every server on the same rows and bucket: the
+/// cross-server counterpart of the store's in-process blob lock (see
+/// [`Catalog::shared_blob_guard`]). Give it back with [`BlobGuard::release`]; one dropped
+/// without that is still let go (PostgreSQL: its connection is closed, never returned to
+/// the pool holding the lock).
+#[async_trait::async_trait]
+pub(crate) trait BlobGuard: Send + Sync + std::fmt::Debug {
+    /// Lets go of the hold. Infallible for the caller: a failure to unlock is logged and the
+    /// hold is let go another way (PostgreSQL: by closing its connection).
+    async fn release(self: Box<Self>);
+}
+
+/// What [`Catalog::try_exclusive_blob_guard`] got.
+#[derive(Debug)]
+pub(crate) enum ExclusiveBlobGuard {
+    /// The backend has no other server to order against (SQLite: one process per file).
+    NotNeeded,
+    /// The exclusive hold: no other server is between a blob upload and its row's commit.
+    Held(Box<dyn BlobGuard>),
+    /// Another server holds the shared hold (it is ingesting): try again later.
+    Busy,
+}
+
 /// The store's rows in one data base backend. See the module documentation.
 #[async_trait::async_trait]
 pub(crate) trait Catalog: Send + Sync + std::fmt::Debug {
@@ -251,6 +274,16 @@ pub(crate) trait Catalog: Send + Sync + std::fmt::Debug {
 
     /// Refreshes the query planner's statistics.
     async fn optimize(&self) -> Result<(), StoreError>;
+
+    /// The shared cross-server blob hold, which an ingest into a shared bucket keeps from its
+    /// blob upload to its row's commit; waits while another server holds the exclusive one
+    /// (for a sweep or a delete's blob removal, which try it and never wait). `None`: the
+    /// backend needs none (SQLite, whose file one process writes).
+    async fn shared_blob_guard(&self) -> Result<Option<Box<dyn BlobGuard>>, StoreError>;
+
+    /// The exclusive cross-server blob hold if no server holds the shared one, without
+    /// waiting (see [`Catalog::shared_blob_guard`]).
+    async fn try_exclusive_blob_guard(&self) -> Result<ExclusiveBlobGuard, StoreError>;
 
     /// Closes the connections (waits for queries in flight; later calls fail).
     async fn close(&self);

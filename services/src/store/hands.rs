@@ -13,7 +13,7 @@ use std::sync::OnceLock;
 use dfs_core::hand::{HandModel, HandSpec, BUILTIN_HANDS};
 use dfs_core::replay::ReplayReport;
 
-use super::catalog::{BlobRef, NewHand, NewReplay};
+use super::catalog::{BlobRef, ExclusiveBlobGuard, NewHand, NewReplay};
 use super::error::StoreError;
 use super::types::{Hand, HandSummary, Replay};
 use super::{blob, StagedBlob, Store};
@@ -215,7 +215,6 @@ impl Store {
         })
         .await
         .map_err(|e| StoreError::Corrupt(format!("blob writer task failed: {e}")))??;
-        self.publish(&rel).await?;
         self.insert_replay_row(skill_id, hand, report, (sha256, size, rel), guard)
             .await
     }
@@ -236,13 +235,14 @@ impl Store {
         let rel = tokio::task::spawn_blocking(move || mcap.commit(&dir))
             .await
             .map_err(|e| StoreError::Corrupt(format!("blob writer task failed: {e}")))??;
-        self.publish(&rel).await?;
         self.insert_replay_row(skill_id, hand, report, (sha256, size, rel), guard)
             .await
     }
 
-    /// The row of a replay whose blob (sha256, size, relative path) is written, under the
-    /// blob lock's read `guard`.
+    /// The row of a replay whose blob (sha256, size, relative path) is written to the data
+    /// directory, under the blob lock's read `guard`: the blob is uploaded to the bucket (if
+    /// any) and the row inserted holding the cross-server blob lock shared
+    /// ([`Store::shared_blob_hold`]).
     async fn insert_replay_row(
         &self,
         skill_id: i64,
@@ -253,23 +253,29 @@ impl Store {
     ) -> Result<Replay, StoreError> {
         let report_json = serde_json::to_string(report)?;
         let blob = BlobRef { sha256, rel };
-        let replay = self
-            .inner
-            .catalog
-            .insert_replay(NewReplay {
-                skill_id,
-                hand,
-                success: report.success,
-                failure_reason: report.failure_reason.map(|r| r.name()),
-                report_json: &report_json,
-                blob: &blob,
-                size_bytes: size,
-            })
-            .await?;
-        let Some(replay) = replay else {
+        let hold = self.shared_blob_hold().await?;
+        let replay = async {
+            self.publish(&blob.rel).await?;
+            self.inner
+                .catalog
+                .insert_replay(NewReplay {
+                    skill_id,
+                    hand,
+                    success: report.success,
+                    failure_reason: report.failure_reason.map(|r| r.name()),
+                    report_json: &report_json,
+                    blob: &blob,
+                    size_bytes: size,
+                })
+                .await
+        }
+        .await;
+        hold.release().await;
+        let Some(replay) = replay? else {
             // The skill was deleted while the replay ran: remove the blob unless a row names
-            // the same bytes. Under the exclusive lock no writer of the same bytes is between
-            // writing its blob and inserting its row.
+            // the same bytes. Under the exclusive locks (in-process, and across servers if
+            // free) no writer of the same bytes is between writing its blob and inserting
+            // its row.
             drop(guard);
             let _exclusive = self.inner.blob_lock.write().await;
             self.remove_unreferenced_blobs(&[blob]).await;
@@ -311,8 +317,40 @@ impl Store {
 
     /// Unlinks the blobs of `deleted` that no session or replay row names any more. Call with
     /// the blob lock held exclusively, after the rows' deletion committed. Best effort: a
-    /// leftover blob is harmless garbage.
+    /// leftover blob is harmless garbage, which the orphan sweep removes later.
+    ///
+    /// With a bucket shared by several servers, the removals also hold the cross-server blob
+    /// lock exclusively ([`Store::try_exclusive_blob_hold`]), so that no other server is
+    /// between uploading the same bytes again and committing a row that names them. If
+    /// another server is ingesting, the blobs are left for the sweep rather than waited on.
     pub(super) async fn remove_unreferenced_blobs(&self, deleted: &[BlobRef]) {
+        if deleted.is_empty() {
+            return;
+        }
+        let exclusive = match self.try_exclusive_blob_hold().await {
+            Ok(ExclusiveBlobGuard::Held(g)) => Some(g),
+            Ok(ExclusiveBlobGuard::NotNeeded) => None,
+            Ok(ExclusiveBlobGuard::Busy) => {
+                tracing::info!(
+                    blobs = deleted.len(),
+                    "another server is ingesting into the bucket: deleted rows' blobs are left \
+                     for the orphan sweep"
+                );
+                return;
+            }
+            Err(e) => {
+                tracing::warn!(error = %e, "could not take the blob lock to remove blobs");
+                return;
+            }
+        };
+        self.remove_unreferenced_blobs_locked(deleted).await;
+        if let Some(g) = exclusive {
+            g.release().await;
+        }
+    }
+
+    /// [`Store::remove_unreferenced_blobs`] once every blob lock it needs is held.
+    async fn remove_unreferenced_blobs_locked(&self, deleted: &[BlobRef]) {
         let mut seen = std::collections::BTreeSet::new();
         for BlobRef { sha256, rel } in deleted {
             if !seen.insert(sha256.as_str()) {

@@ -37,7 +37,8 @@ use std::time::Duration;
 pub use blob::{StagedBlob, StagedWriter};
 pub use error::StoreError;
 pub use postgres::{
-    is_postgres_url, redact_url, SkillsChanged, PG_CONNECT_TIMEOUT, PG_MAX_CONNECTIONS,
+    is_postgres_url, redact_url, SkillsChanged, BLOB_LOCK_CLASS, PG_CONNECT_TIMEOUT,
+    PG_MAX_CONNECTIONS,
 };
 pub use remote::{Blobs, S3Bucket, BUCKET_CONNECT_TIMEOUT};
 pub use sqlite::{APPLICATION_ID, DB_FILE, MAX_CONNECTIONS, PAGE_CACHE_KIB};
@@ -45,7 +46,9 @@ pub use sqlite::{APPLICATION_ID, DB_FILE, MAX_CONNECTIONS, PAGE_CACHE_KIB};
 use crate::assist::features::TEMPLATE_DIM;
 use crate::assist::index::{RecognitionIndex, StoredTemplate};
 use crate::segmentation::SEGMENTATION_VERSION;
-use catalog::{BlobRef, Catalog, CheckedSkill, IndexedSkill, NewSession};
+use catalog::{
+    BlobGuard, BlobRef, Catalog, CheckedSkill, ExclusiveBlobGuard, IndexedSkill, NewSession,
+};
 use dfs_core::names::Named;
 
 /// Youngest unreferenced blob the server's sweep removes (see [`Store::sweep_orphan_blobs`]):
@@ -116,6 +119,9 @@ pub struct SweepReport {
     pub removed: usize,
     /// Their bytes.
     pub removed_bytes: u64,
+    /// Nothing was removed because another server on the same data base and bucket was
+    /// ingesting (it held the cross-server blob lock shared): the next sweep tries again.
+    pub skipped_busy: bool,
 }
 pub use hands::MAX_HAND_NAME;
 pub use query::{
@@ -149,12 +155,37 @@ struct Inner {
     /// recognise (copied on the next change while one holds it).
     recognition: std::sync::RwLock<Arc<RecognitionIndex>>,
     /// Ingests hold it shared from blob write to index update; deletes hold it exclusively.
+    /// With a bucket and a PostgreSQL catalog, its counterpart across servers is the
+    /// catalog's blob guard ([`Store::shared_blob_hold`]), taken inside it.
     blob_lock: tokio::sync::RwLock<()>,
     /// The data directory's writer lock ([`WRITER_LOCK_FILE`]), held until [`Store::close`]
     /// or the last clone is dropped; `None` for a store opened to read only.
     writer: std::sync::Mutex<Option<std::fs::File>>,
     /// Following other servers' writes (PostgreSQL) and telling [`Store::skill_changes`].
     follow: postgres::follow::Follow,
+}
+
+/// The cross-server blob hold an ingest keeps from its blob upload to its row's commit (see
+/// [`Store::sweep_orphan_blobs`]): empty where none is needed (no bucket, or SQLite). Give it
+/// back with [`CrossServerBlobHold::release`]; dropped, it is let go all the same (its
+/// connection closed).
+#[doc(hidden)]
+#[derive(Debug)]
+#[must_use = "the hold lasts until released"]
+pub struct CrossServerBlobHold(Option<Box<dyn BlobGuard>>);
+
+impl CrossServerBlobHold {
+    /// Whether a cross-server lock is held (a bucket and a PostgreSQL catalog).
+    pub fn is_held(&self) -> bool {
+        self.0.is_some()
+    }
+
+    /// Lets go of the hold.
+    pub async fn release(self) {
+        if let Some(g) = self.0 {
+            g.release().await;
+        }
+    }
 }
 
 /// The file in the data directory whose lock says a process writes it (`flock`, released by
@@ -601,8 +632,7 @@ impl Store {
         let rel = tokio::task::spawn_blocking(move || blob::write_atomic(&dir, &sha, &bytes))
             .await
             .map_err(|e| StoreError::Corrupt(format!("blob writer task failed: {e}")))??;
-        self.publish(&rel).await?;
-        self.insert_session(&sha256, size, &rel, meta, checked, duration_ns)
+        self.publish_and_insert_session(&sha256, size, &rel, meta, checked, duration_ns)
             .await
     }
 
@@ -631,9 +661,62 @@ impl Store {
         let rel = tokio::task::spawn_blocking(move || staged.commit(&dir))
             .await
             .map_err(|e| StoreError::Corrupt(format!("blob writer task failed: {e}")))??;
-        self.publish(&rel).await?;
-        self.insert_session(&sha256, size, &rel, meta, checked, duration_ns)
+        self.publish_and_insert_session(&sha256, size, &rel, meta, checked, duration_ns)
             .await
+    }
+
+    /// Uploads the blob at `rel` to the bucket (if any) and inserts the session's rows,
+    /// holding the cross-server blob lock shared throughout (see
+    /// [`Store::sweep_orphan_blobs`]). Call under the in-process blob lock, shared.
+    async fn publish_and_insert_session(
+        &self,
+        sha256: &str,
+        size: i64,
+        rel: &str,
+        meta: SessionMeta,
+        checked: Vec<CheckedSkill>,
+        duration_ns: i64,
+    ) -> Result<IngestOutcome, StoreError> {
+        let hold = self.shared_blob_hold().await?;
+        let done = async {
+            self.publish(rel).await?;
+            self.insert_session(sha256, size, rel, meta, checked, duration_ns)
+                .await
+        }
+        .await;
+        hold.release().await;
+        done
+    }
+
+    /// The cross-server blob lock, shared: held by an ingest from its blob upload to its
+    /// row's commit, so that no other server's sweep or delete removes the object meanwhile.
+    /// Needed only with a bucket (the data directory is one process's) and a catalog that
+    /// several servers share (PostgreSQL); empty otherwise. Waits only while another server
+    /// holds it exclusively, which it does briefly and never waiting itself.
+    pub(crate) async fn shared_blob_hold(&self) -> Result<CrossServerBlobHold, StoreError> {
+        if self.inner.remote.is_none() {
+            return Ok(CrossServerBlobHold(None));
+        }
+        Ok(CrossServerBlobHold(
+            self.inner.catalog.shared_blob_guard().await?,
+        ))
+    }
+
+    /// Test hook: takes [`Store::shared_blob_hold`] as an ingest does, for a test to hold it
+    /// across another store's sweep.
+    #[doc(hidden)]
+    pub async fn hold_shared_blob_lock(&self) -> Result<CrossServerBlobHold, StoreError> {
+        self.shared_blob_hold().await
+    }
+
+    /// The cross-server blob lock, exclusive, if no other server holds it (see
+    /// [`Store::shared_blob_hold`]); [`ExclusiveBlobGuard::NotNeeded`] without a bucket or
+    /// with SQLite. Never waits.
+    pub(crate) async fn try_exclusive_blob_hold(&self) -> Result<ExclusiveBlobGuard, StoreError> {
+        if self.inner.remote.is_none() {
+            return Ok(ExclusiveBlobGuard::NotNeeded);
+        }
+        self.inner.catalog.try_exclusive_blob_guard().await
     }
 
     /// The rows of a session whose blob is at `rel`, in one transaction.
@@ -715,6 +798,32 @@ impl Store {
         batch: Vec<(Vec<u8>, SessionMeta, Vec<NewSkill>)>,
     ) -> Result<usize, StoreError> {
         let _guard = self.inner.blob_lock.read().await;
+        let hold = self.shared_blob_hold().await?;
+        let inserted = self.bulk_publish_and_insert(batch).await;
+        hold.release().await;
+        let (inserted, sessions) = inserted?;
+        let stored = || {
+            inserted
+                .iter()
+                .zip(&sessions)
+                .flat_map(|(ids, (_, checked))| ids.iter().flatten().zip(checked))
+        };
+        let mut index = self.inner.index.write().expect("index lock");
+        for (id, c) in stored() {
+            index.insert(*id, c.feature);
+        }
+        drop(index);
+        self.update_recognition(&[], stored().map(|(id, c)| new_template(*id, c)));
+        Ok(stored().count())
+    }
+
+    /// [`Store::bulk_ingest`]'s blob writes, uploads and transaction; per session, its skills'
+    /// ids (or `None`, stored already), and its (SHA-256, checked skills).
+    #[allow(clippy::type_complexity)]
+    async fn bulk_publish_and_insert(
+        &self,
+        batch: Vec<(Vec<u8>, SessionMeta, Vec<NewSkill>)>,
+    ) -> Result<(Vec<Option<Vec<i64>>>, Vec<(String, Vec<CheckedSkill>)>), StoreError> {
         let mut prepared = Vec::with_capacity(batch.len());
         for (bytes, meta, skills) in batch {
             let checked = checked_skills(skills)?;
@@ -744,19 +853,12 @@ impl Store {
             )
             .collect();
         let inserted = self.inner.catalog.bulk_insert_sessions(&sessions).await?;
-        let stored = || {
-            inserted
-                .iter()
-                .zip(&sessions)
-                .flat_map(|(ids, new)| ids.iter().flatten().zip(new.skills))
-        };
-        let mut index = self.inner.index.write().expect("index lock");
-        for (id, c) in stored() {
-            index.insert(*id, c.feature);
-        }
-        drop(index);
-        self.update_recognition(&[], stored().map(|(id, c)| new_template(*id, c)));
-        Ok(stored().count())
+        drop(sessions);
+        let sessions = prepared
+            .into_iter()
+            .map(|(sha256, _, _, _, checked, _)| (sha256, checked))
+            .collect();
+        Ok((inserted, sessions))
     }
 
     /// Sessions by ascending id, `limit` (1..=1000) per page, after `cursor`.
@@ -872,12 +974,19 @@ impl Store {
     /// commit within seconds of their blob write: the server sweeps with
     /// [`ORPHAN_BLOB_MIN_AGE`].
     ///
-    /// With a bucket shared by several servers, another server's ingest is not under this
-    /// lock: it uploads its blob again (renewing the object's modification time) before its
-    /// row commits, and each candidate's object is looked up again just before its removal,
-    /// so an object written since the listing, or within `min_age`, is left alone. What is
-    /// left is a window of one request: another server uploading the same bytes again, and
-    /// committing its row, between that look-up and the removal (docs/backends.md).
+    /// With a bucket shared by several servers on one PostgreSQL data base, another server's
+    /// ingest is not under this lock but under its cross-server counterpart, an advisory lock
+    /// of the data base ([`BLOB_LOCK_CLASS`]): every ingest holds it shared from its blob
+    /// upload to its row's commit, and the sweep, holding the in-process lock, tries it
+    /// exclusively before reading the referenced paths and keeps it until its last removal.
+    /// While another server is ingesting the sweep does not wait: it removes nothing this
+    /// round, logs it and says so ([`SweepReport::skipped_busy`]). So no removal runs while
+    /// any server is between an upload and its commit, and a blob committed before the lock
+    /// was taken is among the referenced paths: the window the former look-up-then-remove
+    /// check left (another server uploading the same bytes again and committing between the
+    /// two) is closed. Each candidate's object is still looked up again just before its
+    /// removal, so an object written since the listing, or within `min_age`, is left alone
+    /// (docs/backends.md).
     pub async fn sweep_orphan_blobs(&self, min_age: Duration) -> Result<SweepReport, StoreError> {
         let dir = self.inner.dir.clone();
         let mut listed = tokio::task::spawn_blocking(move || blob::blobs_older_than(&dir, min_age))
@@ -898,6 +1007,33 @@ impl Store {
             return Ok(report);
         }
         let _guard = self.inner.blob_lock.write().await;
+        let exclusive = match self.try_exclusive_blob_hold().await? {
+            ExclusiveBlobGuard::Busy => {
+                tracing::info!(
+                    examined = report.examined,
+                    "another server is ingesting into the bucket: unreferenced blobs are left \
+                     for the next sweep"
+                );
+                report.skipped_busy = true;
+                return Ok(report);
+            }
+            ExclusiveBlobGuard::Held(g) => Some(g),
+            ExclusiveBlobGuard::NotNeeded => None,
+        };
+        let done = self.remove_orphans(listed, min_age, &mut report).await;
+        if let Some(g) = exclusive {
+            g.release().await;
+        }
+        done.map(|()| report)
+    }
+
+    /// The sweep's removals of the `listed` blobs that no row names, under the blob locks.
+    async fn remove_orphans(
+        &self,
+        listed: Vec<blob::BlobFile>,
+        min_age: Duration,
+        report: &mut SweepReport,
+    ) -> Result<(), StoreError> {
         let referenced = self.inner.catalog.referenced_blob_paths().await?;
         for orphan in listed.into_iter().filter(|b| !referenced.contains(&b.rel)) {
             if let Some(remote) = &self.inner.remote {
@@ -919,7 +1055,7 @@ impl Store {
                 }
             }
         }
-        Ok(report)
+        Ok(())
     }
 
     /// Deletes a session, its skills, their phase rows and replays (one transaction), then its

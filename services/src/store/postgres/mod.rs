@@ -9,11 +9,13 @@
 //! as the SQLite backend does. Behaviour is the SQLite backend's: the store's tests run
 //! against both (`services/tests/store_common`).
 //!
-//! Blobs stay files in the data directory. The in-memory indexes are loaded at start and then
+//! Blobs stay files in the data directory (or objects in a bucket the servers share, ordered
+//! across servers by an advisory lock: [`blob_lock`]). The in-memory indexes are loaded at start and then
 //! follow the writes of every server on the same data base through `LISTEN/NOTIFY`
 //! ([`follow`]: a trigger on `skills` notifies, each store listens, and a lost connection is
 //! made again and answered with a reload).
 
+mod blob_lock;
 pub(crate) mod follow;
 mod skill_filter;
 
@@ -27,8 +29,8 @@ use store_postgres::rows::BlobRow;
 use store_postgres::{NewHandRow, NewReplayRow, NewSessionRow, SessionListing, MIGRATOR};
 
 use super::catalog::{
-    BlobRef, Catalog, CheckedSkill, DeletedSession, IndexedSkill, NewHand, NewReplay, NewSession,
-    ReplacedRows, Replacement,
+    BlobGuard, BlobRef, Catalog, CheckedSkill, DeletedSession, ExclusiveBlobGuard, IndexedSkill,
+    NewHand, NewReplay, NewSession, ReplacedRows, Replacement,
 };
 use super::query::{SessionFilter, SkillFilter};
 use super::reprocess::{plan, StoredForm};
@@ -38,6 +40,7 @@ use super::types::{
 };
 use super::StoreError;
 
+pub use blob_lock::BLOB_LOCK_CLASS;
 pub use follow::SkillsChanged;
 
 /// Connections the pool opens at most.
@@ -78,6 +81,9 @@ pub fn redact_url(url: &str) -> String {
 #[derive(Debug, Clone)]
 pub(crate) struct PgCatalog {
     pool: PgPool,
+    /// Connections the blob lock's guards may hold at once ([`blob_lock`]): at most half the
+    /// pool, so that ingests holding a guard always find a connection for their rows.
+    blob_guards: std::sync::Arc<tokio::sync::Semaphore>,
 }
 
 impl PgCatalog {
@@ -139,7 +145,12 @@ impl PgCatalog {
                 return Err(e.into());
             }
         }
-        Ok(PgCatalog { pool })
+        Ok(PgCatalog {
+            pool,
+            blob_guards: std::sync::Arc::new(tokio::sync::Semaphore::new(
+                (PG_MAX_CONNECTIONS / 2) as usize,
+            )),
+        })
     }
 }
 
@@ -592,6 +603,16 @@ impl Catalog for PgCatalog {
 
     async fn optimize(&self) -> Result<(), StoreError> {
         Ok(store_postgres::analyze(&self.pool).await?)
+    }
+
+    async fn shared_blob_guard(&self) -> Result<Option<Box<dyn BlobGuard>>, StoreError> {
+        blob_lock::shared(&self.pool, &self.blob_guards)
+            .await
+            .map(Some)
+    }
+
+    async fn try_exclusive_blob_guard(&self) -> Result<ExclusiveBlobGuard, StoreError> {
+        blob_lock::try_exclusive(&self.pool, &self.blob_guards).await
     }
 
     async fn close(&self) {

@@ -24,8 +24,8 @@ use sqlx::sqlite::{
 use sqlx::{Connection as _, SqliteConnection};
 
 use super::catalog::{
-    BlobRef, Catalog, CheckedSkill, DeletedSession, IndexedSkill, NewHand, NewReplay, NewSession,
-    Replacement,
+    BlobGuard, BlobRef, Catalog, CheckedSkill, DeletedSession, ExclusiveBlobGuard, IndexedSkill,
+    NewHand, NewReplay, NewSession, Replacement,
 };
 use super::query::{SessionFilter, SkillFilter};
 use super::types::{
@@ -326,6 +326,15 @@ impl Catalog for SqliteCatalog {
             .await?;
         sqlx::query!("ANALYZE").execute(&mut *conn).await?;
         Ok(())
+    }
+
+    async fn shared_blob_guard(&self) -> Result<Option<Box<dyn BlobGuard>>, StoreError> {
+        // One process writes a SQLite file: the store's in-process blob lock is enough.
+        Ok(None)
+    }
+
+    async fn try_exclusive_blob_guard(&self) -> Result<ExclusiveBlobGuard, StoreError> {
+        Ok(ExclusiveBlobGuard::NotNeeded)
     }
 
     async fn close(&self) {
