@@ -7,18 +7,18 @@
 //! ICMS_REQUIRE_TOOLS), as cli_serve_database.rs.
 
 mod common;
+#[path = "../../services/tests/tcp_relay/mod.rs"]
+mod tcp_relay;
 
-use std::io::{Read, Write};
-use std::net::{Shutdown, TcpListener, TcpStream};
+use std::io::Write;
 use std::path::Path;
-use std::sync::atomic::{AtomicBool, Ordering};
-use std::sync::Arc;
 use std::time::Duration;
 
 use common::server::Running;
 use services::store::bench::{synthetic_blob, synthetic_skill, SplitMix64};
 use services::store::{Database, SessionMeta, Store};
 use sqlx::Connection as _;
+use tcp_relay::Relay;
 
 /// How long a change through one server may take to show through the other.
 const DEADLINE: Duration = Duration::from_secs(5);
@@ -145,57 +145,6 @@ fn a_skill_deleted_through_one_server_is_gone_from_the_others_cache() {
     assert_eq!(b.call("GET", &format!("/api/v1/skills/{}", ids[1])).0, 200);
 }
 
-/// A TCP relay to the test data base whose new connections can be held back: what cuts a
-/// server off from PostgreSQL for as long as the test says.
-struct Relay {
-    addr: std::net::SocketAddr,
-    held: Arc<AtomicBool>,
-}
-
-impl Relay {
-    fn to(upstream: String) -> Relay {
-        let listener = TcpListener::bind("127.0.0.1:0").unwrap();
-        let addr = listener.local_addr().unwrap();
-        let held = Arc::new(AtomicBool::new(false));
-        let hold = Arc::clone(&held);
-        std::thread::spawn(move || {
-            for client in listener.incoming() {
-                let Ok(client) = client else { continue };
-                let hold = Arc::clone(&hold);
-                let upstream = upstream.clone();
-                std::thread::spawn(move || {
-                    while hold.load(Ordering::SeqCst) {
-                        std::thread::sleep(Duration::from_millis(5));
-                    }
-                    if let Ok(server) = TcpStream::connect(&upstream) {
-                        pipe(client, server);
-                    }
-                });
-            }
-        });
-        Relay { addr, held }
-    }
-}
-
-/// Copies both ways between `a` and `b` until either side ends.
-fn pipe(a: TcpStream, b: TcpStream) {
-    let copy = |mut from: TcpStream, mut to: TcpStream| {
-        move || {
-            let mut buf = [0u8; 16 * 1024];
-            while let Ok(n @ 1..) = from.read(&mut buf) {
-                if to.write_all(&buf[..n]).is_err() {
-                    break;
-                }
-            }
-            let _ = to.shutdown(Shutdown::Both);
-            let _ = from.shutdown(Shutdown::Both);
-        }
-    };
-    let (a2, b2) = (a.try_clone().unwrap(), b.try_clone().unwrap());
-    std::thread::spawn(copy(a, b));
-    std::thread::spawn(copy(b2, a2));
-}
-
 #[test]
 fn a_server_whose_listening_connection_was_lost_drops_its_cache_when_it_listens_again() {
     let Some(base) = postgres_or_skip(
@@ -225,7 +174,7 @@ fn a_server_whose_listening_connection_was_lost_drops_its_cache_when_it_listens_
 
     // B's listening connection ends, and cannot come back while A deletes.
     let name = format!("icms-follow {} #0", b.child.id());
-    relay.held.store(true, Ordering::SeqCst);
+    relay.hold();
     let ended: Vec<bool> = rt.block_on(async {
         let mut conn = sqlx::PgConnection::connect(&url).await.unwrap();
         let ended = sqlx::query_scalar(
@@ -250,7 +199,7 @@ fn a_server_whose_listening_connection_was_lost_drops_its_cache_when_it_listens_
     );
 
     // Back: B listens again, reloads, and drops its cache.
-    relay.held.store(false, Ordering::SeqCst);
+    relay.release();
     b.eventually(
         &path,
         404,

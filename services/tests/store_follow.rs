@@ -7,17 +7,15 @@
 //! under ICMS_REQUIRE_TOOLS), as the other store tests.
 
 mod store_common;
+mod tcp_relay;
 
-use std::io::{Read, Write};
-use std::net::{Shutdown, TcpListener, TcpStream};
-use std::sync::atomic::{AtomicBool, Ordering};
-use std::sync::Arc;
 use std::time::{Duration, Instant};
 
 use services::segmentation::SEGMENTATION_VERSION;
 use services::store::{Database, SkillsChanged, Store};
 use sqlx::Connection as _;
 use store_common::{fake_mcap, meta, skills, Backend};
+use tcp_relay::Relay;
 
 /// How long a change may take to show in the other store.
 const DEADLINE: Duration = Duration::from_secs(5);
@@ -151,72 +149,6 @@ async fn a_skill_stored_replaced_or_deleted_through_one_store_shows_in_the_other
     assert_eq!(b.skill_count(), 2);
     a.close().await;
     b.close().await;
-}
-
-/// A TCP relay to the test data base whose new connections can be held back: what cuts a
-/// store off from PostgreSQL for as long as the test says.
-struct Relay {
-    addr: std::net::SocketAddr,
-    held: Arc<AtomicBool>,
-}
-
-impl Relay {
-    fn to(upstream: String) -> Relay {
-        let listener = TcpListener::bind("127.0.0.1:0").unwrap();
-        let addr = listener.local_addr().unwrap();
-        let held = Arc::new(AtomicBool::new(false));
-        let hold = Arc::clone(&held);
-        std::thread::spawn(move || {
-            for client in listener.incoming() {
-                let Ok(client) = client else { continue };
-                let hold = Arc::clone(&hold);
-                let upstream = upstream.clone();
-                std::thread::spawn(move || {
-                    while hold.load(Ordering::SeqCst) {
-                        std::thread::sleep(Duration::from_millis(5));
-                    }
-                    let Ok(server) = TcpStream::connect(&upstream) else {
-                        return;
-                    };
-                    pipe(client, server);
-                });
-            }
-        });
-        Relay { addr, held }
-    }
-
-    /// New connections wait (existing ones go on) until [`Relay::release`].
-    fn hold(&self) {
-        self.held.store(true, Ordering::SeqCst);
-    }
-
-    fn release(&self) {
-        self.held.store(false, Ordering::SeqCst);
-    }
-}
-
-/// Copies both ways between `a` and `b` until either side ends.
-fn pipe(a: TcpStream, b: TcpStream) {
-    let copy = |mut from: TcpStream, mut to: TcpStream| {
-        move || {
-            let mut buf = [0u8; 16 * 1024];
-            loop {
-                match from.read(&mut buf) {
-                    Ok(0) | Err(_) => break,
-                    Ok(n) => {
-                        if to.write_all(&buf[..n]).is_err() {
-                            break;
-                        }
-                    }
-                }
-            }
-            let _ = to.shutdown(Shutdown::Both);
-            let _ = from.shutdown(Shutdown::Both);
-        }
-    };
-    let (a2, b2) = (a.try_clone().unwrap(), b.try_clone().unwrap());
-    std::thread::spawn(copy(a, b));
-    std::thread::spawn(copy(b2, a2));
 }
 
 /// `url` with its `host:port` replaced by `addr`; and the `host:port` it named.
