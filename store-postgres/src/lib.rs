@@ -10,6 +10,7 @@
 //! that way). The one query built at run time, the skill filter, and the multi-row inserts are
 //! services' (`store::postgres`), from typed parts with every value bound.
 
+pub mod jobs;
 pub mod rows;
 
 use sqlx::migrate::Migrator;

@@ -214,3 +214,38 @@ pub struct StaleSessionRow {
     /// Its skills.
     pub skill_count: i64,
 }
+
+/// A row of `jobs`.
+#[derive(Debug, Clone, sqlx::FromRow)]
+pub struct JobRow {
+    /// Column `id`.
+    pub id: i64,
+    /// Column `kind`.
+    pub kind: String,
+    /// Column `request`.
+    pub request: String,
+    /// Column `state`.
+    pub state: String,
+    /// Column `cancel_requested`.
+    pub cancel_requested: bool,
+    /// Column `attempts`.
+    pub attempts: i64,
+    /// Column `worker`.
+    pub worker: Option<String>,
+    /// Column `session_id`.
+    pub session_id: Option<i64>,
+    /// Column `session_created`.
+    pub session_created: Option<bool>,
+    /// Column `replay_id`.
+    pub replay_id: Option<i64>,
+    /// Column `error_status`.
+    pub error_status: Option<i64>,
+    /// Column `error_detail`.
+    pub error_detail: Option<String>,
+    /// Column `created_at`.
+    pub created_at: String,
+    /// Column `started_at`.
+    pub started_at: Option<String>,
+    /// Column `finished_at`.
+    pub finished_at: Option<String>,
+}

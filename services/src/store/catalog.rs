@@ -16,7 +16,9 @@
 use std::collections::HashSet;
 
 use super::error::StoreError;
+use super::jobs::JobClaim;
 use super::query::{SessionFilter, SkillFilter};
+use super::rows::JobRow;
 use super::types::{
     Hand, HandSummary, IngestOutcome, NewSkill, Replay, SessionMeta, SessionRecord, SkillRecord,
     StaleSession, FEATURE_DIM,
@@ -118,6 +120,36 @@ pub(crate) struct NewReplay<'a> {
     pub blob: &'a BlobRef,
     /// Size of the blob, bytes.
     pub size_bytes: i64,
+}
+
+/// A job to insert ([`Catalog::insert_job`]).
+#[derive(Debug, Clone, Copy)]
+pub(crate) struct NewJob<'a> {
+    /// Its kind's name.
+    pub kind: &'static str,
+    /// Hex SHA-256 of its request.
+    pub key: &'a str,
+    /// Its request, JSON.
+    pub request: &'a str,
+    /// A replay's skill.
+    pub skill_id: Option<i64>,
+}
+
+/// How a claim on a job ends, as the columns [`Catalog::settle_job`] writes.
+#[derive(Debug, Clone, Copy)]
+pub(crate) struct SettleRow<'a> {
+    /// `done`, `failed` or `cancelled`.
+    pub state: &'static str,
+    /// A simulation's session.
+    pub session_id: Option<i64>,
+    /// Whether the job stored that session.
+    pub session_created: Option<bool>,
+    /// A replay's id.
+    pub replay_id: Option<i64>,
+    /// A failure's HTTP status.
+    pub error_status: Option<i64>,
+    /// A failure's message.
+    pub error_detail: Option<&'a str>,
 }
 
 /// What [`Catalog::replace_session_skills`] did.
@@ -284,6 +316,52 @@ pub(crate) trait Catalog: Send + Sync + std::fmt::Debug {
     /// The exclusive cross-server blob hold if no server holds the shared one, without
     /// waiting (see [`Catalog::shared_blob_guard`]).
     async fn try_exclusive_blob_guard(&self) -> Result<ExclusiveBlobGuard, StoreError>;
+
+    /// Inserts a job unless the same request (`key`) has a waiting, running or done job or a
+    /// replay's skill is gone: `None` then.
+    async fn insert_job(&self, job: NewJob<'_>) -> Result<Option<JobRow>, StoreError>;
+
+    /// The waiting, running or done job of the request `key`.
+    async fn active_job(&self, key: &str) -> Result<Option<JobRow>, StoreError>;
+
+    /// Number of jobs waiting for a worker.
+    async fn queued_jobs(&self) -> Result<i64, StoreError>;
+
+    /// One job.
+    async fn job(&self, id: i64) -> Result<Option<JobRow>, StoreError>;
+
+    /// Jobs with an id below `before`, in `state` if given, newest first, at most `limit`.
+    async fn jobs(
+        &self,
+        state: Option<&str>,
+        before: i64,
+        limit: i64,
+    ) -> Result<Vec<JobRow>, StoreError>;
+
+    /// Ends the running jobs whose lease ran out and that may not be claimed again (cancel
+    /// asked for, or `max_attempts` claims had: failed with 503 and `detail`); their number.
+    async fn expire_jobs(&self, max_attempts: i64, detail: &str) -> Result<u64, StoreError>;
+
+    /// Claims the oldest waiting job, or the oldest running one whose lease ran out with fewer
+    /// than `max_attempts` claims, for `worker`, for `lease_ms`.
+    async fn claim_job(
+        &self,
+        worker: &str,
+        lease_ms: i64,
+        max_attempts: i64,
+    ) -> Result<Option<JobRow>, StoreError>;
+
+    /// Renews a claim for `lease_ms`: whether a cancel was asked for; `None`: the claim is gone.
+    async fn renew_job(&self, claim: &JobClaim, lease_ms: i64) -> Result<Option<bool>, StoreError>;
+
+    /// Ends a claim; whether it still held.
+    async fn settle_job(&self, claim: &JobClaim, end: SettleRow<'_>) -> Result<bool, StoreError>;
+
+    /// Gives a claimed job back to the queue (its attempt not counted); whether it still held.
+    async fn release_job(&self, claim: &JobClaim) -> Result<bool, StoreError>;
+
+    /// Cancels a job (a running one: asks its worker to); the job after that.
+    async fn cancel_job(&self, id: i64) -> Result<Option<JobRow>, StoreError>;
 
     /// Closes the connections (waits for queries in flight; later calls fail).
     async fn close(&self);

@@ -86,6 +86,12 @@ pub enum StoreError {
     /// No replay with this id.
     #[error("no replay with id {0}")]
     ReplayNotFound(i64),
+    /// No job with this id.
+    #[error("no job with id {0}")]
+    JobNotFound(i64),
+    /// Too many jobs wait for a worker already (their number): the work was not accepted.
+    #[error("{0} simulations and replays wait for a worker already; try again when fewer do")]
+    QueueFull(u64),
     /// A hand that cannot be built: its URDF or spec is invalid (the message names the problem).
     #[error("the hand is invalid: {0}")]
     InvalidHand(String),

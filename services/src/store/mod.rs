@@ -21,6 +21,7 @@ mod blob;
 mod catalog;
 mod error;
 mod hands;
+mod jobs;
 mod knn;
 mod postgres;
 mod query;
@@ -124,6 +125,10 @@ pub struct SweepReport {
     pub skipped_busy: bool,
 }
 pub use hands::MAX_HAND_NAME;
+pub use jobs::{
+    Job, JobClaim, JobEnd, JobError, JobKind, JobRequest, JobResult, JobState, Renewal, Submitted,
+    JOB_LEASE, MAX_JOB_ATTEMPTS, MAX_JOB_LIMIT,
+};
 pub use query::{
     SessionQuery, SkillQuery, SortField, SortKey, SortOrder, DEFAULT_LIMIT, MAX_LIMIT,
 };

@@ -15,7 +15,7 @@ use super::types::{HandSummary, Replay, SessionRecord, SkillRecord, FEATURE_DIM}
 use crate::assist::features::TEMPLATE_DIM;
 
 pub(crate) use store_postgres::rows::{
-    HandRow, HandSummaryRow, IndexedSkillRow, ReplayRow, SessionRow, SkillRow,
+    HandRow, HandSummaryRow, IndexedSkillRow, JobRow, ReplayRow, SessionRow, SkillRow,
 };
 
 /// A feature vector as its column holds it.

@@ -25,13 +25,15 @@ use std::time::Duration;
 use dfs_core::names::Named;
 use sqlx::postgres::{PgConnectOptions, PgPool, PgPoolOptions};
 use sqlx::{Connection as _, PgConnection, Postgres, QueryBuilder};
-use store_postgres::rows::BlobRow;
+use store_postgres::jobs as pg_jobs;
+use store_postgres::rows::{BlobRow, JobRow};
 use store_postgres::{NewHandRow, NewReplayRow, NewSessionRow, SessionListing, MIGRATOR};
 
 use super::catalog::{
     BlobGuard, BlobRef, Catalog, CheckedSkill, DeletedSession, ExclusiveBlobGuard, IndexedSkill,
-    NewHand, NewReplay, NewSession, ReplacedRows, Replacement,
+    NewHand, NewJob, NewReplay, NewSession, ReplacedRows, Replacement, SettleRow,
 };
+use super::jobs::JobClaim;
 use super::query::{SessionFilter, SkillFilter};
 use super::reprocess::{plan, StoredForm};
 use super::rows::{approach_to_blob, convert, feature_to_blob};
@@ -613,6 +615,71 @@ impl Catalog for PgCatalog {
 
     async fn try_exclusive_blob_guard(&self) -> Result<ExclusiveBlobGuard, StoreError> {
         blob_lock::try_exclusive(&self.pool, &self.blob_guards).await
+    }
+
+    async fn insert_job(&self, job: NewJob<'_>) -> Result<Option<JobRow>, StoreError> {
+        Ok(pg_jobs::insert(&self.pool, job.kind, job.key, job.request, job.skill_id).await?)
+    }
+
+    async fn active_job(&self, key: &str) -> Result<Option<JobRow>, StoreError> {
+        Ok(pg_jobs::active(&self.pool, key).await?)
+    }
+
+    async fn queued_jobs(&self) -> Result<i64, StoreError> {
+        Ok(pg_jobs::queued(&self.pool).await?)
+    }
+
+    async fn job(&self, id: i64) -> Result<Option<JobRow>, StoreError> {
+        Ok(pg_jobs::get(&self.pool, id).await?)
+    }
+
+    async fn jobs(
+        &self,
+        state: Option<&str>,
+        before: i64,
+        limit: i64,
+    ) -> Result<Vec<JobRow>, StoreError> {
+        Ok(pg_jobs::list(&self.pool, state, before, limit).await?)
+    }
+
+    async fn expire_jobs(&self, max_attempts: i64, detail: &str) -> Result<u64, StoreError> {
+        Ok(pg_jobs::expire(&self.pool, max_attempts, detail).await?)
+    }
+
+    async fn claim_job(
+        &self,
+        worker: &str,
+        lease_ms: i64,
+        max_attempts: i64,
+    ) -> Result<Option<JobRow>, StoreError> {
+        Ok(pg_jobs::claim(&self.pool, worker, lease_ms, max_attempts).await?)
+    }
+
+    async fn renew_job(&self, claim: &JobClaim, lease_ms: i64) -> Result<Option<bool>, StoreError> {
+        let attempt = i64::from(claim.attempt);
+        Ok(pg_jobs::renew(&self.pool, claim.id, &claim.worker, attempt, lease_ms).await?)
+    }
+
+    async fn settle_job(&self, claim: &JobClaim, end: SettleRow<'_>) -> Result<bool, StoreError> {
+        let attempt = i64::from(claim.attempt);
+        let s = pg_jobs::Settle {
+            state: end.state,
+            session_id: end.session_id,
+            session_created: end.session_created,
+            replay_id: end.replay_id,
+            error_status: end.error_status,
+            error_detail: end.error_detail,
+        };
+        Ok(pg_jobs::settle(&self.pool, claim.id, &claim.worker, attempt, s).await?)
+    }
+
+    async fn release_job(&self, claim: &JobClaim) -> Result<bool, StoreError> {
+        let attempt = i64::from(claim.attempt);
+        Ok(pg_jobs::release(&self.pool, claim.id, &claim.worker, attempt).await?)
+    }
+
+    async fn cancel_job(&self, id: i64) -> Result<Option<JobRow>, StoreError> {
+        Ok(pg_jobs::cancel(&self.pool, id).await?)
     }
 
     async fn close(&self) {

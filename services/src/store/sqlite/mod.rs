@@ -8,6 +8,7 @@
 //! time is the skill filter ([`skill_filter`]), from typed parts with every value bound.
 
 mod hands;
+mod jobs;
 mod reprocess;
 mod sessions;
 mod skill_filter;
@@ -25,9 +26,11 @@ use sqlx::{Connection as _, SqliteConnection};
 
 use super::catalog::{
     BlobGuard, BlobRef, Catalog, CheckedSkill, DeletedSession, ExclusiveBlobGuard, IndexedSkill,
-    NewHand, NewReplay, NewSession, Replacement,
+    NewHand, NewJob, NewReplay, NewSession, Replacement, SettleRow,
 };
+use super::jobs::JobClaim;
 use super::query::{SessionFilter, SkillFilter};
+use super::rows::JobRow;
 use super::types::{
     Hand, HandSummary, IngestOutcome, Replay, SessionRecord, SkillRecord, StaleSession,
 };
@@ -335,6 +338,60 @@ impl Catalog for SqliteCatalog {
 
     async fn try_exclusive_blob_guard(&self) -> Result<ExclusiveBlobGuard, StoreError> {
         Ok(ExclusiveBlobGuard::NotNeeded)
+    }
+
+    async fn insert_job(&self, job: NewJob<'_>) -> Result<Option<JobRow>, StoreError> {
+        jobs::insert(&self.pool, job).await
+    }
+
+    async fn active_job(&self, key: &str) -> Result<Option<JobRow>, StoreError> {
+        jobs::active(&self.pool, key).await
+    }
+
+    async fn queued_jobs(&self) -> Result<i64, StoreError> {
+        jobs::queued(&self.pool).await
+    }
+
+    async fn job(&self, id: i64) -> Result<Option<JobRow>, StoreError> {
+        jobs::get(&self.pool, id).await
+    }
+
+    async fn jobs(
+        &self,
+        state: Option<&str>,
+        before: i64,
+        limit: i64,
+    ) -> Result<Vec<JobRow>, StoreError> {
+        jobs::list(&self.pool, state, before, limit).await
+    }
+
+    async fn expire_jobs(&self, max_attempts: i64, detail: &str) -> Result<u64, StoreError> {
+        jobs::expire(&self.pool, max_attempts, detail).await
+    }
+
+    async fn claim_job(
+        &self,
+        worker: &str,
+        lease_ms: i64,
+        max_attempts: i64,
+    ) -> Result<Option<JobRow>, StoreError> {
+        jobs::claim(&self.pool, worker, lease_ms, max_attempts).await
+    }
+
+    async fn renew_job(&self, claim: &JobClaim, lease_ms: i64) -> Result<Option<bool>, StoreError> {
+        jobs::renew(&self.pool, claim, lease_ms).await
+    }
+
+    async fn settle_job(&self, claim: &JobClaim, end: SettleRow<'_>) -> Result<bool, StoreError> {
+        jobs::settle(&self.pool, claim, end).await
+    }
+
+    async fn release_job(&self, claim: &JobClaim) -> Result<bool, StoreError> {
+        jobs::release(&self.pool, claim).await
+    }
+
+    async fn cancel_job(&self, id: i64) -> Result<Option<JobRow>, StoreError> {
+        jobs::cancel(&self.pool, id).await
     }
 
     async fn close(&self) {
