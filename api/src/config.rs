@@ -6,10 +6,11 @@ use std::path::PathBuf;
 use std::time::Duration;
 
 use axum::http::HeaderValue;
-use services::store::{Blobs, Database, StoreError};
+use services::store::{Blobs, Database, StoreError, JOB_LEASE};
 
 use crate::http::server::{default_max_connections, ConnectionLimits};
 use crate::http::{LayerConfig, StateConfig};
+use crate::jobs::WorkerConfig;
 
 /// Default largest request body: 256 MiB.
 pub const DEFAULT_MAX_BODY: usize = 256 * 1024 * 1024;
@@ -60,9 +61,24 @@ pub struct ServeArgs {
     /// Time limit of one request in seconds, body included (over it: 503).
     #[arg(long, default_value_t = 120.0)]
     pub request_timeout: f64,
-    /// Simulations that may run at once; further requests wait for a turn.
+    /// Simulations and replays this server runs at once: its job workers, which take jobs
+    /// submitted through any server on the same data base. 0: none; the jobs are run by other
+    /// servers and `icms worker`s on the same PostgreSQL data base (not allowed with SQLite,
+    /// whose file no other process may write).
     #[arg(long, default_value_t = 2)]
     pub max_simulations: usize,
+    /// Longest a simulation or replay request waits for its job, seconds (at most 80 % of
+    /// --request-timeout): finished by then it is answered 201 with its result, otherwise
+    /// 202 with the job's URL. 0: always 202.
+    #[arg(long, default_value_t = 30.0)]
+    pub job_wait: f64,
+    /// Longest a job may run, seconds: then it is stopped and failed (503), nothing stored.
+    #[arg(long, default_value_t = 600.0)]
+    pub job_timeout: f64,
+    /// Jobs that may wait for a worker; further simulation and replay requests get 503 with
+    /// `Retry-After`.
+    #[arg(long, default_value_t = 1000)]
+    pub max_queued_jobs: usize,
     /// MiB of skill JSON the server keeps in memory for `GET /api/v1/skills/{id}` (0: none).
     #[arg(long, default_value_t = 64)]
     pub cache_mib: usize,
@@ -71,7 +87,7 @@ pub struct ServeArgs {
     /// a turn, then get 503 with `Retry-After`.
     #[arg(long, default_value_t = 2)]
     pub max_ingests: usize,
-    /// Longest wait of an upload, simulation or replay for a free turn before 503, seconds.
+    /// Longest wait of an upload for a free turn before 503, seconds.
     #[arg(long, default_value_t = 10.0)]
     pub queue_wait: f64,
     /// Seconds a client may take from a request's first byte to the end of its headers.
@@ -109,6 +125,8 @@ pub const MAX_MAX_BODY: usize = 64 << 30;
 pub const MAX_TIMEOUT_S: f64 = 86_400.0;
 /// Largest accepted `--max-simulations`, `--max-ingests`, `--max-live` and `--live-threads`.
 pub const MAX_WORKERS: usize = 256;
+/// Largest accepted `--max-queued-jobs`.
+pub const MAX_QUEUED_JOBS: usize = 1_000_000;
 /// Largest accepted `--cache-mib` (64 GiB).
 pub const MAX_CACHE_MIB: usize = 1 << 16;
 /// Largest accepted `--max-connections`.
@@ -166,6 +184,9 @@ impl Default for ServeArgs {
             cors_origins: Vec::new(),
             request_timeout: 120.0,
             max_simulations: 2,
+            job_wait: 30.0,
+            job_timeout: 600.0,
+            max_queued_jobs: 1000,
             cache_mib: 64,
             max_ingests: 2,
             queue_wait: 10.0,
@@ -193,8 +214,10 @@ pub struct ServeConfig {
     pub blobs: Blobs,
     /// Seed an empty data base with simulated sessions.
     pub demo: bool,
-    /// Handler state settings (token, body limit, simulations, cache).
+    /// Handler state settings (token, body limit, job wait, cache).
     pub state: StateConfig,
+    /// This server's job workers.
+    pub workers: WorkerConfig,
     /// Address of the Foxglove WebSocket server publishing live sessions, if any.
     pub foxglove: Option<SocketAddr>,
     /// Layer settings (time limit, CORS).
@@ -258,7 +281,30 @@ impl ServeArgs {
         let live_silence = seconds("--live-silence", self.live_silence)?;
         let max_body = count("--max-body", self.max_body, 1, MAX_MAX_BODY)?;
         let max_upload = count("--max-upload", self.max_upload, 1, MAX_MAX_BODY)?;
-        let max_simulations = count("--max-simulations", self.max_simulations, 1, MAX_WORKERS)?;
+        let max_simulations = count("--max-simulations", self.max_simulations, 0, MAX_WORKERS)?;
+        if max_simulations == 0 && database == Database::Sqlite {
+            return Err(ConfigError::OutOfRange(
+                "--max-simulations 0 leaves the jobs to other processes, and with SQLite (no \
+                 --database-url) no other process may write the data directory: nothing would \
+                 run them. Give --max-simulations 1 or more, or a PostgreSQL --database-url \
+                 with `icms worker`s"
+                    .into(),
+            ));
+        }
+        let job_timeout = seconds("--job-timeout", self.job_timeout)?;
+        if !(self.job_wait.is_finite() && (0.0..=MAX_TIMEOUT_S).contains(&self.job_wait)) {
+            return Err(ConfigError::OutOfRange(format!(
+                "--job-wait must be a number of seconds in [0, {MAX_TIMEOUT_S}], got {}",
+                self.job_wait
+            )));
+        }
+        let job_wait = Duration::from_secs_f64(self.job_wait).min(request_timeout.mul_f64(0.8));
+        let max_queued_jobs = count(
+            "--max-queued-jobs",
+            self.max_queued_jobs,
+            1,
+            MAX_QUEUED_JOBS,
+        )? as u64;
         let max_ingests = count("--max-ingests", self.max_ingests, 1, MAX_WORKERS)?;
         let cache_bytes = count("--cache-mib", self.cache_mib, 0, MAX_CACHE_MIB)? << 20;
         let max_live = count("--max-live", self.max_live, 1, MAX_WORKERS)?;
@@ -291,13 +337,19 @@ impl ServeArgs {
                 token,
                 max_body,
                 max_upload,
-                max_simulations,
+                job_wait,
+                max_queued_jobs,
                 max_ingests,
                 queue_wait,
                 cache_bytes,
                 max_live,
                 live_threads,
                 live_silence,
+            },
+            workers: WorkerConfig {
+                count: max_simulations,
+                job_timeout,
+                lease: JOB_LEASE,
             },
             layers: LayerConfig {
                 request_timeout,
@@ -383,20 +435,31 @@ mod tests {
                 "{bad}"
             );
         }
+        // No workers: only where other processes can run the jobs (PostgreSQL).
         let a = ServeArgs {
             max_simulations: 0,
             ..ServeArgs::default()
         };
         let e = a.into_config().unwrap_err().to_string();
-        assert!(e.contains("--max-simulations"), "{e}");
+        assert!(
+            e.contains("--max-simulations") && e.contains("icms worker"),
+            "{e}"
+        );
+        let a = ServeArgs {
+            max_simulations: 0,
+            database_url: Some("postgres://icms@localhost/icms".into()),
+            ..ServeArgs::default()
+        };
+        assert_eq!(a.into_config().unwrap().workers.count, 0);
     }
 
     #[test]
     fn every_numeric_option_is_range_checked_without_panicking() {
         let bad_seconds = [0.0, -1.0, 1e30, f64::INFINITY, f64::NAN, 86_401.0];
         type Set = fn(&mut ServeArgs, f64);
-        let timeouts: [(&str, Set); 4] = [
+        let timeouts: [(&str, Set); 5] = [
             ("--request-timeout", |a, v| a.request_timeout = v),
+            ("--job-timeout", |a, v| a.job_timeout = v),
             ("--queue-wait", |a, v| a.queue_wait = v),
             ("--header-timeout", |a, v| a.header_timeout = v),
             ("--keep-alive-timeout", |a, v| a.keep_alive_timeout = v),
@@ -413,7 +476,13 @@ mod tests {
             assert!(a.into_config().is_ok(), "{name} of a day");
         }
         type SetN = fn(&mut ServeArgs, usize);
-        let counts: [(&str, SetN, usize); 8] = [
+        let counts: [(&str, SetN, usize); 10] = [
+            ("--max-queued-jobs", |a, v| a.max_queued_jobs = v, 0),
+            (
+                "--max-queued-jobs",
+                |a, v| a.max_queued_jobs = v,
+                usize::MAX,
+            ),
             ("--max-body", |a, v| a.max_body = v, 0),
             ("--max-upload", |a, v| a.max_upload = v, 0),
             ("--max-upload", |a, v| a.max_upload = v, usize::MAX),
@@ -429,6 +498,34 @@ mod tests {
             let e = a.into_config().unwrap_err().to_string();
             assert!(e.contains(name), "{name} {v}: {e}");
         }
+    }
+
+    #[test]
+    fn the_job_wait_may_be_zero_and_stays_within_the_request_time_limit() {
+        for bad in [-1.0, f64::NAN, f64::INFINITY, 86_401.0] {
+            let a = ServeArgs {
+                job_wait: bad,
+                ..ServeArgs::default()
+            };
+            let e = a.into_config().unwrap_err().to_string();
+            assert!(e.contains("--job-wait"), "{bad}: {e}");
+        }
+        let wait = |job_wait, request_timeout| {
+            ServeArgs {
+                job_wait,
+                request_timeout,
+                ..ServeArgs::default()
+            }
+            .into_config()
+            .unwrap()
+            .state
+            .job_wait
+        };
+        assert_eq!(wait(0.0, 120.0), Duration::ZERO);
+        assert_eq!(wait(30.0, 120.0), Duration::from_secs(30));
+        // A wait the request's time limit would cut short is shortened, so the client gets
+        // its 202 rather than a 503.
+        assert_eq!(wait(30.0, 10.0), Duration::from_secs(8));
     }
 
     #[test]

@@ -9,6 +9,7 @@ pub mod cli;
 pub mod config;
 pub mod filters;
 pub mod http;
+pub mod jobs;
 pub mod live_client;
 pub mod memory;
 pub mod startup;

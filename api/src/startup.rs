@@ -7,13 +7,14 @@ use std::net::SocketAddr;
 
 use axum::Router;
 use dfs_core::scenario::Scenario;
-use services::store::{Store, StoreError};
+use services::store::{JobRequest, Store, StoreError};
 use tokio::net::TcpListener;
 use tokio_util::sync::CancellationToken;
 
 use crate::config::ServeConfig;
 use crate::http::server::ConnectionLimits;
 use crate::http::{self, AppState};
+use crate::jobs::{self, WorkerConfig};
 
 /// Why the server could not start or stopped with an error.
 #[derive(Debug, thiserror::Error)]
@@ -46,6 +47,7 @@ pub struct Application {
     state: AppState,
     demo: bool,
     connections: ConnectionLimits,
+    workers: WorkerConfig,
     foxglove: Option<foxglove::WebSocketServerHandle>,
 }
 
@@ -122,6 +124,7 @@ impl Application {
             state,
             demo: config.demo,
             connections: config.connections,
+            workers: config.workers,
             foxglove,
         })
     }
@@ -141,14 +144,26 @@ impl Application {
         &self.state
     }
 
-    /// Serves until `shutdown` completes, then stops accepting, tells running simulations and
-    /// replays to stop (they end within a fraction of a second and answer 503), waits at most
-    /// the shutdown grace for open connections, and closes the database.
+    /// Serves until `shutdown` completes, then stops accepting, tells the job workers to stop
+    /// (their running simulations and replays end within a fraction of a second and go back to
+    /// the queue, for the next server or worker), waits at most the shutdown grace for open
+    /// connections, and closes the database.
     pub async fn run_until(
         self,
         shutdown: impl Future<Output = ()> + Send + 'static,
     ) -> Result<(), StartupError> {
         let stopping = self.state.shutdown_token().clone();
+        let mut workers = jobs::spawn_workers(
+            self.state.store(),
+            &self.workers,
+            self.state.jobs(),
+            &stopping,
+        );
+        tracing::info!(
+            workers = self.workers.count,
+            job_timeout_s = self.workers.job_timeout.as_secs_f64(),
+            "job workers started"
+        );
         let seeding = if self.demo {
             let state = self.state.clone();
             let stop = stopping.clone();
@@ -192,6 +207,9 @@ impl Application {
         if let Some(task) = seeding {
             let _ = task.await;
         }
+        // Each worker stops its job within a fraction of a second and gives it back (or stores
+        // what it finished).
+        while workers.join_next().await.is_some() {}
         let _ = sweeping.await;
         self.state.store().close().await;
         tracing::info!("database closed; stopped");
@@ -268,7 +286,9 @@ async fn sweep_blobs(state: &AppState, stop: &CancellationToken) {
 }
 
 /// Seeds an empty data base with one simulated session of every built-in scenario (seed 0),
-/// so that a newcomer sees skills at once. Stops between sessions when `stop` is cancelled.
+/// so that a newcomer sees skills at once: one job each, which the workers run (the same
+/// requests as `POST /api/v1/simulations {"scenario": NAME}`, so a seeding interrupted and
+/// started again queues nothing twice).
 async fn seed_if_empty(state: &AppState, stop: &CancellationToken) {
     match state.store().list_sessions(1, None).await {
         Ok(page) if page.items.is_empty() => {}
@@ -283,6 +303,7 @@ async fn seed_if_empty(state: &AppState, stop: &CancellationToken) {
         "empty data base: seeding it with simulated sessions of the built-in scenarios \
          (--no-demo skips this)"
     );
+    let mut queued = 0;
     for name in Scenario::BUILTINS {
         if stop.is_cancelled() {
             tracing::info!("seeding stopped by shutdown");
@@ -291,15 +312,20 @@ async fn seed_if_empty(state: &AppState, stop: &CancellationToken) {
         let Some(scenario) = Scenario::builtin(name, 0) else {
             continue;
         };
-        match http::simulations::simulate_and_store(state, scenario, None).await {
-            Ok(out) => tracing::info!(
-                scenario = name,
-                session_id = out.session_id,
-                skills = out.skill_ids.len(),
-                "seeded"
-            ),
-            Err(p) => tracing::warn!(scenario = name, problem = %p, "seeding failed"),
+        let request = JobRequest::Simulation {
+            scenario: Box::new(scenario),
+            duration: None,
+        };
+        match state.store().submit_job(&request, u64::MAX).await {
+            Ok(s) => {
+                queued += usize::from(s.new);
+                state.jobs().job_submitted();
+            }
+            Err(e) => tracing::warn!(scenario = name, error = %e, "seeding failed"),
         }
     }
-    tracing::info!("seeding done");
+    tracing::info!(
+        jobs = queued,
+        "seeding queued; the sessions appear as the workers finish them"
+    );
 }

@@ -49,6 +49,41 @@ export function post(path, body) {
   });
 }
 
+/**
+ * POST `body` to `path`, an endpoint that runs a job (a simulation, a replay): its result.
+ * A job not finished within the server's wait is answered 202 with the job; it is then read
+ * every half second (`onWaiting(job)` told each time) until done, and its result read, or
+ * until it failed or was cancelled (thrown as the ApiError the request would have got).
+ */
+export async function postJob(path, body, onWaiting) {
+  let r;
+  try {
+    r = await fetch(path, {
+      method: 'POST',
+      headers: { 'Content-Type': 'application/json' },
+      body: JSON.stringify(body),
+    });
+  } catch (e) {
+    throw new ApiError(0, 'The server does not answer', String(e.message ?? e));
+  }
+  if (!r.ok) throw await problemOf(r);
+  if (r.status !== 202) return r.json();
+  let job = await r.json();
+  for (;;) {
+    if (job.state === 'done') return api(job.result_url);
+    if (job.state === 'failed') {
+      const e = job.error ?? {};
+      throw new ApiError(e.status ?? 500, e.title ?? 'Failed', e.detail ?? `job ${job.job_id} failed`);
+    }
+    if (job.state === 'cancelled') {
+      throw new ApiError(409, 'Cancelled', `job ${job.job_id} was cancelled before it finished`);
+    }
+    if (onWaiting) onWaiting(job);
+    await new Promise(resolve => setTimeout(resolve, 500));
+    job = await api(job.url);
+  }
+}
+
 /** A query string of the non-empty entries of `params`. */
 export function query(params) {
   const q = new URLSearchParams();

@@ -1,6 +1,6 @@
 // The ICMS web page: a hash router over a few views, each built from the API's JSON with
 // textContent only (dom.js), errors shown with the problem's title and detail (api.js).
-import { api, post, query, showError, clearError, ApiError } from './api.js';
+import { api, post, postJob, query, showError, clearError, ApiError } from './api.js';
 import { h, replace, fmt, facts } from './dom.js';
 
 const main = document.getElementById('main');
@@ -270,7 +270,9 @@ async function replaysPanel(box, skill) {
     run.disabled = true;
     status.textContent = `Replaying on ${select.value}… (simulated at 1 kHz, this takes a few seconds)`;
     try {
-      const r = await post(`/api/v1/skills/${skill.id}/replays`, { hand: select.value });
+      const r = await postJob(`/api/v1/skills/${skill.id}/replays`, { hand: select.value }, job => {
+        status.textContent = `Replaying on ${select.value}… (job ${job.job_id}: ${job.state})`;
+      });
       status.textContent = `Replay #${r.replay_id} on ${r.hand}: ${r.success ? 'the object was held' : `failed (${r.failure_reason})`}.`;
       const again = await api(`/api/v1/skills/${skill.id}/replays`);
       renderList(again.items);

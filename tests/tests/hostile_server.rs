@@ -72,17 +72,21 @@ fn a_deeply_nested_urdf_or_json_body_is_refused_and_the_server_lives() {
 }
 
 #[test]
-fn work_over_the_time_limit_is_stopped_and_its_turn_freed() {
+fn work_over_the_job_time_limit_is_stopped_and_its_turn_freed() {
     let rt = tokio::runtime::Runtime::new().unwrap();
     let dir = tempfile::tempdir().unwrap();
-    // One turn; a request may take 0.3 s: a 120 s simulation takes longer than that.
+    // One worker; a job may run 0.3 s: a 120 s simulation takes longer than that.
     let server = start(
         dir.path(),
-        &["--request-timeout", "0.3", "--max-simulations", "1"],
+        &["--job-timeout", "0.3", "--max-simulations", "1"],
     );
     let long = json!({"scenario": "two-grasps", "seed": 1, "duration": 120});
     let r = rt.block_on(server.client.post_json("/api/v1/simulations", &long, None));
-    assert_eq!(r.status.as_u16(), 503, "{}", r.problem(503));
+    let detail = r.problem(503);
+    assert!(
+        detail.contains("time limit") && detail.contains("--job-timeout"),
+        "{detail}"
+    );
     assert!(
         server.wait_for_log(
             &["work stopped before it finished"],
@@ -91,6 +95,18 @@ fn work_over_the_time_limit_is_stopped_and_its_turn_freed() {
         "the simulation was stopped:\n{}",
         server.log()
     );
+    let jobs = rt.block_on(server.client.get("/api/v1/jobs")).json();
+    assert_eq!(jobs["items"][0]["state"], "failed", "{jobs}");
+    assert_eq!(jobs["items"][0]["error"]["status"], 503, "{jobs}");
+    // The one worker is free again: a short simulation runs and is stored.
+    let short = json!({"scenario": "two-grasps", "seed": 1, "duration": 0.2});
+    let r = rt.block_on(server.client.post_json("/api/v1/simulations", &short, None));
+    assert_eq!(
+        r.status.as_u16(),
+        201,
+        "{}",
+        String::from_utf8_lossy(&r.body)
+    );
     healthy(&rt, &server);
     server.terminate();
     let (code, log) = server.wait();
@@ -98,39 +114,67 @@ fn work_over_the_time_limit_is_stopped_and_its_turn_freed() {
 }
 
 #[test]
-fn sigterm_stops_work_in_flight_and_the_process_exits() {
+fn sigterm_stops_work_in_flight_and_its_jobs_wait_for_the_next_start() {
     let rt = tokio::runtime::Runtime::new().unwrap();
     let dir = tempfile::tempdir().unwrap();
     let server = start(dir.path(), &["--max-simulations", "2"]);
-    let long = json!({"scenario": "two-grasps", "seed": 2, "duration": 120});
     let mut calls = Vec::new();
-    for _ in 0..2 {
+    for seed in [2, 3] {
         let client = server.client.clone();
-        let body = long.clone();
+        let body = json!({"scenario": "two-grasps", "seed": seed, "duration": 120});
         calls.push(
             rt.spawn(async move { client.post_json("/api/v1/simulations", &body, None).await }),
         );
     }
-    assert!(
-        server.wait_for_log(
-            &["/api/v1/simulations", "started processing request"],
-            Duration::from_secs(60)
-        ),
-        "{}",
-        server.log()
-    );
-    std::thread::sleep(Duration::from_millis(100));
+    let began = Instant::now();
+    while server.log().matches("job claimed").count() < 2 {
+        assert!(
+            began.elapsed() < Duration::from_secs(60),
+            "both jobs were claimed: {}",
+            server.log()
+        );
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    std::thread::sleep(Duration::from_millis(300));
     server.terminate();
     let Some((code, log)) = server.wait_within(Duration::from_secs(30)) else {
         panic!("icms serve was still running 30 s after SIGTERM");
     };
     assert_eq!(code, Some(0), "{log}");
     assert!(log.contains("database closed"), "{log}");
+    assert!(
+        log.contains("the job goes back to the queue"),
+        "the running jobs were given back: {log}"
+    );
     for call in calls {
-        // Each call was answered (503 if its work was stopped, 201 if it had finished) or its
-        // connection was closed by the exit; none hangs.
-        let _ = rt.block_on(async { tokio::time::timeout(Duration::from_secs(30), call).await });
+        // Each call was answered (202 with its job: the server stopped waiting at shutdown)
+        // or its connection was closed by the exit; none hangs.
+        if let Ok(Ok(r)) =
+            rt.block_on(async { tokio::time::timeout(Duration::from_secs(30), call).await })
+        {
+            assert_eq!(
+                r.status.as_u16(),
+                202,
+                "{}",
+                String::from_utf8_lossy(&r.body)
+            );
+        }
     }
+    // Nothing accepted is lost: started again, the server finds both jobs waiting (or already
+    // running again), their interrupted attempts not counted.
+    let server = start(dir.path(), &["--max-simulations", "2"]);
+    let jobs = rt.block_on(server.client.get("/api/v1/jobs")).json();
+    let items = jobs["items"].as_array().unwrap();
+    assert_eq!(items.len(), 2, "{jobs}");
+    for j in items {
+        assert!(
+            j["state"] == "queued" || (j["state"] == "running" && j["attempts"] == 1),
+            "{j}"
+        );
+    }
+    server.terminate();
+    let (code, log) = server.wait();
+    assert_eq!(code, Some(0), "{log}");
 }
 
 /// An MCAP file of `messages` messages of `size` zero bytes each on one schemaless topic, in

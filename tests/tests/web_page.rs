@@ -303,7 +303,8 @@ async fn the_web_page_works_in_headless_chromium_and_firefox() {
     let server = ServerProcess::start(
         env!("CARGO_BIN_EXE_icms-e2e"),
         dir.path(),
-        &["--no-demo", "--data", data],
+        // Every replay answered 202 with its job: the page follows the job to its replay.
+        &["--no-demo", "--data", data, "--job-wait", "0"],
         "warn",
     );
     let c = &server.client;

@@ -6,6 +6,7 @@ use serde::Serialize;
 use std::hint::black_box;
 use std::time::Instant;
 
+pub mod jobs;
 pub mod store;
 pub mod tick;
 
@@ -154,6 +155,21 @@ pub enum BenchCommand {
         keep: bool,
         /// An empty PostgreSQL data base to bench instead of SQLite (postgres://…); the bench
         /// fills it. See docs/backends.md.
+        #[arg(long, value_name = "URL")]
+        database_url: Option<String>,
+    },
+    /// Replay jobs (skill x built-in hand, from the built-in scenarios' skills) run by one
+    /// worker, then by two, each round on a fresh store seeded alike (not timed): the time
+    /// until every job has ended, and the ratio.
+    Jobs {
+        /// Print JSON: `{"rounds": [{"workers", "seconds", ...}], "speedup", ...}`.
+        #[arg(long)]
+        json: bool,
+        /// Replay jobs per round.
+        #[arg(long, default_value_t = 100, value_parser = clap::value_parser!(u64).range(1..=1000))]
+        jobs: u64,
+        /// An empty PostgreSQL data base to run the jobs on (postgres://…; the bench makes and
+        /// drops a schema per round). Default: temporary SQLite data directories.
         #[arg(long, value_name = "URL")]
         database_url: Option<String>,
     },
@@ -344,6 +360,19 @@ pub fn run(c: BenchCommand) -> Result<(), CliError> {
                 print_json(&r)
             } else {
                 store::print(&r);
+                Ok(())
+            }
+        }
+        BenchCommand::Jobs {
+            json,
+            jobs: n,
+            database_url,
+        } => {
+            let r = jobs::bench_jobs(n as usize, database_url.as_deref())?;
+            if json {
+                print_json(&r)
+            } else {
+                jobs::print(&r);
                 Ok(())
             }
         }

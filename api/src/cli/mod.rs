@@ -11,6 +11,7 @@ mod serve;
 mod sessions;
 mod simulate;
 mod skills;
+mod worker;
 
 use clap::{Parser, Subcommand};
 use std::path::Path;
@@ -77,6 +78,9 @@ enum Command {
     /// The HTTP API: record sessions, simulate, query and browse skills. Creates and migrates
     /// the data directory; seeds an empty data base with simulated sessions (--no-demo skips).
     Serve(Box<crate::config::ServeArgs>),
+    /// Runs simulation and replay jobs submitted through the servers on the same data base,
+    /// without serving HTTP: another machine's cores for `icms serve` (PostgreSQL).
+    Worker(worker::WorkerArgs),
     /// Queries the skill data base: filters, sorting, cursor pagination, similar skills.
     Skills(Box<skills::SkillsArgs>),
     /// The built-in robot hands (glove10, allegro, barrett, inspire, gripper), or one hand.
@@ -119,6 +123,7 @@ pub fn run() -> ExitCode {
         Command::Hands(a) => replay::run_hands(a),
         Command::Replay(a) => replay::run_replay(a),
         Command::Serve(a) => serve::run_serve(*a),
+        Command::Worker(a) => worker::run_worker(a),
         Command::Bench(b) => bench::run(b),
     };
     match result {

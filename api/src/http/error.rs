@@ -186,7 +186,12 @@ impl From<StoreError> for Problem {
             StoreError::SessionNotFound(_)
             | StoreError::SkillNotFound(_)
             | StoreError::HandNotFound(_)
-            | StoreError::ReplayNotFound(_) => Problem::not_found(e.to_string()),
+            | StoreError::ReplayNotFound(_)
+            | StoreError::JobNotFound(_) => Problem::not_found(e.to_string()),
+            StoreError::QueueFull(_) => Problem::busy(
+                format!("the server is busy: {e}; nothing was queued"),
+                BUSY_RETRY_AFTER_S,
+            ),
             StoreError::Conflict(_) => Problem::conflict(e.to_string()),
             StoreError::ObjectStore { .. } => Problem::busy(
                 format!("{e}; nothing was stored or changed, try again"),

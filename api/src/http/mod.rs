@@ -8,7 +8,8 @@
 //! | `POST /api/v1/sessions` | upload an MCAP session (201, or 200 if already stored) |
 //! | `GET /api/v1/sessions`, `GET /api/v1/sessions/{id}` | list (paginated), get |
 //! | `GET /api/v1/sessions/{id}/mcap`, `DELETE /api/v1/sessions/{id}` | download, delete |
-//! | `POST /api/v1/simulations` | simulate a scenario server-side and store it |
+//! | `POST /api/v1/simulations` | simulate a scenario server-side and store it (a job: 201, or 202 with the job) |
+//! | `GET /api/v1/jobs`, `GET /api/v1/jobs/{id}`, `DELETE /api/v1/jobs/{id}` | simulations and replays as jobs: list, follow, cancel |
 //! | `GET /api/v1/skills` | every store filter, sort, `limit`, `cursor` |
 //! | `GET /api/v1/skills/{id}`, `GET /api/v1/skills/{id}/similar`, `DELETE /api/v1/skills/{id}` | |
 //! | `GET /api/v1/hands`, `POST /api/v1/hands` | built-in and uploaded hands; upload URDF + spec |
@@ -27,6 +28,7 @@ pub mod extract;
 pub mod forces;
 pub mod frames;
 pub mod hands;
+pub mod jobs;
 mod linger;
 pub mod live;
 pub mod meta;
@@ -83,6 +85,7 @@ pub fn routes() -> OpenApiRouter<AppState> {
         .merge(simulations::router())
         .merge(hands::router())
         .merge(replays::router())
+        .merge(jobs::router())
         .merge(live::router())
         .merge(meta::api_router());
     OpenApiRouter::new()
@@ -107,7 +110,10 @@ fn finish_openapi(mut api: OpenApi, writes_need_token: bool) -> OpenApi {
              skill data base, upload robot hands (URDF + hand spec) and replay skills on them. \
              Errors are application/problem+json (RFC 9457); a request that does not parse as \
              HTTP is refused by the HTTP layer with its status and no body. A request over the \
-             server's time limit is answered 503. Operations that take query parameters refuse \
+             server's time limit is answered 503. Simulations and replays are jobs that any \
+             server or `icms worker` on the same data base runs: a request not finished within \
+             the server's job wait is answered 202 with the job (GET /api/v1/jobs/{id}). \
+             Operations that take query parameters refuse \
              unknown ones (400, naming them); the others ignore a query string. A JSON body \
              with a key twice in one object is refused (400, naming the key). Live glove \
              sessions are a WebSocket, GET /api/v1/live: a JSON start message, then binary \

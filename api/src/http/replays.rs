@@ -1,17 +1,16 @@
 //! Replays of stored skills on robot hands: `POST /api/v1/skills/{id}/replays` retargets the
-//! skill onto a hand and simulates it (on the blocking pool, under the same semaphore as the
-//! simulations), stores the report and the replay's MCAP, and answers 201 with the report —
+//! skill onto a hand and simulates it (a job, as simulations are: see [`super::jobs`]), stores
+//! the report and the replay's MCAP, and answers 201 with the report —
 //! also when the replay failed (`success: false` with a `failure_reason`): a failed replay is a
 //! result, not an error. `GET /api/v1/skills/{id}/replays`, `GET /api/v1/replays/{id}` and
 //! `GET /api/v1/replays/{id}/mcap` read them back. Replays go with their skill.
 
 use axum::extract::State;
-use axum::response::Response;
-use dfs_core::replay::{FailureReason, ReplayParams, ReplayReport, SkillSpec};
+use axum::response::{IntoResponse, Response};
+use dfs_core::replay::{FailureReason, ReplayReport};
 use serde::{Deserialize, Serialize};
-use services::replay::{replay_skill_until, skill_spec_from_json, ReplaySource};
-use services::session::SessionOut;
-use services::store::{Hand, Replay, StagedBlob, StoreError};
+use services::replay::skill_spec_from_json;
+use services::store::{JobRequest, JobResult, Replay, StoreError};
 use utoipa::ToSchema;
 use utoipa_axum::router::OpenApiRouter;
 use utoipa_axum::routes;
@@ -19,6 +18,7 @@ use utoipa_axum::routes;
 use super::created;
 use super::error::{Problem, ProblemBody};
 use super::extract::{Id, Json, WriteAccess};
+use super::jobs::{self, JobBody, Waited};
 use super::sessions::{send_mcap, McapFile};
 use super::state::AppState;
 
@@ -98,40 +98,6 @@ pub fn router() -> OpenApiRouter<AppState> {
         .routes(routes!(download_replay))
 }
 
-/// Replays `skill` on `hand` straight into a staged blob of the store, hashed as the recorder
-/// writes it: blocking work, for the blocking pool. Returns the report and the staged file, which
-/// storing moves into place (never read into memory).
-fn replay_blocking(
-    store: &services::store::Store,
-    hand: &Hand,
-    skill: &SkillSpec,
-    source: &ReplaySource,
-    stop: &dfs_core::Stop,
-) -> Result<(ReplayReport, StagedBlob), Problem> {
-    let loaded = hand.load()?;
-    let mut staged = store.stage_upload().map_err(|e| Problem::internal(&e))?;
-    let out = SessionOut::Stream {
-        out: Box::new(staged.writer().map_err(|e| Problem::internal(&e))?),
-        name: staged.path().to_path_buf(),
-    };
-    let report = replay_skill_until(
-        &loaded,
-        skill,
-        &ReplayParams::default(),
-        source,
-        Some(out),
-        stop,
-    )
-    .map_err(|e| match e {
-        services::RecordingError::InvalidInput { .. } => {
-            Problem::unprocessable(format!("the replay could not run: {e}"))
-        }
-        other => Problem::internal(&other),
-    })?;
-    staged.finish().map_err(|e| Problem::internal(&e))?;
-    Ok((report, staged))
-}
-
 /// Retargets a stored skill onto a hand, simulates it in the DFS at 1 kHz and stores the
 /// report and the replay's MCAP. A replay that fails (unreachable, torque limit, slip, no force
 /// closure) is stored and answered 201 like one that succeeds, with `success: false` and its
@@ -144,10 +110,14 @@ fn replay_blocking(
     responses(
         (status = 201, description = "Replayed and stored (successful or not: see `success`); `Location` names the replay", body = ReplayBody,
             headers(("Location" = String, description = "URL of the replay"))),
+        (status = 200, description = "The same request's job had stored this replay already", body = ReplayBody),
+        (status = 202, description = "Not finished within the server's job wait (`--job-wait`): the job, which `Location` names; `GET` it until `done`, then follow its `result_url`. The same request meanwhile answers the same job", body = JobBody,
+            headers(("Location" = String, description = "URL of the job"), ("Retry-After" = u32, description = "Seconds before looking again"))),
         (status = 400, description = "The id is not an integer, malformed JSON (a key twice in one object included, named), or a body that could not be read", body = ProblemBody, content_type = "application/problem+json"),
         (status = 404, description = "No skill with this id", body = ProblemBody, content_type = "application/problem+json"),
         (status = 422, description = "No hand with this name (named), a bad field, or a skill that does not describe a replayable grasp", body = ProblemBody, content_type = "application/problem+json"),
-        (status = 503, description = "Over the server's time limit (the replay is stopped and not stored), every simulation turn is taken (with `Retry-After`), or the server is stopping", body = ProblemBody, content_type = "application/problem+json"),
+        (status = 409, description = "The job was cancelled (`DELETE /api/v1/jobs/{id}`) before it finished", body = ProblemBody, content_type = "application/problem+json"),
+        (status = 503, description = "The job ran over the server's job time limit (stopped, nothing stored), too many jobs wait already (with `Retry-After`), or the data base cannot be reached", body = ProblemBody, content_type = "application/problem+json"),
     ))]
 async fn create_replay(
     _: WriteAccess,
@@ -155,9 +125,14 @@ async fn create_replay(
     Id(skill_id): Id,
     Json(req): Json<ReplayRequest>,
 ) -> Result<Response, Problem> {
+    // Checked here so that a missing skill or hand, or a skill that is no grasp, is answered
+    // at once, not by the job.
     let skill = st.store().get_skill(skill_id).await?;
+    let name = format!("skill {skill_id}");
+    skill_spec_from_json(&skill.params, &name)
+        .map_err(|e| Problem::unprocessable(format!("{name} cannot be replayed: {e}")))?;
     let hand = match st.store().get_hand(&req.hand).await {
-        Ok(h) => h,
+        Ok(h) => h.summary.name,
         Err(StoreError::HandNotFound(name)) => {
             return Err(Problem::unprocessable(format!(
                 "hand: no hand named {name:?} (GET /api/v1/hands lists them)"
@@ -165,31 +140,23 @@ async fn create_replay(
         }
         Err(e) => return Err(e.into()),
     };
-    let source = ReplaySource {
-        skill_id: Some(skill_id),
-        skill_name: format!("skill {skill_id}"),
-    };
-    let spec = skill_spec_from_json(&skill.params, &source.skill_name)
-        .map_err(|e| Problem::unprocessable(format!("skill {skill_id} cannot be replayed: {e}")))?;
-    let store = st.store().clone();
-    let hand_name = hand.summary.name.clone();
-    let (report, staged) = st
-        .run_limited(move |stop| replay_blocking(&store, &hand, &spec, &source, stop))
-        .await?;
-    let replay = st
-        .store()
-        .insert_replay_staged(skill_id, &hand_name, &report, staged)
-        .await?;
-    tracing::info!(
-        replay_id = replay.id,
-        skill_id,
-        hand = %hand_name,
-        success = replay.success,
-        failure_reason = replay.failure_reason.map_or("", |r| r.name()),
-        "replay stored"
-    );
-    let location = format!("/api/v1/replays/{}", replay.id);
-    Ok(created(ReplayBody::from(replay), &location))
+    let request = JobRequest::Replay { skill_id, hand };
+    match jobs::submit(&st, &request).await? {
+        Waited::Pending(job) => Ok(jobs::accepted(&job)),
+        Waited::Finished { job, new } => match job.result {
+            Some(JobResult::Replay { id }) => {
+                let body = ReplayBody::from(st.store().get_replay(id).await?);
+                if new {
+                    Ok(created(body, &format!("/api/v1/replays/{id}")))
+                } else {
+                    Ok(axum::Json(body).into_response())
+                }
+            }
+            _ => Err(jobs::problem_of(&job).unwrap_or_else(|| {
+                Problem::internal(&format!("replay job {} ended without a replay", job.id))
+            })),
+        },
+    }
 }
 
 /// The replays of a skill.

@@ -1,13 +1,12 @@
 //! `/api/v1/simulations`: a scenario (built-in name or scenario object) run server-side through
-//! the closed 1 kHz loop and recorded, on the blocking pool and never on the async workers,
-//! then segmented and stored like an upload. A semaphore bounds how many run at once.
+//! the closed 1 kHz loop and recorded, then segmented and stored like an upload: a job that a
+//! worker of any server on the data base runs (see [`super::jobs`]).
 
 use axum::extract::State;
 use axum::response::Response;
 use dfs_core::scenario::Scenario;
 use serde::Deserialize;
-use services::session::{SessionOut, SessionSource};
-use services::store::{IngestOutcome, StagedBlob};
+use services::store::{IngestOutcome, JobRequest, JobResult};
 use utoipa::openapi::schema::{ObjectBuilder, OneOfBuilder, Schema, Type};
 use utoipa::openapi::RefOr;
 use utoipa::ToSchema;
@@ -16,6 +15,7 @@ use utoipa_axum::routes;
 
 use super::error::{Problem, ProblemBody};
 use super::extract::{field_error, Json, WriteAccess};
+use super::jobs::{self, JobBody, Waited};
 use super::sessions::StoredSession;
 use super::state::AppState;
 
@@ -113,58 +113,9 @@ fn scenario_of(req: &SimulationRequest) -> Result<Scenario, Problem> {
     Ok(scenario)
 }
 
-/// Simulates `scenario` straight into a staged blob of the store (`blobs/sha256/staging/`),
-/// hashed as the recorder writes it, and segments it from the file in two streamed passes:
-/// all blocking work, for the blocking pool. The file is never read into memory; storing it
-/// is a rename.
-fn simulate_blocking(
-    store: &services::store::Store,
-    scenario: &Scenario,
-    duration: Option<f64>,
-    stop: &dfs_core::Stop,
-) -> Result<
-    (
-        StagedBlob,
-        services::store::SessionMeta,
-        Vec<services::store::NewSkill>,
-    ),
-    Problem,
-> {
-    let mut staged = store.stage_upload().map_err(|e| Problem::internal(&e))?;
-    let out = SessionOut::Stream {
-        out: Box::new(staged.writer().map_err(|e| Problem::internal(&e))?),
-        name: staged.path().to_path_buf(),
-    };
-    services::session::record_simulation_until(scenario, duration, out, |_, _| {}, stop).map_err(
-        |e| match e {
-            services::RecordingError::InvalidInput { .. }
-            | services::RecordingError::Simulation { .. } => {
-                Problem::unprocessable(format!("the simulation failed: {e}"))
-            }
-            other => Problem::internal(&other),
-        },
-    )?;
-    staged.finish().map_err(|e| Problem::internal(&e))?;
-    let (meta, skills) = services::ingest::analyse_source(&SessionSource::File(staged.path()))
-        .map_err(|e| Problem::internal(&format!("a simulated session did not read back: {e}")))?;
-    Ok((staged, meta, skills))
-}
-
-/// Simulates and stores a scenario (see [`AppState::run_limited`]).
-pub async fn simulate_and_store(
-    st: &AppState,
-    scenario: Scenario,
-    duration: Option<f64>,
-) -> Result<IngestOutcome, Problem> {
-    let store = st.store().clone();
-    let (staged, meta, skills) = st
-        .run_limited(move |stop| simulate_blocking(&store, &scenario, duration, stop))
-        .await?;
-    Ok(st.store().ingest_staged(staged, meta, skills).await?)
-}
-
 /// Runs a scenario server-side through the closed 1 kHz loop, records it as a session and
-/// stores it with its skills.
+/// stores it with its skills: a job, answered with its session when it finishes within the
+/// server's job wait, else 202 with the job.
 #[utoipa::path(post, path = "/simulations", tag = "simulations",
     request_body(content = SimulationRequest, content_type = "application/json",
         example = json!({"scenario": "two-grasps", "seed": 7})),
@@ -172,26 +123,45 @@ pub async fn simulate_and_store(
     responses(
         (status = 201, description = "Simulated and stored; `Location` names the new session", body = StoredSession,
             headers(("Location" = String, description = "URL of the session"))),
-        (status = 200, description = "An identical session was already stored: that session", body = StoredSession),
+        (status = 200, description = "An identical session was already stored (or the same request's job had stored it): that session", body = StoredSession),
+        (status = 202, description = "Not finished within the server's job wait (`--job-wait`): the job, which `Location` names; `GET` it until `done`, then follow its `result_url`. The same request meanwhile answers the same job", body = JobBody,
+            headers(("Location" = String, description = "URL of the job"), ("Retry-After" = u32, description = "Seconds before looking again"))),
         (status = 400, description = "Malformed JSON (a key twice in one object included, named), or a body that could not be read", body = ProblemBody, content_type = "application/problem+json"),
         (status = 422, description = "An unknown scenario, an invalid field (named) or duration, or the simulation failed", body = ProblemBody, content_type = "application/problem+json"),
-        (status = 503, description = "Over the server's time limit (the simulation is stopped and not stored), every simulation turn is taken (with `Retry-After`), or the server is stopping", body = ProblemBody, content_type = "application/problem+json"),
+        (status = 409, description = "The job was cancelled (`DELETE /api/v1/jobs/{id}`) before it finished", body = ProblemBody, content_type = "application/problem+json"),
+        (status = 503, description = "The job ran over the server's job time limit (stopped, nothing stored), too many jobs wait already (with `Retry-After`), or the data base cannot be reached", body = ProblemBody, content_type = "application/problem+json"),
     ))]
 async fn run_simulation(
     _: WriteAccess,
     State(st): State<AppState>,
     Json(req): Json<SimulationRequest>,
 ) -> Result<Response, Problem> {
-    let scenario = scenario_of(&req)?;
-    let name = scenario.name.clone();
-    let out = simulate_and_store(&st, scenario, req.duration).await?;
-    tracing::info!(
-        scenario = %name,
-        session_id = out.session_id,
-        skills = out.skill_ids.len(),
-        "simulated session stored"
-    );
-    StoredSession::reply(&st, out).await
+    let request = JobRequest::Simulation {
+        scenario: Box::new(scenario_of(&req)?),
+        duration: req.duration,
+    };
+    match jobs::submit(&st, &request).await? {
+        Waited::Pending(job) => Ok(jobs::accepted(&job)),
+        Waited::Finished { job, new } => match job.result {
+            Some(JobResult::Session { id, created }) => {
+                let session = st.store().get_session(id).await?;
+                let out = IngestOutcome {
+                    session_id: id,
+                    // A repeated request finds the session its job stored: 200.
+                    created: created && new,
+                    skill_ids: session.skill_ids,
+                    matched_skill_ids: session.matched_skill_ids,
+                };
+                StoredSession::reply(&st, out).await
+            }
+            _ => Err(jobs::problem_of(&job).unwrap_or_else(|| {
+                Problem::internal(&format!(
+                    "simulation job {} ended without a session",
+                    job.id
+                ))
+            })),
+        },
+    }
 }
 
 #[cfg(test)]

@@ -1,5 +1,5 @@
-//! The state every handler shares: the store, the configured token, limits, the simulation
-//! semaphore and the hot-skill cache. One `Clone` handle (an `Arc`).
+//! The state every handler shares: the store, the configured token, limits, the signals of the
+//! job workers and the hot-skill cache. One `Clone` handle (an `Arc`).
 
 use std::path::PathBuf;
 use std::sync::{Arc, OnceLock};
@@ -7,7 +7,6 @@ use std::time::Duration;
 
 use bytes::Bytes;
 
-use dfs_core::Stop;
 use services::store::Store;
 use tokio::sync::{OwnedSemaphorePermit, Semaphore};
 use tokio_util::sync::CancellationToken;
@@ -15,6 +14,7 @@ use tokio_util::sync::CancellationToken;
 use super::cache::SkillCache;
 use super::error::Problem;
 use super::live::LiveHub;
+use crate::jobs::JobSignals;
 
 /// What the handlers need besides the request. Cheap to clone.
 #[derive(Clone)]
@@ -27,8 +27,10 @@ struct Inner {
     token: Option<String>,
     max_body: usize,
     max_upload: usize,
-    simulations: Arc<Semaphore>,
     ingests: Arc<Semaphore>,
+    jobs: Arc<JobSignals>,
+    job_wait: Duration,
+    max_queued_jobs: u64,
     queue_wait: Duration,
     shutdown: CancellationToken,
     cache: Arc<SkillCache>,
@@ -57,11 +59,13 @@ pub struct StateConfig {
     /// Largest session upload (`POST /api/v1/sessions`), bytes: streamed to disk, so memory
     /// does not grow with it.
     pub max_upload: usize,
-    /// Simulations and replays that may run at once; more wait for a turn.
-    pub max_simulations: usize,
+    /// Longest a simulation or replay request waits for its job before 202 with the job.
+    pub job_wait: Duration,
+    /// Jobs that may wait for a worker; more are refused 503 with `Retry-After`.
+    pub max_queued_jobs: u64,
     /// Session uploads that may be read and segmented at once; more wait for a turn.
     pub max_ingests: usize,
-    /// Longest wait for a turn (simulation, replay or ingest) before 503 with `Retry-After`.
+    /// Longest wait of an upload for a turn before 503 with `Retry-After`.
     pub queue_wait: Duration,
     /// Bytes of skill JSON kept in memory.
     pub cache_bytes: usize,
@@ -84,8 +88,10 @@ impl AppState {
                 token: config.token.clone(),
                 max_body: config.max_body,
                 max_upload: config.max_upload,
-                simulations: Arc::new(Semaphore::new(config.max_simulations.max(1))),
                 ingests: Arc::new(Semaphore::new(config.max_ingests.max(1))),
+                jobs: Arc::new(JobSignals::default()),
+                job_wait: config.job_wait,
+                max_queued_jobs: config.max_queued_jobs,
                 queue_wait: config.queue_wait,
                 shutdown: CancellationToken::new(),
                 cache: Arc::new(SkillCache::new(config.cache_bytes)),
@@ -121,47 +127,19 @@ impl AppState {
         self.inner.max_upload
     }
 
-    /// Runs `work` (a simulation or a replay) on the blocking pool once one of the
-    /// simulation permits is free (waiting at most the queue wait, then 503 with
-    /// `Retry-After`). `work` gets a [`Stop`] that is set when the request goes away (its
-    /// time limit passed or the client left: this future is dropped) and when the server
-    /// shuts down; work that honours it ends within a fraction of a second, freeing its
-    /// permit, and its answer is 503.
-    pub async fn run_limited<T: Send + 'static>(
-        &self,
-        work: impl FnOnce(&Stop) -> Result<T, Problem> + Send + 'static,
-    ) -> Result<T, Problem> {
-        let permit = self
-            .turn(&self.inner.simulations, "simulations and replays")
-            .await?;
-        let stop = Arc::new(Stop::new());
-        // Dropped with this future (the request's time limit, a client that left): stop.
-        let _on_drop = StopOnDrop(Arc::clone(&stop));
-        let worker_stop = Arc::clone(&stop);
-        let handle = tokio::task::spawn_blocking(move || {
-            let _permit = permit;
-            let out = work(&worker_stop);
-            if out.is_err() && worker_stop.is_stopped() {
-                tracing::info!("work stopped before it finished; its turn is free");
-            }
-            out
-        });
-        tokio::pin!(handle);
-        let joined = tokio::select! {
-            j = &mut handle => j,
-            () = self.inner.shutdown.cancelled() => {
-                stop.stop();
-                handle.await
-            }
-        };
-        let out = joined.map_err(|e| Problem::internal(&e))?;
-        match out {
-            // Only shutdown is left to see here: a dropped request has no one to answer.
-            Err(_) if stop.is_stopped() => Err(Problem::unavailable(
-                "the server is shutting down; the work was stopped before it finished",
-            )),
-            out => out,
-        }
+    /// What this server's job workers and the requests waiting for jobs tell each other.
+    pub fn jobs(&self) -> &Arc<JobSignals> {
+        &self.inner.jobs
+    }
+
+    /// Longest a simulation or replay request waits for its job.
+    pub fn job_wait(&self) -> Duration {
+        self.inner.job_wait
+    }
+
+    /// Jobs that may wait for a worker at once.
+    pub fn max_queued_jobs(&self) -> u64 {
+        self.inner.max_queued_jobs
     }
 
     /// A turn to read and segment an uploaded session: waits at most the queue wait for one of
@@ -198,7 +176,8 @@ impl AppState {
         }
     }
 
-    /// Tells the work in flight to stop (shutdown): see [`AppState::run_limited`].
+    /// Tells the work in flight to stop (shutdown): the job workers give their jobs back, the
+    /// live sessions end, requests waiting for a turn or a job are answered.
     pub fn stop_work(&self) {
         self.inner.shutdown.cancel();
     }
@@ -226,14 +205,5 @@ impl AppState {
     /// Sets the OpenAPI document, once, when the router is built.
     pub fn set_openapi_json(&self, json: Bytes) {
         let _ = self.inner.openapi.set(json);
-    }
-}
-
-/// Sets its stop when dropped.
-struct StopOnDrop(Arc<Stop>);
-
-impl Drop for StopOnDrop {
-    fn drop(&mut self) {
-        self.0.stop();
     }
 }
