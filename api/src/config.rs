@@ -41,6 +41,11 @@ pub struct ServeArgs {
     /// answer within 10 s. Default: none, files in the data directory. See docs/backends.md.
     #[arg(long, env = "ICMS_BLOBS", value_name = "URL")]
     pub blobs: Option<String>,
+    /// MiB of the data directory the copies of the bucket's files may take (with --blobs):
+    /// past it, the least recently used copies (unused for 10 minutes) are removed; they stay
+    /// in the bucket and are downloaded again when next read.
+    #[arg(long, default_value_t = DEFAULT_BLOB_CACHE_MIB)]
+    pub blob_cache_mib: u64,
     /// Bearer token that write requests (uploads, simulations, deletes) must send; reads stay
     /// open. Without one, writes are open too (allowed on a loopback address only).
     #[arg(long, env = "ICMS_TOKEN", hide_env_values = true)]
@@ -125,6 +130,21 @@ pub const MAX_MAX_BODY: usize = 64 << 30;
 pub const MAX_TIMEOUT_S: f64 = 86_400.0;
 /// Largest accepted `--max-simulations`, `--max-ingests`, `--max-live` and `--live-threads`.
 pub const MAX_WORKERS: usize = 256;
+/// Default `--blob-cache-mib`: 10 GiB of copies of a bucket's blobs.
+pub const DEFAULT_BLOB_CACHE_MIB: u64 = 10 * 1024;
+
+/// `--blob-cache-mib` in bytes, if it is at least 1 and at most 2^40 MiB.
+pub fn blob_cache_bytes(mib: u64) -> Result<u64, ConfigError> {
+    if (1..=1 << 40).contains(&mib) {
+        Ok(mib << 20)
+    } else {
+        Err(ConfigError::OutOfRange(format!(
+            "--blob-cache-mib must be in 1..={}, got {mib}",
+            1u64 << 40
+        )))
+    }
+}
+
 /// Largest accepted `--max-queued-jobs`.
 pub const MAX_QUEUED_JOBS: usize = 1_000_000;
 /// Largest accepted `--cache-mib` (64 GiB).
@@ -177,6 +197,7 @@ impl Default for ServeArgs {
             data: PathBuf::from("icms-data"),
             database_url: None,
             blobs: None,
+            blob_cache_mib: DEFAULT_BLOB_CACHE_MIB,
             token: None,
             no_demo: false,
             max_body: DEFAULT_MAX_BODY,
@@ -212,6 +233,8 @@ pub struct ServeConfig {
     pub database: Database,
     /// Where the blobs are: the data directory or a bucket.
     pub blobs: Blobs,
+    /// Bytes the data directory's copies of a bucket's blobs may take.
+    pub blob_cache_bytes: u64,
     /// Seed an empty data base with simulated sessions.
     pub demo: bool,
     /// Handler state settings (token, body limit, job wait, cache).
@@ -331,6 +354,7 @@ impl ServeArgs {
             data: self.data,
             database,
             blobs,
+            blob_cache_bytes: blob_cache_bytes(self.blob_cache_mib)?,
             demo: !self.no_demo,
             foxglove: self.foxglove,
             state: StateConfig {
@@ -497,6 +521,14 @@ mod tests {
             set(&mut a, v);
             let e = a.into_config().unwrap_err().to_string();
             assert!(e.contains(name), "{name} {v}: {e}");
+        }
+        for v in [0, u64::MAX] {
+            let a = ServeArgs {
+                blob_cache_mib: v,
+                ..ServeArgs::default()
+            };
+            let e = a.into_config().unwrap_err().to_string();
+            assert!(e.contains("--blob-cache-mib"), "{v}: {e}");
         }
     }
 

@@ -48,11 +48,15 @@ pub struct Application {
     demo: bool,
     connections: ConnectionLimits,
     workers: WorkerConfig,
+    blob_cache_bytes: u64,
     foxglove: Option<foxglove::WebSocketServerHandle>,
 }
 
 /// Longest wait at shutdown for the live sessions to be finished and stored.
 pub const LIVE_STORE_GRACE: std::time::Duration = std::time::Duration::from_secs(30);
+
+/// How often the server and `icms worker` trim the copies of a bucket's blobs.
+pub const TRIM_INTERVAL: std::time::Duration = std::time::Duration::from_secs(60);
 
 /// How often the server sweeps unreferenced blobs (besides once at start-up).
 pub const SWEEP_INTERVAL: std::time::Duration = std::time::Duration::from_secs(3600);
@@ -125,6 +129,7 @@ impl Application {
             demo: config.demo,
             connections: config.connections,
             workers: config.workers,
+            blob_cache_bytes: config.blob_cache_bytes,
             foxglove,
         })
     }
@@ -178,6 +183,12 @@ impl Application {
             let stop = stopping.clone();
             tokio::spawn(async move { sweep_blobs(&state, &stop).await })
         };
+        let trimming = {
+            let store = self.state.store().clone();
+            let stop = stopping.clone();
+            let max = self.blob_cache_bytes;
+            tokio::spawn(async move { trim_blob_copies(&store, max, &stop).await })
+        };
         tracing::info!(addr = %self.addr, data = %self.state.store().data_dir().display(),
             writes_need_token = self.state.token().is_some(),
             max_connections = self.connections.max_connections,
@@ -211,6 +222,7 @@ impl Application {
         // what it finished).
         while workers.join_next().await.is_some() {}
         let _ = sweeping.await;
+        let _ = trimming.await;
         self.state.store().close().await;
         tracing::info!("database closed; stopped");
         served.map_err(|source| StartupError::Io {
@@ -280,6 +292,33 @@ async fn sweep_blobs(state: &AppState, stop: &CancellationToken) {
         }
         tokio::select! {
             () = tokio::time::sleep(SWEEP_INTERVAL) => {}
+            () = stop.cancelled() => return,
+        }
+    }
+}
+
+/// Keeps the data directory's copies of a bucket's blobs within `max_bytes`: trims them now
+/// and every [`TRIM_INTERVAL`] until `stop` (nothing to do without a bucket).
+pub async fn trim_blob_copies(store: &Store, max_bytes: u64, stop: &CancellationToken) {
+    loop {
+        match store
+            .trim_blob_copies(max_bytes, services::store::ORPHAN_BLOB_MIN_AGE)
+            .await
+        {
+            Ok(r) if r.removed > 0 => tracing::info!(
+                copies = r.copies,
+                bytes = r.bytes,
+                removed = r.removed,
+                removed_bytes = r.removed_bytes,
+                "removed the least recently used copies of the bucket's files (--blob-cache-mib)"
+            ),
+            Ok(_) => {}
+            Err(e) => {
+                tracing::warn!(error = %e, "trimming the copies of the bucket's files failed")
+            }
+        }
+        tokio::select! {
+            () = tokio::time::sleep(TRIM_INTERVAL) => {}
             () = stop.cancelled() => return,
         }
     }

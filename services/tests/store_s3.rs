@@ -242,7 +242,90 @@ async fn a_sweep_skips_while_another_server_ingests_and_removes_after(backend: B
     b.close().await;
 }
 
+/// Sets the modification time of the file at `path` to `ago` before now.
+fn used_ago(path: &Path, ago: Duration) {
+    std::fs::File::options()
+        .write(true)
+        .open(path)
+        .unwrap()
+        .set_modified(std::time::SystemTime::now() - ago)
+        .unwrap();
+}
+
+async fn the_copies_of_a_buckets_blobs_are_trimmed_least_recently_used_first(backend: Backend) {
+    let Some(s3) = S3Server::start("the_copies_are_trimmed") else {
+        return;
+    };
+    let tmp = tempfile::tempdir().unwrap();
+    let database = backend.database(tmp.path()).await;
+    let store = open(tmp.path(), &database, s3.bucket("trim")).await;
+    const SIZE: usize = 100_000;
+    let mut ids = Vec::new();
+    for i in 0..4u64 {
+        let out = store
+            .ingest(
+                &fake_mcap(100 + i, SIZE),
+                meta(100 + i, 1),
+                skills(100 + i, 1),
+            )
+            .await
+            .unwrap();
+        ids.push(out.session_id);
+    }
+    let minute = Duration::from_secs(60);
+    let paths: Vec<_> = {
+        let mut v = Vec::new();
+        for id in &ids {
+            v.push(store.session_blob_path(*id).await.unwrap());
+        }
+        v
+    };
+    // Last used 40, 30 and 20 minutes ago, and now.
+    for (p, ago) in paths.iter().zip([40, 30, 20]) {
+        used_ago(p, minute * ago);
+    }
+    let young = Duration::from_secs(600);
+    let r = store
+        .trim_blob_copies(2 * SIZE as u64 + SIZE as u64 / 2, young)
+        .await
+        .unwrap();
+    assert_eq!((r.copies, r.bytes), (4, 4 * SIZE as u64), "{r:?}");
+    assert_eq!((r.removed, r.removed_bytes), (2, 2 * SIZE as u64), "{r:?}");
+    let kept: Vec<bool> = paths.iter().map(|p| p.exists()).collect();
+    assert_eq!(
+        kept,
+        [false, false, true, true],
+        "the least recently used went first"
+    );
+    // Never one used within the last ten minutes, however small the bound.
+    let r = store.trim_blob_copies(0, young).await.unwrap();
+    assert_eq!(r.removed, 1, "{r:?}");
+    assert!(paths[3].exists());
+    // The objects stay in the bucket: a removed copy comes back when read, and is young then.
+    let again = store.session_blob_path(ids[0]).await.unwrap();
+    assert_eq!(std::fs::read(&again).unwrap(), fake_mcap(100, SIZE));
+    assert_eq!(store.trim_blob_copies(0, young).await.unwrap().removed, 0);
+    // Reading a copy marks it used: one used 20 minutes ago and read now stays.
+    used_ago(&again, minute * 20);
+    store.session_blob_path(ids[0]).await.unwrap();
+    assert_eq!(store.trim_blob_copies(0, young).await.unwrap().removed, 0);
+    assert!(again.exists());
+    // Without a bucket the files are the blobs: nothing is ever trimmed.
+    let plain_dir = tempfile::tempdir().unwrap();
+    let plain = backend.open(plain_dir.path()).await;
+    let out = plain
+        .ingest(&fake_mcap(200, SIZE), meta(200, 1), skills(200, 1))
+        .await
+        .unwrap();
+    let path = plain.session_blob_path(out.session_id).await.unwrap();
+    used_ago(&path, minute * 60);
+    let r = plain.trim_blob_copies(0, young).await.unwrap();
+    assert_eq!(r, services::store::TrimReport::default());
+    assert!(path.exists());
+}
+
 backend_tests!(
+    the_copies_of_a_buckets_blobs_are_trimmed_least_recently_used_first,
     a_sweep_skips_while_another_server_ingests_and_removes_after,
     blobs_are_objects_in_the_bucket_and_come_back_from_it,
     a_second_store_on_the_same_rows_and_bucket_reads_what_the_first_wrote,

@@ -8,9 +8,9 @@ use services::store::{Blobs, Database, Store, JOB_LEASE};
 use tokio_util::sync::CancellationToken;
 
 use super::CliError;
-use crate::config::MAX_WORKERS;
+use crate::config::{blob_cache_bytes, DEFAULT_BLOB_CACHE_MIB, MAX_WORKERS};
 use crate::jobs::{spawn_workers, JobSignals, WorkerConfig};
-use crate::startup::shutdown_signal;
+use crate::startup::{shutdown_signal, trim_blob_copies};
 
 /// Arguments of `icms worker`.
 #[derive(Debug, Clone, clap::Args)]
@@ -26,6 +26,10 @@ pub struct WorkerArgs {
     /// AWS_REGION, AWS_ACCESS_KEY_ID and AWS_SECRET_ACCESS_KEY.
     #[arg(long, env = "ICMS_BLOBS", value_name = "URL")]
     pub blobs: Option<String>,
+    /// MiB of the data directory the copies of the bucket's files may take: past it, the
+    /// least recently used copies (unused for 10 minutes) are removed.
+    #[arg(long, default_value_t = DEFAULT_BLOB_CACHE_MIB)]
+    pub blob_cache_mib: u64,
     /// Jobs run at once. Default: the number of cores.
     #[arg(long)]
     pub workers: Option<usize>,
@@ -44,6 +48,7 @@ pub fn run_worker(a: WorkerArgs) -> Result<(), CliError> {
     crate::telemetry::init();
     let database = Database::from_url(a.database_url.as_deref())?;
     let blobs = Blobs::from_arg(a.blobs.as_deref())?;
+    let cache_bytes = blob_cache_bytes(a.blob_cache_mib)?;
     let count = a
         .workers
         .unwrap_or_else(|| std::thread::available_parallelism().map_or(2, |n| n.get()));
@@ -91,10 +96,16 @@ pub fn run_worker(a: WorkerArgs) -> Result<(), CliError> {
         );
         let stop = CancellationToken::new();
         let mut workers = spawn_workers(&store, &config, &Arc::new(JobSignals::default()), &stop);
+        let trimming = {
+            let store = store.clone();
+            let stop = stop.clone();
+            tokio::spawn(async move { trim_blob_copies(&store, cache_bytes, &stop).await })
+        };
         shutdown_signal().await;
         tracing::info!("shutting down: the jobs in hand go back to the queue");
         stop.cancel();
         while workers.join_next().await.is_some() {}
+        let _ = trimming.await;
         store.close().await;
         tracing::info!("database closed; stopped");
         Ok(())

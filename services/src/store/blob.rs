@@ -331,9 +331,9 @@ pub(crate) struct BlobFile {
     pub bytes: u64,
 }
 
-/// The blob files (`blobs/sha256/xx/*.mcap`) last modified at least `min_age` ago; best
-/// effort (unreadable entries are skipped). Blocking.
-pub(crate) fn blobs_older_than(data_dir: &Path, min_age: std::time::Duration) -> Vec<BlobFile> {
+/// The blob files (`blobs/sha256/xx/*.mcap`) with their last modification; best effort
+/// (unreadable entries are skipped). Blocking.
+pub(crate) fn blob_files(data_dir: &Path) -> Vec<(BlobFile, std::time::SystemTime)> {
     let Ok(shards) = fs::read_dir(data_dir.join("blobs/sha256")) else {
         return Vec::new();
     };
@@ -349,20 +349,36 @@ pub(crate) fn blobs_older_than(data_dir: &Path, min_age: std::time::Duration) ->
                 continue;
             }
             let Ok(md) = f.metadata() else { continue };
-            let old = md
-                .modified()
-                .ok()
-                .and_then(|t| t.elapsed().ok())
-                .is_some_and(|age| age >= min_age);
-            if md.is_file() && old {
-                out.push(BlobFile {
+            let Ok(modified) = md.modified() else {
+                continue;
+            };
+            if md.is_file() {
+                let file = BlobFile {
                     rel: format!("blobs/sha256/{shard_name}/{name}"),
                     bytes: md.len(),
-                });
+                };
+                out.push((file, modified));
             }
         }
     }
     out
+}
+
+/// The blob files last modified at least `min_age` ago ([`blob_files`]). Blocking.
+pub(crate) fn blobs_older_than(data_dir: &Path, min_age: std::time::Duration) -> Vec<BlobFile> {
+    blob_files(data_dir)
+        .into_iter()
+        .filter(|(_, modified)| modified.elapsed().is_ok_and(|age| age >= min_age))
+        .map(|(f, _)| f)
+        .collect()
+}
+
+/// Marks the blob file at `path` as used now (its modification time), so that trimming the
+/// copies of a bucket's blobs ([`super::Store::trim_blob_copies`]) keeps it; best effort.
+pub(crate) fn touch(path: &Path) {
+    if let Ok(f) = fs::File::options().write(true).open(path) {
+        let _ = f.set_modified(std::time::SystemTime::now());
+    }
 }
 
 #[cfg(test)]

@@ -111,6 +111,53 @@ impl std::fmt::Debug for Database {
     }
 }
 
+/// What [`Store::trim_blob_copies`] did.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, serde::Serialize)]
+pub struct TrimReport {
+    /// Copies found.
+    pub copies: usize,
+    /// Their bytes, before.
+    pub bytes: u64,
+    /// Copies removed.
+    pub removed: usize,
+    /// Their bytes.
+    pub removed_bytes: u64,
+}
+
+/// [`Store::trim_blob_copies`]'s work, blocking.
+fn trim_copies(dir: &Path, max_bytes: u64, min_age: Duration) -> TrimReport {
+    let mut files = blob::blob_files(dir);
+    let mut report = TrimReport {
+        copies: files.len(),
+        bytes: files.iter().map(|(f, _)| f.bytes).sum(),
+        ..TrimReport::default()
+    };
+    let mut left = report.bytes;
+    // Least recently used first.
+    files.sort_by_key(|(_, modified)| *modified);
+    for (f, _) in files {
+        if left <= max_bytes {
+            break;
+        }
+        let path = dir.join(&f.rel);
+        // Read again: a copy used since the listing is young again.
+        let old = std::fs::metadata(&path)
+            .and_then(|m| m.modified())
+            .ok()
+            .and_then(|t| t.elapsed().ok())
+            .is_some_and(|age| age >= min_age);
+        if !old {
+            continue;
+        }
+        if blob::remove(dir, &f.rel).is_ok() {
+            report.removed += 1;
+            report.removed_bytes += f.bytes;
+            left -= f.bytes;
+        }
+    }
+    report
+}
+
 /// What [`Store::sweep_orphan_blobs`] did.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq, serde::Serialize)]
 pub struct SweepReport {
@@ -939,6 +986,9 @@ impl Store {
             return Ok(path);
         };
         if tokio::fs::metadata(&path).await.is_ok_and(|m| m.is_file()) {
+            // Used now: trimming the copies keeps it a while (Store::trim_blob_copies).
+            let touched = path.clone();
+            let _ = tokio::task::spawn_blocking(move || blob::touch(&touched)).await;
             return Ok(path);
         }
         let sha256 = blob::sha256_of(rel)
@@ -959,6 +1009,33 @@ impl Store {
             Some(remote) => remote.delete(rel).await,
             None => Ok(()),
         }
+    }
+
+    /// Bounds the data directory's copies of a bucket's blobs to `max_bytes`: while they hold
+    /// more, removes the least recently used copy (by its modification time, which writing,
+    /// downloading and each read through [`Store::local_blob`] set) that was last used at least
+    /// `min_age` ago. The objects stay in the bucket; a removed copy is downloaded again when
+    /// next read. Without a bucket the files are the blobs themselves: nothing is removed.
+    ///
+    /// It holds the blob lock that ingests hold from their copy's write to their commit, so no
+    /// copy an ingest is uploading goes; a copy just downloaded or read is younger than
+    /// `min_age` (the server uses [`ORPHAN_BLOB_MIN_AGE`]) and stays, and each candidate's
+    /// time is read again just before its removal, so one read since the listing stays too.
+    pub async fn trim_blob_copies(
+        &self,
+        max_bytes: u64,
+        min_age: Duration,
+    ) -> Result<TrimReport, StoreError> {
+        if self.inner.remote.is_none() {
+            return Ok(TrimReport::default());
+        }
+        // No ingest of this process is between its copy's write and its upload and commit
+        // (they hold the lock shared), so no copy is removed from under an upload.
+        let _no_ingest = self.inner.blob_lock.write().await;
+        let dir = self.inner.dir.clone();
+        tokio::task::spawn_blocking(move || trim_copies(&dir, max_bytes, min_age))
+            .await
+            .map_err(|e| StoreError::Corrupt(format!("blob copy trimming task failed: {e}")))
     }
 
     /// SQLite's `synchronous` setting on the store's connections (2 = `FULL`, 1 = `NORMAL`),
