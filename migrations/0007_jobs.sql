@@ -14,7 +14,8 @@
 -- request while its job waits, runs or after it is done answers with that job (a job that
 -- failed or was cancelled is not reused: asking again runs the work again). A job goes with its
 -- result, and a replay job with its skill (ON DELETE CASCADE): once the session, replay or skill
--- is deleted, the same request runs again.
+-- is deleted, the same request runs again. Failed and cancelled jobs are deleted a week after
+-- they ended (the server's hourly sweep). A request is at most 64 KiB as stored.
 CREATE TABLE jobs (
     id               INTEGER PRIMARY KEY AUTOINCREMENT,
     kind             TEXT    NOT NULL CHECK (kind IN ('simulation', 'replay')),
@@ -39,8 +40,10 @@ CREATE TABLE jobs (
 -- One waiting, running or done job per request.
 CREATE UNIQUE INDEX jobs_request ON jobs (request_key)
     WHERE state IN ('queued', 'running', 'done');
--- What workers look through for a job to claim.
-CREATE INDEX jobs_open ON jobs (id) WHERE state IN ('queued', 'running');
+-- What workers look through for a job to claim, the queue's length, the lists by state, and
+-- the pruning of old failed and cancelled jobs. (A partial index over the open states would
+-- not serve `state = 'queued'`: SQLite does not prove one IN list from an equality.)
+CREATE INDEX jobs_state ON jobs (state, id);
 -- The cascades from deleted rows.
 CREATE INDEX jobs_skill ON jobs (skill_id);
 CREATE INDEX jobs_session ON jobs (session_id);

@@ -199,14 +199,49 @@ impl Worker {
             },
             Err(p) => failed(&p),
         };
-        match self.store.settle_job(&claim, &end).await {
-            Ok(true) => tracing::info!(job_id = job.id, end = ?end, "job ended"),
-            Ok(false) => tracing::info!(
-                job_id = job.id,
-                "the job's claim was gone when it ended: another worker has it, or it is gone"
+        self.settle(&claim, end).await;
+    }
+
+    /// Records the end of the job of `claim`, trying again on a failure: a done job whose
+    /// result cannot be named (it was deleted as it was stored) is recorded failed, and a job
+    /// whose end cannot be recorded at all is given back to the queue rather than left to
+    /// its lease.
+    async fn settle(&self, claim: &JobClaim, mut end: JobEnd) {
+        for attempt in 1..=3 {
+            match self.store.settle_job(claim, &end).await {
+                Ok(true) => {
+                    tracing::info!(job_id = claim.id, end = ?end, "job ended");
+                    return;
+                }
+                Ok(false) => {
+                    tracing::info!(
+                        job_id = claim.id,
+                        "the job's claim was gone when it ended: another worker has it, or \
+                         it is gone"
+                    );
+                    return;
+                }
+                Err(e) => {
+                    tracing::warn!(job_id = claim.id, attempt, error = %e,
+                        "could not record the job's end");
+                    if attempt == 2 && matches!(end, JobEnd::Done(_)) {
+                        end = failed(&Problem::conflict(format!(
+                            "the job's result was stored but could not be recorded as its \
+                             result ({e}); it may have been deleted meanwhile: ask again"
+                        )));
+                    }
+                    tokio::time::sleep(Duration::from_secs(1)).await;
+                }
+            }
+        }
+        match self.store.settle_job(claim, &JobEnd::Released).await {
+            Ok(_) => tracing::warn!(
+                job_id = claim.id,
+                "the job's end could not be recorded: it is back in the queue"
             ),
-            Err(e) => tracing::warn!(job_id = job.id, error = %e,
-                "could not record the job's end; it will be claimed again when its lease runs out"),
+            Err(e) => tracing::warn!(job_id = claim.id, error = %e,
+                "the job's end could not be recorded; it will be claimed again when its lease \
+                 runs out"),
         }
     }
 
@@ -270,8 +305,17 @@ impl Worker {
         let period = (self.config.lease / 3).clamp(Duration::from_millis(50), CANCEL_POLL);
         let mut renewals = tokio::time::interval_at(tokio::time::Instant::now() + period, period);
         let mut why: Option<StopReason> = None;
+        // The first reason stands, but a cancel outranks the deadline (the user asked; the job
+        // ends cancelled, not failed) and a lost claim outranks everything (the job is not
+        // this worker's to end).
         let halt = |reason: StopReason, why: &mut Option<StopReason>| {
-            if why.is_none() {
+            let replace = match *why {
+                None => true,
+                Some(StopReason::Deadline) => reason == StopReason::Cancelled,
+                Some(StopReason::Lost) => false,
+                Some(_) => reason == StopReason::Lost,
+            };
+            if replace {
                 *why = Some(reason);
                 stop.stop();
             }
@@ -324,11 +368,27 @@ impl Worker {
                 ))))
             }
             (_, Err(p)) => Some(failed(&p)),
-            // Finished as it was told to stop: what it made is kept.
-            (_, Ok(made)) => Some(match self.keep(made).await {
-                Ok(result) => JobEnd::Done(result),
-                Err(p) => failed(&p),
-            }),
+            // Finished as it was told to stop: what it made is kept. Storing it (a bucket upload,
+            // the rows) may outlast a lease: the claim is renewed meanwhile.
+            (_, Ok(made)) => {
+                let keep = self.keep(made);
+                tokio::pin!(keep);
+                let kept = loop {
+                    tokio::select! {
+                        r = &mut keep => break r,
+                        _ = renewals.tick() => {
+                            if let Err(e) = self.store.renew_job(claim, self.config.lease).await {
+                                tracing::warn!(job_id = claim.id, error = %e,
+                                    "could not renew the job's claim");
+                            }
+                        }
+                    }
+                };
+                Some(match kept {
+                    Ok(result) => JobEnd::Done(result),
+                    Err(p) => failed(&p),
+                })
+            }
         }
     }
 

@@ -267,8 +267,8 @@ async fn clear_scratch(dir: &std::path::Path) {
     }
 }
 
-/// Sweeps unreferenced blobs now and every [`SWEEP_INTERVAL`] until `stop`, logging what
-/// went.
+/// Sweeps unreferenced blobs and deletes week-old failed and cancelled jobs, now and every
+/// [`SWEEP_INTERVAL`] until `stop`, logging what went.
 async fn sweep_blobs(state: &AppState, stop: &CancellationToken) {
     loop {
         match state
@@ -289,6 +289,15 @@ async fn sweep_blobs(state: &AppState, stop: &CancellationToken) {
             ),
             Ok(r) => tracing::debug!(examined = r.examined, "no unreferenced blobs"),
             Err(e) => tracing::warn!(error = %e, "sweeping unreferenced blobs failed"),
+        }
+        match state
+            .store()
+            .prune_jobs(services::store::FINISHED_JOB_RETENTION)
+            .await
+        {
+            Ok(0) => {}
+            Ok(n) => tracing::info!(jobs = n, "deleted failed and cancelled jobs a week old"),
+            Err(e) => tracing::warn!(error = %e, "deleting old jobs failed"),
         }
         tokio::select! {
             () = tokio::time::sleep(SWEEP_INTERVAL) => {}

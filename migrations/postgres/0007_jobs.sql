@@ -25,7 +25,7 @@ CREATE TABLE jobs (
 );
 CREATE UNIQUE INDEX jobs_request ON jobs (request_key)
     WHERE state IN ('queued', 'running', 'done');
-CREATE INDEX jobs_open ON jobs (id) WHERE state IN ('queued', 'running');
+CREATE INDEX jobs_state ON jobs (state, id);
 CREATE INDEX jobs_skill ON jobs (skill_id);
 CREATE INDEX jobs_session ON jobs (session_id);
 CREATE INDEX jobs_replay ON jobs (replay_id);

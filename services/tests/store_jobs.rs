@@ -11,7 +11,7 @@ use std::time::Duration;
 use dfs_core::scenario::Scenario;
 use services::store::{
     Job, JobEnd, JobError, JobRequest, JobResult, JobState, Renewal, Store, StoreError,
-    MAX_JOB_ATTEMPTS,
+    MAX_JOB_ATTEMPTS, MAX_JOB_REQUEST_BYTES,
 };
 use store_common::{fake_mcap, meta, skills, Backend};
 
@@ -252,7 +252,7 @@ async fn workers_claiming_at_once_never_take_the_same_job(backend: Backend) {
     assert_eq!(all.len(), JOBS as usize, "every job claimed once: {all:?}");
     assert_eq!(distinct.len(), JOBS as usize);
     let running = store
-        .jobs(Some(JobState::Running), None, 1000)
+        .jobs(Some(JobState::Running), None, 200)
         .await
         .unwrap();
     assert_eq!(running.len(), JOBS as usize);
@@ -278,7 +278,7 @@ async fn jobs_are_listed_newest_first_by_state_a_page_at_a_time(backend: Backend
         .unwrap();
     assert_eq!(cancelled.len(), 1);
     assert_eq!(cancelled[0].id, ids[1]);
-    for bad in [0, 1001] {
+    for bad in [0, 201] {
         assert!(matches!(
             store.jobs(None, None, bad).await,
             Err(StoreError::InvalidQuery(_))
@@ -286,7 +286,129 @@ async fn jobs_are_listed_newest_first_by_state_a_page_at_a_time(backend: Backend
     }
 }
 
+async fn the_same_request_submitted_at_once_makes_one_job(backend: Backend) {
+    let tmp = tempfile::tempdir().unwrap();
+    let store = backend.open(tmp.path()).await;
+    let mut tasks = tokio::task::JoinSet::new();
+    for _ in 0..8 {
+        let store = store.clone();
+        tasks.spawn(async move { store.submit_job(&simulation(3), 100).await.unwrap() });
+    }
+    let mut got = Vec::new();
+    while let Some(s) = tasks.join_next().await {
+        got.push(s.unwrap());
+    }
+    assert_eq!(got.iter().filter(|s| s.new).count(), 1, "{got:?}");
+    assert!(got.iter().all(|s| s.job.id == got[0].job.id), "{got:?}");
+    assert_eq!(store.jobs(None, None, 100).await.unwrap().len(), 1);
+}
+
+async fn a_request_too_large_to_keep_is_refused(backend: Backend) {
+    let tmp = tempfile::tempdir().unwrap();
+    let store = backend.open(tmp.path()).await;
+    let mut scenario = Scenario::builtin(Scenario::BUILTINS[0], 1).unwrap();
+    scenario.name = "x".repeat(MAX_JOB_REQUEST_BYTES);
+    let request = JobRequest::Simulation {
+        scenario: Box::new(scenario),
+        duration: None,
+    };
+    let e = store.submit_job(&request, 100).await.unwrap_err();
+    assert!(matches!(e, StoreError::InvalidInput(_)), "{e}");
+    assert!(e.to_string().contains("bytes"), "{e}");
+    assert!(store.jobs(None, None, 100).await.unwrap().is_empty());
+}
+
+async fn a_job_its_worker_cannot_read_is_failed_saying_so(backend: Backend) {
+    let tmp = tempfile::tempdir().unwrap();
+    let store = backend.open(tmp.path()).await;
+    let (a, _) = submit(&store, &simulation(1)).await;
+    let (b, _) = submit(&store, &simulation(2)).await;
+    // A newer version's request, say: not a request this worker knows.
+    backend
+        .sql(
+            tmp.path(),
+            &[(
+                r#"UPDATE jobs SET request = '{"kind": "teleport"}' WHERE id = ?"#,
+                Some(a.id),
+            )],
+        )
+        .await;
+    assert!(store.claim_job("w", LEASE).await.unwrap().is_none());
+    let failed = backend
+        .count(
+            tmp.path(),
+            "SELECT COUNT(*) FROM jobs WHERE state = 'failed' AND error_status = 500 \
+             AND error_detail LIKE '%cannot be read by the worker%'",
+        )
+        .await;
+    assert_eq!(failed, 1);
+    // The next claim takes the next job.
+    assert_eq!(claim(&store, "w", LEASE).await.id, b.id);
+}
+
+async fn old_failed_and_cancelled_jobs_are_deleted_and_done_ones_kept(backend: Backend) {
+    let tmp = tempfile::tempdir().unwrap();
+    let store = backend.open(tmp.path()).await;
+    let out = store
+        .ingest(&fake_mcap(1, 1000), meta(1, 1), skills(1, 1))
+        .await
+        .unwrap();
+    let mut ids = Vec::new();
+    for seed in 0..4 {
+        ids.push(submit(&store, &simulation(seed)).await.0.id);
+    }
+    // 0: cancelled long ago; 1: cancelled now; 2: failed long ago; 3: done long ago.
+    store.cancel_job(ids[0]).await.unwrap();
+    store.cancel_job(ids[1]).await.unwrap();
+    for (id, end) in [
+        (
+            ids[2],
+            JobEnd::Failed(JobError {
+                status: 422,
+                detail: "no".into(),
+            }),
+        ),
+        (
+            ids[3],
+            JobEnd::Done(JobResult::Session {
+                id: out.session_id,
+                created: true,
+            }),
+        ),
+    ] {
+        let j = claim(&store, "w", LEASE).await;
+        assert_eq!(j.id, id);
+        assert!(store.settle_job(&j.claim().unwrap(), &end).await.unwrap());
+    }
+    for id in [ids[0], ids[2], ids[3]] {
+        backend
+            .sql(
+                tmp.path(),
+                &[(
+                    "UPDATE jobs SET finished_at = '2020-01-01T00:00:00.000Z' WHERE id = ?",
+                    Some(id),
+                )],
+            )
+            .await;
+    }
+    let week = Duration::from_secs(7 * 24 * 3600);
+    assert_eq!(store.prune_jobs(week).await.unwrap(), 2);
+    let left: Vec<i64> = store
+        .jobs(None, None, 100)
+        .await
+        .unwrap()
+        .iter()
+        .map(|j| j.id)
+        .collect();
+    assert_eq!(left, [ids[3], ids[1]]);
+    assert_eq!(store.prune_jobs(week).await.unwrap(), 0);
+}
+
 backend_tests!(
+    the_same_request_submitted_at_once_makes_one_job,
+    a_request_too_large_to_keep_is_refused,
+    a_job_its_worker_cannot_read_is_failed_saying_so,
+    old_failed_and_cancelled_jobs_are_deleted_and_done_ones_kept,
     a_request_has_one_job_until_it_fails_or_is_cancelled,
     a_replay_job_goes_with_its_skill_and_a_done_job_with_its_result,
     only_the_claim_that_holds_a_job_renews_settles_or_gives_it_back,

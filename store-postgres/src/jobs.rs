@@ -261,3 +261,17 @@ pub async fn cancel<'e>(e: impl PgExecutor<'e>, id: i64) -> Result<Option<JobRow
     .fetch_optional(e)
     .await
 }
+
+/// Deletes the failed and cancelled jobs that ended more than `age_s` seconds ago; their
+/// number.
+pub async fn prune<'e>(e: impl PgExecutor<'e>, age_s: f64) -> Result<u64> {
+    Ok(sqlx::query!(
+        r#"DELETE FROM jobs WHERE state IN ('failed', 'cancelled')
+           AND finished_at < to_char((now() - make_interval(secs => $1)) AT TIME ZONE 'UTC',
+               'YYYY-MM-DD"T"HH24:MI:SS.MS"Z"')"#,
+        age_s
+    )
+    .execute(e)
+    .await?
+    .rows_affected())
+}

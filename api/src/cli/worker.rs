@@ -69,7 +69,7 @@ pub fn run_worker(a: WorkerArgs) -> Result<(), CliError> {
     let config = WorkerConfig {
         count,
         job_timeout: seconds("--job-timeout", a.job_timeout, 0.001)?,
-        lease: seconds("--lease", a.lease, 0.1)?,
+        lease: seconds("--lease", a.lease, 1.0)?,
     };
     if matches!(database, Database::Postgres(_)) && matches!(blobs, Blobs::Local) {
         return Err(CliError(

@@ -115,8 +115,8 @@ pub struct JobParams {
     pub state: Option<String>,
     /// Only jobs with an id below this (the previous page's `next_before`).
     pub before: Option<i64>,
-    /// Page size, 1 to 1000. Default 50.
-    #[param(minimum = 1, maximum = 1000)]
+    /// Page size, 1 to 200. Default 50.
+    #[param(minimum = 1, maximum = 200)]
     pub limit: Option<u32>,
 }
 
@@ -147,8 +147,15 @@ pub enum Waited {
 }
 
 /// Submits `request` as a job (or finds the same request's job) and waits for it up to the
-/// server's job wait.
-pub async fn submit(st: &AppState, request: &JobRequest) -> Result<Waited, Problem> {
+/// server's job wait, and never past a fifth of the request's time limit before its end
+/// (`deadline`, from [`super::RequestDeadline`]), so that a slow body or data base does not
+/// turn the 202 into the time limit's 503.
+pub async fn submit(
+    st: &AppState,
+    request: &JobRequest,
+    deadline: Option<super::RequestDeadline>,
+) -> Result<Waited, Problem> {
+    let started = tokio::time::Instant::now();
     let submitted = st.store().submit_job(request, st.max_queued_jobs()).await?;
     let new = submitted.new;
     let mut job = submitted.job;
@@ -160,7 +167,13 @@ pub async fn submit(st: &AppState, request: &JobRequest) -> Result<Waited, Probl
         );
         st.jobs().job_submitted();
     }
-    let until = tokio::time::Instant::now() + st.job_wait();
+    // job_wait is at most 80 % of the time limit: the margin it leaves is kept from the
+    // request's end.
+    let mut until = started + st.job_wait();
+    if let Some(super::RequestDeadline(end)) = deadline {
+        let margin = st.job_wait().mul_f64(0.25).max(Duration::from_millis(5));
+        until = until.min(end.checked_sub(margin).unwrap_or(started));
+    }
     while !job.state.is_finished() {
         let now = tokio::time::Instant::now();
         if now >= until || st.shutdown_token().is_cancelled() {
@@ -171,7 +184,16 @@ pub async fn submit(st: &AppState, request: &JobRequest) -> Result<Waited, Probl
             () = tokio::time::sleep(WAIT_POLL.min(until - now)) => {}
             () = st.shutdown_token().cancelled() => {}
         }
-        job = st.store().job(job.id).await?;
+        job = match st.store().job(job.id).await {
+            Ok(j) => j,
+            Err(services::store::StoreError::JobNotFound(id)) => {
+                return Err(Problem::conflict(format!(
+                    "job {id} went while it ran: its skill or its result was deleted \
+                     meanwhile; ask again to run it anew"
+                )))
+            }
+            Err(e) => return Err(e.into()),
+        };
     }
     Ok(Waited::Finished { job, new })
 }
@@ -265,6 +287,7 @@ async fn cancel_job(
     Id(id): Id,
 ) -> Result<axum::Json<JobBody>, Problem> {
     let job = st.store().cancel_job(id).await?;
+    // A cancelled job cancelled again is answered as it is (200): cancelling is idempotent.
     if matches!(job.state, JobState::Done | JobState::Failed) {
         return Err(Problem::conflict(format!(
             "job {id} is {} already: there is nothing to cancel",

@@ -299,9 +299,16 @@ pub(crate) fn created(body: impl serde::Serialize, location: &str) -> Response {
     r
 }
 
+/// When the request's time limit runs out: set by [`time_limit`] for the handlers that wait
+/// (a simulation or replay waiting for its job answers 202 before it).
+#[derive(Debug, Clone, Copy)]
+pub struct RequestDeadline(pub tokio::time::Instant);
+
 /// Middleware: a request that takes longer than the limit (reading its body included) is
 /// answered 503 problem+json.
-async fn time_limit(State(limit): State<Duration>, req: Request, next: Next) -> Response {
+async fn time_limit(State(limit): State<Duration>, mut req: Request, next: Next) -> Response {
+    req.extensions_mut()
+        .insert(RequestDeadline(tokio::time::Instant::now() + limit));
     match tokio::time::timeout(limit, next.run(req)).await {
         Ok(r) => r,
         Err(_) => Problem::unavailable(format!(

@@ -7,6 +7,7 @@
 
 use axum::extract::State;
 use axum::response::{IntoResponse, Response};
+use axum::Extension;
 use dfs_core::replay::{FailureReason, ReplayReport};
 use serde::{Deserialize, Serialize};
 use services::replay::skill_spec_from_json;
@@ -21,6 +22,7 @@ use super::extract::{Id, Json, WriteAccess};
 use super::jobs::{self, JobBody, Waited};
 use super::sessions::{send_mcap, McapFile};
 use super::state::AppState;
+use super::RequestDeadline;
 
 /// A replay to run.
 #[derive(Debug, Clone, Deserialize, ToSchema)]
@@ -123,6 +125,7 @@ async fn create_replay(
     _: WriteAccess,
     State(st): State<AppState>,
     Id(skill_id): Id,
+    deadline: Option<Extension<RequestDeadline>>,
     Json(req): Json<ReplayRequest>,
 ) -> Result<Response, Problem> {
     // Checked here so that a missing skill or hand, or a skill that is no grasp, is answered
@@ -141,7 +144,7 @@ async fn create_replay(
         Err(e) => return Err(e.into()),
     };
     let request = JobRequest::Replay { skill_id, hand };
-    match jobs::submit(&st, &request).await? {
+    match jobs::submit(&st, &request, deadline.map(|e| e.0)).await? {
         Waited::Pending(job) => Ok(jobs::accepted(&job)),
         Waited::Finished { job, new } => match job.result {
             Some(JobResult::Replay { id }) => {

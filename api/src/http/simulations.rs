@@ -4,6 +4,7 @@
 
 use axum::extract::State;
 use axum::response::Response;
+use axum::Extension;
 use dfs_core::scenario::Scenario;
 use serde::Deserialize;
 use services::store::{IngestOutcome, JobRequest, JobResult};
@@ -18,6 +19,7 @@ use super::extract::{field_error, Json, WriteAccess};
 use super::jobs::{self, JobBody, Waited};
 use super::sessions::StoredSession;
 use super::state::AppState;
+use super::RequestDeadline;
 
 /// Longest session a simulation request may ask for, simulated seconds (a minute of session
 /// is about 50 MB of MCAP).
@@ -134,13 +136,14 @@ fn scenario_of(req: &SimulationRequest) -> Result<Scenario, Problem> {
 async fn run_simulation(
     _: WriteAccess,
     State(st): State<AppState>,
+    deadline: Option<Extension<RequestDeadline>>,
     Json(req): Json<SimulationRequest>,
 ) -> Result<Response, Problem> {
     let request = JobRequest::Simulation {
         scenario: Box::new(scenario_of(&req)?),
         duration: req.duration,
     };
-    match jobs::submit(&st, &request).await? {
+    match jobs::submit(&st, &request, deadline.map(|e| e.0)).await? {
         Waited::Pending(job) => Ok(jobs::accepted(&job)),
         Waited::Finished { job, new } => match job.result {
             Some(JobResult::Session { id, created }) => {

@@ -363,6 +363,9 @@ pub(crate) trait Catalog: Send + Sync + std::fmt::Debug {
     /// Cancels a job (a running one: asks its worker to); the job after that.
     async fn cancel_job(&self, id: i64) -> Result<Option<JobRow>, StoreError>;
 
+    /// Deletes the failed and cancelled jobs that ended more than `age_s` seconds ago.
+    async fn prune_jobs(&self, age_s: i64) -> Result<u64, StoreError>;
+
     /// Closes the connections (waits for queries in flight; later calls fail).
     async fn close(&self);
 }

@@ -33,8 +33,19 @@ pub const JOB_LEASE: Duration = Duration::from_secs(30);
 /// again (a job that kills its worker every time must not kill every worker in turn).
 pub const MAX_JOB_ATTEMPTS: u32 = 3;
 
-/// Largest page of [`Store::jobs`](super::Store::jobs).
-pub const MAX_JOB_LIMIT: u32 = 1000;
+/// Largest page of [`Store::jobs`](super::Store::jobs): with requests of at most
+/// [`MAX_JOB_REQUEST_BYTES`], a page holds at most 12.5 MiB of them.
+pub const MAX_JOB_LIMIT: u32 = 200;
+
+/// Largest request a job stores, bytes of its JSON: a scenario of 256 tasks and 8 objects is
+/// about 15 KiB.
+pub const MAX_JOB_REQUEST_BYTES: usize = 64 * 1024;
+
+/// How long failed and cancelled jobs are kept after they ended ([`Store::prune_jobs`]):
+/// a week.
+///
+/// [`Store::prune_jobs`]: super::Store::prune_jobs
+pub const FINISHED_JOB_RETENTION: Duration = Duration::from_secs(7 * 24 * 3600);
 
 /// What a job runs.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -345,6 +356,13 @@ impl super::Store {
         max_queued: u64,
     ) -> Result<Submitted, StoreError> {
         let (json, key) = request.encode()?;
+        if json.len() > MAX_JOB_REQUEST_BYTES {
+            return Err(StoreError::InvalidInput(format!(
+                "the request is {} bytes as stored, more than the {MAX_JOB_REQUEST_BYTES} a job \
+                 may hold (a scenario's names or tasks too long?)",
+                json.len()
+            )));
+        }
         let skill_id = match request {
             JobRequest::Replay { skill_id, .. } => Some(*skill_id),
             JobRequest::Simulation { .. } => None,
@@ -440,10 +458,39 @@ impl super::Store {
                  failed after {MAX_JOB_ATTEMPTS} attempts)"
             );
         }
-        match catalog.claim_job(worker, lease_ms(lease), max).await? {
-            Some(row) => Ok(Some(row.try_into()?)),
-            None => Ok(None),
+        let Some(row) = catalog.claim_job(worker, lease_ms(lease), max).await? else {
+            return Ok(None);
+        };
+        let claim = JobClaim {
+            id: row.id,
+            worker: row.worker.clone().unwrap_or_default(),
+            attempt: u32::try_from(row.attempts).unwrap_or(0),
+        };
+        match Job::try_from(row) {
+            Ok(job) => Ok(Some(job)),
+            // A row this worker cannot read (a newer version's request, a row changed by
+            // hand): failed at once, saying why, rather than left to its lease.
+            Err(e) => {
+                tracing::warn!(job_id = claim.id, error = %e, "a claimed job does not read");
+                let end = JobEnd::Failed(JobError {
+                    status: 500,
+                    detail: format!(
+                        "job {} cannot be read by the worker that took it ({}): {e}",
+                        claim.id, claim.worker
+                    ),
+                });
+                self.settle_job(&claim, &end).await?;
+                Ok(None)
+            }
         }
+    }
+
+    /// Deletes the failed and cancelled jobs that ended more than `age` ago (the server's
+    /// sweep does, with [`FINISHED_JOB_RETENTION`]); their number. Done jobs stay: each goes
+    /// with its result.
+    pub async fn prune_jobs(&self, age: Duration) -> Result<u64, StoreError> {
+        let age_s = i64::try_from(age.as_secs()).unwrap_or(i64::MAX);
+        self.inner.catalog.prune_jobs(age_s).await
     }
 
     /// Renews a claim for another `lease`.

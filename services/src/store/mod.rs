@@ -174,7 +174,7 @@ pub struct SweepReport {
 pub use hands::MAX_HAND_NAME;
 pub use jobs::{
     Job, JobClaim, JobEnd, JobError, JobKind, JobRequest, JobResult, JobState, Renewal, Submitted,
-    JOB_LEASE, MAX_JOB_ATTEMPTS, MAX_JOB_LIMIT,
+    FINISHED_JOB_RETENTION, JOB_LEASE, MAX_JOB_ATTEMPTS, MAX_JOB_LIMIT, MAX_JOB_REQUEST_BYTES,
 };
 pub use query::{
     SessionQuery, SkillQuery, SortField, SortKey, SortOrder, DEFAULT_LIMIT, MAX_LIMIT,

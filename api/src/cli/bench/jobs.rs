@@ -185,7 +185,16 @@ async fn round(store: &Store, jobs: usize, workers: usize) -> Result<Round, CliE
         .map(|(b, a)| (b - a) / seconds);
     stop.cancel();
     while set.join_next().await.is_some() {}
-    let done = store.jobs(Some(JobState::Done), None, 1000).await?.len();
+    let mut done = 0;
+    let mut before = None;
+    loop {
+        let page = store.jobs(Some(JobState::Done), before, 200).await?;
+        done += page.len();
+        match page.last() {
+            Some(j) if page.len() == 200 => before = Some(j.id),
+            _ => break,
+        }
+    }
     for j in store.jobs(Some(JobState::Failed), None, 3).await? {
         eprintln!("  failed: {:?}: {:?}", j.request, j.error);
     }

@@ -682,6 +682,10 @@ impl Catalog for PgCatalog {
         Ok(pg_jobs::cancel(&self.pool, id).await?)
     }
 
+    async fn prune_jobs(&self, age_s: i64) -> Result<u64, StoreError> {
+        Ok(pg_jobs::prune(&self.pool, age_s as f64).await?)
+    }
+
     async fn close(&self) {
         self.pool.close().await;
     }

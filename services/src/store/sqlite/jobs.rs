@@ -245,3 +245,17 @@ pub(super) async fn cancel(pool: &SqlitePool, id: i64) -> Result<Option<JobRow>,
     .fetch_optional(pool)
     .await?)
 }
+
+/// Deletes the failed and cancelled jobs that ended more than `age_s` seconds ago; their
+/// number.
+pub(super) async fn prune(pool: &SqlitePool, age_s: i64) -> Result<u64, StoreError> {
+    let modifier = format!("-{age_s} seconds");
+    Ok(sqlx::query!(
+        r#"DELETE FROM jobs WHERE state IN ('failed', 'cancelled')
+           AND finished_at < strftime('%Y-%m-%dT%H:%M:%fZ', 'now', ?)"#,
+        modifier
+    )
+    .execute(pool)
+    .await?
+    .rows_affected())
+}

@@ -394,6 +394,10 @@ impl Catalog for SqliteCatalog {
         jobs::cancel(&self.pool, id).await
     }
 
+    async fn prune_jobs(&self, age_s: i64) -> Result<u64, StoreError> {
+        jobs::prune(&self.pool, age_s).await
+    }
+
     async fn close(&self) {
         self.pool.close().await;
     }
