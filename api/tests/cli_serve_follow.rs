@@ -10,10 +10,10 @@ mod common;
 #[path = "../../services/tests/tcp_relay/mod.rs"]
 mod tcp_relay;
 
-use std::io::Write;
 use std::path::Path;
 use std::time::Duration;
 
+use common::pg::{fresh_schema, postgres_or_skip};
 use common::server::Running;
 use services::store::bench::{synthetic_blob, synthetic_skill, SplitMix64};
 use services::store::{Database, SessionMeta, Store};
@@ -23,48 +23,12 @@ use tcp_relay::Relay;
 /// How long a change through one server may take to show through the other.
 const DEADLINE: Duration = Duration::from_secs(5);
 
-/// The test data base's URL, or `None` (after saying so) to skip.
-fn postgres_or_skip(test: &str) -> Option<String> {
-    match std::env::var("ICMS_TEST_POSTGRES_URL") {
-        Ok(url) if !url.is_empty() => Some(url),
-        _ => {
-            // scripts/test sets both: there a missing server fails the test instead of
-            // skipping it.
-            assert!(
-                std::env::var_os("ICMS_REQUIRE_TOOLS").is_none_or(|v| v.is_empty()),
-                "ICMS_TEST_POSTGRES_URL is not set but ICMS_REQUIRE_TOOLS is"
-            );
-            let _ = writeln!(
-                std::io::stderr(),
-                "SKIPPED {test}: ICMS_TEST_POSTGRES_URL is not set (scripts/test sets it)"
-            );
-            None
-        }
-    }
-}
-
 fn runtime() -> tokio::runtime::Runtime {
     tokio::runtime::Builder::new_multi_thread()
         .worker_threads(2)
         .enable_all()
         .build()
         .unwrap()
-}
-
-/// A fresh schema `schema` in the test data base at `base`; the URL that works in it.
-fn fresh_schema(rt: &tokio::runtime::Runtime, base: &str, schema: &str) -> String {
-    rt.block_on(async {
-        let mut conn = sqlx::PgConnection::connect(base).await.unwrap();
-        for q in [
-            format!("DROP SCHEMA IF EXISTS {schema} CASCADE"),
-            format!("CREATE SCHEMA {schema}"),
-        ] {
-            sqlx::query(&q).execute(&mut conn).await.unwrap();
-        }
-        conn.close().await.unwrap();
-    });
-    let sep = if base.contains('?') { '&' } else { '?' };
-    format!("{base}{sep}options=-c%20search_path%3D{schema}")
 }
 
 /// Stores a session of `n` synthetic skills in the data base at `url` (through a store of its

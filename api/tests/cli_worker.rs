@@ -11,51 +11,16 @@ mod common;
 #[path = "../../services/tests/s3_server/mod.rs"]
 mod s3_server;
 
-use std::io::{BufRead, BufReader, Write};
+use std::io::{BufRead, BufReader};
 use std::path::Path;
 use std::process::{Child, Command, Stdio};
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 
+use common::pg::{fresh_schema, postgres_or_skip};
 use common::server::{unchunk, Running};
 use s3_server::{S3Server, BUCKET};
 use serde_json::Value;
-use sqlx::Connection as _;
-
-/// The test data base's URL, or `None` (after saying so) to skip.
-fn postgres_or_skip(test: &str) -> Option<String> {
-    match std::env::var("ICMS_TEST_POSTGRES_URL") {
-        Ok(url) if !url.is_empty() => Some(url),
-        _ => {
-            assert!(
-                std::env::var_os("ICMS_REQUIRE_TOOLS").is_none_or(|v| v.is_empty()),
-                "ICMS_TEST_POSTGRES_URL is not set but ICMS_REQUIRE_TOOLS is"
-            );
-            let _ = writeln!(
-                std::io::stderr(),
-                "SKIPPED {test}: ICMS_TEST_POSTGRES_URL is not set (scripts/test sets it)"
-            );
-            None
-        }
-    }
-}
-
-/// A fresh schema `schema` in the test data base at `base`; the URL that works in it.
-fn fresh_schema(base: &str, schema: &str) -> String {
-    let rt = tokio::runtime::Runtime::new().unwrap();
-    rt.block_on(async {
-        let mut conn = sqlx::PgConnection::connect(base).await.unwrap();
-        for q in [
-            format!("DROP SCHEMA IF EXISTS {schema} CASCADE"),
-            format!("CREATE SCHEMA {schema}"),
-        ] {
-            sqlx::query(&q).execute(&mut conn).await.unwrap();
-        }
-        conn.close().await.unwrap();
-    });
-    let sep = if base.contains('?') { '&' } else { '?' };
-    format!("{base}{sep}options=-c%20search_path%3D{schema}")
-}
 
 /// A running `icms worker` and what it wrote to stderr so far.
 struct Worker {
@@ -135,7 +100,8 @@ fn a_worker_killed_mid_job_loses_no_job() {
     let Some(s3) = S3Server::start(test) else {
         return;
     };
-    let url = fresh_schema(&base, "t_cli_worker_kill");
+    let rt = tokio::runtime::Runtime::new().unwrap();
+    let url = fresh_schema(&rt, &base, "t_cli_worker_kill");
     let blobs = format!("s3://{BUCKET}/workers");
     let tmp = tempfile::tempdir().unwrap();
     let env = s3.env();

@@ -2,6 +2,7 @@
 
 #![allow(dead_code)] // each test file uses some of these
 
+pub mod pg;
 pub mod server;
 
 use std::path::Path;
