@@ -147,9 +147,9 @@ pub enum Waited {
 }
 
 /// Submits `request` as a job (or finds the same request's job) and waits for it up to the
-/// server's job wait, and never past a fifth of the request's time limit before its end
-/// (`deadline`, from [`super::RequestDeadline`]), so that a slow body or data base does not
-/// turn the 202 into the time limit's 503.
+/// server's job wait, stopping at the latest a quarter of the job wait (5 ms at least) before
+/// the request's time limit (`deadline`, from [`super::RequestDeadline`]), so that a slow body
+/// or data base does not turn the 202 into the time limit's 503.
 pub async fn submit(
     st: &AppState,
     request: &JobRequest,
