@@ -190,7 +190,7 @@ fn start_icms(data: &Path, cache_mib: usize) -> (SocketAddr, tokio::sync::onesho
     on_own_runtime(move |addr_tx, stop_rx| async move {
         let config = ServeArgs {
             addr: SocketAddr::from(([127, 0, 0, 1], 0)),
-            data,
+            store: api::config::StoreArgs::in_dir(data),
             no_demo: true,
             cache_mib,
             ..ServeArgs::default()

@@ -26,26 +26,9 @@ pub struct ServeArgs {
     /// but a loopback address needs a token.
     #[arg(long, default_value = "127.0.0.1:8080", value_parser = listen_address)]
     pub addr: SocketAddr,
-    /// Data directory: SQLite database and MCAP blobs, created and migrated on first start.
-    /// With --database-url, it holds the MCAP blobs only; with --blobs, copies of them.
-    #[arg(long, default_value = "icms-data")]
-    pub data: PathBuf,
-    /// PostgreSQL data base to keep the rows in instead of the data directory's SQLite file
-    /// (postgres://user:password@host:port/dbname), migrated on start. It must answer within
-    /// 5 s. Default: none, SQLite. See docs/backends.md.
-    #[arg(long, env = "DATABASE_URL", hide_env_values = true, value_name = "URL")]
-    pub database_url: Option<String>,
-    /// S3-compatible bucket to keep the session and replay files in instead of the data
-    /// directory (s3://bucket or s3://bucket/prefix). Endpoint and credentials come from
-    /// AWS_ENDPOINT_URL, AWS_REGION, AWS_ACCESS_KEY_ID and AWS_SECRET_ACCESS_KEY; the bucket must
-    /// answer within 10 s. Default: none, files in the data directory. See docs/backends.md.
-    #[arg(long, env = "ICMS_BLOBS", value_name = "URL")]
-    pub blobs: Option<String>,
-    /// MiB of the data directory the copies of the bucket's files may take (with --blobs):
-    /// past it, the least recently used copies (unused for 10 minutes) are removed; they stay
-    /// in the bucket and are downloaded again when next read.
-    #[arg(long, default_value_t = DEFAULT_BLOB_CACHE_MIB)]
-    pub blob_cache_mib: u64,
+    /// Where the store is: data directory, data base, bucket.
+    #[command(flatten)]
+    pub store: StoreArgs,
     /// Bearer token that write requests (uploads, simulations, deletes) must send; reads stay
     /// open. Without one, writes are open too (allowed on a loopback address only).
     #[arg(long, env = "ICMS_TOKEN", hide_env_values = true)]
@@ -123,6 +106,63 @@ pub struct ServeArgs {
     pub foxglove: Option<SocketAddr>,
 }
 
+/// Where a store is: the options `icms serve` and `icms worker` share.
+#[derive(Debug, Clone, clap::Args)]
+pub struct StoreArgs {
+    /// Data directory: SQLite database and MCAP blobs, created and migrated on first start.
+    /// With --database-url, it holds the MCAP blobs only; with --blobs, copies of them. One
+    /// process at a time writes a data directory.
+    #[arg(long, default_value = "icms-data")]
+    pub data: PathBuf,
+    /// PostgreSQL data base to keep the rows in instead of the data directory's SQLite file
+    /// (postgres://user:password@host:port/dbname), migrated on start. It must answer within
+    /// 5 s. Default: none, SQLite. See docs/backends.md.
+    #[arg(long, env = "DATABASE_URL", hide_env_values = true, value_name = "URL")]
+    pub database_url: Option<String>,
+    /// S3-compatible bucket to keep the session and replay files in instead of the data
+    /// directory (s3://bucket or s3://bucket/prefix). Endpoint and credentials come from
+    /// AWS_ENDPOINT_URL, AWS_REGION, AWS_ACCESS_KEY_ID and AWS_SECRET_ACCESS_KEY; the bucket must
+    /// answer within 10 s. Default: none, files in the data directory. See docs/backends.md.
+    #[arg(long, env = "ICMS_BLOBS", value_name = "URL")]
+    pub blobs: Option<String>,
+    /// MiB of the data directory the copies of the bucket's files may take (with --blobs):
+    /// past it, the least recently used copies (unused for 10 minutes) are removed; they stay
+    /// in the bucket and are downloaded again when next read.
+    #[arg(long, default_value_t = DEFAULT_BLOB_CACHE_MIB)]
+    pub blob_cache_mib: u64,
+}
+
+impl Default for StoreArgs {
+    fn default() -> Self {
+        StoreArgs::in_dir(PathBuf::from("icms-data"))
+    }
+}
+
+impl StoreArgs {
+    /// The defaults (SQLite, files in the directory) in data directory `data`.
+    pub fn in_dir(data: PathBuf) -> StoreArgs {
+        StoreArgs {
+            data,
+            database_url: None,
+            blobs: None,
+            blob_cache_mib: DEFAULT_BLOB_CACHE_MIB,
+        }
+    }
+
+    /// The checked data base, blobs and copy-cache bound, errors naming the option.
+    pub fn resolve(&self) -> Result<(Database, Blobs, u64), ConfigError> {
+        let database = Database::from_url(self.database_url.as_deref()).map_err(|e| match e {
+            StoreError::InvalidInput(m) => ConfigError::DatabaseUrl(m),
+            other => ConfigError::DatabaseUrl(other.to_string()),
+        })?;
+        let blobs = Blobs::from_arg(self.blobs.as_deref()).map_err(|e| match e {
+            StoreError::InvalidInput(m) => ConfigError::Blobs(m),
+            other => ConfigError::Blobs(other.to_string()),
+        })?;
+        Ok((database, blobs, blob_cache_bytes(self.blob_cache_mib)?))
+    }
+}
+
 /// Largest accepted `--max-body` and `--max-upload`: 64 GiB.
 pub const MAX_MAX_BODY: usize = 64 << 30;
 /// Longest accepted `--request-timeout`, `--queue-wait`, `--header-timeout` and
@@ -154,7 +194,7 @@ pub const MAX_CONNECTIONS: usize = 1 << 20;
 
 /// `value` seconds as a duration, if it is in (0, [`MAX_TIMEOUT_S`]]; else the error names
 /// `option`.
-fn seconds(option: &str, value: f64) -> Result<Duration, ConfigError> {
+pub(crate) fn seconds(option: &str, value: f64) -> Result<Duration, ConfigError> {
     if value.is_finite() && value > 0.0 && value <= MAX_TIMEOUT_S {
         Ok(Duration::from_secs_f64(value))
     } else {
@@ -165,7 +205,12 @@ fn seconds(option: &str, value: f64) -> Result<Duration, ConfigError> {
 }
 
 /// `value` if it is in `lo..=hi`; else the error names `option`.
-fn count(option: &str, value: usize, lo: usize, hi: usize) -> Result<usize, ConfigError> {
+pub(crate) fn count(
+    option: &str,
+    value: usize,
+    lo: usize,
+    hi: usize,
+) -> Result<usize, ConfigError> {
     if (lo..=hi).contains(&value) {
         Ok(value)
     } else {
@@ -194,10 +239,7 @@ impl Default for ServeArgs {
     fn default() -> Self {
         ServeArgs {
             addr: SocketAddr::from(([127, 0, 0, 1], 8080)),
-            data: PathBuf::from("icms-data"),
-            database_url: None,
-            blobs: None,
-            blob_cache_mib: DEFAULT_BLOB_CACHE_MIB,
+            store: StoreArgs::default(),
             token: None,
             no_demo: false,
             max_body: DEFAULT_MAX_BODY,
@@ -289,14 +331,7 @@ impl ServeArgs {
         if token.is_none() && !self.addr.ip().is_loopback() {
             return Err(ConfigError::OpenNonLoopback(self.addr));
         }
-        let database = Database::from_url(self.database_url.as_deref()).map_err(|e| match e {
-            StoreError::InvalidInput(m) => ConfigError::DatabaseUrl(m),
-            other => ConfigError::DatabaseUrl(other.to_string()),
-        })?;
-        let blobs = Blobs::from_arg(self.blobs.as_deref()).map_err(|e| match e {
-            StoreError::InvalidInput(m) => ConfigError::Blobs(m),
-            other => ConfigError::Blobs(other.to_string()),
-        })?;
+        let (database, blobs, blob_cache_bytes) = self.store.resolve()?;
         let request_timeout = seconds("--request-timeout", self.request_timeout)?;
         let queue_wait = seconds("--queue-wait", self.queue_wait)?;
         let header_timeout = seconds("--header-timeout", self.header_timeout)?;
@@ -351,10 +386,10 @@ impl ServeArgs {
             .collect::<Result<Vec<_>, _>>()?;
         Ok(ServeConfig {
             addr: self.addr,
-            data: self.data,
+            data: self.store.data,
             database,
             blobs,
-            blob_cache_bytes: blob_cache_bytes(self.blob_cache_mib)?,
+            blob_cache_bytes,
             demo: !self.no_demo,
             foxglove: self.foxglove,
             state: StateConfig {
@@ -471,7 +506,10 @@ mod tests {
         );
         let a = ServeArgs {
             max_simulations: 0,
-            database_url: Some("postgres://icms@localhost/icms".into()),
+            store: StoreArgs {
+                database_url: Some("postgres://icms@localhost/icms".into()),
+                ..StoreArgs::default()
+            },
             ..ServeArgs::default()
         };
         assert_eq!(a.into_config().unwrap().workers.count, 0);
@@ -524,7 +562,10 @@ mod tests {
         }
         for v in [0, u64::MAX] {
             let a = ServeArgs {
-                blob_cache_mib: v,
+                store: StoreArgs {
+                    blob_cache_mib: v,
+                    ..StoreArgs::default()
+                },
                 ..ServeArgs::default()
             };
             let e = a.into_config().unwrap_err().to_string();

@@ -109,7 +109,7 @@ impl HttpTarget {
             .tempdir_in(&setup.scratch)
             .map_err(|e| err("making a data directory", e))?;
         let args = api::config::ServeArgs {
-            data: data.path().to_path_buf(),
+            store: api::config::StoreArgs::in_dir(data.path().to_path_buf()),
             no_demo: true,
             ..api::config::ServeArgs::default()
         };

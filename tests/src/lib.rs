@@ -9,7 +9,7 @@ use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};
 use std::time::Duration;
 
-use api::config::ServeArgs;
+use api::config::{ServeArgs, StoreArgs};
 use api::startup::Application;
 use bytes::Bytes;
 use reqwest::header::{HeaderMap, AUTHORIZATION, CONTENT_TYPE};
@@ -154,7 +154,7 @@ impl Client {
 pub fn test_args(data: &Path) -> ServeArgs {
     ServeArgs {
         addr: SocketAddr::from(([127, 0, 0, 1], 0)),
-        data: data.to_path_buf(),
+        store: StoreArgs::in_dir(data.to_path_buf()),
         no_demo: true,
         ..ServeArgs::default()
     }

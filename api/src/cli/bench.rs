@@ -668,7 +668,7 @@ fn bench_live(
         .map_err(|e| CliError(format!("starting the async runtime: {e}")))?;
     let args = crate::config::ServeArgs {
         addr: std::net::SocketAddr::from(([127, 0, 0, 1], 0)),
-        data: dir.path().join("data"),
+        store: crate::config::StoreArgs::in_dir(dir.path().join("data")),
         no_demo: true,
         ..crate::config::ServeArgs::default()
     };
@@ -781,7 +781,7 @@ fn bench_upload(name: &str, uploads: u64, duration: f64) -> Result<UploadBench, 
     let mut times = rt.block_on(async {
         let config = crate::config::ServeArgs {
             addr: std::net::SocketAddr::from(([127, 0, 0, 1], 0)),
-            data: dir.path().join("data"),
+            store: crate::config::StoreArgs::in_dir(dir.path().join("data")),
             no_demo: true,
             ..crate::config::ServeArgs::default()
         }

@@ -135,6 +135,16 @@ pub fn run() -> ExitCode {
     }
 }
 
+/// The multi-threaded runtime of a long-running process (`icms serve`, `icms worker`), with
+/// the allocator's arenas limited first ([`crate::memory::limit_arenas`]).
+pub(crate) fn server_runtime() -> Result<tokio::runtime::Runtime, CliError> {
+    crate::memory::limit_arenas();
+    tokio::runtime::Builder::new_multi_thread()
+        .enable_all()
+        .build()
+        .map_err(|e| CliError(format!("tokio: {e}")))
+}
+
 /// Opens the data base in `data` for a command that only reads it (`icms skills`,
 /// `icms hands --data`): a directory without one is an error naming it, and nothing is created
 /// there (a mistyped `--data` would otherwise leave an empty data base behind and list nothing).

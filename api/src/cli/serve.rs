@@ -8,12 +8,7 @@ use crate::startup::{shutdown_signal, Application};
 pub fn run_serve(a: ServeArgs) -> Result<(), CliError> {
     crate::telemetry::init();
     let config = a.into_config()?;
-    crate::memory::limit_arenas();
-    let rt = tokio::runtime::Builder::new_multi_thread()
-        .enable_all()
-        .build()
-        .map_err(|e| CliError(format!("tokio: {e}")))?;
-    rt.block_on(async {
+    super::server_runtime()?.block_on(async {
         tokio::spawn(crate::memory::trim_periodically());
         let app = Application::build(config).await?;
         eprintln!(
