@@ -49,11 +49,13 @@ fn box_pinch() -> SkillSpec {
         contacts: vec![
             SkillContact {
                 finger: "thumb".into(),
+                part: dfs_core::hand::ContactPart::Fingertip,
                 position_b: Vector::new(-0.025, 0.0, 0.0),
                 normal_b: Vector::x(),
             },
             SkillContact {
                 finger: "index".into(),
+                part: dfs_core::hand::ContactPart::Fingertip,
                 position_b: Vector::new(0.025, 0.0, 0.0),
                 normal_b: -Vector::x(),
             },

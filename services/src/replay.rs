@@ -205,6 +205,7 @@ pub fn skill_spec_from_json(value: &serde_json::Value, location: &str) -> Result
             .into_iter()
             .map(|c| SkillContact {
                 finger: c.finger,
+                part: c.part,
                 position_b: Vector::from(c.position_b),
                 normal_b: Vector::from(c.normal_b),
             })

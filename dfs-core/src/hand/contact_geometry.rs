@@ -87,6 +87,48 @@ impl BodyPart {
     }
 }
 
+/// Which part of the hand a contact is: a fingertip, or with whole-hand contact the palm or a
+/// phalanx. What session files record per contact and skills keep per contact
+/// ([`crate::replay::SkillContact::part`]).
+#[derive(
+    Debug, Clone, Copy, Default, PartialEq, Eq, Hash, serde::Serialize, serde::Deserialize,
+)]
+#[serde(rename_all = "snake_case")]
+pub enum ContactPart {
+    /// A fingertip: what every contact of a session without whole-hand contact is, and what a
+    /// file written before the field existed reads as.
+    #[default]
+    Fingertip,
+    /// The palm (whole-hand contact).
+    Palm,
+    /// A phalanx or metacarpal (whole-hand contact).
+    Phalanx,
+}
+
+impl ContactPart {
+    /// Whether this is a fingertip.
+    pub fn is_fingertip(&self) -> bool {
+        *self == ContactPart::Fingertip
+    }
+
+    /// The part of a hand's contact shape.
+    pub fn of_body(part: BodyPart) -> ContactPart {
+        match part {
+            BodyPart::Palm => ContactPart::Palm,
+            BodyPart::Phalanx { .. } => ContactPart::Phalanx,
+        }
+    }
+
+    /// `"fingertip"`, `"palm"` or `"phalanx"`.
+    pub fn name(self) -> &'static str {
+        match self {
+            ContactPart::Fingertip => "fingertip",
+            ContactPart::Palm => "palm",
+            ContactPart::Phalanx => "phalanx",
+        }
+    }
+}
+
 /// A solid fixed in a link's frame that touches objects.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub enum ContactPrimitive {

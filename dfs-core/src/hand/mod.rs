@@ -22,7 +22,8 @@ pub mod urdf_write;
 
 pub use builtin::{builtin_hand, builtin_spec, thumb_of, BUILTIN_HANDS};
 pub use contact_geometry::{
-    BodyPart, ContactPrimitive, ContactShape, MAX_CONTACT_SHAPES, MAX_CONTACT_SHAPES_PER_LINK,
+    BodyPart, ContactPart, ContactPrimitive, ContactShape, MAX_CONTACT_SHAPES,
+    MAX_CONTACT_SHAPES_PER_LINK,
 };
 pub use model::*;
 pub use shapes::{link_shapes, LinkShape, Primitive, ShapeSource};

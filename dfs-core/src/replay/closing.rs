@@ -636,6 +636,7 @@ mod tests {
     fn sphere_lift() -> SkillSpec {
         let contact = |finger: &str, dir: Vector| SkillContact {
             finger: finger.into(),
+            part: crate::hand::ContactPart::Fingertip,
             position_b: -dir.normalize() * 0.04,
             normal_b: dir.normalize(),
         };

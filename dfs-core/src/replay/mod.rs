@@ -104,8 +104,12 @@ use crate::scenario::Phase;
 /// One contact of a skill, in the object frame B.
 #[derive(Debug, Clone, PartialEq)]
 pub struct SkillContact {
-    /// The recording hand's fingertip (provenance; `thumb` marks the thumb's side).
+    /// The recording hand's fingertip or contact shape (provenance; `thumb` marks the
+    /// thumb's side).
     pub finger: String,
+    /// The part of the hand that touched: a fingertip, or in a whole-hand grasp the palm or a
+    /// phalanx.
+    pub part: crate::hand::ContactPart,
     /// Contact point in B (m).
     pub position_b: Vector,
     /// Unit normal in B, pointing into the object.
@@ -499,11 +503,13 @@ mod tests {
             contacts: vec![
                 SkillContact {
                     finger: "thumb".into(),
+                    part: crate::hand::ContactPart::Fingertip,
                     position_b: Vector::new(-0.025, 0.0, 0.0),
                     normal_b: Vector::x(),
                 },
                 SkillContact {
                     finger: "index".into(),
+                    part: crate::hand::ContactPart::Fingertip,
                     position_b: Vector::new(0.025, 0.0, 0.0),
                     normal_b: -Vector::x(),
                 },
@@ -528,6 +534,25 @@ mod tests {
             ],
             held_until_s: None,
         }
+    }
+
+    /// A skill held by the palm too (a power grasp) is refused naming its first palm or
+    /// phalanx contact, not planned as if the palm were a fingertip.
+    #[test]
+    fn a_whole_hand_skill_is_refused_naming_its_palm_contact() {
+        let hand = builtin_hand("allegro").unwrap();
+        let mut skill = box_pinch(0.2);
+        skill.contacts[1].finger = "palm".into();
+        skill.contacts[1].part = crate::hand::ContactPart::Palm;
+        let e = plan(&hand, thumb_of(&hand), &skill, &ReplayParams::default())
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains("skill.contacts[1]") && e.contains("palm contact (`palm`)"),
+            "{e}"
+        );
+        skill.contacts[1].part = crate::hand::ContactPart::Fingertip;
+        assert!(plan(&hand, thumb_of(&hand), &skill, &ReplayParams::default()).is_ok());
     }
 
     #[test]
@@ -732,6 +757,7 @@ mod tests {
     fn glove10_cylinder_skill() -> SkillSpec {
         let contact = |finger: &str, p: [Real; 3], n: [Real; 3]| SkillContact {
             finger: finger.into(),
+            part: crate::hand::ContactPart::Fingertip,
             position_b: Vector::from(p),
             normal_b: Vector::from(n).normalize(),
         };

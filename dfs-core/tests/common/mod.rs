@@ -329,6 +329,7 @@ pub fn scenario_skill(name: &str) -> SkillSpec {
         .filter(|&k| plan.tips[k])
         .map(|k| SkillContact {
             finger: glove.fingertips[k].name.clone(),
+            part: dfs_core::hand::ContactPart::Fingertip,
             position_b: plan.contacts_b[k] - plan.normals_b[k] * glove.fingertips[k].radius,
             normal_b: -plan.normals_b[k],
         })

@@ -114,43 +114,7 @@ impl Intensity4 {
     }
 }
 
-/// Which part of the hand a contact of [`Contacts`] is.
-#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Hash, Serialize, Deserialize)]
-#[serde(rename_all = "snake_case")]
-pub enum ContactPart {
-    /// A fingertip: what every contact of a session without whole-hand contact is, and what a
-    /// file written before the field existed reads as.
-    #[default]
-    Fingertip,
-    /// The palm (whole-hand contact).
-    Palm,
-    /// A phalanx or metacarpal (whole-hand contact).
-    Phalanx,
-}
-
-impl ContactPart {
-    /// Whether this is a fingertip.
-    pub fn is_fingertip(&self) -> bool {
-        *self == ContactPart::Fingertip
-    }
-
-    /// The part of a hand's contact shape.
-    pub fn of_body(part: dfs_core::hand::BodyPart) -> ContactPart {
-        match part {
-            dfs_core::hand::BodyPart::Palm => ContactPart::Palm,
-            dfs_core::hand::BodyPart::Phalanx { .. } => ContactPart::Phalanx,
-        }
-    }
-
-    /// `"fingertip"`, `"palm"` or `"phalanx"`.
-    pub fn name(self) -> &'static str {
-        match self {
-            ContactPart::Fingertip => "fingertip",
-            ContactPart::Palm => "palm",
-            ContactPart::Phalanx => "phalanx",
-        }
-    }
-}
+pub use dfs_core::hand::ContactPart;
 
 /// One contact of [`Contacts`]: a fingertip or, with whole-hand contact, a palm or phalanx
 /// contact shape ([`part`](Self::part)). A fingertip away from the object (most of them, most

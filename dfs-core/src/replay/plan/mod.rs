@@ -132,6 +132,19 @@ fn validate(skill: &SkillSpec, thumb: usize, hand: &HandModel) -> Result<()> {
         ));
     }
     for (i, c) in skill.contacts.iter().enumerate() {
+        // A power grasp held by the palm or the phalanges: the planner retargets fingertip
+        // contacts only, so it says so rather than putting a fingertip where the palm was.
+        if !c.part.is_fingertip() {
+            return Err(DfsError::invalid(
+                format!("skill.contacts[{i}]"),
+                format!(
+                    "a {} contact (`{}`) of a whole-hand grasp; replaying palm and phalanx \
+                     contacts on a robot hand is not supported yet, only fingertip skills replay",
+                    c.part.name(),
+                    c.finger
+                ),
+            ));
+        }
         let ok = c
             .position_b
             .iter()
