@@ -9,7 +9,7 @@ use std::collections::BTreeMap;
 use std::path::Path;
 
 use dfs_core::contact::Friction;
-use dfs_core::hand::{builtin_hand, builtin_spec, thumb_of, HandModel, HandSpec};
+use dfs_core::hand::{builtin_hand, builtin_spec, thumb_of, ContactPart, HandModel, HandSpec};
 use dfs_core::math::Vector;
 use dfs_core::replay::{
     run_with_stop, DrivenReplay, DrivenStart, ReplayParams, ReplayReport, ReplayTick, SkillContact,
@@ -36,6 +36,33 @@ pub struct LoadedHand {
     pub spec: Option<HandSpec>,
     /// The URDF text (absent for `glove10`).
     pub urdf: Option<String>,
+}
+
+impl LoadedHand {
+    /// The model to replay `skill` with: for a power grasp (a skill with a palm contact) on a
+    /// hand loaded without contact geometry, the model with its palm and phalanges from its
+    /// URDF's `<collision>` elements
+    /// ([`dfs_core::hand::contact_geometry::contact_shapes_from_urdf`]), which a power grasp's
+    /// replay holds the object with; the model as it is otherwise. Collision geometry that is
+    /// degenerate, or more shapes than the limits, is refused naming the link.
+    pub fn model_for(&self, skill: &SkillSpec) -> Result<std::borrow::Cow<'_, HandModel>> {
+        let power = skill.contacts.iter().any(|c| c.part == ContactPart::Palm);
+        match &self.urdf {
+            Some(urdf) if power && self.model.contact_shapes.is_empty() => {
+                let mut model = self.model.clone();
+                model.contact_shapes =
+                    dfs_core::hand::contact_geometry::contact_shapes_from_urdf(&model, urdf)
+                        .map_err(|e| {
+                            invalid(
+                                format!("hand {:?} URDF", self.model.name),
+                                format!("its collision geometry, for a power grasp: {e}"),
+                            )
+                        })?;
+                Ok(std::borrow::Cow::Owned(model))
+            }
+            _ => Ok(std::borrow::Cow::Borrowed(&self.model)),
+        }
+    }
 }
 
 fn invalid(location: impl Into<String>, detail: impl Into<String>) -> RecordingError {
@@ -138,24 +165,6 @@ pub fn skill_spec_from_json(value: &serde_json::Value, location: &str) -> Result
         .to_shape()
         .map_err(|e| invalid(location, format!("skill.object: {e}")))?;
     let contacts = parameters.contacts;
-    // A power grasp held by the palm or the phalanges: the replay retargets fingertip
-    // contacts only, so it says so rather than replaying part of the grasp.
-    if let Some((i, c)) = contacts
-        .iter()
-        .enumerate()
-        .find(|(_, c)| !c.part.is_fingertip())
-    {
-        return Err(invalid(
-            location,
-            format!(
-                "skill.parameters.contacts[{i}]: a {} contact (`{}`) of a whole-hand grasp; \
-                 replaying palm and phalanx contacts on a robot hand is not supported yet, \
-                 only fingertip skills replay",
-                c.part.name(),
-                c.finger
-            ),
-        ));
-    }
     // When the recording lost the object: the grip profiles span grasp start → release end.
     let find = |phase: Phase| phases.iter().find(|p| p.name == phase);
     let held_until_s = match (find(Phase::Grasp), phases.last()) {
@@ -278,16 +287,10 @@ pub fn replay_skill_until(
     stop: &Stop,
 ) -> Result<ReplayReport> {
     let location = format!("hand {:?}", hand.model.name);
+    let model = hand.model_for(skill)?;
     let Some(out) = out else {
-        return dfs_core::replay::run_with_stop(
-            &hand.model,
-            hand.thumb,
-            skill,
-            params,
-            stop,
-            |_| {},
-        )
-        .map_err(|e| run_error(location, e));
+        return dfs_core::replay::run_with_stop(&model, hand.thumb, skill, params, stop, |_| {})
+            .map_err(|e| run_error(location, e));
     };
     let object = dfs_core::object::RigidObject::new(skill.shape, skill.mass)
         .map_err(|e| invalid("skill.object", e.to_string()))?;
@@ -305,9 +308,9 @@ pub fn replay_skill_until(
         scene: None,
         assist_topics: false,
     };
-    let mut recorder = SessionRecorder::create_to(out, &hand.model, &object, &info)?;
+    let mut recorder = SessionRecorder::create_to(out, &model, &object, &info)?;
     let mut failed: Option<RecordingError> = None;
-    let report = run_with_stop(&hand.model, hand.thumb, skill, params, stop, |tick| {
+    let report = run_with_stop(&model, hand.thumb, skill, params, stop, |tick| {
         if failed.is_some() {
             return;
         }
@@ -367,6 +370,7 @@ pub fn driven_replay(
     dfs_core::object::RigidObject::new(skill.shape, skill.mass)
         .map_err(|e| invalid("skill.object", e.to_string()))?;
     let location = format!("hand {:?}", hand.model.name);
-    DrivenReplay::start(&hand.model, hand.thumb, skill, params, start_s, stop)
+    let model = hand.model_for(skill)?;
+    DrivenReplay::start(&model, hand.thumb, skill, params, start_s, stop)
         .map_err(|e| run_error(location, e))
 }

@@ -356,22 +356,108 @@ fn the_peak_torque_ratio_is_of_the_torque_applied() {
     );
 }
 
-/// The operator's power grasp is held by the palm and the phalanges too; a replay retargets
-/// fingertip contacts only, so it refuses the skill naming the first palm or phalanx contact
-/// rather than replaying part of the grasp.
+/// The operator's power grasp is held by the palm and the phalanges too. A robot hand with palm
+/// contact geometry (its URDF's collision elements) replays it as a power grasp: the palm on
+/// the skill's palm contact, the fingers wrapped, and the recorded replay shows the palm
+/// pressing the cylinder through the lift. A hand without palm geometry refuses it, naming the
+/// palm contact.
 #[test]
-fn a_whole_hand_skill_is_refused_for_replay_naming_its_palm_or_phalanx_contact() {
+fn a_power_grasp_replays_with_the_palm_on_allegro_and_barrett() {
+    use dfs_core::hand::ContactPart;
+    let skill = recorded_skill("cylinder-power-grasp");
+    assert!(skill.contacts.iter().any(|c| c.part == ContactPart::Palm));
     let dir = tempfile::tempdir().unwrap();
-    let path = dir.path().join("session.mcap");
-    let s = Scenario::builtin("cylinder-power-grasp", 0).unwrap();
-    record_simulation(&s, None, &path, |_, _| {}).unwrap();
-    let seg = segment(&read_session(&path).unwrap(), &SegmentParams::default());
-    let json = serde_json::to_value(&seg.skills[0]).unwrap();
-    let e = skill_spec_from_json(&json, "power.json")
-        .unwrap_err()
-        .to_string();
+    for name in ["allegro", "barrett"] {
+        let hand = load_builtin_hand(name).unwrap();
+        let out = dir.path().join(format!("{name}.mcap"));
+        let r = replay_skill(
+            &hand,
+            &skill,
+            &ReplayParams::default(),
+            &ReplaySource::default(),
+            Some(&out),
+        )
+        .unwrap();
+        assert!(r.success, "{name}: {:?} {}", r.failure_reason, r.detail);
+        assert!(r.lift_height_m > 0.07, "{name} lifted {}", r.lift_height_m);
+        assert!(r.position_error_max_m < 0.02, "{name}");
+        // The report's contacts are the wrap's: the palm's first, then the fingers'.
+        let model = hand.model_for(&skill).unwrap();
+        let palm_names: Vec<&str> = model
+            .contact_shapes
+            .iter()
+            .filter(|s| s.part == dfs_core::hand::BodyPart::Palm)
+            .map(|s| s.name.as_str())
+            .collect();
+        assert!(
+            palm_names.contains(&r.contacts[0].finger.as_str()),
+            "{name}"
+        );
+        assert!(r.contacts.len() >= 3, "{name}: {:?}", r.contacts);
+        // In the recording, the palm pushes on the cylinder while it is lifted and carried: all
+        // the time on Barrett, part of it on Allegro (whose thumb and fingers then carry it).
+        let rec = read_session(&out).unwrap();
+        assert!(rec.is_replay());
+        let lifted = |t: &(u64, services::session::Contacts)| {
+            rec.object
+                .iter()
+                .find(|(ts, _)| *ts == t.0)
+                .is_some_and(|(_, o)| o.pose.position.z > skill.start_pose().translation.z + 0.05)
+        };
+        let (mut held, mut palm) = (0, 0);
+        for c in rec.contacts.iter().filter(|c| lifted(c)) {
+            held += 1;
+            if c.1
+                .fingers
+                .iter()
+                .any(|f| f.part == ContactPart::Palm && f.in_contact)
+            {
+                palm += 1;
+            }
+        }
+        assert!(held > 500, "{name}: {held} lifted ticks");
+        assert!(palm * 3 > held, "{name}: palm pushing {palm} of {held}");
+    }
+    // Inspire and glove10 report (held, or how the object got away), never err.
+    for name in ["inspire", "glove10"] {
+        let r = replay(&load_builtin_hand(name).unwrap(), &skill);
+        assert!(r.ticks > 0 || r.failure_reason.is_some(), "{name}");
+        assert!(r.success || !r.detail.is_empty(), "{name}");
+    }
+    // Degenerate collision geometry is refused naming the link, not replayed.
+    let mut broken = load_builtin_hand("allegro").unwrap();
+    broken.urdf = broken.urdf.map(|u| {
+        u.replacen(
+            r#"<box size="0.0414 0.112 0.0448"/>"#,
+            r#"<box size="0 0.112 0.0448"/>"#,
+            1,
+        )
+    });
+    let e = replay_skill(
+        &broken,
+        &skill,
+        &ReplayParams::default(),
+        &ReplaySource::default(),
+        None,
+    )
+    .unwrap_err()
+    .to_string();
     assert!(
-        e.contains("skill.parameters.contacts[") && e.contains("not supported yet"),
+        e.contains("collision 0 of link \"base_link\"") && e.contains("got 0"),
+        "{e}"
+    );
+    // The gripper has no palm to hold it with: refused, naming the palm contact.
+    let e = replay_skill(
+        &load_builtin_hand("gripper").unwrap(),
+        &skill,
+        &ReplayParams::default(),
+        &ReplaySource::default(),
+        None,
+    )
+    .unwrap_err()
+    .to_string();
+    assert!(
+        e.contains("skill.contacts[") && e.contains("palm contact") && e.contains("no palm"),
         "{e}"
     );
 }

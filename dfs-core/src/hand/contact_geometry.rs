@@ -51,8 +51,8 @@ use crate::object::Shape;
 /// phalanges; Allegro's URDF has 19 collision boxes off its fingertip links). Fingertips are
 /// counted separately ([`super::MAX_TIPS`]).
 pub const MAX_CONTACT_SHAPES: usize = 24;
-/// Most contact shapes fixed to one link: 4.
-pub const MAX_CONTACT_SHAPES_PER_LINK: usize = 4;
+/// Most contact shapes fixed to one link: 8 (the Inspire hand's palm is eight boxes).
+pub const MAX_CONTACT_SHAPES_PER_LINK: usize = 8;
 /// Weight (m per unit² of the search parameter) that pulls a non-unique deepest point toward
 /// the middle of a line contact (module documentation).
 const CENTRING: Real = 1e-9;
@@ -805,7 +805,7 @@ mod tests {
         let five = vec![ball(palm); MAX_CONTACT_SHAPES_PER_LINK + 1];
         let e = validate_contact_shapes(&h, &five).unwrap_err().to_string();
         assert!(
-            e.contains("link \"palm\"") && e.contains("at most 4 per link"),
+            e.contains("link \"palm\"") && e.contains("at most 8 per link"),
             "{e}"
         );
         validate_contact_shapes(&h, &five[..MAX_CONTACT_SHAPES_PER_LINK]).unwrap();
@@ -897,7 +897,7 @@ mod tests {
             .unwrap_err()
             .to_string();
         assert!(
-            e.contains("link \"finger\"") && e.contains("at most 4 per link"),
+            e.contains("link \"finger\"") && e.contains("at most 8 per link"),
             "{e}"
         );
         // Meshes are not contact geometry.

@@ -89,11 +89,13 @@ mod clock;
 mod closing;
 mod driven;
 mod plan;
+mod power;
 mod run;
 
 pub use clock::{PhaseClock, PhaseSpan, MAX_CATCH_UP_RATE, MAX_HELD_CATCH_UP_RATE, RATE_SLEW};
 pub use driven::{DrivenReplay, DrivenStart, DrivenTick};
 pub use plan::{plan, plan_with_stop, Plan, RetargetStep};
+pub use power::{PowerContact, PowerPlan};
 pub use run::{run, run_with, run_with_stop, Replay, ReplayTick};
 
 use crate::contact::{ContactModel, Friction};
@@ -249,7 +251,8 @@ pub struct ReplayReport {
     pub max_slip_m: Real,
     /// Ticks in which a held contact slipped (outside its friction cone).
     pub slip_ticks: u64,
-    /// Smallest `1 − u` of a transmitting contact while held, `u` the share of its friction
+    /// Smallest `1 − u` of a transmitting contact while held (a fingertip, or a power grasp's
+    /// palm or phalanx), `u` the share of its friction
     /// cone it uses ([`cone_usage`](crate::contact::cone_usage): `|c_t| / (μ c_n)`, with the
     /// torsion for the soft finger's elliptic cone); 1 = pure normal force, 0 = on the cone.
     #[cfg_attr(feature = "utoipa", schema(value_type = f64))]
@@ -536,8 +539,9 @@ mod tests {
         }
     }
 
-    /// A skill held by the palm too (a power grasp) is refused naming its first palm or
-    /// phalanx contact, not planned as if the palm were a fingertip.
+    /// A skill held by the palm too (a power grasp) on a hand without palm contact geometry is
+    /// refused naming its first palm or phalanx contact, not planned as if the palm were a
+    /// fingertip.
     #[test]
     fn a_whole_hand_skill_is_refused_naming_its_palm_contact() {
         let hand = builtin_hand("allegro").unwrap();
@@ -548,11 +552,55 @@ mod tests {
             .unwrap_err()
             .to_string();
         assert!(
-            e.contains("skill.contacts[1]") && e.contains("palm contact (`palm`)"),
+            e.contains("skill.contacts[1]")
+                && e.contains("palm contact (`palm`)")
+                && e.contains("no palm contact geometry"),
             "{e}"
         );
+        // A phalanx without a palm contact is neither a power grasp nor a fingertip one.
+        skill.contacts[1].part = crate::hand::ContactPart::Phalanx;
+        let e = plan(&hand, thumb_of(&hand), &skill, &ReplayParams::default())
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("without a palm contact"), "{e}");
         skill.contacts[1].part = crate::hand::ContactPart::Fingertip;
         assert!(plan(&hand, thumb_of(&hand), &skill, &ReplayParams::default()).is_ok());
+    }
+
+    /// A power grasp on a hand with a palm (glove10) is planned as one, whatever the object:
+    /// too big to wrap it is a report (never a panic), and a stop ends the planning.
+    #[test]
+    fn a_power_grasp_is_planned_as_a_wrap_and_its_failures_are_reports() {
+        let hand = builtin_hand("glove10").unwrap();
+        let thumb = thumb_of(&hand);
+        let params = ReplayParams::default();
+        let mut skill = box_pinch(0.2);
+        skill.contacts[1].finger = "palm".into();
+        skill.contacts[1].part = crate::hand::ContactPart::Palm;
+        let p = plan(&hand, thumb, &skill, &params).unwrap();
+        let power = p.power.as_ref().expect("a wrap");
+        assert_eq!(power.contacts[0].part, crate::hand::ContactPart::Palm);
+        assert!(power.grip > 0.0 && power.grip <= 1.0);
+        assert!(power.close.iter().any(|&c| c != 0.0));
+        // An object a metre across: no wrap holds it; the replay says why.
+        skill.shape = Shape::Box {
+            half_extents: [0.5, 0.5, 0.5],
+        };
+        skill.contacts[1].position_b = Vector::new(0.5, 0.0, 0.0);
+        let r = run(&hand, thumb, &skill, &params).unwrap();
+        assert!(!r.success && r.failure_reason.is_some(), "{}", r.detail);
+        let stop = crate::Stop::default();
+        stop.stop();
+        assert!(matches!(
+            plan_with_stop(&hand, thumb, &box_power(), &params, &stop),
+            Err(crate::DfsError::Cancelled)
+        ));
+    }
+
+    fn box_power() -> SkillSpec {
+        let mut skill = box_pinch(0.2);
+        skill.contacts[1].part = crate::hand::ContactPart::Palm;
+        skill
     }
 
     #[test]

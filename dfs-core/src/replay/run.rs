@@ -116,6 +116,8 @@ impl Replay {
             contact_model: skill.contact_model,
             friction: skill.friction,
             table_height: Some(0.0),
+            // A power grasp holds the object with the palm and the phalanges too.
+            whole_hand: plan.power.is_some(),
             ..DfsParams::default()
         };
         let start = skill.start_pose();
@@ -123,7 +125,7 @@ impl Replay {
         let n = hand.dof();
         let timeline = skill.timeline();
         let mut pre_base = plan.base_grasp;
-        pre_base.translation.vector -= plan.approach_dir * 0.08;
+        pre_base.translation.vector -= plan.approach_dir * super::power::APPROACH;
         let mut dfs = Dfs::new(hand, object, ObjectState::at_rest(start), dfs_params)?;
         let zeros = [0.0; MAX_DOF];
         dfs.step(&GloveSample {
@@ -150,6 +152,11 @@ impl Replay {
             kd[d] = (1.4 * (kp[d] * md).sqrt()).min(0.5 * md / DT);
         }
         let mut grasp_dof = [false; MAX_DOF];
+        if let Some(power) = &plan.power {
+            for d in 0..n {
+                grasp_dof[d] = power.close[d] != 0.0;
+            }
+        }
         for g in &hand.finger_groups {
             if g.tips.iter().any(|&k| plan.active[k]) {
                 for &d in &g.dofs {
@@ -159,7 +166,9 @@ impl Replay {
         }
         let n_steps = (timeline.end / DT).round() as u64;
         let pinch = match hand.finger_groups.as_slice() {
-            [g] if g.tips.len() == 2 && hand.fingertips.len() == 2 => Some((g.tips[0], g.tips[1])),
+            [g] if g.tips.len() == 2 && hand.fingertips.len() == 2 && plan.power.is_none() => {
+                Some((g.tips[0], g.tips[1]))
+            }
             _ => None,
         };
         let jaw_line = pinch.map(|(a, b)| {
@@ -200,6 +209,22 @@ impl Replay {
         let release = replay.timeline.release_start;
         replay.release_base = replay.follow(release);
         Ok(replay)
+    }
+
+    /// Ticks run so far.
+    pub fn ticks_run(&self) -> u64 {
+        self.step
+    }
+
+    /// The share of the held part of the replay (`grasp` end to `release` start) for which the
+    /// object stayed within the success bounds of its reference: 1 when it never left them.
+    pub(super) fn held_fraction(&self) -> Real {
+        let tl = &self.timeline;
+        let span = (tl.release_start - tl.grasp_end).max(1e-3);
+        match self.stats.lost_at {
+            None => 1.0,
+            Some(t) => ((t - tl.grasp_end) / span).clamp(0.0, 1.0),
+        }
     }
 
     /// The plan.
@@ -277,6 +302,11 @@ impl Replay {
         let reference = self.reference;
         let obj = self.dfs.object_state().pose;
         let mut tau = [0.0; MAX_DOF];
+        if let Some(power) = &self.plan.power {
+            self.power_torques(power, t, q, qd, &mut tau);
+            self.clamp_torques(t, &tau);
+            return;
+        }
         // Posture: joint-space impedance to the preshape or grasp angles; weak on the fingers
         // while they are steered in task space.
         for d in 0..n {
@@ -332,6 +362,58 @@ impl Replay {
                 }
             }
         }
+        self.clamp_torques(t, &tau);
+    }
+
+    /// The torques of a power grasp ([`super::power`]): the fingers taking part close by
+    /// torque alone, each flexing DOF pushing with the same fraction of its limit (ramped up
+    /// over the first 60 % of `grasp` to the planned grip, down over the first 40 % of
+    /// `release`), then open back by joint impedance; every other DOF is held at its angle.
+    fn power_torques(
+        &self,
+        power: &super::PowerPlan,
+        t: Real,
+        q: &[Real],
+        qd: &[Real],
+        tau: &mut [Real; MAX_DOF],
+    ) {
+        let tl = &self.timeline;
+        let phase = |a: Real, b: Real| ((t - a) / (b - a).max(1e-3)).clamp(0.0, 1.0);
+        let (level, open) = if t < tl.grasp_start {
+            (0.0, 1.0)
+        } else if t < tl.release_start {
+            // Closing gently (as the operator's wrap does), then squeezing.
+            let s = phase(tl.grasp_start, tl.grasp_end);
+            let gentle = crate::operator::power::WRAP_CLOSE.min(power.grip);
+            (
+                gentle * min_jerk(s / 0.3) + (power.grip - gentle) * min_jerk((s - 0.6) / 0.4),
+                0.0,
+            )
+        } else {
+            let s = phase(tl.release_start, tl.release_end);
+            (
+                power.grip * (1.0 - min_jerk(s / 0.4)),
+                min_jerk((s - 0.4) / 0.6),
+            )
+        };
+        let hand = self.dfs.hand();
+        for d in 0..hand.dof() {
+            let damping = self.kd[d] * qd[d];
+            tau[d] = if power.close[d] != 0.0 {
+                power.close[d] * hand.torque_limit[d] * level
+                    + open * self.kp[d] * (self.plan.q_pre[d] - q[d])
+                    - damping
+            } else {
+                self.kp[d] * (self.plan.q_grasp[d] - q[d]) - damping
+            };
+        }
+    }
+
+    /// Clamps the controller's torques `tau` at the tick at `t` to the hand's limits into
+    /// `self.tau`, with the statistics of saturation and the peak.
+    fn clamp_torques(&mut self, t: Real, tau: &[Real; MAX_DOF]) {
+        let hand = self.dfs.hand();
+        let n = hand.dof();
         let held = t >= self.timeline.grasp_end && t < self.timeline.release_start;
         let mut saturated = false;
         for d in 0..n {
@@ -465,6 +547,19 @@ impl Replay {
             let anchor = *s.anchors[k].get_or_insert(frame.p_b);
             s.max_slip = s.max_slip.max((frame.p_b - anchor).norm());
             let c = tip.transmitted;
+            if c[2] > 0.05 && mu > 0.0 {
+                let model = self.dfs.params().contact_model;
+                let margin = 1.0 - cone_usage(model, &self.skill.friction, &c);
+                s.min_margin = Some(s.min_margin.map_or(margin, |m: Real| m.min(margin)));
+            }
+        }
+        // A power grasp's palm and phalanges (none without whole-hand contact).
+        for b in self.dfs.body_contacts() {
+            if !(b.in_contact && b.frame.is_some()) {
+                continue;
+            }
+            slip |= b.slip;
+            let c = b.transmitted;
             if c[2] > 0.05 && mu > 0.0 {
                 let model = self.dfs.params().contact_model;
                 let margin = 1.0 - cone_usage(model, &self.skill.friction, &c);

@@ -334,9 +334,16 @@ impl Worker {
                 return;
             }
         };
+        let model = match hand.model_for(&spec) {
+            Ok(m) => m,
+            Err(e) => {
+                self.say(fail(format!("skill {skill_id} cannot be applied: {e}")));
+                return;
+            }
+        };
         let now_s = t_ns as f64 * 1e-9;
         let started = DrivenReplay::start(
-            &hand.model,
+            &model,
             hand.thumb,
             &spec,
             &ReplayParams::default(),

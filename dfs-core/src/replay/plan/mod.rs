@@ -14,7 +14,6 @@ mod step;
 
 pub(in crate::replay) use candidates::{plan_candidates, Keys};
 pub(in crate::replay) use forces::actuation_map;
-#[cfg(test)]
 pub(in crate::replay) use forces::load_at;
 pub use step::RetargetStep;
 
@@ -25,7 +24,7 @@ use crate::contact::{ContactFrame, Intensity};
 use crate::error::{DfsError, Result};
 use crate::grasp::quality::{grasp_quality, QualityParams};
 use crate::hand::ik::{solve_tips, IkParams};
-use crate::hand::{HandModel, Kinematics, MAX_DOF, MAX_TIPS};
+use crate::hand::{ContactPart, HandModel, Kinematics, MAX_DOF, MAX_TIPS};
 use crate::math::{Isometry, Point, Real, Vector};
 use crate::replay::SkillSpec;
 use crate::scenario::MAX_SCRIPT_S;
@@ -76,6 +75,10 @@ pub struct Plan {
     /// simulated (it could only drop the object). A failure later along the motion (a
     /// transient the torques cannot follow) is a warning: the replay runs and tells.
     pub fails_at_rest: bool,
+    /// A power grasp's wrap (the skill held by the palm: [`crate::replay`]'s power grasps);
+    /// `None` for a fingertip grasp. Its fingertips are then not [`Plan::active`]: the
+    /// fingers close by torque and touch where they wrap.
+    pub power: Option<super::power::PowerPlan>,
 }
 
 /// Validates a skill for replay; the error names the field.
@@ -134,12 +137,18 @@ fn validate(skill: &SkillSpec, thumb: usize, hand: &HandModel) -> Result<()> {
     for (i, c) in skill.contacts.iter().enumerate() {
         // A power grasp held by the palm or the phalanges: the planner retargets fingertip
         // contacts only, so it says so rather than putting a fingertip where the palm was.
-        if !c.part.is_fingertip() {
+        if !c.part.is_fingertip() && !super::power::is_power(hand, skill) {
+            let why = if skill.contacts.iter().any(|c| c.part == ContactPart::Palm) {
+                "and the hand has no palm contact geometry to replay it with (its URDF's \
+                 <collision> elements on the link its fingers branch from)"
+            } else {
+                "without a palm contact: a power grasp is replayed from its palm contact, and \
+                 a fingertip grasp from fingertips only"
+            };
             return Err(DfsError::invalid(
                 format!("skill.contacts[{i}]"),
                 format!(
-                    "a {} contact (`{}`) of a whole-hand grasp; replaying palm and phalanx \
-                     contacts on a robot hand is not supported yet, only fingertip skills replay",
+                    "a {} contact (`{}`) of a whole-hand grasp, {why}",
                     c.part.name(),
                     c.finger
                 ),
@@ -197,6 +206,9 @@ pub fn plan_with_stop(
 ) -> Result<Plan> {
     validate(skill, thumb, hand)?;
     stop.check()?;
+    if super::power::is_power(hand, skill) {
+        return super::power::plan_power(hand, thumb, skill, params, stop);
+    }
     let (best, refusals) = choose(hand, thumb, skill, params, stop)?;
     let mut plan = grasp_plan(hand, thumb, skill, params, &best, stop)?;
     if !best.ok {
@@ -383,6 +395,7 @@ fn grasp_plan(
         torque_map,
         failure: None,
         fails_at_rest: false,
+        power: None,
     })
 }
 
@@ -489,6 +502,20 @@ impl Refusals {
 impl Plan {
     /// The retargeted contacts for a report.
     pub fn planned_contacts(&self) -> Vec<PlannedContact> {
+        if let Some(power) = &self.power {
+            return power
+                .contacts
+                .iter()
+                .map(|c| {
+                    let (p, n) = (c.frame.p_b, c.frame.normal_b());
+                    PlannedContact {
+                        finger: c.name.clone(),
+                        position_b: [p.x, p.y, p.z],
+                        normal_b: [n.x, n.y, n.z],
+                    }
+                })
+                .collect();
+        }
         self.contacts
             .iter()
             .enumerate()
