@@ -32,10 +32,13 @@ use session::Collect;
 use source::stream_source;
 
 /// Largest raw message (bytes), in either format: ours are under 2 kB (a tick of a 30-DOF
-/// hand), and the most a session may hold ([`MAX_SESSION_DOFS`](super::MAX_SESSION_DOFS) names and values,
-/// [`MAX_SESSION_FINGERS`](super::MAX_SESSION_FINGERS) fingertips) is far under this. Bigger messages are refused before
+/// hand), and the most a session may hold ([`MAX_SESSION_DOFS`] names and values,
+/// [`MAX_SESSION_FINGERS`] fingertips) is far under this. Bigger messages are refused before
 /// they are decoded: decoding may take a hundred times their size (an empty nested protobuf
 /// message, or an empty JSON string, is 2 bytes of input and a struct or `String` in memory).
+///
+/// [`MAX_SESSION_DOFS`]: super::MAX_SESSION_DOFS
+/// [`MAX_SESSION_FINGERS`]: super::MAX_SESSION_FINGERS
 pub const MAX_RAW_MESSAGE_BYTES: usize = 256 * 1024;
 
 /// Largest protobuf schema of a raw topic (bytes): ours is a few kB. A bigger one is refused
@@ -61,26 +64,26 @@ pub fn read_session(path: impl AsRef<Path>) -> Result<Session> {
 
 /// Reads a session file safely (CRC prevalidation, record length limit, decompression bounded
 /// by the file's length: [`ReadLimits::decompressed_limit`]). The four raw topics must be
-/// present with their `icms.*` schemas ([`RecordingError::MissingTopic`](crate::error::RecordingError::MissingTopic),
-/// [`RecordingError::UnknownSchema`](crate::error::RecordingError::UnknownSchema) otherwise); Foxglove topics, if present, must carry their
-/// official schema names. A malformed `ground_truth` record is [`RecordingError::InvalidInput`](crate::error::RecordingError::InvalidInput).
+/// present with their `icms.*` schemas ([`RecordingError::MissingTopic`],
+/// [`RecordingError::UnknownSchema`] otherwise); Foxglove topics, if present, must carry their
+/// official schema names. A malformed `ground_truth` record is [`RecordingError::InvalidInput`].
 ///
 /// The content is checked too, each error naming the topic, the message's number and log time
-/// and the field ([`RecordingError::InvalidInput`](crate::error::RecordingError::InvalidInput), or [`RecordingError::InvalidJson`](crate::error::RecordingError::InvalidJson) for a
+/// and the field ([`RecordingError::InvalidInput`], or [`RecordingError::InvalidJson`] for a
 /// message not of its type, a number beyond a finite `f64` included):
 ///
-/// - every raw topic spans at least [`MIN_SESSION_NS`](super::MIN_SESSION_NS) (two ticks);
-/// - `/glove/joint_states` and `/glove/feedback`: 1 to [`MAX_SESSION_DOFS`](super::MAX_SESSION_DOFS) `names`, each
+/// - every raw topic spans at least [`MIN_SESSION_NS`] (two ticks);
+/// - `/glove/joint_states` and `/glove/feedback`: 1 to [`MAX_SESSION_DOFS`] `names`, each
 ///   array one element per name, the names those of `/glove/joint_states` message 0;
-/// - `/dfs/contacts` and `/glove/feedback`: 1 to [`MAX_SESSION_FINGERS`](super::MAX_SESSION_FINGERS) `fingers`, named as in
+/// - `/dfs/contacts` and `/glove/feedback`: 1 to [`MAX_SESSION_FINGERS`] `fingers`, named as in
 ///   `/dfs/contacts` message 0;
 /// - `/dfs/contacts`: the normal of every finger touching a unit vector, and `/object/state`:
 ///   `pose.orientation` and `pose_in_hand.orientation` unit quaternions (within
-///   [`UNIT_NORM_TOLERANCE`](super::UNIT_NORM_TOLERANCE));
+///   [`UNIT_NORM_TOLERANCE`]);
 /// - metadata: at most one `session`, `ground_truth` and `replay` record, at most
-///   [`MAX_METADATA_RECORDS`](super::MAX_METADATA_RECORDS) records, [`MAX_METADATA_ENTRIES`](super::MAX_METADATA_ENTRIES) entries per record, keys of
-///   [`MAX_METADATA_KEY_BYTES`](super::MAX_METADATA_KEY_BYTES), values of [`MAX_METADATA_VALUE_BYTES`](super::MAX_METADATA_VALUE_BYTES),
-///   [`MAX_METADATA_BYTES`](super::MAX_METADATA_BYTES) in all.
+///   [`MAX_METADATA_RECORDS`] records, [`MAX_METADATA_ENTRIES`] entries per record, keys of
+///   [`MAX_METADATA_KEY_BYTES`], values of [`MAX_METADATA_VALUE_BYTES`],
+///   [`MAX_METADATA_BYTES`] in all.
 ///
 /// In format 2 (protobuf) a raw topic's schema must define its message field for field as ours
 /// ([`super::proto::schema_difference`]; at most [`MAX_RAW_SCHEMA_BYTES`]), every message must
@@ -91,6 +94,20 @@ pub fn read_session(path: impl AsRef<Path>) -> Result<Session> {
 /// Not checked, being harmless: the Foxglove topics' content beyond that (for viewers only),
 /// `n_contacts` (segmentation counts the fingers in contact itself), the normal of a finger
 /// not touching (segmentation ignores it).
+///
+/// [`RecordingError::MissingTopic`]: crate::error::RecordingError::MissingTopic
+/// [`RecordingError::UnknownSchema`]: crate::error::RecordingError::UnknownSchema
+/// [`RecordingError::InvalidInput`]: crate::error::RecordingError::InvalidInput
+/// [`RecordingError::InvalidJson`]: crate::error::RecordingError::InvalidJson
+/// [`MIN_SESSION_NS`]: super::MIN_SESSION_NS
+/// [`MAX_SESSION_DOFS`]: super::MAX_SESSION_DOFS
+/// [`MAX_SESSION_FINGERS`]: super::MAX_SESSION_FINGERS
+/// [`UNIT_NORM_TOLERANCE`]: super::UNIT_NORM_TOLERANCE
+/// [`MAX_METADATA_RECORDS`]: super::MAX_METADATA_RECORDS
+/// [`MAX_METADATA_ENTRIES`]: super::MAX_METADATA_ENTRIES
+/// [`MAX_METADATA_KEY_BYTES`]: super::MAX_METADATA_KEY_BYTES
+/// [`MAX_METADATA_VALUE_BYTES`]: super::MAX_METADATA_VALUE_BYTES
+/// [`MAX_METADATA_BYTES`]: super::MAX_METADATA_BYTES
 pub fn read_session_with_limits(path: impl AsRef<Path>, limits: &ReadLimits) -> Result<Session> {
     read_session_file_with(path, limits, DecodeTopics::ALL)
 }
