@@ -67,7 +67,7 @@
 //! and array lengths); the calling thread decodes and checks the ones it takes and hands them
 //! on, and checks the Foxglove topics (a visitor that takes no raw topic leaves everything to
 //! the reading thread). The raw topics of format 2 are decoded by a decoder of our own
-//! (`session/wire.rs`, held to prost's by property tests) into reused SI messages: no
+//! (`session/wire/`, held to prost's by property tests) into reused SI messages: no
 //! allocation per message; the Foxglove topics' messages are checked against the SDK's
 //! schemas as prost would decode them, without building them (`wire::MessageCheck`, held to
 //! prost likewise). [`read_session`] collects the samples into a [`Session`] for callers that
