@@ -106,9 +106,11 @@ pub struct ServeArgs {
     pub foxglove: Option<SocketAddr>,
 }
 
-/// Where a store is: the options `icms serve` and `icms worker` share.
+/// Where the data is: the data directory, and optionally a PostgreSQL data base and an
+/// S3-compatible bucket. Every command that opens the skill data base takes these (`icms
+/// serve`, `icms worker`, `icms ingest`, `icms skills`, `icms replay`, ...).
 #[derive(Debug, Clone, clap::Args)]
-pub struct StoreArgs {
+pub struct DataArgs {
     /// Data directory: SQLite database and MCAP blobs, created and migrated on first start.
     /// With --database-url, it holds the MCAP blobs only; with --blobs, copies of them. One
     /// process at a time writes a data directory.
@@ -125,6 +127,39 @@ pub struct StoreArgs {
     /// answer within 10 s. Default: none, files in the data directory. See docs/backends.md.
     #[arg(long, env = "ICMS_BLOBS", value_name = "URL")]
     pub blobs: Option<String>,
+}
+
+impl DataArgs {
+    /// The defaults (SQLite, files in the directory) in data directory `data`.
+    pub fn in_dir(data: PathBuf) -> DataArgs {
+        DataArgs {
+            data,
+            database_url: None,
+            blobs: None,
+        }
+    }
+
+    /// The checked data base and blobs, errors naming the option.
+    pub fn resolve(&self) -> Result<(Database, Blobs), ConfigError> {
+        let database = Database::from_url(self.database_url.as_deref()).map_err(|e| match e {
+            StoreError::InvalidInput(m) => ConfigError::DatabaseUrl(m),
+            other => ConfigError::DatabaseUrl(other.to_string()),
+        })?;
+        let blobs = Blobs::from_arg(self.blobs.as_deref()).map_err(|e| match e {
+            StoreError::InvalidInput(m) => ConfigError::Blobs(m),
+            other => ConfigError::Blobs(other.to_string()),
+        })?;
+        Ok((database, blobs))
+    }
+}
+
+/// Where a store is and how much of the data directory its copies of a bucket's files may
+/// take: the options `icms serve` and `icms worker` share.
+#[derive(Debug, Clone, clap::Args)]
+pub struct StoreArgs {
+    /// The data directory, data base and bucket.
+    #[command(flatten)]
+    pub at: DataArgs,
     /// MiB of the data directory the copies of the bucket's files may take (with --blobs):
     /// past it, the least recently used copies (unused for 10 minutes) are removed; they stay
     /// in the bucket and are downloaded again when next read.
@@ -142,23 +177,14 @@ impl StoreArgs {
     /// The defaults (SQLite, files in the directory) in data directory `data`.
     pub fn in_dir(data: PathBuf) -> StoreArgs {
         StoreArgs {
-            data,
-            database_url: None,
-            blobs: None,
+            at: DataArgs::in_dir(data),
             blob_cache_mib: DEFAULT_BLOB_CACHE_MIB,
         }
     }
 
     /// The checked data base, blobs and copy-cache bound, errors naming the option.
     pub fn resolve(&self) -> Result<(Database, Blobs, u64), ConfigError> {
-        let database = Database::from_url(self.database_url.as_deref()).map_err(|e| match e {
-            StoreError::InvalidInput(m) => ConfigError::DatabaseUrl(m),
-            other => ConfigError::DatabaseUrl(other.to_string()),
-        })?;
-        let blobs = Blobs::from_arg(self.blobs.as_deref()).map_err(|e| match e {
-            StoreError::InvalidInput(m) => ConfigError::Blobs(m),
-            other => ConfigError::Blobs(other.to_string()),
-        })?;
+        let (database, blobs) = self.at.resolve()?;
         Ok((database, blobs, blob_cache_bytes(self.blob_cache_mib)?))
     }
 }
@@ -386,7 +412,7 @@ impl ServeArgs {
             .collect::<Result<Vec<_>, _>>()?;
         Ok(ServeConfig {
             addr: self.addr,
-            data: self.store.data,
+            data: self.store.at.data,
             database,
             blobs,
             blob_cache_bytes,
@@ -507,7 +533,10 @@ mod tests {
         let a = ServeArgs {
             max_simulations: 0,
             store: StoreArgs {
-                database_url: Some("postgres://icms@localhost/icms".into()),
+                at: DataArgs {
+                    database_url: Some("postgres://icms@localhost/icms".into()),
+                    ..DataArgs::in_dir("icms-data".into())
+                },
                 ..StoreArgs::default()
             },
             ..ServeArgs::default()

@@ -145,6 +145,41 @@ pub(crate) fn server_runtime() -> Result<tokio::runtime::Runtime, CliError> {
         .map_err(|e| CliError(format!("tokio: {e}")))
 }
 
+/// How a command opens the skill data base ([`open_store`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(crate) enum Open {
+    /// Created and migrated if missing (`icms ingest`, a replay that stores itself).
+    Create,
+    /// Only read: an SQLite data directory without a data base is an error naming it.
+    Read,
+    /// Written, but not created (`icms reprocess`).
+    Write,
+}
+
+/// Opens the skill data base `at` names: the data directory's SQLite file as before (see
+/// [`open_existing_store`]), or with `--database-url` / `--blobs` the PostgreSQL data base
+/// (migrated as `icms serve` migrates it) and the bucket, the data directory holding the
+/// files (or their copies). Errors name the option or the directory.
+pub(crate) async fn open_store(
+    at: &crate::config::DataArgs,
+    how: Open,
+) -> Result<services::store::Store, CliError> {
+    use services::store::{Blobs, Database, Store};
+    let (database, blobs) = at.resolve().map_err(|e| CliError(e.to_string()))?;
+    if matches!(database, Database::Sqlite) && matches!(blobs, Blobs::Local) {
+        return match how {
+            Open::Create => Store::open(&at.data)
+                .await
+                .map_err(|e| CliError(format!("{}: {e}", at.data.display()))),
+            Open::Read => open_existing_store(&at.data).await,
+            Open::Write => open_existing_store_to_write(&at.data).await,
+        };
+    }
+    Store::open_on(&at.data, &database, &blobs)
+        .await
+        .map_err(|e| CliError(format!("{}: {e}", at.data.display())))
+}
+
 /// Opens the data base in `data` for a command that only reads it (`icms skills`,
 /// `icms hands --data`): a directory without one is an error naming it, and nothing is created
 /// there (a mistyped `--data` would otherwise leave an empty data base behind and list nothing).

@@ -14,9 +14,9 @@ use super::CliError;
 pub struct RecogniseArgs {
     /// The session file (MCAP).
     session: PathBuf,
-    /// Data directory whose stored skills it is compared with.
-    #[arg(long, default_value = "icms-data")]
-    data: PathBuf,
+    /// The data base whose stored skills it is compared with.
+    #[command(flatten)]
+    at: crate::config::DataArgs,
     /// Print JSON: `{"objects", "observations", "first_touch_ns", "verdicts": [...]}`, each
     /// verdict with its session time.
     #[arg(long)]
@@ -26,7 +26,7 @@ pub struct RecogniseArgs {
 /// Runs the recogniser over the session and prints its verdicts.
 pub fn run_recognise(a: RecogniseArgs) -> Result<(), CliError> {
     let rt = tokio::runtime::Runtime::new()?;
-    let store = rt.block_on(super::open_existing_store(&a.data))?;
+    let store = rt.block_on(super::open_store(&a.at, super::Open::Read))?;
     // A stored hand's model, if the session names one that is not built in.
     let run = recognise_source(
         &SessionSource::File(&a.session),

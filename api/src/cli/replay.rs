@@ -3,7 +3,8 @@
 //! the DFS, with its report and optionally an MCAP. A replay of a stored skill (`--skill ID`) is
 //! stored in the data base beside it, with its MCAP, like `POST /api/v1/skills/{id}/replays`.
 
-use super::{no_data_base, open_existing_store, print_json, CliError};
+use super::{no_data_base, open_store, print_json, CliError, Open};
+use crate::config::DataArgs;
 use dfs_core::hand::BUILTIN_HANDS;
 use dfs_core::replay::ReplayParams;
 use serde::Serialize;
@@ -32,35 +33,37 @@ fn runtime() -> Result<tokio::runtime::Runtime, CliError> {
         .map_err(|e| CliError(format!("starting the runtime: {e}")))
 }
 
-/// Runs `f` on the existing store in `data` (it only reads: a directory without a data base
-/// is an error and nothing is created), then closes it.
+/// Runs `f` on the existing store `at` names (it only reads: an SQLite data directory without
+/// a data base is an error and nothing is created), then closes it.
 fn with_store<T>(
-    data: &Path,
+    at: &DataArgs,
     f: impl AsyncFnOnce(&Store) -> Result<T, StoreError>,
 ) -> Result<T, CliError> {
     runtime()?.block_on(async {
-        let store = open_existing_store(data).await?;
+        let store = open_store(at, Open::Read).await?;
         let out = f(&store).await;
         store.close().await;
         Ok(out?)
     })
 }
 
-/// Whether `data` holds a data base (so looking a hand up there cannot create one).
-fn has_store(data: &Path) -> bool {
-    data.join(DB_FILE).is_file()
+/// Whether `at` names a data base (so looking a hand up there cannot create one): an SQLite
+/// data directory that holds one, or a PostgreSQL data base (created by whoever runs it).
+fn has_store(at: &DataArgs) -> bool {
+    at.database_url.is_some() || at.data.join(DB_FILE).is_file()
 }
 
 /// Lists the built-in hands (and with --data the uploaded ones), or shows one.
 pub fn run_hands(a: HandsArgs) -> Result<(), CliError> {
     let mut from_file = false;
-    let hands: Vec<HandSummary> = match (&a.hand, &a.data) {
-        (Some(h), data) => {
-            let (hand, origin) = resolve_hand(h, data.as_deref(), "hand")?;
+    let at = a.data.clone().map(DataArgs::in_dir);
+    let hands: Vec<HandSummary> = match (&a.hand, &at) {
+        (Some(h), at) => {
+            let (hand, origin) = resolve_hand(h, at.as_ref(), "hand")?;
             from_file = origin == Origin::File;
             vec![HandSummary::of(&hand, origin == Origin::Builtin, None)]
         }
-        (None, Some(data)) => with_store(data, async |s| s.list_hands().await)?,
+        (None, Some(at)) => with_store(at, async |s| s.list_hands().await)?,
         (None, None) => BUILTIN_HANDS
             .iter()
             .map(|h| Ok(HandSummary::of(&load_hand(h)?, true, None)))
@@ -103,7 +106,7 @@ pub(super) enum Origin {
 /// and where it came from. `what` names the argument in errors (`--hand`, `hand`).
 pub(super) fn resolve_hand(
     name_or_path: &str,
-    data: Option<&Path>,
+    at: Option<&DataArgs>,
     what: &str,
 ) -> Result<(LoadedHand, Origin), CliError> {
     if BUILTIN_HANDS.contains(&name_or_path) {
@@ -112,7 +115,7 @@ pub(super) fn resolve_hand(
     if Path::new(name_or_path).is_file() {
         return Ok((load_hand(name_or_path)?, Origin::File));
     }
-    match data {
+    match at {
         Some(d) if has_store(d) => {
             let name = name_or_path.to_owned();
             let hand = with_store(d, async move |s| s.get_hand(&name).await?.load()).map_err(
@@ -121,7 +124,7 @@ pub(super) fn resolve_hand(
                         "{what} {name_or_path:?} is neither a built-in hand ({}), a spec file, \
                          nor a hand in {}: {e}",
                         BUILTIN_HANDS.join(", "),
-                        d.display()
+                        d.data.display()
                     ))
                 },
             )?;
@@ -131,7 +134,7 @@ pub(super) fn resolve_hand(
             "{what} {name_or_path:?} is neither a built-in hand ({}) nor a spec file, and \
              there is no uploaded hand to look it up in: {}",
             BUILTIN_HANDS.join(", "),
-            no_data_base(d)
+            no_data_base(&d.data)
         ))),
         None => Ok((load_hand(name_or_path)?, Origin::File)),
     }
@@ -149,9 +152,9 @@ pub struct ReplayArgs {
     /// hand uploaded to the data base.
     #[arg(long)]
     hand: String,
-    /// Data directory of the skill data base, for a skill id or an uploaded hand.
-    #[arg(long, default_value = "icms-data")]
-    data: PathBuf,
+    /// The skill data base, for a skill id or an uploaded hand.
+    #[command(flatten)]
+    at: DataArgs,
     /// Record the replay into this MCAP file (viewable in Foxglove like a session).
     #[arg(long)]
     out: Option<PathBuf>,
@@ -193,13 +196,13 @@ fn read_skill(a: &ReplayArgs) -> Result<(serde_json::Value, ReplaySource), CliEr
             a.skill
         ))
     })?;
-    if !has_store(&a.data) {
+    if !has_store(&a.at) {
         return Err(CliError(format!(
             "--skill {id}: there is no skill data base in {} (see --data)",
-            a.data.display()
+            a.at.data.display()
         )));
     }
-    let skill = with_store(&a.data, async |s| s.get_skill(id).await)?;
+    let skill = with_store(&a.at, async |s| s.get_skill(id).await)?;
     Ok((
         skill.params,
         ReplaySource {
@@ -273,7 +276,7 @@ fn refuse_out_over_inputs(
 pub fn run_replay(a: ReplayArgs) -> Result<(), CliError> {
     let (value, source) = read_skill(&a)?;
     let skill = skill_spec_from_json(&value, &source.skill_name)?;
-    let (hand, origin) = resolve_hand(&a.hand, Some(&a.data), "--hand")?;
+    let (hand, origin) = resolve_hand(&a.hand, Some(&a.at), "--hand")?;
     if let Some(out) = &a.out {
         refuse_out_over_inputs(out, &a, &hand, origin)?;
     }
@@ -289,7 +292,7 @@ pub fn run_replay(a: ReplayArgs) -> Result<(), CliError> {
         return print_report(&a, &source, &report, None);
     };
     let rt = runtime()?;
-    let store = rt.block_on(Store::open(&a.data))?;
+    let store = rt.block_on(open_store(&a.at, Open::Create))?;
     let result = (|| {
         if !builtin {
             rt.block_on(ensure_hand_stored(&store, &hand))?;
@@ -299,7 +302,7 @@ pub fn run_replay(a: ReplayArgs) -> Result<(), CliError> {
         let out = match &a.out {
             Some(p) => p.clone(),
             None => {
-                let dir = a.data.join("tmp");
+                let dir = a.at.data.join("tmp");
                 std::fs::create_dir_all(&dir)
                     .map_err(|e| CliError(format!("{}: {e}", dir.display())))?;
                 tmp = tempfile::Builder::new()
@@ -358,7 +361,11 @@ fn print_report(
         println!("  recorded to {}", out.display());
     }
     if let Some(id) = replay_id {
-        println!("  stored as replay {id} in {}", a.data.display());
+        let place = match &a.at.database_url {
+            Some(_) => "the PostgreSQL data base".to_owned(),
+            None => a.at.data.display().to_string(),
+        };
+        println!("  stored as replay {id} in {place}");
     }
     Ok(())
 }

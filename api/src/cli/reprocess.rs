@@ -1,21 +1,20 @@
 //! `icms reprocess`: the stored sessions whose skills an older segmentation made are segmented
 //! again (see `services::reprocess`).
 
-use super::{open_existing_store_to_write, print_json, CliError};
+use super::{print_json, CliError};
 use services::reprocess::{reprocess, ReprocessEvent, ReprocessReport};
 use services::store::ReplacedSkills;
 use std::io::{IsTerminal, Write};
-use std::path::PathBuf;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
 
 /// Arguments of `icms reprocess`.
 #[derive(Debug, clap::Args)]
 pub struct ReprocessArgs {
-    /// Data directory (SQLite database and MCAP blobs). It must hold a data base: nothing is
+    /// The data base to reprocess. An SQLite data directory must hold one: nothing is
     /// created.
-    #[arg(long, default_value = "icms-data")]
-    data: PathBuf,
+    #[command(flatten)]
+    at: crate::config::DataArgs,
     /// Print the summary as JSON (and no progress).
     #[arg(long)]
     json: bool,
@@ -122,7 +121,7 @@ fn summary(r: &ReprocessReport) -> Vec<String> {
 /// Reprocesses the data base in `--data`; see the `Reprocess` subcommand's help.
 pub fn run_reprocess(a: ReprocessArgs) -> Result<(), CliError> {
     super::skills::runtime()?.block_on(async {
-        let store = open_existing_store_to_write(&a.data).await?;
+        let store = super::open_store(&a.at, super::Open::Write).await?;
         // SIGINT or SIGTERM: finish the session in hand, then stop; a second one stops at
         // once (the session's transaction is rolled back, nothing is lost either way).
         let stop = Arc::new(AtomicBool::new(false));
@@ -178,7 +177,7 @@ pub fn run_reprocess(a: ReprocessArgs) -> Result<(), CliError> {
         progress.clear();
         watcher.abort();
         store.close().await;
-        let report = result.map_err(|e| CliError(format!("{}: {e}", a.data.display())))?;
+        let report = result.map_err(|e| CliError(format!("{}: {e}", a.at.data.display())))?;
         if a.json {
             print_json(&report)?;
         } else {

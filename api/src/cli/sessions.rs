@@ -258,7 +258,8 @@ pub(crate) fn load_calibration(path: &Path, hand: &HandModel) -> Result<Calibrat
 pub fn run_import(a: ImportArgs) -> Result<(), CliError> {
     let object = load_object(&a.object)?;
     let base = a.base.as_deref().map(parse_base).transpose()?;
-    let (hand, origin) = super::replay::resolve_hand(&a.hand, Some(&a.data), "--hand")?;
+    let at = crate::config::DataArgs::in_dir(a.data.clone());
+    let (hand, origin) = super::replay::resolve_hand(&a.hand, Some(&at), "--hand")?;
     let calibration = a
         .calibration
         .as_deref()

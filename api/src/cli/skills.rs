@@ -1,6 +1,7 @@
 //! `icms ingest` and `icms skills`: the skill data base from the command line.
 
-use super::{open_existing_store, print_json, CliError};
+use super::{open_store, print_json, CliError, Open};
+use crate::config::DataArgs;
 use crate::filters::SkillFilters;
 use services::ingest::{ingest_files, IngestError, INGEST_FILES_IN_FLIGHT};
 use services::store::IngestOutcome;
@@ -13,9 +14,9 @@ pub struct IngestArgs {
     /// Session files (MCAP) to store with their skills.
     #[arg(required = true)]
     files: Vec<PathBuf>,
-    /// Data directory (SQLite database and MCAP blobs).
-    #[arg(long, default_value = "icms-data")]
-    data: PathBuf,
+    /// Where the data base is.
+    #[command(flatten)]
+    at: DataArgs,
     /// Print JSON.
     #[arg(long)]
     json: bool,
@@ -34,9 +35,9 @@ pub struct SkillsArgs {
         "grasp_type", "min_quality", "phase", "phase_min_s", "phase_max_s", "sort", "cursor",
     ])]
     similar_to: Option<i64>,
-    /// Data directory.
-    #[arg(long, default_value = "icms-data")]
-    data: PathBuf,
+    /// Where the data base is.
+    #[command(flatten)]
+    at: DataArgs,
     /// Print JSON.
     #[arg(long)]
     json: bool,
@@ -70,9 +71,7 @@ pub fn run_ingest(a: IngestArgs) -> Result<(), CliError> {
         )));
     }
     runtime()?.block_on(async {
-        let store = Store::open(&a.data)
-            .await
-            .map_err(|e| CliError(format!("{}: {e}", a.data.display())))?;
+        let store = open_store(&a.at, Open::Create).await?;
         let mut results = Vec::new();
         let mut failed = Vec::new();
         ingest_paths(&store, &a.files, |f, stored| {
@@ -131,7 +130,7 @@ pub fn run_ingest(a: IngestArgs) -> Result<(), CliError> {
 /// Reads only: a `--data` directory without a data base is an error, and nothing is created.
 pub fn run_skills(a: SkillsArgs) -> Result<(), CliError> {
     runtime()?.block_on(async {
-        let store = open_existing_store(&a.data).await?;
+        let store = open_store(&a.at, Open::Read).await?;
         if let Some(id) = a.similar_to {
             // The same bounds as `GET /skills/{id}/similar?k=`.
             let k = a.filters.limit.unwrap_or(DEFAULT_LIMIT);
@@ -251,7 +250,7 @@ pub fn run_demo(a: DemoArgs) -> Result<(), CliError> {
     }
     run_ingest(IngestArgs {
         files,
-        data: a.data.clone(),
+        at: DataArgs::in_dir(a.data.clone()),
         json: false,
     })?;
     println!();
@@ -261,7 +260,7 @@ pub fn run_demo(a: DemoArgs) -> Result<(), CliError> {
             ..SkillFilters::default()
         },
         similar_to: None,
-        data: a.data,
+        at: DataArgs::in_dir(a.data),
         json: false,
     })
 }

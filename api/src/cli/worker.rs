@@ -62,7 +62,7 @@ pub fn run_worker(a: WorkerArgs) -> Result<(), CliError> {
                 .into(),
         ));
     }
-    let data = &a.store.data;
+    let data = &a.store.at.data;
     server_runtime()?.block_on(async {
         let store = Store::open_on(data, &database, &blobs)
             .await
