@@ -25,7 +25,8 @@
 //!    the table.
 //! 3. **The wrap.** Each finger's flexing DOFs close together from open to closed until one of
 //!    its shapes (its phalanges' contact shapes or its fingertip) first touches the object;
-//!    that touch is its contact (a finger that never touches stays open, out of the grasp).
+//!    that touch is its contact (a finger touching already when open has that touch; one
+//!    that never touches stays open, out of the grasp).
 //!    Candidates are ranked by the number of fingers touching, plus the Ferrari-Canny ε of the
 //!    palm's and the fingers' contacts, less the mean distance (m) from each of the skill's
 //!    non-palm contacts to the nearest of the wrap's (the hand wraps where the recorded one
@@ -632,7 +633,7 @@ fn curl(
         for &d in flex {
             let (lo, hi) = hand.sweep_range(d);
             let open = posture.q_open[d];
-            let closed = if open == lo { hi } else { lo };
+            let closed = if posture.close[d] > 0.0 { hi } else { lo };
             q[d] = open + (closed - open) * s;
         }
         hand.forward_kinematics(base, &q[..n], kin);
@@ -680,10 +681,13 @@ fn curl(
         best
     };
     let open = *q;
-    if touch_at(0.0, q, kin).is_none_or(|b| b.0 <= 0.0) {
-        *q = open;
-        touch_at(0.0, q, kin);
-        return None;
+    match touch_at(0.0, q, kin) {
+        None => return None,
+        // Touching already when open: that is its contact.
+        Some((gap, contact, link, p, normal)) if gap <= 0.0 => {
+            return Some((contact, link, p, normal))
+        }
+        Some(_) => {}
     }
     let mut prev = 0.0;
     for i in 1..=CURL_STEPS {
