@@ -47,7 +47,14 @@ pub struct RecognitionIndex {
     template_cols: Vec<Vec<f32>>,
     /// Per feature dimension: the column.
     feature_cols: Vec<Vec<f32>>,
+    /// Per shape code (0-3): the least and greatest value of each feature dimension over its
+    /// rows (`-inf, inf` where one is NaN), so that a ranking can pass over a shape's rows none
+    /// of which can come near enough ([`Self::rank_features`]).
+    feature_bounds: [[(f32, f32); FEATURE_DIM]; 4],
 }
+
+/// Bounds of a group with no rows: nothing is near them.
+const EMPTY_BOUNDS: [(f32, f32); FEATURE_DIM] = [(f32::INFINITY, f32::NEG_INFINITY); FEATURE_DIM];
 
 /// A stored skill ranked against a query.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -73,6 +80,7 @@ impl RecognitionIndex {
         let mut index = RecognitionIndex {
             template_cols: vec![Vec::new(); TEMPLATE_DIM],
             feature_cols: vec![Vec::new(); FEATURE_DIM],
+            feature_bounds: [EMPTY_BOUNDS; 4],
             ..Default::default()
         };
         let mut skills: Vec<StoredTemplate> = skills.into_iter().collect();
@@ -124,6 +132,19 @@ impl RecognitionIndex {
         for (j, col) in self.feature_cols.iter_mut().enumerate() {
             col.insert(at, s.feature[j]);
         }
+        widen(&mut self.feature_bounds[usize::from(shape)], &s.feature);
+    }
+
+    /// Recomputes [`Self::feature_bounds`] from the rows (after a removal).
+    fn rebound(&mut self) {
+        self.feature_bounds = [EMPTY_BOUNDS; 4];
+        for row in 0..self.len() {
+            let feature = self.feature(row);
+            widen(
+                &mut self.feature_bounds[usize::from(self.shapes[row])],
+                &feature,
+            );
+        }
     }
 
     /// Removes skills by id (unknown ids are ignored).
@@ -149,6 +170,7 @@ impl RecognitionIndex {
         for col in self.template_cols.iter_mut().chain(&mut self.feature_cols) {
             retain(col, &keep);
         }
+        self.rebound();
     }
 
     /// Number of skills.
@@ -292,24 +314,70 @@ impl RecognitionIndex {
         top: usize,
         scratch: &'s mut Scratch,
     ) -> &'s [Ranked] {
-        let n = self.len();
-        scratch.sum.clear();
-        scratch.sum.resize(n, 0.0);
-        for &j in dims {
-            let q = query[j];
-            for (s, &v) in scratch.sum.iter_mut().zip(&self.feature_cols[j]) {
-                let d = v - q;
-                *s += d * d;
+        // Shape by shape (rows are grouped by shape), nearest group first: a group none of
+        // whose rows can be nearer than the `top`-th found so far is passed over. Its bound
+        // (the distance to the box of its rows' values) is at most any row's distance, term
+        // by term and summed in the same order, so what is passed over could not have been
+        // ranked: the result is the full scan's, rows and distances alike (the
+        // test `pruned_ranking_is_the_full_scans` compares them). With the shape's one-hot
+        // dimensions compared, the other shapes' rows are √2 away at least.
+        let mut groups = [(0.0f32, 0usize, 0usize); 4];
+        for (code, g) in groups.iter_mut().enumerate() {
+            let lo = self.shapes.partition_point(|&c| usize::from(c) < code);
+            let hi = self.shapes.partition_point(|&c| usize::from(c) <= code);
+            let bounds = &self.feature_bounds[code];
+            let mut lb = 0.0f32;
+            for &j in dims {
+                let (min, max) = bounds[j];
+                let gap = (min - query[j]).max(query[j] - max).max(0.0);
+                lb += gap * gap;
             }
+            *g = (lb.sqrt(), lo, hi);
         }
+        groups.sort_by(|a, b| a.0.total_cmp(&b.0));
         scratch.order.clear();
-        scratch
-            .order
-            .extend(scratch.sum.iter().enumerate().map(|(row, &s)| Ranked {
-                row,
-                distance: s.sqrt(),
-            }));
+        for &(bound, lo, hi) in &groups {
+            if lo == hi {
+                continue;
+            }
+            let kth = if top > 0 && scratch.order.len() >= top {
+                scratch.order[top - 1].distance
+            } else {
+                f32::INFINITY
+            };
+            // NaN bounds compare false: such a group is scanned.
+            if bound > kth {
+                continue;
+            }
+            scratch.sum.clear();
+            scratch.sum.resize(hi - lo, 0.0);
+            for &j in dims {
+                let q = query[j];
+                for (s, &v) in scratch.sum.iter_mut().zip(&self.feature_cols[j][lo..hi]) {
+                    let d = v - q;
+                    *s += d * d;
+                }
+            }
+            scratch
+                .order
+                .extend(scratch.sum.iter().enumerate().map(|(k, &s)| Ranked {
+                    row: lo + k,
+                    distance: s.sqrt(),
+                }));
+            select_top(&mut scratch.order, top);
+        }
         select_top(&mut scratch.order, top)
+    }
+}
+
+/// Widens `bounds` to hold `feature` (a NaN value makes its dimension unbounded).
+fn widen(bounds: &mut [(f32, f32); FEATURE_DIM], feature: &[f32; FEATURE_DIM]) {
+    for (b, &v) in bounds.iter_mut().zip(feature) {
+        *b = if v.is_nan() || b.0.is_nan() {
+            (f32::NEG_INFINITY, f32::INFINITY)
+        } else {
+            (b.0.min(v), b.1.max(v))
+        };
     }
 }
 
@@ -386,6 +454,95 @@ mod tests {
         assert!((r[0].distance - 2f32.sqrt()).abs() < 1e-5);
         assert_eq!(index.feature(r[1].row), [0.0; FEATURE_DIM]);
         assert_eq!(index.kind(r[1].row), "a");
+    }
+
+    /// The ranking that passes over far shapes gives the full scan's rows and distances, on
+    /// random indexes of every shape mix (with removals, replacements and NaN values), for
+    /// queries of every shape and dimension set.
+    #[test]
+    fn pruned_ranking_is_the_full_scans() {
+        use proptest::prelude::*;
+        let full = |index: &RecognitionIndex, q: &[f32; FEATURE_DIM], dims: &[usize], top| {
+            let mut all: Vec<Ranked> = (0..index.len())
+                .map(|row| {
+                    let mut s = 0.0f32;
+                    for &j in dims {
+                        let d = index.feature_cols[j][row] - q[j];
+                        s += d * d;
+                    }
+                    Ranked {
+                        row,
+                        distance: s.sqrt(),
+                    }
+                })
+                .collect();
+            select_top(&mut all, top).to_vec()
+        };
+        let row = (
+            0usize..4,
+            prop::array::uniform16(-2.0f32..2.0),
+            any::<bool>(),
+        );
+        proptest!(ProptestConfig::with_cases(200), |(
+            rows in prop::collection::vec(row, 0..60),
+            query in (0usize..4, prop::array::uniform16(-2.0f32..2.0)),
+            top in 0usize..8,
+            remove in prop::collection::vec(0i64..60, 0..5),
+            all_dims in any::<bool>(),
+        )| {
+            let stored = |id: usize, (shape, values, nan): &(usize, [f32; 16], bool)| {
+                let mut template = [f32::NAN; TEMPLATE_DIM];
+                template[..3].fill(0.0);
+                if *shape < 3 {
+                    template[*shape] = 1.0;
+                }
+                let mut feature = [0.0f32; FEATURE_DIM];
+                for (j, f) in feature.iter_mut().enumerate() {
+                    *f = values[j % 16];
+                }
+                for k in 0..3 {
+                    feature[13 + k] = if k == *shape { 1.0 } else { 0.0 };
+                }
+                if *nan {
+                    feature[2] = f32::NAN;
+                }
+                StoredTemplate {
+                    skill_id: id as i64,
+                    kind: format!("k{shape}"),
+                    object_name: None,
+                    template,
+                    feature,
+                }
+            };
+            let (half, rest) = rows.split_at(rows.len() / 2);
+            let mut index =
+                RecognitionIndex::new(half.iter().enumerate().map(|(i, r)| stored(i, r)));
+            for (i, r) in rest.iter().enumerate() {
+                index.insert(stored(half.len() + i, r));
+            }
+            index.remove(&remove);
+            let mut q = [0.0f32; FEATURE_DIM];
+            for (j, v) in q.iter_mut().enumerate() {
+                *v = query.1[j % 16];
+            }
+            for k in 0..3 {
+                q[13 + k] = if k == query.0 { 1.0 } else { 0.0 };
+            }
+            let dims: Vec<usize> = if all_dims {
+                (0..FEATURE_DIM).collect()
+            } else {
+                GRASP_STAGE_DIMS.to_vec()
+            };
+            let mut scratch = Scratch::default();
+            let got = index.rank_features(&q, &dims, top, &mut scratch).to_vec();
+            let want = full(&index, &q, &dims, top);
+            prop_assert_eq!(got.len(), want.len());
+            for (g, w) in got.iter().zip(&want) {
+                prop_assert_eq!(g.row, w.row);
+                prop_assert!(g.distance.to_bits() == w.distance.to_bits()
+                    || (g.distance.is_nan() && w.distance.is_nan()));
+            }
+        });
     }
 
     #[test]
