@@ -433,29 +433,24 @@ fn a_power_grasp_replays_with_the_palm_on_allegro_and_barrett() {
             1,
         )
     });
-    let e = replay_skill(
-        &broken,
-        &skill,
-        &ReplayParams::default(),
-        &ReplaySource::default(),
-        None,
-    )
-    .unwrap_err()
-    .to_string();
+    let refused = |hand: &LoadedHand| {
+        replay_skill(
+            hand,
+            &skill,
+            &ReplayParams::default(),
+            &ReplaySource::default(),
+            None,
+        )
+        .unwrap_err()
+        .to_string()
+    };
+    let e = refused(&broken);
     assert!(
         e.contains("collision 0 of link \"base_link\"") && e.contains("got 0"),
         "{e}"
     );
     // The gripper has no palm to hold it with: refused, naming the palm contact.
-    let e = replay_skill(
-        &load_builtin_hand("gripper").unwrap(),
-        &skill,
-        &ReplayParams::default(),
-        &ReplaySource::default(),
-        None,
-    )
-    .unwrap_err()
-    .to_string();
+    let e = refused(&load_builtin_hand("gripper").unwrap());
     assert!(
         e.contains("skill.contacts[") && e.contains("palm contact") && e.contains("no palm"),
         "{e}"
