@@ -20,6 +20,8 @@
 //! The glove's motors are taken to track the DFS's position commands exactly; the measured
 //! angles are those plus sensor noise.
 //!
+//! [`Scenario`]: crate::scenario::Scenario
+//!
 //! # Varied reaches
 //!
 //! By default every seed reaches alike: the hand starts 0.15 m straight above its approach
@@ -212,10 +214,10 @@ pub struct Simulation {
     /// Per fingertip: where it first touched while holding (the pad on the surface) and the
     /// inward contact normal there, both in the frame of the link its finger is mounted on.
     hold_in_mount: [Option<(Vector, Vector)>; MAX_TIPS],
-    /// Per fingertip: the link its finger is mounted on ([`mount_link`]).
+    /// Per fingertip: the link its finger is mounted on ([`mount_link`](plan::mount_link)).
     mount: [usize; MAX_TIPS],
     /// Per fingertip of the grasp: it rests on the object instead of squeezing it
-    /// ([`resting_tips`]).
+    /// ([`resting_tips`](phases::resting_tips)).
     resting: [bool; MAX_TIPS],
     base: Isometry,
     base_acceleration: Vector,
