@@ -1,7 +1,13 @@
 //! The simulated operator's tests.
 
+use super::phases::resting_tips;
+use super::plan::tip_index;
 use super::reach::hand_points;
 use super::*;
+use crate::hand::{HandModel, Kinematics};
+use crate::object::Shape;
+use crate::scenario::Scenario;
+use rand::SeedableRng;
 
 fn run(name: &str, seed: u64) -> (Simulation, Vec<(Phase, Real, bool, usize)>) {
     let s = Scenario::builtin(name, seed).unwrap();
