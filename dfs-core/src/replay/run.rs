@@ -366,9 +366,10 @@ impl Replay {
     }
 
     /// The torques of a power grasp ([`super::power`]): the fingers taking part close by
-    /// torque alone, each flexing DOF pushing with the same fraction of its limit (ramped up
-    /// over the first 60 % of `grasp` to the planned grip, down over the first 40 % of
-    /// `release`), then open back by joint impedance; every other DOF is held at its angle.
+    /// torque alone, each flexing DOF pushing with the same fraction of its limit (up to
+    /// [`crate::operator::power::WRAP_CLOSE`] over the first 30 % of `grasp` while they close,
+    /// to the planned grip over its last 40 %, down over the first 40 % of `release`), then
+    /// open back by joint impedance; every other DOF is held at its angle.
     fn power_torques(
         &self,
         power: &super::PowerPlan,
