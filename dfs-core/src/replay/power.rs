@@ -20,9 +20,10 @@
 //!    (the mean of its palm contacts', into the object), rolled about it in 12 steps, its palm
 //!    centre put on the line through the palm contacts' centroid along the normal (and shifted
 //!    0-4.5 cm toward the fingers, so that they reach farther around), and slid in until the
-//!    open hand first touches the object. The palm must be what touches (within 1 mm), and
-//!    nothing of the open hand, nor of the approach 8 cm back along the normal, may be below
-//!    the table.
+//!    open hand first touches the object. The palm must be what touches (within 1 mm), and no
+//!    fingertip or contact shape's link origin of the open hand, there or 8 cm back along the
+//!    normal where the approach starts, may be below the table (the wrapped hand is checked
+//!    the same way).
 //! 3. **The wrap.** Each finger's flexing DOFs close together from open to closed until one of
 //!    its shapes (its phalanges' contact shapes or its fingertip) first touches the object;
 //!    that touch is its contact (a finger touching already when open has that touch; one
