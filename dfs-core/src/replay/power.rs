@@ -47,15 +47,16 @@
 //!    margin for the object at rest refuses the replay (`torque_limit`); one they cannot carry
 //!    with the margin along the motion is a warning and the replay runs at grip 1.
 //! 5. **Trials.** The six best-ranked wraps are tried in the DFS, in order, as the replay itself
-//!    would run them: the first that holds the object through the skill's motion (the report's
-//!    success bounds) is the plan; if none does, the one that followed the reference longest,
-//!    whose replay then reports how it failed. The force optimiser of fingertip grasps
+//!    would run them, up to 2 s into the held motion (the lift and the first of the carrying;
+//!    so a long skill costs no more to plan): the first that keeps the object within the
+//!    report's success bounds that far is the plan; if none does, the one that followed the
+//!    reference longest, whose replay then reports how it failed. The force optimiser of fingertip grasps
 //!    ([`crate::grasp::optimise`]) is not used: a wrap's fingers push with one level each, not
 //!    with planned force vectors, and its contacts move as the fingers wrap further (the DFS
 //!    finds them every tick).
 //!
-//! What a trial costs is a replay's simulation (5-10 s of simulated time, 40-80 ms on this
-//! machine with whole-hand contact), so planning a power grasp takes up to six of them.
+//! A trial costs at most the simulation up to 2 s into the held motion (about 4-5 s of
+//! simulated time for the built-in skills), so planning a power grasp takes up to six of them.
 
 use super::base_pose::ROLLS;
 use super::plan::Plan;
@@ -80,6 +81,8 @@ const MIN_GRIP: Real = 0.3;
 /// Where the palm's contact point is placed along the palm toward the fingers from the palm
 /// shapes' centre (m): nearer the fingers, they reach farther around the object.
 const SHIFTS: [Real; 4] = [0.0, 0.015, 0.03, 0.045];
+/// How far into the held motion a trial runs (s): the lift and the first of the carrying.
+const TRIAL_HELD_S: Real = 2.0;
 /// Wraps tried in the DFS, best ranked first.
 const TRIALS: usize = 6;
 /// Steps of a finger's closing sweep before the bisection of its first touch.
@@ -235,17 +238,20 @@ pub(super) fn plan_power(
             }
             continue;
         }
+        // The trial runs to TRIAL_HELD_S into the held motion (at most): a skill an hour long
+        // costs its trials no more than a short one's.
+        let tl = skill.timeline();
+        let until = (tl.grasp_end + TRIAL_HELD_S).min(tl.release_start);
         let mut trial = super::run::Replay::from_plan(plan.clone(), skill, params)?;
-        while trial.step()? {
+        while (trial.ticks_run() as Real) * super::run::DT < until && trial.step()? {
             if trial.ticks_run() % 100 == 0 {
                 stop.check()?;
             }
         }
-        let report = trial.report();
-        if report.success {
+        let held = trial.held_fraction(until);
+        if held >= 1.0 {
             return Ok(plan);
         }
-        let held = trial.held_fraction();
         if best.as_ref().is_none_or(|b| held > b.0) {
             best = Some((held, plan));
         }

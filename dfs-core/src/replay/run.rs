@@ -216,11 +216,12 @@ impl Replay {
         self.step
     }
 
-    /// The share of the held part of the replay (`grasp` end to `release` start) for which the
-    /// object stayed within the success bounds of its reference: 1 when it never left them.
-    pub(super) fn held_fraction(&self) -> Real {
+    /// The share of the held part of the replay from the end of `grasp` to `until` (s) for
+    /// which the object stayed within the success bounds of its reference: 1 when it never
+    /// left them (so far).
+    pub(super) fn held_fraction(&self, until: Real) -> Real {
         let tl = &self.timeline;
-        let span = (tl.release_start - tl.grasp_end).max(1e-3);
+        let span = (until - tl.grasp_end).max(1e-3);
         match self.stats.lost_at {
             None => 1.0,
             Some(t) => ((t - tl.grasp_end) / span).clamp(0.0, 1.0),
