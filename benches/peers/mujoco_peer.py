@@ -9,7 +9,7 @@ the ratio of the two medians, not absolute times (the machine's speed varies bet
 
 The scene (`--scene fingertips`) is the DFS's, read from `fingertips_scene.json` beside this
 file (written by `icms bench tick --scene fingertips --describe`; a test in
-api/tests/cli_bench.rs keeps the two equal):
+api/tests/integration/cli_bench.rs keeps the two equal):
 
 - glove10 as MJCF (`glove10_mjcf.py`: the same links, masses, inertias, joint limits, armature
   and damping; the coupled joints as stiff joint equality constraints), its base (forearm)
