@@ -2,6 +2,7 @@
 //! unilateral contacts across a gap, and scenes of several objects.
 
 use super::*;
+use crate::contact::Friction;
 use crate::fixtures::glove10_holding_paper_sphere;
 use crate::math::force_of;
 use proptest::prelude::*;
