@@ -114,8 +114,6 @@ pub struct Dfs {
     /// Per object: its transmitting contacts, `frames[start..start + len]` (the contacts are
     /// ordered by object, and by fingertip within one).
     contact_range: [(usize, usize); MAX_OBJECTS],
-    /// Per tip: the object it touched the tick before (its anchor is on that object).
-    tip_object: [usize; MAX_TIPS],
     /// Ticks after which two objects overlapped.
     overlap_ticks: u64,
     /// Per object: the table's impulses at its support points last tick (the warm start).
@@ -128,29 +126,12 @@ pub struct Dfs {
     kin: Kinematics,
     mass: DofMatrix,
     scratch: DofMatrix,
-    anchors_b: [Option<Vector>; MAX_TIPS],
-    /// Per tip: its contact point the tick before (world), of the finger dynamics' fingertip.
-    prev_tip_points: [Option<Vector>; MAX_TIPS],
+    /// Per fingertip: what the tick carries from one tick to the next and from the force stage
+    /// to the finger step ([`TipState`]); entries beyond the hand's fingertips unused.
+    tips: [TipState; MAX_TIPS],
     /// The hand base's pose in the last sample and the one before (for its turn).
     base: Option<Isometry>,
     prev_base: Option<Isometry>,
-    /// Per tip: contact spring deflection (world; tangential from the stick anchor plus the
-    /// penetration along the normal, less the preload of a pushing tip), the tip's velocity not
-    /// explained by its joints relative to the object (world), whether it sticks, and the
-    /// passive friction force on the object.
-    spring_err: [Vector; MAX_TIPS],
-    spring_vel: [Vector; MAX_TIPS],
-    stick: [bool; MAX_TIPS],
-    /// Per tip: the tangential damping of its contact spring this tick (N·s/m), the surface
-    /// damping limited by [`STABLE_DAMPING`].
-    tangential_damping: [Real; MAX_TIPS],
-    /// Per tip: the stiffness (N/m) along the normal with which the operator's untransmitted
-    /// push draws a fingertip whose pad is on the contact ramp back in (its normal intensity
-    /// over the ramp's depth; 0 off the ramp), for the implicit step.
-    ramp_stiffness: [Real; MAX_TIPS],
-    /// Per tip: how far the pad has twisted about the normal since it stuck (rad).
-    twist: [Real; MAX_TIPS],
-    passive_world: [Vector; MAX_TIPS],
     frames: [ContactFrame; MAX_CONTACTS],
     transmitted: [Intensity; MAX_CONTACTS],
     /// Per transmitting contact: its fingertip, or `MAX_TIPS + s` for contact shape `s`.
@@ -175,6 +156,61 @@ pub struct Dfs {
     /// Per contact shape, what the last tick found ([`Dfs::body_contacts`]).
     body_out: [BodyContact; MAX_CONTACT_SHAPES],
     out: TickOutput,
+}
+
+/// What the DFS carries for one fingertip: from one tick to the next (the object it touched,
+/// where it stuck, its last contact point, its twist) and from the force stage to the implicit
+/// finger step (its contact spring's deflection, velocity and damping). Units SI. The DOFs
+/// moving each tip are the hand's structure, made once, and stay in [`Dfs`]'s `tip_dofs`.
+#[derive(Debug, Clone, Copy)]
+struct TipState {
+    /// The object (index in the scene) it touched the tick before: its anchor and twist are on
+    /// that object.
+    object: usize,
+    /// Where it stuck on the object (m, the object's frame B): the anchor of its tangential
+    /// spring; `None` while it is not sticking.
+    anchor_b: Option<Vector>,
+    /// Its contact point the tick before (m, world), of the finger dynamics' fingertip; `None`
+    /// when it touched nothing.
+    prev_point: Option<Vector>,
+    /// Its contact spring's deflection (m, world): tangential from the stick anchor plus the
+    /// penetration along the normal, less the preload of a pushing tip.
+    spring_err: Vector,
+    /// Its velocity not explained by its joints, relative to the object (m/s, world): what the
+    /// contact damper damps.
+    spring_vel: Vector,
+    /// It sticks: its tangential spring to the anchor acts this tick.
+    stick: bool,
+    /// The tangential damping of its contact spring this tick (N·s/m): the surface damping
+    /// limited by [`STABLE_DAMPING`].
+    tangential_damping: Real,
+    /// The stiffness (N/m) along the normal with which the operator's untransmitted push draws
+    /// a fingertip whose pad is on the contact ramp back in (its normal intensity over the
+    /// ramp's depth; 0 off the ramp), for the implicit step.
+    ramp_stiffness: Real,
+    /// How far the pad has twisted about the normal since it stuck (rad).
+    twist: Real,
+    /// The passive friction force on the object (N, world): the transmitted tangential force
+    /// beyond the operator's, which the contact spring carries on the finger side.
+    passive_world: Vector,
+}
+
+impl TipState {
+    /// A fingertip that has touched nothing yet, its tangential damping `surface_damping`.
+    fn new(surface_damping: Real) -> Self {
+        TipState {
+            object: 0,
+            anchor_b: None,
+            prev_point: None,
+            spring_err: Vector::zeros(),
+            spring_vel: Vector::zeros(),
+            stick: false,
+            tangential_damping: surface_damping,
+            ramp_stiffness: 0.0,
+            twist: 0.0,
+            passive_world: Vector::zeros(),
+        }
+    }
 }
 
 /// Constants of one object's body, made once.
@@ -431,7 +467,6 @@ impl Dfs {
             grasps: [grasp; MAX_OBJECTS],
             grasp_active: [false; MAX_OBJECTS],
             contact_range: [(0, 0); MAX_OBJECTS],
-            tip_object: [0; MAX_TIPS],
             overlap_ticks: 0,
             table_support: [TableSupport::default(); MAX_OBJECTS],
             q: [0.0; MAX_DOF],
@@ -441,17 +476,9 @@ impl Dfs {
             kin: Kinematics::default(),
             mass: DofMatrix::identity(),
             scratch: DofMatrix::identity(),
-            anchors_b: [None; MAX_TIPS],
-            prev_tip_points: [None; MAX_TIPS],
+            tips: [TipState::new(params.surface_damping); MAX_TIPS],
             base: None,
             prev_base: None,
-            spring_err: [Vector::zeros(); MAX_TIPS],
-            spring_vel: [Vector::zeros(); MAX_TIPS],
-            stick: [false; MAX_TIPS],
-            tangential_damping: [params.surface_damping; MAX_TIPS],
-            ramp_stiffness: [0.0; MAX_TIPS],
-            twist: [0.0; MAX_TIPS],
-            passive_world: [Vector::zeros(); MAX_TIPS],
             frames: [ContactFrame::from_normal(Vector::zeros(), Vector::z()); MAX_CONTACTS],
             transmitted: [Intensity::zeros(); MAX_CONTACTS],
             contact_tip: [0; MAX_CONTACTS],
@@ -738,22 +765,22 @@ impl Dfs {
         let mut n = 0;
         let mut contact_object = [0usize; MAX_CONTACTS];
         for k in 0..self.hand.fingertips.len() {
-            self.passive_world[k] = Vector::zeros();
-            self.stick[k] = false;
-            self.ramp_stiffness[k] = 0.0;
+            self.tips[k].passive_world = Vector::zeros();
+            self.tips[k].stick = false;
+            self.tips[k].ramp_stiffness = 0.0;
             let Some(frame) = self.out.tips[k].frame else {
-                self.anchors_b[k] = None;
-                self.prev_tip_points[k] = None;
-                self.twist[k] = 0.0;
+                self.tips[k].anchor_b = None;
+                self.tips[k].prev_point = None;
+                self.tips[k].twist = 0.0;
                 continue;
             };
             let o = self.out.tips[k].object;
-            if self.tip_object[k] != o {
+            if self.tips[k].object != o {
                 // It went from one object to another: its anchor and twist were on the other.
-                self.anchors_b[k] = None;
-                self.prev_tip_points[k] = None;
-                self.twist[k] = 0.0;
-                self.tip_object[k] = o;
+                self.tips[k].anchor_b = None;
+                self.tips[k].prev_point = None;
+                self.tips[k].twist = 0.0;
+                self.tips[k].object = o;
             }
             let body = &self.bodies[o];
             let friction = self.objects[o].friction;
@@ -800,7 +827,7 @@ impl Dfs {
                 1.0
             };
             let passed = c * share;
-            self.ramp_stiffness[k] = if share > 0.0 && share < 1.0 && c[2] > 0.0 {
+            self.tips[k].ramp_stiffness = if share > 0.0 && share < 1.0 && c[2] > 0.0 {
                 c[2] / ramp
             } else {
                 0.0
@@ -808,7 +835,7 @@ impl Dfs {
             // Contact spring: the fingertip's deflection from where it stuck on the object.
             let tip_point = centre + z_world * radius;
             let tip_b = rot_inv * (tip_point - pos);
-            let anchor_b = self.anchors_b[k].unwrap_or(tip_b);
+            let anchor_b = self.tips[k].anchor_b.unwrap_or(tip_b);
             let mut err = tip_point - (rot * anchor_b + pos);
             err -= z_world * err.dot(&z_world);
             let w_obj = rot * w_b;
@@ -817,15 +844,16 @@ impl Dfs {
             // object, the rate of the spring's deflection. Of the finger dynamics' fingertip, it
             // follows the joint velocities and the base, never a difference of measured angles,
             // whose sensor noise the damper would amplify.
-            let v_rel = self.prev_tip_points[k]
+            let v_rel = self.tips[k]
+                .prev_point
                 .map(|prev| (tip_point - prev) / dt - v_obj)
                 .unwrap_or_else(Vector::zeros);
-            self.prev_tip_points[k] = Some(tip_point);
+            self.tips[k].prev_point = Some(tip_point);
             let mut v_joint = Vector::zeros();
             for &d in dofs {
                 v_joint += Vector::new(j[(0, d)], j[(1, d)], j[(2, d)]) * self.qd[d];
             }
-            self.spring_vel[k] = v_rel - v_joint;
+            self.tips[k].spring_vel = v_rel - v_joint;
             // The tangential damping at this contact: a cheap bound on the inverse effective
             // mass first (|r × t| ≤ |r|), the exact one only when that bound limits it.
             let mut damping = self.params.surface_damping;
@@ -834,7 +862,7 @@ impl Dfs {
                 damping = damping
                     .min(damping_budget / inverse_mass_across(&self.objects[o].object, &frame));
             }
-            self.tangential_damping[k] = damping;
+            self.tips[k].tangential_damping = damping;
             // Passive friction: a sticking fingertip drags the object along with it (tangential
             // spring-damper to the anchor), within the friction cone together with the
             // operator's own tangential force.
@@ -859,7 +887,7 @@ impl Dfs {
                 if c_t * inv_inertia > damping_budget {
                     c_t = damping_budget / inv_inertia;
                 }
-                (spin, self.twist[k] + spin * dt, c_t)
+                (spin, self.tips[k].twist + spin * dt, c_t)
             } else {
                 (0.0, 0.0, 0.0)
             };
@@ -881,17 +909,17 @@ impl Dfs {
             let tangential = |c: &Intensity| c[0] * c[0] + c[1] * c[1];
             let slides = split.slip && tangential(&split.transmitted) < tangential(&with_passive);
             let stick = t.in_contact && !slides;
-            self.stick[k] = stick;
+            self.tips[k].stick = stick;
             // Beyond the torsional cone the pad turns on the surface and keeps only the twist
             // the cone allows.
-            self.twist[k] = if !soft || !t.in_contact || c[2] <= 0.0 {
+            self.tips[k].twist = if !soft || !t.in_contact || c[2] <= 0.0 {
                 0.0
             } else if self.params.torsion_stiffness > 0.0 && split.transmitted[3] != torsion {
                 (split.transmitted[3] - spin * torsion_damping) / self.params.torsion_stiffness
             } else {
                 twist
             };
-            self.anchors_b[k] = if stick { Some(anchor_b) } else { None };
+            self.tips[k].anchor_b = if stick { Some(anchor_b) } else { None };
             // The normal spring (on the finger only) holds a detected fingertip on the surface,
             // across the contact margin's gap too, and one that pushes at the preload depth.
             let depth = if c[2] > 0.0 {
@@ -899,7 +927,7 @@ impl Dfs {
             } else {
                 penetration
             };
-            self.spring_err[k] = if stick {
+            self.tips[k].spring_err = if stick {
                 err + z_world * depth
             } else {
                 z_world * depth
@@ -907,7 +935,7 @@ impl Dfs {
             if t.in_contact {
                 let tangential =
                     split.transmitted - passed.component_mul(&self.params.contact_model.mask());
-                self.passive_world[k] =
+                self.tips[k].passive_world =
                     rot * (frame.rot_b * Vector::new(tangential[0], tangential[1], 0.0));
             }
             if t.in_contact && n < MAX_CONTACTS {
@@ -1092,7 +1120,7 @@ impl Dfs {
             let j = &self.kin.tip_jacobians[k];
             // The feedback, less the passive friction part: the contact spring below carries
             // that on the finger side, implicitly.
-            let f = t.feedback_force_world + self.passive_world[k];
+            let f = t.feedback_force_world + self.tips[k].passive_world;
             // Only the DOFs moving the tip, in solve order (the spring block below is written
             // in that order): its other Jacobian columns are zero.
             let dofs = self.tip_dofs_solve[k].as_slice();
@@ -1101,11 +1129,11 @@ impl Dfs {
             }
             let Some(frame) = t.frame else { continue };
             let z_world = rots[t.object] * frame.normal_b();
-            let stick = self.stick[k];
-            let v = self.spring_vel[k];
+            let stick = self.tips[k].stick;
+            let v = self.tips[k].spring_vel;
             // A sticking tip is damped across the normal as the object is (`damping`), along it
             // by the surface damping; a sliding one along the normal only.
-            let damping = self.tangential_damping[k];
+            let damping = self.tips[k].tangential_damping;
             let extra_normal = p.surface_damping - damping;
             // How each tip is sprung: along the normal only (sliding), alike in every direction
             // (sticking, the tangential damping not limited) or more along the normal.
@@ -1114,7 +1142,7 @@ impl Dfs {
                 (true, true) => Spring::Isotropic,
                 (true, false) => Spring::StiffNormal,
             };
-            let f = -self.spring_err[k] * p.surface_stiffness
+            let f = -self.tips[k].spring_err * p.surface_stiffness
                 - match spring {
                     Spring::Normal => z_world * v.dot(&z_world) * p.surface_damping,
                     Spring::Isotropic => v * damping,
@@ -1126,7 +1154,7 @@ impl Dfs {
             // fingertip in, stiffly (its normal intensity over the ramp's depth), so that
             // stiffness is in the implicit step too (its force is already in `f`, the feedback
             // holding only what was passed on).
-            let ramp = dt * dt * self.ramp_stiffness[k];
+            let ramp = dt * dt * self.tips[k].ramp_stiffness;
             // The tip's linear Jacobian column of DOF d (column-major storage).
             let js = j.as_slice();
             let col = |d: usize| Vector::new(js[6 * d], js[6 * d + 1], js[6 * d + 2]);
