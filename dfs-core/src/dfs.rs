@@ -82,14 +82,16 @@
 use crate::contact::{apply_friction, detect, ContactFrame, ContactModel, Intensity};
 use crate::error::{DfsError, Result};
 use crate::grasp::{GraspMatrix, MAX_CONTACTS};
-use crate::hand::{DofMatrix, DofSet, FkPlan, HandModel, Kinematics, MassPlan, MAX_DOF, MAX_TIPS};
+use crate::hand::{DofMatrix, FkPlan, HandModel, Kinematics, MassPlan, MAX_DOF, MAX_TIPS};
 use crate::math::{
     cholesky_solve_in_place, envelope_cholesky_solve, Isometry, Real, Vector, Wrench,
 };
 use crate::object::{external_wrench_b, integrate, shapes_overlap, ObjectState, RigidObject};
 use crate::table::{Table, TableSupport};
+use build::{BodyConstants, TipDofs};
 
 mod body;
+mod build;
 mod params;
 mod types;
 use crate::hand::MAX_CONTACT_SHAPES;
@@ -213,80 +215,6 @@ impl TipState {
     }
 }
 
-/// Constants of one object's body, made once.
-#[derive(Debug, Clone, Copy)]
-struct BodyConstants {
-    /// The inverse mass (1/kg) and largest inverse principal moment of inertia
-    /// (1/(kg·m²)), for a bound on the inverse effective mass at a contact.
-    inv_mass: Real,
-    inv_inertia_max: Real,
-    /// Radius of the sphere about the centre that holds the shape (m).
-    bounding_radius: Real,
-}
-
-impl BodyConstants {
-    fn of(object: &RigidObject) -> Self {
-        BodyConstants {
-            inv_mass: 1.0 / object.mass,
-            inv_inertia_max: object.inertia_inv.symmetric_eigenvalues().max(),
-            bounding_radius: object.shape.bounding_radius(),
-        }
-    }
-}
-
-/// The order and envelope for [`envelope_cholesky_solve`] of the implicit finger step: the
-/// DOFs of each finger group, then the rest (the wrist's, shared by every tip, and any that
-/// move no tip); `first[i]` is the first position coupled to position `i` through M(θ)
-/// ([`HandModel::inertia_coupling`]) or through a fingertip moved by both DOFs (its contact
-/// spring).
-fn finger_step_envelope(
-    hand: &HandModel,
-    tip_dofs: &[TipDofs; MAX_TIPS],
-    whole_hand: bool,
-) -> ([usize; MAX_DOF], [usize; MAX_DOF]) {
-    let n = hand.dof().min(MAX_DOF);
-    let mut pattern = hand.inertia_coupling();
-    let n_shapes = if whole_hand {
-        hand.contact_shapes.len().min(MAX_CONTACT_SHAPES)
-    } else {
-        0
-    };
-    let shape_dofs = hand.contact_shapes[..n_shapes]
-        .iter()
-        .map(|s| TipDofs::of_link(hand, s.link));
-    for t in tip_dofs
-        .iter()
-        .take(hand.fingertips.len())
-        .copied()
-        .chain(shape_dofs)
-    {
-        let set = t.as_slice().iter().fold(0 as DofSet, |s, &d| s | 1 << d);
-        for &d in t.as_slice() {
-            pattern[d] |= set;
-        }
-    }
-    let mut order = [0; MAX_DOF];
-    let mut placed = [false; MAX_DOF];
-    let mut len = 0;
-    let grouped = hand
-        .finger_groups
-        .iter()
-        .flat_map(|g| g.dofs.iter().copied());
-    for d in grouped.chain(0..n) {
-        if d < n && !placed[d] {
-            placed[d] = true;
-            order[len] = d;
-            len += 1;
-        }
-    }
-    let mut first = [0; MAX_DOF];
-    for i in 0..len {
-        let row = pattern[order[i]] | 1 << order[i];
-        first[i] = (0..=i).find(|&j| row & (1 << order[j]) != 0).unwrap_or(i);
-    }
-    (order, first)
-}
-
 /// The object's largest inverse effective mass (1/kg) at the contact `frame` for a push across
 /// its normal: the maximum over unit tangents `t` of `1/m + (r × t)ᵀ I⁻¹ (r × t)`, `r` the
 /// contact point from the centre of mass (B), the larger eigenvalue of a 2x2 matrix.
@@ -330,171 +258,7 @@ fn not_finite(state: &ObjectState, f_ext: &Wrench) -> Option<&'static str> {
     }
 }
 
-/// The DOFs moving one fingertip, ascending (fixed capacity).
-#[derive(Debug, Clone, Copy)]
-struct TipDofs {
-    dofs: [usize; MAX_DOF],
-    len: usize,
-}
-
-impl TipDofs {
-    fn of(hand: &HandModel, tip: usize) -> TipDofs {
-        Self::of_link(hand, hand.fingertips[tip].link)
-    }
-
-    /// The DOFs moving `link`, ascending.
-    fn of_link(hand: &HandModel, link: usize) -> TipDofs {
-        let set = hand.dofs_moving_link(link);
-        let mut t = TipDofs {
-            dofs: [0; MAX_DOF],
-            len: 0,
-        };
-        for d in (0..hand.dof().min(MAX_DOF)).filter(|&d| set & (1 << d) != 0) {
-            t.dofs[t.len] = d;
-            t.len += 1;
-        }
-        t
-    }
-
-    #[inline]
-    fn as_slice(&self) -> &[usize] {
-        &self.dofs[..self.len]
-    }
-}
-
 impl Dfs {
-    /// A DFS for `hand` and `object`, the object at `state`, with the friction
-    /// `params.friction`: a scene of one object. Validates the hand and parameters.
-    pub fn new(
-        hand: HandModel,
-        object: RigidObject,
-        state: ObjectState,
-        params: DfsParams,
-    ) -> Result<Self> {
-        let one = DfsObject {
-            object,
-            friction: params.friction,
-            state,
-        };
-        Self::with_objects(hand, &[one], params)
-    }
-
-    /// A DFS for `hand` and a scene of 1 to [`MAX_OBJECTS`] objects, each with its own
-    /// friction (`params.friction` is not used). Validates the hand, the parameters and each
-    /// object's friction and state (errors name `objects[i]`).
-    pub fn with_objects(hand: HandModel, objects: &[DfsObject], params: DfsParams) -> Result<Self> {
-        hand.validate()?;
-        params.validate()?;
-        if hand.fingertips.len() > MAX_CONTACTS {
-            return Err(DfsError::invalid(
-                "hand.fingertips",
-                format!("at most {MAX_CONTACTS} fingertips"),
-            ));
-        }
-        let Some(first) = objects.first() else {
-            return Err(DfsError::invalid("objects", "needs at least one object"));
-        };
-        if objects.len() > MAX_OBJECTS {
-            return Err(DfsError::invalid(
-                "objects",
-                format!(
-                    "{} objects; at most {MAX_OBJECTS} are simulated",
-                    objects.len()
-                ),
-            ));
-        }
-        for (i, o) in objects.iter().enumerate() {
-            for (what, v) in [("mu", o.friction.mu), ("mu_torsion", o.friction.mu_torsion)] {
-                if !(v.is_finite() && v >= 0.0) {
-                    return Err(DfsError::invalid(
-                        format!("objects[{i}].friction.{what}"),
-                        format!("must be a finite number ≥ 0, got {v}"),
-                    ));
-                }
-            }
-            if not_finite(&o.state, &Wrench::zeros()).is_some() {
-                return Err(DfsError::invalid(
-                    format!("objects[{i}].state"),
-                    "pose and velocities must be finite",
-                ));
-            }
-        }
-        let n_objects = objects.len();
-        let mut scene = [*first; MAX_OBJECTS];
-        scene[..n_objects].copy_from_slice(objects);
-        let mut bodies = [BodyConstants::of(&first.object); MAX_OBJECTS];
-        for (b, o) in bodies.iter_mut().zip(objects) {
-            *b = BodyConstants::of(&o.object);
-        }
-        let state = first.state;
-        let mut out = TickOutput {
-            n_tips: hand.fingertips.len(),
-            object: state,
-            n_objects,
-            ..TickOutput::default()
-        };
-        for (o, obj) in out.objects.iter_mut().zip(objects) {
-            o.state = obj.state;
-        }
-        let mut tip_dofs = [TipDofs {
-            dofs: [0; MAX_DOF],
-            len: 0,
-        }; MAX_TIPS];
-        for (k, t) in tip_dofs.iter_mut().enumerate().take(hand.fingertips.len()) {
-            *t = TipDofs::of(&hand, k);
-        }
-        let (solve_order, solve_first) = finger_step_envelope(&hand, &tip_dofs, params.whole_hand);
-        let mut solve_position = [0; MAX_DOF];
-        for (i, &d) in solve_order.iter().enumerate().take(hand.dof().min(MAX_DOF)) {
-            solve_position[d] = i;
-        }
-        let mut tip_dofs_solve = tip_dofs;
-        for t in tip_dofs_solve.iter_mut() {
-            let len = t.len;
-            t.dofs[..len].sort_by_key(|&d| solve_position[d]);
-        }
-        let mass_plan = hand.mass_plan();
-        let fk_plan = hand.fk_plan();
-        let body = body::BodyState::new(&hand, params.whole_hand, &solve_position);
-        out.n_body = body.n;
-        let grasp = GraspMatrix::new(&[], params.contact_model, &first.friction);
-        Ok(Dfs {
-            hand,
-            params,
-            objects: scene,
-            n_objects,
-            bodies,
-            grasps: [grasp; MAX_OBJECTS],
-            grasp_active: [false; MAX_OBJECTS],
-            contact_range: [(0, 0); MAX_OBJECTS],
-            overlap_ticks: 0,
-            table_support: [TableSupport::default(); MAX_OBJECTS],
-            q: [0.0; MAX_DOF],
-            qd: [0.0; MAX_DOF],
-            q_measured: [0.0; MAX_DOF],
-            initialised: false,
-            kin: Kinematics::default(),
-            mass: DofMatrix::identity(),
-            scratch: DofMatrix::identity(),
-            tips: [TipState::new(params.surface_damping); MAX_TIPS],
-            base: None,
-            prev_base: None,
-            frames: [ContactFrame::from_normal(Vector::zeros(), Vector::z()); MAX_CONTACTS],
-            transmitted: [Intensity::zeros(); MAX_CONTACTS],
-            contact_tip: [0; MAX_CONTACTS],
-            tip_dofs,
-            solve_order,
-            solve_first,
-            tip_dofs_solve,
-            mass_plan,
-            fk_plan,
-            factor: DofMatrix::zeros(),
-            body,
-            body_out: [BodyContact::default(); MAX_CONTACT_SHAPES],
-            out,
-        })
-    }
-
     /// The hand model.
     pub fn hand(&self) -> &HandModel {
         &self.hand

@@ -25,8 +25,12 @@ pub struct DfsParams {
     /// Contact model. Default point with friction.
     pub contact_model: ContactModel,
     /// Friction between fingertips and object. Default μ = 0.8, μ_t = 0.005 m. The object's of
-    /// [`Dfs::new`](super::Dfs::new); a scene of [`Dfs::with_objects`](super::Dfs::with_objects) gives each object its own
-    /// ([`DfsObject::friction`](super::DfsObject::friction)).
+    /// [`Dfs::new`]; a scene of [`Dfs::with_objects`] gives each object its own
+    /// ([`DfsObject::friction`]).
+    ///
+    /// [`Dfs::new`]: super::Dfs::new
+    /// [`Dfs::with_objects`]: super::Dfs::with_objects
+    /// [`DfsObject::friction`]: super::DfsObject::friction
     pub friction: Friction,
     /// Gap (m) up to which a fingertip is detected as touching the object (its contact frame
     /// is known and reported); it transmits force only once the gap has closed (see
@@ -95,8 +99,10 @@ pub struct DfsParams {
     /// fingertips alone, as before issue 21 item 5.
     pub whole_hand: bool,
     /// Stiffness (N/m) of a whole-hand contact, along the normal and of its stick spring,
-    /// limited per contact by [`BODY_STIFFNESS_BUDGET`](super::BODY_STIFFNESS_BUDGET). Default 20 000 (a 5 N push presses a
+    /// limited per contact by [`BODY_STIFFNESS_BUDGET`]. Default 20 000 (a 5 N push presses a
     /// palm 0.25 mm in).
+    ///
+    /// [`BODY_STIFFNESS_BUDGET`]: super::BODY_STIFFNESS_BUDGET
     pub body_stiffness: Real,
     /// Damping (N·s/m) of a whole-hand contact, along the normal and of its stick spring, limited
     /// per contact by [`STABLE_DAMPING`]. Default 30.

@@ -135,9 +135,12 @@ pub struct TickOutput {
     pub feedback_torque: [Real; MAX_DOF],
     /// Fingertip centres in the world (m).
     pub tip_centres: [Point; MAX_TIPS],
-    /// Number of contact shapes taking part (0 unless [`DfsParams::whole_hand`](super::DfsParams::whole_hand)); their state
-    /// is [`Dfs::body_contacts`](super::Dfs::body_contacts), kept out of this output so that copying a tick's output (a
+    /// Number of contact shapes taking part (0 unless [`DfsParams::whole_hand`]); their state
+    /// is [`Dfs::body_contacts`], kept out of this output so that copying a tick's output (a
     /// recorder does, every tick) does not copy 24 contact states.
+    ///
+    /// [`DfsParams::whole_hand`]: super::DfsParams::whole_hand
+    /// [`Dfs::body_contacts`]: super::Dfs::body_contacts
     pub n_body: usize,
 }
 
