@@ -79,20 +79,22 @@
 //!
 //! Deterministic: the same inputs give bit-identical outputs. Allocation-free per tick.
 
-use crate::contact::{apply_friction, detect, ContactFrame, ContactModel, Intensity};
+use crate::contact::{apply_friction, ContactFrame, ContactModel, Intensity};
 use crate::error::{DfsError, Result};
 use crate::grasp::{GraspMatrix, MAX_CONTACTS};
 use crate::hand::{DofMatrix, FkPlan, HandModel, Kinematics, MassPlan, MAX_DOF, MAX_TIPS};
-use crate::math::{
-    cholesky_solve_in_place, envelope_cholesky_solve, Isometry, Real, Vector, Wrench,
-};
-use crate::object::{external_wrench_b, integrate, shapes_overlap, ObjectState, RigidObject};
-use crate::table::{Table, TableSupport};
+use crate::math::{cholesky_solve_in_place, envelope_cholesky_solve, Isometry, Real, Vector};
+use crate::object::{ObjectState, RigidObject};
+use crate::table::TableSupport;
 use build::{BodyConstants, TipDofs};
 
 mod body;
 mod build;
+mod contacts;
+mod glove;
+mod objects;
 mod params;
+mod table;
 mod types;
 use crate::hand::MAX_CONTACT_SHAPES;
 pub use body::{BodyContact, BODY_STIFFNESS_BUDGET};
@@ -240,24 +242,6 @@ enum Spring {
     StiffNormal,
 }
 
-/// The first part of an object update that is not finite, if any.
-fn not_finite(state: &ObjectState, f_ext: &Wrench) -> Option<&'static str> {
-    let finite = |v: &[Real]| v.iter().all(|x| x.is_finite());
-    if !finite(f_ext.as_slice()) {
-        Some("wrench")
-    } else if !(finite(state.pose.translation.vector.as_slice())
-        && finite(state.pose.rotation.coords.as_slice()))
-    {
-        Some("pose")
-    } else if !(finite(state.linear_velocity.as_slice())
-        && finite(state.angular_velocity_b.as_slice()))
-    {
-        Some("velocity")
-    } else {
-        None
-    }
-}
-
 impl Dfs {
     /// The hand model.
     pub fn hand(&self) -> &HandModel {
@@ -354,18 +338,8 @@ impl Dfs {
             *b = o.state;
         }
         self.stage_object();
-        let diverged = (0..self.n_objects)
-            .find_map(|i| not_finite(&self.objects[i].state, &self.out.objects[i].f_ext_b));
-        if let Some(what) = diverged {
-            for (i, b) in before.iter().enumerate().take(self.n_objects) {
-                self.objects[i].state = *b;
-                // The table's solve starts over next tick (its warm start may hold the NaN).
-                self.table_support[i].clear();
-                self.out.objects[i].state = *b;
-                self.out.objects[i].f_ext_b = Wrench::zeros();
-            }
-            self.out.object = before[0];
-            self.out.f_ext_b = Wrench::zeros();
+        if let Some(what) = self.diverged() {
+            self.restore_objects(&before);
             return Err(DfsError::Diverged { what });
         }
         self.stage_overlaps();
@@ -375,40 +349,8 @@ impl Dfs {
 
     /// Stage 1: validate the sample; kinematics, Jacobians and M(θ).
     pub fn stage_glove(&mut self, s: &GloveSample<'_>) -> Result<()> {
+        self.check_sample(s)?;
         let n = self.hand.dof();
-        if s.tau.len() != n {
-            return Err(DfsError::WrongLength {
-                what: "joint torques",
-                got: s.tau.len(),
-                expected: n,
-            });
-        }
-        self.hand.check_angles(s.q, self.params.angle_slack)?;
-        for (i, &t) in s.tau.iter().enumerate() {
-            if !t.is_finite() {
-                return Err(DfsError::NotFinite {
-                    what: "joint torque",
-                    index: i,
-                    value: t,
-                });
-            }
-            let lim = self.hand.torque_limit[i] * self.params.torque_range;
-            if t.abs() > lim {
-                return Err(DfsError::OutOfRange {
-                    what: "joint torque",
-                    index: i,
-                    value: t,
-                    lower: -lim,
-                    upper: lim,
-                });
-            }
-        }
-        let b = &s.base;
-        if !(b.translation.vector.iter().all(|v| v.is_finite())
-            && b.rotation.coords.iter().all(|v| v.is_finite()))
-        {
-            return Err(DfsError::invalid("base", "hand base pose is not finite"));
-        }
         if !self.initialised {
             self.q[..n].copy_from_slice(s.q);
             self.initialised = true;
@@ -427,35 +369,7 @@ impl Dfs {
     /// Stage 2: contact detection between fingertip spheres and the objects: each fingertip
     /// touches the object it penetrates deepest among those within the contact margin.
     pub fn stage_contacts(&mut self) {
-        let mut rot_inv = [nalgebra::Rotation3::<Real>::identity(); MAX_OBJECTS];
-        for (r, o) in rot_inv.iter_mut().zip(&self.objects[..self.n_objects]) {
-            *r = o.state.pose.rotation.to_rotation_matrix().transpose();
-        }
-        let margin = self.params.contact_margin;
-        for (k, tip) in self.hand.fingertips.iter().enumerate() {
-            let c_world = self.kin.tip_centres[k];
-            self.out.tip_centres[k] = c_world;
-            let t = &mut self.out.tips[k];
-            *t = TipContact::default();
-            for (i, o) in self.objects[..self.n_objects].iter().enumerate() {
-                let pos = o.state.pose.translation.vector;
-                // Beyond the bounding sphere by more than the radius and margin: no contact.
-                let reach = self.bodies[i].bounding_radius + tip.radius + margin;
-                let rel = c_world.coords - pos;
-                if rel.norm_squared() > reach * reach * (1.0 + 1e-9) {
-                    continue;
-                }
-                let c_b = rot_inv[i] * rel;
-                if let Some(d) = detect(&o.object.shape, &c_b, tip.radius, margin) {
-                    if !t.touching || d.penetration > t.penetration {
-                        t.touching = true;
-                        t.object = i;
-                        t.frame = Some(d.frame);
-                        t.penetration = d.penetration;
-                    }
-                }
-            }
-        }
+        self.detect_tip_contacts();
         if self.body.n > 0 {
             self.detect_body_contacts();
         }
@@ -499,10 +413,7 @@ impl Dfs {
             }
         }
         // Each object's orientation as a matrix: applied about ten times per touching tip.
-        let mut rots = [nalgebra::Rotation3::<Real>::identity(); MAX_OBJECTS];
-        for (r, o) in rots.iter_mut().zip(&self.objects[..self.n_objects]) {
-            *r = o.state.pose.rotation.to_rotation_matrix();
-        }
+        let rots = self.object_rotations();
         let dt = self.params.dt;
         // How fast the hand base turns (world), from the arm tracker's poses: a soft pad's
         // spin about the normal is its base's and its joints'.
@@ -752,34 +663,7 @@ impl Dfs {
     /// integration.
     pub fn stage_object(&mut self) {
         for i in 0..self.n_objects {
-            let (start, n) = self.contact_range[i];
-            self.grasp_active[i] = n > 0;
-            let (f_hand, rank) = if n > 0 {
-                let g = &mut self.grasps[i];
-                g.rebuild(
-                    &self.frames[start..start + n],
-                    self.params.contact_model,
-                    &self.objects[i].friction,
-                );
-                (g.wrench(&self.transmitted[start..start + n]), g.rank)
-            } else {
-                (Wrench::zeros(), 0)
-            };
-            let o = &self.objects[i];
-            let mut f_ext = external_wrench_b(&o.object, &o.state, &f_hand, &self.params.gravity);
-            let table = self.table_wrench_b(i, &f_ext);
-            f_ext += table;
-            let o = &mut self.objects[i];
-            integrate(&o.object, &mut o.state, &f_ext, self.params.dt);
-            self.clamp_to_table(i);
-            self.out.objects[i] = ObjectOutput {
-                state: self.objects[i].state,
-                object_force_b: f_hand,
-                f_ext_b: f_ext,
-                table_force_b: table,
-                n_contacts: n,
-                grasp_rank: rank,
-            };
+            self.step_object(i);
         }
         let first = self.out.objects[0];
         self.out.grasp_rank = first.grasp_rank;
@@ -793,22 +677,7 @@ impl Dfs {
     /// this is reported, never resolved): [`TickOutput::overlap`] and
     /// [`TickOutput::n_overlaps`].
     pub fn stage_overlaps(&mut self) {
-        let mut first = None;
-        let mut count = 0;
-        for i in 0..self.n_objects {
-            for j in i + 1..self.n_objects {
-                let (a, b) = (&self.objects[i], &self.objects[j]);
-                if shapes_overlap(
-                    &a.object.shape,
-                    &a.state.pose,
-                    &b.object.shape,
-                    &b.state.pose,
-                ) {
-                    first.get_or_insert((i, j));
-                    count += 1;
-                }
-            }
-        }
+        let (first, count) = self.overlapping_pairs();
         self.out.overlap = first;
         self.out.n_overlaps = count;
         if count > 0 {
@@ -819,10 +688,7 @@ impl Dfs {
     /// Stage 5: per object, the reaction `c_o = W⁺ f_ext` (eq. 27), friction-limited; feedback
     /// per finger; finger dynamics (eq. 19-21) integrated implicitly to the motor commands.
     pub fn stage_feedback(&mut self, tau: &[Real]) {
-        let mut rots = [nalgebra::Rotation3::<Real>::identity(); MAX_OBJECTS];
-        for (r, o) in rots.iter_mut().zip(&self.objects[..self.n_objects]) {
-            *r = o.state.pose.rotation.to_rotation_matrix();
-        }
+        let rots = self.object_rotations();
         for (i, rot) in rots.iter().enumerate().take(self.n_objects) {
             if !self.grasp_active[i] {
                 continue;
@@ -979,33 +845,6 @@ impl Dfs {
         }
         self.out.motor_q[..ndof].copy_from_slice(&self.q[..ndof]);
         self.out.motor_qd[..ndof].copy_from_slice(&self.qd[..ndof]);
-    }
-
-    /// The table, if the scene has one.
-    fn table(&self) -> Option<Table> {
-        self.params.table_height.map(|height| Table {
-            height,
-            mu: self.params.table_mu,
-            rolling: self.params.table_rolling,
-        })
-    }
-
-    /// The table's wrench on object `i` (B) given every other force `f_b` on it this tick:
-    /// support at its lowest points with friction ([`Table::support_wrench_b`]).
-    fn table_wrench_b(&mut self, i: usize, f_b: &Wrench) -> Wrench {
-        let Some(table) = self.table() else {
-            return Wrench::zeros();
-        };
-        let (o, support) = (&self.objects[i], &mut self.table_support[i]);
-        table.support_wrench_b(support, &o.object, &o.state, f_b, self.params.dt)
-    }
-
-    /// Lifts object `i` out of the table if the step left it below ([`Table::lift_out`]).
-    fn clamp_to_table(&mut self, i: usize) {
-        if let Some(table) = self.table() {
-            let o = &mut self.objects[i];
-            table.lift_out(&o.object.shape, &mut o.state);
-        }
     }
 }
 

@@ -4,7 +4,8 @@
 //! solved.
 
 use super::body::{self, BodyContact};
-use super::{not_finite, Dfs, DfsObject, DfsParams, TickOutput, TipState, MAX_OBJECTS};
+use super::objects::not_finite;
+use super::{Dfs, DfsObject, DfsParams, TickOutput, TipState, MAX_OBJECTS};
 use crate::contact::{ContactFrame, Intensity};
 use crate::error::{DfsError, Result};
 use crate::grasp::{GraspMatrix, MAX_CONTACTS};

@@ -5,6 +5,7 @@ use super::*;
 use crate::contact::Friction;
 use crate::fixtures::glove10_holding_paper_sphere;
 use crate::math::force_of;
+use crate::math::Wrench;
 use proptest::prelude::*;
 
 fn all_finite(out: &TickOutput) -> bool {
