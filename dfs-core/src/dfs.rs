@@ -79,11 +79,11 @@
 //!
 //! Deterministic: the same inputs give bit-identical outputs. Allocation-free per tick.
 
-use crate::contact::{apply_friction, ContactFrame, ContactModel, Intensity};
+use crate::contact::{apply_friction, ContactFrame, Intensity};
 use crate::error::{DfsError, Result};
 use crate::grasp::{GraspMatrix, MAX_CONTACTS};
 use crate::hand::{DofMatrix, FkPlan, HandModel, Kinematics, MassPlan, MAX_DOF, MAX_TIPS};
-use crate::math::{cholesky_solve_in_place, envelope_cholesky_solve, Isometry, Real, Vector};
+use crate::math::{envelope_cholesky_solve, Isometry, Real, Vector};
 use crate::object::{ObjectState, RigidObject};
 use crate::table::TableSupport;
 use build::{BodyConstants, TipDofs};
@@ -91,6 +91,7 @@ use build::{BodyConstants, TipDofs};
 mod body;
 mod build;
 mod contacts;
+mod forces;
 mod glove;
 mod objects;
 mod params;
@@ -215,20 +216,6 @@ impl TipState {
             passive_world: Vector::zeros(),
         }
     }
-}
-
-/// The object's largest inverse effective mass (1/kg) at the contact `frame` for a push across
-/// its normal: the maximum over unit tangents `t` of `1/m + (r × t)ᵀ I⁻¹ (r × t)`, `r` the
-/// contact point from the centre of mass (B), the larger eigenvalue of a 2x2 matrix.
-fn inverse_mass_across(object: &RigidObject, frame: &ContactFrame) -> Real {
-    let r = frame.p_b;
-    let m = frame.rot_b.matrix();
-    let u1 = r.cross(&Vector::new(m[(0, 0)], m[(1, 0)], m[(2, 0)]));
-    let u2 = r.cross(&Vector::new(m[(0, 1)], m[(1, 1)], m[(2, 1)]));
-    let (iu1, iu2) = (object.inertia_inv * u1, object.inertia_inv * u2);
-    let (a, b, c) = (u1.dot(&iu1), u1.dot(&iu2), u2.dot(&iu2));
-    let half_gap = 0.5 * (a - c);
-    1.0 / object.mass + 0.5 * (a + c) + (half_gap * half_gap + b * b).sqrt()
 }
 
 /// How a touching fingertip's contact spring-damper acts on the finger in the implicit step.
@@ -378,285 +365,25 @@ impl Dfs {
     /// Stage 3: fingertip forces from joint torques (eq. 14), intensities, friction (eq. 15-18)
     /// for the fingertips pressed into the object; a fingertip across a gap transmits nothing.
     pub fn stage_forces(&mut self, tau: &[Real]) {
-        let lam2 = self.params.tip_force_damping * self.params.tip_force_damping;
-        for g in &self.hand.finger_groups {
-            let m = g.dofs.len();
-            if m == 0 {
-                continue;
-            }
-            // A = Σ_tips J_gᵀ J_g + λ² I over the group's DOFs; y = A⁻¹ τ_g; f_tip = J_tip y.
-            let a = &mut self.scratch;
-            let mut y = [0.0; MAX_DOF];
-            for (ia, &da) in g.dofs.iter().enumerate() {
-                y[ia] = tau[da];
-                for (ib, &db) in g.dofs.iter().enumerate() {
-                    let mut s = if ia == ib { lam2 } else { 0.0 };
-                    for &tip in &g.tips {
-                        let j = &self.kin.tip_jacobians[tip];
-                        s += j[(0, da)] * j[(0, db)]
-                            + j[(1, da)] * j[(1, db)]
-                            + j[(2, da)] * j[(2, db)];
-                    }
-                    a[(ia, ib)] = s;
-                }
-            }
-            if !cholesky_solve_in_place(a, m, &mut y) {
-                continue;
-            }
-            for &tip in &g.tips {
-                let j = &self.kin.tip_jacobians[tip];
-                let mut f = Vector::zeros();
-                for (ia, &da) in g.dofs.iter().enumerate() {
-                    f += Vector::new(j[(0, da)], j[(1, da)], j[(2, da)]) * y[ia];
-                }
-                self.out.tips[tip].tip_force_world = f;
-            }
-        }
-        // Each object's orientation as a matrix: applied about ten times per touching tip.
-        let rots = self.object_rotations();
-        let dt = self.params.dt;
-        // How fast the hand base turns (world), from the arm tracker's poses: a soft pad's
-        // spin about the normal is its base's and its joints'.
-        let soft = self.params.contact_model == ContactModel::SoftFinger;
-        let w_base = match (soft, self.prev_base, self.base) {
-            (true, Some(prev), Some(now)) => {
-                (now.rotation * prev.rotation.inverse()).scaled_axis() / dt
-            }
-            _ => Vector::zeros(),
-        };
-        let mut touching = [0usize; MAX_OBJECTS];
-        for t in self.out.tips[..self.hand.fingertips.len()]
-            .iter()
-            .filter(|t| t.frame.is_some())
-        {
-            touching[t.object] += 1;
-        }
-        for b in self.body_out[..self.body.n]
-            .iter()
-            .filter(|b| b.frame.is_some())
-        {
-            touching[b.object] += 1;
-        }
+        self.tip_forces_from_torques(tau);
+        let cx = self.force_context();
         let mut n = 0;
         let mut contact_object = [0usize; MAX_CONTACTS];
         for k in 0..self.hand.fingertips.len() {
-            self.tips[k].passive_world = Vector::zeros();
-            self.tips[k].stick = false;
-            self.tips[k].ramp_stiffness = 0.0;
-            let Some(frame) = self.out.tips[k].frame else {
-                self.tips[k].anchor_b = None;
-                self.tips[k].prev_point = None;
-                self.tips[k].twist = 0.0;
-                continue;
-            };
-            let o = self.out.tips[k].object;
-            if self.tips[k].object != o {
-                // It went from one object to another: its anchor and twist were on the other.
-                self.tips[k].anchor_b = None;
-                self.tips[k].prev_point = None;
-                self.tips[k].twist = 0.0;
-                self.tips[k].object = o;
-            }
-            let body = &self.bodies[o];
-            let friction = self.objects[o].friction;
-            let state = &self.objects[o].state;
-            let rot = rots[o];
-            let rot_inv = rot.transpose();
-            let pos = state.pose.translation.vector;
-            let v_lin = state.linear_velocity;
-            let w_b = state.angular_velocity_b;
-            // The tangential damping the object's explicit step can carry, shared by the tips
-            // touching it ([`STABLE_DAMPING`]): per tip, `c / m_eff` may not exceed this.
-            let damping_budget = STABLE_DAMPING / (touching[o].max(1) as Real * dt);
-            let c = frame.intensities_of_force_b(&(rot_inv * self.out.tips[k].tip_force_world));
-            // The contact acts on the fingertip of the finger dynamics: the measured one moved
-            // by J (θ − θ_measured) (first order), θ the joint angles the glove's motors are
-            // commanded to, with its own closest point and normal on the object. The measured
-            // angles differ from θ by the sensors' noise, which the stiff springs would pass on
-            // to the object as force (and a curved surface's normal turns with it).
-            let j = &self.kin.tip_jacobians[k];
-            let dofs = self.tip_dofs[k].as_slice();
-            let mut shift = Vector::zeros();
-            for &d in dofs {
-                shift +=
-                    Vector::new(j[(0, d)], j[(1, d)], j[(2, d)]) * (self.q[d] - self.q_measured[d]);
-            }
-            let centre = self.out.tip_centres[k].coords + shift;
-            let radius = self.hand.fingertips[k].radius;
-            let (distance, _, n_out_b) = self.objects[o]
-                .object
-                .shape
-                .closest(&(rot_inv * (centre - pos)));
-            let z_world = -(rot * n_out_b);
-            let penetration = radius - distance;
-            // The pad passes on the operator's intensities in proportion to how far the
-            // measured fingertip presses into the object, up to the contact ramp's depth (all of
-            // them beyond): nothing across a gap, and continuously so (module documentation).
-            let pressed = self.out.tips[k].penetration;
-            let ramp = self.params.contact_ramp;
-            let share = if pressed <= 0.0 {
-                0.0
-            } else if pressed < ramp {
-                pressed / ramp
-            } else {
-                1.0
-            };
-            let passed = c * share;
-            self.tips[k].ramp_stiffness = if share > 0.0 && share < 1.0 && c[2] > 0.0 {
-                c[2] / ramp
-            } else {
-                0.0
-            };
-            // Contact spring: the fingertip's deflection from where it stuck on the object.
-            let tip_point = centre + z_world * radius;
-            let tip_b = rot_inv * (tip_point - pos);
-            let anchor_b = self.tips[k].anchor_b.unwrap_or(tip_b);
-            let mut err = tip_point - (rot * anchor_b + pos);
-            err -= z_world * err.dot(&z_world);
-            let w_obj = rot * w_b;
-            let v_obj = v_lin + w_obj.cross(&(tip_point - pos));
-            // The stick damper's velocity: how fast that contact point moves relative to the
-            // object, the rate of the spring's deflection. Of the finger dynamics' fingertip, it
-            // follows the joint velocities and the base, never a difference of measured angles,
-            // whose sensor noise the damper would amplify.
-            let v_rel = self.tips[k]
-                .prev_point
-                .map(|prev| (tip_point - prev) / dt - v_obj)
-                .unwrap_or_else(Vector::zeros);
-            self.tips[k].prev_point = Some(tip_point);
-            let mut v_joint = Vector::zeros();
-            for &d in dofs {
-                v_joint += Vector::new(j[(0, d)], j[(1, d)], j[(2, d)]) * self.qd[d];
-            }
-            self.tips[k].spring_vel = v_rel - v_joint;
-            // The tangential damping at this contact: a cheap bound on the inverse effective
-            // mass first (|r × t| ≤ |r|), the exact one only when that bound limits it.
-            let mut damping = self.params.surface_damping;
-            let bound = body.inv_mass + frame.p_b.norm_squared() * body.inv_inertia_max;
-            if damping * bound > damping_budget {
-                damping = damping
-                    .min(damping_budget / inverse_mass_across(&self.objects[o].object, &frame));
-            }
-            self.tips[k].tangential_damping = damping;
-            // Passive friction: a sticking fingertip drags the object along with it (tangential
-            // spring-damper to the anchor), within the friction cone together with the
-            // operator's own tangential force.
-            let passive_w = err * self.params.surface_stiffness
-                + (v_rel - z_world * v_rel.dot(&z_world)) * damping;
-            let passive_c = frame.intensities_of_force_b(&(rot_inv * passive_w));
-            // Torsion (soft finger; a point contact transmits none): the fingertip pad drags the
-            // object's spin about the normal along, a torsional spring-damper from where it
-            // stuck. Its damping is limited to what the object's explicit step can carry, shared
-            // as the tangential damping is: `c_τ nᵀ I⁻¹ n` within the same budget per contact. A
-            // light object's spin would otherwise ring from tick to tick at the torsional
-            // cone's limit (a 10 g, 2 cm sphere: c_τ dt nᵀ I⁻¹ n = 3), which the elliptic cone
-            // takes out of the pad's tangential friction.
-            let (spin, twist, torsion_damping) = if soft {
-                let mut w_tip = w_base;
-                for &d in dofs {
-                    w_tip += Vector::new(j[(3, d)], j[(4, d)], j[(5, d)]) * self.qd[d];
-                }
-                let spin = (w_tip - w_obj).dot(&z_world);
-                let mut c_t = self.params.torsion_damping;
-                let inv_inertia = n_out_b.dot(&(self.objects[o].object.inertia_inv * n_out_b));
-                if c_t * inv_inertia > damping_budget {
-                    c_t = damping_budget / inv_inertia;
-                }
-                (spin, self.tips[k].twist + spin * dt, c_t)
-            } else {
-                (0.0, 0.0, 0.0)
-            };
-            let torsion = twist * self.params.torsion_stiffness + spin * torsion_damping;
-            let with_passive = if passed[2] > 0.0 {
-                passed + Intensity::new(passive_c[0], passive_c[1], 0.0, torsion)
-            } else {
-                passed
-            };
-            let split = apply_friction(self.params.contact_model, &friction, &with_passive);
-            let t = &mut self.out.tips[k];
-            t.intensity = c;
-            t.transmitted = split.transmitted;
-            t.slip = split.slip;
-            t.in_contact = !split.separating;
-            // The pad sticks unless it slides: the cone limits its tangential force. A pad that
-            // only spins on the surface (torsional slip of the soft finger, with no tangential
-            // force) keeps its tangential anchor.
-            let tangential = |c: &Intensity| c[0] * c[0] + c[1] * c[1];
-            let slides = split.slip && tangential(&split.transmitted) < tangential(&with_passive);
-            let stick = t.in_contact && !slides;
-            self.tips[k].stick = stick;
-            // Beyond the torsional cone the pad turns on the surface and keeps only the twist
-            // the cone allows.
-            self.tips[k].twist = if !soft || !t.in_contact || c[2] <= 0.0 {
-                0.0
-            } else if self.params.torsion_stiffness > 0.0 && split.transmitted[3] != torsion {
-                (split.transmitted[3] - spin * torsion_damping) / self.params.torsion_stiffness
-            } else {
-                twist
-            };
-            self.tips[k].anchor_b = if stick { Some(anchor_b) } else { None };
-            // The normal spring (on the finger only) holds a detected fingertip on the surface,
-            // across the contact margin's gap too, and one that pushes at the preload depth.
-            let depth = if c[2] > 0.0 {
-                penetration - self.params.contact_preload
-            } else {
-                penetration
-            };
-            self.tips[k].spring_err = if stick {
-                err + z_world * depth
-            } else {
-                z_world * depth
-            };
-            if t.in_contact {
-                let tangential =
-                    split.transmitted - passed.component_mul(&self.params.contact_model.mask());
-                self.tips[k].passive_world =
-                    rot * (frame.rot_b * Vector::new(tangential[0], tangential[1], 0.0));
-            }
-            if t.in_contact && n < MAX_CONTACTS {
+            let transmitting = self.tip_contact(k, &cx);
+            if let Some((frame, transmitted, o)) = transmitting.filter(|_| n < MAX_CONTACTS) {
                 self.frames[n] = frame;
-                self.transmitted[n] = split.transmitted;
+                self.transmitted[n] = transmitted;
                 self.contact_tip[n] = k;
                 contact_object[n] = o;
                 n += 1;
             }
         }
         if self.body.n > 0 {
-            n = self.body_forces(n, &mut contact_object, &touching, &rots);
+            n = self.body_forces(n, &mut contact_object, &cx.touching, &cx.rots);
         }
         self.out.n_contacts = n;
         self.group_contacts_by_object(&contact_object[..n]);
-    }
-
-    /// Orders the transmitting contacts by object (stably: by fingertip within one) and sets
-    /// each object's range of them. With one object nothing moves.
-    fn group_contacts_by_object(&mut self, contact_object: &[usize]) {
-        let n = contact_object.len();
-        let mut count = [0usize; MAX_OBJECTS];
-        for &o in contact_object {
-            count[o] += 1;
-        }
-        let mut start = 0;
-        for (o, range) in self.contact_range[..self.n_objects].iter_mut().enumerate() {
-            *range = (start, count[o]);
-            start += count[o];
-        }
-        if contact_object.iter().all(|&o| o == contact_object[0]) {
-            return;
-        }
-        let (frames, transmitted, tips) = (self.frames, self.transmitted, self.contact_tip);
-        let mut next = [0usize; MAX_OBJECTS];
-        for (o, r) in self.contact_range[..self.n_objects].iter().enumerate() {
-            next[o] = r.0;
-        }
-        for i in 0..n {
-            let o = contact_object[i];
-            let to = next[o];
-            next[o] += 1;
-            self.frames[to] = frames[i];
-            self.transmitted[to] = transmitted[i];
-            self.contact_tip[to] = tips[i];
-        }
     }
 
     /// Stage 4: per object, its wrench (eq. 22-23), table support, Newton-Euler (eq. 24-26),

@@ -1,6 +1,7 @@
 //! The DFS tick's tests: refused samples, free fall, determinism, the contact dampers' limits,
 //! unilateral contacts across a gap, and scenes of several objects.
 
+use super::forces::inverse_mass_across;
 use super::*;
 use crate::contact::Friction;
 use crate::fixtures::glove10_holding_paper_sphere;
