@@ -78,29 +78,40 @@
 //! ([`Dfs::new`]) every number is what the one-object DFS computed, bit for bit.
 //!
 //! Deterministic: the same inputs give bit-identical outputs. Allocation-free per tick.
-
-use crate::contact::{apply_friction, ContactFrame, Intensity};
-use crate::error::{DfsError, Result};
-use crate::grasp::{GraspMatrix, MAX_CONTACTS};
-use crate::hand::{DofMatrix, FkPlan, HandModel, Kinematics, MassPlan, MAX_DOF, MAX_TIPS};
-use crate::math::{envelope_cholesky_solve, Isometry, Real, Vector};
-use crate::object::{ObjectState, RigidObject};
-use crate::table::TableSupport;
-use build::{BodyConstants, TipDofs};
+//!
+//! **Code.** This file holds [`Dfs`], what it carries per fingertip, and the order of the
+//! stages; each stage's steps are in a submodule: `glove` (stage 1's checks), `contacts` (2),
+//! `forces` (3), `objects` and `table` (4), `fingers` (5), and `body` the whole-hand contacts'
+//! share of stages 2, 3 and 5. `build` makes a DFS; `params` and `types` hold what a caller
+//! passes in and reads out (re-exported here); `tests` the tick's tests.
 
 mod body;
 mod build;
 mod contacts;
+mod fingers;
 mod forces;
 mod glove;
 mod objects;
 mod params;
 mod table;
+#[cfg(test)]
+mod tests;
 mod types;
-use crate::hand::MAX_CONTACT_SHAPES;
+
 pub use body::{BodyContact, BODY_STIFFNESS_BUDGET};
 pub use params::{DfsParams, STABLE_DAMPING};
 pub use types::{DfsObject, GloveSample, ObjectOutput, TickOutput, TipContact, MAX_OBJECTS};
+
+use crate::contact::{ContactFrame, Intensity};
+use crate::error::{DfsError, Result};
+use crate::grasp::{GraspMatrix, MAX_CONTACTS};
+use crate::hand::{
+    DofMatrix, FkPlan, HandModel, Kinematics, MassPlan, MAX_CONTACT_SHAPES, MAX_DOF, MAX_TIPS,
+};
+use crate::math::{Isometry, Real, Vector};
+use crate::object::{ObjectState, RigidObject};
+use crate::table::TableSupport;
+use build::{BodyConstants, TipDofs};
 
 /// The Dynamic Force Simulator for one hand and a scene of one to [`MAX_OBJECTS`] objects.
 #[derive(Debug, Clone)]
@@ -216,17 +227,6 @@ impl TipState {
             passive_world: Vector::zeros(),
         }
     }
-}
-
-/// How a touching fingertip's contact spring-damper acts on the finger in the implicit step.
-#[derive(Clone, Copy)]
-enum Spring {
-    /// Sliding: along the normal only.
-    Normal,
-    /// Sticking, damped alike in every direction.
-    Isotropic,
-    /// Sticking, damped less across the normal (the object's step limits it).
-    StiffNormal,
 }
 
 impl Dfs {
@@ -416,164 +416,7 @@ impl Dfs {
     /// per finger; finger dynamics (eq. 19-21) integrated implicitly to the motor commands.
     pub fn stage_feedback(&mut self, tau: &[Real]) {
         let rots = self.object_rotations();
-        for (i, rot) in rots.iter().enumerate().take(self.n_objects) {
-            if !self.grasp_active[i] {
-                continue;
-            }
-            let (start, n) = self.contact_range[i];
-            let g = &self.grasps[i];
-            let friction = self.objects[i].friction;
-            // The reaction is distributed over the transmitting contacts only; the table's
-            // share of f_ext is not the fingers' to carry.
-            let f_fingers = self.out.objects[i].f_ext_b - self.out.objects[i].table_force_b;
-            let mut c_o = [Intensity::zeros(); MAX_CONTACTS];
-            g.distribute(&f_fingers, &mut c_o);
-            for (c, ci) in c_o.iter().enumerate().take(n) {
-                let k = self.contact_tip[start + c];
-                if k >= MAX_TIPS {
-                    self.body_out[k - MAX_TIPS].reaction =
-                        apply_friction(self.params.contact_model, &friction, ci).transmitted;
-                    continue;
-                }
-                let t = &mut self.out.tips[k];
-                t.reaction = apply_friction(self.params.contact_model, &friction, ci).transmitted;
-                t.feedback = t.transmitted - t.reaction;
-                let frame = self.frames[start + c];
-                let fb = frame.rot_b * Vector::new(t.feedback[0], t.feedback[1], t.feedback[2]);
-                t.feedback_force_world = -(rot * fb);
-            }
-        }
+        self.reactions(&rots);
         self.integrate_fingers(tau, &rots);
     }
-
-    /// The implicit finger step; `rots` holds each object's orientation as a matrix.
-    fn integrate_fingers(&mut self, tau: &[Real], rots: &[nalgebra::Rotation3<Real>; MAX_OBJECTS]) {
-        let ndof = self.hand.dof();
-        let p = &self.params;
-        let dt = p.dt;
-        let a = &mut self.scratch;
-        let mut rhs = [0.0; MAX_DOF];
-        // Column by column (the storage is column-major and M symmetric): A's column i is M's
-        // plus the damping on the diagonal, rhs[i] = (M q̇)[i] + dt τ[i].
-        {
-            let (a, m) = (a.as_mut_slice(), self.mass.as_slice());
-            let qd = &self.qd[..ndof];
-            for i in 0..ndof {
-                let col = &m[i * MAX_DOF..i * MAX_DOF + ndof];
-                let to = &mut a[i * MAX_DOF..i * MAX_DOF + ndof];
-                // One pass copies the column and forms the product (no memcpy call per column).
-                let mut s = 0.0;
-                for ((t, &mv), &v) in to.iter_mut().zip(col).zip(qd) {
-                    *t = mv;
-                    s += mv * v;
-                }
-                a[i * MAX_DOF + i] += dt * p.joint_damping;
-                rhs[i] = s + dt * tau[i];
-            }
-        }
-        let mut fb_torque = [0.0; MAX_DOF];
-        for k in 0..self.hand.fingertips.len() {
-            let t = &self.out.tips[k];
-            let j = &self.kin.tip_jacobians[k];
-            // The feedback, less the passive friction part: the contact spring below carries
-            // that on the finger side, implicitly.
-            let f = t.feedback_force_world + self.tips[k].passive_world;
-            // Only the DOFs moving the tip, in solve order (the spring block below is written
-            // in that order): its other Jacobian columns are zero.
-            let dofs = self.tip_dofs_solve[k].as_slice();
-            for &d in dofs {
-                fb_torque[d] += j[(0, d)] * f.x + j[(1, d)] * f.y + j[(2, d)] * f.z;
-            }
-            let Some(frame) = t.frame else { continue };
-            let z_world = rots[t.object] * frame.normal_b();
-            let stick = self.tips[k].stick;
-            let v = self.tips[k].spring_vel;
-            // A sticking tip is damped across the normal as the object is (`damping`), along it
-            // by the surface damping; a sliding one along the normal only.
-            let damping = self.tips[k].tangential_damping;
-            let extra_normal = p.surface_damping - damping;
-            // How each tip is sprung: along the normal only (sliding), alike in every direction
-            // (sticking, the tangential damping not limited) or more along the normal.
-            let spring = match (stick, extra_normal == 0.0) {
-                (false, _) => Spring::Normal,
-                (true, true) => Spring::Isotropic,
-                (true, false) => Spring::StiffNormal,
-            };
-            let f = -self.tips[k].spring_err * p.surface_stiffness
-                - match spring {
-                    Spring::Normal => z_world * v.dot(&z_world) * p.surface_damping,
-                    Spring::Isotropic => v * damping,
-                    Spring::StiffNormal => v * damping + z_world * (v.dot(&z_world) * extra_normal),
-                };
-            let c = dt * p.surface_damping + dt * dt * p.surface_stiffness;
-            let c_stick = dt * damping + dt * dt * p.surface_stiffness;
-            // A pad on the contact ramp: the operator's push it does not pass on draws the
-            // fingertip in, stiffly (its normal intensity over the ramp's depth), so that
-            // stiffness is in the implicit step too (its force is already in `f`, the feedback
-            // holding only what was passed on).
-            let ramp = dt * dt * self.tips[k].ramp_stiffness;
-            // The tip's linear Jacobian column of DOF d (column-major storage).
-            let js = j.as_slice();
-            let col = |d: usize| Vector::new(js[6 * d], js[6 * d + 1], js[6 * d + 2]);
-            // The block is symmetric and the solve reads one triangle of it (row `d1`, column
-            // `d2` no later than `d1` in the solve order): with the tip's DOFs in solve order,
-            // only that triangle is written.
-            for (p1, &d1) in dofs.iter().enumerate() {
-                let col1 = col(d1);
-                if col1 == Vector::zeros() {
-                    continue;
-                }
-                rhs[d1] += dt * col1.dot(&f);
-                let mut pc1 = match spring {
-                    Spring::Normal => z_world * z_world.dot(&col1) * c,
-                    Spring::Isotropic => col1 * c_stick,
-                    Spring::StiffNormal => {
-                        col1 * c_stick + z_world * (z_world.dot(&col1) * (dt * extra_normal))
-                    }
-                };
-                if ramp != 0.0 {
-                    pc1 += z_world * (z_world.dot(&col1) * ramp);
-                }
-                for &d2 in &dofs[..=p1] {
-                    a[(d1, d2)] += pc1.dot(&col(d2));
-                }
-            }
-        }
-        if self.body.n > 0 {
-            self.body
-                .add_to_finger_step(dt, &self.qd, a, &mut rhs, &mut fb_torque);
-        }
-        for d in 0..ndof {
-            rhs[d] += dt * fb_torque[d];
-        }
-        self.out.feedback_torque[..ndof].copy_from_slice(&fb_torque[..ndof]);
-        let solved = envelope_cholesky_solve(
-            a,
-            &self.solve_order[..ndof],
-            &self.solve_first[..ndof],
-            &mut self.factor,
-            &mut rhs,
-        );
-        if solved {
-            for d in 0..ndof {
-                let mut v = rhs[d];
-                let mut q = self.q[d] + dt * v;
-                let (lo, hi) = (self.hand.dof_lower[d], self.hand.dof_upper[d]);
-                if q < lo {
-                    q = lo;
-                    v = v.max(0.0);
-                } else if q > hi {
-                    q = hi;
-                    v = v.min(0.0);
-                }
-                self.q[d] = q;
-                self.qd[d] = v;
-            }
-        }
-        self.out.motor_q[..ndof].copy_from_slice(&self.q[..ndof]);
-        self.out.motor_qd[..ndof].copy_from_slice(&self.qd[..ndof]);
-    }
 }
-
-#[cfg(test)]
-mod tests;
