@@ -948,7 +948,13 @@ impl LiveSession {
             }
             if let Some(assistant) = &self.assistant {
                 if t.is_multiple_of(OBSERVATION_PERIOD_NS) {
-                    assistant.offer(&Observation::of_tick(t, &base, self.thumb, out));
+                    assistant.offer(&Observation::of_tick(
+                        t,
+                        &base,
+                        self.thumb,
+                        out,
+                        self.dfs.body_contacts(),
+                    ));
                 }
             }
             if let Some(recorder) = self.recorder.as_mut() {

@@ -21,8 +21,8 @@
 //! Every quantity is in the world or the object's frame, not the hand's: the template of a
 //! grasp made with one hand model compares with one made with another.
 
-use dfs_core::dfs::{TickOutput, MAX_OBJECTS};
-use dfs_core::hand::MAX_TIPS;
+use dfs_core::dfs::{BodyContact, TickOutput, MAX_OBJECTS};
+use dfs_core::hand::{MAX_CONTACT_SHAPES, MAX_TIPS};
 use dfs_core::math::{Isometry, Point, Vector};
 use dfs_core::object::{Shape, ShapeKind};
 
@@ -147,7 +147,7 @@ fn finite_or_nan(v: f64) -> f32 {
     }
 }
 
-/// A fingertip touching an object.
+/// A fingertip, or a whole-hand contact shape (the palm, a phalanx), touching an object.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct TipTouch {
     /// The object (index in the scene).
@@ -178,6 +178,12 @@ pub struct Observation {
     pub tips: [Point; MAX_TIPS],
     /// Per fingertip: what it touches.
     pub touch: [Option<TipTouch>; MAX_TIPS],
+    /// Whole-hand contact shapes (palm, phalanges) of the stream: `body[..n_body]`.
+    pub n_body: usize,
+    /// Per whole-hand contact shape, what it touches; a shape keeps its slot over the stream.
+    /// A skill's contacts (and so the features it is compared by) count these as they count
+    /// fingertips: a power grasp's palm is one of its contacts.
+    pub body: [Option<TipTouch>; MAX_CONTACT_SHAPES],
     /// Objects of the scene.
     pub n_objects: usize,
     /// Their poses in the world.
@@ -194,13 +200,23 @@ impl Observation {
             thumb: 0,
             tips: [Point::origin(); MAX_TIPS],
             touch: [None; MAX_TIPS],
+            n_body: 0,
+            body: [None; MAX_CONTACT_SHAPES],
             n_objects: 0,
             objects: [Isometry::identity(); MAX_OBJECTS],
         }
     }
 
-    /// The observation of a DFS tick at session time `t_ns` with the hand's base at `base`.
-    pub fn of_tick(t_ns: u64, base: &Isometry, thumb: usize, out: &TickOutput) -> Observation {
+    /// The observation of a DFS tick at session time `t_ns` with the hand's base at `base`,
+    /// with its whole-hand contacts `body` ([`Dfs::body_contacts`](dfs_core::dfs::Dfs::body_contacts):
+    /// empty without whole-hand contact).
+    pub fn of_tick(
+        t_ns: u64,
+        base: &Isometry,
+        thumb: usize,
+        out: &TickOutput,
+        body: &[BodyContact],
+    ) -> Observation {
         let mut o = Observation::empty();
         o.t_ns = t_ns;
         o.base = *base;
@@ -217,6 +233,23 @@ impl Observation {
                     in_contact: tip.in_contact,
                     normal_force: if tip.in_contact {
                         tip.transmitted[2].max(0.0)
+                    } else {
+                        0.0
+                    },
+                }),
+                _ => None,
+            };
+        }
+        o.n_body = body.len().min(MAX_CONTACT_SHAPES);
+        for (slot, c) in o.body.iter_mut().zip(&body[..o.n_body]) {
+            *slot = match (c.touching, c.frame) {
+                (true, Some(frame)) => Some(TipTouch {
+                    object: c.object,
+                    p_b: frame.p_b,
+                    normal_b: frame.normal_b(),
+                    in_contact: c.in_contact,
+                    normal_force: if c.in_contact {
+                        c.transmitted[2].max(0.0)
                     } else {
                         0.0
                     },
@@ -245,6 +278,15 @@ impl Observation {
             .iter()
             .filter(|t| t.is_some_and(|t| t.object == i))
             .count()
+    }
+
+    /// Fingertips and whole-hand contact shapes touching object `i`.
+    pub fn hand_touching(&self, i: usize) -> usize {
+        self.touching(i)
+            + self.body[..self.n_body]
+                .iter()
+                .filter(|t| t.is_some_and(|t| t.object == i))
+                .count()
     }
 
     /// The hand's shape in this observation.

@@ -12,7 +12,9 @@
 use std::collections::BTreeMap;
 
 use dfs_core::dfs::MAX_OBJECTS;
-use dfs_core::hand::{builtin_hand, thumb_of, HandModel, Kinematics, MAX_DOF, MAX_TIPS};
+use dfs_core::hand::{
+    builtin_hand, thumb_of, HandModel, Kinematics, MAX_CONTACT_SHAPES, MAX_DOF, MAX_TIPS,
+};
 use dfs_core::math::{Isometry, Vector};
 use dfs_core::scenario::{ScenarioObject, DEFAULT_OBJECT_NAME};
 
@@ -85,6 +87,8 @@ struct Latest {
     q: [f64; MAX_DOF],
     contacts_ns: Option<u64>,
     touch: [Option<TipTouch>; MAX_TIPS],
+    /// Per whole-hand contact shape (slots in the order their names were first seen).
+    body: [Option<TipTouch>; MAX_CONTACT_SHAPES],
     object_ns: Option<u64>,
     base: Isometry,
     n_objects: usize,
@@ -100,6 +104,8 @@ pub struct Observer<F> {
     kin: Box<Kinematics>,
     thumb: usize,
     latest: Box<Latest>,
+    /// The whole-hand contact shapes' names, in the order they were first seen: their slots.
+    body_names: Vec<String>,
     t0: Option<u64>,
     next_ns: u64,
     until_ns: Option<u64>,
@@ -119,11 +125,13 @@ impl<F: FnMut(&Observation)> Observer<F> {
                 q: [0.0; MAX_DOF],
                 contacts_ns: None,
                 touch: [None; MAX_TIPS],
+                body: [None; MAX_CONTACT_SHAPES],
                 object_ns: None,
                 base: Isometry::identity(),
                 n_objects: 0,
                 objects: [Isometry::identity(); MAX_OBJECTS],
             }),
+            body_names: Vec::new(),
             t0: None,
             next_ns: 0,
             until_ns: None,
@@ -161,6 +169,8 @@ impl<F: FnMut(&Observation)> Observer<F> {
         o.thumb = self.thumb.min(o.n_tips.saturating_sub(1));
         o.tips[..o.n_tips].copy_from_slice(&self.kin.tip_centres[..o.n_tips]);
         o.touch = l.touch;
+        o.n_body = self.body_names.len();
+        o.body = l.body;
         o.n_objects = l.n_objects;
         o.objects = l.objects;
         (self.f)(&o);
@@ -191,22 +201,38 @@ impl<F: FnMut(&Observation)> SessionVisitor for Observer<F> {
     }
 
     fn contacts(&mut self, t: u64, m: &Contacts) -> Result<(), RecordingError> {
-        let touch = &mut self.latest.touch;
-        *touch = [None; MAX_TIPS];
-        for (k, f) in m.fingers.iter().take(MAX_TIPS).enumerate() {
-            if f.touching {
-                touch[k] = Some(TipTouch {
-                    object: f.object as usize,
-                    p_b: v3(&f.point_b),
-                    normal_b: v3(&f.normal_b),
-                    in_contact: f.in_contact,
-                    normal_force: if f.in_contact {
-                        f.transmitted.z.max(0.0)
-                    } else {
-                        0.0
-                    },
-                });
+        // The hand's fingertips first, in its order; then, with whole-hand contact, the palm
+        // and phalanx shapes that touch, by name.
+        let n_tips = self.hand.fingertips.len().min(MAX_TIPS);
+        let l = &mut *self.latest;
+        l.touch = [None; MAX_TIPS];
+        l.body = [None; MAX_CONTACT_SHAPES];
+        for (k, f) in m.fingers.iter().enumerate() {
+            let touch = f.touching.then(|| TipTouch {
+                object: f.object as usize,
+                p_b: v3(&f.point_b),
+                normal_b: v3(&f.normal_b),
+                in_contact: f.in_contact,
+                normal_force: if f.in_contact {
+                    f.transmitted.z.max(0.0)
+                } else {
+                    0.0
+                },
+            });
+            if k < n_tips {
+                l.touch[k] = touch;
+                continue;
             }
+            let slot = match self.body_names.iter().position(|n| *n == f.name) {
+                Some(slot) => slot,
+                // A file naming more shapes than a hand can have: the rest are not observed.
+                None if self.body_names.len() >= MAX_CONTACT_SHAPES => continue,
+                None => {
+                    self.body_names.push(f.name.clone());
+                    self.body_names.len() - 1
+                }
+            };
+            l.body[slot] = touch;
         }
         self.latest.contacts_ns = Some(t);
         self.maybe_observe();

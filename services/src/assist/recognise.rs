@@ -22,11 +22,12 @@
 //! unknown), so a reach that turns to another object is followed.
 //!
 //! [`RecogniserParams::grasp_stage_ns`] after the first touch of the object, once two
-//! fingertips touch it, the
-//! *grasp stage* compares what is known of the grasp by then (object, contacts, grasp
-//! quality: [`GRASP_STAGE_DIMS`] of the feature vector `similar` uses) with the stored
-//! skills' features, and names the stored skill nearest to it. When no fingertip has touched
-//! for [`RecogniserParams::release_ns`], the grasp is over and the next reach begins.
+//! contacts touch it (fingertips, and with whole-hand contact the palm and phalanges, which a
+//! stored skill counts among its contacts as well), the *grasp stage* compares what is known
+//! of the grasp by then (object, contacts, grasp quality: [`GRASP_STAGE_DIMS`] of the feature
+//! vector `similar` uses) with the stored skills' features, and names the stored skill
+//! nearest to it. When nothing of the hand has touched for [`RecogniserParams::release_ns`],
+//! the grasp is over and the next reach begins.
 //!
 //! # Cost per observation
 //!
@@ -42,7 +43,7 @@ use std::sync::Arc;
 
 use dfs_core::contact::{ContactFrame, ContactModel, Friction};
 use dfs_core::grasp::quality::{GraspQuality, QualityJob, QualityParams};
-use dfs_core::hand::MAX_TIPS;
+use dfs_core::hand::{MAX_CONTACT_SHAPES, MAX_TIPS};
 use dfs_core::math::Vector;
 use dfs_core::object::ShapeKind;
 use serde::{Deserialize, Serialize};
@@ -209,13 +210,15 @@ struct TipSum {
     count: u32,
 }
 
-/// The grasp being made: the object two fingertips touch and what they did.
+/// The grasp being made: the object two contacts touch and what they did.
 #[derive(Debug, Clone, Copy)]
 struct GraspTrack {
     object: usize,
     since_ns: u64,
     observations: u32,
     tips: [TipSum; MAX_TIPS],
+    /// Per whole-hand contact shape ([`Observation::body`]).
+    body: [TipSum; MAX_CONTACT_SHAPES],
     decided: bool,
 }
 
@@ -430,7 +433,11 @@ impl Recogniser {
     fn track_grasp(&mut self, obs: &Observation) {
         let t = obs.t_ns;
         let mut touching_any = false;
-        for touch in obs.touch[..obs.n_tips].iter().flatten() {
+        for touch in obs.touch[..obs.n_tips]
+            .iter()
+            .chain(&obs.body[..obs.n_body])
+            .flatten()
+        {
             touching_any |= touch.object < self.builders.len();
         }
         if touching_any {
@@ -446,8 +453,9 @@ impl Recogniser {
             }
             return;
         }
-        // The object two or more fingertips touch.
-        let held = (0..self.builders.len().min(obs.n_objects)).find(|&i| obs.touching(i) >= 2);
+        // The object two or more contacts touch (fingertips, and the palm and phalanges of a
+        // power grasp).
+        let held = (0..self.builders.len().min(obs.n_objects)).find(|&i| obs.hand_touching(i) >= 2);
         let Some(i) = held else {
             if self.grasp.is_some_and(|g| !g.decided) {
                 self.grasp = None;
@@ -462,6 +470,7 @@ impl Recogniser {
                 since_ns: t,
                 observations: 0,
                 tips: [TipSum::default(); MAX_TIPS],
+                body: [TipSum::default(); MAX_CONTACT_SHAPES],
                 decided: false,
             }),
         };
@@ -469,9 +478,12 @@ impl Recogniser {
             return;
         }
         g.observations += 1;
-        for (k, touch) in obs.touch[..obs.n_tips].iter().enumerate() {
+        let sums = g.tips[..obs.n_tips]
+            .iter_mut()
+            .zip(&obs.touch[..obs.n_tips])
+            .chain(g.body[..obs.n_body].iter_mut().zip(&obs.body[..obs.n_body]));
+        for (s, touch) in sums {
             if let Some(touch) = touch.filter(|x| x.object == i) {
-                let s = &mut g.tips[k];
                 s.p_b += touch.p_b;
                 s.n_b += touch.normal_b;
                 s.count += 1;
@@ -596,11 +608,12 @@ fn fresh_builders(objects: &[ObjectInfo]) -> Vec<TemplateBuilder> {
 /// quality's (3 and 4) are filled in by [`set_quality`] from the job returned (`None`: no
 /// contact, or the quality's parameters refused).
 fn grasp_query(object: &ObjectInfo, g: &GraspTrack) -> ([f32; FEATURE_DIM], Option<QualityJob>) {
-    let mut frames = [ContactFrame::from_normal(Vector::zeros(), Vector::z()); MAX_TIPS];
+    let mut frames =
+        [ContactFrame::from_normal(Vector::zeros(), Vector::z()); MAX_TIPS + MAX_CONTACT_SHAPES];
     let mut n = 0;
     let mut mean_abs = Vector::zeros();
     let needed = (g.observations as f64 * 0.3).max(1.0);
-    for s in &g.tips {
+    for s in g.tips.iter().chain(&g.body) {
         if (s.count as f64) < needed {
             continue;
         }
