@@ -3,11 +3,16 @@
 
 use criterion::{criterion_group, criterion_main, Criterion};
 use dfs_core::dfs::GloveSample;
-use dfs_core::fixtures::glove10_holding_paper_sphere;
+use dfs_core::fixtures::{glove10_holding_paper_sphere, HeldSphere};
 use std::hint::black_box;
 
 fn tick(c: &mut Criterion) {
-    let (mut dfs, q, tau, base) = glove10_holding_paper_sphere().expect("fixture");
+    let HeldSphere {
+        mut dfs,
+        q,
+        tau,
+        base,
+    } = glove10_holding_paper_sphere().expect("fixture");
     let start = *dfs.object_state();
     c.bench_function("dfs_tick_glove10_paper_sphere_4_contacts", |b| {
         b.iter(|| {

@@ -348,13 +348,13 @@ pub fn detect(
     radius: Real,
     margin: Real,
 ) -> Option<Detection> {
-    let (d, c, n_out) = shape.closest(centre_b);
-    let gap = d - radius;
+    let closest = shape.closest(centre_b);
+    let gap = closest.distance - radius;
     if gap > margin {
         return None;
     }
     Some(Detection {
-        frame: ContactFrame::from_normal(c, -n_out),
+        frame: ContactFrame::from_normal(closest.point, -closest.normal),
         penetration: -gap,
     })
 }

@@ -11,9 +11,26 @@ use crate::hand::{HandModel, Kinematics, MAX_DOF};
 use crate::math::{Isometry, Real, Vector};
 use crate::object::{ObjectState, RigidObject, Shape};
 
+/// glove10 holding the paper's sphere, as [`glove10_holding_paper_sphere`] sets it up: the DFS
+/// and the glove sample that holds it.
+#[derive(Debug, Clone)]
+pub struct HeldSphere {
+    /// The DFS: glove10 and the sphere, ticked once with [`q`](Self::q), [`tau`](Self::tau)
+    /// and [`base`](Self::base), the sphere then put back at rest where it was placed.
+    pub dfs: Dfs,
+    /// The glove's joint angles θ (rad), one per degree of freedom of glove10.
+    pub q: Vec<Real>,
+    /// The operator's joint torques τ (N·m), one per degree of freedom: 3 N along each
+    /// touching fingertip's inward normal, mapped through its Jacobian (`τ = Σ Jᵀ f`).
+    pub tau: Vec<Real>,
+    /// The hand base's pose in the world: at the origin, palm up.
+    pub base: Isometry,
+}
+
 /// glove10 holding the paper's sphere (1 kg, r = 0.1 m) on four fingertips (index, middle,
 /// ring, little), each pushing 3 N along its inward normal through operator torques
-/// `τ = Σ Jᵀ f` (μ = 1.5 as in §3.4). Returns the DFS and the glove sample (θ, τ, base).
+/// `τ = Σ Jᵀ f` (μ = 1.5 as in §3.4). Returns the DFS and the glove sample (θ, τ, base) as a
+/// [`HeldSphere`].
 /// Four fingertips on one side of a 0.2 m sphere cannot balance its weight (glove10's thumb
 /// cannot span it), so the sphere is not in equilibrium: callers that tick repeatedly reset the
 /// object's state each tick to measure the same four-contact tick.
@@ -21,7 +38,7 @@ use crate::object::{ObjectState, RigidObject, Shape};
 /// The fingers are curled to a fixed pose and the sphere is placed, by least squares, where it
 /// touches all four fingertips, its radius (0.1 m within half a millimetre) such that each
 /// presses at least 0.1 mm into it; the hand base is at the world origin, palm up.
-pub fn glove10_holding_paper_sphere() -> Result<(Dfs, Vec<Real>, Vec<Real>, Isometry)> {
+pub fn glove10_holding_paper_sphere() -> Result<HeldSphere> {
     let hand = HandModel::glove10();
     let n = hand.dof();
     let mut q = vec![0.0; n];
@@ -132,7 +149,7 @@ pub fn glove10_holding_paper_sphere() -> Result<(Dfs, Vec<Real>, Vec<Real>, Isom
         base,
     })?;
     dfs.set_object_state(ObjectState::at_rest(pose));
-    Ok((dfs, q, tau, base))
+    Ok(HeldSphere { dfs, q, tau, base })
 }
 
 /// The paper's §3.4 sphere grasp: four contacts on a sphere centred at B's origin, normals
@@ -158,7 +175,12 @@ mod tests {
 
     #[test]
     fn glove10_touches_the_paper_sphere_with_four_fingertips() {
-        let (mut dfs, q, tau, base) = glove10_holding_paper_sphere().unwrap();
+        let HeldSphere {
+            mut dfs,
+            q,
+            tau,
+            base,
+        } = glove10_holding_paper_sphere().unwrap();
         let out = dfs
             .step(&GloveSample {
                 q: &q,

@@ -8,7 +8,7 @@ use crate::contact::{ContactFrame, ContactModel, Friction};
 use crate::error::{DfsError, Result};
 use crate::grasp::MAX_CONTACTS;
 use crate::math::{Real, Vector};
-use crate::object::{RigidObject, Shape, ShapeKind};
+use crate::object::{ClosestPoint, RigidObject, Shape, ShapeKind};
 use serde::{Deserialize, Serialize};
 
 /// Allowed object mass (kg) in a grasp file: 1 mg to 10 t.
@@ -354,7 +354,11 @@ impl GraspSpec {
         for (i, c) in self.contacts.iter().enumerate() {
             finite_field(format!("contacts[{i}].position"), &c.position)?;
             let p = Vector::from(c.position);
-            let (distance, _, n_out) = object.shape.closest(&p);
+            let ClosestPoint {
+                distance,
+                normal: n_out,
+                ..
+            } = object.shape.closest(&p);
             let tol = surface_tolerance(&object.shape);
             if distance.is_nan() || distance.abs() > tol {
                 return Err(DfsError::invalid(

@@ -28,11 +28,12 @@ struct Tick {
 fn hold_of(name: &str, settle_s: Real) -> (Vec<Tick>, Real) {
     let scenario = Scenario::builtin(name, 1).expect("a built-in scenario");
     let mut sim = Simulation::new(&scenario, HandModel::glove10(), None).expect("set up");
-    let hold = *sim
+    let hold = sim
         .phases()
         .iter()
-        .find(|s| s.phase == Phase::Hold)
-        .expect("a hold");
+        .find(|s| s.span.phase == Phase::Hold)
+        .expect("a hold")
+        .span;
     let from_ns = hold.start_ns + (settle_s * 1e9) as u64;
     let target = sim.target();
     let weight = sim.dfs().objects()[target].object.mass * 9.81;

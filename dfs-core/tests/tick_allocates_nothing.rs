@@ -2,7 +2,7 @@
 //! virtual coupling of a position-only glove or a calibration applied to its samples.
 
 use dfs_core::dfs::GloveSample;
-use dfs_core::fixtures::glove10_holding_paper_sphere;
+use dfs_core::fixtures::{glove10_holding_paper_sphere, HeldSphere};
 use stats_alloc::{Region, StatsAlloc, INSTRUMENTED_SYSTEM};
 use std::alloc::System;
 
@@ -47,7 +47,7 @@ fn ticks_of_objects_on_a_table_allocate_nothing() {
     use dfs_core::dfs::{Dfs, DfsObject, DfsParams};
     use dfs_core::math::{Isometry, Rotation, Vector};
     use dfs_core::object::{ObjectState, RigidObject, Shape};
-    let (dfs, q, tau, _) = glove10_holding_paper_sphere().unwrap();
+    let HeldSphere { dfs, q, tau, .. } = glove10_holding_paper_sphere().unwrap();
     let on_table = |x: f64, shape: Shape, rotation: Rotation| {
         let z = shape.support_depth(&rotation);
         DfsObject {
@@ -119,7 +119,7 @@ fn a_tick_of_a_scene_of_several_objects_allocates_nothing() {
     use dfs_core::dfs::{Dfs, DfsObject, MAX_OBJECTS};
     use dfs_core::math::{Isometry, Vector};
     use dfs_core::object::{ObjectState, RigidObject, Shape};
-    let (dfs, q, tau, base) = glove10_holding_paper_sphere().unwrap();
+    let HeldSphere { dfs, q, tau, base } = glove10_holding_paper_sphere().unwrap();
     let thumb = dfs
         .hand()
         .fingertips
@@ -193,7 +193,12 @@ fn a_tick_of_a_scene_of_several_objects_allocates_nothing() {
 }
 
 fn a_dfs_tick_with_four_contacts_allocates_nothing() {
-    let (mut dfs, q, tau, base) = glove10_holding_paper_sphere().unwrap();
+    let HeldSphere {
+        mut dfs,
+        q,
+        tau,
+        base,
+    } = glove10_holding_paper_sphere().unwrap();
     let start = *dfs.object_state();
     let sample = GloveSample {
         q: &q,
@@ -224,7 +229,12 @@ fn a_dfs_tick_with_four_contacts_allocates_nothing() {
 }
 
 fn a_free_falling_object_tick_and_a_refused_sample_allocate_nothing() {
-    let (mut dfs, q, tau, base) = glove10_holding_paper_sphere().unwrap();
+    let HeldSphere {
+        mut dfs,
+        q,
+        tau,
+        base,
+    } = glove10_holding_paper_sphere().unwrap();
     let mut bad = q.clone();
     bad[4] = f64::NAN;
     let far = dfs_core::math::Isometry::translation(0.0, 0.0, -5.0);
@@ -252,7 +262,12 @@ fn a_free_falling_object_tick_and_a_refused_sample_allocate_nothing() {
 fn a_coupled_tick_with_a_calibration_allocates_nothing() {
     use dfs_core::calibration::Calibration;
     use dfs_core::coupling::{CouplingParams, VirtualCoupling};
-    let (mut dfs, q, mut tau, base) = glove10_holding_paper_sphere().unwrap();
+    let HeldSphere {
+        mut dfs,
+        q,
+        mut tau,
+        base,
+    } = glove10_holding_paper_sphere().unwrap();
     let coupling =
         VirtualCoupling::for_hand(dfs.hand(), &CouplingParams::default(), dfs.params()).unwrap();
     let calibration: Calibration =

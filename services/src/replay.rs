@@ -166,7 +166,7 @@ pub fn skill_spec_from_json(value: &serde_json::Value, location: &str) -> Result
         .map_err(|e| invalid(location, format!("skill.object: {e}")))?;
     let contacts = parameters.contacts;
     // When the recording lost the object: the grip profiles span grasp start → release end.
-    let find = |phase: Phase| phases.iter().find(|p| p.name == phase);
+    let find = |phase: Phase| phases.iter().find(|p| p.phase == phase);
     let held_until_s = match (find(Phase::Grasp), phases.last()) {
         (Some(g), Some(last)) if !contacts.is_empty() => {
             let release = find(Phase::Release);
@@ -230,7 +230,7 @@ pub fn skill_spec_from_json(value: &serde_json::Value, location: &str) -> Result
             .collect(),
         phases: phases
             .iter()
-            .map(|p| (p.name, p.end_ns.saturating_sub(p.start_ns) as f64 * 1e-9))
+            .map(|p| (p.phase, p.end_ns.saturating_sub(p.start_ns) as f64 * 1e-9))
             .collect(),
         held_until_s,
     })

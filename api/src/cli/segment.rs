@@ -44,7 +44,7 @@ pub fn run_segment(a: SegmentArgs) -> Result<(), CliError> {
             .map(|p| {
                 format!(
                     "{} {:.3}-{:.3} s",
-                    p.name,
+                    p.phase,
                     p.start_ns as f64 * 1e-9,
                     p.end_ns as f64 * 1e-9
                 )

@@ -9,7 +9,7 @@ use super::{Dfs, TipState, MAX_OBJECTS, STABLE_DAMPING};
 use crate::contact::{apply_friction, ContactFrame, ContactModel, FrictionSplit, Intensity};
 use crate::hand::MAX_DOF;
 use crate::math::{cholesky_solve_in_place, Real, Vector};
-use crate::object::RigidObject;
+use crate::object::{ClosestPoint, RigidObject};
 use nalgebra::Rotation3;
 
 /// What the force stage uses of the scene at every fingertip this tick.
@@ -316,7 +316,11 @@ impl Dfs {
         let centre = self.out.tip_centres[k].coords + shift;
         let radius = self.hand.fingertips[k].radius;
         let pos = self.objects[o].state.pose.translation.vector;
-        let (distance, _, n_out_b) = self.objects[o]
+        let ClosestPoint {
+            distance,
+            normal: n_out_b,
+            ..
+        } = self.objects[o]
             .object
             .shape
             .closest(&(rot_inv * (centre - pos)));

@@ -4,7 +4,7 @@
 use super::forces::inverse_mass_across;
 use super::*;
 use crate::contact::Friction;
-use crate::fixtures::glove10_holding_paper_sphere;
+use crate::fixtures::{glove10_holding_paper_sphere, HeldSphere};
 use crate::math::force_of;
 use crate::math::Wrench;
 use proptest::prelude::*;
@@ -37,7 +37,12 @@ fn all_finite(out: &TickOutput) -> bool {
 
 #[test]
 fn nan_infinite_and_out_of_range_samples_are_refused_and_change_nothing() {
-    let (mut dfs, q, tau, base) = glove10_holding_paper_sphere().unwrap();
+    let HeldSphere {
+        mut dfs,
+        q,
+        tau,
+        base,
+    } = glove10_holding_paper_sphere().unwrap();
     let before = *dfs.object_state();
     let cases: Vec<(Vec<f64>, Vec<f64>)> = vec![
         (
@@ -101,7 +106,12 @@ fn nan_infinite_and_out_of_range_samples_are_refused_and_change_nothing() {
 
 #[test]
 fn a_diverging_object_update_is_refused_and_no_output_holds_a_nan() {
-    let (mut dfs, q, tau, base) = glove10_holding_paper_sphere().unwrap();
+    let HeldSphere {
+        mut dfs,
+        q,
+        tau,
+        base,
+    } = glove10_holding_paper_sphere().unwrap();
     // An angular velocity whose gyroscopic term overflows: the update is not finite.
     let mut s = *dfs.object_state();
     s.angular_velocity_b = Vector::new(1e200, -1e200, 1e200);
@@ -117,14 +127,16 @@ fn a_diverging_object_update_is_refused_and_no_output_holds_a_nan() {
     assert_eq!(*dfs.object_state(), s, "the last finite state is kept");
     assert!(all_finite(dfs.output()));
     // A sane state afterwards ticks normally again.
-    let (fresh, ..) = glove10_holding_paper_sphere().unwrap();
+    let HeldSphere { dfs: fresh, .. } = glove10_holding_paper_sphere().unwrap();
     dfs.set_object_state(*fresh.object_state());
     assert!(dfs.step(&sample).is_ok());
 }
 
 #[test]
 fn with_zero_contacts_the_object_falls_freely() {
-    let (mut dfs, q, tau, _) = glove10_holding_paper_sphere().unwrap();
+    let HeldSphere {
+        mut dfs, q, tau, ..
+    } = glove10_holding_paper_sphere().unwrap();
     let far = Isometry::translation(0.0, 0.0, -3.0);
     let z0 = dfs.object_state().pose.translation.z;
     for _ in 0..100 {
@@ -145,7 +157,12 @@ fn with_zero_contacts_the_object_falls_freely() {
 #[test]
 fn the_same_inputs_give_bit_identical_outputs() {
     let run = || {
-        let (mut dfs, q, tau, base) = glove10_holding_paper_sphere().unwrap();
+        let HeldSphere {
+            mut dfs,
+            q,
+            tau,
+            base,
+        } = glove10_holding_paper_sphere().unwrap();
         let mut trace = Vec::new();
         for i in 0..200 {
             let mut t = tau.clone();
@@ -193,7 +210,12 @@ fn the_effective_mass_across_a_contact_counts_the_turn_it_causes() {
 fn a_light_objects_tangential_damping_is_limited_to_what_its_step_can_carry() {
     // The paper sphere (1 kg) keeps the surface damping; the same grasp of a 20 g sphere
     // gets what the explicit step allows for four contacts.
-    let (mut heavy, q, tau, base) = glove10_holding_paper_sphere().unwrap();
+    let HeldSphere {
+        dfs: mut heavy,
+        q,
+        tau,
+        base,
+    } = glove10_holding_paper_sphere().unwrap();
     let sample = GloveSample {
         q: &q,
         tau: &tau,
@@ -232,7 +254,7 @@ fn a_fingertip_across_a_gap_pushes_nothing_however_hard_it_is_commanded() {
     // fixture's squeeze), with the sphere shrunk about its centre so that every fingertip
     // is 0.1 mm or 0.8 mm or more off its surface: within the contact margin (the
     // fixture's 5 mm, or the default 1 mm), detected, and transmitting nothing.
-    let (dfs, q, tau, base) = glove10_holding_paper_sphere().unwrap();
+    let HeldSphere { dfs, q, tau, base } = glove10_holding_paper_sphere().unwrap();
     let strong: Vec<Real> = tau.iter().map(|t| 10.0 * t).collect();
     let params = DfsParams {
         torque_range: 100.0,
@@ -330,7 +352,7 @@ fn a_fingertip_across_a_gap_pushes_nothing_however_hard_it_is_commanded() {
 fn an_internal_squeeze_is_fed_back_entirely_and_does_not_move_the_object() {
     // Operator intensities that sum to zero wrench (a pure squeeze) give f_ext = gravity
     // only and feedback = the whole squeeze.
-    let (dfs, ..) = glove10_holding_paper_sphere().unwrap();
+    let HeldSphere { dfs, .. } = glove10_holding_paper_sphere().unwrap();
     let out = dfs.output();
     assert_eq!(out.n_contacts, 4);
     for t in out.tips.iter().filter(|t| t.in_contact) {
@@ -394,7 +416,12 @@ fn tip_bits(out: &TickOutput) -> Vec<u64> {
 
 #[test]
 fn an_object_among_others_moves_and_feels_bit_for_bit_as_it_does_alone() {
-    let (mut alone, q, tau, base) = glove10_holding_paper_sphere().unwrap();
+    let HeldSphere {
+        dfs: mut alone,
+        q,
+        tau,
+        base,
+    } = glove10_holding_paper_sphere().unwrap();
     // The sphere is object 1 here; two balls far off fall on their own.
     let objects = [
         ball_at(2.0, 0.0, 0.0, 0.03),
@@ -448,7 +475,7 @@ fn an_object_among_others_moves_and_feels_bit_for_bit_as_it_does_alone() {
 
 #[test]
 fn a_fingertip_touching_two_objects_contacts_the_one_it_penetrates_deepest() {
-    let (dfs, q, tau, base) = glove10_holding_paper_sphere().unwrap();
+    let HeldSphere { dfs, q, tau, base } = glove10_holding_paper_sphere().unwrap();
     let out = *dfs.output();
     let hand = dfs.hand().clone();
     let thumb = hand
@@ -499,7 +526,7 @@ fn a_fingertip_touching_two_objects_contacts_the_one_it_penetrates_deepest() {
 
 #[test]
 fn objects_passing_into_each_other_are_reported_every_tick_and_counted() {
-    let (dfs, q, tau, _) = glove10_holding_paper_sphere().unwrap();
+    let HeldSphere { dfs, q, tau, .. } = glove10_holding_paper_sphere().unwrap();
     let far = Isometry::translation(0.0, 0.0, -3.0);
     // Two balls falling side by side, 1 cm into each other, and a third clear of both.
     let objects = [
@@ -541,7 +568,7 @@ fn objects_passing_into_each_other_are_reported_every_tick_and_counted() {
 
 #[test]
 fn a_bad_scene_is_refused_naming_the_field() {
-    let (dfs, ..) = glove10_holding_paper_sphere().unwrap();
+    let HeldSphere { dfs, .. } = glove10_holding_paper_sphere().unwrap();
     let hand = dfs.hand().clone();
     let p = *dfs.params();
     let e = Dfs::with_objects(hand.clone(), &[], p).unwrap_err();
@@ -573,7 +600,7 @@ proptest! {
         dq in prop::collection::vec(-1.0..1.0f64, 10),
         dt in prop::collection::vec(-3.0..3.0f64, 10),
     ) {
-        let (mut dfs, q, _, base) = glove10_holding_paper_sphere().unwrap();
+        let HeldSphere { mut dfs, q, base, .. } = glove10_holding_paper_sphere().unwrap();
         let hand = dfs.hand().clone();
         let q: Vec<f64> = q.iter().zip(&dq).enumerate()
             .map(|(i, (a, b))| (a + b).clamp(hand.dof_lower[i], hand.dof_upper[i])).collect();

@@ -322,11 +322,11 @@ pub fn closest_to_object(
 
 /// A ball of `radius` at `c` (B) against the object.
 fn ball(shape: &Shape, c: &Vector, radius: Real) -> ShapeContact {
-    let (d, p, n) = shape.closest(c);
+    let c = shape.closest(c);
     ShapeContact {
-        gap: d - radius,
-        p_b: p,
-        n_out_b: n,
+        gap: c.distance - radius,
+        p_b: c.point,
+        n_out_b: c.normal,
     }
 }
 
@@ -344,7 +344,7 @@ fn capsule_parameter(shape: &Shape, a: &Vector, b: &Vector) -> Real {
             let p1 = Vector::new(0.0, 0.0, half_height);
             segment_segment(a, b, &p0, &p1, t_centre)
         }
-        Shape::Box { .. } => golden(t_centre, |t| shape.closest(&(a + ab * t)).0),
+        Shape::Box { .. } => golden(t_centre, |t| shape.closest(&(a + ab * t)).distance),
     }
 }
 
@@ -598,7 +598,12 @@ mod tests {
     /// the segment.
     fn brute_capsule(shape: &Shape, a: &Vector, b: &Vector, r: Real) -> Real {
         (0..=4000)
-            .map(|i| shape.closest(&(a + (b - a) * (i as Real / 4000.0))).0 - r)
+            .map(|i| {
+                shape
+                    .closest(&(a + (b - a) * (i as Real / 4000.0)))
+                    .distance
+                    - r
+            })
             .fold(Real::INFINITY, Real::min)
     }
 
@@ -614,7 +619,7 @@ mod tests {
                         h.y * (j as Real / 10.0 - 1.0),
                         h.z * (k as Real / 10.0 - 1.0),
                     );
-                    best = best.min(shape.closest(&(pose * Point::from(l)).coords).0);
+                    best = best.min(shape.closest(&(pose * Point::from(l)).coords).distance);
                 }
             }
         }
@@ -707,7 +712,7 @@ mod tests {
                 prop_assert!(c.gap <= brute + LINE_CONTACT_DEPTH + 1e-6, "{} > {} ({which})", c.gap, brute);
             }
             // The reported point is on the object's surface.
-            let (d, ..) = shape.closest(&c.p_b);
+            let d = shape.closest(&c.p_b).distance;
             prop_assert!(d.abs() < 1e-9);
         }
 

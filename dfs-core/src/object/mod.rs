@@ -19,7 +19,7 @@ mod surface;
 mod table_points;
 
 pub use overlap::{shapes_overlap, OVERLAP_TOLERANCE};
-pub use shape::{Shape, ShapeKind};
+pub use shape::{ClosestPoint, Shape, ShapeKind};
 pub use table_points::{TablePoint, CYLINDER_RIM_POINTS, MAX_TABLE_POINTS, RIM_LOWEST_POINT_TILT};
 
 /// A rigid object: shape, mass properties and friction.

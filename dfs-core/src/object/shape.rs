@@ -51,6 +51,25 @@ impl ShapeKind {
     }
 }
 
+/// The point of a shape's surface nearest a query point, as [`Shape::closest`] finds it; all
+/// in the object frame B (origin at the shape's centre, axes the shape's), lengths in m.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ClosestPoint {
+    /// Signed distance (m) from the query point to the surface: positive outside the shape,
+    /// negative inside, zero on the surface. Outside it is the Euclidean distance to
+    /// [`point`](Self::point); inside it is minus the distance to the nearest face (box),
+    /// the curved side or a cap (cylinder), or the surface (sphere).
+    pub distance: Real,
+    /// The nearest surface point, in B (m).
+    pub point: Vector,
+    /// Outward unit normal at [`point`](Self::point), in B. Where the nearest point is on an
+    /// edge or corner of a box, or on a cylinder's rim, it points from
+    /// [`point`](Self::point) towards the query point; for a query at a sphere's centre it
+    /// is B's +z (and the point the top of the sphere), and for one on a cylinder's axis B's
+    /// +x stands in for the radial direction.
+    pub normal: Vector,
+}
+
 /// Geometric shape of an object, centred at the object frame B.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 #[serde(tag = "shape", rename_all = "snake_case", deny_unknown_fields)]
@@ -193,9 +212,9 @@ impl Shape {
         Mat3::from_diagonal(&Vector::from(self.principal_inertia(mass)))
     }
 
-    /// Signed distance from a point in B to the surface (negative inside), the closest surface
-    /// point, and the outward unit normal there.
-    pub fn closest(&self, p_b: &Vector) -> (Real, Vector, Vector) {
+    /// The surface point nearest `p_b` (a point in B, m): the signed distance to it (negative
+    /// inside), the point and the outward unit normal there ([`ClosestPoint`]).
+    pub fn closest(&self, p_b: &Vector) -> ClosestPoint {
         match *self {
             Shape::Sphere { radius } => {
                 let n = p_b.norm();
@@ -204,7 +223,11 @@ impl Shape {
                 } else {
                     Vector::z()
                 };
-                (n - radius, dir * radius, dir)
+                ClosestPoint {
+                    distance: n - radius,
+                    point: dir * radius,
+                    normal: dir,
+                }
             }
             Shape::Box { half_extents } => closest_on_box(p_b, &Vector::from(half_extents)),
             Shape::Cylinder {
@@ -245,7 +268,8 @@ impl Shape {
     }
 }
 
-fn closest_on_box(p: &Vector, h: &Vector) -> (Real, Vector, Vector) {
+/// [`Shape::closest`] for a box of half extents `h`.
+fn closest_on_box(p: &Vector, h: &Vector) -> ClosestPoint {
     let q = p.abs() - h;
     let outside = Vector::new(q.x.max(0.0), q.y.max(0.0), q.z.max(0.0));
     if outside.norm() > 0.0 {
@@ -257,7 +281,11 @@ fn closest_on_box(p: &Vector, h: &Vector) -> (Real, Vector, Vector) {
         );
         let d = p - c;
         let dist = d.norm();
-        (dist, c, d / dist)
+        ClosestPoint {
+            distance: dist,
+            point: c,
+            normal: d / dist,
+        }
     } else {
         // Inside: the nearest face.
         let mut axis = 0;
@@ -271,11 +299,16 @@ fn closest_on_box(p: &Vector, h: &Vector) -> (Real, Vector, Vector) {
         c[axis] = s * h[axis];
         let mut n = Vector::zeros();
         n[axis] = s;
-        (q[axis], c, n)
+        ClosestPoint {
+            distance: q[axis],
+            point: c,
+            normal: n,
+        }
     }
 }
 
-fn closest_on_cylinder(p: &Vector, r: Real, hh: Real) -> (Real, Vector, Vector) {
+/// [`Shape::closest`] for a cylinder of radius `r` and half height `hh` along B's z.
+fn closest_on_cylinder(p: &Vector, r: Real, hh: Real) -> ClosestPoint {
     let rho = (p.x * p.x + p.y * p.y).sqrt();
     let radial = if rho > 1e-12 {
         Vector::new(p.x / rho, p.y / rho, 0.0)
@@ -290,11 +323,19 @@ fn closest_on_cylinder(p: &Vector, r: Real, hh: Real) -> (Real, Vector, Vector) 
         let c = radial * r + Vector::new(0.0, 0.0, sz * hh);
         let d = p - c;
         let dist = d.norm();
-        (dist, c, d / dist)
+        ClosestPoint {
+            distance: dist,
+            point: c,
+            normal: d / dist,
+        }
     } else if dr > dz {
         // Closest to the curved side.
         let c = radial * r + Vector::new(0.0, 0.0, p.z.clamp(-hh, hh));
-        (dr, c, radial)
+        ClosestPoint {
+            distance: dr,
+            point: c,
+            normal: radial,
+        }
     } else {
         // Closest to a cap.
         let c = Vector::new(p.x, p.y, sz * hh)
@@ -303,7 +344,11 @@ fn closest_on_cylinder(p: &Vector, r: Real, hh: Real) -> (Real, Vector, Vector) 
             } else {
                 Vector::zeros()
             };
-        (dz, c, Vector::new(0.0, 0.0, sz))
+        ClosestPoint {
+            distance: dz,
+            point: c,
+            normal: Vector::new(0.0, 0.0, sz),
+        }
     }
 }
 
@@ -331,8 +376,12 @@ mod tests {
         ];
         for s in shapes {
             for p in pts {
-                let (d, c, n) = s.closest(&p);
-                let (d_c, _, _) = s.closest(&c);
+                let ClosestPoint {
+                    distance: d,
+                    point: c,
+                    normal: n,
+                } = s.closest(&p);
+                let d_c = s.closest(&c).distance;
                 assert!(d_c.abs() < 1e-9, "{s:?} {p:?}");
                 assert!((n.norm() - 1.0).abs() < 1e-9);
                 if d > 0.0 {

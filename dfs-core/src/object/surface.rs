@@ -2,14 +2,14 @@
 //! point with its inward normal, where a ray from the centre leaves the surface, how far a
 //! contact can slide on one face, and an antipodal pinch.
 
-use super::Shape;
+use super::{ClosestPoint, Shape};
 use crate::math::{perpendicular, Real, Vector};
 
 impl Shape {
     /// The point on the surface nearest `p_b` and the inward normal there, both in B.
     pub(crate) fn on_surface(&self, p_b: &Vector) -> (Vector, Vector) {
-        let (_, point, outward) = self.closest(p_b);
-        (point, -outward)
+        let c = self.closest(p_b);
+        (c.point, -c.normal)
     }
 
     /// Where the ray from the centre along unit `dir` leaves the surface (B), with the outward
@@ -18,14 +18,14 @@ impl Shape {
         let (mut lo, mut hi) = (0.0, self.bounding_radius() * 1.01 + 1e-6);
         for _ in 0..48 {
             let mid = 0.5 * (lo + hi);
-            if self.closest(&(dir * mid)).0 < 0.0 {
+            if self.closest(&(dir * mid)).distance < 0.0 {
                 lo = mid;
             } else {
                 hi = mid;
             }
         }
         let p = dir * hi;
-        (p, self.closest(&p).2)
+        (p, self.closest(&p).normal)
     }
 
     /// How far (m, at most `limit`) a contact can move from the surface point nearest `p_b`
@@ -44,12 +44,14 @@ impl Shape {
         const STEP: Real = 5e-4;
         let cos_45 = std::f64::consts::FRAC_1_SQRT_2;
         let inside = |q: &Vector| -> bool {
-            let (_, point, n) = self.closest(q);
+            let ClosestPoint {
+                point, normal: n, ..
+            } = self.closest(q);
             let t1 = perpendicular(&Vector::x(), &n, &Vector::y());
             let t2 = n.cross(&t1);
             [t1, -t1, t2, -t2]
                 .iter()
-                .all(|t| self.closest(&(point + t * margin)).2.dot(&n) >= cos_45)
+                .all(|t| self.closest(&(point + t * margin)).normal.dot(&n) >= cos_45)
         };
         let mut s = 0.0;
         while s + STEP <= limit && inside(&(p_b + dir * (s + STEP))) {

@@ -14,7 +14,7 @@ impl Simulation {
     /// planned acceleration, the intended joint angles, the grip, the carried share of the
     /// load, the grip's boost, the wrap's closing and the fingertip offset.
     pub(super) fn update_intention(&mut self, t: u64) {
-        let span = *self.span_now();
+        let span = self.span_now().span;
         let dur = (span.end_ns - span.start_ns) as Real * 1e-9;
         let s = ((t - span.start_ns) as Real * 1e-9 / dur).clamp(0.0, 1.0);
         let (m, m2) = min_jerk(s);

@@ -71,7 +71,7 @@ use crate::error::Result;
 use crate::hand::{MAX_DOF, MAX_TIPS};
 use crate::math::{Isometry, Real, Vector};
 use crate::object::{ObjectState, RigidObject};
-use crate::scenario::{GraspStyle, Phase, ResolvedTask, Scene};
+use crate::scenario::{GraspStyle, Phase, PhaseSpan, ResolvedTask, Scene};
 use rand_chacha::ChaCha8Rng;
 use rand_distr::{Distribution, Normal};
 
@@ -163,15 +163,13 @@ impl Default for OperatorParams {
     }
 }
 
-/// One phase of a session's script with its time span (ns since the session's start).
+/// One phase of a session's script: its time span (ns since the session's start) and the
+/// task the operator carries out in it.
 #[derive(Debug, Clone, Copy, PartialEq)]
-pub struct PhaseSpan {
-    /// The phase.
-    pub phase: Phase,
-    /// Start (ns).
-    pub start_ns: u64,
-    /// End (ns), exclusive.
-    pub end_ns: u64,
+pub struct ScriptPhase {
+    /// The phase and its time span (ns since the session's start, end exclusive), in whole
+    /// ticks.
+    pub span: PhaseSpan,
     /// The task's parameters.
     pub task: ResolvedTask,
 }
@@ -190,7 +188,7 @@ pub struct Simulation {
     target: usize,
     params: OperatorParams,
     style: GraspStyle,
-    spans: Vec<PhaseSpan>,
+    spans: Vec<ScriptPhase>,
     span: usize,
     step: u64,
     n_steps: u64,
@@ -255,8 +253,9 @@ pub struct Simulation {
 }
 
 impl Simulation {
-    /// The phases of the script with their time spans: the ground truth of the session.
-    pub fn phases(&self) -> &[PhaseSpan] {
+    /// The phases of the script with their time spans and tasks: the ground truth of the
+    /// session.
+    pub fn phases(&self) -> &[ScriptPhase] {
         &self.spans
     }
 
@@ -308,7 +307,7 @@ impl Simulation {
 
     /// The phase of the last tick.
     pub fn phase(&self) -> Phase {
-        self.spans[self.span.min(self.spans.len() - 1)].phase
+        self.spans[self.span.min(self.spans.len() - 1)].span.phase
     }
 
     /// The glove sample of the last tick: measured angles, measured operator torques, and the
@@ -349,7 +348,7 @@ impl Simulation {
             return Ok(false);
         }
         let t = self.step * TICK_NS;
-        while self.span + 1 < self.spans.len() && t >= self.spans[self.span].end_ns {
+        while self.span + 1 < self.spans.len() && t >= self.spans[self.span].span.end_ns {
             self.end_phase();
             self.span += 1;
             self.begin_phase()?;
@@ -368,18 +367,18 @@ impl Simulation {
         Ok(true)
     }
 
-    fn span_now(&self) -> &PhaseSpan {
+    fn span_now(&self) -> &ScriptPhase {
         &self.spans[self.span]
     }
 
     fn end_phase(&mut self) {
-        if self.span_now().phase == Phase::Grasp {
+        if self.span_now().span.phase == Phase::Grasp {
             self.object_held = true;
             if self.plan.wrap.is_some() {
                 self.wrap_set = Some(self.dfs.output().motor_q);
             }
         }
-        if self.span_now().phase == Phase::Release {
+        if self.span_now().span.phase == Phase::Release {
             self.object_held = false;
             self.wrap_set = None;
         }

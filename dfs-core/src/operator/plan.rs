@@ -208,7 +208,7 @@ pub fn plan_grasp(
     let inv_obj = pose.inverse();
     for (k, _) in tips.iter().enumerate().filter(|(_, &t)| t) {
         let c_b = (inv_obj * kin.tip_centres[k]).coords;
-        let (_, _, n_out) = object.shape.closest(&c_b);
+        let n_out = object.shape.closest(&c_b).normal;
         contacts_b[k] = c_b;
         normals_b[k] = n_out;
         normal_alignment[k] = push_alignment(hand, &kin, k, &-(pose.rotation * n_out));
@@ -651,10 +651,11 @@ impl Opening<'_> {
                 }
                 hand.forward_kinematics(&self.base_pose, &trial[..n_hand], kin);
                 let clear = g.tips.iter().all(|&k| {
-                    let (d, _, _) = self
+                    let d = self
                         .object
                         .shape
-                        .closest(&(self.inv_obj * kin.tip_centres[k]).coords);
+                        .closest(&(self.inv_obj * kin.tip_centres[k]).coords)
+                        .distance;
                     d - hand.fingertips[k].radius >= clearance
                 });
                 out = trial;
@@ -685,7 +686,7 @@ fn preshape(
     let mut pre_targets: Vec<(usize, Point)> = Vec::new();
     for (k, _) in tips.iter().enumerate().filter(|(_, &t)| t) {
         let c = kin.tip_centres[k];
-        let (_, _, n_out) = object.shape.closest(&(opening.inv_obj * c).coords);
+        let n_out = object.shape.closest(&(opening.inv_obj * c).coords).normal;
         pre_targets.push((k, Point::from(c.coords + (pose.rotation * n_out) * 0.015)));
     }
     let pre_params = IkParams {

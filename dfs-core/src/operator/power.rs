@@ -174,11 +174,13 @@ fn hand_gap(hand: &HandModel, kin: &Kinematics, object: &RigidObject, pose: &Iso
     let shapes = hand.contact_shapes.iter().map(|s| {
         closest_to_object(&s.primitive, &(inv * kin.link_poses[s.link]), &object.shape).gap
     });
-    let tips = hand
-        .fingertips
-        .iter()
-        .enumerate()
-        .map(|(k, t)| object.shape.closest(&(inv * kin.tip_centres[k]).coords).0 - t.radius);
+    let tips = hand.fingertips.iter().enumerate().map(|(k, t)| {
+        object
+            .shape
+            .closest(&(inv * kin.tip_centres[k]).coords)
+            .distance
+            - t.radius
+    });
     shapes.chain(tips).fold(Real::INFINITY, Real::min)
 }
 

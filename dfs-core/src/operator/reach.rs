@@ -211,7 +211,7 @@ pub(super) fn hand_points(hand: &HandModel, kin: &Kinematics, out: &mut Vec<(Vec
 pub(super) fn clearance(p: &Vector, r: Real, objects: &[DfsObject], table_height: Real) -> Real {
     objects.iter().fold(p.z - r - table_height, |c, o| {
         let local = o.state.pose.inverse_transform_point(&Point::from(*p));
-        c.min(o.object.shape.closest(&local.coords).0 - r)
+        c.min(o.object.shape.closest(&local.coords).distance - r)
     })
 }
 

@@ -5,7 +5,7 @@
 use super::plan::mount_link;
 use super::reach::{draw_home, whole_ticks_ns};
 use super::{
-    approach_pose, plan_operator_grasp, raise, OperatorParams, PhaseSpan, Reach, Simulation,
+    approach_pose, plan_operator_grasp, raise, OperatorParams, Reach, ScriptPhase, Simulation,
     REACH_STREAM, TICK_NS,
 };
 use crate::contact::{ContactModel, Friction};
@@ -14,7 +14,7 @@ use crate::error::{DfsError, Result};
 use crate::hand::{HandModel, MAX_DOF, MAX_TIPS};
 use crate::math::{Isometry, Real, Vector};
 use crate::object::{ObjectState, RigidObject};
-use crate::scenario::{Phase, ResolvedTask, Scenario, Scene, MAX_SCRIPT_S, MIN_TASK_S};
+use crate::scenario::{Phase, PhaseSpan, ResolvedTask, Scenario, Scene, MAX_SCRIPT_S, MIN_TASK_S};
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 
@@ -137,7 +137,7 @@ impl Simulation {
 fn schedule(
     tasks: &[ResolvedTask],
     mut reach_rng: Option<&mut ChaCha8Rng>,
-) -> (Vec<PhaseSpan>, Vec<Option<Reach>>, u64) {
+) -> (Vec<ScriptPhase>, Vec<Option<Reach>>, u64) {
     let mut spans = Vec::with_capacity(tasks.len());
     let mut t = 0u64;
     let mut reaches = vec![None; tasks.len()];
@@ -153,10 +153,12 @@ fn schedule(
             (Some(_), Phase::Preshape) => whole_ticks_ns(task.duration / speed),
             _ => (task.duration * 1e9).round() as u64 / TICK_NS * TICK_NS,
         };
-        spans.push(PhaseSpan {
-            phase: task.phase,
-            start_ns: t,
-            end_ns: t + d.max(TICK_NS),
+        spans.push(ScriptPhase {
+            span: PhaseSpan {
+                phase: task.phase,
+                start_ns: t,
+                end_ns: t + d.max(TICK_NS),
+            },
             task: *task,
         });
         t += d.max(TICK_NS);
@@ -166,7 +168,7 @@ fn schedule(
 
 /// The number of ticks of a script that ends at `t` (ns), or of `duration_s` when given: the
 /// spans after it dropped and the last one cut or extended to it.
-fn cut_to_duration(spans: &mut Vec<PhaseSpan>, t: u64, duration_s: Option<Real>) -> Result<u64> {
+fn cut_to_duration(spans: &mut Vec<ScriptPhase>, t: u64, duration_s: Option<Real>) -> Result<u64> {
     let mut n_steps = t / TICK_NS;
     if let Some(d) = duration_s {
         // A session shorter than the shortest phase holds no motion to segment (and one of
@@ -179,9 +181,9 @@ fn cut_to_duration(spans: &mut Vec<PhaseSpan>, t: u64, duration_s: Option<Real>)
         }
         n_steps = ((d * 1e9).round() as u64 / TICK_NS).max(1);
         let end = n_steps * TICK_NS;
-        spans.retain(|s| s.start_ns < end);
+        spans.retain(|s| s.span.start_ns < end);
         if let Some(last) = spans.last_mut() {
-            last.end_ns = end;
+            last.span.end_ns = end;
         }
     }
     Ok(n_steps)

@@ -436,7 +436,7 @@ fn every_builtin_scenario_plans_a_grasp_and_runs_its_first_second() {
         let mut sim = Simulation::new(&s, HandModel::glove10(), Some(1.0)).unwrap();
         while sim.step().unwrap() {}
         assert_eq!(sim.ticks(), 1000, "{name}");
-        assert!(sim.phases().iter().all(|p| p.end_ns <= 1_000_000_000));
+        assert!(sim.phases().iter().all(|p| p.span.end_ns <= 1_000_000_000));
     }
 }
 
@@ -633,10 +633,14 @@ fn varied_reaches_differ_by_seed_keep_the_noise_and_their_durations_make_the_gro
         // is no longer than the scenario says it can be.
         assert!(sim.n_steps as Real * 1e-3 <= s.longest_duration() + 1e-9);
         assert!(s.longest_duration() > s.duration());
-        assert_eq!(sim.spans[0].start_ns, 0);
-        assert!(sim.spans.windows(2).all(|w| w[0].end_ns == w[1].start_ns));
-        assert_eq!(sim.spans.last().unwrap().end_ns, sim.n_steps * TICK_NS);
+        assert_eq!(sim.spans[0].span.start_ns, 0);
+        assert!(sim
+            .spans
+            .windows(2)
+            .all(|w| w[0].span.end_ns == w[1].span.start_ns));
+        assert_eq!(sim.spans.last().unwrap().span.end_ns, sim.n_steps * TICK_NS);
         for (v, p) in sim.spans.iter().zip(&plain.spans) {
+            let (v, p) = (v.span, p.span);
             let (dv, dp) = (v.end_ns - v.start_ns, p.end_ns - p.start_ns);
             match v.phase {
                 Phase::Approach | Phase::Preshape => {
@@ -739,7 +743,7 @@ fn a_varied_first_approach_is_smooth_clear_of_everything_and_as_planned() {
         // Bent as drawn (or less, never down), paused as drawn.
         let len = (end.translation.vector - trace[0].0).norm();
         assert!(path.bend.norm() <= REACH_BEND * len + 1e-9);
-        let span = &sim.spans[0];
+        let span = &sim.spans[0].span;
         let planned = path.reach.move_s + path.reach.pause_s;
         assert!(((span.end_ns - span.start_ns) as Real * 1e-9 - planned).abs() < 1e-9);
     }
@@ -792,7 +796,7 @@ fn a_varied_second_grasp_reaches_from_where_the_hand_is() {
         .spans
         .iter()
         .enumerate()
-        .filter(|(_, p)| p.phase == Phase::Approach)
+        .filter(|(_, p)| p.span.phase == Phase::Approach)
         .nth(1)
         .unwrap()
         .0;

@@ -104,7 +104,7 @@ pub(super) fn curl_onto(
         skill
             .shape
             .closest(&(inv_start * kin.tip_centres[tip]).coords)
-            .0
+            .distance
             - radius
     };
     let (g0, g1) = (gap(q, 0.0), gap(q, 1.0));

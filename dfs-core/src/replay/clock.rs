@@ -69,9 +69,11 @@ pub const MAX_HELD_CATCH_UP_RATE: Real = 1.25;
 /// time, speeds up and slows down smoothly).
 pub const RATE_SLEW: Real = 5.0;
 
-/// A phase's span of replay time (s since the replay's start).
+/// A phase's span of replay time (s since the replay's start) and how fast the replay may run
+/// through it: [`PhaseClock`]'s own, in seconds of the skill's timeline, not a session's
+/// [`PhaseSpan`](crate::scenario::PhaseSpan) (ns since the session's start).
 #[derive(Debug, Clone, Copy, PartialEq)]
-pub struct PhaseSpan {
+pub struct ClockSpan {
     /// The phase.
     pub phase: Phase,
     /// Start (s).
@@ -87,7 +89,7 @@ pub struct PhaseSpan {
 /// Advancing allocates nothing.
 #[derive(Debug, Clone)]
 pub struct PhaseClock {
-    spans: Vec<PhaseSpan>,
+    spans: Vec<ClockSpan>,
     end: Real,
     /// The span of the operator's phase.
     current: usize,
@@ -224,7 +226,7 @@ impl PhaseClock {
     }
 
     /// The spans, in skill order, contiguous from 0 to the timeline's end.
-    pub fn spans(&self) -> &[PhaseSpan] {
+    pub fn spans(&self) -> &[ClockSpan] {
         &self.spans
     }
 
@@ -236,7 +238,7 @@ impl PhaseClock {
 }
 
 /// The phases' spans of replay time; see the module's doc.
-fn spans(skill: &SkillSpec, tl: &Timeline) -> Vec<PhaseSpan> {
+fn spans(skill: &SkillSpec, tl: &Timeline) -> Vec<ClockSpan> {
     use Phase::*;
     let blocks: [(&[Phase], Real, Real, Option<Phase>); 6] = [
         (&[Approach, Preshape], 0.0, tl.grasp_start, Some(Approach)),
@@ -246,7 +248,7 @@ fn spans(skill: &SkillSpec, tl: &Timeline) -> Vec<PhaseSpan> {
         (&[Release], tl.release_start, tl.release_end, Some(Release)),
         (&[Retreat], tl.release_end, tl.end, Some(Retreat)),
     ];
-    let mut out: Vec<PhaseSpan> = Vec::new();
+    let mut out: Vec<ClockSpan> = Vec::new();
     let mut push = |phase: Phase, start: Real, end: Real| {
         if end <= start {
             return;
@@ -257,7 +259,7 @@ fn spans(skill: &SkillSpec, tl: &Timeline) -> Vec<PhaseSpan> {
         };
         match out.last_mut() {
             Some(last) if last.phase == phase => last.end = end,
-            _ => out.push(PhaseSpan {
+            _ => out.push(ClockSpan {
                 phase,
                 start,
                 end,
@@ -289,7 +291,7 @@ fn spans(skill: &SkillSpec, tl: &Timeline) -> Vec<PhaseSpan> {
     }
     if out.is_empty() {
         // Not for a timeline (its grasp, release and retreat last), but keep one span.
-        out.push(PhaseSpan {
+        out.push(ClockSpan {
             phase: Retreat,
             start: 0.0,
             end: tl.end,
@@ -361,7 +363,7 @@ mod tests {
         (top, jerk)
     }
 
-    fn span_of(clock: &PhaseClock, phase: Phase) -> PhaseSpan {
+    fn span_of(clock: &PhaseClock, phase: Phase) -> ClockSpan {
         *clock.spans().iter().find(|s| s.phase == phase).unwrap()
     }
 

@@ -147,7 +147,7 @@ impl Probe<'_> {
     fn gap(&self, centre: &Vector, p: &Vector, tip: usize) -> Real {
         self.shape
             .closest(&self.orient.inverse_transform_vector(&(p - centre)))
-            .0
+            .distance
             - self.radius[tip]
     }
 
@@ -174,10 +174,11 @@ impl Probe<'_> {
                 let a = prev / (prev - g).max(1e-12);
                 let ip = idx(j - 1);
                 let p = path.p[ip] + (path.p[i] - path.p[ip]) * a;
-                let (_, point_b, outward_b) = self
+                let closest = self
                     .shape
                     .closest(&self.orient.inverse_transform_vector(&(p - centre)));
-                let (point, normal) = (self.orient * point_b, -(self.orient * outward_b));
+                let (point, normal) =
+                    (self.orient * closest.point, -(self.orient * closest.normal));
                 let (b, nb) = &path.basis[if a < 0.5 { ip } else { i }];
                 let align = b
                     .iter()
@@ -552,7 +553,7 @@ pub(super) fn closing_candidates(
         free.forward_kinematics(&Isometry::identity(), &q[..n], &mut kin);
         free.tip_jacobians(&mut kin);
         let gap = |p: &Point, k: usize| -> Real {
-            skill.shape.closest(&(inv_start * p).coords).0 - radius[k]
+            skill.shape.closest(&(inv_start * p).coords).distance - radius[k]
         };
         let mut ok = active[thumb] && active.iter().filter(|&&a| a).count() >= 2;
         ok &= q[2] >= 0.0;

@@ -92,7 +92,7 @@ mod plan;
 mod power;
 mod run;
 
-pub use clock::{PhaseClock, PhaseSpan, MAX_CATCH_UP_RATE, MAX_HELD_CATCH_UP_RATE, RATE_SLEW};
+pub use clock::{ClockSpan, PhaseClock, MAX_CATCH_UP_RATE, MAX_HELD_CATCH_UP_RATE, RATE_SLEW};
 pub use driven::{DrivenReplay, DrivenStart, DrivenTick};
 pub use plan::{plan, plan_with_stop, Plan, RetargetStep};
 pub use power::{PowerContact, PowerPlan};

@@ -416,7 +416,13 @@ fn gaps(hand: &HandModel, skill: &SkillSpec, kin: &Kinematics) -> (Real, Real) {
         }
     }
     for (k, t) in hand.fingertips.iter().enumerate() {
-        all = all.min(skill.shape.closest(&(inv * kin.tip_centres[k]).coords).0 - t.radius);
+        all = all.min(
+            skill
+                .shape
+                .closest(&(inv * kin.tip_centres[k]).coords)
+                .distance
+                - t.radius,
+        );
     }
     (palm, all)
 }
@@ -669,19 +675,19 @@ fn curl(
         }
         for &k in tips {
             let centre = (inv * kin.tip_centres[k]).coords;
-            let (d, p, n_out) = skill.shape.closest(&centre);
-            let gap = d - hand.fingertips[k].radius;
+            let closest = skill.shape.closest(&centre);
+            let gap = closest.distance - hand.fingertips[k].radius;
             if best.as_ref().is_none_or(|b| gap < b.0) {
                 best = Some((
                     gap,
                     PowerContact {
                         name: hand.fingertips[k].name.clone(),
                         part: ContactPart::Fingertip,
-                        frame: ContactFrame::from_normal(p, -n_out),
+                        frame: ContactFrame::from_normal(closest.point, -closest.normal),
                     },
                     hand.fingertips[k].link,
-                    start * Point::from(p),
-                    start.rotation * -n_out,
+                    start * Point::from(closest.point),
+                    start.rotation * -closest.normal,
                 ));
             }
         }

@@ -137,6 +137,25 @@ impl Ord for Phase {
     }
 }
 
+/// One phase of a session with its time span, ns since the session's start: a phase of the
+/// operator's script ([`Simulation::phases`](crate::operator::Simulation::phases), the
+/// ground truth of a simulated session) or one that segmentation found in a recorded session.
+///
+/// Its JSON, in skills, skill files, the store and the HTTP API, is
+/// `{"name": "grasp", "start_ns": 600000000, "end_ns": 1200000000}`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+pub struct PhaseSpan {
+    /// The phase (`approach`, `preshape`, `grasp`, `lift`, `hold`, `transport`, `place`,
+    /// `release`, `retreat`); `name` in JSON.
+    #[serde(rename = "name")]
+    pub phase: Phase,
+    /// Start, ns since the session's start (the log time of its first `/object/state` sample:
+    /// 0 in the files `icms simulate` records, later for recorders that log epoch times).
+    pub start_ns: u64,
+    /// End (exclusive), ns since the session's start.
+    pub end_ns: u64,
+}
+
 /// How the operator grasps the object: `auto`, `pinch` or `power`.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Default)]
 #[cfg_attr(feature = "utoipa", derive(utoipa::ToSchema))]

@@ -344,7 +344,7 @@ impl HandView {
     /// inside), and the elevation of the centre seen from the object's centre.
     pub fn relative_to(&self, shape: &Shape, pose: &Isometry) -> (f64, f64) {
         let p_b = pose.inverse_transform_point(&self.centre).coords;
-        let (d, _, _) = shape.closest(&p_b);
+        let d = shape.closest(&p_b).distance;
         let elevation = (self.centre.coords - pose.translation.vector)
             .try_normalize(1e-9)
             .map_or(f64::NAN, |u| u.z);

@@ -319,7 +319,7 @@ pub fn approach_templates(
                 end_ns: s
                     .phases
                     .iter()
-                    .find(|p| p.name == dfs_core::scenario::Phase::Grasp)
+                    .find(|p| p.phase == dfs_core::scenario::Phase::Grasp)
                     .or(s.phases.last())?
                     .end_ns
                     + ONSET_WINDOW_NS,

@@ -770,11 +770,11 @@ pub fn phase_lag(online: &[PhaseChange], offline: &[PhaseSpan]) -> LagStats {
             let b = span.start_ns;
             let best = online
                 .iter()
-                .filter(|c| c.phase == span.name && c.decided_ns.abs_diff(b) <= MATCH_WINDOW_NS)
+                .filter(|c| c.phase == span.phase && c.decided_ns.abs_diff(b) <= MATCH_WINDOW_NS)
                 .min_by_key(|c| c.decided_ns.abs_diff(b));
             let ms = |t: u64| (t as f64 - b as f64) * 1e-6;
             BoundaryLag {
-                phase: span.name,
+                phase: span.phase,
                 offline_ns: b,
                 lag_ms: best.map(|c| ms(c.decided_ns)),
                 start_error_ms: best.map(|c| ms(c.start_ns)),
@@ -1077,8 +1077,8 @@ mod tests {
 
     #[test]
     fn the_lag_matches_each_boundary_to_the_nearest_change_into_its_phase() {
-        let span = |name, start_ns, end_ns| PhaseSpan {
-            name,
+        let span = |phase, start_ns, end_ns| PhaseSpan {
+            phase,
             start_ns,
             end_ns,
         };

@@ -94,15 +94,15 @@ impl SkillAcc {
         let end_ns = phases.last().map_or(0, |p| p.end_ns);
         let grasp_start = phases
             .iter()
-            .find(|p| p.name == Phase::Grasp)
+            .find(|p| p.phase == Phase::Grasp)
             .map_or(start_ns, |p| p.start_ns);
         let grasp_end = phases
             .iter()
             .rev()
-            .find(|p| matches!(p.name, Phase::Release | Phase::Grasp) || HELD.contains(&p.name))
+            .find(|p| matches!(p.phase, Phase::Release | Phase::Grasp) || HELD.contains(&p.phase))
             .map_or(end_ns, |p| p.end_ns);
         let held_span = {
-            let h: Vec<&PhaseSpan> = phases.iter().filter(|p| HELD.contains(&p.name)).collect();
+            let h: Vec<&PhaseSpan> = phases.iter().filter(|p| HELD.contains(&p.phase)).collect();
             match (h.first(), h.last()) {
                 (Some(a), Some(b)) => (a.start_ns, b.end_ns),
                 _ => (grasp_start, grasp_end),
@@ -208,7 +208,7 @@ impl SkillAcc {
             self.pi += 1;
         }
         let pi = self.pi;
-        let phase = self.phases.get(pi).map(|p| p.name);
+        let phase = self.phases.get(pi).map(|p| p.phase);
         let offset = t.saturating_sub(self.grasp_start) as f64;
         let mut sum_n = 0.0;
         for (fi, f) in c.fingers.iter().enumerate() {
@@ -317,7 +317,7 @@ impl SkillAcc {
         let (motion, extent) = self.motion();
         let mut phase_durations = BTreeMap::new();
         for p in &self.phases {
-            *phase_durations.entry(p.name).or_insert(0.0) += (p.end_ns - p.start_ns) as f64 * 1e-9;
+            *phase_durations.entry(p.phase).or_insert(0.0) += (p.end_ns - p.start_ns) as f64 * 1e-9;
         }
         let internal = self.internal;
         let internal_force_n = if internal.1 > 0 {

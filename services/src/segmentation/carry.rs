@@ -42,7 +42,7 @@ impl CarryState {
         CarryState {
             from: phases
                 .iter()
-                .find(|p| p.name == Phase::Grasp)
+                .find(|p| p.phase == Phase::Grasp)
                 .map_or(first, |p| p.start_ns),
             to: phases.last().map_or(0, |p| p.end_ns),
             min_carry_m: params.min_carry_m,

@@ -129,7 +129,7 @@ fn well_formed(
             floor = b;
             floor_ns = end_ns;
             phases.push(PhaseSpan {
-                name,
+                phase: name,
                 start_ns,
                 end_ns,
             });

@@ -106,7 +106,7 @@ pub(super) fn mean_intensity(
 ) -> BTreeMap<Phase, [f64; 4]> {
     let mut m: BTreeMap<Phase, ([f64; 4], usize)> = BTreeMap::new();
     for (p, (s, c)) in phases.iter().zip(per_phase) {
-        let e = m.entry(p.name).or_insert(([0.0; 4], 0));
+        let e = m.entry(p.phase).or_insert(([0.0; 4], 0));
         for k in 0..4 {
             e.0[k] += s[k];
         }

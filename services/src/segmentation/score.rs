@@ -29,7 +29,7 @@ pub fn score(found: &[PhaseSpan], truth: &[GroundTruthPhase]) -> Score {
         let name = t.name.parse::<Phase>().ok();
         let best = found
             .iter()
-            .filter(|f| Some(f.name) == name)
+            .filter(|f| Some(f.phase) == name)
             .map(|f| {
                 let ov = f
                     .end_ns
@@ -97,7 +97,7 @@ mod tests {
         let found: Vec<PhaseSpan> = truth
             .iter()
             .map(|p| PhaseSpan {
-                name: p.name.parse().unwrap(),
+                phase: p.name.parse().unwrap(),
                 start_ns: p.start_ns,
                 end_ns: p.end_ns,
             })

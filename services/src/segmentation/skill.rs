@@ -10,18 +10,9 @@ use dfs_core::DfsError;
 use serde::{Deserialize, Serialize};
 
 use crate::session::ContactPart;
-/// A phase found by [`segment`](super::segment).
-#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
-pub struct PhaseSpan {
-    /// The phase (`approach`, `preshape`, `grasp`, `lift`, `hold`, `transport`, `place`,
-    /// `release`, `retreat`).
-    pub name: Phase,
-    /// Start, ns since the session's start (the log time of its first `/object/state` sample:
-    /// 0 in the files `icms simulate` records, later for recorders that log epoch times).
-    pub start_ns: u64,
-    /// End (exclusive), ns since the session start.
-    pub end_ns: u64,
-}
+// A phase found by `segment`: dfs-core's one phase-span type (`{"name", "start_ns", "end_ns"}`
+// in JSON), still at this path.
+pub use dfs_core::scenario::PhaseSpan;
 
 /// The result of [`segment`](super::segment): one skill per grasp, in time order.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]

@@ -144,7 +144,7 @@ fn print_run(r: &Run, label: &str, changes: &[PhaseChange], stats: &LagStats) {
     let offline: Vec<String> = r
         .offline
         .iter()
-        .map(|p| format!("{} {}", p.name, p.start_ns / 1_000_000))
+        .map(|p| format!("{} {}", p.phase, p.start_ns / 1_000_000))
         .collect();
     println!(
         "{} {} {label}: median |lag| {:.0} ms, matched {}/{}\n  offline:  {}\n  on-line:  {}",

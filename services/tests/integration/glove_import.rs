@@ -112,7 +112,7 @@ fn assert_same_skills(a: &[Skill], b: &[Skill], tol: &Tolerance) {
     } = *tol;
     assert_eq!(a.len(), b.len(), "skill count");
     for (x, y) in a.iter().zip(b) {
-        let names = |s: &Skill| s.phases.iter().map(|p| p.name).collect::<Vec<_>>();
+        let names = |s: &Skill| s.phases.iter().map(|p| p.phase).collect::<Vec<_>>();
         assert_eq!(names(x), names(y));
         for (p, q) in x.phases.iter().zip(&y.phases) {
             assert!(p.start_ns.abs_diff(q.start_ns) < 5_000_000, "{p:?} {q:?}");

@@ -39,7 +39,7 @@ fn describe(seg: &Segmentation, s: &Session) -> String {
         .map(|p| {
             format!(
                 "{} {}-{}",
-                p.name,
+                p.phase,
                 p.start_ns / 1_000_000,
                 p.end_ns / 1_000_000
             )
@@ -77,7 +77,11 @@ fn box_pinch_lift_finds_every_phase_in_order_near_the_ground_truth() {
     let s = session("box-pinch-lift", 1, None);
     let seg = segment(&s, &SegmentParams::default());
     assert_eq!(seg.skills.len(), 1, "{}", describe(&seg, &s));
-    let names: Vec<&str> = seg.skills[0].phases.iter().map(|p| p.name.name()).collect();
+    let names: Vec<&str> = seg.skills[0]
+        .phases
+        .iter()
+        .map(|p| p.phase.name())
+        .collect();
     let truth: Vec<&str> = s.phases.iter().map(|p| p.name.as_str()).collect();
     assert_eq!(names, truth, "{}", describe(&seg, &s));
     let sc = score(&found(&seg), &s.phases);

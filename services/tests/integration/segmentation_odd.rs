@@ -223,7 +223,7 @@ fn check(seg: &Segmentation, s: &Session) -> Result<(), String> {
                 ));
             }
             prev_end = p.end_ns;
-            prev_name = format!("{} (skill {k})", p.name);
+            prev_name = format!("{} (skill {k})", p.phase);
         }
         let src = &skill.parameters.source;
         if src.start_ns != skill.phases[0].start_ns || src.end_ns != prev_end {
@@ -244,7 +244,7 @@ fn describe(seg: &Segmentation) -> String {
             s.phases.iter().map(move |p| {
                 format!(
                     "[{k}] {} {:.3}-{:.3}",
-                    p.name,
+                    p.phase,
                     p.start_ns as f64 * 1e-9,
                     p.end_ns as f64 * 1e-9
                 )

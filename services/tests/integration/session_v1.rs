@@ -23,7 +23,7 @@ fn a_v1_session_reads_segments_and_ingests() {
     let seg = segment(&session, &SegmentParams::default());
     assert_eq!(seg.skills.len(), 1);
     let skill = &seg.skills[0];
-    let names: Vec<&str> = skill.phases.iter().map(|p| p.name.name()).collect();
+    let names: Vec<&str> = skill.phases.iter().map(|p| p.phase.name()).collect();
     assert_eq!(
         names,
         ["approach", "grasp", "lift", "hold", "place", "release", "retreat"]

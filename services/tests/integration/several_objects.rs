@@ -90,7 +90,7 @@ fn a_session_of_three_objects_records_each_and_its_skill_names_the_box() {
     assert_eq!(grasped.name.as_deref(), Some("box"));
     assert_eq!(grasped.shape.to_string(), "box");
     assert_eq!(grasped.mass, 0.2);
-    let phases: Vec<Phase> = seg.skills[0].phases.iter().map(|p| p.name).collect();
+    let phases: Vec<Phase> = seg.skills[0].phases.iter().map(|p| p.phase).collect();
     assert!(
         phases.contains(&Phase::Lift) && phases.contains(&Phase::Place),
         "{phases:?}"

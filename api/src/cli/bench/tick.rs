@@ -51,7 +51,7 @@
 use super::super::CliError;
 use dfs_core::contact::{ContactModel, Friction};
 use dfs_core::dfs::{Dfs, DfsParams, GloveSample};
-use dfs_core::fixtures::glove10_holding_paper_sphere;
+use dfs_core::fixtures::{glove10_holding_paper_sphere, HeldSphere};
 use dfs_core::hand::{HandModel, Kinematics};
 use dfs_core::math::{Isometry, Real, Rotation, Vector};
 use dfs_core::object::{ObjectState, RigidObject, Shape};
@@ -822,7 +822,12 @@ fn bench_replay(
 /// The benchmark before issue 21: glove10 and the paper's sphere, one frozen sample, the
 /// object reset every tick.
 fn bench_frozen(batch: usize, batches: usize) -> Result<TickBench, CliError> {
-    let (mut dfs, q, tau, base) = glove10_holding_paper_sphere()?;
+    let HeldSphere {
+        mut dfs,
+        q,
+        tau,
+        base,
+    } = glove10_holding_paper_sphere()?;
     let start = *dfs.object_state();
     let sample = GloveSample {
         q: &q,

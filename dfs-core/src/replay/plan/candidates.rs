@@ -366,7 +366,7 @@ fn score(
         // stay out of the object: the demonstrator's did, or it would be a contact.
         let presses = (0..nt).any(|k| {
             let c_b = (inv_start * kin.tip_centres[k]).coords;
-            !active[k] && skill.shape.closest(&c_b).0 < hand.fingertips[k].radius
+            !active[k] && skill.shape.closest(&c_b).distance < hand.fingertips[k].radius
         });
         if presses {
             error = error.max(1.0);

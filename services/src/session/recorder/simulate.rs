@@ -84,9 +84,9 @@ pub fn record_simulation_until<'a>(
             .phases()
             .iter()
             .map(|s| GroundTruthPhase {
-                name: s.phase.name().to_owned(),
-                start_ns: s.start_ns,
-                end_ns: s.end_ns,
+                name: s.span.phase.name().to_owned(),
+                start_ns: s.span.start_ns,
+                end_ns: s.span.end_ns,
             })
             .collect(),
         started_at: None,
