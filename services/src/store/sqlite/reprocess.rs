@@ -1,12 +1,12 @@
 //! Reprocessing in SQLite: the sessions an older segmentation made, and replacing a session's
 //! skills in one transaction.
 
-use sqlx::SqlitePool;
+use sqlx::{Sqlite, SqlitePool};
 
-use super::skills::insert_skills;
 use crate::store::catalog::{BlobRef, CheckedSkill, ReplacedRows, Replacement};
 use crate::store::reprocess::{plan, StoredForm};
 use crate::store::rows::approach_to_blob;
+use crate::store::skill_insert::insert_skills;
 use crate::store::types::StaleSession;
 use crate::store::StoreError;
 
@@ -157,7 +157,7 @@ pub(super) async fn replace(
         }
     }
     let added = plan.added.iter().map(|&i| &skills[i]);
-    let added_ids = insert_skills(&mut tx, session_id, added).await?;
+    let added_ids = insert_skills::<Sqlite>(&mut tx, session_id, added).await?;
     let version_column = i64::from(version);
     sqlx::query!(
         "UPDATE sessions SET segmentation_version = ? WHERE id = ?",
