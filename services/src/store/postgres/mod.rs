@@ -36,7 +36,7 @@ use super::catalog::{
 use super::jobs::JobClaim;
 use super::query::{SessionFilter, SkillFilter};
 use super::reprocess::{plan, StoredForm};
-use super::rows::{approach_to_blob, convert};
+use super::rows::{approach_to_blob, convert, session_version};
 use super::skill_insert::insert_skills;
 use super::types::{
     Hand, HandSummary, IngestOutcome, Replay, SessionRecord, SkillRecord, StaleSession,
@@ -178,14 +178,6 @@ async fn insert_session_row(
         },
     )
     .await?)
-}
-
-fn version_u32(session_id: i64, v: i64) -> Result<u32, StoreError> {
-    u32::try_from(v).map_err(|_| {
-        StoreError::Corrupt(format!(
-            "session {session_id}: segmentation version {v} is out of range"
-        ))
-    })
 }
 
 #[async_trait::async_trait]
@@ -402,17 +394,7 @@ impl Catalog for PgCatalog {
         &self,
         version: u32,
     ) -> Result<Vec<StaleSession>, StoreError> {
-        store_postgres::sessions_segmented_before(&self.pool, i64::from(version))
-            .await?
-            .into_iter()
-            .map(|r| {
-                Ok(StaleSession {
-                    id: r.id,
-                    segmentation_version: version_u32(r.id, r.segmentation_version)?,
-                    skill_count: usize::try_from(r.skill_count).unwrap_or(0),
-                })
-            })
-            .collect()
+        convert(store_postgres::sessions_segmented_before(&self.pool, i64::from(version)).await?)
     }
 
     async fn sessions_segmented_after(&self, version: u32) -> Result<u64, StoreError> {
@@ -438,7 +420,7 @@ impl Catalog for PgCatalog {
             tx.rollback().await?;
             return Ok(Replacement::SessionNotFound);
         };
-        let from_version = version_u32(session_id, from)?;
+        let from_version = session_version(session_id, from)?;
         if from_version >= version {
             tx.rollback().await?;
             return Ok(Replacement::UpToDate);
@@ -446,28 +428,7 @@ impl Catalog for PgCatalog {
         let old: Vec<(i64, StoredForm)> = store_postgres::stored_skills_of(&mut tx, session_id)
             .await?
             .into_iter()
-            .map(|r| {
-                (
-                    r.id,
-                    StoredForm {
-                        object_shape: r.object_shape,
-                        object_name: r.object_name,
-                        object_mass: r.object_mass,
-                        mu: r.mu,
-                        contact_count: r.contact_count,
-                        contact_model: r.contact_model,
-                        grasp_type: r.grasp_type,
-                        quality: r.quality,
-                        volume: r.volume,
-                        duration_s: r.duration_s,
-                        start_ns: r.start_ns,
-                        end_ns: r.end_ns,
-                        phase_durations: r.phase_durations,
-                        feature: r.feature,
-                        params: r.params,
-                    },
-                )
-            })
+            .map(StoredForm::of_row)
             .collect();
         let plan = plan(&old, &new_forms);
         for &(id, i) in &plan.kept {
