@@ -315,22 +315,18 @@ impl Catalog for PgCatalog {
     }
 
     async fn insert_hand(&self, h: NewHand<'_>) -> Result<Option<String>, StoreError> {
-        let dof = i64::try_from(h.summary.dof)
-            .map_err(|_| StoreError::InvalidHand(format!("{} DOFs are too many", h.summary.dof)))?;
-        let fingers = serde_json::to_string(&h.summary.fingers)?;
-        let dof_names = serde_json::to_string(&h.summary.dof_names)?;
-        let [torque_limit_min, torque_limit_max] = h.summary.torque_limit;
+        let c = h.columns()?;
         Ok(store_postgres::insert_hand(
             &self.pool,
             NewHandRow {
                 name: h.name,
                 spec: h.spec_json,
                 urdf: h.urdf,
-                dof,
-                fingers: &fingers,
-                dof_names: &dof_names,
-                torque_limit_min,
-                torque_limit_max,
+                dof: c.dof,
+                fingers: &c.fingers,
+                dof_names: &c.dof_names,
+                torque_limit_min: c.torque_limit_min,
+                torque_limit_max: c.torque_limit_max,
             },
         )
         .await?)
