@@ -103,6 +103,40 @@ pub(crate) struct NewHand<'a> {
     pub summary: &'a HandSummary,
 }
 
+/// The columns of a new hand's row that its summary holds in another form, as every backend
+/// stores them.
+#[derive(Debug, Clone, PartialEq)]
+pub(crate) struct HandColumns {
+    /// Its DOFs, as the signed column holds them.
+    pub dof: i64,
+    /// Its fingertip names, JSON.
+    pub fingers: String,
+    /// Its DOF names, JSON.
+    pub dof_names: String,
+    /// Its lowest torque limit.
+    pub torque_limit_min: f64,
+    /// Its highest torque limit.
+    pub torque_limit_max: f64,
+}
+
+impl NewHand<'_> {
+    /// The columns of its row computed from its summary; more DOFs than the column holds are
+    /// [`StoreError::InvalidHand`].
+    pub(crate) fn columns(&self) -> Result<HandColumns, StoreError> {
+        let s = self.summary;
+        let dof = i64::try_from(s.dof)
+            .map_err(|_| StoreError::InvalidHand(format!("{} DOFs are too many", s.dof)))?;
+        let [torque_limit_min, torque_limit_max] = s.torque_limit;
+        Ok(HandColumns {
+            dof,
+            fingers: serde_json::to_string(&s.fingers)?,
+            dof_names: serde_json::to_string(&s.dof_names)?,
+            torque_limit_min,
+            torque_limit_max,
+        })
+    }
+}
+
 /// A replay whose blob is written: the row [`Catalog::insert_replay`] writes.
 #[derive(Debug, Clone, Copy)]
 pub(crate) struct NewReplay<'a> {

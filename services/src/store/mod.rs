@@ -37,6 +37,8 @@ mod records;
 mod remote;
 mod reprocess;
 mod rows;
+mod skill_filter;
+mod skill_insert;
 mod sqlite;
 mod sweep;
 mod types;

@@ -5,7 +5,7 @@
 use dfs_core::names::Named;
 
 use super::catalog::{BlobRef, CheckedSkill, Replacement};
-use super::rows::feature_to_blob;
+use super::rows::{feature_to_blob, StoredSkillRow};
 use super::types::{NewSkill, ReplacedSkills, StaleSession};
 use super::{blob, validate_skill, Store, StoreError};
 
@@ -32,6 +32,30 @@ pub(crate) struct StoredForm {
 }
 
 impl StoredForm {
+    /// A stored skill's row as its id and its stored form.
+    pub(crate) fn of_row(r: StoredSkillRow) -> (i64, StoredForm) {
+        (
+            r.id,
+            StoredForm {
+                object_shape: r.object_shape,
+                object_name: r.object_name,
+                object_mass: r.object_mass,
+                mu: r.mu,
+                contact_count: r.contact_count,
+                contact_model: r.contact_model,
+                grasp_type: r.grasp_type,
+                quality: r.quality,
+                volume: r.volume,
+                duration_s: r.duration_s,
+                start_ns: r.start_ns,
+                end_ns: r.end_ns,
+                phase_durations: r.phase_durations,
+                feature: r.feature,
+                params: r.params,
+            },
+        )
+    }
+
     /// What a catalog writes for the checked skill `c`.
     pub(crate) fn of_new(c: &CheckedSkill) -> Result<Self, StoreError> {
         let s = &c.skill;

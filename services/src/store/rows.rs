@@ -11,11 +11,12 @@ use dfs_core::replay::FailureReason;
 
 use super::catalog::IndexedSkill;
 use super::error::StoreError;
-use super::types::{HandSummary, Replay, SessionRecord, SkillRecord, FEATURE_DIM};
+use super::types::{HandSummary, Replay, SessionRecord, SkillRecord, StaleSession, FEATURE_DIM};
 use crate::assist::features::TEMPLATE_DIM;
 
 pub(crate) use store_postgres::rows::{
     HandRow, HandSummaryRow, IndexedSkillRow, JobRow, ReplayRow, SessionRow, SkillRow,
+    StaleSessionRow, StoredSkillRow,
 };
 
 /// A feature vector as its column holds it.
@@ -67,6 +68,15 @@ fn named<T: Named>(id: i64, column: &str, text: &str) -> Result<T, StoreError> {
 fn segmentation_version(v: i64) -> Result<u32, StoreError> {
     u32::try_from(v)
         .map_err(|_| StoreError::Corrupt(format!("segmentation version {v} is out of range")))
+}
+
+/// The segmentation version of session `session_id` from its signed column.
+pub(crate) fn session_version(session_id: i64, v: i64) -> Result<u32, StoreError> {
+    u32::try_from(v).map_err(|_| {
+        StoreError::Corrupt(format!(
+            "session {session_id}: segmentation version {v} is out of range"
+        ))
+    })
 }
 
 impl TryFrom<SkillRow> for SkillRecord {
@@ -206,6 +216,18 @@ impl TryFrom<IndexedSkillRow> for IndexedSkill {
             object_shape: r.object_shape,
             grasp_type: r.grasp_type,
             object_name: r.object_name,
+        })
+    }
+}
+
+impl TryFrom<StaleSessionRow> for StaleSession {
+    type Error = StoreError;
+
+    fn try_from(r: StaleSessionRow) -> Result<Self, StoreError> {
+        Ok(StaleSession {
+            id: r.id,
+            segmentation_version: session_version(r.id, r.segmentation_version)?,
+            skill_count: usize::try_from(r.skill_count).unwrap_or(0),
         })
     }
 }

@@ -12,11 +12,7 @@ pub(super) async fn insert_hand(
     pool: &SqlitePool,
     h: NewHand<'_>,
 ) -> Result<Option<String>, StoreError> {
-    let dof = i64::try_from(h.summary.dof)
-        .map_err(|_| StoreError::InvalidHand(format!("{} DOFs are too many", h.summary.dof)))?;
-    let fingers = serde_json::to_string(&h.summary.fingers)?;
-    let dof_names = serde_json::to_string(&h.summary.dof_names)?;
-    let [torque_min, torque_max] = h.summary.torque_limit;
+    let c = h.columns()?;
     Ok(sqlx::query_scalar!(
         r#"INSERT INTO hands (name, spec, urdf, dof, fingers, dof_names, torque_limit_min,
                torque_limit_max) VALUES (?, ?, ?, ?, ?, ?, ?, ?)
@@ -24,11 +20,11 @@ pub(super) async fn insert_hand(
         h.name,
         h.spec_json,
         h.urdf,
-        dof,
-        fingers,
-        dof_names,
-        torque_min,
-        torque_max,
+        c.dof,
+        c.fingers,
+        c.dof_names,
+        c.torque_limit_min,
+        c.torque_limit_max,
     )
     .fetch_optional(pool)
     .await?)

@@ -4,8 +4,9 @@
 //! Every fixed query is one of sqlx's compile-time-checked macros (`query!`, `query_as!`,
 //! `query_scalar!`), checked against the migrated schema: with a data base at `DATABASE_URL`
 //! while developing, from the query data committed in `.sqlx/` otherwise (regenerate it with
-//! `scripts/sqlx-prepare` after changing a query or a migration). The one query built at run
-//! time is the skill filter ([`skill_filter`]), from typed parts with every value bound.
+//! `scripts/sqlx-prepare` after changing a query or a migration). Built at run time, from
+//! typed parts with every value bound, and shared with the PostgreSQL backend: the skill
+//! filter ([`skill_filter`]) and the multi-row skill inserts ([`super::skill_insert`]).
 
 mod hands;
 mod jobs;

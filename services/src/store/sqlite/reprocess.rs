@@ -1,12 +1,14 @@
 //! Reprocessing in SQLite: the sessions an older segmentation made, and replacing a session's
 //! skills in one transaction.
 
-use sqlx::SqlitePool;
+use sqlx::{Sqlite, SqlitePool};
 
-use super::skills::insert_skills;
 use crate::store::catalog::{BlobRef, CheckedSkill, ReplacedRows, Replacement};
 use crate::store::reprocess::{plan, StoredForm};
-use crate::store::rows::approach_to_blob;
+use crate::store::rows::{
+    approach_to_blob, convert, session_version, StaleSessionRow, StoredSkillRow,
+};
+use crate::store::skill_insert::insert_skills;
 use crate::store::types::StaleSession;
 use crate::store::StoreError;
 
@@ -16,7 +18,8 @@ pub(super) async fn segmented_before(
     version: u32,
 ) -> Result<Vec<StaleSession>, StoreError> {
     let version = i64::from(version);
-    let rows = sqlx::query!(
+    let rows = sqlx::query_as!(
+        StaleSessionRow,
         r#"SELECT id AS "id!", segmentation_version,
                (SELECT count(*) FROM skills WHERE session_id = s.id) AS "skill_count!: i64"
            FROM sessions s WHERE segmentation_version < ? ORDER BY id"#,
@@ -24,20 +27,7 @@ pub(super) async fn segmented_before(
     )
     .fetch_all(pool)
     .await?;
-    rows.into_iter()
-        .map(|r| {
-            Ok(StaleSession {
-                id: r.id,
-                segmentation_version: u32::try_from(r.segmentation_version).map_err(|_| {
-                    StoreError::Corrupt(format!(
-                        "session {}: segmentation version {} is out of range",
-                        r.id, r.segmentation_version
-                    ))
-                })?,
-                skill_count: usize::try_from(r.skill_count).unwrap_or(0),
-            })
-        })
-        .collect()
+    convert(rows)
 }
 
 /// Number of sessions segmented by a version above `version`.
@@ -78,17 +68,14 @@ pub(super) async fn replace(
         tx.rollback().await?;
         return Ok(Replacement::SessionNotFound);
     };
-    let from_version = u32::try_from(from).map_err(|_| {
-        StoreError::Corrupt(format!(
-            "session {session_id}: segmentation version {from} is out of range"
-        ))
-    })?;
+    let from_version = session_version(session_id, from)?;
     if from_version >= version {
         tx.rollback().await?;
         return Ok(Replacement::UpToDate);
     }
 
-    let old = sqlx::query!(
+    let old: Vec<(i64, StoredForm)> = sqlx::query_as!(
+        StoredSkillRow,
         r#"SELECT id AS "id!", object_shape, object_name, object_mass, mu, contact_count,
                contact_model, grasp_type, quality, volume, duration_s, start_ns, end_ns,
                phase_durations, feature, params
@@ -98,29 +85,8 @@ pub(super) async fn replace(
     .fetch_all(&mut *tx)
     .await?
     .into_iter()
-    .map(|r| {
-        (
-            r.id,
-            StoredForm {
-                object_shape: r.object_shape,
-                object_name: r.object_name,
-                object_mass: r.object_mass,
-                mu: r.mu,
-                contact_count: r.contact_count,
-                contact_model: r.contact_model,
-                grasp_type: r.grasp_type,
-                quality: r.quality,
-                volume: r.volume,
-                duration_s: r.duration_s,
-                start_ns: r.start_ns,
-                end_ns: r.end_ns,
-                phase_durations: r.phase_durations,
-                feature: r.feature,
-                params: r.params,
-            },
-        )
-    })
-    .collect::<Vec<_>>();
+    .map(StoredForm::of_row)
+    .collect();
     let plan = plan(&old, &new_forms);
 
     // A kept skill takes the new approach template (derived data, not the skill's identity:
@@ -157,7 +123,7 @@ pub(super) async fn replace(
         }
     }
     let added = plan.added.iter().map(|&i| &skills[i]);
-    let added_ids = insert_skills(&mut tx, session_id, added).await?;
+    let added_ids = insert_skills::<Sqlite>(&mut tx, session_id, added).await?;
     let version_column = i64::from(version);
     sqlx::query!(
         "UPDATE sessions SET segmentation_version = ? WHERE id = ?",

@@ -4,12 +4,12 @@
 use std::collections::HashSet;
 
 use dfs_core::names::Named;
-use sqlx::SqlitePool;
+use sqlx::{Sqlite, SqlitePool};
 
-use super::skills::insert_skills;
 use crate::store::catalog::{BlobRef, DeletedSession, NewSession};
 use crate::store::query::SessionFilter;
 use crate::store::rows::{convert, SessionRow};
+use crate::store::skill_insert::insert_skills;
 use crate::store::types::{IngestOutcome, SessionRecord};
 use crate::store::StoreError;
 
@@ -80,7 +80,7 @@ pub(super) async fn insert(
         tx.rollback().await?;
         return Ok(None);
     };
-    let skill_ids = insert_skills(&mut tx, session_id, new.skills.iter()).await?;
+    let skill_ids = insert_skills::<Sqlite>(&mut tx, session_id, new.skills.iter()).await?;
     tx.commit().await?;
     Ok(Some((session_id, skill_ids)))
 }
@@ -103,7 +103,9 @@ pub(super) async fn bulk_insert(
     let mut out = Vec::with_capacity(sessions.len());
     for new in sessions {
         out.push(match insert_row(&mut tx, new).await? {
-            Some(session_id) => Some(insert_skills(&mut tx, session_id, new.skills.iter()).await?),
+            Some(session_id) => {
+                Some(insert_skills::<Sqlite>(&mut tx, session_id, new.skills.iter()).await?)
+            }
             None => None,
         });
     }
