@@ -25,6 +25,7 @@ enum Spring {
 /// The implicit finger step's matrix without the contact springs, column by column (the
 /// storage is column-major and M symmetric): `a`'s column i is M's plus the joint damping
 /// `dt joint_damping` on the diagonal; `rhs[i] = (M q̇)[i] + dt τ[i]`.
+#[inline]
 fn finger_step_matrix(
     a: &mut DofMatrix,
     mass: &DofMatrix,
@@ -132,6 +133,7 @@ impl Dfs {
     /// `fb_torque` (`Jᵀ f`), and, touching, its contact spring-damper's force into `rhs` and its
     /// stiffness and damping into the step's matrix (`scratch`, the solve order's lower
     /// triangle).
+    #[inline]
     fn add_tip_to_finger_step(
         &mut self,
         k: usize,
@@ -212,6 +214,7 @@ impl Dfs {
 
     /// The joint velocities `qd_new` the implicit step solved for, integrated to the joint
     /// angles and stopped at the joints' limits.
+    #[inline]
     fn step_joints(&mut self, qd_new: &[Real; MAX_DOF]) {
         let dt = self.params.dt;
         for d in 0..self.hand.dof() {

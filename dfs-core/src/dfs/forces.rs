@@ -88,6 +88,7 @@ struct TipPush {
 /// object with the contact ramp `ramp` (m): in proportion up to the ramp's depth, all of them
 /// beyond, none across a gap (module documentation). With it, the stiffness (N/m) with which
 /// the push not passed on draws a pad on the ramp in (0 off the ramp).
+#[inline]
 fn pad_share(pressed: Real, ramp: Real, c: &Intensity) -> (Intensity, Real) {
     let share = if pressed <= 0.0 {
         0.0
@@ -171,6 +172,7 @@ impl Dfs {
     }
 
     /// The objects' orientations, the base's turn and how many contacts touch each object.
+    #[inline]
     pub(super) fn force_context(&self) -> ForceContext {
         let rots = self.object_rotations();
         let dt = self.params.dt;
@@ -209,6 +211,7 @@ impl Dfs {
     /// friction cone together with its stick spring and torsion (into the tick's output and
     /// its [`TipState`]). The contact frame, transmitted intensities and object when it
     /// transmits force; `None` when it touches nothing or does not push.
+    #[inline]
     pub(super) fn tip_contact(
         &mut self,
         k: usize,
@@ -240,6 +243,7 @@ impl Dfs {
 
     /// What touching fingertip `k` asks of the friction cone on object `o`: the operator's
     /// intensities its pad passes on, plus the stick spring's and the torsion's.
+    #[inline]
     fn tip_push(&mut self, k: usize, frame: ContactFrame, o: usize, cx: &ForceContext) -> TipPush {
         let rot = cx.rots[o];
         let rot_inv = rot.transpose();
@@ -300,6 +304,7 @@ impl Dfs {
     /// commanded to, with its own closest point and normal on the object. The measured
     /// angles differ from θ by the sensors' noise, which the stiff springs would pass on
     /// to the object as force (and a curved surface's normal turns with it).
+    #[inline]
     fn dynamics_tip(
         &self,
         k: usize,
@@ -337,6 +342,7 @@ impl Dfs {
     /// object, and how fast its contact point moves relative to the object; the latter, less
     /// what its joints explain, into its [`TipState::spring_vel`], and the contact point into
     /// its [`TipState::prev_point`].
+    #[inline]
     fn tangential_spring(
         &mut self,
         k: usize,
@@ -383,6 +389,7 @@ impl Dfs {
     /// limited to `budget` per unit inverse effective mass ([`STABLE_DAMPING`]). A cheap bound
     /// on the inverse effective mass first (|r × t| ≤ |r|), the exact one only when that bound
     /// limits it.
+    #[inline]
     fn tangential_damping_at(&self, o: usize, frame: &ContactFrame, budget: Real) -> Real {
         let body = &self.bodies[o];
         let mut damping = self.params.surface_damping;
@@ -401,6 +408,7 @@ impl Dfs {
     /// object's spin would otherwise ring from tick to tick at the torsional cone's limit (a
     /// 10 g, 2 cm sphere: c_τ dt nᵀ I⁻¹ n = 3), which the elliptic cone takes out of the pad's
     /// tangential friction.
+    #[inline]
     fn torsion(
         &self,
         k: usize,
@@ -433,6 +441,7 @@ impl Dfs {
     /// Fingertip `k`'s contact settled by the friction cone (`split` of `push`): into the
     /// tick's output, and into its [`TipState`] whether it sticks, its twist, anchor, spring
     /// deflection and passive friction. Whether it transmits force.
+    #[inline]
     fn settle_tip(
         &mut self,
         k: usize,

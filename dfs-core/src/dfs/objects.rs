@@ -28,6 +28,7 @@ pub(super) fn not_finite(state: &ObjectState, f_ext: &Wrench) -> Option<&'static
 
 impl Dfs {
     /// Each object's orientation as a matrix (identity beyond the scene's objects).
+    #[inline]
     pub(super) fn object_rotations(&self) -> [Rotation3<Real>; MAX_OBJECTS] {
         let mut rots = [Rotation3::<Real>::identity(); MAX_OBJECTS];
         for (r, o) in rots.iter_mut().zip(&self.objects[..self.n_objects]) {
