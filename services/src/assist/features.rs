@@ -21,6 +21,7 @@
 //! Every quantity is in the world or the object's frame, not the hand's: the template of a
 //! grasp made with one hand model compares with one made with another.
 
+use dfs_core::contact::ContactFrame;
 use dfs_core::dfs::{BodyContact, TickOutput, MAX_OBJECTS};
 use dfs_core::hand::{MAX_CONTACT_SHAPES, MAX_TIPS};
 use dfs_core::math::{Isometry, Point, Vector};
@@ -162,6 +163,27 @@ pub struct TipTouch {
     pub normal_force: f64,
 }
 
+impl TipTouch {
+    /// The touch of a contact that is `touching` object `object` at `frame` (in B), pushing
+    /// (`in_contact`) with normal intensity `normal` (N); `None` when it does not touch.
+    pub fn of(
+        touching: bool,
+        frame: Option<&ContactFrame>,
+        object: usize,
+        in_contact: bool,
+        normal: f64,
+    ) -> Option<TipTouch> {
+        let frame = frame.filter(|_| touching)?;
+        Some(TipTouch {
+            object,
+            p_b: frame.p_b,
+            normal_b: frame.normal_b(),
+            in_contact,
+            normal_force: if in_contact { normal.max(0.0) } else { 0.0 },
+        })
+    }
+}
+
 /// What the assistant sees of one tick. Fixed capacity, `Copy`: it crosses a bounded channel
 /// to the assistant's thread without allocating.
 #[derive(Debug, Clone, Copy)]
@@ -223,39 +245,24 @@ impl Observation {
         o.n_tips = out.n_tips.min(MAX_TIPS);
         o.thumb = thumb.min(o.n_tips.saturating_sub(1));
         o.tips[..o.n_tips].copy_from_slice(&out.tip_centres[..o.n_tips]);
-        for k in 0..o.n_tips {
-            let tip = &out.tips[k];
-            o.touch[k] = match (tip.touching, tip.frame) {
-                (true, Some(frame)) => Some(TipTouch {
-                    object: tip.object,
-                    p_b: frame.p_b,
-                    normal_b: frame.normal_b(),
-                    in_contact: tip.in_contact,
-                    normal_force: if tip.in_contact {
-                        tip.transmitted[2].max(0.0)
-                    } else {
-                        0.0
-                    },
-                }),
-                _ => None,
-            };
+        for (slot, tip) in o.touch.iter_mut().zip(&out.tips[..o.n_tips]) {
+            *slot = TipTouch::of(
+                tip.touching,
+                tip.frame.as_ref(),
+                tip.object,
+                tip.in_contact,
+                tip.transmitted[2],
+            );
         }
         o.n_body = body.len().min(MAX_CONTACT_SHAPES);
         for (slot, c) in o.body.iter_mut().zip(&body[..o.n_body]) {
-            *slot = match (c.touching, c.frame) {
-                (true, Some(frame)) => Some(TipTouch {
-                    object: c.object,
-                    p_b: frame.p_b,
-                    normal_b: frame.normal_b(),
-                    in_contact: c.in_contact,
-                    normal_force: if c.in_contact {
-                        c.transmitted[2].max(0.0)
-                    } else {
-                        0.0
-                    },
-                }),
-                _ => None,
-            };
+            *slot = TipTouch::of(
+                c.touching,
+                c.frame.as_ref(),
+                c.object,
+                c.in_contact,
+                c.transmitted[2],
+            );
         }
         o.n_objects = out.n_objects.min(MAX_OBJECTS);
         for i in 0..o.n_objects {

@@ -7,7 +7,7 @@
 //! against a live PostgreSQL). What is built at run time, from typed parts with every value
 //! bound, is the SQLite backend's code too: the skill filter ([`skill_filter`]) and the
 //! multi-row skill inserts ([`super::skill_insert`]). Behaviour is the SQLite backend's: the
-//! store's tests run against both (`services/tests/store_common`).
+//! store's tests run against both (`services/tests/integration/store_common`).
 //!
 //! Blobs stay files in the data directory (or objects in a bucket the servers share, ordered
 //! across servers by an advisory lock: [`blob_lock`]). The in-memory indexes are loaded at start and then
