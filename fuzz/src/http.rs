@@ -1,5 +1,6 @@
 //! The HTTP target: request bodies to the API's router in-process (`api::http::app` over a
-//! store in a scratch directory, as `icms serve` builds it), one request per input through
+//! store in a scratch directory, with the job workers that run its simulations and replays, as
+//! `icms serve` builds it), one request per input through
 //! `tower::ServiceExt::oneshot` on a current-thread runtime. A panic is a finding (the driver
 //! catches it), and so is any 5xx answer.
 //!
@@ -76,7 +77,23 @@ pub struct HttpTarget {
     mcap_parsed: Vec<McapFile>,
     hands: Vec<seeds::HandSeed>,
     log: ErrorLog,
+    /// Stops the job workers when the target is dropped.
+    _workers: WorkerGuard,
     _data: tempfile::TempDir,
+}
+
+/// The job workers of the target's server (`api::jobs::spawn_workers`, as `icms serve` starts
+/// them): without them a simulation or replay request waits out the server's job wait (30 s)
+/// for a job nobody runs, and answers 202.
+struct WorkerGuard {
+    stop: tokio_util::sync::CancellationToken,
+    _set: tokio::task::JoinSet<()>,
+}
+
+impl Drop for WorkerGuard {
+    fn drop(&mut self) {
+        self.stop.cancel();
+    }
 }
 
 fn err(what: &str, e: impl std::fmt::Display) -> SeedError {
@@ -117,7 +134,7 @@ impl HttpTarget {
             .into_config()
             .map_err(|e| err("server configuration", e))?;
         let full = seeds::full_session(&setup.scratch)?;
-        let (app, skill_id) = rt.block_on(async {
+        let (app, skill_id, workers) = rt.block_on(async {
             let store = services::store::Store::open(&config.data)
                 .await
                 .map_err(|e| err("opening the store", e))?;
@@ -133,7 +150,10 @@ impl HttpTarget {
                 .ok_or_else(|| err("storing the seed session", "no skills"))?;
             let state = api::http::AppState::new(store, &config.state)
                 .map_err(|e| err("starting the live stepping threads", e))?;
-            Ok::<_, SeedError>((api::http::app(state, &config.layers), skill_id))
+            let stop = tokio_util::sync::CancellationToken::new();
+            let set = api::jobs::spawn_workers(state.store(), &config.workers, state.jobs(), &stop);
+            let workers = WorkerGuard { stop, _set: set };
+            Ok::<_, SeedError>((api::http::app(state, &config.layers), skill_id, workers))
         })?;
 
         let hands = seeds::hands(&setup.hands_dir)?;
@@ -188,6 +208,7 @@ impl HttpTarget {
             mcap_parsed,
             hands,
             log,
+            _workers: workers,
             _data: data,
         })
     }
