@@ -1,5 +1,6 @@
-//! Test helpers shared by the services integration tests: JSON Schema validation against the
-//! embedded Foxglove schemas, example messages, and a top-level MCAP record lister.
+//! Test helpers shared by the services integration tests: JSON Schema validation (Python's
+//! `jsonschema`) against the embedded Foxglove schemas, example messages, and a top-level MCAP
+//! record lister.
 
 #![allow(dead_code)]
 
@@ -7,25 +8,52 @@ use serde_json::Value;
 use services::foxglove::*;
 use services::mcap_io::JsonSchema;
 
-/// Validates `instance` against `schema` (the embedded JSON Schema text); returns every error.
-pub fn validate_against(schema: &JsonSchema, instance: &Value) -> Result<(), Vec<String>> {
+/// Validates each of `instances` against `schema` (the embedded JSON Schema text) with Python's
+/// `jsonschema` (tests/python/validate_json.py), a validator independent of our code; returns
+/// each instance's errors, or `None` (with a note) where the tests run without their Python
+/// set-up (see `interpreter::python_with`).
+pub fn validate_each(schema: &JsonSchema, instances: &[Value]) -> Option<Vec<Vec<String>>> {
+    let python = crate::interpreter::python_with(&["jsonschema"])?;
     let schema_json: Value = serde_json::from_str(&schema.data).expect("schema is JSON");
-    let validator = jsonschema::validator_for(&schema_json).expect("schema compiles");
-    let errors: Vec<String> = validator
-        .iter_errors(instance)
-        .map(|e| format!("{} at {}", e, e.instance_path()))
-        .collect();
-    if errors.is_empty() {
+    let job = serde_json::json!({"schema": schema_json, "instances": instances});
+    let script =
+        std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../tests/python/validate_json.py");
+    let mut child = std::process::Command::new(python)
+        .arg(script)
+        .stdin(std::process::Stdio::piped())
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .expect("running validate_json.py");
+    let mut stdin = child.stdin.take().expect("stdin");
+    let writer = std::thread::spawn(move || serde_json::to_writer(&mut stdin, &job));
+    let output = child.wait_with_output().expect("validate_json.py runs");
+    writer.join().expect("writer").expect("job written");
+    assert!(
+        output.status.success(),
+        "validate_json.py failed ({}): {}",
+        output.status,
+        String::from_utf8_lossy(&output.stderr)
+    );
+    Some(serde_json::from_slice(&output.stdout).expect("validate_json.py prints JSON"))
+}
+
+/// Validates `instance` against `schema`: `Some(Err(every error))` when it breaks the schema,
+/// `None` without the Python set-up (see [`validate_each`]).
+pub fn validate_against(schema: &JsonSchema, instance: &Value) -> Option<Result<(), Vec<String>>> {
+    let mut errors = validate_each(schema, std::slice::from_ref(instance))?;
+    let errors = errors.pop().expect("one list per instance");
+    Some(if errors.is_empty() {
         Ok(())
     } else {
         Err(errors)
-    }
+    })
 }
 
 /// Serialises `msg` and validates it against `schema`, panicking with the errors.
 pub fn assert_valid<T: serde::Serialize>(schema: &JsonSchema, msg: &T) {
     let value = serde_json::to_value(msg).expect("serialises");
-    if let Err(errors) = validate_against(schema, &value) {
+    if let Some(Err(errors)) = validate_against(schema, &value) {
         panic!(
             "{} does not validate against {}:\n{}\n{}",
             std::any::type_name::<T>(),
@@ -34,6 +62,12 @@ pub fn assert_valid<T: serde::Serialize>(schema: &JsonSchema, msg: &T) {
             serde_json::to_string_pretty(&value).unwrap()
         );
     }
+}
+
+/// Whether `instance` breaks `schema`; `true` without the Python set-up, where nothing is
+/// checked (see [`validate_each`]).
+pub fn rejects(schema: &JsonSchema, instance: &Value) -> bool {
+    validate_against(schema, instance).is_none_or(|r| r.is_err())
 }
 
 fn pose(x: f64, y: f64, z: f64) -> Pose {
