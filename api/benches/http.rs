@@ -354,30 +354,8 @@ fn main() {
     assert!(has_wrk, "this benchmark needs wrk: apt-get install wrk");
     let dir = tempfile::tempdir().unwrap();
     let data = dir.path().join("icms-data");
-
-    let rt = tokio::runtime::Runtime::new().unwrap();
-    let t = Instant::now();
-    rt.block_on(async {
-        let store = Store::open(&data).await.unwrap();
-        generate_synthetic(&store, a.skills, 1).await.unwrap();
-        store.close().await;
-    });
-    eprintln!(
-        "{} synthetic skills in {:.1} s",
-        a.skills,
-        t.elapsed().as_secs_f64()
-    );
-
-    let script = dir.path().join("random-ids.lua");
-    std::fs::write(
-        &script,
-        format!(
-            "math.randomseed(42)\nrequest = function()\n  return wrk.format(\"GET\", \
-             \"/api/v1/skills/\" .. math.random(1, {}))\nend\n",
-            a.skills
-        ),
-    )
-    .unwrap();
+    fill_store(&data, a.skills);
+    let script = write_wrk_script(dir.path(), a.skills);
 
     // Room for every skill: the figure is of answers from the cache.
     let (icms, stop_icms) = start_icms(&data, 4096);
@@ -388,46 +366,9 @@ fn main() {
         ("icms-no-cache", nocache),
         ("bare axum+sqlx", bare),
     ];
-    // Same answer from both for one id (the bare server's JSON is the store's row).
-    let (s1, b1) = Conn::new(icms).request("GET", "/api/v1/skills/7", None);
-    let (s2, b2) = Conn::new(bare).request("GET", "/api/v1/skills/7", None);
-    assert_eq!((s1, s2), (200, 200));
-    let v1: serde_json::Value = serde_json::from_slice(&b1).unwrap();
-    let v2: serde_json::Value = serde_json::from_slice(&b2).unwrap();
-    assert_eq!(v1, v2, "both servers return the same skill");
-
-    // Warm-up: every skill once through the caching server (its cache then holds them all, as
-    // it would hold the hot skills of a real workload), then a short load on each server
-    // (SQLite's page cache, connections).
-    let mut conn = Conn::new(icms);
-    for id in 1..=a.skills {
-        let (status, _) = conn.request("GET", &format!("/api/v1/skills/{id}"), None);
-        assert_eq!(status, 200);
-    }
-    for (name, addr) in servers {
-        run_wrk(name, addr, &script, 3, a.connections);
-    }
-    let mut loads = Vec::new();
-    for _ in 0..a.rounds {
-        for (name, addr) in servers {
-            let l = run_wrk(name, addr, &script, a.seconds, a.connections);
-            eprintln!(
-                "{:<16} {:>9.0} req/s  p50 {:.2} ms  p99 {:.2} ms  non-2xx {}",
-                l.server, l.requests_per_s, l.p50_ms, l.p99_ms, l.non_2xx
-            );
-            loads.push(l);
-        }
-    }
-    let mean = |name: &str| {
-        let v: Vec<f64> = loads
-            .iter()
-            .filter(|l| l.server == name)
-            .map(|l| l.requests_per_s)
-            .collect();
-        v.iter().sum::<f64>() / v.len() as f64
-    };
-    let ratio = mean("icms") / mean("bare axum+sqlx");
-    let ratio_nocache = mean("icms-no-cache") / mean("bare axum+sqlx");
+    assert_same_skill(icms, bare);
+    warm_up(icms, &servers, &script, &a);
+    let loads = load_runs(&servers, &script, &a);
     stop_nocache.send(()).ok();
     stop_bare.send(()).ok();
 
@@ -436,12 +377,108 @@ fn main() {
         "filtered GET /skills over {} skills, unloaded: p50 {:.2} ms p99 {:.2} ms (n = {})",
         a.skills, filtered.p50_ms, filtered.p99_ms, filtered.n
     );
+    let (upload, upload_bytes) = upload_timing(icms, dir.path(), a.upload_seconds);
+    stop_icms.send(()).ok();
+    std::thread::sleep(Duration::from_millis(200));
+    report(
+        &a,
+        &Results {
+            loads,
+            filtered,
+            upload,
+            upload_bytes,
+        },
+    );
+}
 
-    // Upload of a long session: simulated first (not timed), then uploaded, deleted and
-    // uploaded again; each upload reads, validates, segments and stores it.
+/// Fills a fresh store at `data` with `skills` synthetic skills.
+fn fill_store(data: &Path, skills: usize) {
+    let rt = tokio::runtime::Runtime::new().unwrap();
+    let t = Instant::now();
+    rt.block_on(async {
+        let store = Store::open(data).await.unwrap();
+        generate_synthetic(&store, skills, 1).await.unwrap();
+        store.close().await;
+    });
+    eprintln!(
+        "{} synthetic skills in {:.1} s",
+        skills,
+        t.elapsed().as_secs_f64()
+    );
+}
+
+/// Writes wrk's script of `GET /api/v1/skills/{id}` over uniformly random ids into `dir`.
+fn write_wrk_script(dir: &Path, skills: usize) -> std::path::PathBuf {
+    let script = dir.join("random-ids.lua");
+    std::fs::write(
+        &script,
+        format!(
+            "math.randomseed(42)\nrequest = function()\n  return wrk.format(\"GET\", \
+             \"/api/v1/skills/\" .. math.random(1, {}))\nend\n",
+            skills
+        ),
+    )
+    .unwrap();
+    script
+}
+
+/// Same answer from both servers for one id (the bare server's JSON is the store's row).
+fn assert_same_skill(icms: SocketAddr, bare: SocketAddr) {
+    let (s1, b1) = Conn::new(icms).request("GET", "/api/v1/skills/7", None);
+    let (s2, b2) = Conn::new(bare).request("GET", "/api/v1/skills/7", None);
+    assert_eq!((s1, s2), (200, 200));
+    let v1: serde_json::Value = serde_json::from_slice(&b1).unwrap();
+    let v2: serde_json::Value = serde_json::from_slice(&b2).unwrap();
+    assert_eq!(v1, v2, "both servers return the same skill");
+}
+
+/// Warm-up: every skill once through the caching server `icms` (its cache then holds them
+/// all, as it would hold the hot skills of a real workload), then a short load on each server
+/// (SQLite's page cache, connections).
+fn warm_up(icms: SocketAddr, servers: &[(&str, SocketAddr)], script: &Path, a: &Args) {
+    let mut conn = Conn::new(icms);
+    for id in 1..=a.skills {
+        let (status, _) = conn.request("GET", &format!("/api/v1/skills/{id}"), None);
+        assert_eq!(status, 200);
+    }
+    for &(name, addr) in servers {
+        run_wrk(name, addr, script, 3, a.connections);
+    }
+}
+
+/// The load runs: every server in turn, `a.rounds` times.
+fn load_runs(servers: &[(&str, SocketAddr)], script: &Path, a: &Args) -> Vec<Load> {
+    let mut loads = Vec::new();
+    for _ in 0..a.rounds {
+        for &(name, addr) in servers {
+            let l = run_wrk(name, addr, script, a.seconds, a.connections);
+            eprintln!(
+                "{:<16} {:>9.0} req/s  p50 {:.2} ms  p99 {:.2} ms  non-2xx {}",
+                l.server, l.requests_per_s, l.p50_ms, l.p99_ms, l.non_2xx
+            );
+            loads.push(l);
+        }
+    }
+    loads
+}
+
+/// Mean requests per second of the server `name` over its load runs.
+fn mean_rps(loads: &[Load], name: &str) -> f64 {
+    let v: Vec<f64> = loads
+        .iter()
+        .filter(|l| l.server == name)
+        .map(|l| l.requests_per_s)
+        .collect();
+    v.iter().sum::<f64>() / v.len() as f64
+}
+
+/// Upload of a long session to `icms`: simulated first into `dir` (not timed), then uploaded,
+/// deleted and uploaded again; each upload reads, validates, segments and stores it. The
+/// timings and the file's size.
+fn upload_timing(icms: SocketAddr, dir: &Path, upload_seconds: f64) -> (Timing, usize) {
     let scenario = dfs_core::scenario::Scenario::builtin("two-grasps", 0).unwrap();
-    let file = dir.path().join("long.mcap");
-    services::session::record_simulation(&scenario, Some(a.upload_seconds), &file, |_, _| {})
+    let file = dir.join("long.mcap");
+    services::session::record_simulation(&scenario, Some(upload_seconds), &file, |_, _| {})
         .unwrap();
     let mcap = std::fs::read(&file).unwrap();
     let mut conn = Conn::new(icms);
@@ -466,25 +503,42 @@ fn main() {
     let upload = Timing::from_samples(uploads);
     eprintln!(
         "upload of a {} s session ({:.1} MB): median {:.0} ms, max {:.0} ms",
-        a.upload_seconds,
+        upload_seconds,
         mcap.len() as f64 / 1e6,
         upload.p50_ms,
         upload.max_ms
     );
-    stop_icms.send(()).ok();
-    std::thread::sleep(Duration::from_millis(200));
+    (upload, mcap.len())
+}
 
+/// What the benchmark measured.
+struct Results {
+    /// The load runs, in order.
+    loads: Vec<Load>,
+    /// Filtered `GET /api/v1/skills`, unloaded.
+    filtered: Timing,
+    /// The uploads of the long session.
+    upload: Timing,
+    /// The long session's size (bytes).
+    upload_bytes: usize,
+}
+
+/// Prints the results: JSON with `a.json`, else two lines.
+fn report(a: &Args, r: &Results) {
+    let mean = |name: &str| mean_rps(&r.loads, name);
+    let ratio = mean("icms") / mean("bare axum+sqlx");
+    let ratio_nocache = mean("icms-no-cache") / mean("bare axum+sqlx");
     let report = serde_json::json!({
         "skills": a.skills,
         "connections": a.connections,
         "seconds_per_run": a.seconds,
-        "get_skill_by_id": loads,
+        "get_skill_by_id": r.loads,
         "icms_over_bare": ratio,
         "icms_no_cache_over_bare": ratio_nocache,
-        "filtered_query_unloaded": filtered,
+        "filtered_query_unloaded": r.filtered,
         "upload_session_s": a.upload_seconds,
-        "upload_bytes": mcap.len(),
-        "upload_ms": upload,
+        "upload_bytes": r.upload_bytes,
+        "upload_ms": r.upload,
     });
     if a.json {
         println!("{}", serde_json::to_string_pretty(&report).unwrap());
@@ -504,7 +558,7 @@ fn main() {
         println!(
             "filtered GET /api/v1/skills unloaded: p50 {:.2} ms, p99 {:.2} ms; upload of a {} s \
              session: median {:.0} ms",
-            filtered.p50_ms, filtered.p99_ms, a.upload_seconds, upload.p50_ms
+            r.filtered.p50_ms, r.filtered.p99_ms, a.upload_seconds, r.upload.p50_ms
         );
     }
 }

@@ -116,6 +116,46 @@ pub async fn run(
     mut on_event: impl FnMut(&Event),
 ) -> Result<ClientSummary, ClientError> {
     let began = Instant::now();
+    let mut ws = connect(url, options).await?;
+    let assist_events = start_session(&mut ws, start, &mut on_event).await?;
+    let mut summary = ClientSummary {
+        kind: "summary",
+        assist_events,
+        ..ClientSummary::default()
+    };
+    let mut first_t: Option<(u64, Instant)> = None;
+    for frame in frames {
+        if options.realtime {
+            let (t0, at) = *first_t.get_or_insert((frame.t_ns, Instant::now()));
+            let due = at + Duration::from_nanos(frame.t_ns.saturating_sub(t0));
+            tokio::time::sleep_until(due.into()).await;
+        }
+        let sent = Instant::now();
+        let t_ns = frame.t_ns;
+        ws.send(Message::Binary(frame.bytes))
+            .await
+            .map_err(|e| err("sending a sample", e))?;
+        summary.samples_sent += 1;
+        await_answer(&mut ws, t_ns, sent, &mut summary, &mut on_event).await?;
+    }
+    end_session(&mut ws, &mut summary, &mut on_event).await?;
+    let mut sorted = summary.round_trips_us.clone();
+    sorted.sort_by(f64::total_cmp);
+    summary.p50_us = percentile(&sorted, 0.5);
+    summary.p90_us = percentile(&sorted, 0.9);
+    summary.p99_us = percentile(&sorted, 0.99);
+    summary.p999_us = percentile(&sorted, 0.999);
+    summary.max_us = sorted.last().copied().unwrap_or(0.0);
+    summary.seconds = began.elapsed().as_secs_f64();
+    Ok(summary)
+}
+
+/// The WebSocket of a live session.
+type LiveSocket =
+    tokio_tungstenite::WebSocketStream<tokio_tungstenite::MaybeTlsStream<tokio::net::TcpStream>>;
+
+/// Opens the WebSocket to `url` (with the bearer token of `options`, if any).
+async fn connect(url: &str, options: &ClientOptions) -> Result<LiveSocket, ClientError> {
     let mut request = url
         .into_client_request()
         .map_err(|e| err(&format!("--connect {url}"), e))?;
@@ -129,9 +169,19 @@ pub async fn run(
     // zeroed as it is read into).
     let config = tokio_tungstenite::tungstenite::protocol::WebSocketConfig::default()
         .read_buffer_size(8 * 1024);
-    let (mut ws, _) = tokio_tungstenite::connect_async_with_config(request, Some(config), true)
+    let (ws, _) = tokio_tungstenite::connect_async_with_config(request, Some(config), true)
         .await
         .map_err(|e| err(&format!("connecting to {url}"), e))?;
+    Ok(ws)
+}
+
+/// Sends `start` and reads up to its answer, `started` (an error and a close refuse the
+/// session); the assistant's events that came before it.
+async fn start_session(
+    ws: &mut LiveSocket,
+    start: &StartMessage,
+    on_event: &mut impl FnMut(&Event),
+) -> Result<Vec<serde_json::Value>, ClientError> {
     let start_text = serde_json::to_string(&ClientMessage::Start(Box::new(start.clone())))
         .map_err(|e| err("encoding the start message", e))?;
     ws.send(Message::Text(start_text.into()))
@@ -140,10 +190,10 @@ pub async fn run(
     // The answer to start: `started`, or an error and a close.
     let mut summary_assist = Vec::new();
     loop {
-        match next(&mut ws).await? {
+        match next(ws).await? {
             Incoming::Event(e @ Event::Started { .. }) => {
                 on_event(&e);
-                break;
+                return Ok(summary_assist);
             }
             Incoming::Event(Event::Error { message, .. }) => {
                 return Err(ClientError(format!(
@@ -162,65 +212,64 @@ pub async fn run(
             }
         }
     }
-    let mut summary = ClientSummary {
-        kind: "summary",
-        assist_events: summary_assist,
-        ..ClientSummary::default()
-    };
-    let mut first_t: Option<(u64, Instant)> = None;
-    for frame in frames {
-        if options.realtime {
-            let (t0, at) = *first_t.get_or_insert((frame.t_ns, Instant::now()));
-            let due = at + Duration::from_nanos(frame.t_ns.saturating_sub(t0));
-            tokio::time::sleep_until(due.into()).await;
-        }
-        let sent = Instant::now();
-        ws.send(Message::Binary(frame.bytes))
-            .await
-            .map_err(|e| err("sending a sample", e))?;
-        summary.samples_sent += 1;
-        // Events may come before the answer; a stale frame is not the answer.
-        loop {
-            match next(&mut ws).await? {
-                Incoming::Feedback(fb) if fb.stale => summary.stale_frames += 1,
-                Incoming::Feedback(fb) => {
-                    summary
-                        .round_trips_us
-                        .push(sent.elapsed().as_secs_f64() * 1e6);
-                    summary.feedback_received += 1;
-                    if summary.first_contact_ns.is_none() && fb.fingers.iter().any(|f| f.in_contact)
-                    {
-                        summary.first_contact_ns = Some(fb.session_ns);
-                    }
-                    // A DFS failure comes as an error right after the answer; it is read with
-                    // the next sample's answer.
-                    break;
+}
+
+/// Reads up to the answer to the sample of time `t_ns` sent at `sent`: its feedback, or the
+/// error refusing it. Events may come before the answer; a stale frame is not the answer.
+async fn await_answer(
+    ws: &mut LiveSocket,
+    t_ns: u64,
+    sent: Instant,
+    summary: &mut ClientSummary,
+    on_event: &mut impl FnMut(&Event),
+) -> Result<(), ClientError> {
+    loop {
+        match next(ws).await? {
+            Incoming::Feedback(fb) if fb.stale => summary.stale_frames += 1,
+            Incoming::Feedback(fb) => {
+                summary
+                    .round_trips_us
+                    .push(sent.elapsed().as_secs_f64() * 1e6);
+                summary.feedback_received += 1;
+                if summary.first_contact_ns.is_none() && fb.fingers.iter().any(|f| f.in_contact) {
+                    summary.first_contact_ns = Some(fb.session_ns);
                 }
-                Incoming::Event(e @ Event::Error { t_ns, .. })
-                    if t_ns.is_none() || t_ns == Some(frame.t_ns) =>
-                {
-                    on_event(&e);
-                    // Refused (not stepped): no feedback comes for it, unless this was a DFS
-                    // failure after the feedback (then the feedback came first).
-                    summary.refused += 1;
-                    break;
-                }
-                Incoming::Event(e) => on_event(&e),
-                Incoming::Assist(v) => summary.assist_events.push(v),
-                Incoming::Closed(reason) => {
-                    return Err(ClientError(format!(
-                        "the server closed the connection mid-session: {reason}"
-                    )))
-                }
+                // A DFS failure comes as an error right after the answer; it is read with
+                // the next sample's answer.
+                return Ok(());
+            }
+            Incoming::Event(e @ Event::Error { t_ns: at, .. })
+                if at.is_none() || at == Some(t_ns) =>
+            {
+                on_event(&e);
+                // Refused (not stepped): no feedback comes for it, unless this was a DFS
+                // failure after the feedback (then the feedback came first).
+                summary.refused += 1;
+                return Ok(());
+            }
+            Incoming::Event(e) => on_event(&e),
+            Incoming::Assist(v) => summary.assist_events.push(v),
+            Incoming::Closed(reason) => {
+                return Err(ClientError(format!(
+                    "the server closed the connection mid-session: {reason}"
+                )))
             }
         }
     }
+}
+
+/// Sends `end` and reads up to the close, taking the stored session from `stored`.
+async fn end_session(
+    ws: &mut LiveSocket,
+    summary: &mut ClientSummary,
+    on_event: &mut impl FnMut(&Event),
+) -> Result<(), ClientError> {
     let end = serde_json::to_string(&ClientMessage::End).unwrap_or_default();
     ws.send(Message::Text(end.into()))
         .await
         .map_err(|e| err("sending end", e))?;
     loop {
-        match next(&mut ws).await? {
+        match next(ws).await? {
             Incoming::Event(e) => {
                 on_event(&e);
                 if let Event::Stored {
@@ -239,18 +288,9 @@ pub async fn run(
             Incoming::Feedback(fb) if fb.stale => summary.stale_frames += 1,
             Incoming::Feedback(_) => {}
             Incoming::Assist(v) => summary.assist_events.push(v),
-            Incoming::Closed(_) => break,
+            Incoming::Closed(_) => return Ok(()),
         }
     }
-    let mut sorted = summary.round_trips_us.clone();
-    sorted.sort_by(f64::total_cmp);
-    summary.p50_us = percentile(&sorted, 0.5);
-    summary.p90_us = percentile(&sorted, 0.9);
-    summary.p99_us = percentile(&sorted, 0.99);
-    summary.p999_us = percentile(&sorted, 0.999);
-    summary.max_us = sorted.last().copied().unwrap_or(0.0);
-    summary.seconds = began.elapsed().as_secs_f64();
-    Ok(summary)
 }
 
 enum Incoming {

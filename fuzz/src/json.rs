@@ -214,6 +214,9 @@ fn bounded_replace(text: &str, from: &str, to: &str) -> String {
 }
 
 /// One structural mutation of `v` (which may be replaced whole).
+///
+/// One table of mutation kinds, weighted by the ranges of `rng.below(16)`; the kinds longer
+/// than a line are functions of their own below.
 fn mutate_value(rng: &mut Rng, v: &mut Value, others: &[Value], raw: &mut Raw) {
     let ptrs = pointers(v, 4096);
     let ptr = rng.pick(&ptrs).clone();
@@ -223,158 +226,187 @@ fn mutate_value(rng: &mut Rng, v: &mut Value, others: &[Value], raw: &mut Raw) {
     match rng.below(16) {
         0 | 1 => *node = interesting_number(rng),
         2 => *node = random_value(rng),
-        3 => {
-            // Nest the node a little (serde_json's own limit is 128).
-            let depth = rng.small_size(200);
-            for _ in 0..depth {
-                let inner = std::mem::take(node);
-                *node = if rng.one_in(2) {
-                    Value::Array(vec![inner])
-                } else {
-                    Value::Object(Map::from_iter([("a".to_owned(), inner)]))
-                };
-            }
-        }
-        4 => {
-            // Nest far deeper, as text.
-            let depth = if rng.one_in(8) {
-                rng.range(100, MAX_TEXT_DEPTH)
-            } else {
-                rng.range(100, 1000)
-            };
-            let (open, close) = if rng.one_in(2) {
-                ("[", "]")
-            } else {
-                ("{\"a\":", "}")
-            };
-            let inner = serde_json::to_string(node).unwrap_or_default();
-            let close_all = if rng.one_in(4) {
-                String::new()
-            } else {
-                close.repeat(depth)
-            };
-            *node = raw.value(format!("{}{inner}{close_all}", open.repeat(depth)));
-        }
-        5 => {
-            // A huge array of copies of the node (or of a number).
-            let elem = if rng.one_in(2) {
-                node.clone()
-            } else {
-                interesting_number(rng)
-            };
-            let size = serde_json::to_string(&elem).map_or(1, |s| s.len().max(1));
-            let n = 1 + rng.small_size((MAX_STRING * 4 / size).clamp(2, MAX_ARRAY));
-            *node = Value::Array(vec![elem; n]);
-        }
+        3 => nest_value(rng, node),
+        4 => nest_text(rng, node, raw),
+        5 => *node = huge_array(rng, node),
         6 => *node = Value::String(random_string(rng)),
-        7 => match node {
-            Value::Array(a) if !a.is_empty() => {
-                let i = rng.below(a.len());
-                match rng.below(3) {
-                    0 => {
-                        a.remove(i);
-                    }
-                    1 => {
-                        let x = a[i].clone();
-                        a.insert(i, x);
-                    }
-                    _ => a.truncate(i),
-                }
-            }
-            Value::Object(m) if !m.is_empty() => {
-                let keys: Vec<String> = m.keys().cloned().collect();
-                let k = rng.pick(&keys).clone();
-                m.remove(&k);
-            }
-            _ => *node = Value::Null,
-        },
-        8 => match node {
-            Value::Object(m) => {
-                let k = if rng.one_in(2) {
-                    random_string(rng)
-                } else {
-                    "unknown_field".to_owned()
-                };
-                m.insert(k, random_value(rng));
-            }
-            Value::Array(a) => {
-                let x = a.first().cloned().unwrap_or_else(|| random_value(rng));
-                a.push(x);
-            }
-            _ => *node = Value::Array(vec![node.clone()]),
-        },
-        9 => {
-            // A key twice in one object (textual: a map cannot hold it).
-            if let Value::Object(m) = node {
-                if let Some((k, x)) = m.iter().next().map(|(k, x)| (k.clone(), x.clone())) {
-                    let value = if rng.one_in(2) { x } else { random_value(rng) };
-                    let text = serde_json::to_string(&value).unwrap_or_default();
-                    let dup = format!("{}:{text}", serde_json::to_string(&k).unwrap_or_default());
-                    let placeholder = format!("\u{1}DUP{}\u{1}", raw.pairs.len());
-                    m.insert(placeholder.clone(), Value::Null);
-                    let quoted = serde_json::to_string(&placeholder).unwrap_or_default();
-                    raw.pairs.push((quoted, dup));
-                }
-            } else {
-                *node = raw.value((*rng.pick(&RAW_NUMBERS)).to_owned());
-            }
-        }
+        7 => remove_element(rng, node),
+        8 => add_element(rng, node),
+        9 => duplicate_key(rng, node, raw),
         10 => *node = raw.value((*rng.pick(&RAW_NUMBERS)).to_owned()),
-        11 if !others.is_empty() => {
-            // A subtree of another seed.
-            let o = rng.pick(others);
-            let optrs = pointers(o, 4096);
-            let p = rng.pick(&optrs);
-            if let Some(x) = o.pointer(p) {
-                *node = x.clone();
-            }
-        }
-        12 => {
-            // Tweak a number.
-            if let Some(x) = node.as_f64() {
-                let y = match rng.below(6) {
-                    0 => -x,
-                    1 => x * 10.0,
-                    2 => x + 1.0,
-                    3 => x * 1e6,
-                    4 => x / 1e6,
-                    _ => x + 1e-12,
-                };
-                *node = Number::from_f64(y).map_or(Value::Null, Value::Number);
-            } else {
-                *node = interesting_number(rng);
-            }
-        }
-        13 => {
-            // Mutate a string's bytes.
-            if let Value::String(s) = node {
-                let mut b = s.clone().into_bytes();
-                bytes::mutate(rng, &mut b, &[]);
-                *s = String::from_utf8_lossy(&b).into_owned();
-            } else {
-                *node = Value::String(random_string(rng));
-            }
-        }
-        14 => {
-            // Swap with another node of the same document (copy over).
-            let p2 = rng.pick(&ptrs).clone();
-            if let Some(x) = v.pointer(&p2).cloned() {
-                if let Some(node) = v.pointer_mut(&ptr) {
-                    *node = x;
+        11 if !others.is_empty() => splice_subtree(rng, node, others),
+        12 => tweak_number(rng, node),
+        13 => mutate_string(rng, node),
+        14 => copy_other_node(rng, v, &ptrs, &ptr),
+        _ => empty_value(node),
+    }
+}
+
+/// Nests the node a little (serde_json's own limit is 128).
+fn nest_value(rng: &mut Rng, node: &mut Value) {
+    let depth = rng.small_size(200);
+    for _ in 0..depth {
+        let inner = std::mem::take(node);
+        *node = if rng.one_in(2) {
+            Value::Array(vec![inner])
+        } else {
+            Value::Object(Map::from_iter([("a".to_owned(), inner)]))
+        };
+    }
+}
+
+/// Nests the node far deeper, as text.
+fn nest_text(rng: &mut Rng, node: &mut Value, raw: &mut Raw) {
+    let depth = if rng.one_in(8) {
+        rng.range(100, MAX_TEXT_DEPTH)
+    } else {
+        rng.range(100, 1000)
+    };
+    let (open, close) = if rng.one_in(2) {
+        ("[", "]")
+    } else {
+        ("{\"a\":", "}")
+    };
+    let inner = serde_json::to_string(node).unwrap_or_default();
+    let close_all = if rng.one_in(4) {
+        String::new()
+    } else {
+        close.repeat(depth)
+    };
+    *node = raw.value(format!("{}{inner}{close_all}", open.repeat(depth)));
+}
+
+/// A huge array of copies of the node (or of a number).
+fn huge_array(rng: &mut Rng, node: &Value) -> Value {
+    let elem = if rng.one_in(2) {
+        node.clone()
+    } else {
+        interesting_number(rng)
+    };
+    let size = serde_json::to_string(&elem).map_or(1, |s| s.len().max(1));
+    let n = 1 + rng.small_size((MAX_STRING * 4 / size).clamp(2, MAX_ARRAY));
+    Value::Array(vec![elem; n])
+}
+
+/// Removes, doubles or truncates at an element of a container; a scalar becomes null.
+fn remove_element(rng: &mut Rng, node: &mut Value) {
+    match node {
+        Value::Array(a) if !a.is_empty() => {
+            let i = rng.below(a.len());
+            match rng.below(3) {
+                0 => {
+                    a.remove(i);
                 }
+                1 => {
+                    let x = a[i].clone();
+                    a.insert(i, x);
+                }
+                _ => a.truncate(i),
             }
         }
-        _ => {
-            // Empty the container or zero the scalar.
-            *node = match node {
-                Value::Array(_) => Value::Array(Vec::new()),
-                Value::Object(_) => Value::Object(Map::new()),
-                Value::String(_) => Value::String(String::new()),
-                Value::Number(_) => Value::from(0),
-                _ => Value::Null,
+        Value::Object(m) if !m.is_empty() => {
+            let keys: Vec<String> = m.keys().cloned().collect();
+            let k = rng.pick(&keys).clone();
+            m.remove(&k);
+        }
+        _ => *node = Value::Null,
+    }
+}
+
+/// Adds a field or an element to a container; a scalar is wrapped in an array.
+fn add_element(rng: &mut Rng, node: &mut Value) {
+    match node {
+        Value::Object(m) => {
+            let k = if rng.one_in(2) {
+                random_string(rng)
+            } else {
+                "unknown_field".to_owned()
             };
+            m.insert(k, random_value(rng));
+        }
+        Value::Array(a) => {
+            let x = a.first().cloned().unwrap_or_else(|| random_value(rng));
+            a.push(x);
+        }
+        _ => *node = Value::Array(vec![node.clone()]),
+    }
+}
+
+/// A key twice in one object (textual: a map cannot hold it); a non-object becomes a raw
+/// number.
+fn duplicate_key(rng: &mut Rng, node: &mut Value, raw: &mut Raw) {
+    if let Value::Object(m) = node {
+        if let Some((k, x)) = m.iter().next().map(|(k, x)| (k.clone(), x.clone())) {
+            let value = if rng.one_in(2) { x } else { random_value(rng) };
+            let text = serde_json::to_string(&value).unwrap_or_default();
+            let dup = format!("{}:{text}", serde_json::to_string(&k).unwrap_or_default());
+            let placeholder = format!("\u{1}DUP{}\u{1}", raw.pairs.len());
+            m.insert(placeholder.clone(), Value::Null);
+            let quoted = serde_json::to_string(&placeholder).unwrap_or_default();
+            raw.pairs.push((quoted, dup));
+        }
+    } else {
+        *node = raw.value((*rng.pick(&RAW_NUMBERS)).to_owned());
+    }
+}
+
+/// A subtree of another seed (`others` is not empty).
+fn splice_subtree(rng: &mut Rng, node: &mut Value, others: &[Value]) {
+    let o = rng.pick(others);
+    let optrs = pointers(o, 4096);
+    let p = rng.pick(&optrs);
+    if let Some(x) = o.pointer(p) {
+        *node = x.clone();
+    }
+}
+
+/// Tweaks a number; a non-number becomes an interesting one.
+fn tweak_number(rng: &mut Rng, node: &mut Value) {
+    if let Some(x) = node.as_f64() {
+        let y = match rng.below(6) {
+            0 => -x,
+            1 => x * 10.0,
+            2 => x + 1.0,
+            3 => x * 1e6,
+            4 => x / 1e6,
+            _ => x + 1e-12,
+        };
+        *node = Number::from_f64(y).map_or(Value::Null, Value::Number);
+    } else {
+        *node = interesting_number(rng);
+    }
+}
+
+/// Mutates a string's bytes; a non-string becomes a random string.
+fn mutate_string(rng: &mut Rng, node: &mut Value) {
+    if let Value::String(s) = node {
+        let mut b = s.clone().into_bytes();
+        bytes::mutate(rng, &mut b, &[]);
+        *s = String::from_utf8_lossy(&b).into_owned();
+    } else {
+        *node = Value::String(random_string(rng));
+    }
+}
+
+/// Copies another node of the same document (picked from `ptrs`) over the one at `ptr`.
+fn copy_other_node(rng: &mut Rng, v: &mut Value, ptrs: &[String], ptr: &str) {
+    let p2 = rng.pick(ptrs).clone();
+    if let Some(x) = v.pointer(&p2).cloned() {
+        if let Some(node) = v.pointer_mut(ptr) {
+            *node = x;
         }
     }
+}
+
+/// Empties the container or zeroes the scalar.
+fn empty_value(node: &mut Value) {
+    *node = match node {
+        Value::Array(_) => Value::Array(Vec::new()),
+        Value::Object(_) => Value::Object(Map::new()),
+        Value::String(_) => Value::String(String::new()),
+        Value::Number(_) => Value::from(0),
+        _ => Value::Null,
+    };
 }
 
 /// Length of the compact serialisation, counted without building it.

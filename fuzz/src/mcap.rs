@@ -440,273 +440,302 @@ const INTERESTING_U64: [u64; 10] = [
     1_700_000_000_000_000_000,
 ];
 
+/// A record's place: its top-level index, and its index inside the chunk when it is inner.
+type Site = (usize, Option<usize>);
+
 /// One MCAP-aware mutation. `others` are the other seed files (to splice records from).
+///
+/// One table of mutation kinds, weighted by the ranges of `rng.below(18)`; each kind is a
+/// function of its own below.
 pub fn mutate(rng: &mut Rng, f: &mut McapFile, others: &[McapFile]) {
     let sites = f.sites();
     if sites.is_empty() {
         return;
     }
     match rng.below(18) {
-        0..=3 => {
-            // A message's JSON payload.
-            let msgs = f.sites_with(op::MESSAGE);
-            if msgs.is_empty() {
-                return;
-            }
-            let site = *rng.pick(&msgs);
-            if let Some(r) = f.record_mut(site) {
-                if r.body.len() >= MESSAGE_HEADER {
-                    let payload = r.body.split_off(MESSAGE_HEADER);
-                    let n = rng.range(1, 2);
-                    let new = json::mutate_text(rng, &payload, &[], n);
-                    r.body.extend_from_slice(&new);
-                }
-            }
+        0..=3 => mutate_message_payload(rng, f),
+        4 => mutate_message_header(rng, f),
+        5 | 6 => mutate_record_bytes(rng, f, &sites),
+        7 | 8 => mutate_metadata(rng, f),
+        9 => delete_record(rng, f, &sites),
+        10 => duplicate_record(rng, f, &sites),
+        11 => move_or_swap_record(rng, f, &sites),
+        12 => mutate_chunk_header(rng, f),
+        13 => mutate_opcode(rng, f, &sites),
+        14 => mutate_channel(rng, f),
+        15 if !others.is_empty() => splice_record(rng, f, others),
+        16 => truncate_records(rng, f),
+        _ => mutate_crc_mode(rng, f, &sites),
+    }
+}
+
+/// A message's JSON payload.
+fn mutate_message_payload(rng: &mut Rng, f: &mut McapFile) {
+    let msgs = f.sites_with(op::MESSAGE);
+    if msgs.is_empty() {
+        return;
+    }
+    let site = *rng.pick(&msgs);
+    if let Some(r) = f.record_mut(site) {
+        if r.body.len() >= MESSAGE_HEADER {
+            let payload = r.body.split_off(MESSAGE_HEADER);
+            let n = rng.range(1, 2);
+            let new = json::mutate_text(rng, &payload, &[], n);
+            r.body.extend_from_slice(&new);
         }
-        4 => {
-            // A message header field.
-            let msgs = f.sites_with(op::MESSAGE);
-            if msgs.is_empty() {
-                return;
-            }
-            let site = *rng.pick(&msgs);
-            if let Some(r) = f.record_mut(site) {
-                if r.body.len() >= MESSAGE_HEADER {
-                    match rng.below(4) {
-                        0 => {
-                            let id = rng.below(12) as u16;
-                            r.body[0..2].copy_from_slice(&id.to_le_bytes());
-                        }
-                        1 => {
-                            let s = rng.next_u64() as u32;
-                            r.body[2..6].copy_from_slice(&s.to_le_bytes());
-                        }
-                        2 => {
-                            let t = if rng.one_in(2) {
-                                *rng.pick(&INTERESTING_U64)
-                            } else {
-                                let old = u64::from_le_bytes(
-                                    r.body[6..14].try_into().unwrap_or_default(),
-                                );
-                                old.wrapping_add(rng.next_u64() % 2_000_000_000)
-                                    .wrapping_sub(1_000_000_000)
-                            };
-                            r.body[6..14].copy_from_slice(&t.to_le_bytes());
-                        }
-                        _ => {
-                            let t = *rng.pick(&INTERESTING_U64);
-                            r.body[14..22].copy_from_slice(&t.to_le_bytes());
-                        }
-                    }
+    }
+}
+
+/// A message header field: channel id, sequence, log time or publish time.
+fn mutate_message_header(rng: &mut Rng, f: &mut McapFile) {
+    let msgs = f.sites_with(op::MESSAGE);
+    if msgs.is_empty() {
+        return;
+    }
+    let site = *rng.pick(&msgs);
+    if let Some(r) = f.record_mut(site) {
+        if r.body.len() >= MESSAGE_HEADER {
+            match rng.below(4) {
+                0 => {
+                    let id = rng.below(12) as u16;
+                    r.body[0..2].copy_from_slice(&id.to_le_bytes());
                 }
-            }
-        }
-        5 | 6 => {
-            // Any record's bytes (inner or top level).
-            let site = *rng.pick(&sites);
-            if let Some(r) = f.record_mut(site) {
-                let n = rng.range(1, 3);
-                bytes::mutate_n(rng, &mut r.body, &[], n);
-            }
-        }
-        7 | 8 => {
-            // A metadata value (JSON-aware when it is JSON), a key, or an entry more.
-            let metas = f.sites_with(op::METADATA);
-            if metas.is_empty() {
-                return;
-            }
-            let site = *rng.pick(&metas);
-            if let Some(r) = f.record_mut(site) {
-                if let Some((mut name, mut entries)) = parse_metadata(&r.body) {
-                    if entries.is_empty() || rng.one_in(8) {
-                        entries.push(("object".to_owned(), "{}".to_owned()));
-                    }
-                    let i = rng.below(entries.len());
-                    match rng.below(6) {
-                        0 => {
-                            let mut k = entries[i].0.clone().into_bytes();
-                            bytes::mutate(rng, &mut k, &[]);
-                            entries[i].0 = String::from_utf8_lossy(&k).into_owned();
-                        }
-                        1 => {
-                            let e = entries[i].clone();
-                            entries.push(e);
-                        }
-                        2 => {
-                            entries.remove(i);
-                        }
-                        3 if rng.one_in(4) => {
-                            name =
-                                (*rng.pick(&["session", "ground_truth", "replay", ""])).to_owned();
-                        }
-                        _ => {
-                            let v = entries[i].1.clone();
-                            let n = rng.range(1, 2);
-                            let out = json::mutate_text(rng, v.as_bytes(), &[], n);
-                            entries[i].1 = String::from_utf8_lossy(&out).into_owned();
-                        }
-                    }
-                    r.body = write_metadata(&name, &entries);
+                1 => {
+                    let s = rng.next_u64() as u32;
+                    r.body[2..6].copy_from_slice(&s.to_le_bytes());
                 }
-            }
-        }
-        9 => {
-            // Delete a record.
-            let site = *rng.pick(&sites);
-            match site {
-                (i, None) => {
-                    f.items.remove(i);
-                }
-                (i, Some(j)) => {
-                    if let Some(Item::Chunk(c)) = f.items.get_mut(i) {
-                        c.original = None;
-                        c.inner.remove(j);
-                    }
-                }
-            }
-        }
-        10 => {
-            // Duplicate a record (in place or at another top-level position).
-            let site = *rng.pick(&sites);
-            match site {
-                (i, None) => {
-                    let item = f.items[i].clone();
-                    let at = if rng.one_in(2) {
-                        i
+                2 => {
+                    let t = if rng.one_in(2) {
+                        *rng.pick(&INTERESTING_U64)
                     } else {
-                        rng.below(f.items.len())
+                        let old = u64::from_le_bytes(r.body[6..14].try_into().unwrap_or_default());
+                        old.wrapping_add(rng.next_u64() % 2_000_000_000)
+                            .wrapping_sub(1_000_000_000)
                     };
-                    f.items.insert(at, item);
+                    r.body[6..14].copy_from_slice(&t.to_le_bytes());
                 }
-                (i, Some(j)) => {
-                    if let Some(Item::Chunk(c)) = f.items.get_mut(i) {
-                        c.original = None;
-                        let r = c.inner[j].clone();
-                        let at = rng.below(c.inner.len() + 1);
-                        c.inner.insert(at, r);
-                    }
+                _ => {
+                    let t = *rng.pick(&INTERESTING_U64);
+                    r.body[14..22].copy_from_slice(&t.to_le_bytes());
                 }
             }
         }
-        11 => {
-            // Move an inner record to the top level, or swap two top-level items.
-            let site = *rng.pick(&sites);
-            if let (i, Some(j)) = site {
-                if let Some(Item::Chunk(c)) = f.items.get_mut(i) {
-                    c.original = None;
-                    let r = c.inner.remove(j);
-                    let at = rng.below(f.items.len());
-                    f.items.insert(at, Item::Plain(r));
+    }
+}
+
+/// Any record's bytes (inner or top level).
+fn mutate_record_bytes(rng: &mut Rng, f: &mut McapFile, sites: &[Site]) {
+    let site = *rng.pick(sites);
+    if let Some(r) = f.record_mut(site) {
+        let n = rng.range(1, 3);
+        bytes::mutate_n(rng, &mut r.body, &[], n);
+    }
+}
+
+/// A metadata value (JSON-aware when it is JSON), a key, or an entry more.
+fn mutate_metadata(rng: &mut Rng, f: &mut McapFile) {
+    let metas = f.sites_with(op::METADATA);
+    if metas.is_empty() {
+        return;
+    }
+    let site = *rng.pick(&metas);
+    if let Some(r) = f.record_mut(site) {
+        if let Some((mut name, mut entries)) = parse_metadata(&r.body) {
+            if entries.is_empty() || rng.one_in(8) {
+                entries.push(("object".to_owned(), "{}".to_owned()));
+            }
+            let i = rng.below(entries.len());
+            match rng.below(6) {
+                0 => {
+                    let mut k = entries[i].0.clone().into_bytes();
+                    bytes::mutate(rng, &mut k, &[]);
+                    entries[i].0 = String::from_utf8_lossy(&k).into_owned();
                 }
-            } else {
-                let a = rng.below(f.items.len());
-                let b = rng.below(f.items.len());
-                f.items.swap(a, b);
+                1 => {
+                    let e = entries[i].clone();
+                    entries.push(e);
+                }
+                2 => {
+                    entries.remove(i);
+                }
+                3 if rng.one_in(4) => {
+                    name = (*rng.pick(&["session", "ground_truth", "replay", ""])).to_owned();
+                }
+                _ => {
+                    let v = entries[i].1.clone();
+                    let n = rng.range(1, 2);
+                    let out = json::mutate_text(rng, v.as_bytes(), &[], n);
+                    entries[i].1 = String::from_utf8_lossy(&out).into_owned();
+                }
             }
+            r.body = write_metadata(&name, &entries);
         }
-        12 => {
-            // A chunk's compression or times.
-            let chunks: Vec<usize> = (0..f.items.len())
-                .filter(|&i| matches!(f.items[i], Item::Chunk(_)))
-                .collect();
-            if chunks.is_empty() {
-                return;
-            }
-            let i = *rng.pick(&chunks);
-            if let Item::Chunk(c) = &mut f.items[i] {
+    }
+}
+
+/// Deletes a record.
+fn delete_record(rng: &mut Rng, f: &mut McapFile, sites: &[Site]) {
+    let site = *rng.pick(sites);
+    match site {
+        (i, None) => {
+            f.items.remove(i);
+        }
+        (i, Some(j)) => {
+            if let Some(Item::Chunk(c)) = f.items.get_mut(i) {
                 c.original = None;
-                match rng.below(3) {
-                    0 => {
-                        c.compression =
-                            (*rng.pick(&["", "zstd", "lz4", "gzip", "ZSTD", "zstd\0"])).to_owned()
-                    }
-                    1 => c.start = *rng.pick(&INTERESTING_U64),
-                    _ => c.end = *rng.pick(&INTERESTING_U64),
-                }
+                c.inner.remove(j);
             }
         }
-        13 => {
-            // An opcode.
-            let site = *rng.pick(&sites);
-            let new = *rng.pick(&[
-                0x00u8, 0x01, 0x02, 0x03, 0x04, 0x05, 0x06, 0x07, 0x08, 0x09, 0x0b, 0x0c, 0x0d,
-                0x0e, 0x0f, 0x10, 0x7f, 0x80, 0xff,
-            ]);
-            if let Some(r) = f.record_mut(site) {
-                r.op = new;
-            }
-        }
-        14 => {
-            // A channel's topic, encoding or schema id.
-            let chans = f.sites_with(op::CHANNEL);
-            if chans.is_empty() {
-                return;
-            }
-            let site = *rng.pick(&chans);
-            if let Some(r) = f.record_mut(site) {
-                let mut pos = 4;
-                let (Some(mut topic), Some(mut enc)) =
-                    (read_str(&r.body, &mut pos), read_str(&r.body, &mut pos))
-                else {
-                    return;
-                };
-                let rest = r.body[pos..].to_vec();
-                let mut head = r.body[..4].to_vec();
-                match rng.below(3) {
-                    0 => topic = (*rng.pick(&TOPICS)).to_owned(),
-                    1 => enc = (*rng.pick(&["json", "cbor", "", "protobuf"])).to_owned(),
-                    _ => {
-                        let id = rng.below(10) as u16;
-                        if rng.one_in(2) {
-                            head[0..2].copy_from_slice(&id.to_le_bytes());
-                        } else {
-                            head[2..4].copy_from_slice(&id.to_le_bytes());
-                        }
-                    }
-                }
-                let mut body = head;
-                put_str(&mut body, &topic);
-                put_str(&mut body, &enc);
-                body.extend_from_slice(&rest);
-                r.body = body;
-            }
-        }
-        15 if !others.is_empty() => {
-            // A record from another seed file.
-            let o = rng.pick(others);
-            if o.items.is_empty() {
-                return;
-            }
-            let item = o.items[rng.below(o.items.len())].clone();
-            let at = rng.below(f.items.len() + 1);
+    }
+}
+
+/// Duplicates a record (in place or at another top-level position).
+fn duplicate_record(rng: &mut Rng, f: &mut McapFile, sites: &[Site]) {
+    let site = *rng.pick(sites);
+    match site {
+        (i, None) => {
+            let item = f.items[i].clone();
+            let at = if rng.one_in(2) {
+                i
+            } else {
+                rng.below(f.items.len())
+            };
             f.items.insert(at, item);
         }
-        16 => {
-            // Truncate the file's record list (a writer that died), maybe keeping the footer.
-            let n = rng.below(f.items.len());
-            let footer = f.items.last().cloned();
-            f.items.truncate(n);
-            if rng.one_in(2) {
-                if let Some(ft) = footer {
-                    f.items.push(ft);
+        (i, Some(j)) => {
+            if let Some(Item::Chunk(c)) = f.items.get_mut(i) {
+                c.original = None;
+                let r = c.inner[j].clone();
+                let at = rng.below(c.inner.len() + 1);
+                c.inner.insert(at, r);
+            }
+        }
+    }
+}
+
+/// Moves an inner record to the top level, or swaps two top-level items.
+fn move_or_swap_record(rng: &mut Rng, f: &mut McapFile, sites: &[Site]) {
+    let site = *rng.pick(sites);
+    if let (i, Some(j)) = site {
+        if let Some(Item::Chunk(c)) = f.items.get_mut(i) {
+            c.original = None;
+            let r = c.inner.remove(j);
+            let at = rng.below(f.items.len());
+            f.items.insert(at, Item::Plain(r));
+        }
+    } else {
+        let a = rng.below(f.items.len());
+        let b = rng.below(f.items.len());
+        f.items.swap(a, b);
+    }
+}
+
+/// A chunk's compression or times.
+fn mutate_chunk_header(rng: &mut Rng, f: &mut McapFile) {
+    let chunks: Vec<usize> = (0..f.items.len())
+        .filter(|&i| matches!(f.items[i], Item::Chunk(_)))
+        .collect();
+    if chunks.is_empty() {
+        return;
+    }
+    let i = *rng.pick(&chunks);
+    if let Item::Chunk(c) = &mut f.items[i] {
+        c.original = None;
+        match rng.below(3) {
+            0 => {
+                c.compression =
+                    (*rng.pick(&["", "zstd", "lz4", "gzip", "ZSTD", "zstd\0"])).to_owned()
+            }
+            1 => c.start = *rng.pick(&INTERESTING_U64),
+            _ => c.end = *rng.pick(&INTERESTING_U64),
+        }
+    }
+}
+
+/// An opcode.
+fn mutate_opcode(rng: &mut Rng, f: &mut McapFile, sites: &[Site]) {
+    let site = *rng.pick(sites);
+    let new = *rng.pick(&[
+        0x00u8, 0x01, 0x02, 0x03, 0x04, 0x05, 0x06, 0x07, 0x08, 0x09, 0x0b, 0x0c, 0x0d, 0x0e, 0x0f,
+        0x10, 0x7f, 0x80, 0xff,
+    ]);
+    if let Some(r) = f.record_mut(site) {
+        r.op = new;
+    }
+}
+
+/// A channel's topic, encoding or schema id.
+fn mutate_channel(rng: &mut Rng, f: &mut McapFile) {
+    let chans = f.sites_with(op::CHANNEL);
+    if chans.is_empty() {
+        return;
+    }
+    let site = *rng.pick(&chans);
+    if let Some(r) = f.record_mut(site) {
+        let mut pos = 4;
+        let (Some(mut topic), Some(mut enc)) =
+            (read_str(&r.body, &mut pos), read_str(&r.body, &mut pos))
+        else {
+            return;
+        };
+        let rest = r.body[pos..].to_vec();
+        let mut head = r.body[..4].to_vec();
+        match rng.below(3) {
+            0 => topic = (*rng.pick(&TOPICS)).to_owned(),
+            1 => enc = (*rng.pick(&["json", "cbor", "", "protobuf"])).to_owned(),
+            _ => {
+                let id = rng.below(10) as u16;
+                if rng.one_in(2) {
+                    head[0..2].copy_from_slice(&id.to_le_bytes());
+                } else {
+                    head[2..4].copy_from_slice(&id.to_le_bytes());
                 }
             }
         }
+        let mut body = head;
+        put_str(&mut body, &topic);
+        put_str(&mut body, &enc);
+        body.extend_from_slice(&rest);
+        r.body = body;
+    }
+}
+
+/// A record from another seed file (`others` is not empty).
+fn splice_record(rng: &mut Rng, f: &mut McapFile, others: &[McapFile]) {
+    let o = rng.pick(others);
+    if o.items.is_empty() {
+        return;
+    }
+    let item = o.items[rng.below(o.items.len())].clone();
+    let at = rng.below(f.items.len() + 1);
+    f.items.insert(at, item);
+}
+
+/// Truncates the file's record list (a writer that died), maybe keeping the footer.
+fn truncate_records(rng: &mut Rng, f: &mut McapFile) {
+    let n = rng.below(f.items.len());
+    let footer = f.items.last().cloned();
+    f.items.truncate(n);
+    if rng.one_in(2) {
+        if let Some(ft) = footer {
+            f.items.push(ft);
+        }
+    }
+}
+
+/// Changes how CRCs are written: the section CRCs left stale, or a chunk's zero or stale.
+fn mutate_crc_mode(rng: &mut Rng, f: &mut McapFile, sites: &[Site]) {
+    match rng.below(3) {
+        0 => f.fix_section_crcs = false,
         _ => {
-            // Change how CRCs are written.
-            match rng.below(3) {
-                0 => f.fix_section_crcs = false,
-                _ => {
-                    let site = *rng.pick(&sites);
-                    if let Some(Item::Chunk(c)) = f.items.get_mut(site.0) {
-                        c.original = None;
-                        c.crc = if rng.one_in(2) {
-                            CrcMode::Zero
-                        } else {
-                            CrcMode::Stale(rng.next_u64() as u32)
-                        };
-                    }
-                }
+            let site = *rng.pick(sites);
+            if let Some(Item::Chunk(c)) = f.items.get_mut(site.0) {
+                c.original = None;
+                c.crc = if rng.one_in(2) {
+                    CrcMode::Zero
+                } else {
+                    CrcMode::Stale(rng.next_u64() as u32)
+                };
             }
         }
     }

@@ -701,37 +701,83 @@ impl LiveSession {
 
     /// Decodes and validates a frame into `self.cur` (leaving `self.prev` the last accepted).
     fn accept(&mut self, frame: &[u8]) -> std::result::Result<(), SampleError> {
-        let refuse = |t_ns: Option<u64>, message: String| Err(SampleError { t_ns, message });
+        self.decode(frame).map_err(|message| SampleError {
+            t_ns: None,
+            message,
+        })?;
+        let t = self.sample.t_ns;
+        let at_t = |message: String| SampleError {
+            t_ns: Some(t),
+            message,
+        };
+        let (input, torques) = self.validate().map_err(at_t)?;
+        if self.drive.is_none() {
+            let drive = GloveDrive::new(self.dfs.hand(), self.dfs.params(), torques, None)
+                .map_err(|e| at_t(format!("the glove's coupling: {e}")))?;
+            self.drive = Some(drive);
+        }
+        if self.first_t_ns.is_none() {
+            self.first_t_ns = Some(t);
+            self.prev = input;
+        } else {
+            self.prev = self.cur;
+        }
+        self.cur = input;
+        self.last_t_ns = t;
+        self.base = input.base;
+        Ok(())
+    }
+
+    /// Decodes `frame` into `self.sample`; what is wrong with it if it is not a sample.
+    fn decode(&mut self, frame: &[u8]) -> std::result::Result<(), String> {
         if frame.len() > MAX_FRAME_BYTES {
-            return refuse(
-                None,
-                format!(
-                    "the frame is {} bytes; a sample frame has at most {MAX_FRAME_BYTES}",
-                    frame.len()
-                ),
-            );
+            return Err(format!(
+                "the frame is {} bytes; a sample frame has at most {MAX_FRAME_BYTES}",
+                frame.len()
+            ));
         }
         let s = &mut self.sample;
         s.clear();
-        if let Err(e) = s.merge(frame) {
-            return refuse(
-                None,
-                format!("the binary frame is not an icms.live.Sample: {e}"),
-            );
+        s.merge(frame)
+            .map_err(|e| format!("the binary frame is not an icms.live.Sample: {e}"))
+    }
+
+    /// Checks the decoded sample against the hand, the session's glove and the previous
+    /// sample: its input in session time (angles calibrated), and whether it gives torques.
+    /// What is wrong with it, naming the field, if it is refused.
+    fn validate(&self) -> std::result::Result<(Input, bool), String> {
+        let n = self.dof;
+        let torques = self.check_lengths()?;
+        let q = self.calibrated_angles()?;
+        self.check_torque_limits()?;
+        let base = self.sample_base()?;
+        let session_ns = self.sample_session_ns()?;
+        let mut input = Input {
+            session_ns,
+            q: [0.0; MAX_DOF],
+            tau: [0.0; MAX_DOF],
+            base,
+        };
+        input.q[..n].copy_from_slice(&q[..n]);
+        if torques {
+            input.tau[..n].copy_from_slice(&self.sample.tau);
         }
-        let t = s.t_ns;
+        Ok((input, torques))
+    }
+
+    /// Checks the sample gives one angle per DOF and one torque per DOF or none, as the
+    /// session's first sample did, every value finite; whether it gives torques.
+    fn check_lengths(&self) -> std::result::Result<bool, String> {
+        let s = &self.sample;
         let n = self.dof;
         let hand = self.dfs.hand();
         if s.q.len() != n {
-            return refuse(
-                Some(t),
-                format!(
-                    "q has {} values; the hand {} has {n} DOFs ({})",
-                    s.q.len(),
-                    hand.name,
-                    hand.dof_names.join(", ")
-                ),
-            );
+            return Err(format!(
+                "q has {} values; the hand {} has {n} DOFs ({})",
+                s.q.len(),
+                hand.name,
+                hand.dof_names.join(", ")
+            ));
         }
         let torques = match self.drive {
             Some(d) => d.torques(),
@@ -743,142 +789,114 @@ impl LiveSession {
             } else {
                 "a glove"
             };
-            return refuse(
-                Some(t),
-                if torques {
-                    format!(
-                        "tau has {} values; {kind} gave torques, so every sample gives one per \
-                         DOF ({n} for {})",
-                        s.tau.len(),
-                        hand.name
-                    )
-                } else {
-                    format!(
-                        "tau has {} values; the session's first sample gave none (a glove of \
-                         positions only), so no sample may",
-                        s.tau.len()
-                    )
-                },
-            );
+            return Err(if torques {
+                format!(
+                    "tau has {} values; {kind} gave torques, so every sample gives one per \
+                     DOF ({n} for {})",
+                    s.tau.len(),
+                    hand.name
+                )
+            } else {
+                format!(
+                    "tau has {} values; the session's first sample gave none (a glove of \
+                     positions only), so no sample may",
+                    s.tau.len()
+                )
+            });
         }
         for (what, values) in [("q", &s.q), ("tau", &s.tau)] {
             if let Some(i) = values.iter().position(|v| !v.is_finite()) {
-                return refuse(
-                    Some(t),
-                    format!(
-                        "{what}[{i}] ({}) is {}; every value must be finite",
-                        hand.dof_names[i], values[i]
-                    ),
-                );
+                return Err(format!(
+                    "{what}[{i}] ({}) is {}; every value must be finite",
+                    hand.dof_names[i], values[i]
+                ));
             }
         }
+        Ok(torques)
+    }
+
+    /// The sample's angles, calibrated, checked against the hand's joint limits (with the
+    /// DFS's slack).
+    fn calibrated_angles(&self) -> std::result::Result<[f64; MAX_DOF], String> {
+        let n = self.dof;
         let mut q = [0.0; MAX_DOF];
-        q[..n].copy_from_slice(&s.q);
+        q[..n].copy_from_slice(&self.sample.q);
         self.calibration.apply(&mut q[..n]);
         let slack = self.dfs.params().angle_slack;
-        if let Err(e) = hand.check_angles(&q[..n], slack) {
+        if let Err(e) = self.dfs.hand().check_angles(&q[..n], slack) {
             let calibrated = if self.calibration.is_identity() {
                 ""
             } else {
                 " (calibrated)"
             };
-            return refuse(Some(t), format!("q{calibrated}: {e}"));
+            return Err(format!("q{calibrated}: {e}"));
         }
+        Ok(q)
+    }
+
+    /// Checks the sample's torques are within the hand's limits (times the DFS's range).
+    fn check_torque_limits(&self) -> std::result::Result<(), String> {
+        let hand = self.dfs.hand();
         let range = self.dfs.params().torque_range;
-        for (i, &v) in s.tau.iter().enumerate() {
+        for (i, &v) in self.sample.tau.iter().enumerate() {
             let lim = hand.torque_limit[i] * range;
             if v.abs() > lim {
-                return refuse(
-                    Some(t),
-                    format!(
-                        "tau[{i}] ({}) is {v} N·m; the hand's limit there is ±{lim} \
-                         ({range} × its actuator's)",
-                        hand.dof_names[i]
-                    ),
-                );
+                return Err(format!(
+                    "tau[{i}] ({}) is {v} N·m; the hand's limit there is ±{lim} \
+                     ({range} × its actuator's)",
+                    hand.dof_names[i]
+                ));
             }
         }
-        let base = match &s.wrist {
-            None => self.base,
+        Ok(())
+    }
+
+    /// The hand base's pose at the sample: its wrist pose, else the last one.
+    fn sample_base(&self) -> std::result::Result<Isometry, String> {
+        match &self.sample.wrist {
+            None => Ok(self.base),
             Some(w) => {
                 let p = w.position.unwrap_or_default();
                 let Some(o) = w.orientation else {
-                    return refuse(Some(t), "wrist.orientation is missing".to_owned());
+                    return Err("wrist.orientation is missing".to_owned());
                 };
-                match pose_from([p.x, p.y, p.z], [o.x, o.y, o.z, o.w]) {
-                    Ok(pose) => pose,
-                    Err(m) => return refuse(Some(t), format!("wrist: {m}")),
-                }
+                pose_from([p.x, p.y, p.z], [o.x, o.y, o.z, o.w]).map_err(|m| format!("wrist: {m}"))
             }
-        };
-        let session_ns = match self.first_t_ns {
-            None => 0,
-            Some(first) => {
-                if t <= self.last_t_ns {
-                    return refuse(
-                        Some(t),
-                        format!(
-                            "t_ns {t} is not after the previous sample's {}: samples must come \
-                             in time order",
-                            self.last_t_ns
-                        ),
-                    );
-                }
-                if t - self.last_t_ns > MAX_SAMPLE_GAP_NS {
-                    return refuse(
-                        Some(t),
-                        format!(
-                            "t_ns {t} is {} s after the previous sample; at most {} s may \
-                             pass between samples",
-                            (t - self.last_t_ns) as f64 * 1e-9,
-                            MAX_SAMPLE_GAP_NS as f64 * 1e-9
-                        ),
-                    );
-                }
-                let s = t - first;
-                if s > MAX_SESSION_NS {
-                    return refuse(
-                        Some(t),
-                        format!(
-                            "the session would be {} s long; a live session is at most {} s: \
-                             end it and start another",
-                            s as f64 * 1e-9,
-                            MAX_SESSION_NS as f64 * 1e-9
-                        ),
-                    );
-                }
-                s
-            }
-        };
-        let mut input = Input {
-            session_ns,
-            q: [0.0; MAX_DOF],
-            tau: [0.0; MAX_DOF],
-            base,
-        };
-        input.q[..n].copy_from_slice(&q[..n]);
-        if torques {
-            input.tau[..n].copy_from_slice(&s.tau);
         }
-        if self.drive.is_none() {
-            let drive = GloveDrive::new(hand, self.dfs.params(), torques, None).map_err(|e| {
-                SampleError {
-                    t_ns: Some(t),
-                    message: format!("the glove's coupling: {e}"),
-                }
-            })?;
-            self.drive = Some(drive);
+    }
+
+    /// The sample's session time (ns): 0 for the first; later ones after the previous sample,
+    /// at most [`MAX_SAMPLE_GAP_NS`] after it and within [`MAX_SESSION_NS`] of the first.
+    fn sample_session_ns(&self) -> std::result::Result<u64, String> {
+        let t = self.sample.t_ns;
+        let Some(first) = self.first_t_ns else {
+            return Ok(0);
+        };
+        if t <= self.last_t_ns {
+            return Err(format!(
+                "t_ns {t} is not after the previous sample's {}: samples must come in time \
+                 order",
+                self.last_t_ns
+            ));
         }
-        if self.first_t_ns.is_none() {
-            self.first_t_ns = Some(t);
-            self.prev = input;
-        } else {
-            self.prev = self.cur;
+        if t - self.last_t_ns > MAX_SAMPLE_GAP_NS {
+            return Err(format!(
+                "t_ns {t} is {} s after the previous sample; at most {} s may pass between \
+                 samples",
+                (t - self.last_t_ns) as f64 * 1e-9,
+                MAX_SAMPLE_GAP_NS as f64 * 1e-9
+            ));
         }
-        self.cur = input;
-        self.last_t_ns = t;
-        self.base = base;
-        Ok(())
+        let s = t - first;
+        if s > MAX_SESSION_NS {
+            return Err(format!(
+                "the session would be {} s long; a live session is at most {} s: end it and \
+                 start another",
+                s as f64 * 1e-9,
+                MAX_SESSION_NS as f64 * 1e-9
+            ));
+        }
+        Ok(s)
     }
 
     /// Steps every tick due up to the current sample, interpolating its input from the

@@ -333,99 +333,31 @@ pub fn run(c: BenchCommand) -> Result<(), CliError> {
             sessions,
             duration,
             scenario,
-        } => {
-            let r = bench_ingest(&scenario, sessions.max(1), duration)?;
-            if json {
-                print_json(&r)
-            } else {
-                println!(
-                    "ingest of {} {} s {} sessions ({} bytes each): {:.1} sessions/s ({} files at once; one at a time {:.1}/s); per session alone: read + segment {:.1} ms, store {:.1} ms (synchronous=FULL; NORMAL: {:.1} ms) (medians)",
-                    r.sessions, r.duration, r.scenario, r.file_bytes, r.sessions_per_second,
-                    r.in_flight, r.sessions_per_second_one_at_a_time,
-                    r.analyse_ms, r.store_ms, r.store_ms_synchronous_normal
-                );
-                Ok(())
-            }
-        }
+        } => run_ingest(json, sessions, duration, &scenario),
         BenchCommand::Store {
             json,
             skills,
             dir,
             keep,
             database_url,
-        } => {
-            let database = services::store::Database::from_url(database_url.as_deref())?;
-            let r = store::bench_store(skills as usize, dir, keep, &database)?;
-            if json {
-                print_json(&r)
-            } else {
-                store::print(&r);
-                Ok(())
-            }
-        }
+        } => run_store(json, skills, dir, keep, database_url.as_deref()),
         BenchCommand::Jobs {
             json,
             jobs: n,
             database_url,
-        } => {
-            let r = jobs::bench_jobs(n as usize, database_url.as_deref())?;
-            if json {
-                print_json(&r)
-            } else {
-                jobs::print(&r);
-                Ok(())
-            }
-        }
+        } => run_jobs(json, n, database_url.as_deref()),
         BenchCommand::Upload {
             json,
             uploads,
             duration,
             scenario,
-        } => {
-            let r = bench_upload(&scenario, uploads, duration)?;
-            if json {
-                print_json(&r)
-            } else {
-                println!(
-                    "upload of {} {} s {} sessions ({} bytes each) over HTTP on loopback: median {:.1} ms, min {:.1} ms, max {:.1} ms (read + segment alone: {:.1} ms)",
-                    r.uploads, r.duration, r.scenario, r.file_bytes, r.median_ms, r.min_ms,
-                    r.max_ms, r.analyse_ms
-                );
-                Ok(())
-            }
-        }
+        } => run_upload(json, uploads, duration, &scenario),
         BenchCommand::Recognition {
             json,
             train,
             test,
             stored,
-        } => {
-            let r = bench_recognition(train, test, stored)?;
-            if json {
-                print_json(&r)
-            } else {
-                let c = r.cost.as_ref();
-                println!(
-                    "recognition over {} held-out sessions ({:?} stored): target and kind named 200 ms before first contact {:.0} %, median decision at {:.0} % of the reach ({:.0} ms before contact); nearest stored skill named by 1 s after contact {:.0} % (exact knowledge of what is known then: {:.0} %); kind left out: unknown {:.0} %, stored as new {:.0} %; cost per observation with {} skills: mean {:.2} µs, p99 {:.2} µs, max {:.0} µs (least of {} runs per observation: mean {:.2} µs, p99 {:.2} µs, max {:.0} µs); an approach decision mean {:.0} µs (max {:.0} µs); a grasp-stage step mean {:.0} µs (max {:.0} µs), {:.1} observations per grasp-stage decision",
-                    r.sessions.len(), r.stored_per_kind, 100.0 * r.anticipated_fraction,
-                    100.0 * r.median_decided_fraction, r.median_lead_ms,
-                    100.0 * r.nearest_fraction, 100.0 * r.nearest_bound_fraction,
-                    100.0 * r.unknown_fraction,
-                    100.0 * r.stored_as_new_fraction, c.map_or(0, |c| c.stored_skills),
-                    c.map_or(0.0, |c| c.mean_us), c.map_or(0.0, |c| c.p99_us),
-                    c.map_or(0.0, |c| c.max_us),
-                    services::assist::evaluate::COST_REPEATS,
-                    c.map_or(0.0, |c| c.least_mean_us), c.map_or(0.0, |c| c.least_p99_us),
-                    c.map_or(0.0, |c| c.least_max_us),
-                    c.map_or(0.0, |c| c.approach_decision_mean_us),
-                    c.map_or(0.0, |c| c.approach_decision_max_us),
-                    c.map_or(0.0, |c| c.grasp_step_mean_us),
-                    c.map_or(0.0, |c| c.grasp_step_max_us),
-                    c.map_or(0.0, |c| c.grasp_steps_per_decision)
-                );
-                Ok(())
-            }
-        }
+        } => run_recognition(json, train, test, stored),
         BenchCommand::Live {
             json,
             sessions,
@@ -433,58 +365,168 @@ pub fn run(c: BenchCommand) -> Result<(), CliError> {
             rate,
             scenario,
             assist,
-        } => {
-            let r = bench_live(&scenario, sessions as usize, seconds, rate, assist)?;
-            if json {
-                print_json(&r)
-            } else {
-                println!(
-                    "{} live sessions × {} s at {} Hz over loopback ({} stepping threads, {} cores, load {:.2} before): round trip p50 {:.0} µs, p90 {:.0} µs, p99 {:.0} µs, p99.9 {:.0} µs, max {:.0} µs; {} samples, {} dropped, {} refused; {} of {} stored",
-                    r.sessions, r.seconds, r.rate_hz, r.live_threads, r.cores, r.load_before,
-                    r.p50_us, r.p90_us, r.p99_us, r.p999_us, r.max_us, r.samples, r.dropped,
-                    r.refused, r.stored, r.sessions
-                );
-                Ok(())
-            }
-        }
+        } => run_live(json, sessions, seconds, rate, &scenario, assist),
         BenchCommand::Tick {
             json,
             scene,
             iterations,
             describe,
-        } => {
-            if describe {
-                return print_json(&tick::describe(scene)?);
-            }
-            let r = tick::bench_tick(scene, iterations as usize)?;
-            if json {
-                print_json(&r)
-            } else {
-                println!(
-                    "DFS tick, scene {:?} ({} contacts at the end, at least {}): median {:.0} ns per tick (batches of {}), p99 {:.0} ns, median of single ticks {:.0} ns, {} allocations/tick over {} ticks",
-                    scene, r.contacts, r.min_contacts, r.median_ns, r.batch_ticks, r.p99_ns,
-                    r.median_tick_ns, r.allocations_per_tick, r.iterations
-                );
-                Ok(())
-            }
-        }
+        } => run_tick(json, scene, iterations, describe),
         BenchCommand::Session {
             json,
             duration,
             scenario,
-        } => {
-            let r = bench_session(&scenario, duration)?;
-            if json {
-                print_json(&r)
-            } else {
-                println!(
-                    "{} s of {}: simulate + record {:.3} s ({:.0}× real time), simulate alone {:.3} s ({:.0}×); {} bytes ({:.0} bytes/min), {} messages",
-                    duration, r.scenario, r.seconds, r.realtime_factor, r.simulation_seconds,
-                    r.simulation_realtime_factor, r.file_bytes, r.bytes_per_minute, r.messages
-                );
-                Ok(())
-            }
-        }
+        } => run_session(json, duration, &scenario),
+    }
+}
+
+/// `icms bench ingest`: runs it and prints the result.
+fn run_ingest(json: bool, sessions: u64, duration: f64, scenario: &str) -> Result<(), CliError> {
+    let r = bench_ingest(scenario, sessions.max(1), duration)?;
+    if json {
+        print_json(&r)
+    } else {
+        println!(
+            "ingest of {} {} s {} sessions ({} bytes each): {:.1} sessions/s ({} files at once; one at a time {:.1}/s); per session alone: read + segment {:.1} ms, store {:.1} ms (synchronous=FULL; NORMAL: {:.1} ms) (medians)",
+            r.sessions, r.duration, r.scenario, r.file_bytes, r.sessions_per_second,
+            r.in_flight, r.sessions_per_second_one_at_a_time,
+            r.analyse_ms, r.store_ms, r.store_ms_synchronous_normal
+        );
+        Ok(())
+    }
+}
+
+/// `icms bench store`: runs it and prints the result.
+fn run_store(
+    json: bool,
+    skills: u64,
+    dir: Option<std::path::PathBuf>,
+    keep: bool,
+    database_url: Option<&str>,
+) -> Result<(), CliError> {
+    let database = services::store::Database::from_url(database_url)?;
+    let r = store::bench_store(skills as usize, dir, keep, &database)?;
+    if json {
+        print_json(&r)
+    } else {
+        store::print(&r);
+        Ok(())
+    }
+}
+
+/// `icms bench jobs`: runs it and prints the result.
+fn run_jobs(json: bool, n: u64, database_url: Option<&str>) -> Result<(), CliError> {
+    let r = jobs::bench_jobs(n as usize, database_url)?;
+    if json {
+        print_json(&r)
+    } else {
+        jobs::print(&r);
+        Ok(())
+    }
+}
+
+/// `icms bench upload`: runs it and prints the result.
+fn run_upload(json: bool, uploads: u64, duration: f64, scenario: &str) -> Result<(), CliError> {
+    let r = bench_upload(scenario, uploads, duration)?;
+    if json {
+        print_json(&r)
+    } else {
+        println!(
+            "upload of {} {} s {} sessions ({} bytes each) over HTTP on loopback: median {:.1} ms, min {:.1} ms, max {:.1} ms (read + segment alone: {:.1} ms)",
+            r.uploads, r.duration, r.scenario, r.file_bytes, r.median_ms, r.min_ms,
+            r.max_ms, r.analyse_ms
+        );
+        Ok(())
+    }
+}
+
+/// `icms bench recognition`: runs it and prints the result.
+fn run_recognition(json: bool, train: u64, test: u64, stored: usize) -> Result<(), CliError> {
+    let r = bench_recognition(train, test, stored)?;
+    if json {
+        print_json(&r)
+    } else {
+        let c = r.cost.as_ref();
+        println!(
+            "recognition over {} held-out sessions ({:?} stored): target and kind named 200 ms before first contact {:.0} %, median decision at {:.0} % of the reach ({:.0} ms before contact); nearest stored skill named by 1 s after contact {:.0} % (exact knowledge of what is known then: {:.0} %); kind left out: unknown {:.0} %, stored as new {:.0} %; cost per observation with {} skills: mean {:.2} µs, p99 {:.2} µs, max {:.0} µs (least of {} runs per observation: mean {:.2} µs, p99 {:.2} µs, max {:.0} µs); an approach decision mean {:.0} µs (max {:.0} µs); a grasp-stage step mean {:.0} µs (max {:.0} µs), {:.1} observations per grasp-stage decision",
+            r.sessions.len(), r.stored_per_kind, 100.0 * r.anticipated_fraction,
+            100.0 * r.median_decided_fraction, r.median_lead_ms,
+            100.0 * r.nearest_fraction, 100.0 * r.nearest_bound_fraction,
+            100.0 * r.unknown_fraction,
+            100.0 * r.stored_as_new_fraction, c.map_or(0, |c| c.stored_skills),
+            c.map_or(0.0, |c| c.mean_us), c.map_or(0.0, |c| c.p99_us),
+            c.map_or(0.0, |c| c.max_us),
+            services::assist::evaluate::COST_REPEATS,
+            c.map_or(0.0, |c| c.least_mean_us), c.map_or(0.0, |c| c.least_p99_us),
+            c.map_or(0.0, |c| c.least_max_us),
+            c.map_or(0.0, |c| c.approach_decision_mean_us),
+            c.map_or(0.0, |c| c.approach_decision_max_us),
+            c.map_or(0.0, |c| c.grasp_step_mean_us),
+            c.map_or(0.0, |c| c.grasp_step_max_us),
+            c.map_or(0.0, |c| c.grasp_steps_per_decision)
+        );
+        Ok(())
+    }
+}
+
+/// `icms bench live`: runs it and prints the result.
+fn run_live(
+    json: bool,
+    sessions: u64,
+    seconds: f64,
+    rate: u32,
+    scenario: &str,
+    assist: bool,
+) -> Result<(), CliError> {
+    let r = bench_live(scenario, sessions as usize, seconds, rate, assist)?;
+    if json {
+        print_json(&r)
+    } else {
+        println!(
+            "{} live sessions × {} s at {} Hz over loopback ({} stepping threads, {} cores, load {:.2} before): round trip p50 {:.0} µs, p90 {:.0} µs, p99 {:.0} µs, p99.9 {:.0} µs, max {:.0} µs; {} samples, {} dropped, {} refused; {} of {} stored",
+            r.sessions, r.seconds, r.rate_hz, r.live_threads, r.cores, r.load_before,
+            r.p50_us, r.p90_us, r.p99_us, r.p999_us, r.max_us, r.samples, r.dropped,
+            r.refused, r.stored, r.sessions
+        );
+        Ok(())
+    }
+}
+
+/// `icms bench tick`: describes the scene, or runs it and prints the result.
+fn run_tick(
+    json: bool,
+    scene: tick::TickScene,
+    iterations: u64,
+    describe: bool,
+) -> Result<(), CliError> {
+    if describe {
+        return print_json(&tick::describe(scene)?);
+    }
+    let r = tick::bench_tick(scene, iterations as usize)?;
+    if json {
+        print_json(&r)
+    } else {
+        println!(
+            "DFS tick, scene {:?} ({} contacts at the end, at least {}): median {:.0} ns per tick (batches of {}), p99 {:.0} ns, median of single ticks {:.0} ns, {} allocations/tick over {} ticks",
+            scene, r.contacts, r.min_contacts, r.median_ns, r.batch_ticks, r.p99_ns,
+            r.median_tick_ns, r.allocations_per_tick, r.iterations
+        );
+        Ok(())
+    }
+}
+
+/// `icms bench session`: runs it and prints the result.
+fn run_session(json: bool, duration: f64, scenario: &str) -> Result<(), CliError> {
+    let r = bench_session(scenario, duration)?;
+    if json {
+        print_json(&r)
+    } else {
+        println!(
+            "{} s of {}: simulate + record {:.3} s ({:.0}× real time), simulate alone {:.3} s ({:.0}×); {} bytes ({:.0} bytes/min), {} messages",
+            duration, r.scenario, r.seconds, r.realtime_factor, r.simulation_seconds,
+            r.simulation_realtime_factor, r.file_bytes, r.bytes_per_minute, r.messages
+        );
+        Ok(())
     }
 }
 
@@ -620,6 +662,8 @@ fn load_average() -> f64 {
         .unwrap_or(-1.0)
 }
 
+/// `icms bench live` (see [`BenchCommand::Live`]): `sessions` clients streaming `name`'s
+/// simulated operator at `rate` Hz for `seconds` to the server started in-process.
 fn bench_live(
     name: &str,
     sessions: usize,
@@ -633,6 +677,78 @@ fn bench_live(
         )));
     }
     let every = u64::from((1000 / rate).max(1));
+    let streams = live_streams(name, sessions, seconds, every, assist)?;
+    let dir = tempfile::tempdir().map_err(|e| CliError(format!("temporary directory: {e}")))?;
+    crate::memory::limit_arenas();
+    let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
+    let server_rt = tokio::runtime::Builder::new_multi_thread()
+        .enable_all()
+        .build()
+        .map_err(|e| CliError(format!("starting the async runtime: {e}")))?;
+    let args = crate::config::ServeArgs {
+        addr: std::net::SocketAddr::from(([127, 0, 0, 1], 0)),
+        store: crate::config::StoreArgs::in_dir(dir.path().join("data")),
+        no_demo: true,
+        ..crate::config::ServeArgs::default()
+    };
+    if assist {
+        store_live_skills(dir.path(), name)?;
+    }
+    let config = args.into_config()?;
+    let live_threads = config.state.live_threads;
+    let app = server_rt.block_on(crate::startup::Application::build(config))?;
+    let url = format!("ws://{}/api/v1/live", app.local_addr());
+    let (stop, stopped) = tokio::sync::oneshot::channel::<()>();
+    let server = server_rt.spawn(app.run_until(async move {
+        let _ = stopped.await;
+    }));
+    // The clients on a runtime of their own, as a glove's driver would be a process of its
+    // own.
+    let client_rt = tokio::runtime::Builder::new_current_thread()
+        .enable_all()
+        .build()
+        .map_err(|e| CliError(format!("starting the client runtime: {e}")))?;
+    let load_before = load_average();
+    let results = client_rt.block_on(stream_live(&url, streams));
+    let load_after = load_average();
+    let _ = stop.send(());
+    server_rt
+        .block_on(server)
+        .map_err(|e| CliError(format!("the server task: {e}")))??;
+    let totals = LiveTotals::of(results)?;
+    let all = &totals.round_trips_us;
+    let p = |q| crate::live_client::percentile(all, q);
+    Ok(LiveBench {
+        p50_us: p(0.5),
+        p90_us: p(0.9),
+        p99_us: p(0.99),
+        p999_us: p(0.999),
+        max_us: all.last().copied().unwrap_or(0.0),
+        samples: totals.samples,
+        dropped: totals.samples - totals.answered - totals.refused,
+        refused: totals.refused,
+        sessions,
+        rate_hz: rate,
+        seconds,
+        realtime: true,
+        assist,
+        live_threads,
+        cores,
+        load_before,
+        load_after,
+        stored: totals.stored,
+    })
+}
+
+/// The start message and the simulated glove frames (a sample every `every` ms for `seconds`)
+/// of each of `sessions` live sessions of scenario `name`, seeds 0 on.
+fn live_streams(
+    name: &str,
+    sessions: usize,
+    seconds: f64,
+    every: u64,
+    assist: bool,
+) -> Result<Vec<LiveStream>, CliError> {
     let mut streams = Vec::new();
     for seed in 0..sessions as u64 {
         let scenario = dfs_core::scenario::Scenario::builtin(name, seed)
@@ -659,108 +775,96 @@ fn bench_live(
         };
         streams.push((start, frames));
     }
-    let dir = tempfile::tempdir().map_err(|e| CliError(format!("temporary directory: {e}")))?;
-    crate::memory::limit_arenas();
-    let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
-    let server_rt = tokio::runtime::Builder::new_multi_thread()
-        .enable_all()
-        .build()
-        .map_err(|e| CliError(format!("starting the async runtime: {e}")))?;
-    let args = crate::config::ServeArgs {
-        addr: std::net::SocketAddr::from(([127, 0, 0, 1], 0)),
-        store: crate::config::StoreArgs::in_dir(dir.path().join("data")),
-        no_demo: true,
-        ..crate::config::ServeArgs::default()
-    };
-    if assist {
-        // Skills to recognise: three sessions of the scenario, stored before the server starts.
-        let rt = tokio::runtime::Runtime::new()?;
-        rt.block_on(async {
-            let store = services::store::Store::open(&dir.path().join("data")).await?;
-            for seed in 100..103 {
-                let scenario = dfs_core::scenario::Scenario::builtin(name, seed)
-                    .ok_or_else(|| CliError(format!("no built-in scenario {name:?}")))?;
-                let path = dir.path().join(format!("stored-{seed}.mcap"));
-                services::session::record_simulation(&scenario, None, path.as_path(), |_, _| {})?;
-                services::ingest::ingest_file(&store, path, format!("stored-{seed}")).await?;
-            }
-            store.close().await;
-            Ok::<_, CliError>(())
-        })?;
-    }
-    let config = args.into_config()?;
-    let live_threads = config.state.live_threads;
-    let app = server_rt.block_on(crate::startup::Application::build(config))?;
-    let url = format!("ws://{}/api/v1/live", app.local_addr());
-    let (stop, stopped) = tokio::sync::oneshot::channel::<()>();
-    let server = server_rt.spawn(app.run_until(async move {
-        let _ = stopped.await;
-    }));
-    // The clients on a runtime of their own, as a glove's driver would be a process of its
-    // own.
-    let client_rt = tokio::runtime::Builder::new_current_thread()
-        .enable_all()
-        .build()
-        .map_err(|e| CliError(format!("starting the client runtime: {e}")))?;
-    let load_before = load_average();
-    let results = client_rt.block_on(async {
-        let mut tasks = Vec::new();
-        for (start, frames) in streams {
-            let url = url.clone();
-            tasks.push(tokio::spawn(async move {
-                let options = crate::live_client::ClientOptions {
-                    token: None,
-                    realtime: true,
-                };
-                crate::live_client::run(&url, &start, frames, &options, |_| {}).await
-            }));
+    Ok(streams)
+}
+
+/// Skills for the assistant to recognise: three sessions of scenario `name` (seeds 100-102)
+/// stored in the data directory under `dir`, before the server starts.
+fn store_live_skills(dir: &std::path::Path, name: &str) -> Result<(), CliError> {
+    let rt = tokio::runtime::Runtime::new()?;
+    rt.block_on(async {
+        let store = services::store::Store::open(&dir.join("data")).await?;
+        for seed in 100..103 {
+            let scenario = dfs_core::scenario::Scenario::builtin(name, seed)
+                .ok_or_else(|| CliError(format!("no built-in scenario {name:?}")))?;
+            let path = dir.join(format!("stored-{seed}.mcap"));
+            services::session::record_simulation(&scenario, None, path.as_path(), |_, _| {})?;
+            services::ingest::ingest_file(&store, path, format!("stored-{seed}")).await?;
         }
-        let mut out = Vec::new();
-        for t in tasks {
-            out.push(t.await);
-        }
-        out
-    });
-    let load_after = load_average();
-    let _ = stop.send(());
-    server_rt
-        .block_on(server)
-        .map_err(|e| CliError(format!("the server task: {e}")))??;
-    let mut all = Vec::new();
-    let (mut samples, mut answered, mut refused, mut stored) = (0, 0, 0, 0);
-    for r in results {
-        let s = r
-            .map_err(|e| CliError(format!("a live client task: {e}")))?
-            .map_err(|e| CliError(e.0))?;
-        samples += s.samples_sent;
-        answered += s.feedback_received;
-        refused += s.refused;
-        stored += usize::from(s.session_id.is_some());
-        all.extend(s.round_trips_us);
-    }
-    all.sort_by(f64::total_cmp);
-    let p = |q| crate::live_client::percentile(&all, q);
-    Ok(LiveBench {
-        p50_us: p(0.5),
-        p90_us: p(0.9),
-        p99_us: p(0.99),
-        p999_us: p(0.999),
-        max_us: all.last().copied().unwrap_or(0.0),
-        samples,
-        dropped: samples - answered - refused,
-        refused,
-        sessions,
-        rate_hz: rate,
-        seconds,
-        realtime: true,
-        assist,
-        live_threads,
-        cores,
-        load_before,
-        load_after,
-        stored,
+        store.close().await;
+        Ok::<_, CliError>(())
     })
 }
+
+/// Streams every session to the live route at `url` at once, one task each, in real time;
+/// each task's outcome, in order.
+async fn stream_live(url: &str, streams: Vec<LiveStream>) -> Vec<ClientOutcome> {
+    let mut tasks = Vec::new();
+    for (start, frames) in streams {
+        let url = url.to_owned();
+        tasks.push(tokio::spawn(async move {
+            let options = crate::live_client::ClientOptions {
+                token: None,
+                realtime: true,
+            };
+            crate::live_client::run(&url, &start, frames, &options, |_| {}).await
+        }));
+    }
+    let mut out = Vec::new();
+    for t in tasks {
+        out.push(t.await);
+    }
+    out
+}
+
+/// The live sessions' counts, all together.
+struct LiveTotals {
+    /// Samples sent.
+    samples: u64,
+    /// Feedback frames received.
+    answered: u64,
+    /// Samples refused.
+    refused: u64,
+    /// Sessions stored.
+    stored: usize,
+    /// Every round trip (µs), sorted.
+    round_trips_us: Vec<f64>,
+}
+
+impl LiveTotals {
+    /// Adds up the clients' summaries; the first failed client is the error.
+    fn of(results: Vec<ClientOutcome>) -> Result<LiveTotals, CliError> {
+        let mut all = Vec::new();
+        let (mut samples, mut answered, mut refused, mut stored) = (0, 0, 0, 0);
+        for r in results {
+            let s = r
+                .map_err(|e| CliError(format!("a live client task: {e}")))?
+                .map_err(|e| CliError(e.0))?;
+            samples += s.samples_sent;
+            answered += s.feedback_received;
+            refused += s.refused;
+            stored += usize::from(s.session_id.is_some());
+            all.extend(s.round_trips_us);
+        }
+        all.sort_by(f64::total_cmp);
+        Ok(LiveTotals {
+            samples,
+            answered,
+            refused,
+            stored,
+            round_trips_us: all,
+        })
+    }
+}
+
+/// A live session to stream: its start message and its glove frames.
+type LiveStream = (services::live::StartMessage, Vec<crate::live_client::Frame>);
+
+/// How a live client's task ended.
+type ClientOutcome = Result<
+    Result<crate::live_client::ClientSummary, crate::live_client::ClientError>,
+    tokio::task::JoinError,
+>;
 
 fn bench_upload(name: &str, uploads: u64, duration: f64) -> Result<UploadBench, CliError> {
     let dir = tempfile::tempdir().map_err(|e| CliError(format!("temporary directory: {e}")))?;

@@ -270,29 +270,11 @@ pub fn run_import(a: ImportArgs) -> Result<(), CliError> {
         Some("none") => WristInput::Ignore,
         Some(t) => WristInput::Topic(t.to_owned()),
     };
-    let out = a.out.clone().unwrap_or_else(|| {
-        let stem = a
-            .input
-            .file_stem()
-            .map(|s| s.to_string_lossy().into_owned())
-            .unwrap_or_else(|| "glove".into());
-        a.input.with_file_name(format!("{stem}.session.mcap"))
-    });
-    let mut inputs = vec![("the --input file", a.input.clone())];
-    if Scenario::builtin(&a.object, 0).is_none() && !a.object.trim_start().starts_with('{') {
-        inputs.push(("the --object file", PathBuf::from(&a.object)));
-    }
-    if let Some(c) = &a.calibration {
-        inputs.push(("the --calibration file", c.clone()));
-    }
-    if origin == Origin::File {
-        let spec = PathBuf::from(&a.hand);
-        if let Some(urdf) = hand.spec.as_ref().map(|s| &s.urdf) {
-            let dir = spec.parent().unwrap_or(Path::new("."));
-            inputs.push(("the URDF of the --hand spec", dir.join(urdf)));
-        }
-        inputs.push(("the --hand file", spec));
-    }
+    let out = a
+        .out
+        .clone()
+        .unwrap_or_else(|| default_import_out(&a.input));
+    let inputs = import_inputs(&a, hand.spec.as_ref(), origin == Origin::File);
     super::refuse_out_over_inputs(&out, &inputs)?;
     let recording = read_glove_file_with(&a.input, &hand.model, &wrist).map_err(|e| {
         // Errors about the file's content name it already; the MCAP reader's do not.
@@ -334,17 +316,71 @@ pub fn run_import(a: ImportArgs) -> Result<(), CliError> {
         whole_hand: a.whole_hand,
     };
     let start = Instant::now();
-    let summary =
-        replay_glove(&recording, &object, &options, &name, &out).map_err(|e| match &e {
-            services::RecordingError::Simulation { time_ns, .. } => CliError(format!(
-                "{}: {e} ({} holds the {} ticks before it)",
-                a.input.display(),
-                out.display(),
-                time_ns / 1_000_000
-            )),
-            _ => CliError(format!("{}: {e}", a.input.display())),
-        })?;
+    let summary = replay_glove(&recording, &object, &options, &name, &out)
+        .map_err(|e| replay_error(&a.input, &out, e))?;
     let elapsed = start.elapsed().as_secs_f64();
+    report_import(&a, &out, &hand_name, &recording, &object, &summary, elapsed)
+}
+
+/// Where `icms import-glove` writes without `--out`: `STEM.session.mcap` beside the input.
+fn default_import_out(input: &Path) -> PathBuf {
+    let stem = input
+        .file_stem()
+        .map(|s| s.to_string_lossy().into_owned())
+        .unwrap_or_else(|| "glove".into());
+    input.with_file_name(format!("{stem}.session.mcap"))
+}
+
+/// The files an import reads, which its output must not overwrite: the input, the object's
+/// and the calibration's files, and the hand's spec and its URDF when the hand is a file
+/// (`hand_from_file`, its spec `spec`).
+fn import_inputs(
+    a: &ImportArgs,
+    spec: Option<&dfs_core::hand::HandSpec>,
+    hand_from_file: bool,
+) -> Vec<(&'static str, PathBuf)> {
+    let mut inputs = vec![("the --input file", a.input.clone())];
+    if Scenario::builtin(&a.object, 0).is_none() && !a.object.trim_start().starts_with('{') {
+        inputs.push(("the --object file", PathBuf::from(&a.object)));
+    }
+    if let Some(c) = &a.calibration {
+        inputs.push(("the --calibration file", c.clone()));
+    }
+    if hand_from_file {
+        let spec_path = PathBuf::from(&a.hand);
+        if let Some(urdf) = spec.map(|s| &s.urdf) {
+            let dir = spec_path.parent().unwrap_or(Path::new("."));
+            inputs.push(("the URDF of the --hand spec", dir.join(urdf)));
+        }
+        inputs.push(("the --hand file", spec_path));
+    }
+    inputs
+}
+
+/// The error of a failed replay of `input` into `out` (a DFS failure says how many ticks the
+/// file holds).
+fn replay_error(input: &Path, out: &Path, e: services::RecordingError) -> CliError {
+    match &e {
+        services::RecordingError::Simulation { time_ns, .. } => CliError(format!(
+            "{}: {e} ({} holds the {} ticks before it)",
+            input.display(),
+            out.display(),
+            time_ns / 1_000_000
+        )),
+        _ => CliError(format!("{}: {e}", input.display())),
+    }
+}
+
+/// Prints what an import did (as JSON with `--json`).
+fn report_import(
+    a: &ImportArgs,
+    out: &Path,
+    hand_name: &str,
+    recording: &services::session::import::GloveRecording,
+    object: &ScenarioObject,
+    summary: &services::session::RecordSummary,
+    elapsed: f64,
+) -> Result<(), CliError> {
     let glove_input = if recording.has_torques() {
         "torques"
     } else {

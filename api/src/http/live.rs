@@ -532,14 +532,16 @@ async fn stream(
     mut session: Box<LiveSession>,
 ) -> (Box<LiveSession>, EndReason) {
     let silence = st.live().silence;
-    let mut last_sample = Instant::now();
-    let mut any_sample = false;
-    let mut stale = false;
+    let mut clock = SampleClock {
+        last_sample: Instant::now(),
+        any_sample: false,
+        stale: false,
+    };
     loop {
-        let wait_until = if any_sample && !stale {
-            last_sample + STALE_AFTER
+        let wait_until = if clock.any_sample && !clock.stale {
+            clock.last_sample + STALE_AFTER
         } else {
-            last_sample + silence
+            clock.last_sample + silence
         };
         let msg = tokio::select! {
             biased;
@@ -550,23 +552,9 @@ async fn stream(
             m = tokio::time::timeout_at(wait_until, socket.recv()) => m,
         };
         let msg = match msg {
-            Err(_) if any_sample && !stale => {
-                stale = true;
-                let (s, frame) = pinned
-                    .run(move || {
-                        let frame = Bytes::copy_from_slice(session.stale_feedback());
-                        (session, frame)
-                    })
-                    .await;
-                session = s;
-                let _ = socket.send(Message::Binary(frame)).await;
-                send_event(
-                    socket,
-                    &Event::Stale {
-                        session_ns: session.session_ns(),
-                    },
-                )
-                .await;
+            Err(_) if clock.any_sample && !clock.stale => {
+                clock.stale = true;
+                session = go_stale(socket, pinned, session).await;
                 continue;
             }
             Err(_) => {
@@ -582,70 +570,132 @@ async fn stream(
         };
         match msg {
             Message::Binary(frame) => {
-                let (s, reply) = pinned.run(move || step(session, frame)).await;
+                let (s, ended) = answer_sample(socket, pinned, session, frame, &mut clock).await;
                 session = s;
-                match reply {
-                    Reply::Refused(e) => {
-                        send_error(socket, e.t_ns, e.message).await;
-                    }
-                    Reply::Answered {
-                        feedback,
-                        failure,
-                        resumed,
-                        events,
-                    } => {
-                        any_sample = true;
-                        last_sample = Instant::now();
-                        stale = false;
-                        if socket.send(Message::Binary(feedback)).await.is_err() {
-                            return (session, EndReason::Disconnected);
-                        }
-                        if resumed {
-                            send_event(
-                                socket,
-                                &Event::Resumed {
-                                    session_ns: session.session_ns(),
-                                },
-                            )
-                            .await;
-                        }
-                        if let Some(e) = failure {
-                            send_error(socket, e.t_ns, e.message).await;
-                        }
-                        for text in events {
-                            if socket.send(Message::Text(text.into())).await.is_err() {
-                                return (session, EndReason::Disconnected);
-                            }
-                        }
-                    }
+                if let Some(reason) = ended {
+                    return (session, reason);
                 }
             }
-            Message::Text(text) => match ClientMessage::parse(text.as_str()) {
-                Ok(ClientMessage::End) => return (session, EndReason::Ended),
-                Ok(ClientMessage::Start(_)) => {
-                    send_error(
-                        socket,
-                        None,
-                        "the session has started already: send samples, or end".to_owned(),
-                    )
-                    .await;
+            Message::Text(text) => {
+                if let Some(reason) = on_text(socket, text.as_str()).await {
+                    return (session, reason);
                 }
-                Err(e) => {
-                    send_error(
-                        socket,
-                        None,
-                        format!(
-                            "a text frame must be {{\"type\": \"end\"}} once the session has \
-                             started: {e}"
-                        ),
-                    )
-                    .await;
-                }
-            },
+            }
             Message::Close(_) => return (session, EndReason::Disconnected),
             Message::Ping(_) | Message::Pong(_) => {}
         }
     }
+}
+
+/// When a session last had a sample: what [`stream`] waits for next (the next sample until
+/// [`STALE_AFTER`], then until the silence limit).
+struct SampleClock {
+    /// When the last sample was answered.
+    last_sample: Instant,
+    /// A sample was answered.
+    any_sample: bool,
+    /// The session is in a stale period (no sample for [`STALE_AFTER`]).
+    stale: bool,
+}
+
+/// No sample came for [`STALE_AFTER`]: sends the zero-force feedback and the `stale` event.
+async fn go_stale(
+    socket: &mut WebSocket,
+    pinned: &Pinned,
+    mut session: Box<LiveSession>,
+) -> Box<LiveSession> {
+    let (session, frame) = pinned
+        .run(move || {
+            let frame = Bytes::copy_from_slice(session.stale_feedback());
+            (session, frame)
+        })
+        .await;
+    let _ = socket.send(Message::Binary(frame)).await;
+    send_event(
+        socket,
+        &Event::Stale {
+            session_ns: session.session_ns(),
+        },
+    )
+    .await;
+    session
+}
+
+/// Steps the session on the sample `frame` and sends what it got: the error refusing it, or
+/// its feedback (then `resumed`, a DFS failure and the assistant's events), the sample noted
+/// on `clock`. Returns the session, and why it ended if the client is gone.
+async fn answer_sample(
+    socket: &mut WebSocket,
+    pinned: &Pinned,
+    session: Box<LiveSession>,
+    frame: Bytes,
+    clock: &mut SampleClock,
+) -> (Box<LiveSession>, Option<EndReason>) {
+    let (session, reply) = pinned.run(move || step(session, frame)).await;
+    match reply {
+        Reply::Refused(e) => {
+            send_error(socket, e.t_ns, e.message).await;
+        }
+        Reply::Answered {
+            feedback,
+            failure,
+            resumed,
+            events,
+        } => {
+            clock.any_sample = true;
+            clock.last_sample = Instant::now();
+            clock.stale = false;
+            if socket.send(Message::Binary(feedback)).await.is_err() {
+                return (session, Some(EndReason::Disconnected));
+            }
+            if resumed {
+                send_event(
+                    socket,
+                    &Event::Resumed {
+                        session_ns: session.session_ns(),
+                    },
+                )
+                .await;
+            }
+            if let Some(e) = failure {
+                send_error(socket, e.t_ns, e.message).await;
+            }
+            for text in events {
+                if socket.send(Message::Text(text.into())).await.is_err() {
+                    return (session, Some(EndReason::Disconnected));
+                }
+            }
+        }
+    }
+    (session, None)
+}
+
+/// A text frame once the session has started: `end` ends it (`Some`); anything else is
+/// answered with an error.
+async fn on_text(socket: &mut WebSocket, text: &str) -> Option<EndReason> {
+    match ClientMessage::parse(text) {
+        Ok(ClientMessage::End) => return Some(EndReason::Ended),
+        Ok(ClientMessage::Start(_)) => {
+            send_error(
+                socket,
+                None,
+                "the session has started already: send samples, or end".to_owned(),
+            )
+            .await;
+        }
+        Err(e) => {
+            send_error(
+                socket,
+                None,
+                format!(
+                    "a text frame must be {{\"type\": \"end\"}} once the session has \
+                     started: {e}"
+                ),
+            )
+            .await;
+        }
+    }
+    None
 }
 
 /// What a sample frame got.

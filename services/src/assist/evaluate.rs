@@ -251,7 +251,41 @@ pub struct EvalSetup<'a> {
 }
 
 /// Runs the evaluation (see the module docs).
-pub fn evaluate(setup: EvalSetup<'_>) -> Result<Evaluation, RecordingError> {
+pub fn evaluate(mut setup: EvalSetup<'_>) -> Result<Evaluation, RecordingError> {
+    let Recordings {
+        stored,
+        kinds_of,
+        held,
+    } = record_all(&mut setup)?;
+    let index = Arc::new(RecognitionIndex::new(stored.clone()));
+    let mut stored_per_kind = BTreeMap::new();
+    for k in kinds_of.values() {
+        *stored_per_kind.entry(k.clone()).or_insert(0) += 1;
+    }
+    let sessions = held
+        .iter()
+        .map(|r| score_session(&index, r, &kinds_of, &setup.params))
+        .collect();
+    let open_set = score_open_set(&index, &held, &kinds_of, &stored_per_kind, &setup.params);
+    let cost = setup
+        .cost_skills
+        .map(|n| measure_cost(&stored, n, &held, &setup.params));
+    Ok(summarise(stored_per_kind, sessions, open_set, cost))
+}
+
+/// The recorded sessions: the training sessions' skills as stored, and the held-out sessions.
+struct Recordings {
+    /// The training sessions' skills (ids from 1).
+    stored: Vec<StoredTemplate>,
+    /// Each stored skill's grasp kind, by id.
+    kinds_of: BTreeMap<i64, String>,
+    /// The held-out sessions, with their observations.
+    held: Vec<Recorded>,
+}
+
+/// Records the training sessions (storing their skills), then the held-out ones, telling
+/// `setup.progress` of each.
+fn record_all(setup: &mut EvalSetup<'_>) -> Result<Recordings, RecordingError> {
     let total = setup.train.len() + setup.test.len();
     let mut done = 0;
     let mut stored = Vec::new();
@@ -280,84 +314,107 @@ pub fn evaluate(setup: EvalSetup<'_>) -> Result<Evaluation, RecordingError> {
         done += 1;
         (setup.progress)(done, total);
     }
-    let index = Arc::new(RecognitionIndex::new(stored.clone()));
-    let mut stored_per_kind = BTreeMap::new();
-    for k in kinds_of.values() {
-        *stored_per_kind.entry(k.clone()).or_insert(0) += 1;
-    }
+    Ok(Recordings {
+        stored,
+        kinds_of,
+        held,
+    })
+}
 
-    // Closed set.
-    let mut sessions = Vec::new();
-    for r in &held {
-        let verdicts = run(&index, r, &setup.params).0;
-        let fc = r.first_contact_ns;
-        let before = |limit: u64| verdicts.iter().filter(move |v| v.session_ns() <= limit);
-        let correct = |v: &Verdict| match v {
-            Verdict::Recognised { object, skill, .. } => {
-                *object == r.target && kinds_of.get(&skill.skill_id) == Some(&r.kind)
-            }
-            Verdict::Unknown { .. } => false,
-        };
-        let (anticipated, decided_ns) = match fc {
-            Some(fc) if fc >= ANTICIPATION_NS => {
-                let limit = fc - ANTICIPATION_NS;
-                let last = before(limit).next_back();
-                let ok = last.is_some_and(correct);
-                // Decided when the run of correct verdicts that ends there began.
-                let mut decided = None;
-                for v in before(limit) {
-                    if correct(v) {
-                        decided.get_or_insert(v.session_ns());
-                    } else {
-                        decided = None;
-                    }
+/// Scores one held-out session against the whole index (the closed set).
+fn score_session(
+    index: &Arc<RecognitionIndex>,
+    r: &Recorded,
+    kinds_of: &BTreeMap<i64, String>,
+    params: &RecogniserParams,
+) -> SessionScore {
+    let verdicts = run(index, r, params).0;
+    let fc = r.first_contact_ns;
+    let before = |limit: u64| verdicts.iter().filter(move |v| v.session_ns() <= limit);
+    let correct = |v: &Verdict| match v {
+        Verdict::Recognised { object, skill, .. } => {
+            *object == r.target && kinds_of.get(&skill.skill_id) == Some(&r.kind)
+        }
+        Verdict::Unknown { .. } => false,
+    };
+    let (anticipated, decided_ns) = anticipation(&verdicts, fc, correct);
+    let nearest_truth = r.skill.map(|(_, f)| nearest_by_feature(index, &f));
+    let nearest_named = match (fc, nearest_truth) {
+        (Some(fc), Some(Some(truth))) => before(fc + NEAREST_WITHIN_NS)
+            .next_back()
+            .and_then(|v| v.skill())
+            .is_some_and(|c| c.skill_id == truth),
+        _ => false,
+    };
+    // What any grasp-stage decision could do: the nearest on the dimensions known 1 s
+    // after the touch, taken from the completed grasp itself (exactly, not estimated).
+    let bound_named = r.skill.is_some_and(|(_, f)| {
+        let mut dims: Vec<usize> = super::index::GRASP_STAGE_DIMS.to_vec();
+        dims.push(5);
+        let top = index
+            .rank_features(&f, &dims, 1, &mut Scratch::default())
+            .first()
+            .map(|x| index.skill_id(x.row));
+        top.is_some() && top == nearest_truth.flatten()
+    });
+    SessionScore {
+        scenario: r.scenario.name.clone(),
+        seed: r.scenario.seed,
+        kind: r.kind.clone(),
+        target: r.target.clone(),
+        first_contact_ns: fc,
+        anticipated,
+        decided_ns,
+        decided_fraction: decided_ns
+            .zip(fc)
+            .map(|(d, fc)| d as f64 / fc.max(1) as f64),
+        nearest_named,
+        nearest_skill_id: nearest_truth.flatten(),
+        nearest_on_known_dims: bound_named,
+        verdicts,
+    }
+}
+
+/// Whether the last verdict [`ANTICIPATION_NS`] before the first contact `fc` is `correct`,
+/// and if so when the run of correct verdicts that ends there began (session ns).
+fn anticipation(
+    verdicts: &[Verdict],
+    fc: Option<u64>,
+    correct: impl Fn(&Verdict) -> bool,
+) -> (bool, Option<u64>) {
+    match fc {
+        Some(fc) if fc >= ANTICIPATION_NS => {
+            let limit = fc - ANTICIPATION_NS;
+            let before = |limit: u64| verdicts.iter().filter(move |v| v.session_ns() <= limit);
+            let last = before(limit).next_back();
+            let ok = last.is_some_and(&correct);
+            // Decided when the run of correct verdicts that ends there began.
+            let mut decided = None;
+            for v in before(limit) {
+                if correct(v) {
+                    decided.get_or_insert(v.session_ns());
+                } else {
+                    decided = None;
                 }
-                (ok, decided.filter(|_| ok))
             }
-            _ => (false, None),
-        };
-        let nearest_truth = r.skill.map(|(_, f)| nearest_by_feature(&index, &f));
-        let nearest_named = match (fc, nearest_truth) {
-            (Some(fc), Some(Some(truth))) => before(fc + NEAREST_WITHIN_NS)
-                .next_back()
-                .and_then(|v| v.skill())
-                .is_some_and(|c| c.skill_id == truth),
-            _ => false,
-        };
-        // What any grasp-stage decision could do: the nearest on the dimensions known 1 s
-        // after the touch, taken from the completed grasp itself (exactly, not estimated).
-        let bound_named = r.skill.is_some_and(|(_, f)| {
-            let mut dims: Vec<usize> = super::index::GRASP_STAGE_DIMS.to_vec();
-            dims.push(5);
-            let top = index
-                .rank_features(&f, &dims, 1, &mut Scratch::default())
-                .first()
-                .map(|x| index.skill_id(x.row));
-            top.is_some() && top == nearest_truth.flatten()
-        });
-        sessions.push(SessionScore {
-            scenario: r.scenario.name.clone(),
-            seed: r.scenario.seed,
-            kind: r.kind.clone(),
-            target: r.target.clone(),
-            first_contact_ns: fc,
-            anticipated,
-            decided_ns,
-            decided_fraction: decided_ns
-                .zip(fc)
-                .map(|(d, fc)| d as f64 / fc.max(1) as f64),
-            nearest_named,
-            nearest_skill_id: nearest_truth.flatten(),
-            nearest_on_known_dims: bound_named,
-            verdicts,
-        });
+            (ok, decided.filter(|_| ok))
+        }
+        _ => (false, None),
     }
+}
 
-    // Open set: each kind left out in turn.
+/// The open set: each kind left out of the index in turn, its held-out sessions scored.
+fn score_open_set(
+    index: &RecognitionIndex,
+    held: &[Recorded],
+    kinds_of: &BTreeMap<i64, String>,
+    stored_per_kind: &BTreeMap<String, usize>,
+    params: &RecogniserParams,
+) -> Vec<OpenSetScore> {
     let mut open_set = Vec::new();
     let kinds: Vec<String> = stored_per_kind.keys().cloned().collect();
     for kind in &kinds {
-        let mut without = (*index).clone();
+        let mut without = index.clone();
         let ids: Vec<i64> = kinds_of
             .iter()
             .filter(|(_, k)| *k == kind)
@@ -366,21 +423,14 @@ pub fn evaluate(setup: EvalSetup<'_>) -> Result<Evaluation, RecordingError> {
         without.remove(&ids);
         let without = Arc::new(without);
         for r in held.iter().filter(|r| r.kind == *kind) {
-            let verdicts = run(&without, r, &setup.params).0;
+            let verdicts = run(&without, r, params).0;
             let limit = r.first_contact_ns.unwrap_or(u64::MAX / 2) + NEAREST_WITHIN_NS;
             let unknown = verdicts
                 .iter()
                 .rfind(|v| v.session_ns() <= limit)
                 .is_some_and(|v| matches!(v, Verdict::Unknown { .. }));
             let stored_as_new = r.skill.is_some_and(|(t, f)| {
-                link_completed(
-                    &without,
-                    t.as_ref(),
-                    &f,
-                    &setup.params,
-                    &mut Scratch::default(),
-                )
-                .is_none()
+                link_completed(&without, t.as_ref(), &f, params, &mut Scratch::default()).is_none()
             });
             open_set.push(OpenSetScore {
                 scenario: r.scenario.name.clone(),
@@ -391,63 +441,88 @@ pub fn evaluate(setup: EvalSetup<'_>) -> Result<Evaluation, RecordingError> {
             });
         }
     }
+    open_set
+}
 
-    let cost = setup.cost_skills.map(|n| {
-        let big = Arc::new(grown(&stored, n));
-        let mut times = Vec::new();
-        let mut least = Vec::new();
-        let mut approach_times = Vec::new();
-        let mut grasp_times = Vec::new();
-        let mut grasp_decisions = 0;
-        for r in &held {
-            let (_, t, d) = run(&big, r, &setup.params);
-            let mut low = t.clone();
-            for _ in 1..COST_REPEATS {
-                for (l, x) in low.iter_mut().zip(run(&big, r, &setup.params).1) {
-                    *l = l.min(x);
-                }
+/// Times recognition over the held-out sessions with the index grown to `n` skills.
+fn measure_cost(
+    stored: &[StoredTemplate],
+    n: usize,
+    held: &[Recorded],
+    params: &RecogniserParams,
+) -> Cost {
+    let big = Arc::new(grown(stored, n));
+    let mut times = Vec::new();
+    let mut least = Vec::new();
+    let mut approach_times = Vec::new();
+    let mut grasp_times = Vec::new();
+    let mut grasp_decisions = 0;
+    for r in held {
+        let (_, t, d) = run(&big, r, params);
+        let mut low = t.clone();
+        for _ in 1..COST_REPEATS {
+            for (l, x) in low.iter_mut().zip(run(&big, r, params).1) {
+                *l = l.min(x);
             }
-            times.extend(t);
-            least.extend(low);
-            approach_times.extend(d.approach);
-            grasp_times.extend(d.grasp);
-            grasp_decisions += d.grasp_decisions;
         }
-        let mean = |v: &[f64]| v.iter().sum::<f64>() / v.len().max(1) as f64;
-        let max = |v: &[f64]| v.iter().copied().fold(0.0, f64::max);
-        let p99 = |v: &[f64]| {
-            let mut sorted = v.to_vec();
-            sorted.sort_by(f64::total_cmp);
-            sorted
-                .get(((sorted.len() as f64 - 1.0) * 0.99).round() as usize)
-                .copied()
-                .unwrap_or(0.0)
-        };
-        Cost {
-            stored_skills: big.len(),
-            observations: times.len(),
-            mean_us: mean(&times),
-            p99_us: p99(&times),
-            max_us: max(&times),
-            approach_decision_mean_us: mean(&approach_times),
-            approach_decision_max_us: max(&approach_times),
-            grasp_step_mean_us: mean(&grasp_times),
-            grasp_step_max_us: max(&grasp_times),
-            grasp_decisions,
-            grasp_steps_per_decision: grasp_times.len() as f64 / grasp_decisions.max(1) as f64,
-            least_mean_us: mean(&least),
-            least_p99_us: p99(&least),
-            least_max_us: max(&least),
-        }
-    });
+        times.extend(t);
+        least.extend(low);
+        approach_times.extend(d.approach);
+        grasp_times.extend(d.grasp);
+        grasp_decisions += d.grasp_decisions;
+    }
+    Cost {
+        stored_skills: big.len(),
+        observations: times.len(),
+        mean_us: mean(&times),
+        p99_us: p99(&times),
+        max_us: max(&times),
+        approach_decision_mean_us: mean(&approach_times),
+        approach_decision_max_us: max(&approach_times),
+        grasp_step_mean_us: mean(&grasp_times),
+        grasp_step_max_us: max(&grasp_times),
+        grasp_decisions,
+        grasp_steps_per_decision: grasp_times.len() as f64 / grasp_decisions.max(1) as f64,
+        least_mean_us: mean(&least),
+        least_p99_us: p99(&least),
+        least_max_us: max(&least),
+    }
+}
 
+/// The mean of `v` (0 when empty).
+fn mean(v: &[f64]) -> f64 {
+    v.iter().sum::<f64>() / v.len().max(1) as f64
+}
+
+/// The largest of `v` (0 when empty).
+fn max(v: &[f64]) -> f64 {
+    v.iter().copied().fold(0.0, f64::max)
+}
+
+/// The 99th percentile of `v` (nearest rank; 0 when empty).
+fn p99(v: &[f64]) -> f64 {
+    let mut sorted = v.to_vec();
+    sorted.sort_by(f64::total_cmp);
+    sorted
+        .get(((sorted.len() as f64 - 1.0) * 0.99).round() as usize)
+        .copied()
+        .unwrap_or(0.0)
+}
+
+/// The evaluation: the scores with their fractions and medians.
+fn summarise(
+    stored_per_kind: BTreeMap<String, usize>,
+    sessions: Vec<SessionScore>,
+    open_set: Vec<OpenSetScore>,
+    cost: Option<Cost>,
+) -> Evaluation {
     let frac = |n: usize, d: usize| if d == 0 { 0.0 } else { n as f64 / d as f64 };
     let mut fractions: Vec<f64> = sessions.iter().filter_map(|s| s.decided_fraction).collect();
     let mut leads: Vec<f64> = sessions
         .iter()
         .filter_map(|s| Some((s.first_contact_ns? as f64 - s.decided_ns? as f64) * 1e-6))
         .collect();
-    Ok(Evaluation {
+    Evaluation {
         anticipated_fraction: frac(
             sessions.iter().filter(|s| s.anticipated).count(),
             sessions.len(),
@@ -474,7 +549,7 @@ pub fn evaluate(setup: EvalSetup<'_>) -> Result<Evaluation, RecordingError> {
         sessions,
         open_set,
         cost,
-    })
+    }
 }
 
 /// The times (µs) of the observations that decided, by stage, and the grasp-stage decisions.

@@ -91,25 +91,10 @@ fn salvage_into(input: &Path, output: &Path) -> Result<SalvageReport> {
         .len();
     let out_file = File::create(output)
         .map_err(|e| RecordingError::io(format!("creating {}", output.display()), e))?;
-    let mut writer = WriterOptions::default()
+    let writer = WriterOptions::default()
         .to_mcap()
         .create(BufWriter::new(out_file))?;
-
-    let mut report = SalvageReport {
-        messages: 0,
-        chunks: 0,
-        last_log_time_ns: None,
-        dropped_bytes: 0,
-        schemas: 0,
-        channels: 0,
-        metadata_records: 0,
-        input_was_complete: false,
-        stop_reason: None,
-    };
-    // Input id -> output id.
-    let mut schema_ids: HashMap<u16, u16> = HashMap::new();
-    let mut channel_ids: HashMap<u16, u16> = HashMap::new();
-    let mut write_error: Option<mcap::McapError> = None;
+    let mut copier = Copier::new(writer);
 
     let limits = ReadLimits::default();
     let outcome = scan(
@@ -117,120 +102,14 @@ fn salvage_into(input: &Path, output: &Path) -> Result<SalvageReport> {
         Some(total_len),
         &limits,
         false,
-        |batch: Batch| {
-            // Check the whole batch links up before writing any of it.
-            let offset = batch.offset;
-            let corrupt = |detail: String| RecordingError::Corrupt { offset, detail };
-            let mut new_schemas = std::collections::HashSet::new();
-            let mut new_channels = std::collections::HashSet::new();
-            for r in &batch.records {
-                match r {
-                    Record::Schema { header, .. } => {
-                        new_schemas.insert(header.id);
-                    }
-                    Record::Channel(c) => {
-                        if c.schema_id != 0
-                            && !schema_ids.contains_key(&c.schema_id)
-                            && !new_schemas.contains(&c.schema_id)
-                        {
-                            return Err(corrupt(format!(
-                                "channel {:?} refers to unknown schema {}",
-                                c.topic, c.schema_id
-                            )));
-                        }
-                        new_channels.insert(c.id);
-                    }
-                    Record::Message { header, .. }
-                        if !channel_ids.contains_key(&header.channel_id)
-                            && !new_channels.contains(&header.channel_id) =>
-                    {
-                        return Err(corrupt(format!(
-                            "message refers to unknown channel {}",
-                            header.channel_id
-                        )));
-                    }
-                    _ => {}
-                }
-            }
-            let result: mcap::McapResult<()> = (|| {
-                for r in batch.records {
-                    match r {
-                        Record::Schema { header, data } => {
-                            if let std::collections::hash_map::Entry::Vacant(e) =
-                                schema_ids.entry(header.id)
-                            {
-                                let id =
-                                    writer.add_schema(&header.name, &header.encoding, &data)?;
-                                e.insert(id);
-                                report.schemas += 1;
-                            }
-                        }
-                        Record::Channel(c) => {
-                            if let std::collections::hash_map::Entry::Vacant(e) =
-                                channel_ids.entry(c.id)
-                            {
-                                let schema_id = if c.schema_id == 0 {
-                                    0
-                                } else {
-                                    schema_ids[&c.schema_id]
-                                };
-                                let id = writer.add_channel(
-                                    schema_id,
-                                    &c.topic,
-                                    &c.message_encoding,
-                                    &c.metadata,
-                                )?;
-                                e.insert(id);
-                                report.channels += 1;
-                            }
-                        }
-                        Record::Message { header, data } => {
-                            let out_header = MessageHeader {
-                                channel_id: channel_ids[&header.channel_id],
-                                ..header
-                            };
-                            writer.write_to_known_channel(&out_header, &data)?;
-                            report.messages += 1;
-                            report.last_log_time_ns = Some(
-                                report
-                                    .last_log_time_ns
-                                    .map_or(header.log_time, |t| t.max(header.log_time)),
-                            );
-                        }
-                        Record::Metadata(m) => {
-                            writer.write_metadata(&m)?;
-                            report.metadata_records += 1;
-                        }
-                        // A session's `hand.urdf`, say: kept with its times and media type.
-                        Record::Attachment { header, data, .. } => {
-                            writer.attach(&mcap::Attachment {
-                                log_time: header.log_time,
-                                create_time: header.create_time,
-                                name: header.name,
-                                media_type: header.media_type,
-                                data,
-                            })?;
-                        }
-                        _ => {}
-                    }
-                }
-                Ok(())
-            })();
-            if let Err(e) = result {
-                // An output error: stop, and report it as such below.
-                let msg = e.to_string();
-                write_error = Some(e);
-                return Err(RecordingError::Corrupt {
-                    offset,
-                    detail: format!("writing the salvaged file failed: {msg}"),
-                });
-            }
-            if batch.is_chunk {
-                report.chunks += 1;
-            }
-            Ok(())
-        },
+        |batch: Batch| copier.take(batch),
     )?;
+    let Copier {
+        writer,
+        mut report,
+        write_error,
+        ..
+    } = copier;
     if let Some(e) = write_error {
         return Err(e.into());
     }
@@ -254,7 +133,12 @@ fn salvage_into(input: &Path, output: &Path) -> Result<SalvageReport> {
             },
         });
     }
+    finish_output(writer, output)?;
+    Ok(report)
+}
 
+/// Finishes the salvaged file (summary, footer) and makes it durable.
+fn finish_output(mut writer: mcap::Writer<BufWriter<File>>, output: &Path) -> Result<()> {
     writer.finish()?;
     let file = writer.into_inner().into_inner().map_err(|e| {
         RecordingError::io(format!("flushing {}", output.display()), e.into_error())
@@ -264,5 +148,169 @@ fn salvage_into(input: &Path, output: &Path) -> Result<SalvageReport> {
     let mut file = file;
     file.flush()
         .map_err(|e| RecordingError::io(format!("flushing {}", output.display()), e))?;
-    Ok(report)
+    Ok(())
+}
+
+/// The output side of a salvage: each batch the scan hands over that links up (its channels'
+/// schemas and its messages' channels known) is written whole, and counted in the report.
+struct Copier {
+    /// The output.
+    writer: mcap::Writer<BufWriter<File>>,
+    /// What was copied so far.
+    report: SalvageReport,
+    /// Input schema id -> output id.
+    schema_ids: HashMap<u16, u16>,
+    /// Input channel id -> output id.
+    channel_ids: HashMap<u16, u16>,
+    /// The output error that stopped the copy, if one did.
+    write_error: Option<mcap::McapError>,
+}
+
+impl Copier {
+    /// Nothing copied yet, into `writer`.
+    fn new(writer: mcap::Writer<BufWriter<File>>) -> Self {
+        Copier {
+            writer,
+            report: SalvageReport {
+                messages: 0,
+                chunks: 0,
+                last_log_time_ns: None,
+                dropped_bytes: 0,
+                schemas: 0,
+                channels: 0,
+                metadata_records: 0,
+                input_was_complete: false,
+                stop_reason: None,
+            },
+            schema_ids: HashMap::new(),
+            channel_ids: HashMap::new(),
+            write_error: None,
+        }
+    }
+
+    /// Writes `batch` if the whole of it links up; an error stops the scan (an output error
+    /// is kept in `write_error` too).
+    fn take(&mut self, batch: Batch) -> Result<()> {
+        // Check the whole batch links up before writing any of it.
+        self.check_links(&batch)?;
+        let offset = batch.offset;
+        let result: mcap::McapResult<()> =
+            batch.records.into_iter().try_for_each(|r| self.write(r));
+        if let Err(e) = result {
+            // An output error: stop, and report it as such below.
+            let msg = e.to_string();
+            self.write_error = Some(e);
+            return Err(RecordingError::Corrupt {
+                offset,
+                detail: format!("writing the salvaged file failed: {msg}"),
+            });
+        }
+        if batch.is_chunk {
+            self.report.chunks += 1;
+        }
+        Ok(())
+    }
+
+    /// Whether every channel of `batch` refers to a known schema (or none) and every message
+    /// to a known channel, counting those the batch itself brings.
+    fn check_links(&self, batch: &Batch) -> Result<()> {
+        let offset = batch.offset;
+        let corrupt = |detail: String| RecordingError::Corrupt { offset, detail };
+        let mut new_schemas = std::collections::HashSet::new();
+        let mut new_channels = std::collections::HashSet::new();
+        for r in &batch.records {
+            match r {
+                Record::Schema { header, .. } => {
+                    new_schemas.insert(header.id);
+                }
+                Record::Channel(c) => {
+                    if c.schema_id != 0
+                        && !self.schema_ids.contains_key(&c.schema_id)
+                        && !new_schemas.contains(&c.schema_id)
+                    {
+                        return Err(corrupt(format!(
+                            "channel {:?} refers to unknown schema {}",
+                            c.topic, c.schema_id
+                        )));
+                    }
+                    new_channels.insert(c.id);
+                }
+                Record::Message { header, .. }
+                    if !self.channel_ids.contains_key(&header.channel_id)
+                        && !new_channels.contains(&header.channel_id) =>
+                {
+                    return Err(corrupt(format!(
+                        "message refers to unknown channel {}",
+                        header.channel_id
+                    )));
+                }
+                _ => {}
+            }
+        }
+        Ok(())
+    }
+
+    /// Writes one record of a batch that links up (a schema or channel once, under its output
+    /// id); records of other kinds are left out.
+    fn write(&mut self, r: Record<'static>) -> mcap::McapResult<()> {
+        match r {
+            Record::Schema { header, data } => {
+                if let std::collections::hash_map::Entry::Vacant(e) =
+                    self.schema_ids.entry(header.id)
+                {
+                    let id = self
+                        .writer
+                        .add_schema(&header.name, &header.encoding, &data)?;
+                    e.insert(id);
+                    self.report.schemas += 1;
+                }
+            }
+            Record::Channel(c) => {
+                if let std::collections::hash_map::Entry::Vacant(e) = self.channel_ids.entry(c.id) {
+                    let schema_id = if c.schema_id == 0 {
+                        0
+                    } else {
+                        self.schema_ids[&c.schema_id]
+                    };
+                    let id = self.writer.add_channel(
+                        schema_id,
+                        &c.topic,
+                        &c.message_encoding,
+                        &c.metadata,
+                    )?;
+                    e.insert(id);
+                    self.report.channels += 1;
+                }
+            }
+            Record::Message { header, data } => {
+                let out_header = MessageHeader {
+                    channel_id: self.channel_ids[&header.channel_id],
+                    ..header
+                };
+                self.writer.write_to_known_channel(&out_header, &data)?;
+                self.report.messages += 1;
+                self.report.last_log_time_ns = Some(
+                    self.report
+                        .last_log_time_ns
+                        .map_or(header.log_time, |t| t.max(header.log_time)),
+                );
+            }
+            Record::Metadata(m) => {
+                self.writer.write_metadata(&m)?;
+                self.report.metadata_records += 1;
+            }
+            // A session's `hand.urdf`, say: kept with its times and media type.
+            Record::Attachment { header, data, .. } => {
+                self.writer.attach(&mcap::Attachment {
+                    log_time: header.log_time,
+                    create_time: header.create_time,
+                    name: header.name,
+                    media_type: header.media_type,
+                    data,
+                })?;
+            }
+            _ => {}
+        }
+        Ok(())
+    }
 }

@@ -270,146 +270,12 @@ fn solve2(
 /// Builds the `fingertips` scene (see the module documentation).
 fn fingertips() -> Result<Held, CliError> {
     let hand = HandModel::glove10();
-    let n = hand.dof();
-    let (mcp, pip) = (dof(&hand, "middle_mcp")?, dof(&hand, "middle_pip")?);
-    let (t_cmc, t_mcp) = (dof(&hand, "thumb_cmc")?, dof(&hand, "thumb_mcp")?);
-    let (i_mcp, i_pip, i_dip) = (
-        dof(&hand, "index_mcp")?,
-        dof(&hand, "index_pip")?,
-        dof(&hand, "index_dip")?,
-    );
-    let tips: Vec<usize> = CONTACT_TIPS
-        .iter()
-        .map(|t| tip(&hand, t))
-        .collect::<Result<_, _>>()?;
-    let [thumb, index, middle, ring] = [tips[0], tips[1], tips[2], tips[3]];
-    let reach = |k: usize| BALL_RADIUS + hand.fingertips[k].radius;
     // Everything is solved in the palm frame (the base at the identity), then turned palm up.
     let mut kin = Box::<Kinematics>::default();
-    let mut q = vec![0.0; n];
-    q[mcp] = COUPLED_MCP;
-    q[pip] = COUPLED_PIP;
-    let tip_at = |kin: &mut Kinematics, q: &[Real], k: usize| -> Vector {
-        hand.forward_kinematics(&Isometry::identity(), q, kin);
-        kin.tip_centres[k].coords
-    };
-    let (pm, pr) = (tip_at(&mut kin, &q, middle), tip_at(&mut kin, &q, ring));
-    let ((cx, cz), err) = {
-        let (x, err) = solve2(
-            |[x, z]| {
-                let c = Vector::new(x, CENTRE_Y, z);
-                [
-                    (pm - c).norm() - reach(middle),
-                    (pr - c).norm() - reach(ring),
-                ]
-            },
-            [pm.x - BALL_RADIUS, pm.z - CONTACT_BELOW],
-            [-1.0, -1.0],
-            [1.0, 1.0],
-        );
-        ((x[0], x[1]), err)
-    };
-    if err > 1e-9 {
-        return Err(CliError(format!(
-            "fingertips scene: no ball centre touches the middle and ring fingertips ({err:.1e} m off)"
-        )));
-    }
-    let centre = Vector::new(cx, CENTRE_Y, cz);
-    // A fingertip's spot: in its flexion plane (its centre's palm y), CONTACT_BELOW toward the
-    // palm from the ball's centre, on the thumb's side (−x) or the fingers' (+x).
-    let spot = |k: usize, y: Real, side: Real| -> Result<Vector, CliError> {
-        let (dy, h) = (y - centre.y, CONTACT_BELOW);
-        let s = reach(k).powi(2) - dy * dy - h * h;
-        if s <= 0.0 {
-            return Err(CliError(format!(
-                "fingertips scene: fingertip {} cannot reach the ball",
-                hand.fingertips[k].name
-            )));
-        }
-        Ok(Vector::new(centre.x + side * s.sqrt(), y, centre.z + h))
-    };
-    let lim = |d: usize| (hand.dof_lower[d], hand.dof_upper[d]);
-    let y_thumb = tip_at(&mut kin, &q, thumb).y;
-    let target = spot(thumb, y_thumb, -1.0)?;
-    let (x, err_t) = solve2(
-        |[a, b]| {
-            let mut qq = q.clone();
-            qq[t_cmc] = a;
-            qq[t_mcp] = b;
-            let p = tip_at(&mut kin, &qq, thumb);
-            [p.x - target.x, p.z - target.z]
-        },
-        [0.3, 0.5],
-        [lim(t_cmc).0, lim(t_mcp).0],
-        [lim(t_cmc).1, lim(t_mcp).1],
-    );
-    q[t_cmc] = x[0];
-    q[t_mcp] = x[1];
-    let y_index = tip_at(&mut kin, &q, index).y;
-    let target = spot(index, y_index, 1.0)?;
-    // The index curls like the coupled fingers: its DIP at ⅔ of its PIP.
-    let dip_of = |p: Real| (p * 2.0 / 3.0).min(hand.dof_upper[i_dip]);
-    let (x, err_i) = solve2(
-        |[a, b]| {
-            let mut qq = q.clone();
-            qq[i_mcp] = a;
-            qq[i_pip] = b;
-            qq[i_dip] = dip_of(b);
-            let p = tip_at(&mut kin, &qq, index);
-            [p.x - target.x, p.z - target.z]
-        },
-        [0.8, 1.0],
-        [lim(i_mcp).0, lim(i_pip).0],
-        [lim(i_mcp).1, lim(i_pip).1],
-    );
-    q[i_mcp] = x[0];
-    q[i_pip] = x[1];
-    q[i_dip] = dip_of(x[1]);
-    if err_t.max(err_i) > 1e-9 {
-        return Err(CliError(format!(
-            "fingertips scene: the thumb or the index cannot reach its spot ({:.1e} m off)",
-            err_t.max(err_i)
-        )));
-    }
+    let Posture { q, centre, tips } = fingertips_posture(&hand, &mut kin)?;
     // Every fingertip of the grasp touches; the others are clear by 5 mm.
     hand.forward_kinematics(&Isometry::identity(), &q, &mut kin);
-    for (k, t) in hand.fingertips.iter().enumerate() {
-        let gap = (kin.tip_centres[k].coords - centre).norm() - reach(k);
-        let ok = if tips.contains(&k) {
-            gap.abs() < 1e-9
-        } else {
-            gap > 0.005
-        };
-        if !ok {
-            return Err(CliError(format!(
-                "fingertips scene: fingertip {} is {:.2} mm from the ball",
-                t.name,
-                gap * 1e3
-            )));
-        }
-    }
-    // Feed-forward fingertip forces f_k = (x, 0, z) in the palm frame (each finger pushes in
-    // its flexion plane): nearest to SQUEEZE_N along each in-plane inward normal such that
-    // they carry the weight (palm +z is down once palm up) without a moment about the palm's
-    // x and y axes; the moment about its z (the thumb's plane lies beside the fingers') is
-    // friction's.
-    hand.tip_jacobians(&mut kin);
-    let m = tips.len();
-    let mut a = nalgebra::DMatrix::<Real>::zeros(4, 2 * m);
-    let mut f0 = nalgebra::DVector::<Real>::zeros(2 * m);
-    for (i, &k) in tips.iter().enumerate() {
-        let p = kin.tip_centres[k].coords;
-        let r = p - centre;
-        // Columns: unit force along x, along z; rows: Σfx, Σfz, Mx, My.
-        a[(0, 2 * i)] = 1.0;
-        a[(1, 2 * i + 1)] = 1.0;
-        a[(2, 2 * i + 1)] = r.y;
-        a[(3, 2 * i)] = r.z;
-        a[(3, 2 * i + 1)] = -r.x;
-        let inward = nalgebra::Vector2::new(centre.x - p.x, centre.z - p.z).normalize();
-        f0[2 * i] = inward.x * SQUEEZE_N;
-        f0[2 * i + 1] = inward.y * SQUEEZE_N;
-    }
+    check_ball_gaps(&hand, &kin, centre, &tips)?;
     // Palm up, rolled by BASE_ROLL: the palm frame turned by π + BASE_ROLL about x.
     let base = Isometry::from_parts(
         Vector::zeros().into(),
@@ -423,22 +289,8 @@ fn fingertips() -> Result<Held, CliError> {
         },
         ..DfsParams::default()
     };
-    // The weight in the palm frame; its part across the flexion planes (palm y) is friction's.
-    let weight = base.rotation.inverse() * params.gravity * BALL_MASS;
-    let b = nalgebra::DVector::from_vec(vec![-weight.x, -weight.z, 0.0, 0.0]);
-    let aat = &a * a.transpose();
-    let y = aat
-        .lu()
-        .solve(&(&b - &a * &f0))
-        .ok_or_else(|| CliError("fingertips scene: singular force balance".into()))?;
-    let f = &f0 + a.transpose() * y;
-    let mut tau_ff = vec![0.0; n];
-    for (i, &k) in tips.iter().enumerate() {
-        let j = &kin.tip_jacobians[k];
-        for (d, t) in tau_ff.iter_mut().enumerate() {
-            *t += j[(0, d)] * f[2 * i] + j[(2, d)] * f[2 * i + 1];
-        }
-    }
+    hand.tip_jacobians(&mut kin);
+    let tau_ff = feed_forward_torques(&hand, &kin, centre, &tips, &base, &params)?;
     let kp: Vec<Real> = hand.torque_limit.iter().map(|l| l * KP_PER_LIMIT).collect();
     let kd: Vec<Real> = hand.torque_limit.iter().map(|l| l * KD_PER_LIMIT).collect();
     let centre_w = base * dfs_core::math::Point::from(centre);
@@ -472,6 +324,225 @@ fn fingertips() -> Result<Held, CliError> {
         grip_period_s: GRIP_PERIOD_S,
     };
     Ok(Held { scene, dfs, base })
+}
+
+/// The `fingertips` scene's set posture, solved in the palm frame.
+struct Posture {
+    /// The set posture θ_set (rad).
+    q: Vec<Real>,
+    /// The ball's centre (palm frame, m).
+    centre: Vector,
+    /// The fingertips that hold the ball, those of [`CONTACT_TIPS`] in order.
+    tips: Vec<usize>,
+}
+
+/// Solves the set posture (see the module documentation): the middle finger's coupled MCP and
+/// PIP set, the ball's centre on the middle and ring fingertips, the thumb and index
+/// fingertips put on it by inverse kinematics. `kin` is scratch.
+fn fingertips_posture(hand: &HandModel, kin: &mut Kinematics) -> Result<Posture, CliError> {
+    let n = hand.dof();
+    let (mcp, pip) = (dof(hand, "middle_mcp")?, dof(hand, "middle_pip")?);
+    let (t_cmc, t_mcp) = (dof(hand, "thumb_cmc")?, dof(hand, "thumb_mcp")?);
+    let (i_mcp, i_pip, i_dip) = (
+        dof(hand, "index_mcp")?,
+        dof(hand, "index_pip")?,
+        dof(hand, "index_dip")?,
+    );
+    let tips: Vec<usize> = CONTACT_TIPS
+        .iter()
+        .map(|t| tip(hand, t))
+        .collect::<Result<_, _>>()?;
+    let [thumb, index, middle, ring] = [tips[0], tips[1], tips[2], tips[3]];
+    let mut q = vec![0.0; n];
+    q[mcp] = COUPLED_MCP;
+    q[pip] = COUPLED_PIP;
+    let centre = ball_centre(hand, kin, &q, middle, ring)?;
+    let lim = |d: usize| (hand.dof_lower[d], hand.dof_upper[d]);
+    let y_thumb = tip_at(hand, kin, &q, thumb).y;
+    let target = spot(hand, centre, thumb, y_thumb, -1.0)?;
+    let (x, err_t) = solve2(
+        |[a, b]| {
+            let mut qq = q.clone();
+            qq[t_cmc] = a;
+            qq[t_mcp] = b;
+            let p = tip_at(hand, kin, &qq, thumb);
+            [p.x - target.x, p.z - target.z]
+        },
+        [0.3, 0.5],
+        [lim(t_cmc).0, lim(t_mcp).0],
+        [lim(t_cmc).1, lim(t_mcp).1],
+    );
+    q[t_cmc] = x[0];
+    q[t_mcp] = x[1];
+    let y_index = tip_at(hand, kin, &q, index).y;
+    let target = spot(hand, centre, index, y_index, 1.0)?;
+    // The index curls like the coupled fingers: its DIP at ⅔ of its PIP.
+    let dip_of = |p: Real| (p * 2.0 / 3.0).min(hand.dof_upper[i_dip]);
+    let (x, err_i) = solve2(
+        |[a, b]| {
+            let mut qq = q.clone();
+            qq[i_mcp] = a;
+            qq[i_pip] = b;
+            qq[i_dip] = dip_of(b);
+            let p = tip_at(hand, kin, &qq, index);
+            [p.x - target.x, p.z - target.z]
+        },
+        [0.8, 1.0],
+        [lim(i_mcp).0, lim(i_pip).0],
+        [lim(i_mcp).1, lim(i_pip).1],
+    );
+    q[i_mcp] = x[0];
+    q[i_pip] = x[1];
+    q[i_dip] = dip_of(x[1]);
+    if err_t.max(err_i) > 1e-9 {
+        return Err(CliError(format!(
+            "fingertips scene: the thumb or the index cannot reach its spot ({:.1e} m off)",
+            err_t.max(err_i)
+        )));
+    }
+    Ok(Posture { q, centre, tips })
+}
+
+/// How far fingertip `k`'s centre is from the ball's when it touches it (m).
+fn reach(hand: &HandModel, k: usize) -> Real {
+    BALL_RADIUS + hand.fingertips[k].radius
+}
+
+/// Fingertip `k`'s centre in the palm frame at posture `q` (`kin` is scratch).
+fn tip_at(hand: &HandModel, kin: &mut Kinematics, q: &[Real], k: usize) -> Vector {
+    hand.forward_kinematics(&Isometry::identity(), q, kin);
+    kin.tip_centres[k].coords
+}
+
+/// The ball's centre (palm frame) at [`CENTRE_Y`] across the hand where it touches the
+/// `middle` and `ring` fingertips of posture `q`.
+fn ball_centre(
+    hand: &HandModel,
+    kin: &mut Kinematics,
+    q: &[Real],
+    middle: usize,
+    ring: usize,
+) -> Result<Vector, CliError> {
+    let (pm, pr) = (tip_at(hand, kin, q, middle), tip_at(hand, kin, q, ring));
+    let ((cx, cz), err) = {
+        let (x, err) = solve2(
+            |[x, z]| {
+                let c = Vector::new(x, CENTRE_Y, z);
+                [
+                    (pm - c).norm() - reach(hand, middle),
+                    (pr - c).norm() - reach(hand, ring),
+                ]
+            },
+            [pm.x - BALL_RADIUS, pm.z - CONTACT_BELOW],
+            [-1.0, -1.0],
+            [1.0, 1.0],
+        );
+        ((x[0], x[1]), err)
+    };
+    if err > 1e-9 {
+        return Err(CliError(format!(
+            "fingertips scene: no ball centre touches the middle and ring fingertips ({err:.1e} m off)"
+        )));
+    }
+    Ok(Vector::new(cx, CENTRE_Y, cz))
+}
+
+/// A fingertip's spot on the ball at `centre`: in its flexion plane (its centre's palm `y`),
+/// [`CONTACT_BELOW`] toward the palm from the ball's centre, on the thumb's side (`side` −1,
+/// −x) or the fingers' (+1, +x).
+fn spot(
+    hand: &HandModel,
+    centre: Vector,
+    k: usize,
+    y: Real,
+    side: Real,
+) -> Result<Vector, CliError> {
+    let (dy, h) = (y - centre.y, CONTACT_BELOW);
+    let s = reach(hand, k).powi(2) - dy * dy - h * h;
+    if s <= 0.0 {
+        return Err(CliError(format!(
+            "fingertips scene: fingertip {} cannot reach the ball",
+            hand.fingertips[k].name
+        )));
+    }
+    Ok(Vector::new(centre.x + side * s.sqrt(), y, centre.z + h))
+}
+
+/// Checks, on the kinematics `kin` of the set posture, that every fingertip of the grasp
+/// (`tips`) touches the ball at `centre` and the others are clear of it by 5 mm.
+fn check_ball_gaps(
+    hand: &HandModel,
+    kin: &Kinematics,
+    centre: Vector,
+    tips: &[usize],
+) -> Result<(), CliError> {
+    for (k, t) in hand.fingertips.iter().enumerate() {
+        let gap = (kin.tip_centres[k].coords - centre).norm() - reach(hand, k);
+        let ok = if tips.contains(&k) {
+            gap.abs() < 1e-9
+        } else {
+            gap > 0.005
+        };
+        if !ok {
+            return Err(CliError(format!(
+                "fingertips scene: fingertip {} is {:.2} mm from the ball",
+                t.name,
+                gap * 1e3
+            )));
+        }
+    }
+    Ok(())
+}
+
+/// The feed-forward torques τ_ff = Σ Jᵀ f of the fingertips `tips` holding the ball at
+/// `centre`, from the kinematics `kin` of the set posture (tip Jacobians computed), the hand
+/// at `base` in a DFS with `params`.
+///
+/// Fingertip forces f_k = (x, 0, z) in the palm frame (each finger pushes in its flexion
+/// plane): nearest to [`SQUEEZE_N`] along each in-plane inward normal such that they carry the
+/// weight (palm +z is down once palm up) without a moment about the palm's x and y axes; the
+/// moment about its z (the thumb's plane lies beside the fingers') is friction's.
+fn feed_forward_torques(
+    hand: &HandModel,
+    kin: &Kinematics,
+    centre: Vector,
+    tips: &[usize],
+    base: &Isometry,
+    params: &DfsParams,
+) -> Result<Vec<Real>, CliError> {
+    let m = tips.len();
+    let mut a = nalgebra::DMatrix::<Real>::zeros(4, 2 * m);
+    let mut f0 = nalgebra::DVector::<Real>::zeros(2 * m);
+    for (i, &k) in tips.iter().enumerate() {
+        let p = kin.tip_centres[k].coords;
+        let r = p - centre;
+        // Columns: unit force along x, along z; rows: Σfx, Σfz, Mx, My.
+        a[(0, 2 * i)] = 1.0;
+        a[(1, 2 * i + 1)] = 1.0;
+        a[(2, 2 * i + 1)] = r.y;
+        a[(3, 2 * i)] = r.z;
+        a[(3, 2 * i + 1)] = -r.x;
+        let inward = nalgebra::Vector2::new(centre.x - p.x, centre.z - p.z).normalize();
+        f0[2 * i] = inward.x * SQUEEZE_N;
+        f0[2 * i + 1] = inward.y * SQUEEZE_N;
+    }
+    // The weight in the palm frame; its part across the flexion planes (palm y) is friction's.
+    let weight = base.rotation.inverse() * params.gravity * BALL_MASS;
+    let b = nalgebra::DVector::from_vec(vec![-weight.x, -weight.z, 0.0, 0.0]);
+    let aat = &a * a.transpose();
+    let y = aat
+        .lu()
+        .solve(&(&b - &a * &f0))
+        .ok_or_else(|| CliError("fingertips scene: singular force balance".into()))?;
+    let f = &f0 + a.transpose() * y;
+    let mut tau_ff = vec![0.0; hand.dof()];
+    for (i, &k) in tips.iter().enumerate() {
+        let j = &kin.tip_jacobians[k];
+        for (d, t) in tau_ff.iter_mut().enumerate() {
+            *t += j[(0, d)] * f[2 * i] + j[(2, d)] * f[2 * i + 1];
+        }
+    }
+    Ok(tau_ff)
 }
 
 /// The `power-grasp` scene: where everything is once the grasp has settled and how the operator

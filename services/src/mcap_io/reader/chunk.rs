@@ -51,13 +51,6 @@ pub(super) fn unpack_chunk(
         });
     }
     let size = header.uncompressed_size as usize;
-    // A header that declares less than the content holds: decompression stops at the declared
-    // size (which the reader counted against its budget), never past it.
-    let overflows = || {
-        corrupt(format!(
-            "chunk decompresses to more than the {size} bytes its header declares"
-        ))
-    };
     let data = match header.compression.as_str() {
         "" => {
             let mut out = reuse.unwrap_or_default();
@@ -65,65 +58,109 @@ pub(super) fn unpack_chunk(
             out.extend_from_slice(compressed);
             out
         }
-        "zstd" => {
-            // Single-pass decoding into exactly the declared size: zstd fails rather than
-            // write past it. The context is the caller's, reused from chunk to chunk (its
-            // window limit is a sticky parameter; each frame starts afresh), and the buffer is
-            // one handed back or pooled if one is big enough (its pages already mapped; the
-            // size was checked against the limit above).
-            let mut out = match reuse {
-                Some(buffer) if buffer.capacity() >= size => buffer,
-                Some(small) => {
-                    CHUNK_BUFFERS.give(small);
-                    CHUNK_BUFFERS.take(size)
-                }
-                None => CHUNK_BUFFERS.take(size),
-            };
-            let dctx = bounded_dctx(dctx).map_err(|name| corrupt(format!("zstd: {name}")))?;
-            let written = if out.capacity() == size {
-                // Into its spare capacity, exactly the declared size: nothing to zero first.
-                out.clear();
-                dctx.decompress(&mut out, compressed)
-            } else {
-                // A bigger buffer: into its first `size` bytes (only what its previous content
-                // lacks of them is zeroed).
-                out.resize(size, 0);
-                dctx.decompress(&mut out[..], compressed)
-            }
-            .map_err(|code| match zstd::zstd_safe::get_error_name(code) {
-                ZSTD_DST_TOO_SMALL => overflows(),
-                name => corrupt(format!("zstd: {name}")),
-            })?;
-            out.truncate(written);
-            out
-        }
-        "lz4" => {
-            // An LZ4 frame, read to at most one byte past the declared size: a chunk that
-            // decodes to more is refused there, before it can grow without bound.
-            let mut out = reuse.unwrap_or_default();
-            out.clear();
-            lz4::Decoder::new(compressed)
-                .and_then(|d| d.take(size as u64 + 1).read_to_end(&mut out))
-                .map_err(|e| corrupt(format!("lz4: {e}")))?;
-            if out.len() > size {
-                return Err(overflows());
-            }
-            out
-        }
+        "zstd" => decompress_zstd(offset, compressed, size, dctx, reuse)?,
+        "lz4" => decompress_lz4(offset, compressed, size, reuse)?,
         other => {
             return Err(corrupt(format!(
                 "unsupported compression {other:?} (supported: zstd, lz4, none)"
             )))
         }
     };
+    check_content(offset, header, &data)?;
+    let others = parse_others(&data, offset, limits)?;
+    Ok(ChunkContent { data, others })
+}
+
+/// The error of a chunk at `offset` whose header declares less than the content holds:
+/// decompression stops at the declared `size` (which the reader counted against its budget),
+/// never past it.
+fn chunk_overflows(offset: u64, size: usize) -> RecordingError {
+    RecordingError::Corrupt {
+        offset,
+        detail: format!("chunk decompresses to more than the {size} bytes its header declares"),
+    }
+}
+
+/// Decompresses a zstd chunk (at `offset`) of declared `size` (at most
+/// [`ReadLimits::max_record_bytes`]).
+///
+/// Single-pass decoding into exactly the declared size: zstd fails rather than write past it.
+/// The context is the caller's, reused from chunk to chunk (its window limit is a sticky
+/// parameter; each frame starts afresh), and the buffer is one handed back or pooled if one is
+/// big enough (its pages already mapped; the caller checked the size against the limit).
+fn decompress_zstd(
+    offset: u64,
+    compressed: &[u8],
+    size: usize,
+    dctx: &mut Option<zstd::zstd_safe::DCtx<'static>>,
+    reuse: Option<Vec<u8>>,
+) -> Result<Vec<u8>> {
+    let corrupt = |detail: String| RecordingError::Corrupt { offset, detail };
+    let mut out = match reuse {
+        Some(buffer) if buffer.capacity() >= size => buffer,
+        Some(small) => {
+            CHUNK_BUFFERS.give(small);
+            CHUNK_BUFFERS.take(size)
+        }
+        None => CHUNK_BUFFERS.take(size),
+    };
+    let dctx = bounded_dctx(dctx).map_err(|name| corrupt(format!("zstd: {name}")))?;
+    let written = if out.capacity() == size {
+        // Into its spare capacity, exactly the declared size: nothing to zero first.
+        out.clear();
+        dctx.decompress(&mut out, compressed)
+    } else {
+        // A bigger buffer: into its first `size` bytes (only what its previous content
+        // lacks of them is zeroed).
+        out.resize(size, 0);
+        dctx.decompress(&mut out[..], compressed)
+    }
+    .map_err(|code| match zstd::zstd_safe::get_error_name(code) {
+        ZSTD_DST_TOO_SMALL => chunk_overflows(offset, size),
+        name => corrupt(format!("zstd: {name}")),
+    })?;
+    out.truncate(written);
+    Ok(out)
+}
+
+/// Decompresses an LZ4 frame chunk (at `offset`) of declared `size`, read to at most one byte
+/// past that size: a chunk that decodes to more is refused there, before it can grow without
+/// bound.
+fn decompress_lz4(
+    offset: u64,
+    compressed: &[u8],
+    size: usize,
+    reuse: Option<Vec<u8>>,
+) -> Result<Vec<u8>> {
+    let mut out = reuse.unwrap_or_default();
+    out.clear();
+    lz4::Decoder::new(compressed)
+        .and_then(|d| d.take(size as u64 + 1).read_to_end(&mut out))
+        .map_err(|e| RecordingError::Corrupt {
+            offset,
+            detail: format!("lz4: {e}"),
+        })?;
+    if out.len() > size {
+        return Err(chunk_overflows(offset, size));
+    }
+    Ok(out)
+}
+
+/// Checks a decompressed chunk's content (the chunk at `offset`) against the size and the
+/// CRC (unless zero) its header declares.
+fn check_content(offset: u64, header: &ChunkHeader, data: &[u8]) -> Result<()> {
+    let size = header.uncompressed_size as usize;
     if data.len() != size {
-        return Err(corrupt(format!(
-            "chunk content is {} bytes, its header says {size}",
-            data.len()
-        )));
+        return Err(RecordingError::Corrupt {
+            offset,
+            detail: format!(
+                "chunk content is {} bytes, its header says {size}",
+                data.len()
+            ),
+        });
     }
     if header.uncompressed_crc != 0 {
-        let calculated = crc32fast::hash(&data);
+        let calculated = crc32fast::hash(data);
         if calculated != header.uncompressed_crc {
             return Err(RecordingError::ChunkCrcMismatch {
                 offset,
@@ -132,9 +169,16 @@ pub(super) fn unpack_chunk(
             });
         }
     }
+    Ok(())
+}
+
+/// Frames the records of the content `data` of the chunk at `offset`: checks each message is
+/// as long as its header, and parses the others (in order).
+fn parse_others(data: &[u8], offset: u64, limits: &ReadLimits) -> Result<Vec<Record<'static>>> {
+    let corrupt = |detail: String| RecordingError::Corrupt { offset, detail };
     let mut others = Vec::new();
     let mut pos = 0usize;
-    while let Some((opcode, start, end)) = next_chunk_record(&data, pos, offset, limits)? {
+    while let Some((opcode, start, end)) = next_chunk_record(data, pos, offset, limits)? {
         let body = &data[start..end];
         if opcode == op::MESSAGE {
             if body.len() < MESSAGE_HEADER_LEN {
@@ -157,7 +201,7 @@ pub(super) fn unpack_chunk(
         }
         pos = end;
     }
-    Ok(ChunkContent { data, others })
+    Ok(others)
 }
 
 /// The record of chunk content `data` that starts at `pos`: its opcode and where its body lies

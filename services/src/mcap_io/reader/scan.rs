@@ -58,9 +58,35 @@ pub(crate) fn scan<R: Read>(
     emit_chunks: bool,
     mut on_batch: impl FnMut(Batch) -> Result<()>,
 ) -> Result<ScanOutcome> {
+    let mut reader = open_reader(&mut src, limits, emit_chunks)?;
+    let mut outcome = ScanOutcome {
+        complete: false,
+        committed_offset: 8,
+        error: None,
+    };
+    if let Err(err) = scan_records(
+        &mut src,
+        &mut reader,
+        total_len,
+        limits,
+        &mut on_batch,
+        &mut outcome,
+    ) {
+        outcome.error = Some(err);
+    }
+    Ok(outcome)
+}
+
+/// Checks the MCAP magic at the start of `src` and returns the sans-I/O reader that checks the
+/// records, already fed the magic.
+fn open_reader<R: Read>(
+    src: &mut R,
+    limits: &ReadLimits,
+    emit_chunks: bool,
+) -> Result<LinearReader> {
     let mut magic = [0u8; 8];
-    let got = read_up_to(&mut src, &mut magic)
-        .map_err(|e| RecordingError::io("reading the MCAP magic", e))?;
+    let got =
+        read_up_to(src, &mut magic).map_err(|e| RecordingError::io("reading the MCAP magic", e))?;
     if got < magic.len() || magic != *mcap::MAGIC {
         return Err(RecordingError::NotMcap);
     }
@@ -79,12 +105,22 @@ pub(crate) fn scan<R: Read>(
     // The data section CRC covers the magic too.
     reader.insert(magic.len()).copy_from_slice(&magic);
     reader.notify_read(magic.len());
-    let mut offset = 8u64;
-    let mut outcome = ScanOutcome {
-        complete: false,
-        committed_offset: offset,
-        error: None,
-    };
+    Ok(reader)
+}
+
+/// The loop of [`scan`] after the magic: frames each top-level record, checks it, hands it to
+/// `reader` and its records to `on_batch`, moving `outcome.committed_offset` past each batch
+/// accepted. `Ok` once the footer and the end magic were read; otherwise the error that
+/// stopped it.
+fn scan_records<R: Read>(
+    src: &mut R,
+    reader: &mut LinearReader,
+    total_len: Option<u64>,
+    limits: &ReadLimits,
+    on_batch: &mut impl FnMut(Batch) -> Result<()>,
+    outcome: &mut ScanOutcome,
+) -> Result<()> {
+    let mut offset = outcome.committed_offset;
     // Decompressed bytes the chunks so far declare, against what the input's length allows.
     let budget = limits.budget(total_len);
     let mut declared = 0u64;
@@ -92,80 +128,7 @@ pub(crate) fn scan<R: Read>(
     let mut record = PooledBuffer(CHUNK_BUFFERS.take(0));
     let record = &mut record.0;
     loop {
-        // Frame the next top-level record.
-        let mut head = [0u8; OPCODE_LEN_SIZE as usize];
-        let got = match read_up_to(&mut src, &mut head) {
-            Ok(n) => n,
-            Err(e) => {
-                outcome.error = Some(RecordingError::io(format!("reading at byte {offset}"), e));
-                return Ok(outcome);
-            }
-        };
-        if got == 0 {
-            // Clean end of input between records, but no footer: truncated.
-            outcome.error = Some(RecordingError::Truncated {
-                offset,
-                detail: "file ends without a footer (the writer did not finish)".into(),
-            });
-            return Ok(outcome);
-        }
-        if got < head.len() {
-            outcome.error = Some(RecordingError::Truncated {
-                offset,
-                detail: "file ends inside a record header".into(),
-            });
-            return Ok(outcome);
-        }
-        let opcode = head[0];
-        let len = u64::from_le_bytes(head[1..].try_into().expect("8 bytes"));
-        if !known_or_private(opcode) {
-            outcome.error = Some(RecordingError::Corrupt {
-                offset,
-                detail: format!("reserved record opcode {opcode:#04x}"),
-            });
-            return Ok(outcome);
-        }
-        let remaining = total_len.map(|t| t.saturating_sub(offset + OPCODE_LEN_SIZE));
-        if let Some(remaining) = remaining {
-            if len > remaining {
-                outcome.error = Some(RecordingError::Truncated {
-                    offset,
-                    detail: format!(
-                        "record (opcode {opcode:#04x}) claims {len} bytes but only {remaining} remain"
-                    ),
-                });
-                return Ok(outcome);
-            }
-        }
-        if len > limits.max_record_bytes {
-            outcome.error = Some(RecordingError::RecordTooLong {
-                offset,
-                opcode,
-                len,
-                limit: limits.max_record_bytes,
-            });
-            return Ok(outcome);
-        }
-        record.clear();
-        if total_len.is_some() {
-            // Its length is within what the input holds (checked above) and the record
-            // limit: room for it at once, not grown by doubling.
-            record.reserve(head.len() + len as usize);
-        }
-        record.extend_from_slice(&head);
-        // `take` + `read_to_end` grows the buffer with the data actually present, so a bogus
-        // length on a stream of unknown size cannot force a large allocation.
-        if let Err(e) = (&mut src).take(len).read_to_end(record) {
-            outcome.error = Some(RecordingError::io(format!("reading at byte {offset}"), e));
-            return Ok(outcome);
-        }
-        if (record.len() as u64) < OPCODE_LEN_SIZE + len {
-            outcome.error = Some(RecordingError::Truncated {
-                offset,
-                detail: format!("file ends inside a record (opcode {opcode:#04x})"),
-            });
-            return Ok(outcome);
-        }
+        let (opcode, len) = read_record(src, record, offset, total_len, limits)?;
 
         // A chunk counts against the decompression budget with the size its header declares,
         // before anything decompresses it; none decompresses past that size.
@@ -174,97 +137,183 @@ pub(crate) fn scan<R: Read>(
                 let size = u64::from_le_bytes(size.try_into().expect("8 bytes"));
                 declared = declared.saturating_add(size);
                 if declared > budget {
-                    outcome.error = Some(limits.over_limit(total_len, offset, declared));
-                    return Ok(outcome);
+                    return Err(limits.over_limit(total_len, offset, declared));
                 }
             }
         }
 
         // Its length-prefixed fields must fit in it: the parser allocates what they declare.
-        if let Err(detail) =
-            super::super::lengths::check(opcode, &record[OPCODE_LEN_SIZE as usize..])
-        {
-            outcome.error = Some(RecordingError::Corrupt { offset, detail });
-            return Ok(outcome);
-        }
+        super::super::lengths::check(opcode, &record[OPCODE_LEN_SIZE as usize..])
+            .map_err(|detail| RecordingError::Corrupt { offset, detail })?;
 
         // Hand the whole record to the sans-I/O reader and drain what it yields.
         reader.insert(record.len()).copy_from_slice(record);
         reader.notify_read(record.len());
-        let mut batch = Batch {
-            offset,
-            is_chunk: opcode == op::CHUNK,
-            records: Vec::new(),
-        };
-        let mut is_footer = false;
-        let mut failure = None;
-        while let Some(event) = reader.next_event() {
-            match event {
-                Ok(LinearReadEvent::ReadRequest(_)) => break,
-                Ok(LinearReadEvent::Record { data, opcode }) => {
-                    // A record from inside a chunk: its fields too must fit in it.
-                    if let Err(detail) = super::super::lengths::check(opcode, data) {
-                        failure = Some(RecordingError::Corrupt { offset, detail });
-                        break;
-                    }
-                    match mcap::parse_record(opcode, data) {
-                        Ok(Record::Unknown { opcode, .. }) if !known_or_private(opcode) => {
-                            failure = Some(RecordingError::Corrupt {
-                                offset,
-                                detail: format!("reserved record opcode {opcode:#04x} in a chunk"),
-                            });
-                            break;
-                        }
-                        Ok(Record::Chunk { header, data }) => {
-                            // Its compressed bytes into a pooled buffer (the reader of the
-                            // batch gives it back).
-                            let mut owned = CHUNK_BUFFERS.take(data.len());
-                            owned.clear();
-                            owned.extend_from_slice(&data);
-                            batch.records.push(Record::Chunk {
-                                header,
-                                data: Cow::Owned(owned),
-                            });
-                        }
-                        Ok(r) => {
-                            is_footer |= matches!(r, Record::Footer(_));
-                            batch.records.push(r.into_owned());
-                        }
-                        Err(e) => {
-                            failure = Some(map_mcap_error(e, offset, limits));
-                            break;
-                        }
-                    }
-                }
-                Err(e) => {
-                    failure = Some(map_mcap_error(e, offset, limits));
-                    break;
-                }
-            }
-        }
-        if let Some(err) = failure {
-            outcome.error = Some(err);
-            return Ok(outcome);
-        }
-        if let Err(err) = on_batch(batch) {
-            outcome.error = Some(err);
-            return Ok(outcome);
-        }
+        let (batch, is_footer) = drain_batch(reader, offset, opcode == op::CHUNK, limits)?;
+        on_batch(batch)?;
         offset += OPCODE_LEN_SIZE + len;
         outcome.committed_offset = offset;
         if is_footer {
-            let mut end = [0u8; 8];
-            let got = read_up_to(&mut src, &mut end).unwrap_or(0);
-            if got == end.len() && end == *mcap::MAGIC {
-                outcome.complete = true;
-            } else {
-                outcome.error = Some(RecordingError::Truncated {
-                    offset,
-                    detail: "footer is not followed by the MCAP magic".into(),
-                });
-            }
-            return Ok(outcome);
+            read_end_magic(src, offset)?;
+            outcome.complete = true;
+            return Ok(());
         }
+    }
+}
+
+/// Reads the top-level record at `offset` into `record` (its opcode and length too) after
+/// checking that its opcode is not reserved and that its length fits both what is left of the
+/// input and the record limit; returns its opcode and length.
+fn read_record<R: Read>(
+    src: &mut R,
+    record: &mut Vec<u8>,
+    offset: u64,
+    total_len: Option<u64>,
+    limits: &ReadLimits,
+) -> Result<(u8, u64)> {
+    // Frame the next top-level record.
+    let mut head = [0u8; OPCODE_LEN_SIZE as usize];
+    let got = read_up_to(src, &mut head)
+        .map_err(|e| RecordingError::io(format!("reading at byte {offset}"), e))?;
+    if got == 0 {
+        // Clean end of input between records, but no footer: truncated.
+        return Err(RecordingError::Truncated {
+            offset,
+            detail: "file ends without a footer (the writer did not finish)".into(),
+        });
+    }
+    if got < head.len() {
+        return Err(RecordingError::Truncated {
+            offset,
+            detail: "file ends inside a record header".into(),
+        });
+    }
+    let opcode = head[0];
+    let len = u64::from_le_bytes(head[1..].try_into().expect("8 bytes"));
+    if !known_or_private(opcode) {
+        return Err(RecordingError::Corrupt {
+            offset,
+            detail: format!("reserved record opcode {opcode:#04x}"),
+        });
+    }
+    let remaining = total_len.map(|t| t.saturating_sub(offset + OPCODE_LEN_SIZE));
+    if let Some(remaining) = remaining {
+        if len > remaining {
+            return Err(RecordingError::Truncated {
+                offset,
+                detail: format!(
+                    "record (opcode {opcode:#04x}) claims {len} bytes but only {remaining} remain"
+                ),
+            });
+        }
+    }
+    if len > limits.max_record_bytes {
+        return Err(RecordingError::RecordTooLong {
+            offset,
+            opcode,
+            len,
+            limit: limits.max_record_bytes,
+        });
+    }
+    record.clear();
+    if total_len.is_some() {
+        // Its length is within what the input holds (checked above) and the record
+        // limit: room for it at once, not grown by doubling.
+        record.reserve(head.len() + len as usize);
+    }
+    record.extend_from_slice(&head);
+    // `take` + `read_to_end` grows the buffer with the data actually present, so a bogus
+    // length on a stream of unknown size cannot force a large allocation.
+    src.by_ref()
+        .take(len)
+        .read_to_end(record)
+        .map_err(|e| RecordingError::io(format!("reading at byte {offset}"), e))?;
+    if (record.len() as u64) < OPCODE_LEN_SIZE + len {
+        return Err(RecordingError::Truncated {
+            offset,
+            detail: format!("file ends inside a record (opcode {opcode:#04x})"),
+        });
+    }
+    Ok((opcode, len))
+}
+
+/// Drains what `reader` yields for the top-level record just given it (at `offset`) into a
+/// batch; also whether the batch holds the footer.
+fn drain_batch(
+    reader: &mut LinearReader,
+    offset: u64,
+    is_chunk: bool,
+    limits: &ReadLimits,
+) -> Result<(Batch, bool)> {
+    let mut batch = Batch {
+        offset,
+        is_chunk,
+        records: Vec::new(),
+    };
+    let mut is_footer = false;
+    while let Some(event) = reader.next_event() {
+        match event {
+            Ok(LinearReadEvent::ReadRequest(_)) => break,
+            Ok(LinearReadEvent::Record { data, opcode }) => {
+                is_footer |= push_record(&mut batch, opcode, data, offset, limits)?;
+            }
+            Err(e) => return Err(map_mcap_error(e, offset, limits)),
+        }
+    }
+    Ok((batch, is_footer))
+}
+
+/// Checks and parses one record the reader yielded (from the top-level record at `offset`)
+/// and adds it, owned, to `batch`; whether it is the footer.
+fn push_record(
+    batch: &mut Batch,
+    opcode: u8,
+    data: &[u8],
+    offset: u64,
+    limits: &ReadLimits,
+) -> Result<bool> {
+    // A record from inside a chunk: its fields too must fit in it.
+    super::super::lengths::check(opcode, data)
+        .map_err(|detail| RecordingError::Corrupt { offset, detail })?;
+    match mcap::parse_record(opcode, data) {
+        Ok(Record::Unknown { opcode, .. }) if !known_or_private(opcode) => {
+            Err(RecordingError::Corrupt {
+                offset,
+                detail: format!("reserved record opcode {opcode:#04x} in a chunk"),
+            })
+        }
+        Ok(Record::Chunk { header, data }) => {
+            // Its compressed bytes into a pooled buffer (the reader of the batch gives it
+            // back).
+            let mut owned = CHUNK_BUFFERS.take(data.len());
+            owned.clear();
+            owned.extend_from_slice(&data);
+            batch.records.push(Record::Chunk {
+                header,
+                data: Cow::Owned(owned),
+            });
+            Ok(false)
+        }
+        Ok(r) => {
+            let is_footer = matches!(r, Record::Footer(_));
+            batch.records.push(r.into_owned());
+            Ok(is_footer)
+        }
+        Err(e) => Err(map_mcap_error(e, offset, limits)),
+    }
+}
+
+/// Reads the magic that must follow the footer (which ends at `offset`).
+fn read_end_magic<R: Read>(src: &mut R, offset: u64) -> Result<()> {
+    let mut end = [0u8; 8];
+    let got = read_up_to(src, &mut end).unwrap_or(0);
+    if got == end.len() && end == *mcap::MAGIC {
+        Ok(())
+    } else {
+        Err(RecordingError::Truncated {
+            offset,
+            detail: "footer is not followed by the MCAP magic".into(),
+        })
     }
 }
 

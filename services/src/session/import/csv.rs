@@ -34,7 +34,6 @@ enum Column {
 
 /// Parses glove CSV text; `name` (e.g. the file name) prefixes error locations.
 pub fn parse_glove_csv(text: &str, name: &str, hand: &HandModel) -> Result<GloveRecording> {
-    let n = hand.dof();
     // Spreadsheets export UTF-8 with a byte order mark; it is not part of the first column.
     let text = text.strip_prefix('\u{feff}').unwrap_or(text);
     let mut lines = text
@@ -45,6 +44,56 @@ pub fn parse_glove_csv(text: &str, name: &str, hand: &HandModel) -> Result<Glove
     let Some((header_line, header)) = lines.next() else {
         return Err(invalid(name, "empty file: expected a header line"));
     };
+    let header = parse_header(header, header_line, name, hand)?;
+    let mut rec = GloveRecording {
+        names: hand.dof_names.clone(),
+        times_ns: Vec::new(),
+        q: Vec::new(),
+        tau: header.torques.then(Vec::new),
+        wrist: header.wrist.then(|| WristTrack {
+            source: "csv".to_owned(),
+            times_ns: Vec::new(),
+            poses: Vec::new(),
+        }),
+    };
+    let mut rows = Rows {
+        name,
+        header: &header,
+        t0: None,
+        q: vec![0.0; hand.dof()],
+        tau: vec![0.0; hand.dof()],
+        wrist: [0.0; 7],
+    };
+    for (line_no, line) in lines {
+        rows.push(line_no, line, &mut rec)?;
+    }
+    if rec.is_empty() {
+        return Err(invalid(name, "no samples after the header"));
+    }
+    Ok(rec)
+}
+
+/// A CSV file's header line, checked against the hand.
+struct Header<'a> {
+    /// The column names, `time_s` first.
+    columns: Vec<&'a str>,
+    /// What each column after `time_s` holds.
+    mapping: Vec<Column>,
+    /// The file has a torque column for every DOF (else for none).
+    torques: bool,
+    /// The file has the wrist pose columns (else none of them).
+    wrist: bool,
+}
+
+/// Parses the `header` line (line `header_line` of the file `name`): `time_s` first, then each
+/// column a DOF of `hand`, its torque or a wrist pose column, none twice and none missing.
+fn parse_header<'a>(
+    header: &'a str,
+    header_line: usize,
+    name: &str,
+    hand: &HandModel,
+) -> Result<Header<'a>> {
+    let n = hand.dof();
     let columns: Vec<&str> = header.split(',').map(str::trim).collect();
     if columns[0] != "time_s" {
         return Err(invalid(
@@ -59,18 +108,13 @@ pub fn parse_glove_csv(text: &str, name: &str, hand: &HandModel) -> Result<Glove
         .map(|(i, s)| (s.as_str(), i))
         .collect();
     let mut mapping = Vec::with_capacity(columns.len() - 1);
-    let mut seen_angle = vec![false; n];
-    let mut seen_torque = vec![false; n];
-    let mut seen_wrist = [false; 7];
+    let mut seen = Seen {
+        angle: vec![false; n],
+        torque: vec![false; n],
+        wrist: [false; 7],
+    };
     for (c, col) in columns.iter().enumerate().skip(1) {
-        // A DOF's own name first (a DOF may be called `tau_x` or `wrist_x`).
-        let column = if let Some(&d) = dof_index.get(col) {
-            Column::Angle(d)
-        } else if let Some(&d) = col.strip_prefix("tau_").and_then(|j| dof_index.get(j)) {
-            Column::Torque(d)
-        } else if let Some(w) = WRIST_COLUMNS.iter().position(|w| w == col) {
-            Column::Wrist(w)
-        } else {
+        let Some(column) = column_of(col, &dof_index) else {
             return Err(invalid(
                 format!("{name} line {header_line}, column {}", c + 1),
                 format!(
@@ -82,12 +126,12 @@ pub fn parse_glove_csv(text: &str, name: &str, hand: &HandModel) -> Result<Glove
                 ),
             ));
         };
-        let seen = match column {
-            Column::Angle(d) => &mut seen_angle[d],
-            Column::Torque(d) => &mut seen_torque[d],
-            Column::Wrist(w) => &mut seen_wrist[w],
+        let flag = match column {
+            Column::Angle(d) => &mut seen.angle[d],
+            Column::Torque(d) => &mut seen.torque[d],
+            Column::Wrist(w) => &mut seen.wrist[w],
         };
-        if std::mem::replace(seen, true) {
+        if std::mem::replace(flag, true) {
             return Err(invalid(
                 format!("{name} line {header_line}, column {}", c + 1),
                 format!("column {col:?} appears twice"),
@@ -95,50 +139,98 @@ pub fn parse_glove_csv(text: &str, name: &str, hand: &HandModel) -> Result<Glove
         }
         mapping.push(column);
     }
-    if let Some(d) = seen_angle.iter().position(|s| !s) {
-        return Err(invalid(
-            format!("{name} line {header_line}"),
-            format!("missing column {}", hand.dof_names[d]),
-        ));
+    seen.check_complete(&format!("{name} line {header_line}"), hand)?;
+    Ok(Header {
+        columns,
+        mapping,
+        torques: seen.torque.iter().any(|&s| s),
+        wrist: seen.wrist.iter().any(|&s| s),
+    })
+}
+
+/// What the column named `col` holds, by the DOFs' indices by name; `None` for an unknown
+/// name. A DOF's own name first (a DOF may be called `tau_x` or `wrist_x`).
+fn column_of(col: &str, dof_index: &HashMap<&str, usize>) -> Option<Column> {
+    if let Some(&d) = dof_index.get(col) {
+        Some(Column::Angle(d))
+    } else if let Some(&d) = col.strip_prefix("tau_").and_then(|j| dof_index.get(j)) {
+        Some(Column::Torque(d))
+    } else {
+        WRIST_COLUMNS
+            .iter()
+            .position(|w| *w == col)
+            .map(Column::Wrist)
     }
-    let torques = seen_torque.iter().any(|&s| s);
-    if let (true, Some(d)) = (torques, seen_torque.iter().position(|s| !s)) {
-        return Err(invalid(
-            format!("{name} line {header_line}"),
-            format!(
-                "missing column tau_{}: give tau_<DOF> for every DOF, or for none (a glove \
-                 that measures positions only)",
-                hand.dof_names[d]
-            ),
-        ));
+}
+
+/// The columns a header names, by kind.
+struct Seen {
+    /// Per DOF, its angle column.
+    angle: Vec<bool>,
+    /// Per DOF, its torque column.
+    torque: Vec<bool>,
+    /// Per [`WRIST_COLUMNS`] entry.
+    wrist: [bool; 7],
+}
+
+impl Seen {
+    /// Refuses a header (at `location`) without every DOF's angle, or with the torques or the
+    /// wrist pose of some but not all.
+    fn check_complete(&self, location: &str, hand: &HandModel) -> Result<()> {
+        if let Some(d) = self.angle.iter().position(|s| !s) {
+            return Err(invalid(
+                location,
+                format!("missing column {}", hand.dof_names[d]),
+            ));
+        }
+        let torques = self.torque.iter().any(|&s| s);
+        if let (true, Some(d)) = (torques, self.torque.iter().position(|s| !s)) {
+            return Err(invalid(
+                location,
+                format!(
+                    "missing column tau_{}: give tau_<DOF> for every DOF, or for none (a glove \
+                     that measures positions only)",
+                    hand.dof_names[d]
+                ),
+            ));
+        }
+        let wrist = self.wrist.iter().any(|&s| s);
+        if let (true, Some(w)) = (wrist, self.wrist.iter().position(|s| !s)) {
+            return Err(invalid(
+                location,
+                format!(
+                    "missing column {}: the wrist pose needs all of {}, or none",
+                    WRIST_COLUMNS[w],
+                    WRIST_COLUMNS.join(",")
+                ),
+            ));
+        }
+        Ok(())
     }
-    let wrist = seen_wrist.iter().any(|&s| s);
-    if let (true, Some(w)) = (wrist, seen_wrist.iter().position(|s| !s)) {
-        return Err(invalid(
-            format!("{name} line {header_line}"),
-            format!(
-                "missing column {}: the wrist pose needs all of {}, or none",
-                WRIST_COLUMNS[w],
-                WRIST_COLUMNS.join(",")
-            ),
-        ));
-    }
-    let mut rec = GloveRecording {
-        names: hand.dof_names.clone(),
-        times_ns: Vec::new(),
-        q: Vec::new(),
-        tau: torques.then(Vec::new),
-        wrist: wrist.then(|| WristTrack {
-            source: "csv".to_owned(),
-            times_ns: Vec::new(),
-            poses: Vec::new(),
-        }),
-    };
-    let mut t0: Option<f64> = None;
-    let mut row_q = vec![0.0; n];
-    let mut row_tau = vec![0.0; n];
-    let mut row_wrist = [0.0; 7];
-    for (line_no, line) in lines {
+}
+
+/// The sample lines of a CSV file, read one by one into a recording.
+struct Rows<'a> {
+    /// The file's name, for error locations.
+    name: &'a str,
+    /// Its header.
+    header: &'a Header<'a>,
+    /// The first sample's time (s).
+    t0: Option<f64>,
+    /// The row's angles, by DOF.
+    q: Vec<f64>,
+    /// The row's torques, by DOF.
+    tau: Vec<f64>,
+    /// The row's wrist pose, as [`WRIST_COLUMNS`].
+    wrist: [f64; 7],
+}
+
+impl Rows<'_> {
+    /// Parses line `line_no`, `line`, and appends its sample to `rec`: every field a finite
+    /// number, the time after the previous sample's and within an hour of the first.
+    fn push(&mut self, line_no: usize, line: &str, rec: &mut GloveRecording) -> Result<()> {
+        let (name, header) = (self.name, self.header);
+        let columns = &header.columns;
         let fields: Vec<&str> = line.split(',').map(str::trim).collect();
         if fields.len() != columns.len() {
             return Err(invalid(
@@ -162,7 +254,33 @@ pub fn parse_glove_csv(text: &str, name: &str, hand: &HandModel) -> Result<Glove
             Ok(v)
         };
         let t = number(0)?;
-        let start = *t0.get_or_insert(t);
+        let t_ns = self.time_ns(t, line_no, rec.times_ns.last().copied())?;
+        for (c, column) in header.mapping.iter().enumerate() {
+            let v = number(c + 1)?;
+            match *column {
+                Column::Angle(d) => self.q[d] = v,
+                Column::Torque(d) => self.tau[d] = v,
+                Column::Wrist(w) => self.wrist[w] = v,
+            }
+        }
+        rec.times_ns.push(t_ns);
+        rec.q.extend_from_slice(&self.q);
+        if let Some(tau) = &mut rec.tau {
+            tau.extend_from_slice(&self.tau);
+        }
+        if let Some(track) = &mut rec.wrist {
+            let pose = wrist_pose(name, line_no, self.wrist)?;
+            track.times_ns.push(t_ns as i64);
+            track.poses.push(pose);
+        }
+        Ok(())
+    }
+
+    /// The time `t` (s) of line `line_no` as ns since the first sample: not before it, at most
+    /// an hour after it, and after the `previous` sample's.
+    fn time_ns(&mut self, t: f64, line_no: usize, previous: Option<u64>) -> Result<u64> {
+        let name = self.name;
+        let start = *self.t0.get_or_insert(t);
         let t_ns = ((t - start) * 1e9).round();
         if !(0.0..=MAX_RECORDING_NS as f64).contains(&t_ns) {
             return Err(invalid(
@@ -171,7 +289,7 @@ pub fn parse_glove_csv(text: &str, name: &str, hand: &HandModel) -> Result<Glove
             ));
         }
         let t_ns = t_ns as u64;
-        if let Some(&prev) = rec.times_ns.last() {
+        if let Some(prev) = previous {
             if t_ns <= prev {
                 return Err(invalid(
                     format!("{name} line {line_no}, column time_s"),
@@ -179,43 +297,27 @@ pub fn parse_glove_csv(text: &str, name: &str, hand: &HandModel) -> Result<Glove
                 ));
             }
         }
-        for (c, column) in mapping.iter().enumerate() {
-            let v = number(c + 1)?;
-            match *column {
-                Column::Angle(d) => row_q[d] = v,
-                Column::Torque(d) => row_tau[d] = v,
-                Column::Wrist(w) => row_wrist[w] = v,
-            }
-        }
-        rec.times_ns.push(t_ns);
-        rec.q.extend_from_slice(&row_q);
-        if let Some(tau) = &mut rec.tau {
-            tau.extend_from_slice(&row_tau);
-        }
-        if let Some(track) = &mut rec.wrist {
-            let [x, y, z, qx, qy, qz, qw] = row_wrist;
-            let rotation = unit_quaternion(qx, qy, qz, qw).ok_or_else(|| {
-                invalid(
-                    format!(
-                        "{name} line {line_no}, columns {}",
-                        WRIST_COLUMNS[3..].join(",")
-                    ),
-                    format!(
-                        "the wrist quaternion ({qx}, {qy}, {qz}, {qw}) has no direction: \
-                         not a rotation"
-                    ),
-                )
-            })?;
-            track.times_ns.push(t_ns as i64);
-            track
-                .poses
-                .push(Isometry::from_parts(Vector::new(x, y, z).into(), rotation));
-        }
+        Ok(t_ns)
     }
-    if rec.is_empty() {
-        return Err(invalid(name, "no samples after the header"));
-    }
-    Ok(rec)
+}
+
+/// The wrist pose of line `line_no` of the file `name` from its [`WRIST_COLUMNS`] values; a
+/// quaternion with no direction is refused.
+fn wrist_pose(name: &str, line_no: usize, values: [f64; 7]) -> Result<Isometry> {
+    let [x, y, z, qx, qy, qz, qw] = values;
+    let rotation = unit_quaternion(qx, qy, qz, qw).ok_or_else(|| {
+        invalid(
+            format!(
+                "{name} line {line_no}, columns {}",
+                WRIST_COLUMNS[3..].join(",")
+            ),
+            format!(
+                "the wrist quaternion ({qx}, {qy}, {qz}, {qw}) has no direction: \
+                 not a rotation"
+            ),
+        )
+    })?;
+    Ok(Isometry::from_parts(Vector::new(x, y, z).into(), rotation))
 }
 
 /// The quaternion `(x, y, z, w)` normalised, `None` if it is not finite or (nearly) zero.

@@ -470,6 +470,40 @@ pub fn replay_glove(
     name: &str,
     out: &Path,
 ) -> Result<RecordSummary> {
+    check_recording(recording, options, name)?;
+    let hand = &options.hand;
+    let calibration = match &options.calibration {
+        Some(c) => c
+            .validate(hand)
+            .map_err(|e| invalid("calibration", e.to_string()))?,
+        None => DofCalibration::identity(hand.dof()),
+    };
+    let Simulation {
+        mut dfs,
+        drive,
+        table_height,
+    } = simulation(object, options, recording.has_torques())?;
+    let base = options.base.unwrap_or_else(Isometry::identity);
+    let info = SessionInfo {
+        scenario: name.to_owned(),
+        seed: None,
+        object_json: serde_json::to_string(object).unwrap_or_default(),
+        source: "import-glove".to_owned(),
+        extra: session_extra(recording, options, &base, drive.coupling()),
+        phases: Vec::new(),
+        started_at: None,
+        table_height: Some(table_height),
+        hand_urdf: options.hand_urdf.clone(),
+        scene: None,
+        assist_topics: false,
+    };
+    let recorder = SessionRecorder::create(out, dfs.hand(), dfs.object(), &info)?;
+    replay_ticks(recording, &calibration, &drive, base, &mut dfs, recorder)
+}
+
+/// Refuses a recording [`replay_glove`] cannot replay: joints other than the hand's DOFs in
+/// order, shorter than the shortest session, or with wrist poses when a fixed base is given.
+fn check_recording(recording: &GloveRecording, options: &ImportOptions, name: &str) -> Result<()> {
     let hand = &options.hand;
     if recording.names != hand.dof_names {
         return Err(invalid(
@@ -503,12 +537,28 @@ pub fn replay_glove(
             ),
         ));
     }
-    let calibration = match &options.calibration {
-        Some(c) => c
-            .validate(hand)
-            .map_err(|e| invalid("calibration", e.to_string()))?,
-        None => DofCalibration::identity(hand.dof()),
-    };
+    Ok(())
+}
+
+/// The DFS of an import, with the object in place, and the glove drive that steps it.
+struct Simulation {
+    /// The DFS.
+    dfs: Dfs,
+    /// How each measured sample drives it.
+    drive: GloveDrive,
+    /// Height of the table's top (m), the object resting on it by default.
+    table_height: f64,
+}
+
+/// The DFS replaying a glove recording (with `torques`, or of positions only) against
+/// `object`, placed at its `position` (default: resting on the table, at the origin), and the
+/// glove drive with the coupling of `options` for that kind of glove.
+fn simulation(
+    object: &ScenarioObject,
+    options: &ImportOptions,
+    torques: bool,
+) -> Result<Simulation> {
+    let hand = &options.hand;
     let at_object = |source: dfs_core::DfsError| invalid("object", source.to_string());
     let rigid = object.to_simulated_object().map_err(at_object)?;
     let depth = rigid.shape.support_depth(&Rotation::identity());
@@ -520,27 +570,41 @@ pub fn replay_glove(
         position.into(),
         Rotation::from_euler_angles(0.0, 0.0, object.yaw),
     );
+    let table_height = position.z - depth;
     let params = DfsParams {
         contact_model: options.contact_model,
         friction: Friction {
             mu: object.mu,
             mu_torsion: object.mu_torsion,
         },
-        table_height: Some(position.z - depth),
+        table_height: Some(table_height),
         whole_hand: options.whole_hand,
         ..DfsParams::default()
     };
-    let given = if recording.has_torques() {
+    let given = if torques {
         options.torque_coupling
     } else {
         options.coupling
     };
-    let drive = GloveDrive::new(hand, &params, recording.has_torques(), given)
+    let drive = GloveDrive::new(hand, &params, torques, given)
         .map_err(|e| invalid("coupling", e.to_string()))?;
-    let coupling = *drive.coupling();
-    let base = options.base.unwrap_or_else(Isometry::identity);
-    let mut dfs =
+    let dfs =
         Dfs::new(hand.clone(), rigid, ObjectState::at_rest(pose), params).map_err(at_object)?;
+    Ok(Simulation {
+        dfs,
+        drive,
+        table_height,
+    })
+}
+
+/// The import's keys of the `session` metadata (see the module docs), for a fixed `base` when
+/// the recording has no wrist poses and the `coupling` in use.
+fn session_extra(
+    recording: &GloveRecording,
+    options: &ImportOptions,
+    base: &Isometry,
+    coupling: &VirtualCoupling,
+) -> BTreeMap<String, String> {
     let mut extra = BTreeMap::from([
         ("input_samples".to_owned(), recording.len().to_string()),
         (
@@ -564,7 +628,7 @@ pub fn replay_glove(
         }
         None => {
             extra.insert("wrist".to_owned(), "fixed".to_owned());
-            extra.insert("base_pose".to_owned(), pose_json(&base));
+            extra.insert("base_pose".to_owned(), pose_json(base));
         }
     }
     if let Some(c) = options.calibration.as_ref().filter(|c| !c.is_empty()) {
@@ -585,21 +649,21 @@ pub fn replay_glove(
     let json = |v: &[f64]| serde_json::to_string(v).unwrap_or_default();
     extra.insert("coupling_stiffness".to_owned(), json(coupling.stiffness()));
     extra.insert("coupling_damping".to_owned(), json(coupling.damping()));
-    let info = SessionInfo {
-        scenario: name.to_owned(),
-        seed: None,
-        object_json: serde_json::to_string(object).unwrap_or_default(),
-        source: "import-glove".to_owned(),
-        extra,
-        phases: Vec::new(),
-        started_at: None,
-        table_height: Some(position.z - depth),
-        hand_urdf: options.hand_urdf.clone(),
-        scene: None,
-        assist_topics: false,
-    };
-    let mut recorder = SessionRecorder::create(out, dfs.hand(), dfs.object(), &info)?;
-    let n = hand.dof();
+    extra
+}
+
+/// Steps `dfs` through `recording` at 1 kHz (the angles calibrated, the base at the wrist
+/// pose or at `base`), recording every tick, then finishes the session file; a DFS error
+/// finishes it with the ticks before and is returned with the tick's time.
+fn replay_ticks(
+    recording: &GloveRecording,
+    calibration: &DofCalibration,
+    drive: &GloveDrive,
+    base: Isometry,
+    dfs: &mut Dfs,
+    mut recorder: SessionRecorder,
+) -> Result<RecordSummary> {
+    let n = dfs.hand().dof();
     let (mut q_measured, mut tau_measured) = (vec![0.0; n], vec![0.0; n]);
     let (mut q, mut tau) = (vec![0.0; n], vec![0.0; n]);
     let torques = recording.has_torques();
