@@ -17,11 +17,13 @@ use std::process::Command;
 use std::time::{Duration, Instant};
 
 use api::config::ServeArgs;
+use api::http::skills::PhaseDuration;
 use api::startup::Application;
 use axum::extract::{Path as UrlPath, State};
 use axum::http::StatusCode;
 use axum::routing::get;
 use axum::{Json, Router};
+use dfs_core::scenario::Phase;
 use serde::Serialize;
 use services::store::bench::{generate_synthetic, random_filtered_query, SplitMix64, Timing};
 use services::store::{SortField, SortOrder, Store};
@@ -63,7 +65,7 @@ fn args() -> Args {
     a
 }
 
-// ---- the bare server: one row lookup, returned as JSON --------------------------------------
+// ---- the bare server: one row lookup (and its session's segmentation version), as JSON --
 
 #[derive(Serialize)]
 struct BareSkill {
@@ -80,9 +82,10 @@ struct BareSkill {
     duration_s: f64,
     start_ns: i64,
     end_ns: i64,
-    phase_durations: serde_json::Value,
+    phase_durations: Vec<PhaseDuration>,
     feature: Vec<f32>,
     params: serde_json::Value,
+    segmentation_version: u32,
     created_at: String,
 }
 
@@ -91,9 +94,10 @@ async fn bare_lookup(
     UrlPath(id): UrlPath<i64>,
 ) -> Result<Json<BareSkill>, StatusCode> {
     let row = sqlx::query(
-        "SELECT id, session_id, object_shape, object_mass, mu, contact_count, contact_model, \
-         grasp_type, quality, volume, duration_s, start_ns, end_ns, phase_durations, feature, \
-         params, created_at FROM skills WHERE id = ?",
+        "SELECT k.id, k.session_id, k.object_shape, k.object_mass, k.mu, k.contact_count, \
+         k.contact_model, k.grasp_type, k.quality, k.volume, k.duration_s, k.start_ns, k.end_ns, \
+         k.phase_durations, k.feature, k.params, k.created_at, s.segmentation_version \
+         FROM skills k JOIN sessions s ON s.id = k.session_id WHERE k.id = ?",
     )
     .bind(id)
     .fetch_optional(&pool)
@@ -127,13 +131,19 @@ async fn bare_lookup(
         duration_s: row.get(10),
         start_ns: row.get(11),
         end_ns: row.get(12),
-        phase_durations: json(13)?,
+        // Stored as [phase, seconds] pairs, answered as the API does (rounded to the tick).
+        phase_durations: serde_json::from_value::<Vec<(Phase, f64)>>(json(13)?)
+            .map_err(|_| StatusCode::INTERNAL_SERVER_ERROR)?
+            .into_iter()
+            .map(|(phase, seconds)| PhaseDuration::new(phase, seconds))
+            .collect(),
         feature: feature
             .chunks_exact(4)
             .map(|c| f32::from_le_bytes([c[0], c[1], c[2], c[3]]))
             .collect(),
         params: json(15)?,
         created_at: text(16)?,
+        segmentation_version: row.get(17),
     }))
 }
 
@@ -357,9 +367,12 @@ fn main() {
     fill_store(&data, a.skills);
     let script = write_wrk_script(dir.path(), a.skills);
 
-    // Room for every skill: the figure is of answers from the cache.
+    // Room for every skill: the figure is of answers from the cache. The server without a
+    // cache gets a copy of the data base: a data directory is one server's (StoreError::InUse).
+    let data_nocache = dir.path().join("icms-data-no-cache");
+    copy_dir(&data, &data_nocache);
     let (icms, stop_icms) = start_icms(&data, 4096);
-    let (nocache, stop_nocache) = start_icms(&data, 0);
+    let (nocache, stop_nocache) = start_icms(&data_nocache, 0);
     let (bare, stop_bare) = start_bare(&data.join(services::store::DB_FILE));
     let servers = [
         ("icms", icms),
@@ -389,6 +402,20 @@ fn main() {
             upload_bytes,
         },
     );
+}
+
+/// Copies the directory `from` (files and subdirectories) to a new directory `to`.
+fn copy_dir(from: &Path, to: &Path) {
+    std::fs::create_dir_all(to).unwrap();
+    for entry in std::fs::read_dir(from).unwrap() {
+        let entry = entry.unwrap();
+        let target = to.join(entry.file_name());
+        if entry.file_type().unwrap().is_dir() {
+            copy_dir(&entry.path(), &target);
+        } else {
+            std::fs::copy(entry.path(), &target).unwrap();
+        }
+    }
 }
 
 /// Fills a fresh store at `data` with `skills` synthetic skills.
