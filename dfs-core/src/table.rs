@@ -38,7 +38,7 @@
 //!
 //! Deterministic (fixed point order, fixed iteration rules) and allocation-free.
 
-use crate::math::{force_of, moment_of, wrench, Mat3, Real, Vector, Wrench};
+use crate::math::{force_of, moment_of, wrench, Mat3, Real, Rotation, Vector, Wrench};
 use crate::object::{ObjectState, RigidObject, Shape, TablePoint, MAX_TABLE_POINTS};
 use nalgebra::{Matrix2, Matrix4, Vector2, Vector4};
 
@@ -203,147 +203,101 @@ impl Table {
         let found = &found[..n];
         let rot = rotation.to_rotation_matrix();
         let inv_inertia_w = rot * object.inertia_inv * rot.transpose();
-        let ii = &inv_inertia_w;
         let inv_mass = 1.0 / object.mass;
         // The velocities after the tick under the other forces alone.
         let mut vel = Velocities {
             v: state.linear_velocity + rotation * force_of(f_b) * (dt * inv_mass),
             w: rotation * (state.angular_velocity_b + object.inertia_inv * moment_of(f_b) * dt),
             inv_mass,
-            inv_inertia_w: ii,
+            inv_inertia_w: &inv_inertia_w,
         };
-        // Each point from the centre (world) and the least normal velocity it may have.
-        let mut r = [Vector::zeros(); MAX_TABLE_POINTS];
-        let mut least = [0.0; MAX_TABLE_POINTS];
-        for (k, p) in found.iter().enumerate() {
-            r[k] = rotation * p.p_b;
-            let gap = state.pose.translation.z + r[k].z - self.height;
-            least[k] = if gap > TOUCHING_GAP { -gap / dt } else { 0.0 };
-        }
-        // The normal block in the coordinates s = (v_z, ω_x, ω_y), on which a point's normal
-        // velocity a_k · s depends (a_k = (1, r_y, −r_x)); a normal wrench w moves s by G w,
-        // G = diag(1/m, I⁻¹ of the horizontal axes) = L Lᵀ. With s = s₀ + L x the block is
-        // min |x| subject to (Lᵀ a_k) · x ≥ least_k − a_k · s₀.
-        let l00 = inv_mass.sqrt();
-        let l11 = ii[(0, 0)].sqrt();
-        let l21 = ii[(1, 0)] / l11;
-        let l22 = (ii[(1, 1)] - l21 * l21).max(0.0).sqrt();
-        let mut g = [Vector::zeros(); MAX_TABLE_POINTS];
-        for (gk, rk) in g.iter_mut().zip(&r[..n]) {
-            *gk = Vector::new(l00, l11 * rk.y - l21 * rk.x, -l22 * rk.x);
-        }
-        let rolls = self.rolling > 0.0 && shape.rolls_on(found);
-        let roll_compliance = Matrix2::new(ii[(0, 0)], ii[(0, 1)], ii[(1, 0)], ii[(1, 1)]);
-        let roll_inertia = roll_compliance.try_inverse().unwrap_or_else(Matrix2::zeros);
-        let roll_metric = Metric::of(&roll_compliance);
-
-        // The warm start.
-        let mut pressure = rotation * support.pressure_b;
-        let mut normal = support.normal;
-        let mut friction = Impulse::at(
-            &pressure,
-            Vector::new(support.friction.x, support.friction.y, 0.0),
-        );
-        let mut torsion = Impulse::couple(Vector::new(0.0, 0.0, support.friction.z));
-        let mut rolling = if rolls {
-            Impulse::couple(Vector::new(support.rolling.x, support.rolling.y, 0.0))
-        } else {
-            Impulse::ZERO
-        };
-        for i in [&normal, &friction, &torsion, &rolling] {
+        let mut rows = Rows::ZERO;
+        rows.fill(self.height, state, found, &vel, dt);
+        let rolling = Rolling::new(self, shape, found, &inv_inertia_w);
+        let mut imp = Impulses::warm_start(support, &rotation, rolling.rolls);
+        for i in [&imp.normal, &imp.friction, &imp.torsion, &imp.rolling] {
             vel.apply(i, 1.0);
         }
-        let mut lambda = [0.0; MAX_TABLE_POINTS];
-        let mut h = [0.0; MAX_TABLE_POINTS];
         support.sweeps = 0;
         for _ in 0..MAX_SWEEPS {
             support.sweeps += 1;
             let before = (vel.v, vel.w);
-            // Normal.
-            vel.apply(&normal, -1.0);
-            for k in 0..n {
-                h[k] = least[k] - (vel.v.z + r[k].y * vel.w.x - r[k].x * vel.w.y);
-            }
-            if !least_distance(&g[..n], &h[..n], &mut lambda[..n]) {
-                lambda[..n].fill(0.0);
-            }
-            let total: Real = lambda[..n].iter().sum();
-            let mut moment = Vector::zeros();
-            let mut centre = Vector::zeros();
-            for (l, rk) in lambda[..n].iter().zip(&r[..n]) {
-                moment += Vector::new(rk.y, -rk.x, 0.0) * *l;
-                centre += rk * *l;
-            }
-            normal = Impulse {
-                linear: Vector::new(0.0, 0.0, total),
-                angular: moment,
-            };
-            vel.apply(&normal, 1.0);
-            let mut lever = 0.0;
-            if total > 0.0 {
-                pressure = centre / total;
-                // The points touching after it: those moving at their least normal velocity.
-                let (mut sum, mut count) = (0.0, 0);
-                for k in 0..n {
-                    let u = vel.v.z + r[k].y * vel.w.x - r[k].x * vel.w.y;
-                    if u - least[k] <= 1e-9 {
-                        sum += (r[k] - pressure).xy().norm();
-                        count += 1;
-                    }
-                }
-                if count > 0 {
-                    lever = TORSION_LEVER * sum / count as Real;
-                }
-            }
-            // Friction at the centre of pressure.
-            vel.apply(&friction, -1.0);
-            let rx = pressure.cross_matrix();
-            let k = Mat3::identity() * inv_mass - rx * ii * rx;
-            let k_t = Matrix2::new(k[(0, 0)], k[(0, 1)], k[(1, 0)], k[(1, 1)]);
-            let u = vel.at(&pressure);
-            let stop = -(k_t.try_inverse().unwrap_or_else(Matrix2::zeros) * u.xy());
-            let f = Metric::of(&k_t).project(stop, self.mu * total);
-            friction = Impulse::at(&pressure, Vector::new(f.x, f.y, 0.0));
-            vel.apply(&friction, 1.0);
-            // Torsion.
-            vel.apply(&torsion, -1.0);
-            let resist = total * (self.mu * lever + if rolls { self.rolling } else { 0.0 });
-            let spin = if ii[(2, 2)] > 0.0 {
-                (-vel.w.z / ii[(2, 2)]).clamp(-resist, resist)
-            } else {
-                0.0
-            };
-            torsion = Impulse::couple(Vector::new(0.0, 0.0, spin));
-            vel.apply(&torsion, 1.0);
-            // Rolling resistance.
-            if rolls {
-                vel.apply(&rolling, -1.0);
-                let stop = -(roll_inertia * vel.w.xy());
-                let l = roll_metric.project(stop, self.rolling * total);
-                rolling = Impulse::couple(Vector::new(l.x, l.y, 0.0));
-                vel.apply(&rolling, 1.0);
-            }
+            self.sweep(&rows, &rolling, &mut imp, &mut vel);
             let change = (vel.v - before.0).norm() + (vel.w - before.1).norm() * size;
             if change < SETTLED_VELOCITY {
                 break;
             }
         }
-        let sweeps = support.sweeps;
-        *support = TableSupport {
-            normal,
-            friction: Vector::new(friction.linear.x, friction.linear.y, torsion.angular.z),
-            pressure_b: rotation.inverse() * pressure,
-            rolling: rolling.angular.xy(),
-            normals: [0.0; MAX_TABLE_POINTS],
-            sweeps,
-        };
-        for (p, l) in found.iter().zip(&lambda[..n]) {
-            support.normals[p.id] = *l;
+        imp.store(support, found, &rotation);
+        imp.wrench_b(&rotation, dt)
+    }
+
+    /// One sweep of the blocks, each solved exactly with the others held: normal, friction at
+    /// the centre of pressure, torsion, rolling resistance.
+    #[inline]
+    fn sweep(&self, rows: &Rows, rolling: &Rolling, imp: &mut Impulses, vel: &mut Velocities<'_>) {
+        let (total, lever) = normal_block(rows, imp, vel);
+        self.friction_block(total, imp, vel);
+        self.torsion_block(total, lever, rolling.rolls, imp, vel);
+        if rolling.rolls {
+            self.rolling_block(total, rolling, imp, vel);
         }
-        let force = normal.linear + friction.linear;
-        let moment = normal.angular + friction.angular + torsion.angular + rolling.angular;
-        let to_b = rotation.inverse();
-        wrench(&(to_b * force / dt), &(to_b * moment / dt))
+    }
+
+    /// Friction at the centre of pressure under the normal impulses' sum `total`: it stops
+    /// the slip there when Coulomb's disc allows, else the largest against the slip.
+    #[inline]
+    fn friction_block(&self, total: Real, imp: &mut Impulses, vel: &mut Velocities<'_>) {
+        let (ii, inv_mass) = (vel.inv_inertia_w, vel.inv_mass);
+        vel.apply(&imp.friction, -1.0);
+        let rx = imp.pressure.cross_matrix();
+        let k = Mat3::identity() * inv_mass - rx * ii * rx;
+        let k_t = Matrix2::new(k[(0, 0)], k[(0, 1)], k[(1, 0)], k[(1, 1)]);
+        let u = vel.at(&imp.pressure);
+        let stop = -(k_t.try_inverse().unwrap_or_else(Matrix2::zeros) * u.xy());
+        let f = Metric::of(&k_t).project(stop, self.mu * total);
+        imp.friction = Impulse::at(&imp.pressure, Vector::new(f.x, f.y, 0.0));
+        vel.apply(&imp.friction, 1.0);
+    }
+
+    /// Torsion: a couple about the normal stopping the spin, at most `μ N` times the `lever`
+    /// (and the rolling resistance's lever when the object `rolls`).
+    #[inline]
+    fn torsion_block(
+        &self,
+        total: Real,
+        lever: Real,
+        rolls: bool,
+        imp: &mut Impulses,
+        vel: &mut Velocities<'_>,
+    ) {
+        let ii = vel.inv_inertia_w;
+        vel.apply(&imp.torsion, -1.0);
+        let resist = total * (self.mu * lever + if rolls { self.rolling } else { 0.0 });
+        let spin = if ii[(2, 2)] > 0.0 {
+            (-vel.w.z / ii[(2, 2)]).clamp(-resist, resist)
+        } else {
+            0.0
+        };
+        imp.torsion = Impulse::couple(Vector::new(0.0, 0.0, spin));
+        vel.apply(&imp.torsion, 1.0);
+    }
+
+    /// Rolling resistance: a couple about the horizontal axes stopping the rolling, at most
+    /// [`rolling`](Table::rolling) × N.
+    #[inline]
+    fn rolling_block(
+        &self,
+        total: Real,
+        rolling: &Rolling,
+        imp: &mut Impulses,
+        vel: &mut Velocities<'_>,
+    ) {
+        vel.apply(&imp.rolling, -1.0);
+        let stop = -(rolling.inertia * vel.w.xy());
+        let l = rolling.metric.project(stop, self.rolling * total);
+        imp.rolling = Impulse::couple(Vector::new(l.x, l.y, 0.0));
+        vel.apply(&imp.rolling, 1.0);
     }
 
     /// Lifts an object whose lowest point is below the table until it touches it; its
@@ -355,6 +309,210 @@ impl Table {
             *z = self.height + depth;
         }
     }
+}
+
+/// The rows of a tick's blocks, one per point of the object that may touch the table.
+struct Rows {
+    /// How many points.
+    n: usize,
+    /// Each point from the centre (world) and the least normal velocity it may have.
+    r: [Vector; MAX_TABLE_POINTS],
+    least: [Real; MAX_TABLE_POINTS],
+    /// The normal block's constraint rows `Lᵀ a_k` ([`Rows::fill`]).
+    g: [Vector; MAX_TABLE_POINTS],
+}
+
+impl Rows {
+    /// No rows, to be filled ([`Rows::fill`]) where they stay.
+    const ZERO: Rows = Rows {
+        n: 0,
+        r: [Vector::new(0.0, 0.0, 0.0); MAX_TABLE_POINTS],
+        least: [0.0; MAX_TABLE_POINTS],
+        g: [Vector::new(0.0, 0.0, 0.0); MAX_TABLE_POINTS],
+    };
+
+    /// The rows of the points `found` of an object in `state` (its velocities `vel` for the
+    /// inverse mass and inertia) on a table at `height`, for a tick of `dt`.
+    #[inline]
+    fn fill(
+        &mut self,
+        height: Real,
+        state: &ObjectState,
+        found: &[TablePoint],
+        vel: &Velocities<'_>,
+        dt: Real,
+    ) {
+        let n = found.len();
+        let rotation = state.pose.rotation;
+        let (ii, inv_mass) = (vel.inv_inertia_w, vel.inv_mass);
+        let (r, least) = (&mut self.r, &mut self.least);
+        self.n = n;
+        for (k, p) in found.iter().enumerate() {
+            r[k] = rotation * p.p_b;
+            let gap = state.pose.translation.z + r[k].z - height;
+            least[k] = if gap > TOUCHING_GAP { -gap / dt } else { 0.0 };
+        }
+        // The normal block in the coordinates s = (v_z, ω_x, ω_y), on which a point's normal
+        // velocity a_k · s depends (a_k = (1, r_y, −r_x)); a normal wrench w moves s by G w,
+        // G = diag(1/m, I⁻¹ of the horizontal axes) = L Lᵀ. With s = s₀ + L x the block is
+        // min |x| subject to (Lᵀ a_k) · x ≥ least_k − a_k · s₀.
+        let l00 = inv_mass.sqrt();
+        let l11 = ii[(0, 0)].sqrt();
+        let l21 = ii[(1, 0)] / l11;
+        let l22 = (ii[(1, 1)] - l21 * l21).max(0.0).sqrt();
+        for (gk, rk) in self.g.iter_mut().zip(&self.r[..n]) {
+            *gk = Vector::new(l00, l11 * rk.y - l21 * rk.x, -l22 * rk.x);
+        }
+    }
+
+    /// The normal velocity of point `k` (a_k · s).
+    #[inline]
+    fn normal_velocity(&self, k: usize, vel: &Velocities<'_>) -> Real {
+        let r = &self.r;
+        vel.v.z + r[k].y * vel.w.x - r[k].x * vel.w.y
+    }
+}
+
+/// Whether the object rolls on its points, and the rolling resistance block's inertia and
+/// metric (about the horizontal axes).
+struct Rolling {
+    rolls: bool,
+    inertia: Matrix2<Real>,
+    metric: Metric,
+}
+
+impl Rolling {
+    /// Rolling of `shape` on its points `found` on `table`, its inverse inertia (world)
+    /// `ii`.
+    #[inline]
+    fn new(table: &Table, shape: &Shape, found: &[TablePoint], ii: &Mat3) -> Rolling {
+        let rolls = table.rolling > 0.0 && shape.rolls_on(found);
+        let roll_compliance = Matrix2::new(ii[(0, 0)], ii[(0, 1)], ii[(1, 0)], ii[(1, 1)]);
+        Rolling {
+            rolls,
+            inertia: roll_compliance.try_inverse().unwrap_or_else(Matrix2::zeros),
+            metric: Metric::of(&roll_compliance),
+        }
+    }
+}
+
+/// The table's impulses over the tick while the blocks are solved for them.
+struct Impulses {
+    normal: Impulse,
+    friction: Impulse,
+    torsion: Impulse,
+    rolling: Impulse,
+    /// Where the friction acts: the centre of pressure (world, from the object's centre).
+    pressure: Vector,
+    /// Each point's normal impulse.
+    lambda: [Real; MAX_TABLE_POINTS],
+}
+
+impl Impulses {
+    /// The last tick's impulses from `support`, for an object turned by `rotation` that
+    /// `rolls` (else without rolling resistance).
+    #[inline]
+    fn warm_start(support: &TableSupport, rotation: &Rotation, rolls: bool) -> Impulses {
+        let pressure = rotation * support.pressure_b;
+        Impulses {
+            normal: support.normal,
+            friction: Impulse::at(
+                &pressure,
+                Vector::new(support.friction.x, support.friction.y, 0.0),
+            ),
+            torsion: Impulse::couple(Vector::new(0.0, 0.0, support.friction.z)),
+            rolling: if rolls {
+                Impulse::couple(Vector::new(support.rolling.x, support.rolling.y, 0.0))
+            } else {
+                Impulse::ZERO
+            },
+            pressure,
+            lambda: [0.0; MAX_TABLE_POINTS],
+        }
+    }
+
+    /// Keeps the impulses in `support` for the next tick's warm start (`found` the points
+    /// they were solved on), with its count of sweeps.
+    #[inline]
+    fn store(&self, support: &mut TableSupport, found: &[TablePoint], rotation: &Rotation) {
+        let sweeps = support.sweeps;
+        *support = TableSupport {
+            normal: self.normal,
+            friction: Vector::new(
+                self.friction.linear.x,
+                self.friction.linear.y,
+                self.torsion.angular.z,
+            ),
+            pressure_b: rotation.inverse() * self.pressure,
+            rolling: self.rolling.angular.xy(),
+            normals: [0.0; MAX_TABLE_POINTS],
+            sweeps,
+        };
+        for (p, l) in found.iter().zip(&self.lambda[..found.len()]) {
+            support.normals[p.id] = *l;
+        }
+    }
+
+    /// Their sum as a wrench over the tick `dt` (B, at the centre) on an object turned by
+    /// `rotation`.
+    #[inline]
+    fn wrench_b(&self, rotation: &Rotation, dt: Real) -> Wrench {
+        let force = self.normal.linear + self.friction.linear;
+        let moment = self.normal.angular
+            + self.friction.angular
+            + self.torsion.angular
+            + self.rolling.angular;
+        let to_b = rotation.inverse();
+        wrench(&(to_b * force / dt), &(to_b * moment / dt))
+    }
+}
+
+/// The normal block: each point's impulse `λ_k ≥ 0` so that it does not move into the table
+/// farther than its gap (a least-distance problem); the impulses' sum and the torsion's lever
+/// about the centre of pressure (the touching points' mean distance from it, times
+/// [`TORSION_LEVER`]; 0 without touching points).
+#[inline]
+fn normal_block(rows: &Rows, imp: &mut Impulses, vel: &mut Velocities<'_>) -> (Real, Real) {
+    let n = rows.n;
+    let (r, least) = (&rows.r, &rows.least);
+    let lambda = &mut imp.lambda;
+    let mut h = [0.0; MAX_TABLE_POINTS];
+    vel.apply(&imp.normal, -1.0);
+    for k in 0..n {
+        h[k] = least[k] - rows.normal_velocity(k, vel);
+    }
+    if !least_distance(&rows.g[..n], &h[..n], &mut lambda[..n]) {
+        lambda[..n].fill(0.0);
+    }
+    let total: Real = lambda[..n].iter().sum();
+    let mut moment = Vector::zeros();
+    let mut centre = Vector::zeros();
+    for (l, rk) in lambda[..n].iter().zip(&r[..n]) {
+        moment += Vector::new(rk.y, -rk.x, 0.0) * *l;
+        centre += rk * *l;
+    }
+    imp.normal = Impulse {
+        linear: Vector::new(0.0, 0.0, total),
+        angular: moment,
+    };
+    vel.apply(&imp.normal, 1.0);
+    let mut lever = 0.0;
+    if total > 0.0 {
+        imp.pressure = centre / total;
+        // The points touching after it: those moving at their least normal velocity.
+        let (mut sum, mut count) = (0.0, 0);
+        for k in 0..n {
+            let u = rows.normal_velocity(k, vel);
+            if u - least[k] <= 1e-9 {
+                sum += (r[k] - imp.pressure).xy().norm();
+                count += 1;
+            }
+        }
+        if count > 0 {
+            lever = TORSION_LEVER * sum / count as Real;
+        }
+    }
+    (total, lever)
 }
 
 /// Least-distance programming (Lawson and Hanson, *Solving Least Squares Problems*, 1974,

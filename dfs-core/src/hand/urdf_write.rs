@@ -12,7 +12,7 @@
 //! speed limits.
 
 use super::shapes::{LinkShape, Primitive, ShapeSource};
-use super::{HandModel, JointDrive, JointKind};
+use super::{HandModel, Joint, JointDrive, JointKind, Link};
 use crate::error::{DfsError, Result};
 use crate::math::{Isometry, Vector};
 
@@ -70,127 +70,9 @@ pub fn hand_urdf(hand: &HandModel, shapes: &[LinkShape]) -> Result<String> {
         .links
         .iter()
         .enumerate()
-        .map(|(l, link)| {
-            let mine = shapes.iter().filter(|s| s.link == l);
-            let i = &link.inertial.inertia;
-            urdf_rs::Link {
-                name: link.name.clone(),
-                inertial: urdf_rs::Inertial {
-                    origin: urdf_rs::Pose {
-                        xyz: vec3(&link.inertial.com),
-                        rpy: urdf_rs::Vec3([0.0; 3]),
-                    },
-                    mass: urdf_rs::Mass {
-                        value: link.inertial.mass,
-                    },
-                    inertia: urdf_rs::Inertia {
-                        ixx: i[(0, 0)],
-                        ixy: i[(0, 1)],
-                        ixz: i[(0, 2)],
-                        iyy: i[(1, 1)],
-                        iyz: i[(1, 2)],
-                        izz: i[(2, 2)],
-                    },
-                },
-                visual: mine
-                    .clone()
-                    .map(|s| urdf_rs::Visual {
-                        name: None,
-                        origin: origin(&s.origin),
-                        geometry: geometry(&s.primitive),
-                        material: Some(material(s.source)),
-                    })
-                    .collect(),
-                collision: mine
-                    .map(|s| urdf_rs::Collision {
-                        name: None,
-                        origin: origin(&s.origin),
-                        geometry: geometry(&s.primitive),
-                    })
-                    .collect(),
-            }
-        })
+        .map(|(l, link)| urdf_link(l, link, shapes))
         .collect();
-    let link_name = |l: usize| hand.links.get(l).map_or("", |k| k.name.as_str()).to_owned();
-    // The joint that is DOF `d` (the DOF's own name if none is).
-    let dof_joint = |d: usize| {
-        hand.joints
-            .iter()
-            .find(|j| j.drive == JointDrive::Dof(d))
-            .map(|j| j.name.clone())
-            .or_else(|| hand.dof_names.get(d).cloned())
-            .unwrap_or_default()
-    };
-    let effort = |d: usize| hand.torque_limit.get(d).copied().unwrap_or(0.0);
-    let joints = hand
-        .joints
-        .iter()
-        .map(|j| {
-            let (effort, mimic) = match j.drive {
-                JointDrive::Fixed => (0.0, None),
-                JointDrive::Dof(d) => (effort(d), None),
-                JointDrive::Mimic {
-                    dof,
-                    multiplier,
-                    offset,
-                } => (
-                    effort(dof),
-                    Some(urdf_rs::Mimic {
-                        joint: dof_joint(dof),
-                        multiplier: Some(multiplier),
-                        offset: Some(offset),
-                    }),
-                ),
-            };
-            let (joint_type, lower, upper, velocity) = match j.kind {
-                JointKind::Revolute => (
-                    urdf_rs::JointType::Revolute,
-                    j.lower,
-                    j.upper,
-                    URDF_VELOCITY_PLACEHOLDER,
-                ),
-                JointKind::Prismatic => (
-                    urdf_rs::JointType::Prismatic,
-                    j.lower,
-                    j.upper,
-                    URDF_VELOCITY_PLACEHOLDER,
-                ),
-                // Unlimited: no lower and upper (the writer leaves infinite values out).
-                JointKind::Continuous => (
-                    urdf_rs::JointType::Continuous,
-                    f64::NEG_INFINITY,
-                    f64::INFINITY,
-                    URDF_VELOCITY_PLACEHOLDER,
-                ),
-                JointKind::Fixed => (urdf_rs::JointType::Fixed, 0.0, 0.0, 0.0),
-            };
-            urdf_rs::Joint {
-                name: j.name.clone(),
-                joint_type,
-                origin: origin(&j.origin),
-                parent: urdf_rs::LinkName {
-                    link: link_name(j.parent),
-                },
-                child: urdf_rs::LinkName {
-                    link: link_name(j.child),
-                },
-                axis: urdf_rs::Axis { xyz: vec3(&j.axis) },
-                limit: urdf_rs::JointLimit {
-                    lower,
-                    upper,
-                    effort,
-                    velocity,
-                    acceleration: f64::INFINITY,
-                    deceleration: f64::INFINITY,
-                    jerk: f64::INFINITY,
-                },
-                calibration: None,
-                dynamics: None,
-                mimic,
-                safety_controller: None,
-            }
-        })
-        .collect();
+    let joints = hand.joints.iter().map(|j| urdf_joint(hand, j)).collect();
     let robot = urdf_rs::Robot {
         name: hand.name.clone(),
         version: None,
@@ -207,4 +89,132 @@ pub fn hand_urdf(hand: &HandModel, shapes: &[LinkShape]) -> Result<String> {
          {body}\n",
         env!("CARGO_PKG_VERSION")
     ))
+}
+
+/// Link `l` with its inertial, and those of `shapes` on it as both visuals and collisions.
+fn urdf_link(l: usize, link: &Link, shapes: &[LinkShape]) -> urdf_rs::Link {
+    let mine = shapes.iter().filter(|s| s.link == l);
+    let i = &link.inertial.inertia;
+    urdf_rs::Link {
+        name: link.name.clone(),
+        inertial: urdf_rs::Inertial {
+            origin: urdf_rs::Pose {
+                xyz: vec3(&link.inertial.com),
+                rpy: urdf_rs::Vec3([0.0; 3]),
+            },
+            mass: urdf_rs::Mass {
+                value: link.inertial.mass,
+            },
+            inertia: urdf_rs::Inertia {
+                ixx: i[(0, 0)],
+                ixy: i[(0, 1)],
+                ixz: i[(0, 2)],
+                iyy: i[(1, 1)],
+                iyz: i[(1, 2)],
+                izz: i[(2, 2)],
+            },
+        },
+        visual: mine
+            .clone()
+            .map(|s| urdf_rs::Visual {
+                name: None,
+                origin: origin(&s.origin),
+                geometry: geometry(&s.primitive),
+                material: Some(material(s.source)),
+            })
+            .collect(),
+        collision: mine
+            .map(|s| urdf_rs::Collision {
+                name: None,
+                origin: origin(&s.origin),
+                geometry: geometry(&s.primitive),
+            })
+            .collect(),
+    }
+}
+
+/// Joint `j` of `hand`: its type, origin, axis, limits and mimic.
+fn urdf_joint(hand: &HandModel, j: &Joint) -> urdf_rs::Joint {
+    let link_name = |l: usize| hand.links.get(l).map_or("", |k| k.name.as_str()).to_owned();
+    let effort = |d: usize| hand.torque_limit.get(d).copied().unwrap_or(0.0);
+    let (effort, mimic) = match j.drive {
+        JointDrive::Fixed => (0.0, None),
+        JointDrive::Dof(d) => (effort(d), None),
+        JointDrive::Mimic {
+            dof,
+            multiplier,
+            offset,
+        } => (
+            effort(dof),
+            Some(urdf_rs::Mimic {
+                joint: dof_joint(hand, dof),
+                multiplier: Some(multiplier),
+                offset: Some(offset),
+            }),
+        ),
+    };
+    let (joint_type, limit) = type_and_limit(j, effort);
+    urdf_rs::Joint {
+        name: j.name.clone(),
+        joint_type,
+        origin: origin(&j.origin),
+        parent: urdf_rs::LinkName {
+            link: link_name(j.parent),
+        },
+        child: urdf_rs::LinkName {
+            link: link_name(j.child),
+        },
+        axis: urdf_rs::Axis { xyz: vec3(&j.axis) },
+        limit,
+        calibration: None,
+        dynamics: None,
+        mimic,
+        safety_controller: None,
+    }
+}
+
+/// The joint that is DOF `d` of `hand` (the DOF's own name if none is).
+fn dof_joint(hand: &HandModel, d: usize) -> String {
+    hand.joints
+        .iter()
+        .find(|j| j.drive == JointDrive::Dof(d))
+        .map(|j| j.name.clone())
+        .or_else(|| hand.dof_names.get(d).cloned())
+        .unwrap_or_default()
+}
+
+/// Joint `j`'s URDF type and limits, `effort` its DOF's torque limit.
+fn type_and_limit(j: &Joint, effort: f64) -> (urdf_rs::JointType, urdf_rs::JointLimit) {
+    let (joint_type, lower, upper, velocity) = match j.kind {
+        JointKind::Revolute => (
+            urdf_rs::JointType::Revolute,
+            j.lower,
+            j.upper,
+            URDF_VELOCITY_PLACEHOLDER,
+        ),
+        JointKind::Prismatic => (
+            urdf_rs::JointType::Prismatic,
+            j.lower,
+            j.upper,
+            URDF_VELOCITY_PLACEHOLDER,
+        ),
+        // Unlimited: no lower and upper (the writer leaves infinite values out).
+        JointKind::Continuous => (
+            urdf_rs::JointType::Continuous,
+            f64::NEG_INFINITY,
+            f64::INFINITY,
+            URDF_VELOCITY_PLACEHOLDER,
+        ),
+        JointKind::Fixed => (urdf_rs::JointType::Fixed, 0.0, 0.0, 0.0),
+    };
+    let limit = urdf_rs::JointLimit {
+        lower,
+        upper,
+        effort,
+        velocity,
+        acceleration: f64::INFINITY,
+        deceleration: f64::INFINITY,
+        jerk: f64::INFINITY,
+    };
+    (joint_type, limit)
 }

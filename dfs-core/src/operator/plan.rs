@@ -419,8 +419,21 @@ fn best_candidate(
     } else {
         [0.0; MAX_TIPS]
     };
-    let mut best: Option<Candidate> = None;
-    let mut best_err = Real::INFINITY;
+    let mut search = CandidateSearch {
+        targets: TargetSearch {
+            hand,
+            object,
+            centre,
+            power,
+            lateral: &lateral,
+            thumb,
+            fingers,
+        },
+        posture,
+        heights,
+        best: None,
+        best_err: Real::INFINITY,
+    };
     // Try grasp axes × hand orientations (yaw of the palm about the vertical) × heights.
     let spreads: &[Real] = if fingers.len() > 1 && !power {
         &[0.02, -0.02][..]
@@ -430,94 +443,129 @@ fn best_candidate(
     for &(axis_angle, half) in axes {
         for (k, &spread) in (0..12).flat_map(|k| spreads.iter().map(move |s| (k, s))) {
             let psi = k as Real * std::f64::consts::PI / 6.0;
-            let rot = Rotation::from_euler_angles(0.0, 0.0, obj_yaw + axis_angle + psi);
-            let (free, real) = planning_model(hand, rot, thumb, fingers);
-            let n = free.dof();
-            let a = Rotation::from_euler_angles(0.0, 0.0, obj_yaw + axis_angle) * Vector::x();
-            let side = Vector::z().cross(&a);
-            let params = IkParams {
-                max_iterations: 150,
-                tolerance: 2e-4,
-                ..IkParams::default()
-            }
-            .with_frozen(posture.frozen.iter().map(|d| d + 3));
-            let signs = [(1.0, 1.0), (1.0, -1.0), (-1.0, 1.0), (-1.0, -1.0)];
-            for (&h, (sign, thumb_sign)) in heights
-                .iter()
-                .flat_map(|h| signs.into_iter().map(move |s| (h, s)))
-            {
-                // Power: the flexion planes are parallel, so the thumb's axis points the
-                // same way as the fingers'.
-                if power && sign != thumb_sign {
-                    continue;
-                }
-                let targets = TargetSearch {
-                    hand,
-                    object,
-                    centre,
-                    power,
-                    lateral: &lateral,
-                    thumb,
-                    fingers,
-                }
-                .targets(
-                    &Placement {
-                        a,
-                        side,
-                        h,
-                        half,
-                        sign,
-                        thumb_sign,
-                        spread,
-                    },
-                    real.len(),
-                );
-                let mut q_start = [0.0; MAX_DOF];
-                q_start[3..n].copy_from_slice(&posture.q[..n - 3]);
-                let back = rot * Vector::x() * -0.12;
-                q_start[0] = centre.x + back.x;
-                q_start[1] = centre.y + back.y;
-                q_start[2] = centre.z + 0.05 + h;
-                let mut q = [0.0; MAX_DOF];
-                let r = solve_tips(
-                    &free,
-                    &Isometry::identity(),
-                    &targets,
-                    &q_start[..n],
-                    &params,
-                    kin,
-                    &mut q[..n],
-                );
-                best_err = best_err.min(r.max_error);
-                if r.max_error > 0.008 {
-                    continue;
-                }
-                free.tip_jacobians(kin);
-                let align = push_score(
-                    &free,
-                    kin,
-                    &targets,
-                    real.len(),
-                    &(centre + Vector::z() * h),
-                );
-                let score = align - r.max_error * 20.0;
-                if best.as_ref().is_none_or(|b| score > b.score + 1e-9) {
-                    best = Some(Candidate {
-                        score,
-                        ik_error: r.max_error,
-                        q,
-                        rotation: rot,
-                    });
-                }
-            }
+            search.orientation(obj_yaw + axis_angle, psi, half, spread, kin);
         }
     }
-    best.ok_or_else(|| {
+    let best_err = search.best_err;
+    search.best.ok_or_else(|| {
         DfsError::invalid(
             "object",
             format!("no grasp of this object is reachable for the hand (fingertips {:.1} mm from the surface)", best_err * 1e3),
         )
     })
+}
+
+/// The search of [`best_candidate`]: what its candidates share, and the best found so far.
+struct CandidateSearch<'a> {
+    targets: TargetSearch<'a>,
+    posture: &'a StartPosture,
+    /// Heights above the centre tried.
+    heights: &'a [Real],
+    best: Option<Candidate>,
+    /// The least IK error of any candidate (m).
+    best_err: Real,
+}
+
+impl CandidateSearch<'_> {
+    /// The candidates with the grasp axis at `yaw` (world) and the palm turned `psi` more
+    /// about the vertical: each height × side (the fingers' spread `spread`, the object's half
+    /// width along the axis `half`).
+    fn orientation(
+        &mut self,
+        yaw: Real,
+        psi: Real,
+        half: Real,
+        spread: Real,
+        kin: &mut Kinematics,
+    ) {
+        let TargetSearch {
+            hand,
+            power,
+            thumb,
+            fingers,
+            ..
+        } = self.targets;
+        let rot = Rotation::from_euler_angles(0.0, 0.0, yaw + psi);
+        let (free, real) = planning_model(hand, rot, thumb, fingers);
+        let a = Rotation::from_euler_angles(0.0, 0.0, yaw) * Vector::x();
+        let side = Vector::z().cross(&a);
+        let params = IkParams {
+            max_iterations: 150,
+            tolerance: 2e-4,
+            ..IkParams::default()
+        }
+        .with_frozen(self.posture.frozen.iter().map(|d| d + 3));
+        let signs = [(1.0, 1.0), (1.0, -1.0), (-1.0, 1.0), (-1.0, -1.0)];
+        for (&h, (sign, thumb_sign)) in self
+            .heights
+            .iter()
+            .flat_map(|h| signs.into_iter().map(move |s| (h, s)))
+        {
+            // Power: the flexion planes are parallel, so the thumb's axis points the
+            // same way as the fingers'.
+            if power && sign != thumb_sign {
+                continue;
+            }
+            let placement = Placement {
+                a,
+                side,
+                h,
+                half,
+                sign,
+                thumb_sign,
+                spread,
+            };
+            self.placement(&free, real.len(), rot, &placement, &params, kin);
+        }
+    }
+
+    /// One candidate: the planning model `free` (`n_real` real fingertips) turned by `rot`,
+    /// its fingertips solved for onto `p`'s targets from the start posture behind the object;
+    /// kept if it reaches them and pushes better than the best so far.
+    fn placement(
+        &mut self,
+        free: &HandModel,
+        n_real: usize,
+        rot: Rotation,
+        p: &Placement,
+        params: &IkParams,
+        kin: &mut Kinematics,
+    ) {
+        let centre = self.targets.centre;
+        let targets = self.targets.targets(p, n_real);
+        let n = free.dof();
+        let mut q_start = [0.0; MAX_DOF];
+        q_start[3..n].copy_from_slice(&self.posture.q[..n - 3]);
+        let back = rot * Vector::x() * -0.12;
+        q_start[0] = centre.x + back.x;
+        q_start[1] = centre.y + back.y;
+        q_start[2] = centre.z + 0.05 + p.h;
+        let mut q = [0.0; MAX_DOF];
+        let r = solve_tips(
+            free,
+            &Isometry::identity(),
+            &targets,
+            &q_start[..n],
+            params,
+            kin,
+            &mut q[..n],
+        );
+        self.best_err = self.best_err.min(r.max_error);
+        if r.max_error > 0.008 {
+            return;
+        }
+        free.tip_jacobians(kin);
+        let align = push_score(free, kin, &targets, n_real, &(centre + Vector::z() * p.h));
+        let score = align - r.max_error * 20.0;
+        if self.best.as_ref().is_none_or(|b| score > b.score + 1e-9) {
+            self.best = Some(Candidate {
+                score,
+                ik_error: r.max_error,
+                q,
+                rotation: rot,
+            });
+        }
+    }
 }
 
 /// Power grasp: where each fingertip's flexion plane lies across the hand (m, along the

@@ -436,7 +436,6 @@ pub(super) fn closing_candidates(
 ) -> Result<Vec<Candidate>> {
     stop.check()?;
     let nt = hand.fingertips.len();
-    let n_hand = hand.dof();
     let q_rest = mid_angles(hand);
     let paths = closing_paths(hand, &q_rest);
     let tips: Vec<usize> = (0..nt)
@@ -447,41 +446,130 @@ pub(super) fn closing_candidates(
     }
     let radius: Vec<Real> = hand.fingertips.iter().map(|t| t.radius).collect();
     let mu = skill.friction.mu * (1.0 - params.friction_margin);
-    let need = 1.0 / (1.0 + mu * mu).sqrt();
-    let need_sin = mu / (1.0 + mu * mu).sqrt();
-    let probe_in = |orient: Rotation| Probe {
-        shape: &skill.shape,
-        orient,
-        paths: &paths,
-        radius: &radius,
-        thumb,
-        tips: &tips,
-        need,
-        need_sin,
-    };
-    // The skill's grasp axis, from its thumb's side to the other.
-    let (_, _, a_s) = grasp_axis(skill);
-    let up_perp = perpendicular(&-Vector::z(), &a_s, &Vector::x());
-    let side = a_s.cross(&up_perp);
     let start = skill.start_pose();
-    let inv_start = start.inverse();
-    // The hand's rotation for a hand-frame grasp (its own grasp axis along the skill's) at
-    // roll `r` about it, with the approach direction; `None` from below the table.
-    let roll = |a_h: &Vector, d_h: &Vector, r: usize| -> Option<(Rotation, Vector)> {
-        let psi = r as Real * std::f64::consts::TAU / ROLLS as Real;
-        let d_w = up_perp * psi.cos() + side * psi.sin();
-        // The palm would come from below the table.
-        (d_w.z <= 0.35).then(|| (align(a_h, d_h, &a_s, &d_w), d_w))
+    let closing = Closing {
+        hand,
+        thumb,
+        skill,
+        params,
+        q_rest: &q_rest,
+        paths: &paths,
+        tips: &tips,
+        radius: &radius,
+        need: 1.0 / (1.0 + mu * mu).sqrt(),
+        need_sin: mu / (1.0 + mu * mu).sqrt(),
+        start,
+        inv_start: start.inverse(),
     };
-    // Each hand-frame grasp with the rotations of the hand tried for it in the world. A
-    // sphere looks the same from every side: its grasps are found once and the hand is
-    // rolled about their own axes. Any other shape is found in the orientation the world
-    // will give it: for each roll of the hand's own grasp axis (thumb to the other
-    // fingertips, at mid-range angles) about the skill's, B in the hand frame is the inverse
-    // of the hand's rotation.
-    let mut trials: Vec<(HandGrasp, Rotation, Vector)> = Vec::new();
-    if matches!(skill.shape, Shape::Sphere { .. }) {
-        for g in hand_grasps(&probe_in(Rotation::identity()), &paths, &radius, stop)? {
+    let rolls = Rolls::of(skill);
+    // Each hand-frame grasp with the rotations of the hand tried for it in the world.
+    let trials = if matches!(skill.shape, Shape::Sphere { .. }) {
+        closing.sphere_trials(&rolls, stop)?
+    } else {
+        closing.rolled_trials(&rolls, stop)?
+    };
+    let mut kin = Kinematics::default();
+    let mut out = Vec::new();
+    let mut frames: Vec<Vec<ContactFrame>> = Vec::new();
+    for trial in &trials {
+        stop.check()?;
+        let (candidate, contacts) = closing.world_candidate(trial, &mut kin);
+        out.push(candidate);
+        frames.push(contacts);
+    }
+    keep_force_closure(&mut out, &frames, skill, mu, stop)?;
+    Ok(out)
+}
+
+/// What the search for grasps from the hand's closing motion shares (module documentation).
+struct Closing<'a> {
+    hand: &'a HandModel,
+    thumb: usize,
+    skill: &'a SkillSpec,
+    params: &'a ReplayParams,
+    /// The hand's DOFs at mid range ([`mid_angles`]).
+    q_rest: &'a [Real; MAX_DOF],
+    paths: &'a [Path],
+    /// The fingertips with closing paths.
+    tips: &'a [usize],
+    /// Each fingertip's radius.
+    radius: &'a [Real],
+    /// Cosine and sine of the planned cone's half-angle.
+    need: Real,
+    need_sin: Real,
+    /// The object's start pose, and its inverse.
+    start: Isometry,
+    inv_start: Isometry,
+}
+
+/// A hand-frame grasp with a rotation of the hand tried for it in the world.
+struct Trial {
+    grasp: HandGrasp,
+    rotation: Rotation,
+    /// The approach direction (world).
+    approach: Vector,
+}
+
+/// The skill's grasp axis (from its thumb's side to the other) and the hand's rolls about it.
+struct Rolls {
+    a_s: Vector,
+    /// Across the axis: the one nearest straight down, and the third direction.
+    up_perp: Vector,
+    side: Vector,
+}
+
+impl Rolls {
+    /// The rolls about `skill`'s grasp axis.
+    fn of(skill: &SkillSpec) -> Rolls {
+        let (_, _, a_s) = grasp_axis(skill);
+        let up_perp = perpendicular(&-Vector::z(), &a_s, &Vector::x());
+        let side = a_s.cross(&up_perp);
+        Rolls { a_s, up_perp, side }
+    }
+
+    /// The hand's rotation for a hand-frame grasp (its own grasp axis `a_h` along the skill's,
+    /// approach `d_h`) at roll `r` about it, with the approach direction; `None` from below
+    /// the table.
+    fn roll(&self, a_h: &Vector, d_h: &Vector, r: usize) -> Option<(Rotation, Vector)> {
+        let psi = r as Real * std::f64::consts::TAU / ROLLS as Real;
+        let d_w = self.up_perp * psi.cos() + self.side * psi.sin();
+        // The palm would come from below the table.
+        (d_w.z <= 0.35).then(|| (align(a_h, d_h, &self.a_s, &d_w), d_w))
+    }
+}
+
+/// The hand posed for a [`Trial`] in the world ([`Closing::pose`]).
+struct Posed {
+    /// The hand with a free base in the trial's rotation.
+    free: HandModel,
+    /// Its configuration: base position, then the hand's DOFs.
+    q: [Real; MAX_DOF],
+    /// The fingertips that touch the object.
+    active: [bool; MAX_TIPS],
+}
+
+impl Closing<'_> {
+    /// The object as held in orientation `orient` (hand frame).
+    fn probe(&self, orient: Rotation) -> Probe<'_> {
+        Probe {
+            shape: &self.skill.shape,
+            orient,
+            paths: self.paths,
+            radius: self.radius,
+            thumb: self.thumb,
+            tips: self.tips,
+            need: self.need,
+            need_sin: self.need_sin,
+        }
+    }
+
+    /// A sphere looks the same from every side: its grasps are found once and the hand is
+    /// rolled about their own axes.
+    fn sphere_trials(&self, rolls: &Rolls, stop: &Stop) -> Result<Vec<Trial>> {
+        let (thumb, nt) = (self.thumb, self.hand.fingertips.len());
+        let mut trials = Vec::new();
+        let probe = self.probe(Rotation::identity());
+        for g in hand_grasps(&probe, self.paths, self.radius, stop)? {
             let Some(t_thumb) = g.touches[thumb] else {
                 continue;
             };
@@ -496,16 +584,27 @@ pub(super) fn closing_candidates(
                 .unwrap_or_else(Vector::x);
             let d_h = perpendicular(&g.centre, &a_h, &Vector::z());
             for r in 0..ROLLS {
-                if let Some((rot, d_w)) = roll(&a_h, &d_h, r) {
-                    trials.push((g.clone(), rot, d_w));
+                if let Some((rotation, approach)) = rolls.roll(&a_h, &d_h, r) {
+                    trials.push(Trial {
+                        grasp: g.clone(),
+                        rotation,
+                        approach,
+                    });
                 }
             }
         }
-    } else {
+        Ok(trials)
+    }
+
+    /// Any other shape than a sphere is found in the orientation the world will give it: for
+    /// each roll of the hand's own grasp axis (thumb to the other fingertips, at mid-range
+    /// angles) about the skill's, B in the hand frame is the inverse of the hand's rotation.
+    fn rolled_trials(&self, rolls: &Rolls, stop: &Stop) -> Result<Vec<Trial>> {
+        let (hand, thumb) = (self.hand, self.thumb);
         let mut kin = Kinematics::default();
-        hand.forward_kinematics(&Isometry::identity(), &q_rest[..n_hand], &mut kin);
+        hand.forward_kinematics(&Isometry::identity(), &self.q_rest[..hand.dof()], &mut kin);
         let p_t = kin.tip_centres[thumb].coords;
-        let others: Vec<usize> = tips.iter().copied().filter(|&k| k != thumb).collect();
+        let others: Vec<usize> = self.tips.iter().copied().filter(|&k| k != thumb).collect();
         let p_o = others
             .iter()
             .map(|&k| kin.tip_centres[k].coords)
@@ -513,49 +612,82 @@ pub(super) fn closing_candidates(
             / others.len().max(1) as Real;
         let a_h = (p_o - p_t).try_normalize(1e-9).unwrap_or_else(Vector::x);
         let d_h = perpendicular(&(0.5 * (p_t + p_o)), &a_h, &Vector::z());
+        let mut trials = Vec::new();
         for r in 0..ROLLS {
-            let Some((rot, d_w)) = roll(&a_h, &d_h, r) else {
+            let Some((rotation, approach)) = rolls.roll(&a_h, &d_h, r) else {
                 continue;
             };
-            let orient = rot.inverse() * start.rotation;
-            for g in hand_grasps(&probe_in(orient), &paths, &radius, stop)? {
-                trials.push((g, rot, d_w));
+            let orient = rotation.inverse() * self.start.rotation;
+            for grasp in hand_grasps(&self.probe(orient), self.paths, self.radius, stop)? {
+                trials.push(Trial {
+                    grasp,
+                    rotation,
+                    approach,
+                });
             }
         }
+        Ok(trials)
     }
-    let mut kin = Kinematics::default();
-    let mut out = Vec::new();
-    let mut frames: Vec<Vec<ContactFrame>> = Vec::new();
-    for &(ref g, rot, d_w) in &trials {
-        stop.check()?;
+
+    /// The hand placed for `trial` with the object at its start pose: each finger at its
+    /// hand-frame touch or open end, then the fingers taking part closed onto the object where
+    /// it really lies.
+    fn pose(&self, trial: &Trial, kin: &mut Kinematics) -> Posed {
+        let (hand, g, rot) = (self.hand, &trial.grasp, trial.rotation);
+        let (nt, n_hand) = (hand.fingertips.len(), hand.dof());
         let used: Vec<usize> = (0..nt).filter(|&k| g.touches[k].is_some()).collect();
         let free = with_free_base(hand, rot);
         let n = free.dof();
-        let base = start.translation.vector - rot * g.centre;
+        let base = self.start.translation.vector - rot * g.centre;
         let mut q = [0.0; MAX_DOF];
         q[..3].copy_from_slice(base.as_slice());
-        q[3..n].copy_from_slice(&q_rest[..n_hand]);
+        q[3..n].copy_from_slice(&self.q_rest[..n_hand]);
         let mut active = [false; MAX_TIPS];
         for k in 0..nt {
             if let Some(t) = g.touches[k] {
-                paths[t.path].set(hand, t.s, 3, &mut q);
+                self.paths[t.path].set(hand, t.s, 3, &mut q);
                 active[k] = true;
             } else if let Some((pi, end)) = g.open[k] {
-                paths[pi].set(hand, end, 3, &mut q);
+                self.paths[pi].set(hand, end, 3, &mut q);
             }
         }
         // Close the fingers taking part onto the object where it really lies.
         for &k in &used {
-            let path = &paths[g.touches[k].map_or(0, |t| t.path)];
+            let path = &self.paths[g.touches[k].map_or(0, |t| t.path)];
             let dofs: Vec<usize> = path.swept.iter().map(|&d| d + 3).collect();
-            active[k] = curl_onto(&free, skill, &inv_start, k, &dofs, &mut kin, &mut q[..n]);
+            active[k] = curl_onto(
+                &free,
+                self.skill,
+                &self.inv_start,
+                k,
+                &dofs,
+                kin,
+                &mut q[..n],
+            );
         }
-        free.forward_kinematics(&Isometry::identity(), &q[..n], &mut kin);
-        free.tip_jacobians(&mut kin);
+        Posed { free, q, active }
+    }
+
+    /// The world candidate of `trial` and its contacts (B): it counts when every finger taking
+    /// part still pushes within the cone, the normals can balance inside it, no fingertip or
+    /// the base is below the table, the open fingers clear the object and the approach touches
+    /// nothing.
+    fn world_candidate(
+        &self,
+        trial: &Trial,
+        kin: &mut Kinematics,
+    ) -> (Candidate, Vec<ContactFrame>) {
+        let (skill, params, radius) = (self.skill, self.params, self.radius);
+        let (start, inv_start) = (&self.start, &self.inv_start);
+        let (nt, d_w) = (self.hand.fingertips.len(), trial.approach);
+        let Posed { free, q, active } = self.pose(trial, kin);
+        let n = free.dof();
+        free.forward_kinematics(&Isometry::identity(), &q[..n], kin);
+        free.tip_jacobians(kin);
         let gap = |p: &Point, k: usize| -> Real {
             skill.shape.closest(&(inv_start * p).coords).distance - radius[k]
         };
-        let mut ok = active[thumb] && active.iter().filter(|&&a| a).count() >= 2;
+        let mut ok = active[self.thumb] && active.iter().filter(|&&a| a).count() >= 2;
         ok &= q[2] >= 0.0;
         let mut worst: Real = 1.0;
         let mut error: Real = 0.0;
@@ -570,7 +702,7 @@ pub(super) fn closing_candidates(
                 let n_world = start.rotation * n_in;
                 normals[contacts.len()] = n_in;
                 contacts.push(ContactFrame::from_normal(p, n_in));
-                worst = worst.min(push_alignment(&free, &kin, k, &n_world));
+                worst = worst.min(push_alignment(&free, kin, k, &n_world));
                 error = error.max(gap(&c, k).abs());
                 // The preshaped tip moving in along the approach touches nothing.
                 let pre = start * Point::from(p - n_in * (radius[k] + params.preshape_clearance));
@@ -580,25 +712,35 @@ pub(super) fn closing_candidates(
                 ok &= (1..=8).all(|i| gap(&(c - d_w * (APPROACH * i as Real / 8.0)), k) > 0.0);
             }
         }
-        ok &= worst >= need && error <= params.reach_tolerance;
+        ok &= worst >= self.need && error <= params.reach_tolerance;
         let delta = hull_distance(&normals[..contacts.len()]);
-        ok &= delta < need_sin;
+        ok &= delta < self.need_sin;
         let score = if ok { 0.0 } else { -10.0 } + worst - delta + 0.02 * contacts.len() as Real
             - 0.3 * d_w.z;
-        out.push(Candidate {
+        let candidate = Candidate {
             score,
             error,
             ok,
             align: worst,
-            rotation: rot,
+            rotation: trial.rotation,
             approach: d_w,
             q_free: q,
             active,
-        });
-        frames.push(contacts);
+        };
+        (candidate, contacts)
     }
-    // The best that is a force closure inside the planned cones (μ with the margin, as the
-    // forces are planned): one hull for the chosen grasp, more only when it fails.
+}
+
+/// Of the candidates `out` that count, the best that is a force closure inside the planned
+/// cones (μ with the margin, `mu`, as the forces are planned): one hull for the chosen grasp,
+/// more only when it fails; those found not to be no longer count.
+fn keep_force_closure(
+    out: &mut [Candidate],
+    frames: &[Vec<ContactFrame>],
+    skill: &SkillSpec,
+    mu: Real,
+    stop: &Stop,
+) -> Result<()> {
     let planned = crate::contact::Friction {
         mu,
         ..skill.friction
@@ -620,7 +762,7 @@ pub(super) fn closing_candidates(
         out[i].ok = false;
         out[i].score -= 10.0;
     }
-    Ok(out)
+    Ok(())
 }
 
 #[cfg(test)]

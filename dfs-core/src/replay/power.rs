@@ -151,104 +151,29 @@ pub(super) fn plan_power(
     stop: &Stop,
 ) -> Result<Plan> {
     let start = skill.start_pose();
-    // The palm's contacts (a palm and its eminences may be several): their centroid and
-    // mean normal.
-    let (mut centroid, mut normal, mut count) = (Vector::zeros(), Vector::zeros(), 0.0 as Real);
-    for c in skill
-        .contacts
-        .iter()
-        .filter(|c| c.part == ContactPart::Palm)
-    {
-        centroid += c.position_b;
-        normal += c.normal_b.normalize();
-        count += 1.0;
-    }
-    let normal = (normal / count.max(1.0))
-        .try_normalize(1e-6)
-        .unwrap_or_else(|| -Vector::z());
-    let n_w = start.rotation * normal;
-    let p_w = start * Point::from(centroid / count.max(1.0));
+    let palm = PalmContact::of(skill, &start);
     let mut kin = Kinematics::default();
-    let mut wraps: Vec<Wrap> = Vec::new();
-    let mut placed = 0usize;
-    // How deep the object reaches in front of the palm: its centre's distance from the palm
-    // contact along the normal.
-    let depth = (-(centroid / count.max(1.0))).dot(&normal).max(0.01);
-    for posture in postures(hand, depth, &mut kin) {
-        for k in 0..ROLLS {
-            stop.check()?;
-            let roll = k as Real * std::f64::consts::TAU / ROLLS as Real;
-            for shift in SHIFTS {
-                let Some(base) =
-                    place_palm(hand, skill, &posture, &n_w, &p_w, roll, shift, &mut kin)
-                else {
-                    continue;
-                };
-                placed += 1;
-                wraps.extend(wrap(hand, skill, &posture, base, &mut kin));
-            }
-        }
-    }
-    wraps.sort_by(|a, b| b.score.total_cmp(&a.score));
-    // The plan of a wrap, without its grip.
-    let plan_of = |w: &Wrap| Plan {
-        hand: hand.clone(),
+    let (wraps, placed) = ranked_wraps(hand, skill, &palm, stop, &mut kin)?;
+    let planning = Planning {
+        hand,
         thumb,
-        base_grasp: w.base,
-        base_in_b0: start.inverse() * w.base,
-        approach_dir: n_w,
-        q_grasp: w.q_touch,
-        q_pre: w.q_open,
-        contacts: vec![
-            ContactFrame::from_normal(Vector::zeros(), Vector::z());
-            hand.fingertips.len()
-        ],
-        active: vec![false; hand.fingertips.len()],
-        ik_error: 0.0,
-        quality: w.quality,
-        force_times: Vec::new(),
-        forces: Vec::new(),
-        torque_map: nalgebra::DMatrix::zeros(hand.dof(), 0),
-        failure: None,
-        fails_at_rest: false,
-        power: None,
-    };
-    let candidate = |w: &Wrap, kin: &mut Kinematics| {
-        let mut plan = plan_of(w);
-        let (grip, failure) = plan_grip(hand, skill, params, w, kin);
-        if let Some((reason, why, at_rest)) = failure {
-            plan.failure = Some((reason, why));
-            plan.fails_at_rest = at_rest;
-        }
-        plan.power = Some(PowerPlan {
-            close: w.close,
-            grip,
-            contacts: w.contacts.clone(),
-        });
-        plan
+        skill,
+        params,
+        start,
+        approach: palm.n_w,
     };
     // The best few wraps are tried in the DFS: the first that holds the object through the
     // skill's motion is the plan, else the one that followed it longest.
     let mut best: Option<(Real, Plan)> = None;
     for w in wraps.iter().take(TRIALS) {
-        let plan = candidate(w, &mut kin);
+        let plan = planning.candidate(w, &mut kin);
         if plan.fails_at_rest {
             if best.is_none() {
                 best = Some((Real::NEG_INFINITY, plan));
             }
             continue;
         }
-        // The trial runs to TRIAL_HELD_S into the held motion (at most): a skill an hour long
-        // costs its trials no more than a short one's.
-        let tl = skill.timeline();
-        let until = (tl.grasp_end + TRIAL_HELD_S).min(tl.release_start);
-        let mut trial = super::run::Replay::from_plan(plan.clone(), skill, params)?;
-        while (trial.ticks_run() as Real) * super::run::DT < until && trial.step()? {
-            if trial.ticks_run() % 100 == 0 {
-                stop.check()?;
-            }
-        }
-        let held = trial.held_fraction(until);
+        let held = planning.trial(&plan, stop)?;
         if held >= 1.0 {
             return Ok(plan);
         }
@@ -259,34 +184,178 @@ pub(super) fn plan_power(
     if let Some((_, plan)) = best {
         return Ok(plan);
     }
-    let why = if placed == 0 {
-        "a power grasp: no pose of the hand puts its palm on the skill's palm contact with the \
-         open hand touching the object by the palm first and above the table"
-            .to_owned()
-    } else {
-        format!(
-            "a power grasp: in none of the {placed} palm placements do the fingers, closing \
-             from the open hand, touch the object"
-        )
-    };
-    Ok(Plan {
-        failure: Some((FailureReason::Unreachable, why)),
-        fails_at_rest: true,
-        ..plan_of(&Wrap {
-            score: 0.0,
-            base: start,
-            q_touch: [0.0; MAX_DOF],
-            close: [0.0; MAX_DOF],
-            q_open: [0.0; MAX_DOF],
-            contacts: Vec::new(),
-            touches: Vec::new(),
-            quality: ReplayQuality {
-                epsilon: 0.0,
-                volume: 0.0,
-                force_closure: false,
-            },
-        })
-    })
+    Ok(planning.unreachable(placed))
+}
+
+/// The skill's palm contacts (a palm and its eminences may be several) taken together.
+struct PalmContact {
+    /// Their mean normal (world, at the object's start pose).
+    n_w: Vector,
+    /// Their centroid (world, at the object's start pose).
+    p_w: Point,
+    /// How deep the object reaches in front of the palm: its centre's distance from the palm
+    /// contact along the normal.
+    depth: Real,
+}
+
+impl PalmContact {
+    /// The palm contacts of `skill`, whose object starts at `start`.
+    fn of(skill: &SkillSpec, start: &Isometry) -> PalmContact {
+        let (mut centroid, mut normal, mut count) = (Vector::zeros(), Vector::zeros(), 0.0 as Real);
+        for c in skill
+            .contacts
+            .iter()
+            .filter(|c| c.part == ContactPart::Palm)
+        {
+            centroid += c.position_b;
+            normal += c.normal_b.normalize();
+            count += 1.0;
+        }
+        let normal = (normal / count.max(1.0))
+            .try_normalize(1e-6)
+            .unwrap_or_else(|| -Vector::z());
+        PalmContact {
+            n_w: start.rotation * normal,
+            p_w: start * Point::from(centroid / count.max(1.0)),
+            depth: (-(centroid / count.max(1.0))).dot(&normal).max(0.01),
+        }
+    }
+}
+
+/// Every palm placement's wrap (palm normals × rolls × shifts), best ranked first, and how
+/// many placements there were.
+fn ranked_wraps(
+    hand: &HandModel,
+    skill: &SkillSpec,
+    palm: &PalmContact,
+    stop: &Stop,
+    kin: &mut Kinematics,
+) -> Result<(Vec<Wrap>, usize)> {
+    let mut wraps: Vec<Wrap> = Vec::new();
+    let mut placed = 0usize;
+    for posture in postures(hand, palm.depth, kin) {
+        for k in 0..ROLLS {
+            stop.check()?;
+            let roll = k as Real * std::f64::consts::TAU / ROLLS as Real;
+            for shift in SHIFTS {
+                let Some(base) = place_palm(
+                    hand, skill, &posture, &palm.n_w, &palm.p_w, roll, shift, kin,
+                ) else {
+                    continue;
+                };
+                placed += 1;
+                wraps.extend(wrap(hand, skill, &posture, base, kin));
+            }
+        }
+    }
+    wraps.sort_by(|a, b| b.score.total_cmp(&a.score));
+    Ok((wraps, placed))
+}
+
+/// What the plans of one power grasp's wraps share.
+struct Planning<'a> {
+    hand: &'a HandModel,
+    thumb: usize,
+    skill: &'a SkillSpec,
+    params: &'a ReplayParams,
+    /// The object's start pose.
+    start: Isometry,
+    /// The approach direction: the palm contacts' normal (world).
+    approach: Vector,
+}
+
+impl Planning<'_> {
+    /// The plan of a wrap, without its grip.
+    fn plan_of(&self, w: &Wrap) -> Plan {
+        let hand = self.hand;
+        Plan {
+            hand: hand.clone(),
+            thumb: self.thumb,
+            base_grasp: w.base,
+            base_in_b0: self.start.inverse() * w.base,
+            approach_dir: self.approach,
+            q_grasp: w.q_touch,
+            q_pre: w.q_open,
+            contacts: vec![
+                ContactFrame::from_normal(Vector::zeros(), Vector::z());
+                hand.fingertips.len()
+            ],
+            active: vec![false; hand.fingertips.len()],
+            ik_error: 0.0,
+            quality: w.quality,
+            force_times: Vec::new(),
+            forces: Vec::new(),
+            torque_map: nalgebra::DMatrix::zeros(hand.dof(), 0),
+            failure: None,
+            fails_at_rest: false,
+            power: None,
+        }
+    }
+
+    /// The plan of a wrap with its grip ([`plan_grip`]) and, if the grip cannot carry the
+    /// load, how it fails.
+    fn candidate(&self, w: &Wrap, kin: &mut Kinematics) -> Plan {
+        let mut plan = self.plan_of(w);
+        let (grip, failure) = plan_grip(self.hand, self.skill, self.params, w, kin);
+        if let Some((reason, why, at_rest)) = failure {
+            plan.failure = Some((reason, why));
+            plan.fails_at_rest = at_rest;
+        }
+        plan.power = Some(PowerPlan {
+            close: w.close,
+            grip,
+            contacts: w.contacts.clone(),
+        });
+        plan
+    }
+
+    /// Runs `plan` in the DFS to [`TRIAL_HELD_S`] into the held motion (at most: a skill an
+    /// hour long costs its trials no more than a short one's); the share of that time the
+    /// object was held.
+    fn trial(&self, plan: &Plan, stop: &Stop) -> Result<Real> {
+        let tl = self.skill.timeline();
+        let until = (tl.grasp_end + TRIAL_HELD_S).min(tl.release_start);
+        let mut trial = super::run::Replay::from_plan(plan.clone(), self.skill, self.params)?;
+        while (trial.ticks_run() as Real) * super::run::DT < until && trial.step()? {
+            if trial.ticks_run() % 100 == 0 {
+                stop.check()?;
+            }
+        }
+        Ok(trial.held_fraction(until))
+    }
+
+    /// The plan that refuses the replay when no wrap was found in the `placed` palm
+    /// placements (none if 0).
+    fn unreachable(&self, placed: usize) -> Plan {
+        let why = if placed == 0 {
+            "a power grasp: no pose of the hand puts its palm on the skill's palm contact with the \
+             open hand touching the object by the palm first and above the table"
+                .to_owned()
+        } else {
+            format!(
+                "a power grasp: in none of the {placed} palm placements do the fingers, closing \
+                 from the open hand, touch the object"
+            )
+        };
+        Plan {
+            failure: Some((FailureReason::Unreachable, why)),
+            fails_at_rest: true,
+            ..self.plan_of(&Wrap {
+                score: 0.0,
+                base: self.start,
+                q_touch: [0.0; MAX_DOF],
+                close: [0.0; MAX_DOF],
+                q_open: [0.0; MAX_DOF],
+                contacts: Vec::new(),
+                touches: Vec::new(),
+                quality: ReplayQuality {
+                    epsilon: 0.0,
+                    volume: 0.0,
+                    force_closure: false,
+                },
+            })
+        }
+    }
 }
 
 /// The candidate palm normals and, for each, the open hand and the closing directions.

@@ -561,210 +561,299 @@ pub(super) fn start(pts: &[P], tol: f64) -> Result<Build, HullError> {
     Ok(b)
 }
 
+/// Work done and allowed in one call of [`Build::advance`] or [`Build::check`].
+struct Budget {
+    spent: usize,
+    limit: usize,
+}
+
+impl Budget {
+    /// Whether the call stops here: some work done, and the budget spent.
+    #[inline]
+    fn used_up(&self) -> bool {
+        self.spent > 0 && self.spent >= self.limit
+    }
+}
+
+/// What the work heap gives [`Build::advance`] next.
+enum Next {
+    /// The live facet with the farthest outside point.
+    Facet(usize),
+    /// No facet has outside points: the hull is complete.
+    Done,
+    /// The budget ran out among stale entries.
+    Paused,
+}
+
 impl Build {
     /// Goes on with the build, a round (a point made a vertex) at a time, until rounds
     /// costing `budget` or more units are done (two per facet removed or made, one per
-    /// outside point moved, and so on: see the code; at least one round, and the call may end
-    /// among the stale entries of the work heap before a round); whether the hull is complete
-    /// ([`Build::check`] it then). The rounds are those of a build in one go.
+    /// outside point moved, and so on: see `add_vertex`; at least one round, and the
+    /// call may end among the stale entries of the work heap before a round); whether the
+    /// hull is complete ([`Build::check`] it then). The rounds are those of a build in one go.
     pub(super) fn advance(&mut self, pts: &[P], budget: usize) -> Result<bool, HullError> {
-        let b = self;
         let npts = pts.len();
-        let (tol, interior, exact) = (b.tol, b.interior, b.exact);
-        let mut spent = 0usize;
+        let mut budget = Budget {
+            spent: 0,
+            limit: budget,
+        };
         // Each round turns one outside point, the farthest above any facet, into a vertex:
         // at most npts rounds.
         loop {
-            if spent > 0 && spent >= budget {
+            if budget.used_up() {
                 return Ok(false);
             }
-            let round = b.round + 1;
+            let round = self.round + 1;
             if round > npts as u32 + 1 {
                 return Err(HullError::Numerical("too many rounds"));
             }
-            // The facet with the farthest outside point; entries of removed facets or of
-            // outside sets that changed are skipped (a unit each, so that a call may stop
-            // among them: taking them changes nothing else).
-            let fi = loop {
-                match b.work.pop() {
-                    None => return Ok(true),
-                    Some((key, f)) => {
-                        let f = f as usize;
-                        let o = &b.outside[f];
-                        if b.topo[f].alive && o.first != NONE && o.far_dist.to_bits() == key {
-                            break f;
-                        }
-                        spent += 3;
-                        if spent >= budget {
-                            return Ok(false);
-                        }
-                    }
-                }
+            let fi = match self.farthest(&mut budget) {
+                Next::Facet(f) => f,
+                Next::Done => return Ok(true),
+                Next::Paused => return Ok(false),
             };
-            b.round = round;
-            let mut visible = std::mem::take(&mut b.visible);
-            let mut horizon = std::mem::take(&mut b.horizon);
-            let mut new = std::mem::take(&mut b.new);
-            let pi = b.outside[fi].far as usize;
-            let p = pts[pi];
-            // Visible facets: connected to fi, with p strictly outside; and the horizon ridges
-            // between them and the hidden ones.
-            visible.clear();
-            horizon.clear();
-            visible.push(fi);
-            b.topo[fi].alive = false;
-            b.topo[fi].seen = round;
-            b.above[fi] = dist(&b.planes[fi], &p);
-            let mut s = 0;
-            while s < visible.len() {
-                let f = visible[s];
-                s += 1;
-                for j in 0..D {
-                    let g = b.topo[f].nb[j] as usize;
-                    let tg = &mut b.topo[g];
-                    if tg.seen != round {
-                        tg.seen = round;
-                        let above = dist(&b.planes[g], &p);
-                        b.above[g] = above;
-                        if above > tol {
-                            tg.alive = false;
-                            visible.push(g);
-                        }
-                    }
-                    if tg.alive {
-                        let slot = b.topo[f].back[j];
-                        if b.topo[g].nb[slot as usize] as usize != f {
-                            return Err(HullError::Numerical("broken adjacency"));
-                        }
-                        horizon.push(Ridge { f, j, g, slot });
-                    }
-                }
-            }
-            if horizon.is_empty() {
-                return Err(HullError::Numerical("horizon is not closed"));
-            }
-            new.clear();
-            for r in &horizon {
-                let mut t = Topo {
-                    nb: [NONE; D],
-                    v: b.topo[r.f].v,
-                    back: [0; D],
-                    alive: true,
-                    seen: 0,
-                };
-                t.v[r.j] = pi as u32;
-                t.nb[r.j] = r.g as u32;
-                t.back[r.j] = r.slot;
-                let (pf, pg) = (&b.planes[r.f], &b.planes[r.g]);
-                let (af, ag) = (b.above[r.f], b.above[r.g]);
-                let pl = match turn(pts, &t.v, (pf, af), (pg, ag), &interior, exact) {
-                    Some(pl) => pl,
-                    None => plane(pts, &t.v, &interior)
-                        .ok_or(HullError::Numerical("degenerate new facet"))?,
-                };
-                if pl.d - pl.n.dot(&interior) <= 0.0 {
-                    return Err(HullError::Numerical("interior point on a facet"));
-                }
-                let id = b.add_facet(t, pl)?;
-                let tg = &mut b.topo[r.g];
-                tg.nb[r.slot as usize] = id as u32;
-                tg.back[r.slot as usize] = r.j as u8;
-                // The removed facet's side of the ridge points at the new facet too.
-                let tf = &mut b.topo[r.f];
-                tf.nb[r.j] = id as u32;
-                tf.back[r.j] = NEW;
-                new.push(id);
-            }
-            // The new facets pair up across the ridges through p. The new facet on ridge (f, j)
-            // shares with its neighbour opposite v[k] the 4 vertices S of f other than v[j]
-            // and v[k]: turning about S through the visible facets from f, across the ridge
-            // opposite v[k], leads to the next horizon ridge about S, whose new facet it is.
-            let topo = &mut b.topo;
-            let mut walked = 0usize;
-            for (r, &id) in horizon.iter().zip(&new) {
-                for k in 0..D {
-                    if k == r.j || topo[id].nb[k] != NONE {
-                        continue;
-                    }
-                    // h holds S and two more vertices, at ia and ic: cross the ridge opposite ia.
-                    let (mut h, mut ia, mut ic) = (r.f, k, r.j);
-                    let mut steps = 0;
-                    let (m, slot) = loop {
-                        let th = &topo[h];
-                        let across = th.nb[ia] as usize;
-                        if th.back[ia] == NEW {
-                            // Built on h's ridge opposite ia: its vertices are h's, in order.
-                            break (across, ic);
-                        }
-                        steps += 1;
-                        let ta = &topo[across];
-                        if steps > visible.len() || ta.alive || ta.seen != round {
-                            return Err(HullError::Numerical("horizon is not closed"));
-                        }
-                        // Where h's vertex c is in across, without branches.
-                        let c = th.v[ic];
-                        let (mut ic_across, mut found) = (0, 0);
-                        for (i, &x) in ta.v.iter().enumerate() {
-                            let here = usize::from(x == c);
-                            ic_across += i * here;
-                            found += here;
-                        }
-                        if found != 1 {
-                            return Err(HullError::Numerical("broken adjacency"));
-                        }
-                        (h, ia, ic) = (across, ic_across, th.back[ia] as usize);
-                    };
-                    let taken = topo[m].nb[slot];
-                    if m == id || (taken != NONE && taken as usize != id) {
-                        return Err(HullError::Numerical("horizon is not closed"));
-                    }
-                    walked += steps;
-                    topo[id].nb[k] = m as u32;
-                    topo[id].back[k] = slot as u8;
-                    topo[m].nb[slot] = id as u32;
-                    topo[m].back[slot] = k as u8;
-                }
-            }
-            // The visible facets' outside points go to the first new facet they are above
-            // (those on their own horizon ridges first), or are inside.
-            let mut moved = 0usize;
-            for &f in &visible {
-                let mut q = b.outside[f].first;
-                b.outside[f].first = NONE;
-                while q != NONE {
-                    let qi = q as usize;
-                    q = b.next[qi];
-                    moved += 1;
-                    if qi == pi {
-                        continue;
-                    }
-                    let pq = &pts[qi];
-                    let tf = &b.topo[f];
-                    let planes = &b.planes;
-                    let above = |g: usize| {
-                        let d = dist(&planes[g], pq);
-                        (d > tol).then_some((g, d))
-                    };
-                    let to = (0..D)
-                        .filter(|&j| tf.back[j] == NEW)
-                        .find_map(|j| above(tf.nb[j] as usize))
-                        .or_else(|| new.iter().copied().find_map(above));
-                    if let Some((g, d)) = to {
-                        b.add_outside(g, qi, d);
-                    }
-                }
-            }
-            b.free.extend(visible.iter().map(|&f| f as u32));
-            // Units of about 0.1 µs on the project's machine: a facet removed or made (a new
-            // hyperplane, its adjacency) costs two, an outside point moved one, as do four steps
-            // of the walks that pair the new facets (and, above, a stale entry of the work heap
-            // three).
-            spent += 2 * (visible.len() + new.len()) + moved + walked / 4;
-            b.visible = visible;
-            b.horizon = horizon;
-            b.new = new;
+            self.round = round;
+            budget.spent += self.add_vertex(pts, fi)?;
         }
     }
+
+    /// The facet with the farthest outside point; entries of removed facets or of outside
+    /// sets that changed are skipped (a unit each, so that a call may stop among them: taking
+    /// them changes nothing else).
+    #[inline]
+    fn farthest(&mut self, budget: &mut Budget) -> Next {
+        loop {
+            match self.work.pop() {
+                None => return Next::Done,
+                Some((key, f)) => {
+                    let f = f as usize;
+                    let o = &self.outside[f];
+                    if self.topo[f].alive && o.first != NONE && o.far_dist.to_bits() == key {
+                        return Next::Facet(f);
+                    }
+                    budget.spent += 3;
+                    if budget.spent >= budget.limit {
+                        return Next::Paused;
+                    }
+                }
+            }
+        }
+    }
+
+    /// The round `self.round`: makes the farthest outside point of facet `fi` a vertex,
+    /// replacing the facets it sees by new ones through it; what the round cost.
+    #[inline]
+    fn add_vertex(&mut self, pts: &[P], fi: usize) -> Result<usize, HullError> {
+        let mut visible = std::mem::take(&mut self.visible);
+        let mut horizon = std::mem::take(&mut self.horizon);
+        let mut new = std::mem::take(&mut self.new);
+        let pi = self.outside[fi].far as usize;
+        let p = pts[pi];
+        self.find_visible(fi, &p, &mut visible, &mut horizon)?;
+        self.make_facets(pts, pi, &horizon, &mut new)?;
+        let walked = pair_new_facets(&mut self.topo, &horizon, &new, visible.len(), self.round)?;
+        let moved = self.move_outside(pts, pi, &visible, &new);
+        self.free.extend(visible.iter().map(|&f| f as u32));
+        // Units of about 0.1 µs on the project's machine: a facet removed or made (a new
+        // hyperplane, its adjacency) costs two, an outside point moved one, as do four steps
+        // of the walks that pair the new facets (and, in `farthest`, a stale entry of the work
+        // heap three).
+        let cost = 2 * (visible.len() + new.len()) + moved + walked / 4;
+        self.visible = visible;
+        self.horizon = horizon;
+        self.new = new;
+        Ok(cost)
+    }
+
+    /// Visible facets: connected to `fi`, with `p` strictly outside (removed, in `visible`);
+    /// and the horizon ridges between them and the hidden ones (in `horizon`).
+    #[inline]
+    fn find_visible(
+        &mut self,
+        fi: usize,
+        p: &P,
+        visible: &mut Vec<usize>,
+        horizon: &mut Vec<Ridge>,
+    ) -> Result<(), HullError> {
+        let (tol, round) = (self.tol, self.round);
+        visible.clear();
+        horizon.clear();
+        visible.push(fi);
+        self.topo[fi].alive = false;
+        self.topo[fi].seen = round;
+        self.above[fi] = dist(&self.planes[fi], p);
+        let mut s = 0;
+        while s < visible.len() {
+            let f = visible[s];
+            s += 1;
+            for j in 0..D {
+                let g = self.topo[f].nb[j] as usize;
+                let tg = &mut self.topo[g];
+                if tg.seen != round {
+                    tg.seen = round;
+                    let above = dist(&self.planes[g], p);
+                    self.above[g] = above;
+                    if above > tol {
+                        tg.alive = false;
+                        visible.push(g);
+                    }
+                }
+                if tg.alive {
+                    let slot = self.topo[f].back[j];
+                    if self.topo[g].nb[slot as usize] as usize != f {
+                        return Err(HullError::Numerical("broken adjacency"));
+                    }
+                    horizon.push(Ridge { f, j, g, slot });
+                }
+            }
+        }
+        if horizon.is_empty() {
+            return Err(HullError::Numerical("horizon is not closed"));
+        }
+        Ok(())
+    }
+
+    /// A new facet on each horizon ridge, through point `pi` (in `new`, in the order of the
+    /// ridges), adjacent to the hidden facet across the ridge; the removed facet's side of the
+    /// ridge points at it too.
+    #[inline]
+    fn make_facets(
+        &mut self,
+        pts: &[P],
+        pi: usize,
+        horizon: &[Ridge],
+        new: &mut Vec<usize>,
+    ) -> Result<(), HullError> {
+        let (interior, exact) = (self.interior, self.exact);
+        new.clear();
+        for r in horizon {
+            let mut t = Topo {
+                nb: [NONE; D],
+                v: self.topo[r.f].v,
+                back: [0; D],
+                alive: true,
+                seen: 0,
+            };
+            t.v[r.j] = pi as u32;
+            t.nb[r.j] = r.g as u32;
+            t.back[r.j] = r.slot;
+            let (pf, pg) = (&self.planes[r.f], &self.planes[r.g]);
+            let (af, ag) = (self.above[r.f], self.above[r.g]);
+            let pl = match turn(pts, &t.v, (pf, af), (pg, ag), &interior, exact) {
+                Some(pl) => pl,
+                None => plane(pts, &t.v, &interior)
+                    .ok_or(HullError::Numerical("degenerate new facet"))?,
+            };
+            if pl.d - pl.n.dot(&interior) <= 0.0 {
+                return Err(HullError::Numerical("interior point on a facet"));
+            }
+            let id = self.add_facet(t, pl)?;
+            let tg = &mut self.topo[r.g];
+            tg.nb[r.slot as usize] = id as u32;
+            tg.back[r.slot as usize] = r.j as u8;
+            let tf = &mut self.topo[r.f];
+            tf.nb[r.j] = id as u32;
+            tf.back[r.j] = NEW;
+            new.push(id);
+        }
+        Ok(())
+    }
+
+    /// The visible facets' outside points go to the first new facet they are above (those on
+    /// their own horizon ridges first), or are inside; how many were moved.
+    #[inline]
+    fn move_outside(&mut self, pts: &[P], pi: usize, visible: &[usize], new: &[usize]) -> usize {
+        let tol = self.tol;
+        let mut moved = 0usize;
+        for &f in visible {
+            let mut q = self.outside[f].first;
+            self.outside[f].first = NONE;
+            while q != NONE {
+                let qi = q as usize;
+                q = self.next[qi];
+                moved += 1;
+                if qi == pi {
+                    continue;
+                }
+                let pq = &pts[qi];
+                let tf = &self.topo[f];
+                let planes = &self.planes;
+                let above = |g: usize| {
+                    let d = dist(&planes[g], pq);
+                    (d > tol).then_some((g, d))
+                };
+                let to = (0..D)
+                    .filter(|&j| tf.back[j] == NEW)
+                    .find_map(|j| above(tf.nb[j] as usize))
+                    .or_else(|| new.iter().copied().find_map(above));
+                if let Some((g, d)) = to {
+                    self.add_outside(g, qi, d);
+                }
+            }
+        }
+        moved
+    }
+}
+
+/// Pairs up the new facets (`new`, built on the ridges of `horizon`) across the ridges through
+/// the new point; how many steps the walks took. The new facet on ridge (f, j) shares with its
+/// neighbour opposite v[k] the 4 vertices S of f other than v[j] and v[k]: turning about S
+/// through the round's visible facets (`n_visible` of them) from f, across the ridge opposite
+/// v[k], leads to the next horizon ridge about S, whose new facet it is.
+#[inline]
+fn pair_new_facets(
+    topo: &mut [Topo],
+    horizon: &[Ridge],
+    new: &[usize],
+    n_visible: usize,
+    round: u32,
+) -> Result<usize, HullError> {
+    let mut walked = 0usize;
+    for (r, &id) in horizon.iter().zip(new) {
+        for k in 0..D {
+            if k == r.j || topo[id].nb[k] != NONE {
+                continue;
+            }
+            // h holds S and two more vertices, at ia and ic: cross the ridge opposite ia.
+            let (mut h, mut ia, mut ic) = (r.f, k, r.j);
+            let mut steps = 0;
+            let (m, slot) = loop {
+                let th = &topo[h];
+                let across = th.nb[ia] as usize;
+                if th.back[ia] == NEW {
+                    // Built on h's ridge opposite ia: its vertices are h's, in order.
+                    break (across, ic);
+                }
+                steps += 1;
+                let ta = &topo[across];
+                if steps > n_visible || ta.alive || ta.seen != round {
+                    return Err(HullError::Numerical("horizon is not closed"));
+                }
+                // Where h's vertex c is in across, without branches.
+                let c = th.v[ic];
+                let (mut ic_across, mut found) = (0, 0);
+                for (i, &x) in ta.v.iter().enumerate() {
+                    let here = usize::from(x == c);
+                    ic_across += i * here;
+                    found += here;
+                }
+                if found != 1 {
+                    return Err(HullError::Numerical("broken adjacency"));
+                }
+                (h, ia, ic) = (across, ic_across, th.back[ia] as usize);
+            };
+            let taken = topo[m].nb[slot];
+            if m == id || (taken != NONE && taken as usize != id) {
+                return Err(HullError::Numerical("horizon is not closed"));
+            }
+            walked += steps;
+            topo[id].nb[k] = m as u32;
+            topo[id].back[k] = slot as u8;
+            topo[m].nb[slot] = id as u32;
+            topo[m].back[slot] = k as u8;
+        }
+    }
+    Ok(walked)
 }
 
 /// Checks the result and measures the facets in one go ([`Build::check`], then
@@ -807,50 +896,75 @@ impl Build {
     pub(super) fn check(&mut self, pts: &[P], budget: usize) -> Result<bool, HullError> {
         let npts = pts.len();
         // In quarter units.
-        let budget = budget.saturating_mul(4);
-        let mut spent = 0usize;
+        let mut budget = Budget {
+            spent: 0,
+            limit: budget.saturating_mul(4),
+        };
         let checks = match &mut self.checks {
             Some(c) => c,
             None => {
-                // The points by coordinate, so that the products vectorise, in f64 and in f32
-                // (four to a vector register). In f32, n · x is within 9 u r of its value
-                // (u = 2⁻²⁴, r the largest point norm: the rounding of n, x, the products and
-                // their sum), so a facet all of whose points are below its limit less that in
-                // f32 passes; any other is checked again in f64.
-                let r = pts.iter().fold(0.0_f64, |m, p| m.max(p.norm()));
-                let slack = 9.0 * 2f64.powi(-24) * r;
-                let mut cols = vec![0.0; D * npts];
-                for (i, p) in pts.iter().enumerate() {
-                    for c in 0..D {
-                        cols[c * npts + i] = p[c];
-                    }
-                }
-                let cols32: Vec<f32> = cols.iter().map(|&x| x as f32).collect();
-                let topo = &self.topo;
-                let live: Vec<usize> = (0..topo.len()).filter(|&i| topo[i].alive).collect();
-                spent += topo.len() / 16 + npts / 4;
-                self.checks.insert(Checks {
-                    cols,
-                    cols32,
-                    r,
-                    slack,
-                    live,
-                    adjacent: 0,
-                    checked: 0,
-                    measured: 0,
-                    volume: 0.0,
-                    min_offset: f64::INFINITY,
-                })
+                budget.spent += self.topo.len() / 16 + npts / 4;
+                self.checks.insert(Checks::new(pts, &self.topo))
             }
         };
-        let topo = &self.topo;
-        while checks.adjacent < checks.live.len() {
-            if spent > 0 && spent >= budget {
+        if !checks.adjacency(&self.topo, &mut budget)? {
+            return Ok(false);
+        }
+        if !checks.points(&self.planes, self.tol, npts, &mut budget)? {
+            return Ok(false);
+        }
+        Ok(checks.measure(
+            pts,
+            &self.topo,
+            &mut self.planes,
+            &self.interior,
+            &mut budget,
+        ))
+    }
+}
+
+impl Checks {
+    /// The checks of the hull `topo` of `pts`, none done yet. The points by coordinate, so
+    /// that the products vectorise, in f64 and in f32 (four to a vector register). In f32,
+    /// n · x is within 9 u r of its value (u = 2⁻²⁴, r the largest point norm: the rounding
+    /// of n, x, the products and their sum), so a facet all of whose points are below its
+    /// limit less that in f32 passes; any other is checked again in f64.
+    fn new(pts: &[P], topo: &[Topo]) -> Checks {
+        let npts = pts.len();
+        let r = pts.iter().fold(0.0_f64, |m, p| m.max(p.norm()));
+        let slack = 9.0 * 2f64.powi(-24) * r;
+        let mut cols = vec![0.0; D * npts];
+        for (i, p) in pts.iter().enumerate() {
+            for c in 0..D {
+                cols[c * npts + i] = p[c];
+            }
+        }
+        let cols32: Vec<f32> = cols.iter().map(|&x| x as f32).collect();
+        let live: Vec<usize> = (0..topo.len()).filter(|&i| topo[i].alive).collect();
+        Checks {
+            cols,
+            cols32,
+            r,
+            slack,
+            live,
+            adjacent: 0,
+            checked: 0,
+            measured: 0,
+            volume: 0.0,
+            min_offset: f64::INFINITY,
+        }
+    }
+
+    /// Checks the live facets' adjacency (a unit per four facets), as far as the budget goes;
+    /// whether all are checked.
+    fn adjacency(&mut self, topo: &[Topo], budget: &mut Budget) -> Result<bool, HullError> {
+        while self.adjacent < self.live.len() {
+            if budget.used_up() {
                 return Ok(false);
             }
-            let i = checks.live[checks.adjacent];
-            checks.adjacent += 1;
-            spent += 1;
+            let i = self.live[self.adjacent];
+            self.adjacent += 1;
+            budget.spent += 1;
             let t = &topo[i];
             for k in 0..D {
                 let Some(g) = topo.get(t.nb[k] as usize) else {
@@ -865,88 +979,125 @@ impl Build {
                 }
             }
         }
-        fn split<T>(cols: &[T], n: usize) -> [&[T]; D] {
-            let (x0, rest) = cols.split_at(n);
-            let (x1, rest) = rest.split_at(n);
-            let (x2, rest) = rest.split_at(n);
-            let (x3, rest) = rest.split_at(n);
-            let (x4, x5) = rest.split_at(n);
-            [x0, x1, x2, x3, x4, x5]
-        }
-        let [x0, x1, x2, x3, x4, x5] = split(&checks.cols, npts);
-        let [y0, y1, y2, y3, y4, y5] = split(&checks.cols32, npts);
-        let (r, slack, tol) = (checks.r, checks.slack, self.tol);
+        Ok(true)
+    }
+
+    /// Checks that the `npts` points are inside every live facet (two points a unit at 64
+    /// of them), as far as the budget goes; whether all are checked.
+    fn points(
+        &mut self,
+        planes: &[Plane],
+        tol: f64,
+        npts: usize,
+        budget: &mut Budget,
+    ) -> Result<bool, HullError> {
+        let x = columns(&self.cols, npts);
+        let y = columns(&self.cols32, npts);
+        let (r, slack) = (self.r, self.slack);
         // A facet's points: two per unit at 64 of them.
         let per_facet = (npts / 32).max(1);
-        while checks.checked < checks.live.len() {
-            if spent > 0 && spent >= budget {
+        while self.checked < self.live.len() {
+            if budget.used_up() {
                 return Ok(false);
             }
-            let f = &self.planes[checks.live[checks.checked]];
-            checks.checked += 1;
-            spent += per_facet;
-            let n = &f.n;
+            let f = &planes[self.live[self.checked]];
+            self.checked += 1;
+            budget.spent += per_facet;
             let limit = f.d + 1e3 * tol;
             // Below limit − slack, rounded down.
             let below = limit - slack;
             let limit32 = (below - below.abs() * 2f64.powi(-23)) as f32;
             // Only well inside f32's normal range (where its rounding is relative); else
             // straight to f64.
-            if (1e-30..1e30).contains(&r) && limit.abs() < 1e30 {
-                let m: [f32; D] = std::array::from_fn(|c| n[c] as f32);
-                // Counted in u32, the width of an f32 comparison, so that the loop vectorises.
-                let mut inside32 = 0_u32;
-                for i in 0..npts {
-                    let s = m[0] * y0[i]
-                        + m[1] * y1[i]
-                        + m[2] * y2[i]
-                        + m[3] * y3[i]
-                        + m[4] * y4[i]
-                        + m[5] * y5[i];
-                    inside32 += u32::from(s <= limit32);
-                }
-                if inside32 as usize == npts {
-                    continue;
-                }
+            if (1e-30..1e30).contains(&r)
+                && limit.abs() < 1e30
+                && count_below32(&f.n, y, npts, limit32) as usize == npts
+            {
+                continue;
             }
-            let mut inside = 0;
-            for i in 0..npts {
-                let s = n[0] * x0[i]
-                    + n[1] * x1[i]
-                    + n[2] * x2[i]
-                    + n[3] * x3[i]
-                    + n[4] * x4[i]
-                    + n[5] * x5[i];
-                inside += usize::from(s <= limit);
-            }
-            if inside != npts {
+            if count_below(&f.n, x, npts, limit) != npts {
                 return Err(HullError::Numerical("a point is outside the hull"));
             }
         }
-        while checks.measured < checks.live.len() {
-            if spent > 0 && spent >= budget {
-                return Ok(false);
+        Ok(true)
+    }
+
+    /// Measures the live facets of the hull of `pts` (`LANES` at a time, a unit per facet)
+    /// and sums the volume and the least offset, as far as the budget goes; whether all are
+    /// measured.
+    fn measure(
+        &mut self,
+        pts: &[P],
+        topo: &[Topo],
+        planes: &mut [Plane],
+        interior: &P,
+        budget: &mut Budget,
+    ) -> bool {
+        while self.measured < self.live.len() {
+            if budget.used_up() {
+                return false;
             }
-            let end = (checks.measured + LANES).min(checks.live.len());
-            let chunk = &checks.live[checks.measured..end];
-            checks.measured = end;
-            spent += 4 * chunk.len();
+            let end = (self.measured + LANES).min(self.live.len());
+            let chunk = &self.live[self.measured..end];
+            self.measured = end;
+            budget.spent += 4 * chunk.len();
             let mut vs = [topo[chunk[0]].v; LANES];
             for (l, &i) in chunk.iter().enumerate() {
                 vs[l] = topo[i].v;
             }
             let m = measures(pts, &vs);
             for (l, &i) in chunk.iter().enumerate() {
-                let f = &mut self.planes[i];
+                let f = &mut planes[i];
                 f.measure = m[l];
                 // As `Hull::volume` and a fold over `Hull::facets` sum them: in slot order.
-                checks.volume += f.measure * (f.d - f.n.dot(&self.interior));
-                checks.min_offset = checks.min_offset.min(f.d);
+                self.volume += f.measure * (f.d - f.n.dot(interior));
+                self.min_offset = self.min_offset.min(f.d);
             }
         }
-        Ok(true)
+        true
     }
+}
 
+/// The six coordinates' columns of `n` points stored column after column.
+#[inline]
+fn columns<T>(cols: &[T], n: usize) -> [&[T]; D] {
+    let (x0, rest) = cols.split_at(n);
+    let (x1, rest) = rest.split_at(n);
+    let (x2, rest) = rest.split_at(n);
+    let (x3, rest) = rest.split_at(n);
+    let (x4, x5) = rest.split_at(n);
+    [x0, x1, x2, x3, x4, x5]
+}
+
+/// How many of the `npts` points (by coordinate, in f32) have `n · x ≤ limit32` in f32.
+#[inline]
+fn count_below32(n: &P, y: [&[f32]; D], npts: usize, limit32: f32) -> u32 {
+    let [y0, y1, y2, y3, y4, y5] = y;
+    let m: [f32; D] = std::array::from_fn(|c| n[c] as f32);
+    // Counted in u32, the width of an f32 comparison, so that the loop vectorises.
+    let mut inside32 = 0_u32;
+    for i in 0..npts {
+        let s =
+            m[0] * y0[i] + m[1] * y1[i] + m[2] * y2[i] + m[3] * y3[i] + m[4] * y4[i] + m[5] * y5[i];
+        inside32 += u32::from(s <= limit32);
+    }
+    inside32
+}
+
+/// How many of the `npts` points (by coordinate) have `n · x ≤ limit`.
+#[inline]
+fn count_below(n: &P, x: [&[f64]; D], npts: usize, limit: f64) -> usize {
+    let [x0, x1, x2, x3, x4, x5] = x;
+    let mut inside = 0;
+    for i in 0..npts {
+        let s =
+            n[0] * x0[i] + n[1] * x1[i] + n[2] * x2[i] + n[3] * x3[i] + n[4] * x4[i] + n[5] * x5[i];
+        inside += usize::from(s <= limit);
+    }
+    inside
+}
+
+impl Build {
     /// The hull's volume and the least offset of a facet's hyperplane, once [`Build::check`]
     /// is done (what [`Hull::volume`] and the least of [`Hull::facets`]' offsets say).
     pub(super) fn metrics(&self) -> Option<(f64, f64)> {

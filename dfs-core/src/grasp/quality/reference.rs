@@ -1,5 +1,6 @@
 //! The Quickhull that `grasp_quality` used before its hull was rewritten for speed, kept
-//! unchanged (test builds only) as the reference that the new one is compared with.
+//! (test builds only; its build since split into steps, the same operations in the same
+//! order) as the reference that the new one is compared with.
 
 use nalgebra::{SMatrix, SVector};
 
@@ -115,7 +116,24 @@ pub(crate) fn build(pts: &[P], tol: f64) -> Result<Hull, HullError> {
     if npts < D + 1 {
         return Err(HullError::Flat);
     }
-    // Initial simplex: greedily the points farthest from the affine hull of those chosen.
+    let chosen = initial_simplex(pts, tol)?;
+    let interior = chosen.iter().map(|&i| pts[i]).sum::<P>() / (D + 1) as f64;
+    let mut facets = simplex_facets(pts, &chosen, &interior, tol)?;
+    let mut state: Vec<u8> = Vec::new();
+    // Each round turns one outside point into a vertex: at most npts rounds.
+    for _ in 0..=npts {
+        let Some(fi) = facets.iter().position(|f| f.alive && !f.outside.is_empty()) else {
+            return finish(facets, interior, pts, tol);
+        };
+        add_vertex(&mut facets, &mut state, pts, &interior, tol, fi)?;
+    }
+    Err(HullError::Numerical("too many rounds"))
+}
+
+/// The initial simplex's vertices: greedily the points farthest from the affine hull of those
+/// chosen.
+fn initial_simplex(pts: &[P], tol: f64) -> Result<Vec<usize>, HullError> {
+    let npts = pts.len();
     let centroid = pts.iter().sum::<P>() / npts as f64;
     let i0 = (0..npts)
         .max_by(|&a, &b| {
@@ -147,7 +165,17 @@ pub(crate) fn build(pts: &[P], tol: f64) -> Result<Hull, HullError> {
         basis.push(r / rn);
         chosen.push(best);
     }
-    let interior = chosen.iter().map(|&i| pts[i]).sum::<P>() / (D + 1) as f64;
+    Ok(chosen)
+}
+
+/// The facets of the simplex `chosen`, each of the other points in the outside set of the
+/// first facet it is above.
+fn simplex_facets(
+    pts: &[P],
+    chosen: &[usize],
+    interior: &P,
+    tol: f64,
+) -> Result<Vec<Facet>, HullError> {
     let mut facets: Vec<Facet> = Vec::new();
     for k in 0..=D {
         let mut v = [0; D];
@@ -161,7 +189,7 @@ pub(crate) fn build(pts: &[P], tol: f64) -> Result<Hull, HullError> {
             }
         }
         let (n, d) =
-            plane(pts, &v, &interior).ok_or(HullError::Numerical("degenerate simplex facet"))?;
+            plane(pts, &v, interior).ok_or(HullError::Numerical("degenerate simplex facet"))?;
         facets.push(Facet {
             v,
             n,
@@ -179,112 +207,152 @@ pub(crate) fn build(pts: &[P], tol: f64) -> Result<Hull, HullError> {
             f.outside.push(i);
         }
     }
+    Ok(facets)
+}
 
-    let mut state: Vec<u8> = Vec::new();
-    // Each round turns one outside point into a vertex: at most npts rounds.
-    for _ in 0..=npts {
-        let Some(fi) = facets.iter().position(|f| f.alive && !f.outside.is_empty()) else {
-            return finish(facets, interior, pts, tol);
-        };
-        let pi = *facets[fi]
-            .outside
-            .iter()
-            .max_by(|&&a, &&b| dist(&facets[fi], &pts[a]).total_cmp(&dist(&facets[fi], &pts[b])))
-            .ok_or(HullError::Numerical("empty outside set"))?;
-        let p = pts[pi];
-        // Visible facets: connected to fi, with p strictly outside.
-        const UNSEEN: u8 = 0;
-        const VISIBLE: u8 = 1;
-        const HIDDEN: u8 = 2;
-        state.clear();
-        state.resize(facets.len(), UNSEEN);
-        state[fi] = VISIBLE;
-        let mut visible = vec![fi];
-        let mut stack = vec![fi];
-        while let Some(f) = stack.pop() {
-            for g in facets[f].nb {
-                if state[g] == UNSEEN {
-                    if dist(&facets[g], &p) > tol {
-                        state[g] = VISIBLE;
-                        visible.push(g);
-                        stack.push(g);
-                    } else {
-                        state[g] = HIDDEN;
-                    }
+/// A facet's state in a round's visibility search ([`visible_from`]): not met yet,
+const UNSEEN: u8 = 0;
+/// seen by the new point,
+const VISIBLE: u8 = 1;
+/// or not.
+const HIDDEN: u8 = 2;
+
+/// One round: the farthest point of facet `fi`'s outside set made a vertex, the facets it sees
+/// replaced by new ones through it, their outside points given to the new ones.
+fn add_vertex(
+    facets: &mut Vec<Facet>,
+    state: &mut Vec<u8>,
+    pts: &[P],
+    interior: &P,
+    tol: f64,
+    fi: usize,
+) -> Result<(), HullError> {
+    let pi = *facets[fi]
+        .outside
+        .iter()
+        .max_by(|&&a, &&b| dist(&facets[fi], &pts[a]).total_cmp(&dist(&facets[fi], &pts[b])))
+        .ok_or(HullError::Numerical("empty outside set"))?;
+    let visible = visible_from(facets, state, fi, &pts[pi], tol);
+    let (new_ids, ridges) = new_facets(facets, state, &visible, pts, pi, interior)?;
+    pair_up(facets, ridges, &new_ids)?;
+    let mut orphans = Vec::new();
+    for &f in &visible {
+        orphans.append(&mut facets[f].outside);
+        facets[f].alive = false;
+    }
+    for i in orphans {
+        if i == pi {
+            continue;
+        }
+        if let Some(&id) = new_ids.iter().find(|&&id| dist(&facets[id], &pts[i]) > tol) {
+            facets[id].outside.push(i);
+        }
+    }
+    Ok(())
+}
+
+/// Visible facets: connected to `fi`, with `p` strictly outside; `state` marks each facet
+/// met as visible or hidden.
+fn visible_from(facets: &[Facet], state: &mut Vec<u8>, fi: usize, p: &P, tol: f64) -> Vec<usize> {
+    state.clear();
+    state.resize(facets.len(), UNSEEN);
+    state[fi] = VISIBLE;
+    let mut visible = vec![fi];
+    let mut stack = vec![fi];
+    while let Some(f) = stack.pop() {
+        for g in facets[f].nb {
+            if state[g] == UNSEEN {
+                if dist(&facets[g], p) > tol {
+                    state[g] = VISIBLE;
+                    visible.push(g);
+                    stack.push(g);
+                } else {
+                    state[g] = HIDDEN;
                 }
-            }
-        }
-        // New facets on the horizon ridges.
-        let mut new_ids = Vec::new();
-        let mut ridges: Vec<([usize; D - 1], usize, usize)> = Vec::new();
-        for &f in &visible {
-            for j in 0..D {
-                let g = facets[f].nb[j];
-                if state[g] == VISIBLE {
-                    continue;
-                }
-                let mut v = facets[f].v;
-                v[j] = pi;
-                let (n, d) = plane(pts, &v, &interior)
-                    .ok_or(HullError::Numerical("degenerate new facet"))?;
-                if d - n.dot(&interior) <= 0.0 {
-                    return Err(HullError::Numerical("interior point on a facet"));
-                }
-                let id = facets.len();
-                let slot = facets[g]
-                    .nb
-                    .iter()
-                    .position(|&x| x == f)
-                    .ok_or(HullError::Numerical("broken adjacency"))?;
-                facets[g].nb[slot] = id;
-                let mut nb = [usize::MAX; D];
-                nb[j] = g;
-                facets.push(Facet {
-                    v,
-                    n,
-                    d,
-                    nb,
-                    outside: Vec::new(),
-                    alive: true,
-                });
-                for k in 0..D {
-                    if k == j {
-                        continue;
-                    }
-                    ridges.push((ridge_key(&v, k), id, k));
-                }
-                new_ids.push(id);
-            }
-        }
-        // The new facets pair up across the ridges through the new vertex: each such ridge
-        // is shared by exactly two of them.
-        ridges.sort_unstable();
-        if new_ids.is_empty() || !ridges.len().is_multiple_of(2) {
-            return Err(HullError::Numerical("horizon is not closed"));
-        }
-        for pair in ridges.chunks_exact(2) {
-            let ((ka, a, sa), (kb, b, sb)) = (pair[0], pair[1]);
-            if ka != kb {
-                return Err(HullError::Numerical("horizon is not closed"));
-            }
-            facets[a].nb[sa] = b;
-            facets[b].nb[sb] = a;
-        }
-        let mut orphans = Vec::new();
-        for &f in &visible {
-            orphans.append(&mut facets[f].outside);
-            facets[f].alive = false;
-        }
-        for i in orphans {
-            if i == pi {
-                continue;
-            }
-            if let Some(&id) = new_ids.iter().find(|&&id| dist(&facets[id], &pts[i]) > tol) {
-                facets[id].outside.push(i);
             }
         }
     }
-    Err(HullError::Numerical("too many rounds"))
+    visible
+}
+
+/// The ridges of the new facets through the new vertex, as (sorted vertices, facet, index of
+/// the vertex opposite).
+type NewRidges = Vec<([usize; D - 1], usize, usize)>;
+
+/// New facets on the horizon ridges of the `visible` facets, through point `pi`; their ids
+/// and their ridges through `pi`.
+fn new_facets(
+    facets: &mut Vec<Facet>,
+    state: &[u8],
+    visible: &[usize],
+    pts: &[P],
+    pi: usize,
+    interior: &P,
+) -> Result<(Vec<usize>, NewRidges), HullError> {
+    let mut new_ids = Vec::new();
+    let mut ridges: NewRidges = Vec::new();
+    for &f in visible {
+        for j in 0..D {
+            let g = facets[f].nb[j];
+            if state[g] == VISIBLE {
+                continue;
+            }
+            let mut v = facets[f].v;
+            v[j] = pi;
+            let (n, d) =
+                plane(pts, &v, interior).ok_or(HullError::Numerical("degenerate new facet"))?;
+            if d - n.dot(interior) <= 0.0 {
+                return Err(HullError::Numerical("interior point on a facet"));
+            }
+            let id = facets.len();
+            let slot = facets[g]
+                .nb
+                .iter()
+                .position(|&x| x == f)
+                .ok_or(HullError::Numerical("broken adjacency"))?;
+            facets[g].nb[slot] = id;
+            let mut nb = [usize::MAX; D];
+            nb[j] = g;
+            facets.push(Facet {
+                v,
+                n,
+                d,
+                nb,
+                outside: Vec::new(),
+                alive: true,
+            });
+            for k in 0..D {
+                if k == j {
+                    continue;
+                }
+                ridges.push((ridge_key(&v, k), id, k));
+            }
+            new_ids.push(id);
+        }
+    }
+    Ok((new_ids, ridges))
+}
+
+/// The new facets pair up across the ridges through the new vertex: each such ridge is shared
+/// by exactly two of them.
+fn pair_up(
+    facets: &mut [Facet],
+    mut ridges: NewRidges,
+    new_ids: &[usize],
+) -> Result<(), HullError> {
+    ridges.sort_unstable();
+    if new_ids.is_empty() || !ridges.len().is_multiple_of(2) {
+        return Err(HullError::Numerical("horizon is not closed"));
+    }
+    for pair in ridges.chunks_exact(2) {
+        let ((ka, a, sa), (kb, b, sb)) = (pair[0], pair[1]);
+        if ka != kb {
+            return Err(HullError::Numerical("horizon is not closed"));
+        }
+        facets[a].nb[sa] = b;
+        facets[b].nb[sb] = a;
+    }
+    Ok(())
 }
 
 /// Keeps the live facets and checks the result.
