@@ -15,7 +15,7 @@
 //! reason) and the session goes on without the robot.
 
 use std::sync::atomic::{AtomicU64, Ordering};
-use std::sync::mpsc::{sync_channel, Receiver, SyncSender, TrySendError};
+use std::sync::mpsc::{sync_channel, Receiver, SyncSender, TryRecvError, TrySendError};
 use std::sync::Arc;
 use std::thread::JoinHandle;
 
@@ -278,7 +278,15 @@ impl Worker {
 
     fn run(mut self, rx: Receiver<Observation>) -> AssistSummary {
         let mut last_ns = 0;
-        for obs in rx {
+        let mut next = None;
+        loop {
+            let obs = match next.take() {
+                Some(obs) => obs,
+                None => match rx.recv() {
+                    Ok(obs) => obs,
+                    Err(_) => break,
+                },
+            };
             last_ns = obs.t_ns;
             let dropped = self.dropped.load(Ordering::Relaxed);
             if dropped > self.said_dropped {
@@ -303,6 +311,18 @@ impl Worker {
                 touching: obs.in_contact() as u32,
             });
             self.step_robot(&obs, change.map(|c| c.phase));
+            // The rest of this period's recognition work, a slice at a time while no
+            // observation waits (an arriving one waits for one slice at most).
+            while self.recogniser.work() {
+                match rx.try_recv() {
+                    Ok(obs) => {
+                        next = Some(obs);
+                        break;
+                    }
+                    Err(TryRecvError::Empty) => {}
+                    Err(TryRecvError::Disconnected) => break,
+                }
+            }
         }
         self.report_robot(last_ns);
         AssistSummary {

@@ -164,14 +164,17 @@ pub struct OpenSetScore {
     pub stored_as_new: bool,
 }
 
-/// Cost of recognition per observation.
+/// Cost of recognition per call: each observation ([`Recogniser::observe`]), and each slice of
+/// the grasp stage's work the live assistant does between two ([`Recogniser::work`]).
 #[derive(Debug, Clone, Serialize)]
 pub struct Cost {
     /// Stored skills in the index.
     pub stored_skills: usize,
-    /// Observations timed.
+    /// Observations made.
     pub observations: usize,
-    /// Mean time per observation (µs).
+    /// Calls timed: the observations and the slices of work between them that did some.
+    pub calls: usize,
+    /// Mean time per call (µs).
     pub mean_us: f64,
     /// 99th percentile (µs).
     pub p99_us: f64,
@@ -182,20 +185,19 @@ pub struct Cost {
     pub approach_decision_mean_us: f64,
     /// The slowest of those (µs).
     pub approach_decision_max_us: f64,
-    /// Mean time of an observation that worked on a grasp-stage decision (a part of the grasp
-    /// quality of the contacts so far, or the comparison with the stored skills' features)
-    /// (µs).
+    /// Mean time of a call that worked on a grasp-stage decision (a slice of the grasp quality
+    /// of the contacts so far, or the comparison with the stored skills' features) (µs).
     pub grasp_step_mean_us: f64,
     /// The slowest of those (µs).
     pub grasp_step_max_us: f64,
     /// Grasp-stage decisions taken.
     pub grasp_decisions: usize,
-    /// Observations a grasp-stage decision spans, on average (from the one that began it to
-    /// the one that said its verdict).
+    /// Observation periods a grasp-stage decision spans, on average (from the one that began
+    /// it to the one that said its verdict).
     pub grasp_steps_per_decision: f64,
     /// Each session run [`COST_REPEATS`] times (the recogniser does the same work each time),
-    /// per observation the least of its times (µs): what the observation costs without the
-    /// times the thread waited for a core on a loaded machine. Mean, p99 and max.
+    /// per call the least of its times (µs): what the call costs without the times the thread
+    /// waited for a core on a loaded machine. Mean, p99 and max.
     pub least_mean_us: f64,
     /// See [`Cost::least_mean_us`].
     pub least_p99_us: f64,
@@ -457,6 +459,7 @@ fn measure_cost(
     let mut approach_times = Vec::new();
     let mut grasp_times = Vec::new();
     let mut grasp_decisions = 0;
+    let mut grasp_periods = 0;
     for r in held {
         let (_, t, d) = run(&big, r, params);
         let mut low = t.clone();
@@ -470,10 +473,12 @@ fn measure_cost(
         approach_times.extend(d.approach);
         grasp_times.extend(d.grasp);
         grasp_decisions += d.grasp_decisions;
+        grasp_periods += d.grasp_periods;
     }
     Cost {
         stored_skills: big.len(),
-        observations: times.len(),
+        observations: held.iter().map(|r| r.observations.len()).sum(),
+        calls: times.len(),
         mean_us: mean(&times),
         p99_us: p99(&times),
         max_us: max(&times),
@@ -482,7 +487,7 @@ fn measure_cost(
         grasp_step_mean_us: mean(&grasp_times),
         grasp_step_max_us: max(&grasp_times),
         grasp_decisions,
-        grasp_steps_per_decision: grasp_times.len() as f64 / grasp_decisions.max(1) as f64,
+        grasp_steps_per_decision: grasp_periods as f64 / grasp_decisions.max(1) as f64,
         least_mean_us: mean(&least),
         least_p99_us: p99(&least),
         least_max_us: max(&least),
@@ -558,9 +563,12 @@ struct DecisionTimes {
     approach: Vec<f64>,
     grasp: Vec<f64>,
     grasp_decisions: usize,
+    /// Observation periods in which a grasp-stage decision was worked on.
+    grasp_periods: usize,
 }
 
-/// The recogniser over a held-out session: its verdicts, the time of every observation and of
+/// The recogniser over a held-out session: its verdicts, the time of every call (each
+/// observation, and each slice of work after it, as the live assistant makes them) and of
 /// those that decided (µs).
 fn run(
     index: &Arc<RecognitionIndex>,
@@ -582,6 +590,20 @@ fn run(
         } else if rec.decisions() > before.0 {
             decided.approach.push(us);
         }
+        loop {
+            let steps = rec.grasp_steps();
+            let t = Instant::now();
+            let more = rec.work();
+            let us = t.elapsed().as_secs_f64() * 1e6;
+            if rec.grasp_steps() > steps {
+                times.push(us);
+                decided.grasp.push(us);
+            }
+            if !more {
+                break;
+            }
+        }
+        decided.grasp_periods += usize::from(rec.grasp_steps() > before.1);
     }
     (rec.verdicts().to_vec(), times, decided)
 }

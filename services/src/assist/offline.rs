@@ -396,6 +396,9 @@ pub fn recognise_source(
             }
         }
         recogniser.observe(o);
+        // The period's remaining recognition work, as the live assistant does it between
+        // observations.
+        while recogniser.work() {}
     });
     source.stream_again(&ReadLimits::streaming(), &mut observer)?;
     drop(observer);

@@ -29,15 +29,18 @@
 //! nearest to it. When nothing of the hand has touched for [`RecogniserParams::release_ns`],
 //! the grasp is over and the next reach begins.
 //!
-//! # Cost per observation
+//! # Cost per call
 //!
-//! The grasp stage's grasp quality (a convex hull in six dimensions of up to 100 primitive
-//! wrenches) takes a few hundred µs: more than one observation may cost. It is computed a
-//! part at a time ([`QualityJob`]), [`RecogniserParams::grasp_budget`] units of work per
-//! observation, and the stored skills are ranked at the observation after it is done; the
-//! verdict carries the time it is said, a few observations after the decision began (the
-//! contacts it describes are those up to then). The held force line of each shape is
-//! computed once, when the recogniser is made.
+//! The grasp stage's grasp quality (a convex hull in six dimensions of up to 200 primitive
+//! wrenches) takes a few hundred µs: more than one observation, or one sample, may cost. It is
+//! computed a part at a time ([`QualityJob`]): [`RecogniserParams::grasp_budget`] units of work
+//! per observation period, in slices of [`RecogniserParams::grasp_slice`] units, the first in
+//! [`Recogniser::observe`], the others in [`Recogniser::work`] calls between observations (the
+//! live assistant's thread makes them while no observation waits; an offline run makes them
+//! right after each observation, so both come to the same verdicts). The stored skills are
+//! ranked at the observation after it is done; the verdict carries the time it is said, a few
+//! observations after the decision began (the contacts it describes are those up to then). The
+//! held force line of each shape is computed once, when the recogniser is made.
 
 use std::sync::Arc;
 
@@ -83,13 +86,20 @@ pub struct RecogniserParams {
     pub grasp_open_set_distance: f32,
     /// A grasp is over when no fingertip has touched an object this long (ns). Default 300 ms.
     pub release_ns: u64,
-    /// Work of the grasp stage's grasp quality per observation ([`QualityJob::advance`]'s
-    /// budget, units of about 0.1 µs). Default 1500: the quality of two to five soft-finger
-    /// contacts (40-100 primitive wrenches, 5 000-15 000 units) done in about 12 observations
-    /// on average, early enough that no grasp-stage verdict comes later than 1 s after the
-    /// first touch where it came before (`icms bench recognition`: smaller budgets, 150-400,
-    /// delayed the verdicts of power grasps, whose second fingertip touches late, past it).
+    /// Work of the grasp stage's grasp quality per observation period ([`QualityJob::advance`]'s
+    /// units, of about 0.15 µs). Default 5000 (about 0.75 ms of the 10 ms period, in slices):
+    /// the quality of two to five fingertips (40-100 primitive wrenches, 5 000-15 000 units)
+    /// or of a power grasp's eight to ten contacts (160-200 primitives) done in about 5 periods
+    /// on average, so that the verdict of a power grasp, whose second contact comes late, is
+    /// said within 1 s of the first touch (`icms bench recognition`, 2026-11-27: 1500 units
+    /// took 26 periods and said power grasps' verdicts at 1.02-1.52 s, nearest by 1 s 50 %;
+    /// 5000 and more, 62 %).
     pub grasp_budget: usize,
+    /// The most of [`RecogniserParams::grasp_budget`] one call ([`Recogniser::observe`] or
+    /// [`Recogniser::work`]) does. Default 150 (20-30 µs): an observation arriving waits for
+    /// one slice at most. A slice ends between two rounds of the hull (a point made a vertex),
+    /// so one round larger than it (up to about 230 µs in six dimensions) is done whole.
+    pub grasp_slice: usize,
     /// Whether the grasp stage computes the grasp quality of the contacts so far and compares
     /// it (feature dimensions 3 and 4). Default true. Without it a grasp-stage decision costs
     /// the comparison only; on `icms bench recognition`'s held-out sessions (2026-11-26) the
@@ -109,7 +119,8 @@ impl Default for RecogniserParams {
             grasp_stage_ns: 800_000_000,
             grasp_open_set_distance: 1.0,
             release_ns: 300_000_000,
-            grasp_budget: 1500,
+            grasp_budget: 5000,
+            grasp_slice: 150,
             grasp_quality: true,
         }
     }
@@ -245,6 +256,8 @@ pub struct Recogniser {
     said: Option<(usize, Option<u32>)>,
     grasp: Option<GraspTrack>,
     pending: Option<PendingGrasp>,
+    /// What is left of this observation period's [`RecogniserParams::grasp_budget`].
+    allowance: usize,
     last_touch_ns: Option<u64>,
     scratch: Scratch,
     /// Per shape (sphere, box, cylinder): [`RecognitionIndex::held_force_line`].
@@ -278,6 +291,7 @@ impl Recogniser {
             said: None,
             grasp: None,
             pending: None,
+            allowance: 0,
             last_touch_ns: None,
             scratch: Scratch::default(),
             held_lines,
@@ -308,8 +322,8 @@ impl Recogniser {
         self.grasp_decisions
     }
 
-    /// Observations that worked on a grasp-stage decision (its grasp quality, a part at a
-    /// time, and the comparison with the stored skills).
+    /// Calls ([`Recogniser::observe`] or [`Recogniser::work`]) that worked on a grasp-stage
+    /// decision (a slice of its grasp quality, or the comparison with the stored skills).
     pub fn grasp_steps(&self) -> u64 {
         self.grasp_steps
     }
@@ -340,8 +354,22 @@ impl Recogniser {
             self.decide_approach(i, obs.t_ns, true);
         }
         self.track_grasp(obs);
+        self.allowance = self.params.grasp_budget;
         self.advance_grasp(obs.t_ns);
         &self.verdicts[before..]
+    }
+
+    /// Does one more slice of the grasp-stage decision under way (its grasp quality) if this
+    /// observation period's budget allows; true while there is more of it for this period.
+    /// Call it between observations (see the module docs): it says no verdict (the stored
+    /// skills are compared at the next observation).
+    pub fn work(&mut self) -> bool {
+        match &self.pending {
+            Some(PendingGrasp { job: Some(_), .. }) if self.allowance > 0 => {}
+            _ => return false,
+        }
+        self.advance_quality();
+        self.allowance > 0 && matches!(self.pending, Some(PendingGrasp { job: Some(_), .. }))
     }
 
     /// Whether object `i` is among the nearest to the hand.
@@ -503,24 +531,39 @@ impl Recogniser {
         }
     }
 
-    /// Goes on with the grasp-stage decision under way, if any: a part of its grasp quality,
+    /// Goes on with the grasp-stage decision under way, if any: a slice of its grasp quality,
     /// or, the observation after it is done, the comparison with the stored skills.
     fn advance_grasp(&mut self, t_ns: u64) {
-        let Some(p) = &mut self.pending else { return };
-        self.grasp_steps += 1;
-        if let Some(job) = &mut p.job {
-            match job.advance(self.params.grasp_budget) {
-                Ok(None) => return,
-                Ok(Some(q)) => set_quality(&mut p.query, Some(&q)),
-                // A hull that fails its checks: the quality's dimensions stay 0, as at ingest.
-                Err(_) => set_quality(&mut p.query, None),
-            }
-            p.job = None;
+        let Some(p) = &self.pending else { return };
+        if p.job.is_some() {
+            self.advance_quality();
             return;
         }
+        self.grasp_steps += 1;
         let (i, query) = (p.object, p.query);
         self.pending = None;
         self.decide_grasp(i, query, t_ns);
+    }
+
+    /// One slice of the pending grasp quality: at most [`RecogniserParams::grasp_slice`] of
+    /// what is left of the period's budget (the whole of an unlimited one).
+    fn advance_quality(&mut self) {
+        let Some(p) = &mut self.pending else { return };
+        let Some(job) = &mut p.job else { return };
+        self.grasp_steps += 1;
+        let slice = if self.allowance == usize::MAX {
+            usize::MAX
+        } else {
+            self.params.grasp_slice.clamp(1, self.allowance.max(1))
+        };
+        self.allowance = self.allowance.saturating_sub(slice);
+        match job.advance(slice) {
+            Ok(None) => return,
+            Ok(Some(q)) => set_quality(&mut p.query, Some(&q)),
+            // A hull that fails its checks: the quality's dimensions stay 0, as at ingest.
+            Err(_) => set_quality(&mut p.query, None),
+        }
+        p.job = None;
     }
 
     /// The grasp-stage decision on object `i`, its quality known.

@@ -75,8 +75,10 @@ fn templates_from_kept_messages_equal_those_of_a_second_read() {
 }
 
 /// The grasp stage computes its grasp quality a part at a time (`grasp_budget` per
-/// observation): the grasp-stage verdicts name the same objects, skills and distances as when
-/// the quality is computed in one observation; only when they are said differs.
+/// observation period, in slices of `grasp_slice`, the first in the observation and the others
+/// in `work` calls after it): the grasp-stage verdicts name the same objects, skills and
+/// distances as when the period's budget is one slice, or when the quality is computed in one
+/// observation; only when they are said differs.
 #[test]
 fn a_grasp_stage_decided_a_part_at_a_time_names_what_one_decided_at_once_names() {
     use services::assist::recognise::{Stage, Verdict};
@@ -86,7 +88,7 @@ fn a_grasp_stage_decided_a_part_at_a_time_names_what_one_decided_at_once_names()
             .flat_map(|k| seeds.clone().map(move |s| Scenario::variant(k, s).unwrap()))
             .collect::<Vec<_>>()
     };
-    let grasp_verdicts = |grasp_budget: usize| {
+    let grasp_verdicts = |grasp_budget: usize, grasp_slice: usize| {
         let dir = tempfile::tempdir().unwrap();
         let e = evaluate(EvalSetup {
             train: scen(1..=2),
@@ -94,6 +96,7 @@ fn a_grasp_stage_decided_a_part_at_a_time_names_what_one_decided_at_once_names()
             dir: dir.path(),
             params: RecogniserParams {
                 grasp_budget,
+                grasp_slice,
                 ..RecogniserParams::default()
             },
             cost_skills: None,
@@ -129,14 +132,18 @@ fn a_grasp_stage_decided_a_part_at_a_time_names_what_one_decided_at_once_names()
             })
             .collect::<Vec<_>>()
     };
-    let sliced = grasp_verdicts(RecogniserParams::default().grasp_budget);
-    let at_once = grasp_verdicts(usize::MAX);
+    let defaults = RecogniserParams::default();
+    assert!(defaults.grasp_slice < defaults.grasp_budget);
+    let sliced = grasp_verdicts(defaults.grasp_budget, defaults.grasp_slice);
+    let one_slice = grasp_verdicts(defaults.grasp_budget, defaults.grasp_budget);
+    let at_once = grasp_verdicts(usize::MAX, usize::MAX);
     assert_eq!(sliced.len(), KINDS.len());
     assert!(
         sliced.iter().filter(|v| !v.is_empty()).count() >= 2,
         "too few grasp-stage verdicts to compare: {sliced:?}"
     );
     assert_eq!(sliced, at_once);
+    assert_eq!(one_slice, at_once);
 }
 
 /// A power grasp's palm and phalanges are contacts of its stored skill (its contact count, grasp
