@@ -112,6 +112,7 @@ use crate::math::{Isometry, Real, Vector};
 use crate::object::{ObjectState, RigidObject};
 use crate::table::TableSupport;
 use build::{BodyConstants, TipDofs};
+use nalgebra::Rotation3;
 
 /// The Dynamic Force Simulator for one hand and a scene of one to [`MAX_OBJECTS`] objects.
 #[derive(Debug, Clone)]
@@ -140,8 +141,14 @@ pub struct Dfs {
     q_measured: [Real; MAX_DOF],
     initialised: bool,
     kin: Kinematics,
+    /// M(θ) of this tick's measured angles (stage 1), turned in place into the implicit finger
+    /// step's matrix in stage 5.
     mass: DofMatrix,
+    /// The force stage's matrix of a finger group (eq. 14).
     scratch: DofMatrix,
+    /// A finger group's joint torques, solved in place for `(Σ JᵀJ + λ²)⁻¹ τ` (stage 3's
+    /// scratch).
+    group_y: [Real; MAX_DOF],
     /// Per fingertip: what the tick carries from one tick to the next and from the force stage
     /// to the finger step ([`TipState`]); entries beyond the hand's fingertips unused.
     tips: [TipState; MAX_TIPS],
@@ -150,6 +157,12 @@ pub struct Dfs {
     prev_base: Option<Isometry>,
     frames: [ContactFrame; MAX_CONTACTS],
     transmitted: [Intensity; MAX_CONTACTS],
+    /// The reaction `W⁺ f_ext` of one object's contacts (stage 5's scratch; the first of them
+    /// written per object).
+    reaction_scratch: [Intensity; MAX_CONTACTS],
+    /// One fingertip's linear Jacobian columns of the DOFs of its finger group (stage 3) or
+    /// of the DOFs moving it (stage 5): scratch.
+    tip_cols: [Vector; MAX_DOF],
     /// Per transmitting contact: its fingertip, or `MAX_TIPS + s` for contact shape `s`.
     contact_tip: [usize; MAX_CONTACTS],
     /// Per tip: the DOFs that move it (the wrist's and its finger's), ascending. Every other
@@ -169,6 +182,10 @@ pub struct Dfs {
     factor: DofMatrix,
     /// The whole-hand contacts' state ([`DfsParams::whole_hand`]).
     body: body::BodyState,
+    /// Each object's orientation as a matrix, applied about ten times per touching contact:
+    /// made at the start of stage 2 (for detection and forces) and again after the object
+    /// stage (for the feedback), in place; identity beyond the scene's objects.
+    rots: [Rotation3<Real>; MAX_OBJECTS],
     /// Per contact shape, what the last tick found ([`Dfs::body_contacts`]).
     body_out: [BodyContact; MAX_CONTACT_SHAPES],
     out: TickOutput,
@@ -356,6 +373,7 @@ impl Dfs {
     /// Stage 2: contact detection between fingertip spheres and the objects: each fingertip
     /// touches the object it penetrates deepest among those within the contact margin.
     pub fn stage_contacts(&mut self) {
+        self.update_rotations();
         self.detect_tip_contacts();
         if self.body.n > 0 {
             self.detect_body_contacts();
@@ -380,7 +398,7 @@ impl Dfs {
             }
         }
         if self.body.n > 0 {
-            n = self.body_forces(n, &mut contact_object, &cx.touching, &cx.rots);
+            n = self.body_forces(n, &mut contact_object, &cx.touching);
         }
         self.out.n_contacts = n;
         self.group_contacts_by_object(&contact_object[..n]);
@@ -415,8 +433,8 @@ impl Dfs {
     /// Stage 5: per object, the reaction `c_o = W⁺ f_ext` (eq. 27), friction-limited; feedback
     /// per finger; finger dynamics (eq. 19-21) integrated implicitly to the motor commands.
     pub fn stage_feedback(&mut self, tau: &[Real]) {
-        let rots = self.object_rotations();
-        self.reactions(&rots);
-        self.integrate_fingers(tau, &rots);
+        self.update_rotations();
+        self.reactions();
+        self.integrate_fingers(tau);
     }
 }

@@ -240,15 +240,29 @@ pub fn ldlt_factor_in_place<const N: usize>(
     if n > N {
         return false;
     }
-    let u = a.as_mut_slice();
-    // Column j holds row j of L (left of the diagonal) and 1 / D[j] (on it). `v` is row j
-    // of L D while it is being formed.
-    let mut v = [0.0; N];
+    // `v` is row j of L D while it is being formed: no longer than the block needs (a
+    // finger group's block is a few DOFs, and zeroing N entries per call cost a tenth of
+    // the factorisation).
+    if n <= SMALL_LDLT {
+        ldlt_factor_with(a.as_mut_slice(), N, n, &mut [0.0; SMALL_LDLT])
+    } else {
+        ldlt_factor_with(a.as_mut_slice(), N, n, &mut [0.0; N])
+    }
+}
+
+/// Blocks up to this size are factored with `v` on a short array.
+const SMALL_LDLT: usize = 8;
+
+/// [`ldlt_factor_in_place`] of the top-left `n × n` block of the column-major `u` of
+/// `stride` rows, with `v` (at least `n` long) as scratch.
+#[inline(always)]
+fn ldlt_factor_with(u: &mut [Real], stride: usize, n: usize, v: &mut [Real]) -> bool {
+    // Column j holds row j of L (left of the diagonal) and 1 / D[j] (on it).
     for j in 0..n {
-        let (head, tail) = u.split_at_mut(j * N);
+        let (head, tail) = u.split_at_mut(j * stride);
         let col_j = &mut tail[..j + 1];
         for i in 0..j {
-            let col_i = &head[i * N..i * N + i + 1];
+            let col_i = &head[i * stride..i * stride + i + 1];
             v[i] = col_j[i] - dot(&col_i[..i], &v[..i]);
             col_j[i] = v[i] * col_i[i];
         }

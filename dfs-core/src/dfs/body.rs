@@ -134,6 +134,7 @@ impl BodyState {
     /// finger step's matrix `a` (the solve order's lower triangle) and right-hand side `rhs`.
     /// The force holds the damping of the joints' velocity at the step's start; the implicit
     /// step takes that damping at the step's end instead, so it is added back to `rhs`.
+    /// `cols` is scratch for a shape's linear Jacobian columns.
     pub(super) fn add_to_finger_step(
         &self,
         dt: Real,
@@ -141,6 +142,7 @@ impl BodyState {
         a: &mut crate::hand::DofMatrix,
         rhs: &mut [Real; MAX_DOF],
         fb_torque: &mut [Real; MAX_DOF],
+        cols: &mut [Vector; MAX_DOF],
     ) {
         for s in 0..self.n {
             if !self.active[s] {
@@ -153,19 +155,22 @@ impl BodyState {
             let gain = dt * c + dt * dt * k;
             let sticking = self.sticking[s];
             let dofs = self.dofs_solve[s].as_slice();
+            // The linear Jacobian columns of the shape's DOFs (column-major storage), read
+            // once: the block below uses each about as often as the shape has DOFs.
             let js = j.as_slice();
-            let col = |d: usize| Vector::new(js[6 * d], js[6 * d + 1], js[6 * d + 2]);
+            let cols = &mut cols[..dofs.len()];
             let mut v_joint = Vector::zeros();
-            for &d in dofs {
-                v_joint += col(d) * qd[d];
+            for (c, &d) in cols.iter_mut().zip(dofs) {
+                *c = Vector::new(js[6 * d], js[6 * d + 1], js[6 * d + 2]);
+                v_joint += *c * qd[d];
             }
+            let cols = &*cols;
             let damped = if sticking {
                 v_joint * c
             } else {
                 z * (v_joint.dot(&z) * c)
             };
-            for (p1, &d1) in dofs.iter().enumerate() {
-                let col1 = col(d1);
+            for (p1, (&d1, &col1)) in dofs.iter().zip(cols).enumerate() {
                 if col1 == Vector::zeros() {
                     continue;
                 }
@@ -176,8 +181,8 @@ impl BodyState {
                 } else {
                     z * (z.dot(&col1) * gain)
                 };
-                for &d2 in &dofs[..=p1] {
-                    a[(d1, d2)] += pc1.dot(&col(d2));
+                for (&d2, col2) in dofs[..=p1].iter().zip(cols) {
+                    a[(d1, d2)] += pc1.dot(col2);
                 }
             }
         }
@@ -239,14 +244,12 @@ impl Dfs {
 
     /// Stage 3, whole hand: the spring-damper contacts' intensities (module documentation),
     /// appended to the transmitting contacts from `n` on; returns the new count. `touching`
-    /// counts every detected contact per object (for the stability budgets); `rots` holds each
-    /// object's orientation as a matrix.
+    /// counts every detected contact per object (for the stability budgets).
     pub(super) fn body_forces(
         &mut self,
         mut n: usize,
         contact_object: &mut [usize; MAX_CONTACTS],
         touching: &[usize; super::MAX_OBJECTS],
-        rots: &[nalgebra::Rotation3<Real>; super::MAX_OBJECTS],
     ) -> usize {
         let dt = self.params.dt;
         let (k0, c0) = (self.params.body_stiffness, self.params.body_damping);
@@ -263,7 +266,7 @@ impl Dfs {
                 self.body.anchor_object[s] = o;
             }
             let state = &self.objects[o].state;
-            let rot = rots[o];
+            let rot = self.rots[o];
             let rot_inv = rot.transpose();
             let pos = state.pose.translation.vector;
             let z_world = rot * frame.normal_b();

@@ -15,6 +15,7 @@ use crate::hand::{
 use crate::math::{Real, Vector, Wrench};
 use crate::object::{ObjectState, RigidObject};
 use crate::table::TableSupport;
+use nalgebra::Rotation3;
 
 /// Constants of one object's body, made once.
 #[derive(Debug, Clone, Copy)]
@@ -287,6 +288,10 @@ impl Dfs {
             factor: DofMatrix::zeros(),
             body,
             body_out: [BodyContact::default(); MAX_CONTACT_SHAPES],
+            rots: [Rotation3::identity(); MAX_OBJECTS],
+            reaction_scratch: [Intensity::zeros(); MAX_CONTACTS],
+            tip_cols: [Vector::zeros(); MAX_DOF],
+            group_y: [0.0; MAX_DOF],
             out,
         })
     }

@@ -2,19 +2,14 @@
 //! against every object it may reach, touching the one it penetrates deepest within the contact
 //! margin (the palm and phalanges are `dfs::body`'s).
 
-use super::{Dfs, TipContact, MAX_OBJECTS};
+use super::{Dfs, TipContact};
 use crate::contact::detect;
-use crate::math::Real;
-use nalgebra::Rotation3;
 
 impl Dfs {
     /// Every fingertip's contact with the objects into the tick's output: its centre, whether
-    /// it touches, which object, the contact frame and the penetration.
+    /// it touches, which object, the contact frame and the penetration. The objects'
+    /// orientations are this tick's (`Dfs::update_rotations`).
     pub(super) fn detect_tip_contacts(&mut self) {
-        let mut rot_inv = [Rotation3::<Real>::identity(); MAX_OBJECTS];
-        for (r, o) in rot_inv.iter_mut().zip(&self.objects[..self.n_objects]) {
-            *r = o.state.pose.rotation.to_rotation_matrix().transpose();
-        }
         let margin = self.params.contact_margin;
         for (k, tip) in self.hand.fingertips.iter().enumerate() {
             let c_world = self.kin.tip_centres[k];
@@ -29,7 +24,7 @@ impl Dfs {
                 if rel.norm_squared() > reach * reach * (1.0 + 1e-9) {
                     continue;
                 }
-                let c_b = rot_inv[i] * rel;
+                let c_b = self.rots[i].transpose() * rel;
                 if let Some(d) = detect(&o.object.shape, &c_b, tip.radius, margin) {
                     if !t.touching || d.penetration > t.penetration {
                         t.touching = true;

@@ -4,12 +4,10 @@
 //! step's matrix and right-hand side, each fingertip's spring block, the solve, and the joint
 //! limits.
 
-use super::{Dfs, MAX_OBJECTS};
-use crate::contact::{apply_friction, Intensity};
-use crate::grasp::MAX_CONTACTS;
+use super::Dfs;
+use crate::contact::apply_friction;
 use crate::hand::{DofMatrix, MAX_DOF, MAX_TIPS};
 use crate::math::{envelope_cholesky_solve, Real, Vector};
-use nalgebra::Rotation3;
 
 /// How a touching fingertip's contact spring-damper acts on the finger in the implicit step.
 #[derive(Clone, Copy)]
@@ -22,13 +20,13 @@ enum Spring {
     StiffNormal,
 }
 
-/// The implicit finger step's matrix without the contact springs, column by column (the
-/// storage is column-major and M symmetric): `a`'s column i is M's plus the joint damping
-/// `dt joint_damping` on the diagonal; `rhs[i] = (M q̇)[i] + dt τ[i]`.
+/// The implicit finger step's matrix without the contact springs, made in place from M(θ)
+/// column by column (the storage is column-major and M symmetric): column i's product with
+/// q̇ first, `rhs[i] = (M q̇)[i] + dt τ[i]`, then the joint damping `dt joint_damping` added to
+/// its diagonal (a copy of M, 10 memcpy calls a tick, is not needed: M is not used after).
 #[inline]
 fn finger_step_matrix(
     a: &mut DofMatrix,
-    mass: &DofMatrix,
     qd: &[Real],
     tau: &[Real],
     dt: Real,
@@ -36,14 +34,11 @@ fn finger_step_matrix(
     rhs: &mut [Real; MAX_DOF],
 ) {
     let ndof = qd.len();
-    let (a, m) = (a.as_mut_slice(), mass.as_slice());
+    let a = a.as_mut_slice();
     for i in 0..ndof {
-        let col = &m[i * MAX_DOF..i * MAX_DOF + ndof];
-        let to = &mut a[i * MAX_DOF..i * MAX_DOF + ndof];
-        // One pass copies the column and forms the product (no memcpy call per column).
+        let col = &a[i * MAX_DOF..i * MAX_DOF + ndof];
         let mut s = 0.0;
-        for ((t, &mv), &v) in to.iter_mut().zip(col).zip(qd) {
-            *t = mv;
+        for (&mv, &v) in col.iter().zip(qd) {
             s += mv * v;
         }
         a[i * MAX_DOF + i] += dt * joint_damping;
@@ -54,20 +49,23 @@ fn finger_step_matrix(
 impl Dfs {
     /// Per object with contacts on it: the reaction `c_o = W⁺ f_ext` (eq. 27), friction-limited,
     /// distributed over its transmitting contacts, and each fingertip's feedback
-    /// `c̃_h − c̃_o`; `rots` holds each object's orientation as a matrix.
-    pub(super) fn reactions(&mut self, rots: &[Rotation3<Real>; MAX_OBJECTS]) {
-        for (i, rot) in rots.iter().enumerate().take(self.n_objects) {
+    /// `c̃_h − c̃_o`.
+    pub(super) fn reactions(&mut self) {
+        for i in 0..self.n_objects {
             if !self.grasp_active[i] {
                 continue;
             }
+            let rot = &self.rots[i];
             let (start, n) = self.contact_range[i];
             let g = &self.grasps[i];
             let friction = self.objects[i].friction;
             // The reaction is distributed over the transmitting contacts only; the table's
             // share of f_ext is not the fingers' to carry.
             let f_fingers = self.out.objects[i].f_ext_b - self.out.objects[i].table_force_b;
-            let mut c_o = [Intensity::zeros(); MAX_CONTACTS];
-            g.distribute(&f_fingers, &mut c_o);
+            // Into the DFS's scratch: `distribute` writes the first `n`, and a local array of
+            // MAX_CONTACTS intensities was zeroed every tick for them.
+            let c_o = &mut self.reaction_scratch;
+            g.distribute(&f_fingers, c_o);
             for (c, ci) in c_o.iter().enumerate().take(n) {
                 let k = self.contact_tip[start + c];
                 if k >= MAX_TIPS {
@@ -78,25 +76,20 @@ impl Dfs {
                 let t = &mut self.out.tips[k];
                 t.reaction = apply_friction(self.params.contact_model, &friction, ci).transmitted;
                 t.feedback = t.transmitted - t.reaction;
-                let frame = self.frames[start + c];
-                let fb = frame.rot_b * Vector::new(t.feedback[0], t.feedback[1], t.feedback[2]);
+                let rot_b = &self.frames[start + c].rot_b;
+                let fb = rot_b * Vector::new(t.feedback[0], t.feedback[1], t.feedback[2]);
                 t.feedback_force_world = -(rot * fb);
             }
         }
     }
 
-    /// The implicit finger step; `rots` holds each object's orientation as a matrix.
-    pub(super) fn integrate_fingers(
-        &mut self,
-        tau: &[Real],
-        rots: &[Rotation3<Real>; MAX_OBJECTS],
-    ) {
+    /// The implicit finger step.
+    pub(super) fn integrate_fingers(&mut self, tau: &[Real]) {
         let ndof = self.hand.dof();
         let dt = self.params.dt;
         let mut rhs = [0.0; MAX_DOF];
         finger_step_matrix(
-            &mut self.scratch,
-            &self.mass,
+            &mut self.mass,
             &self.qd[..ndof],
             tau,
             dt,
@@ -105,18 +98,24 @@ impl Dfs {
         );
         let mut fb_torque = [0.0; MAX_DOF];
         for k in 0..self.hand.fingertips.len() {
-            self.add_tip_to_finger_step(k, rots, &mut rhs, &mut fb_torque);
+            self.add_tip_to_finger_step(k, &mut rhs, &mut fb_torque);
         }
         if self.body.n > 0 {
-            self.body
-                .add_to_finger_step(dt, &self.qd, &mut self.scratch, &mut rhs, &mut fb_torque);
+            self.body.add_to_finger_step(
+                dt,
+                &self.qd,
+                &mut self.mass,
+                &mut rhs,
+                &mut fb_torque,
+                &mut self.tip_cols,
+            );
         }
         for d in 0..ndof {
             rhs[d] += dt * fb_torque[d];
         }
         self.out.feedback_torque[..ndof].copy_from_slice(&fb_torque[..ndof]);
         let solved = envelope_cholesky_solve(
-            &self.scratch,
+            &self.mass,
             &self.solve_order[..ndof],
             &self.solve_first[..ndof],
             &mut self.factor,
@@ -131,33 +130,37 @@ impl Dfs {
 
     /// Fingertip `k` in the implicit finger step: its feedback force into the feedback torques
     /// `fb_torque` (`Jᵀ f`), and, touching, its contact spring-damper's force into `rhs` and its
-    /// stiffness and damping into the step's matrix (`scratch`, the solve order's lower
+    /// stiffness and damping into the step's matrix (`mass`, the solve order's lower
     /// triangle).
     #[inline]
     fn add_tip_to_finger_step(
         &mut self,
         k: usize,
-        rots: &[Rotation3<Real>; MAX_OBJECTS],
         rhs: &mut [Real; MAX_DOF],
         fb_torque: &mut [Real; MAX_DOF],
     ) {
         let p = &self.params;
         let dt = p.dt;
-        let a = &mut self.scratch;
+        let a = &mut self.mass;
         let tip = &self.tips[k];
         let t = &self.out.tips[k];
-        let j = &self.kin.tip_jacobians[k];
+        // Only the DOFs moving the tip, in solve order (the spring block below is written
+        // in that order): its other Jacobian columns are zero. Their linear Jacobian columns
+        // (column-major storage), read once into the DFS's scratch: the block below uses
+        // each about as often as the tip has DOFs.
+        let dofs = self.tip_dofs_solve[k].as_slice();
+        let js = self.kin.tip_jacobians[k].as_slice();
+        let cols = &mut self.tip_cols[..dofs.len()];
         // The feedback, less the passive friction part: the contact spring below carries
         // that on the finger side, implicitly.
         let f = t.feedback_force_world + tip.passive_world;
-        // Only the DOFs moving the tip, in solve order (the spring block below is written
-        // in that order): its other Jacobian columns are zero.
-        let dofs = self.tip_dofs_solve[k].as_slice();
-        for &d in dofs {
-            fb_torque[d] += j[(0, d)] * f.x + j[(1, d)] * f.y + j[(2, d)] * f.z;
+        for (c, &d) in cols.iter_mut().zip(dofs) {
+            *c = Vector::new(js[6 * d], js[6 * d + 1], js[6 * d + 2]);
+            fb_torque[d] += c.x * f.x + c.y * f.y + c.z * f.z;
         }
-        let Some(frame) = t.frame else { return };
-        let z_world = rots[t.object] * frame.normal_b();
+        let cols = &*cols;
+        let Some(frame) = &t.frame else { return };
+        let z_world = self.rots[t.object] * frame.normal_b();
         let stick = tip.stick;
         let v = tip.spring_vel;
         // A sticking tip is damped across the normal as the object is (`damping`), along it
@@ -184,14 +187,10 @@ impl Dfs {
         // stiffness is in the implicit step too (its force is already in `f`, the feedback
         // holding only what was passed on).
         let ramp = dt * dt * tip.ramp_stiffness;
-        // The tip's linear Jacobian column of DOF d (column-major storage).
-        let js = j.as_slice();
-        let col = |d: usize| Vector::new(js[6 * d], js[6 * d + 1], js[6 * d + 2]);
         // The block is symmetric and the solve reads one triangle of it (row `d1`, column
         // `d2` no later than `d1` in the solve order): with the tip's DOFs in solve order,
         // only that triangle is written.
-        for (p1, &d1) in dofs.iter().enumerate() {
-            let col1 = col(d1);
+        for (p1, (&d1, &col1)) in dofs.iter().zip(cols).enumerate() {
             if col1 == Vector::zeros() {
                 continue;
             }
@@ -206,8 +205,8 @@ impl Dfs {
             if ramp != 0.0 {
                 pc1 += z_world * (z_world.dot(&col1) * ramp);
             }
-            for &d2 in &dofs[..=p1] {
-                a[(d1, d2)] += pc1.dot(&col(d2));
+            for (&d2, col2) in dofs[..=p1].iter().zip(cols) {
+                a[(d1, d2)] += pc1.dot(col2);
             }
         }
     }

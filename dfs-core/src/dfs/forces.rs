@@ -12,10 +12,9 @@ use crate::math::{cholesky_solve_in_place, Real, Vector};
 use crate::object::{ClosestPoint, RigidObject};
 use nalgebra::Rotation3;
 
-/// What the force stage uses of the scene at every fingertip this tick.
+/// What the force stage uses of the scene at every fingertip this tick (besides the objects'
+/// orientations, [`Dfs`]'s `rots`).
 pub(super) struct ForceContext {
-    /// Each object's orientation as a matrix: applied about ten times per touching tip.
-    pub rots: [Rotation3<Real>; MAX_OBJECTS],
     /// The tick length (s).
     pub dt: Real,
     /// The contact model is the soft finger's (the pads twist).
@@ -137,44 +136,52 @@ impl Dfs {
     pub(super) fn tip_forces_from_torques(&mut self, tau: &[Real]) {
         let lam2 = self.params.tip_force_damping * self.params.tip_force_damping;
         for g in &self.hand.finger_groups {
-            let m = g.dofs.len();
+            let m = g.dofs.len().min(MAX_DOF);
             if m == 0 {
                 continue;
             }
-            // A = Σ_tips J_gᵀ J_g + λ² I over the group's DOFs; y = A⁻¹ τ_g; f_tip = J_tip y.
+            let dofs = &g.dofs[..m];
+            // A = Σ_tips J_gᵀ J_g + λ² I over the group's DOFs, its upper triangle (all that
+            // the solve reads); y = A⁻¹ τ_g; f_tip = J_tip y. Each tip's linear Jacobian
+            // columns of the group's DOFs are read once, into the DFS's scratch.
             let a = &mut self.scratch;
-            let mut y = [0.0; MAX_DOF];
-            for (ia, &da) in g.dofs.iter().enumerate() {
-                y[ia] = tau[da];
-                for (ib, &db) in g.dofs.iter().enumerate() {
-                    let mut s = if ia == ib { lam2 } else { 0.0 };
-                    for &tip in &g.tips {
-                        let j = &self.kin.tip_jacobians[tip];
-                        s += j[(0, da)] * j[(0, db)]
-                            + j[(1, da)] * j[(1, db)]
-                            + j[(2, da)] * j[(2, db)];
+            let y = &mut self.group_y[..m];
+            for (ib, &db) in dofs.iter().enumerate() {
+                y[ib] = tau[db];
+                for ia in 0..ib {
+                    a[(ia, ib)] = 0.0;
+                }
+                a[(ib, ib)] = lam2;
+            }
+            let cols = &mut self.tip_cols[..m];
+            for &tip in &g.tips {
+                let js = self.kin.tip_jacobians[tip].as_slice();
+                for (c, &d) in cols.iter_mut().zip(dofs) {
+                    *c = Vector::new(js[6 * d], js[6 * d + 1], js[6 * d + 2]);
+                }
+                for (ib, cb) in cols.iter().enumerate() {
+                    for (ia, ca) in cols[..=ib].iter().enumerate() {
+                        a[(ia, ib)] += ca.x * cb.x + ca.y * cb.y + ca.z * cb.z;
                     }
-                    a[(ia, ib)] = s;
                 }
             }
-            if !cholesky_solve_in_place(a, m, &mut y) {
+            if !cholesky_solve_in_place(a, m, y) {
                 continue;
             }
             for &tip in &g.tips {
                 let j = &self.kin.tip_jacobians[tip];
                 let mut f = Vector::zeros();
-                for (ia, &da) in g.dofs.iter().enumerate() {
-                    f += Vector::new(j[(0, da)], j[(1, da)], j[(2, da)]) * y[ia];
+                for (&yi, &da) in y.iter().zip(dofs) {
+                    f += Vector::new(j[(0, da)], j[(1, da)], j[(2, da)]) * yi;
                 }
                 self.out.tips[tip].tip_force_world = f;
             }
         }
     }
 
-    /// The objects' orientations, the base's turn and how many contacts touch each object.
+    /// The base's turn and how many contacts touch each object.
     #[inline]
     pub(super) fn force_context(&self) -> ForceContext {
-        let rots = self.object_rotations();
         let dt = self.params.dt;
         // How fast the hand base turns (world), from the arm tracker's poses: a soft pad's
         // spin about the normal is its base's and its joints'.
@@ -199,7 +206,6 @@ impl Dfs {
             touching[b.object] += 1;
         }
         ForceContext {
-            rots,
             dt,
             soft,
             w_base,
@@ -245,7 +251,7 @@ impl Dfs {
     /// intensities its pad passes on, plus the stick spring's and the torsion's.
     #[inline]
     fn tip_push(&mut self, k: usize, frame: ContactFrame, o: usize, cx: &ForceContext) -> TipPush {
-        let rot = cx.rots[o];
+        let rot = self.rots[o];
         let rot_inv = rot.transpose();
         // The tangential damping the object's explicit step can carry, shared by the tips
         // touching it ([`STABLE_DAMPING`]): per tip, `c / m_eff` may not exceed this.
@@ -498,7 +504,7 @@ impl Dfs {
         };
         if in_contact {
             let tangential = split.transmitted - push.passed.component_mul(&p.contact_model.mask());
-            tip.passive_world = cx.rots[push.object]
+            tip.passive_world = self.rots[push.object]
                 * (push.frame.rot_b * Vector::new(tangential[0], tangential[1], 0.0));
         }
         in_contact

@@ -6,7 +6,6 @@
 use super::{Dfs, ObjectOutput, MAX_OBJECTS};
 use crate::math::{Real, Wrench};
 use crate::object::{external_wrench_b, integrate, shapes_overlap, ObjectState};
-use nalgebra::Rotation3;
 
 /// The first part of an object update that is not finite, if any.
 pub(super) fn not_finite(state: &ObjectState, f_ext: &Wrench) -> Option<&'static str> {
@@ -27,14 +26,13 @@ pub(super) fn not_finite(state: &ObjectState, f_ext: &Wrench) -> Option<&'static
 }
 
 impl Dfs {
-    /// Each object's orientation as a matrix (identity beyond the scene's objects).
+    /// Each object's orientation as a matrix, into [`Dfs`]'s `rots` (in place: the array is
+    /// 576 bytes, and returned by value it was copied twice a tick).
     #[inline]
-    pub(super) fn object_rotations(&self) -> [Rotation3<Real>; MAX_OBJECTS] {
-        let mut rots = [Rotation3::<Real>::identity(); MAX_OBJECTS];
-        for (r, o) in rots.iter_mut().zip(&self.objects[..self.n_objects]) {
+    pub(super) fn update_rotations(&mut self) {
+        for (r, o) in self.rots.iter_mut().zip(&self.objects[..self.n_objects]) {
             *r = o.state.pose.rotation.to_rotation_matrix();
         }
-        rots
     }
 
     /// Object `i`'s step: the wrench of the transmitting contacts on it through its grasp
