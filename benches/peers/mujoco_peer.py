@@ -85,26 +85,25 @@ def joint_values(dofs, q):
     return v
 
 
-def fingertips_model(scene):
+def hand_model(scene, name, object_body, whole_hand=False):
+    """The MJCF model named `name`: `object_body` (the object's free body), glove10 (with
+    `whole_hand`: its whole-hand contact geometry) on its forearm fixed where the scene has it,
+    a position actuator per DOF with the operator's stiffness and damping; and its data in the
+    scene's starting posture."""
     dofs = scene["dofs"]
     kp, kd = scene["kp"], scene["kd"]
     actuators = "\n".join(
         f'<position name="{d}" joint="{d}" kp="{kp[i]:.17g}" kv="{kd[i]:.17g}" ctrllimited="false"/>'
         for i, d in enumerate(dofs)
     )
-    xml = f"""<mujoco model="glove10_fingertips">
+    xml = f"""<mujoco model="{name}">
   <compiler angle="radian"/>
   <option timestep="{scene['dt']}" gravity="{f(*scene['gravity'])}" cone="elliptic"
           impratio="{IMPRATIO}" integrator="implicitfast"/>
   <worldbody>
-    <body name="object" pos="{f(*scene['ball_position'])}">
-      <freejoint/>
-      <geom name="object" type="sphere" size="{scene['ball_radius']:.17g}" mass="{scene['ball_mass']:.17g}"
-            friction="{scene['ball_mu']:.17g} 0 0" condim="3" contype="0" conaffinity="1"
-            solref="0.004 1"/>
-    </body>
+    {object_body}
     <body name="forearm" mocap="true" pos="{f(*scene['base_position'])}" quat="{f(*scene['base_quaternion'])}">
-      {glove10.glove10_body(["thumb", "index", "middle", "ring", "little"])}
+      {glove10.glove10_body(["thumb", "index", "middle", "ring", "little"], whole_hand=whole_hand)}
     </body>
   </worldbody>
   <equality>
@@ -119,6 +118,32 @@ def fingertips_model(scene):
     for name, value in joint_values(dofs, scene["q"]).items():
         data.qpos[model.joint(name).qposadr[0]] = value
     mujoco.mj_forward(model, data)
+    return model, data
+
+
+def grip_controls(scene):
+    """The operator's grip as the actuators' targets: `controls(step0, nstep)` for steps
+    step0.. is θ_set + g(t) τ_ff / K_p."""
+    q = np.array(scene["q"])
+    tau = np.array(scene["tau_ff"])
+    kp = np.array(scene["kp"])
+
+    def controls(step0, nstep):
+        t = (step0 + np.arange(nstep)) * scene["dt"]
+        grip = 1.0 + scene["grip_swing"] * np.sin(2.0 * math.pi * t / scene["grip_period_s"])
+        return q[None, :] + grip[:, None] * (tau / kp)[None, :]
+
+    return controls
+
+
+def fingertips_model(scene):
+    ball = f"""<body name="object" pos="{f(*scene['ball_position'])}">
+      <freejoint/>
+      <geom name="object" type="sphere" size="{scene['ball_radius']:.17g}" mass="{scene['ball_mass']:.17g}"
+            friction="{scene['ball_mu']:.17g} 0 0" condim="3" contype="0" conaffinity="1"
+            solref="0.004 1"/>
+    </body>"""
+    model, data = hand_model(scene, "glove10_fingertips", ball)
     # The MJCF hand is glove10: at the DFS's start the same fingertips touch the ball.
     centre = data.body("object").xpos
     for tip in scene["contact_tips"]:
@@ -126,54 +151,18 @@ def fingertips_model(scene):
         gap = np.linalg.norm(data.geom_xpos[geom] - centre) - scene["ball_radius"] - model.geom_size[geom][0]
         if abs(gap) >= 1e-6:
             sys.exit(f"mujoco_peer.py: fingertip {tip} starts {gap * 1e3:.3f} mm from the ball, not on it")
-    q = np.array(scene["q"])
-    tau = np.array(scene["tau_ff"])
-    kp = np.array(kp)
-
-    def controls(step0, nstep):
-        """Actuator targets for steps step0.. : θ_set + g(t) τ_ff / K_p."""
-        t = (step0 + np.arange(nstep)) * scene["dt"]
-        grip = 1.0 + scene["grip_swing"] * np.sin(2.0 * math.pi * t / scene["grip_period_s"])
-        return q[None, :] + grip[:, None] * (tau / kp)[None, :]
-
-    return model, data, controls
+    return model, data, grip_controls(scene)
 
 
 def power_grasp_model(scene):
-    dofs = scene["dofs"]
-    kp, kd = scene["kp"], scene["kd"]
-    actuators = "\n".join(
-        f'<position name="{d}" joint="{d}" kp="{kp[i]:.17g}" kv="{kd[i]:.17g}" ctrllimited="false"/>'
-        for i, d in enumerate(dofs)
-    )
     mu = scene["cylinder_mu"]
-    xml = f"""<mujoco model="glove10_power_grasp">
-  <compiler angle="radian"/>
-  <option timestep="{scene['dt']}" gravity="{f(*scene['gravity'])}" cone="elliptic"
-          impratio="{IMPRATIO}" integrator="implicitfast"/>
-  <worldbody>
-    <body name="object" pos="{f(*scene['cylinder_position'])}" quat="{f(*scene['cylinder_quaternion'])}">
+    cylinder = f"""<body name="object" pos="{f(*scene['cylinder_position'])}" quat="{f(*scene['cylinder_quaternion'])}">
       <freejoint/>
       <geom name="object" type="cylinder" size="{scene['cylinder_radius']:.17g} {scene['cylinder_half_height']:.17g}"
             mass="{scene['cylinder_mass']:.17g}" friction="{mu:.17g} 0 0" condim="3" contype="0"
             conaffinity="1" solref="0.004 1"/>
-    </body>
-    <body name="forearm" mocap="true" pos="{f(*scene['base_position'])}" quat="{f(*scene['base_quaternion'])}">
-      {glove10.glove10_body(["thumb", "index", "middle", "ring", "little"], whole_hand=True)}
-    </body>
-  </worldbody>
-  <equality>
-    {glove10.glove10_equalities()}
-  </equality>
-  <actuator>
-    {actuators}
-  </actuator>
-</mujoco>"""
-    model = mujoco.MjModel.from_xml_string(xml)
-    data = mujoco.MjData(model)
-    for name, value in joint_values(dofs, scene["q"]).items():
-        data.qpos[model.joint(name).qposadr[0]] = value
-    mujoco.mj_forward(model, data)
+    </body>"""
+    model, data = hand_model(scene, "glove10_power_grasp", cylinder, whole_hand=True)
     # The MJCF hand is glove10's whole-hand geometry: at the start the DFS's pressing contacts
     # touch the cylinder here too (within 1 mm: the DFS's contacts are springs pressed in).
     touching = set()
@@ -186,16 +175,7 @@ def power_grasp_model(scene):
     missing = [c for c in scene["contacts"] if c not in touching]
     if missing:
         sys.exit(f"mujoco_peer.py: power-grasp: {missing} do not touch the cylinder at the start")
-    q = np.array(scene["q"])
-    tau = np.array(scene["tau_ff"])
-    kp = np.array(kp)
-
-    def controls(step0, nstep):
-        t = (step0 + np.arange(nstep)) * scene["dt"]
-        grip = 1.0 + scene["grip_swing"] * np.sin(2.0 * math.pi * t / scene["grip_period_s"])
-        return q[None, :] + grip[:, None] * (tau / kp)[None, :]
-
-    return model, data, controls
+    return model, data, grip_controls(scene)
 
 
 def held(model, data, start_in_hand):

@@ -443,6 +443,22 @@ const INTERESTING_U64: [u64; 10] = [
 /// A record's place: its top-level index, and its index inside the chunk when it is inner.
 type Site = (usize, Option<usize>);
 
+/// A record of kind `opcode` picked at random (one `rng.pick` among them, none drawn when
+/// there is no such record), marking its chunk changed.
+fn pick_record<'f>(rng: &mut Rng, f: &'f mut McapFile, opcode: u8) -> Option<&'f mut Record> {
+    let sites = f.sites_with(opcode);
+    if sites.is_empty() {
+        return None;
+    }
+    let site = *rng.pick(&sites);
+    f.record_mut(site)
+}
+
+/// A message record picked at random as [`pick_record`] does, when it has a whole header.
+fn pick_message<'f>(rng: &mut Rng, f: &'f mut McapFile) -> Option<&'f mut Record> {
+    pick_record(rng, f, op::MESSAGE).filter(|r| r.body.len() >= MESSAGE_HEADER)
+}
+
 /// One MCAP-aware mutation. `others` are the other seed files (to splice records from).
 ///
 /// One table of mutation kinds, weighted by the ranges of `rng.below(18)`; each kind is a
@@ -471,53 +487,39 @@ pub fn mutate(rng: &mut Rng, f: &mut McapFile, others: &[McapFile]) {
 
 /// A message's JSON payload.
 fn mutate_message_payload(rng: &mut Rng, f: &mut McapFile) {
-    let msgs = f.sites_with(op::MESSAGE);
-    if msgs.is_empty() {
-        return;
-    }
-    let site = *rng.pick(&msgs);
-    if let Some(r) = f.record_mut(site) {
-        if r.body.len() >= MESSAGE_HEADER {
-            let payload = r.body.split_off(MESSAGE_HEADER);
-            let n = rng.range(1, 2);
-            let new = json::mutate_text(rng, &payload, &[], n);
-            r.body.extend_from_slice(&new);
-        }
+    if let Some(r) = pick_message(rng, f) {
+        let payload = r.body.split_off(MESSAGE_HEADER);
+        let n = rng.range(1, 2);
+        let new = json::mutate_text(rng, &payload, &[], n);
+        r.body.extend_from_slice(&new);
     }
 }
 
 /// A message header field: channel id, sequence, log time or publish time.
 fn mutate_message_header(rng: &mut Rng, f: &mut McapFile) {
-    let msgs = f.sites_with(op::MESSAGE);
-    if msgs.is_empty() {
-        return;
-    }
-    let site = *rng.pick(&msgs);
-    if let Some(r) = f.record_mut(site) {
-        if r.body.len() >= MESSAGE_HEADER {
-            match rng.below(4) {
-                0 => {
-                    let id = rng.below(12) as u16;
-                    r.body[0..2].copy_from_slice(&id.to_le_bytes());
-                }
-                1 => {
-                    let s = rng.next_u64() as u32;
-                    r.body[2..6].copy_from_slice(&s.to_le_bytes());
-                }
-                2 => {
-                    let t = if rng.one_in(2) {
-                        *rng.pick(&INTERESTING_U64)
-                    } else {
-                        let old = u64::from_le_bytes(r.body[6..14].try_into().unwrap_or_default());
-                        old.wrapping_add(rng.next_u64() % 2_000_000_000)
-                            .wrapping_sub(1_000_000_000)
-                    };
-                    r.body[6..14].copy_from_slice(&t.to_le_bytes());
-                }
-                _ => {
-                    let t = *rng.pick(&INTERESTING_U64);
-                    r.body[14..22].copy_from_slice(&t.to_le_bytes());
-                }
+    if let Some(r) = pick_message(rng, f) {
+        match rng.below(4) {
+            0 => {
+                let id = rng.below(12) as u16;
+                r.body[0..2].copy_from_slice(&id.to_le_bytes());
+            }
+            1 => {
+                let s = rng.next_u64() as u32;
+                r.body[2..6].copy_from_slice(&s.to_le_bytes());
+            }
+            2 => {
+                let t = if rng.one_in(2) {
+                    *rng.pick(&INTERESTING_U64)
+                } else {
+                    let old = u64::from_le_bytes(r.body[6..14].try_into().unwrap_or_default());
+                    old.wrapping_add(rng.next_u64() % 2_000_000_000)
+                        .wrapping_sub(1_000_000_000)
+                };
+                r.body[6..14].copy_from_slice(&t.to_le_bytes());
+            }
+            _ => {
+                let t = *rng.pick(&INTERESTING_U64);
+                r.body[14..22].copy_from_slice(&t.to_le_bytes());
             }
         }
     }
@@ -534,12 +536,7 @@ fn mutate_record_bytes(rng: &mut Rng, f: &mut McapFile, sites: &[Site]) {
 
 /// A metadata value (JSON-aware when it is JSON), a key, or an entry more.
 fn mutate_metadata(rng: &mut Rng, f: &mut McapFile) {
-    let metas = f.sites_with(op::METADATA);
-    if metas.is_empty() {
-        return;
-    }
-    let site = *rng.pick(&metas);
-    if let Some(r) = f.record_mut(site) {
+    if let Some(r) = pick_record(rng, f, op::METADATA) {
         if let Some((mut name, mut entries)) = parse_metadata(&r.body) {
             if entries.is_empty() || rng.one_in(8) {
                 entries.push(("object".to_owned(), "{}".to_owned()));
@@ -666,12 +663,7 @@ fn mutate_opcode(rng: &mut Rng, f: &mut McapFile, sites: &[Site]) {
 
 /// A channel's topic, encoding or schema id.
 fn mutate_channel(rng: &mut Rng, f: &mut McapFile) {
-    let chans = f.sites_with(op::CHANNEL);
-    if chans.is_empty() {
-        return;
-    }
-    let site = *rng.pick(&chans);
-    if let Some(r) = f.record_mut(site) {
+    if let Some(r) = pick_record(rng, f, op::CHANNEL) {
         let mut pos = 4;
         let (Some(mut topic), Some(mut enc)) =
             (read_str(&r.body, &mut pos), read_str(&r.body, &mut pos))

@@ -229,6 +229,30 @@ impl TestApp {
     }
 }
 
+/// The WebSocket URL of `app`'s live sessions (`/api/v1/live`).
+pub fn live_url(app: &TestApp) -> String {
+    format!("ws://{}/api/v1/live", app.addr)
+}
+
+/// The start message of a live glove10 session of scenario `s`'s objects and target, with the
+/// assistant set as `assist`.
+pub fn live_start(
+    s: &dfs_core::scenario::Scenario,
+    assist: services::live::AssistSettings,
+) -> services::live::StartMessage {
+    services::live::StartMessage {
+        hand: "glove10".into(),
+        object: s.object.clone(),
+        objects: s.objects.clone(),
+        target: s.target.clone(),
+        name: Some(s.name.clone()),
+        wrist: None,
+        assist,
+        calibration: None,
+        whole_hand: false,
+    }
+}
+
 /// The bytes of a session simulated from a built-in scenario (glove10, 1 kHz), `duration`
 /// simulated seconds or the script's length. Different seeds give different bytes.
 pub fn session_bytes(scenario: &str, seed: u64, duration: Option<f64>) -> Vec<u8> {

@@ -6,25 +6,32 @@
 use crate::common;
 use common::icms;
 
+use std::path::Path;
+
 use serde_json::Value;
 
 fn json(out: &str) -> Value {
     serde_json::from_str(out).unwrap_or_else(|e| panic!("not JSON ({e}): {out}"))
 }
 
-#[test]
-fn the_fingertips_scene_prints_its_figures_without_allocating() {
+/// `icms bench tick --scene SCENE --json --iterations 2000`'s report (the run must succeed).
+fn tick_bench(scene: &str) -> Value {
     let (c, out, e) = icms(&[
         "bench",
         "tick",
         "--scene",
-        "fingertips",
+        scene,
         "--json",
         "--iterations",
         "2000",
     ]);
     assert_eq!(c, 0, "{e}");
-    let r = json(&out);
+    json(&out)
+}
+
+#[test]
+fn the_fingertips_scene_prints_its_figures_without_allocating() {
+    let r = tick_bench("fingertips");
     for field in ["median_ns", "p99_ns", "allocations_per_tick"] {
         assert!(r[field].is_number(), "no {field}: {r}");
     }
@@ -38,34 +45,14 @@ fn the_fingertips_scene_prints_its_figures_without_allocating() {
 
 #[test]
 fn the_frozen_scene_of_issue_2_still_runs() {
-    let (c, out, e) = icms(&[
-        "bench",
-        "tick",
-        "--scene",
-        "frozen",
-        "--json",
-        "--iterations",
-        "2000",
-    ]);
-    assert_eq!(c, 0, "{e}");
-    let r = json(&out);
+    let r = tick_bench("frozen");
     assert_eq!(r["allocations_per_tick"].as_f64(), Some(0.0), "{r}");
     assert_eq!(r["contacts"], 4, "{r}");
 }
 
 #[test]
 fn the_power_grasp_scene_holds_the_cylinder_with_whole_hand_contact_without_allocating() {
-    let (c, out, e) = icms(&[
-        "bench",
-        "tick",
-        "--scene",
-        "power-grasp",
-        "--json",
-        "--iterations",
-        "2000",
-    ]);
-    assert_eq!(c, 0, "{e}");
-    let r = json(&out);
+    let r = tick_bench("power-grasp");
     for field in ["median_ns", "p99_ns", "allocations_per_tick"] {
         assert!(r[field].is_number(), "no {field}: {r}");
     }
@@ -125,34 +112,30 @@ fn same(a: &Value, b: &Value, at: &str) {
     }
 }
 
-#[test]
-fn the_mujoco_peer_reads_the_dfs_scene() {
-    let (c, out, e) = icms(&["bench", "tick", "--scene", "fingertips", "--describe"]);
+/// The MuJoCo peer's scene file `benches/peers/{file}` is what `icms bench tick --scene
+/// {scene} --describe` says today.
+fn assert_peer_scene_is_the_dfss(scene: &str, file: &str) {
+    let (c, out, e) = icms(&["bench", "tick", "--scene", scene, "--describe"]);
     assert_eq!(c, 0, "{e}");
-    let path = concat!(
-        env!("CARGO_MANIFEST_DIR"),
-        "/../benches/peers/fingertips_scene.json"
-    );
-    let file = std::fs::read_to_string(path).unwrap();
+    let path = Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../benches/peers")
+        .join(file);
+    let text = std::fs::read_to_string(&path).unwrap();
     same(
         &json(&out),
-        &json(&file),
-        "benches/peers/fingertips_scene.json (rewrite it with `icms bench tick --scene fingertips --describe`)",
+        &json(&text),
+        &format!(
+            "benches/peers/{file} (rewrite it with `icms bench tick --scene {scene} --describe`)"
+        ),
     );
 }
 
 #[test]
+fn the_mujoco_peer_reads_the_dfs_scene() {
+    assert_peer_scene_is_the_dfss("fingertips", "fingertips_scene.json");
+}
+
+#[test]
 fn the_mujoco_peers_power_grasp_scene_is_the_dfss() {
-    let (c, out, e) = icms(&["bench", "tick", "--scene", "power-grasp", "--describe"]);
-    assert_eq!(c, 0, "{e}");
-    let path = concat!(
-        env!("CARGO_MANIFEST_DIR"),
-        "/../benches/peers/power_grasp_scene.json"
-    );
-    let file = std::fs::read_to_string(path).unwrap();
-    same(
-        &json(&out),
-        &json(&file),
-        "benches/peers/power_grasp_scene.json (rewrite it with `icms bench tick --scene power-grasp --describe`)",
-    );
+    assert_peer_scene_is_the_dfss("power-grasp", "power_grasp_scene.json");
 }

@@ -6,11 +6,11 @@
 use crate::common;
 use crate::s3_server;
 
-use std::io::Read;
 use std::path::Path;
 use std::process::Command;
 use std::time::{Duration, Instant};
 
+use common::exit_within;
 use common::server::{unchunk, Running};
 use s3_server::{S3Server, BUCKET};
 
@@ -96,24 +96,11 @@ fn an_unreachable_bucket_at_start_up_is_an_error_naming_it_within_seconds() {
     let mut child = serve(&tmp.path().join("data"), "s3://icms-test/x", &s3)
         .spawn()
         .unwrap();
-    let status = loop {
-        if let Some(status) = child.try_wait().unwrap() {
-            break status;
-        }
-        if started.elapsed() > Duration::from_secs(60) {
-            let _ = child.kill();
-            let _ = child.wait();
-            panic!("icms serve still ran after 60 s with its bucket unreachable");
-        }
-        std::thread::sleep(Duration::from_millis(50));
-    };
-    let mut err = String::new();
-    child
-        .stderr
-        .take()
-        .unwrap()
-        .read_to_string(&mut err)
-        .unwrap();
+    let (status, err) = exit_within(
+        &mut child,
+        Duration::from_secs(60),
+        "icms serve with its bucket unreachable",
+    );
     assert!(!status.success(), "{err}");
     assert!(err.contains("s3://icms-test/x"), "{err}");
     assert!(err.contains(&format!("127.0.0.1:{}", s3.port)), "{err}");

@@ -4,11 +4,12 @@
 
 use crate::common;
 
-use std::io::{Read, Write};
 use std::path::Path;
 use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
 
+use common::exit_within;
+use common::pg::{fresh_schema, postgres_or_skip};
 use common::server::Running;
 
 const ICMS: &str = env!("CARGO_BIN_EXE_icms");
@@ -27,24 +28,8 @@ fn serve_to_the_end(data: &Path, args: &[&str], limit: Duration) -> (i32, String
         .stderr(Stdio::piped())
         .spawn()
         .unwrap();
-    loop {
-        if let Some(status) = child.try_wait().unwrap() {
-            let mut err = String::new();
-            child
-                .stderr
-                .take()
-                .unwrap()
-                .read_to_string(&mut err)
-                .unwrap();
-            return (status.code().unwrap_or(-1), err, start.elapsed());
-        }
-        if start.elapsed() > limit {
-            child.kill().unwrap();
-            let _ = child.wait();
-            panic!("icms serve {args:?} still ran after {limit:?}");
-        }
-        std::thread::sleep(Duration::from_millis(50));
-    }
+    let (status, err) = exit_within(&mut child, limit, &format!("icms serve {args:?}"));
+    (status.code().unwrap_or(-1), err, start.elapsed())
 }
 
 #[test]
@@ -119,17 +104,9 @@ fn a_second_server_on_one_sqlite_data_directory_is_refused_naming_the_first() {
 
 #[test]
 fn a_server_on_postgres_stores_in_it_and_a_restart_finds_the_same_rows() {
-    let Ok(base) = std::env::var("ICMS_TEST_POSTGRES_URL") else {
-        // scripts/test sets both: there a missing server fails the test instead of skipping it.
-        assert!(
-            std::env::var_os("ICMS_REQUIRE_TOOLS").is_none_or(|v| v.is_empty()),
-            "ICMS_TEST_POSTGRES_URL is not set but ICMS_REQUIRE_TOOLS is"
-        );
-        let _ = writeln!(
-            std::io::stderr(),
-            "SKIPPED a_server_on_postgres_stores_in_it_and_a_restart_finds_the_same_rows: \
-             ICMS_TEST_POSTGRES_URL is not set (scripts/test sets it)"
-        );
+    let Some(base) =
+        postgres_or_skip("a_server_on_postgres_stores_in_it_and_a_restart_finds_the_same_rows")
+    else {
         return;
     };
     let tmp = tempfile::tempdir().unwrap();
@@ -139,21 +116,7 @@ fn a_server_on_postgres_stores_in_it_and_a_restart_finds_the_same_rows() {
         .enable_all()
         .build()
         .unwrap();
-    rt.block_on(async {
-        use sqlx::Connection as _;
-        let mut conn = sqlx::PgConnection::connect(&base).await.unwrap();
-        sqlx::query(&format!("DROP SCHEMA IF EXISTS {schema} CASCADE"))
-            .execute(&mut conn)
-            .await
-            .unwrap();
-        sqlx::query(&format!("CREATE SCHEMA {schema}"))
-            .execute(&mut conn)
-            .await
-            .unwrap();
-        conn.close().await.unwrap();
-    });
-    let sep = if base.contains('?') { '&' } else { '?' };
-    let url = format!("{base}{sep}options=-c%20search_path%3D{schema}");
+    let url = fresh_schema(&rt, &base, &schema);
     let data = tmp.path().join("blobs");
     let ingested = {
         // With the demo: the server seeds the empty data base with simulated sessions.

@@ -6,12 +6,12 @@
 
 use crate::common;
 
-use std::io::Write;
 use std::net::{Shutdown, TcpListener, TcpStream};
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 
+use common::pg::{fresh_schema, postgres_or_skip};
 use common::server::Running;
 
 /// Relays 127.0.0.1:`port` to `target` while up.
@@ -101,17 +101,7 @@ impl Drop for Relay {
 
 #[test]
 fn losing_the_data_base_gives_503_and_the_server_recovers_when_it_is_back() {
-    let Ok(base) = std::env::var("ICMS_TEST_POSTGRES_URL") else {
-        // scripts/test sets both: there a missing server fails the test instead of skipping it.
-        assert!(
-            std::env::var_os("ICMS_REQUIRE_TOOLS").is_none_or(|v| v.is_empty()),
-            "ICMS_TEST_POSTGRES_URL is not set but ICMS_REQUIRE_TOOLS is"
-        );
-        let _ = writeln!(
-            std::io::stderr(),
-            "SKIPPED losing_the_data_base_gives_503: ICMS_TEST_POSTGRES_URL is not set \
-             (scripts/test sets it)"
-        );
+    let Some(base) = postgres_or_skip("losing_the_data_base_gives_503") else {
         return;
     };
     // postgres://user:pw@HOST:PORT/db → the same through the relay.
@@ -123,17 +113,8 @@ fn losing_the_data_base_gives_503_and_the_server_recovers_when_it_is_back() {
         .enable_all()
         .build()
         .unwrap();
-    rt.block_on(async {
-        use sqlx::Connection as _;
-        let mut conn = sqlx::PgConnection::connect(&base).await.unwrap();
-        for q in [
-            format!("DROP SCHEMA IF EXISTS {schema} CASCADE"),
-            format!("CREATE SCHEMA {schema}"),
-        ] {
-            sqlx::query(&q).execute(&mut conn).await.unwrap();
-        }
-        conn.close().await.unwrap();
-    });
+    // The schema made directly; the server's URL for it goes through the relay.
+    fresh_schema(&rt, &base, &schema);
     let sep = if path.contains('?') { '&' } else { '?' };
     let url = format!(
         "{scheme_user}@127.0.0.1:{}/{path}{sep}options=-c%20search_path%3D{schema}",

@@ -2,7 +2,7 @@
 //! binary as a user runs it, the files it writes read back with the library.
 
 use crate::common;
-use common::icms;
+use common::{icms, simulate_in};
 
 use serde_json::Value;
 use services::session::read_session;
@@ -213,16 +213,7 @@ fn skill_phases(path: &Path) -> Vec<Vec<String>> {
 fn export_glove_then_import_glove_finds_the_same_skills() {
     let dir = tempfile::tempdir().unwrap();
     let session = dir.path().join("s.mcap");
-    let (code, _, err) = icms(&[
-        "simulate",
-        "--scenario",
-        "sphere-lift",
-        "--seed",
-        "1",
-        "--out",
-        p(&session),
-    ]);
-    assert_eq!(code, 0, "{err}");
+    simulate_in(dir.path(), "sphere-lift", &["--seed", "1"], p(&session));
     let csv = dir.path().join("s.csv");
     let (code, out, err) = icms(&["export-glove", p(&session), "--out", p(&csv), "--json"]);
     assert_eq!(code, 0, "{err}");
@@ -369,14 +360,7 @@ fn skill_types(path: &Path) -> Vec<String> {
 fn a_power_grasp_exported_says_to_import_it_with_the_whole_hand_and_that_gives_its_skill() {
     let dir = tempfile::tempdir().unwrap();
     let session = dir.path().join("power.mcap");
-    let (code, _, err) = icms(&[
-        "simulate",
-        "--scenario",
-        "cylinder-power-grasp",
-        "--out",
-        p(&session),
-    ]);
-    assert_eq!(code, 0, "{err}");
+    simulate_in(dir.path(), "cylinder-power-grasp", &[], p(&session));
     let types = skill_types(&session);
     assert!(
         types.iter().any(|t| t.starts_with("power")),

@@ -191,6 +191,33 @@ mod tests {
         crate::fixtures::paper_sphere_contacts()
     }
 
+    /// The paper's sphere grasp with friction `mu` and `load`, in a unit of length `s` times
+    /// smaller than the metre (`s` = 1000: millimetres): the contacts' positions, μ_t
+    /// (5 mm) and the load's moments `s` times larger. Shared by the tests that the force
+    /// distributions do not depend on the unit.
+    pub(crate) fn paper_grasp_in_unit(
+        s: Real,
+        mu: Real,
+        load: &Wrench,
+    ) -> (Vec<ContactFrame>, Friction, Wrench) {
+        let contacts = paper_contacts()
+            .iter()
+            .map(|c| ContactFrame {
+                p_b: c.p_b * s,
+                rot_b: c.rot_b,
+            })
+            .collect();
+        let friction = Friction {
+            mu,
+            mu_torsion: 0.005 * s,
+        };
+        let mut l = *load;
+        for k in 3..6 {
+            l[k] *= s;
+        }
+        (contacts, friction, l)
+    }
+
     /// Friction of the tests' soft fingers: μ = 0.8, μ_t = 5 mm.
     fn soft() -> Friction {
         Friction {
@@ -270,22 +297,8 @@ mod tests {
         let load = Wrench::new(0.4, -0.3, 9.81, 0.05, -0.02, 0.03);
         let mut by_unit = Vec::new();
         for s in [1.0, 1000.0] {
-            let contacts: Vec<_> = paper_contacts()
-                .iter()
-                .map(|c| ContactFrame {
-                    p_b: c.p_b * s,
-                    rot_b: c.rot_b,
-                })
-                .collect();
-            let friction = Friction {
-                mu: 0.8,
-                mu_torsion: 0.005 * s,
-            };
+            let (contacts, friction, l) = paper_grasp_in_unit(s, 0.8, &load);
             let g = GraspMatrix::new(&contacts, ContactModel::SoftFinger, &friction);
-            let mut l = load;
-            for k in 3..6 {
-                l[k] *= s;
-            }
             let mut c = [Intensity::zeros(); 4];
             g.distribute(&l, &mut c);
             assert!((g.wrench(&c) - l).norm() < 1e-9 * (1.0 + l.norm()));

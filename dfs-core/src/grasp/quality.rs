@@ -307,9 +307,6 @@ impl QualityJob {
             force_closure: false,
             torque_scale: self.rho,
         };
-        let numerical = |why: &str| {
-            DfsError::invalid("grasp wrench space", format!("convex hull failed: {why}"))
-        };
         loop {
             match std::mem::replace(&mut self.state, JobState::Start) {
                 JobState::Done(q) => {
@@ -321,10 +318,9 @@ impl QualityJob {
                         self.state = JobState::Done(not_closure);
                         continue;
                     }
-                    self.state = match hull::start(&self.prims, self.tol) {
-                        Ok(b) => JobState::Rounds(Box::new(b)),
-                        Err(hull::HullError::Flat) => JobState::Done(not_closure),
-                        Err(hull::HullError::Numerical(why)) => return Err(numerical(why)),
+                    self.state = match spans(hull::start(&self.prims, self.tol))? {
+                        Some(b) => JobState::Rounds(Box::new(b)),
+                        None => JobState::Done(not_closure),
                     };
                     // The initial simplex is a part of its own.
                     if budget != usize::MAX && matches!(self.state, JobState::Rounds(_)) {
@@ -332,13 +328,9 @@ impl QualityJob {
                     }
                 }
                 JobState::Rounds(mut b) => {
-                    let done = match b.advance(&self.prims, budget) {
-                        Ok(done) => done,
-                        Err(hull::HullError::Flat) => {
-                            self.state = JobState::Done(not_closure);
-                            continue;
-                        }
-                        Err(hull::HullError::Numerical(why)) => return Err(numerical(why)),
+                    let Some(done) = spans(b.advance(&self.prims, budget))? else {
+                        self.state = JobState::Done(not_closure);
+                        continue;
                     };
                     if !done {
                         self.state = JobState::Rounds(b);
@@ -350,20 +342,16 @@ impl QualityJob {
                     }
                 }
                 JobState::Built(mut b) => {
-                    let done = match b.check(&self.prims, budget) {
-                        Ok(done) => done,
-                        Err(hull::HullError::Flat) => {
-                            self.state = JobState::Done(not_closure);
-                            continue;
-                        }
-                        Err(hull::HullError::Numerical(why)) => return Err(numerical(why)),
+                    let Some(done) = spans(b.check(&self.prims, budget))? else {
+                        self.state = JobState::Done(not_closure);
+                        continue;
                     };
                     if !done {
                         self.state = JobState::Built(b);
                         return Ok(None);
                     }
                     let Some((volume, min_offset)) = b.metrics() else {
-                        return Err(numerical("the checks did not finish"));
+                        return Err(hull_failed("the checks did not finish"));
                     };
                     // Its arrays go to the next hull built on this thread.
                     drop(b.into_hull());
@@ -378,6 +366,21 @@ impl QualityJob {
             }
         }
     }
+}
+
+/// A step of the hull's build: `Some` of what it gives, `None` when the points turn out not to
+/// span six dimensions (no force closure), the error when rounding broke the hull.
+fn spans<T>(step: std::result::Result<T, hull::HullError>) -> Result<Option<T>> {
+    match step {
+        Ok(v) => Ok(Some(v)),
+        Err(hull::HullError::Flat) => Ok(None),
+        Err(hull::HullError::Numerical(why)) => Err(hull_failed(why)),
+    }
+}
+
+/// The error of a convex hull that failed its checks.
+fn hull_failed(why: &str) -> DfsError {
+    DfsError::invalid("grasp wrench space", format!("convex hull failed: {why}"))
 }
 
 #[cfg(test)]

@@ -356,9 +356,9 @@ fn closest_on_cylinder(p: &Vector, r: Real, hh: Real) -> ClosestPoint {
 mod tests {
     use super::*;
 
-    #[test]
-    fn closest_points_lie_on_the_surface_for_every_shape() {
-        let shapes = [
+    /// One shape of each kind.
+    fn shapes() -> [Shape; 3] {
+        [
             Shape::Sphere { radius: 0.1 },
             Shape::Box {
                 half_extents: [0.05, 0.03, 0.08],
@@ -367,14 +367,18 @@ mod tests {
                 radius: 0.04,
                 half_height: 0.1,
             },
-        ];
+        ]
+    }
+
+    #[test]
+    fn closest_points_lie_on_the_surface_for_every_shape() {
         let pts = [
             Vector::new(0.2, 0.01, -0.03),
             Vector::new(0.0, 0.0, 0.3),
             Vector::new(0.01, 0.005, 0.002),
             Vector::new(-0.1, 0.1, 0.2),
         ];
-        for s in shapes {
+        for s in shapes() {
             for p in pts {
                 let ClosestPoint {
                     distance: d,
@@ -412,17 +416,7 @@ mod tests {
 
     #[test]
     fn a_shape_goes_to_its_list_of_sizes_and_back() {
-        let shapes = [
-            Shape::Sphere { radius: 0.1 },
-            Shape::Box {
-                half_extents: [0.05, 0.03, 0.08],
-            },
-            Shape::Cylinder {
-                radius: 0.04,
-                half_height: 0.1,
-            },
-        ];
-        for s in shapes {
+        for s in shapes() {
             assert_eq!(Shape::from_sizes(s.kind(), &s.sizes(), "size"), Ok(s));
         }
         let e = Shape::from_sizes(ShapeKind::Box, &[0.1], "skill.object.size").unwrap_err();

@@ -3,6 +3,7 @@
 //! Run in release (`cargo test --release -p services --test integration -- assist_phase:: --nocapture`
 //! prints the numbers).
 
+use crate::common::Lcg;
 use dfs_core::hand::HandModel;
 use dfs_core::operator::Simulation;
 use dfs_core::scenario::Scenario;
@@ -68,18 +69,6 @@ fn run(name: &str, seed: u64) -> Run {
 fn feed<'a>(samples: impl IntoIterator<Item = &'a PhaseObservation>) -> Vec<PhaseChange> {
     let mut est = OnlinePhase::new(&SegmentParams::default());
     samples.into_iter().filter_map(|o| est.push(o)).collect()
-}
-
-/// Deterministic pseudo-random numbers in [0, 1).
-struct Lcg(u64);
-impl Lcg {
-    fn next(&mut self) -> f64 {
-        self.0 = self
-            .0
-            .wrapping_mul(6364136223846793005)
-            .wrapping_add(1442695040888963407);
-        (self.0 >> 11) as f64 / (1u64 << 53) as f64
-    }
 }
 
 /// Every `step`th tick as a wrist tracker would give it: 5 % of the samples dropped, up to

@@ -28,10 +28,7 @@ use services::session::*;
 fn sphere_session() -> &'static (tempfile::TempDir, PathBuf) {
     static SESSION: OnceLock<(tempfile::TempDir, PathBuf)> = OnceLock::new();
     SESSION.get_or_init(|| {
-        let dir = tempfile::tempdir().unwrap();
-        let path = dir.path().join("sphere.mcap");
-        let scenario = Scenario::builtin("sphere-lift", 3).unwrap();
-        record_simulation(&scenario, None, &path, |_, _| {}).unwrap();
+        let (dir, path, _) = crate::common::sphere_lift_session(3, None);
         (dir, path)
     })
 }

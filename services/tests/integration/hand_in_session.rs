@@ -4,15 +4,12 @@
 //! reader and by the reference Python reader; a `/hand` message that is not a SceneUpdate is
 //! refused.
 
-use crate::interpreter;
-
 use std::collections::{BTreeMap, BTreeSet};
 use std::path::{Path, PathBuf};
 use std::sync::OnceLock;
 
 use dfs_core::hand::{builtin_hand, builtin_spec, link_shapes, HandModel, HandSpec};
 use dfs_core::object::{RigidObject, Shape};
-use dfs_core::scenario::Scenario;
 use foxglove::messages as fg;
 use foxglove::Encode;
 use prost::Message;
@@ -25,13 +22,7 @@ const SECONDS: f64 = 1.5;
 /// One `sphere-lift` session (glove10, seed 3, 1.5 s), recorded once for all tests.
 fn session() -> &'static (tempfile::TempDir, PathBuf, RecordSummary) {
     static SESSION: OnceLock<(tempfile::TempDir, PathBuf, RecordSummary)> = OnceLock::new();
-    SESSION.get_or_init(|| {
-        let dir = tempfile::tempdir().unwrap();
-        let path = dir.path().join("sphere.mcap");
-        let scenario = Scenario::builtin("sphere-lift", 3).unwrap();
-        let summary = record_simulation(&scenario, Some(SECONDS), &path, |_, _| {}).unwrap();
-        (dir, path, summary)
-    })
+    SESSION.get_or_init(|| crate::common::sphere_lift_session(3, Some(SECONDS)))
 }
 
 /// The attachments of an MCAP file: name → (media type, data).
@@ -193,22 +184,11 @@ fn the_hand_is_drawn_on_hand_once_a_second_as_frame_locked_entities_in_its_link_
 #[test]
 fn the_python_reader_decodes_hand_and_sees_the_urdf_attachment() {
     let (_, path, summary) = session();
-    let Some(python) = interpreter::python_with(&["mcap", "zstandard", "lz4", "mcap_protobuf"])
+    let Some(report) =
+        crate::common::python_mcap_report(path, &["mcap", "zstandard", "lz4", "mcap_protobuf"])
     else {
         return;
     };
-    let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("../tests/python/read_mcap.py");
-    let output = std::process::Command::new(python)
-        .arg(script)
-        .arg(path)
-        .output()
-        .expect("running the Python MCAP reader");
-    assert!(
-        output.status.success(),
-        "{}",
-        String::from_utf8_lossy(&output.stderr)
-    );
-    let report: serde_json::Value = serde_json::from_slice(&output.stdout).unwrap();
     let n = summary.write.messages_per_topic[TOPIC_HAND];
     assert_eq!(report["decoded"][TOPIC_HAND], serde_json::json!(n));
     assert_eq!(report["schemas"][TOPIC_HAND], "foxglove.SceneUpdate");

@@ -13,10 +13,6 @@ use common::*;
 use services::foxglove::*;
 use services::mcap_io::{salvage, SessionWriter};
 
-fn script() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("../tests/python/read_mcap.py")
-}
-
 /// The interpreter with the reference MCAP reader (see `interpreter::python_with`).
 fn python() -> Option<PathBuf> {
     interpreter::python_with(&["mcap", "zstandard", "lz4"])
@@ -24,20 +20,7 @@ fn python() -> Option<PathBuf> {
 
 /// Runs the checker; `None` (with a note) when the tests run without their set-up.
 fn python_read(file: &Path) -> Option<serde_json::Value> {
-    let python = python()?;
-    let output = Command::new(python)
-        .arg(script())
-        .arg(file)
-        .output()
-        .expect("running the Python MCAP reader");
-    assert!(
-        output.status.success(),
-        "read_mcap.py failed ({}): {}{}",
-        output.status,
-        String::from_utf8_lossy(&output.stderr),
-        String::from_utf8_lossy(&output.stdout)
-    );
-    Some(serde_json::from_slice(&output.stdout).expect("read_mcap.py prints JSON"))
+    python_mcap_report(file, &["mcap", "zstandard", "lz4"])
 }
 
 fn write_example(path: &Path, ticks: u64) -> BTreeMap<&'static str, u64> {
@@ -122,7 +105,7 @@ fn python_checker_fails_on_a_truncated_file() {
     std::fs::write(&cut, &bytes[..bytes.len() / 2]).unwrap();
     let Some(python) = python() else { return };
     let output = Command::new(python)
-        .arg(script())
+        .arg(read_mcap_script())
         .arg(&cut)
         .output()
         .expect("running the Python MCAP reader");

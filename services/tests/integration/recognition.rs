@@ -1,10 +1,35 @@
 //! Recognition (issue 20) on simulated sessions.
 
 use dfs_core::scenario::Scenario;
-use services::assist::evaluate::{evaluate, EvalSetup};
+use std::ops::RangeInclusive;
+
+use services::assist::evaluate::{evaluate, EvalSetup, Evaluation};
 use services::assist::recognise::RecogniserParams;
 
 const KINDS: [&str; 3] = ["sphere-lift", "box-pinch-lift", "cylinder-power-grasp"];
+
+/// Variants `seeds` of each of the built-in scenarios `kinds`.
+fn variants(kinds: &[&str], seeds: RangeInclusive<u64>) -> Vec<Scenario> {
+    kinds
+        .iter()
+        .flat_map(|k| seeds.clone().map(move |s| Scenario::variant(k, s).unwrap()))
+        .collect()
+}
+
+/// The sessions of `test` recognised with `params` against the skills stored from `train`, in a
+/// data base of their own.
+fn evaluated(train: Vec<Scenario>, test: Vec<Scenario>, params: RecogniserParams) -> Evaluation {
+    let dir = tempfile::tempdir().unwrap();
+    evaluate(EvalSetup {
+        train,
+        test,
+        dir: dir.path(),
+        params,
+        cost_skills: None,
+        progress: &mut |_, _| {},
+    })
+    .unwrap()
+}
 
 /// Skills of three grasp kinds stored from seeds 1-3; seeds 101-102 recognised as they stream:
 /// the target and a skill of the kind named 200 ms before the first contact, and a kind left
@@ -12,22 +37,11 @@ const KINDS: [&str; 3] = ["sphere-lift", "box-pinch-lift", "cylinder-power-grasp
 /// the same on varied operators and more seeds.)
 #[test]
 fn grasps_are_anticipated_and_an_absent_kind_is_unknown_and_learned() {
-    let dir = tempfile::tempdir().unwrap();
-    let scen = |seeds: std::ops::RangeInclusive<u64>| {
-        KINDS
-            .iter()
-            .flat_map(|k| seeds.clone().map(move |s| Scenario::variant(k, s).unwrap()))
-            .collect::<Vec<_>>()
-    };
-    let e = evaluate(EvalSetup {
-        train: scen(1..=3),
-        test: scen(101..=102),
-        dir: dir.path(),
-        params: RecogniserParams::default(),
-        cost_skills: None,
-        progress: &mut |_, _| {},
-    })
-    .unwrap();
+    let e = evaluated(
+        variants(&KINDS, 1..=3),
+        variants(&KINDS, 101..=102),
+        RecogniserParams::default(),
+    );
     let report = serde_json::to_string_pretty(&e).unwrap();
     assert_eq!(e.sessions.len(), 6);
     assert!(e.anticipated_fraction >= 0.9, "{report}");
@@ -82,27 +96,16 @@ fn templates_from_kept_messages_equal_those_of_a_second_read() {
 #[test]
 fn a_grasp_stage_decided_a_part_at_a_time_names_what_one_decided_at_once_names() {
     use services::assist::recognise::{Stage, Verdict};
-    let scen = |seeds: std::ops::RangeInclusive<u64>| {
-        KINDS
-            .iter()
-            .flat_map(|k| seeds.clone().map(move |s| Scenario::variant(k, s).unwrap()))
-            .collect::<Vec<_>>()
-    };
     let grasp_verdicts = |grasp_budget: usize, grasp_slice: usize| {
-        let dir = tempfile::tempdir().unwrap();
-        let e = evaluate(EvalSetup {
-            train: scen(1..=2),
-            test: scen(201..=201),
-            dir: dir.path(),
-            params: RecogniserParams {
+        let e = evaluated(
+            variants(&KINDS, 1..=2),
+            variants(&KINDS, 201..=201),
+            RecogniserParams {
                 grasp_budget,
                 grasp_slice,
                 ..RecogniserParams::default()
             },
-            cost_skills: None,
-            progress: &mut |_, _| {},
-        })
-        .unwrap();
+        );
         e.sessions
             .iter()
             .map(|s| {
@@ -154,21 +157,12 @@ fn a_grasp_stage_decided_a_part_at_a_time_names_what_one_decided_at_once_names()
 #[test]
 fn a_power_grasps_query_counts_its_palm_and_phalanges_as_its_stored_skill_does() {
     use services::assist::recognise::{Stage, Verdict};
-    let scen = |seeds: std::ops::RangeInclusive<u64>| {
-        seeds
-            .map(|s| Scenario::variant("cylinder-power-grasp", s).unwrap())
-            .collect::<Vec<_>>()
-    };
-    let dir = tempfile::tempdir().unwrap();
-    let e = evaluate(EvalSetup {
-        train: scen(1..=4),
-        test: scen(1..=4),
-        dir: dir.path(),
-        params: RecogniserParams::default(),
-        cost_skills: None,
-        progress: &mut |_, _| {},
-    })
-    .unwrap();
+    let power = ["cylinder-power-grasp"];
+    let e = evaluated(
+        variants(&power, 1..=4),
+        variants(&power, 1..=4),
+        RecogniserParams::default(),
+    );
     let report = serde_json::to_string_pretty(&e).unwrap();
     for s in &e.sessions {
         let own = s

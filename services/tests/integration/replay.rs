@@ -17,8 +17,6 @@ use services::session::{
 };
 use services::RecordingError;
 
-use crate::interpreter;
-
 /// The first skill of a built-in scenario recorded with glove10 (seed 0).
 fn recorded_skill(scenario: &str) -> SkillSpec {
     let dir = tempfile::tempdir().unwrap();
@@ -199,20 +197,9 @@ fn a_box_pinch_lift_recorded_with_glove10_replays_on_the_gripper_into_an_mcap() 
 
     // The reference Python reader decodes every message of every topic of the replay from the
     // schemas inside the file (`scripts/test` installs it; without it this check is skipped).
-    if let Some(python) = interpreter::python_with(&["mcap", "zstandard", "lz4", "mcap_protobuf"]) {
-        let script =
-            std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../tests/python/read_mcap.py");
-        let output = std::process::Command::new(python)
-            .arg(script)
-            .arg(&out)
-            .output()
-            .unwrap();
-        assert!(
-            output.status.success(),
-            "{}",
-            String::from_utf8_lossy(&output.stderr)
-        );
-        let read: serde_json::Value = serde_json::from_slice(&output.stdout).unwrap();
+    if let Some(read) =
+        crate::common::python_mcap_report(&out, &["mcap", "zstandard", "lz4", "mcap_protobuf"])
+    {
         for (topic, n) in &counts {
             assert_eq!(read["decoded"][topic], serde_json::json!(n), "{topic}");
         }

@@ -3,6 +3,7 @@
 
 use std::sync::{Mutex, OnceLock};
 
+use crate::common::Lcg;
 use dfs_core::scenario::Scenario;
 use services::segmentation::{score, segment, PhaseSpan, SegmentParams, Segmentation};
 use services::session::{read_session, record_simulation, Session};
@@ -58,18 +59,6 @@ fn describe(seg: &Segmentation, s: &Session) -> String {
         })
         .collect();
     format!("found: {}\ntruth: {}", f.join(", "), t.join(", "))
-}
-
-/// Deterministic pseudo-random numbers in [0, 1).
-struct Lcg(u64);
-impl Lcg {
-    fn next(&mut self) -> f64 {
-        self.0 = self
-            .0
-            .wrapping_mul(6364136223846793005)
-            .wrapping_add(1442695040888963407);
-        (self.0 >> 11) as f64 / (1u64 << 53) as f64
-    }
 }
 
 #[test]

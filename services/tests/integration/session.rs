@@ -3,10 +3,9 @@
 //! deterministic; imports of glove recordings; failures leave readable files.
 
 use crate::common;
-use crate::interpreter;
 
 use std::collections::BTreeMap;
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 use std::sync::OnceLock;
 
 use common::rejects;
@@ -24,13 +23,7 @@ const SECONDS: f64 = 2.5;
 /// One simulated `sphere-lift` session (seed 7, 2.5 s), recorded once for all tests.
 fn sphere_session() -> &'static (tempfile::TempDir, PathBuf, RecordSummary) {
     static SESSION: OnceLock<(tempfile::TempDir, PathBuf, RecordSummary)> = OnceLock::new();
-    SESSION.get_or_init(|| {
-        let dir = tempfile::tempdir().unwrap();
-        let path = dir.path().join("sphere.mcap");
-        let scenario = Scenario::builtin("sphere-lift", 7).unwrap();
-        let summary = record_simulation(&scenario, Some(SECONDS), &path, |_, _| {}).unwrap();
-        (dir, path, summary)
-    })
+    SESSION.get_or_init(|| crate::common::sphere_lift_session(7, Some(SECONDS)))
 }
 
 fn scenario_object(name: &str) -> dfs_core::scenario::ScenarioObject {
@@ -265,24 +258,13 @@ fn the_icms_schemas_reject_a_message_missing_a_field() {
 #[test]
 fn the_python_reader_reads_every_message_of_a_simulated_session() {
     let (_, path, summary) = sphere_session();
-    let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("../tests/python/read_mcap.py");
-    // The interpreter with the reference reader (`scripts/test` sets it up; a plain
-    // `cargo test` without it skips this check, saying so).
-    let Some(python) = interpreter::python_with(&["mcap", "zstandard", "lz4", "mcap_protobuf"])
+    // The reference reader (`scripts/test` sets up its interpreter; a plain `cargo test`
+    // without it skips this check, saying so).
+    let Some(report) =
+        common::python_mcap_report(path, &["mcap", "zstandard", "lz4", "mcap_protobuf"])
     else {
         return;
     };
-    let output = std::process::Command::new(python)
-        .arg(script)
-        .arg(path)
-        .output()
-        .expect("running the Python MCAP reader");
-    assert!(
-        output.status.success(),
-        "{}",
-        String::from_utf8_lossy(&output.stderr)
-    );
-    let report: serde_json::Value = serde_json::from_slice(&output.stdout).unwrap();
     for (topic, n) in &summary.write.messages_per_topic {
         assert_eq!(report["topics"][topic], serde_json::json!(n), "{topic}");
         // Every topic is protobuf, decoded from the schemas inside the file alone.

@@ -5,26 +5,8 @@
 
 use api::live_client::{self, ClientOptions};
 use serde_json::{json, Value};
-use services::live::{AssistMode, AssistSettings, StartMessage};
-use tests::{session_bytes, TestApp};
-
-fn url(app: &TestApp) -> String {
-    format!("ws://{}/api/v1/live", app.addr)
-}
-
-fn start(s: &dfs_core::scenario::Scenario, assist: AssistSettings) -> StartMessage {
-    StartMessage {
-        hand: "glove10".into(),
-        object: s.object.clone(),
-        objects: s.objects.clone(),
-        target: s.target.clone(),
-        name: Some(s.name.clone()),
-        wrist: None,
-        assist,
-        calibration: None,
-        whole_hand: false,
-    }
-}
+use services::live::{AssistMode, AssistSettings};
+use tests::{live_start as start, live_url as url, session_bytes, TestApp};
 
 async fn stream(
     app: &TestApp,

@@ -3,7 +3,19 @@
 
 use reqwest::Method;
 use serde_json::json;
-use tests::{session_bytes, TestApp};
+use tests::{session_bytes, Client, TestApp};
+
+/// The refused requests stored nothing: no session, and the five built-in hands only.
+async fn assert_nothing_stored(c: &Client) {
+    assert_eq!(c.get("/api/v1/sessions").await.json()["items"], json!([]));
+    assert_eq!(
+        c.get("/api/v1/hands").await.json()["items"]
+            .as_array()
+            .unwrap()
+            .len(),
+        5
+    );
+}
 
 const TOKEN: &str = "test-token-1234";
 
@@ -564,14 +576,7 @@ async fn a_json_body_with_a_key_twice_is_refused_naming_the_key() {
     .await
     .problem(422);
     assert!(d.contains("mass"), "{d}");
-    assert_eq!(c.get("/api/v1/sessions").await.json()["items"], json!([]));
-    assert_eq!(
-        c.get("/api/v1/hands").await.json()["items"]
-            .as_array()
-            .unwrap()
-            .len(),
-        5
-    );
+    assert_nothing_stored(c).await;
     app.stop().await;
 }
 
@@ -612,14 +617,7 @@ async fn a_json_array_in_place_of_a_request_object_is_refused_naming_the_object(
         .await
         .problem(422);
     assert!(d.contains("object.mass"), "{d}");
-    assert_eq!(c.get("/api/v1/sessions").await.json()["items"], json!([]));
-    assert_eq!(
-        c.get("/api/v1/hands").await.json()["items"]
-            .as_array()
-            .unwrap()
-            .len(),
-        5
-    );
+    assert_nothing_stored(c).await;
     app.stop().await;
 }
 

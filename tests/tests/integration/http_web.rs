@@ -25,6 +25,15 @@ async fn raw(
     req.send().await.expect("request")
 }
 
+/// The main page's own scripts (not the docs page's, nor vendored ones).
+const OWN_SCRIPTS: [&str; 5] = [
+    "/assets/app.js",
+    "/assets/api.js",
+    "/assets/dom.js",
+    "/assets/plot.js",
+    "/assets/scene.js",
+];
+
 #[tokio::test]
 async fn the_page_its_files_and_not_found_pages() {
     let app = TestApp::spawn().await;
@@ -37,12 +46,7 @@ async fn the_page_its_files_and_not_found_pages() {
     }
     let page = String::from_utf8(app.client.get("/").await.body.to_vec()).unwrap();
     // Every file the pages name is served, with a JavaScript or CSS media type.
-    for asset in [
-        "/assets/app.js",
-        "/assets/api.js",
-        "/assets/dom.js",
-        "/assets/plot.js",
-        "/assets/scene.js",
+    for asset in OWN_SCRIPTS.into_iter().chain([
         "/assets/style.css",
         "/assets/docs.js",
         "/assets/vendor/three/three.module.js",
@@ -52,7 +56,7 @@ async fn the_page_its_files_and_not_found_pages() {
         "/assets/vendor/swagger-ui/swagger-ui-bundle.js",
         "/assets/vendor/swagger-ui/swagger-ui.css",
         "/assets/vendor/three/LICENSE",
-    ] {
+    ]) {
         let r = app.client.get(asset).await;
         assert_eq!(r.status, 200, "{asset}");
         let ct = r.content_type();
@@ -67,13 +71,7 @@ async fn the_page_its_files_and_not_found_pages() {
     }
     assert!(page.contains("/assets/app.js"), "{page}");
     // The page's own scripts never parse strings as HTML: data base strings go in as text.
-    for asset in [
-        "/assets/app.js",
-        "/assets/api.js",
-        "/assets/dom.js",
-        "/assets/plot.js",
-        "/assets/scene.js",
-    ] {
+    for asset in OWN_SCRIPTS {
         let text = String::from_utf8(app.client.get(asset).await.body.to_vec()).unwrap();
         for sink in [
             ".innerHTML",

@@ -12,7 +12,7 @@ use futures_util::{SinkExt, StreamExt};
 use prost::Message as _;
 use serde_json::{json, Value};
 use services::live::{proto, AssistSettings, StartMessage};
-use tests::{session_bytes, TestApp};
+use tests::{live_start, live_url as url, session_bytes, TestApp};
 use tokio_tungstenite::tungstenite::client::IntoClientRequest;
 use tokio_tungstenite::tungstenite::Message;
 
@@ -21,26 +21,12 @@ use crate::interpreter;
 type Ws =
     tokio_tungstenite::WebSocketStream<tokio_tungstenite::MaybeTlsStream<tokio::net::TcpStream>>;
 
-fn url(app: &TestApp) -> String {
-    format!("ws://{}/api/v1/live", app.addr)
-}
-
 fn scenario(name: &str, seed: u64) -> dfs_core::scenario::Scenario {
     dfs_core::scenario::Scenario::builtin(name, seed).unwrap()
 }
 
 fn start_for(s: &dfs_core::scenario::Scenario) -> StartMessage {
-    StartMessage {
-        hand: "glove10".into(),
-        object: s.object.clone(),
-        objects: s.objects.clone(),
-        target: s.target.clone(),
-        name: Some(s.name.clone()),
-        wrist: None,
-        assist: AssistSettings::default(),
-        calibration: None,
-        whole_hand: false,
-    }
+    live_start(s, AssistSettings::default())
 }
 
 /// Streams `frames` as a live session of scenario `s`'s objects, as fast as answered, to the

@@ -60,17 +60,43 @@ pub(super) struct Hull {
     interior: P,
 }
 
-/// The arrays of a build. A thread keeps those of its last hull, so that the next build
-/// reuses them instead of allocating (and faulting in) a few hundred fresh kB.
+/// The arrays of a build, held by the [`Build`] and then by its [`Hull`]. A thread keeps
+/// those of its last hull, so that the next build reuses them instead of allocating (and
+/// faulting in) a few hundred fresh kB.
 #[derive(Default)]
 struct Buffers {
     topo: Vec<Topo>,
     planes: Vec<Plane>,
     outside: Vec<Outside>,
+    /// How far the current round's point is above the facets its visibility search met.
     above: Vec<f64>,
+    /// The next point in the same outside set, or NONE.
     next: Vec<u32>,
+    /// Facets with outside points by the distance of the farthest (as bits, which order
+    /// like the non-negative distances); stale entries are skipped when taken.
     work: BinaryHeap<(u64, u32)>,
+    /// Slots of facets removed in earlier rounds, for new facets.
     free: Vec<u32>,
+}
+
+impl Buffers {
+    /// The thread's spare buffers (or new ones), emptied for a build of `npts` points.
+    fn take_spare(npts: usize) -> Buffers {
+        let mut b: Buffers = SPARE
+            .try_with(|s| s.take())
+            .ok()
+            .flatten()
+            .unwrap_or_default();
+        b.topo.clear();
+        b.planes.clear();
+        b.outside.clear();
+        b.above.clear();
+        b.next.clear();
+        b.next.resize(npts, NONE);
+        b.work.clear();
+        b.free.clear();
+        b
+    }
 }
 
 /// Buffers larger than this many facets are not kept.
@@ -363,18 +389,7 @@ pub(super) struct Build {
     exact: f64,
     /// Rounds done.
     round: u32,
-    topo: Vec<Topo>,
-    planes: Vec<Plane>,
-    outside: Vec<Outside>,
-    /// How far the current round's point is above the facets its visibility search met.
-    above: Vec<f64>,
-    /// The next point in the same outside set, or NONE.
-    next: Vec<u32>,
-    /// Facets with outside points by the distance of the farthest (as bits, which order
-    /// like the non-negative distances); stale entries are skipped when taken.
-    work: BinaryHeap<(u64, u32)>,
-    /// Slots of facets removed in earlier rounds, for new facets.
-    free: Vec<u32>,
+    buffers: Buffers,
     /// A round's visible facets, horizon ridges and new facets (in the order of the horizon
     /// ridges they were built on): kept to reuse their memory.
     visible: Vec<usize>,
@@ -387,35 +402,35 @@ pub(super) struct Build {
 impl Build {
     /// Puts point `i`, `dist` above facet `f`, into `f`'s outside set.
     fn add_outside(&mut self, f: usize, i: usize, dist: f64) {
-        let o = &mut self.outside[f];
+        let o = &mut self.buffers.outside[f];
         if o.first == NONE || dist > o.far_dist {
             o.far = i as u32;
             o.far_dist = dist;
-            self.work.push((dist.to_bits(), f as u32));
+            self.buffers.work.push((dist.to_bits(), f as u32));
         }
-        self.next[i] = o.first;
+        self.buffers.next[i] = o.first;
         o.first = i as u32;
     }
 
     /// Stores a new facet, in a free slot if there is one; its index.
     fn add_facet(&mut self, topo: Topo, plane: Plane) -> Result<usize, HullError> {
-        Ok(match self.free.pop() {
+        Ok(match self.buffers.free.pop() {
             Some(id) => {
                 let id = id as usize;
-                self.topo[id] = topo;
-                self.planes[id] = plane;
-                self.outside[id] = NO_OUTSIDE;
+                self.buffers.topo[id] = topo;
+                self.buffers.planes[id] = plane;
+                self.buffers.outside[id] = NO_OUTSIDE;
                 id
             }
             None => {
-                if self.topo.len() >= NONE as usize {
+                if self.buffers.topo.len() >= NONE as usize {
                     return Err(HullError::Numerical("too many facets"));
                 }
-                self.topo.push(topo);
-                self.planes.push(plane);
-                self.outside.push(NO_OUTSIDE);
-                self.above.push(0.0);
-                self.topo.len() - 1
+                self.buffers.topo.push(topo);
+                self.buffers.planes.push(plane);
+                self.buffers.outside.push(NO_OUTSIDE);
+                self.buffers.above.push(0.0);
+                self.buffers.topo.len() - 1
             }
         })
     }
@@ -486,27 +501,6 @@ pub(super) fn start(pts: &[P], tol: f64) -> Result<Build, HullError> {
     let size = pts.iter().fold(0.0_f64, |m, p| m.max(p.norm()));
     // What a backward-stable computation of a hyperplane may leave at its vertices.
     let exact = 16.0 * f64::EPSILON * size;
-    let Buffers {
-        mut topo,
-        mut planes,
-        mut outside,
-        mut above,
-        mut next,
-        mut work,
-        mut free,
-    } = SPARE
-        .try_with(|s| s.take())
-        .ok()
-        .flatten()
-        .unwrap_or_default();
-    topo.clear();
-    planes.clear();
-    outside.clear();
-    above.clear();
-    next.clear();
-    next.resize(npts, NONE);
-    work.clear();
-    free.clear();
     let mut b = Build {
         tol,
         interior,
@@ -516,13 +510,7 @@ pub(super) fn start(pts: &[P], tol: f64) -> Result<Build, HullError> {
         horizon: Vec::new(),
         new: Vec::new(),
         checks: None,
-        topo,
-        planes,
-        outside,
-        above,
-        next,
-        work,
-        free,
+        buffers: Buffers::take_spare(npts),
     };
     for k in 0..=D {
         let mut t = Topo {
@@ -552,7 +540,7 @@ pub(super) fn start(pts: &[P], tol: f64) -> Result<Build, HullError> {
             continue;
         }
         if let Some((f, d)) = (0..=D)
-            .map(|f| (f, dist(&b.planes[f], p)))
+            .map(|f| (f, dist(&b.buffers.planes[f], p)))
             .find(|&(_, d)| d > tol)
         {
             b.add_outside(f, i, d);
@@ -623,12 +611,13 @@ impl Build {
     #[inline]
     fn farthest(&mut self, budget: &mut Budget) -> Next {
         loop {
-            match self.work.pop() {
+            match self.buffers.work.pop() {
                 None => return Next::Done,
                 Some((key, f)) => {
                     let f = f as usize;
-                    let o = &self.outside[f];
-                    if self.topo[f].alive && o.first != NONE && o.far_dist.to_bits() == key {
+                    let o = &self.buffers.outside[f];
+                    if self.buffers.topo[f].alive && o.first != NONE && o.far_dist.to_bits() == key
+                    {
                         return Next::Facet(f);
                     }
                     budget.spent += 3;
@@ -647,13 +636,19 @@ impl Build {
         let mut visible = std::mem::take(&mut self.visible);
         let mut horizon = std::mem::take(&mut self.horizon);
         let mut new = std::mem::take(&mut self.new);
-        let pi = self.outside[fi].far as usize;
+        let pi = self.buffers.outside[fi].far as usize;
         let p = pts[pi];
         self.find_visible(fi, &p, &mut visible, &mut horizon)?;
         self.make_facets(pts, pi, &horizon, &mut new)?;
-        let walked = pair_new_facets(&mut self.topo, &horizon, &new, visible.len(), self.round)?;
+        let walked = pair_new_facets(
+            &mut self.buffers.topo,
+            &horizon,
+            &new,
+            visible.len(),
+            self.round,
+        )?;
         let moved = self.move_outside(pts, pi, &visible, &new);
-        self.free.extend(visible.iter().map(|&f| f as u32));
+        self.buffers.free.extend(visible.iter().map(|&f| f as u32));
         // Units of about 0.1 µs on the project's machine: a facet removed or made (a new
         // hyperplane, its adjacency) costs two, an outside point moved one, as do four steps
         // of the walks that pair the new facets (and, in `farthest`, a stale entry of the work
@@ -679,28 +674,28 @@ impl Build {
         visible.clear();
         horizon.clear();
         visible.push(fi);
-        self.topo[fi].alive = false;
-        self.topo[fi].seen = round;
-        self.above[fi] = dist(&self.planes[fi], p);
+        self.buffers.topo[fi].alive = false;
+        self.buffers.topo[fi].seen = round;
+        self.buffers.above[fi] = dist(&self.buffers.planes[fi], p);
         let mut s = 0;
         while s < visible.len() {
             let f = visible[s];
             s += 1;
             for j in 0..D {
-                let g = self.topo[f].nb[j] as usize;
-                let tg = &mut self.topo[g];
+                let g = self.buffers.topo[f].nb[j] as usize;
+                let tg = &mut self.buffers.topo[g];
                 if tg.seen != round {
                     tg.seen = round;
-                    let above = dist(&self.planes[g], p);
-                    self.above[g] = above;
+                    let above = dist(&self.buffers.planes[g], p);
+                    self.buffers.above[g] = above;
                     if above > tol {
                         tg.alive = false;
                         visible.push(g);
                     }
                 }
                 if tg.alive {
-                    let slot = self.topo[f].back[j];
-                    if self.topo[g].nb[slot as usize] as usize != f {
+                    let slot = self.buffers.topo[f].back[j];
+                    if self.buffers.topo[g].nb[slot as usize] as usize != f {
                         return Err(HullError::Numerical("broken adjacency"));
                     }
                     horizon.push(Ridge { f, j, g, slot });
@@ -729,7 +724,7 @@ impl Build {
         for r in horizon {
             let mut t = Topo {
                 nb: [NONE; D],
-                v: self.topo[r.f].v,
+                v: self.buffers.topo[r.f].v,
                 back: [0; D],
                 alive: true,
                 seen: 0,
@@ -737,8 +732,8 @@ impl Build {
             t.v[r.j] = pi as u32;
             t.nb[r.j] = r.g as u32;
             t.back[r.j] = r.slot;
-            let (pf, pg) = (&self.planes[r.f], &self.planes[r.g]);
-            let (af, ag) = (self.above[r.f], self.above[r.g]);
+            let (pf, pg) = (&self.buffers.planes[r.f], &self.buffers.planes[r.g]);
+            let (af, ag) = (self.buffers.above[r.f], self.buffers.above[r.g]);
             let pl = match turn(pts, &t.v, (pf, af), (pg, ag), &interior, exact) {
                 Some(pl) => pl,
                 None => plane(pts, &t.v, &interior)
@@ -748,10 +743,10 @@ impl Build {
                 return Err(HullError::Numerical("interior point on a facet"));
             }
             let id = self.add_facet(t, pl)?;
-            let tg = &mut self.topo[r.g];
+            let tg = &mut self.buffers.topo[r.g];
             tg.nb[r.slot as usize] = id as u32;
             tg.back[r.slot as usize] = r.j as u8;
-            let tf = &mut self.topo[r.f];
+            let tf = &mut self.buffers.topo[r.f];
             tf.nb[r.j] = id as u32;
             tf.back[r.j] = NEW;
             new.push(id);
@@ -766,18 +761,18 @@ impl Build {
         let tol = self.tol;
         let mut moved = 0usize;
         for &f in visible {
-            let mut q = self.outside[f].first;
-            self.outside[f].first = NONE;
+            let mut q = self.buffers.outside[f].first;
+            self.buffers.outside[f].first = NONE;
             while q != NONE {
                 let qi = q as usize;
-                q = self.next[qi];
+                q = self.buffers.next[qi];
                 moved += 1;
                 if qi == pi {
                     continue;
                 }
                 let pq = &pts[qi];
-                let tf = &self.topo[f];
-                let planes = &self.planes;
+                let tf = &self.buffers.topo[f];
+                let planes = &self.buffers.planes;
                 let above = |g: usize| {
                     let d = dist(&planes[g], pq);
                     (d > tol).then_some((g, d))
@@ -903,20 +898,20 @@ impl Build {
         let checks = match &mut self.checks {
             Some(c) => c,
             None => {
-                budget.spent += self.topo.len() / 16 + npts / 4;
-                self.checks.insert(Checks::new(pts, &self.topo))
+                budget.spent += self.buffers.topo.len() / 16 + npts / 4;
+                self.checks.insert(Checks::new(pts, &self.buffers.topo))
             }
         };
-        if !checks.adjacency(&self.topo, &mut budget)? {
+        if !checks.adjacency(&self.buffers.topo, &mut budget)? {
             return Ok(false);
         }
-        if !checks.points(&self.planes, self.tol, npts, &mut budget)? {
+        if !checks.points(&self.buffers.planes, self.tol, npts, &mut budget)? {
             return Ok(false);
         }
         Ok(checks.measure(
             pts,
-            &self.topo,
-            &mut self.planes,
+            &self.buffers.topo,
+            &mut self.buffers.planes,
             &self.interior,
             &mut budget,
         ))
@@ -1111,26 +1106,8 @@ impl Build {
     pub(super) fn into_hull(self) -> Hull {
         #[cfg(test)]
         let interior = self.interior;
-        let Build {
-            topo,
-            planes,
-            outside,
-            above,
-            next,
-            work,
-            free,
-            ..
-        } = self;
         Hull {
-            buffers: Buffers {
-                topo,
-                planes,
-                outside,
-                above,
-                next,
-                work,
-                free,
-            },
+            buffers: self.buffers,
             #[cfg(test)]
             interior,
         }

@@ -4,9 +4,67 @@
 
 #![allow(dead_code)]
 
+use std::path::{Path, PathBuf};
+
+use dfs_core::scenario::Scenario;
 use serde_json::Value;
 use services::foxglove::*;
 use services::mcap_io::JsonSchema;
+use services::session::{record_simulation, RecordSummary};
+
+/// A `sphere-lift` session of seed `seed` (`seconds` long, or the whole script), simulated and
+/// recorded to `sphere.mcap` in a temporary directory; the directory, the file and the
+/// recording's summary. The tests that read one keep it in a `OnceLock`.
+pub fn sphere_lift_session(
+    seed: u64,
+    seconds: Option<f64>,
+) -> (tempfile::TempDir, PathBuf, RecordSummary) {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("sphere.mcap");
+    let scenario = Scenario::builtin("sphere-lift", seed).unwrap();
+    let summary = record_simulation(&scenario, seconds, &path, |_, _| {}).unwrap();
+    (dir, path, summary)
+}
+
+/// The reference Python MCAP reader, `tests/python/read_mcap.py`.
+pub fn read_mcap_script() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("../tests/python/read_mcap.py")
+}
+
+/// The reference Python reader's JSON report on `file`, run by an interpreter with `modules`
+/// (`interpreter::python_with`); `None` (with a note) where the tests run without their Python
+/// set-up. The reader must succeed.
+pub fn python_mcap_report(file: &Path, modules: &[&str]) -> Option<Value> {
+    let python = crate::interpreter::python_with(modules)?;
+    let output = std::process::Command::new(python)
+        .arg(read_mcap_script())
+        .arg(file)
+        .output()
+        .expect("running the Python MCAP reader");
+    assert!(
+        output.status.success(),
+        "read_mcap.py failed ({}): {}{}",
+        output.status,
+        String::from_utf8_lossy(&output.stderr),
+        String::from_utf8_lossy(&output.stdout)
+    );
+    Some(serde_json::from_slice(&output.stdout).expect("read_mcap.py prints JSON"))
+}
+
+/// Deterministic pseudo-random numbers in [0, 1) (a 64-bit LCG): the noise of the
+/// segmentation tests, offline and live.
+pub struct Lcg(pub u64);
+
+impl Lcg {
+    /// The next number.
+    pub fn next(&mut self) -> f64 {
+        self.0 = self
+            .0
+            .wrapping_mul(6364136223846793005)
+            .wrapping_add(1442695040888963407);
+        (self.0 >> 11) as f64 / (1u64 << 53) as f64
+    }
+}
 
 /// Validates each of `instances` against `schema` (the embedded JSON Schema text) with Python's
 /// `jsonschema` (tests/python/validate_json.py), a validator independent of our code; returns

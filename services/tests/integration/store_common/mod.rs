@@ -93,6 +93,29 @@ pub fn unreachable_report() -> ReplayReport {
 /// scripts/test-postgres starts). Each test works in a schema of its own in that data base.
 pub const POSTGRES_URL_VAR: &str = "ICMS_TEST_POSTGRES_URL";
 
+/// The URL in [`POSTGRES_URL_VAR`] if it is set; otherwise `None`, after a line on the
+/// standard error that says `test` was skipped and why (written past the harness's capture, so
+/// that it shows in every run). Panics instead under `ICMS_REQUIRE_TOOLS` (scripts/test), so a
+/// run that should test PostgreSQL cannot pass without it.
+pub fn postgres_url_or_skip(test: &str) -> Option<String> {
+    match std::env::var(POSTGRES_URL_VAR) {
+        Ok(url) if !url.is_empty() => Some(url),
+        _ => {
+            // scripts/test sets both: there a missing server fails the test instead of
+            // skipping it.
+            assert!(
+                std::env::var_os("ICMS_REQUIRE_TOOLS").is_none_or(|v| v.is_empty()),
+                "{test}: {POSTGRES_URL_VAR} is not set but ICMS_REQUIRE_TOOLS is"
+            );
+            let _ = writeln!(
+                std::io::stderr(),
+                "SKIPPED {test}: {POSTGRES_URL_VAR} is not set (scripts/test sets it)"
+            );
+            None
+        }
+    }
+}
+
 /// A store backend a test runs against.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Backend {
@@ -103,25 +126,10 @@ pub enum Backend {
 }
 
 impl Backend {
-    /// [`Backend::Postgres`] if [`POSTGRES_URL_VAR`] is set; otherwise `None`, after a line on
-    /// the test's standard error that says the test was skipped and why (written past the
-    /// harness's capture, so that it shows in every run). Panics instead under
-    /// `ICMS_REQUIRE_TOOLS` (scripts/test), so a run that should test PostgreSQL cannot pass
-    /// without it.
+    /// [`Backend::Postgres`] if [`POSTGRES_URL_VAR`] is set; otherwise `None`, skipping as
+    /// [`postgres_url_or_skip`] says.
     pub fn postgres_or_skip(test: &str) -> Option<Backend> {
-        if std::env::var(POSTGRES_URL_VAR).is_ok_and(|v| !v.is_empty()) {
-            return Some(Backend::Postgres);
-        }
-        // scripts/test sets both: there a missing server fails the test instead of skipping it.
-        assert!(
-            std::env::var_os("ICMS_REQUIRE_TOOLS").is_none_or(|v| v.is_empty()),
-            "{test} on PostgreSQL: {POSTGRES_URL_VAR} is not set but ICMS_REQUIRE_TOOLS is"
-        );
-        let _ = writeln!(
-            std::io::stderr(),
-            "SKIPPED {test} on PostgreSQL: {POSTGRES_URL_VAR} is not set (scripts/test sets it)"
-        );
-        None
+        postgres_url_or_skip(&format!("{test} on PostgreSQL")).map(|_| Backend::Postgres)
     }
 
     /// The schema of the store of `dir`: named after the directory, so that reopening the

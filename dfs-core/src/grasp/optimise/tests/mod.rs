@@ -8,7 +8,7 @@ use crate::grasp::GraspMatrix;
 use crate::math::{Vector, STANDARD_GRAVITY};
 use proptest::prelude::*;
 
-use crate::grasp::tests::paper_contacts;
+use crate::grasp::tests::{paper_contacts, paper_grasp_in_unit};
 
 mod newton;
 
@@ -57,15 +57,13 @@ fn a_soft_pad_is_not_given_its_whole_friction_and_torsion_at_once() {
     };
     let (weight, twist) = (3.0, 0.01);
     let load = Wrench::new(0.0, 0.0, weight, twist, 0.0, 0.0);
-    let d = optimise(
+    let d = balanced(
         &contacts,
         ContactModel::SoftFinger,
         &friction,
         &load,
         &params,
-    )
-    .unwrap();
-    assert_balances(&contacts, ContactModel::SoftFinger, &d, &load);
+    );
     // By symmetry each pad carries half the weight and half the twist: the least normal
     // force with (w/2 / μ)² + (m/2 / μ_t)² = c_z².
     let least = ((weight / 2.0 / 0.8).powi(2) + (twist / 2.0 / 0.005).powi(2)).sqrt();
@@ -75,6 +73,19 @@ fn a_soft_pad_is_not_given_its_whole_friction_and_torsion_at_once() {
     }
     // The box would have let each pad push only max(w/2/μ, m/2/μ_t) = 1.875 N.
     assert!(least > 2.0);
+}
+
+/// [`optimise`]'s distribution, asserted to balance `load`.
+fn balanced(
+    contacts: &[ContactFrame],
+    model: ContactModel,
+    friction: &Friction,
+    load: &Wrench,
+    p: &OptimiseParams,
+) -> Distribution {
+    let d = optimise(contacts, model, friction, load, p).unwrap();
+    assert_balances(contacts, model, &d, load);
+    d
 }
 
 fn assert_balances(
@@ -100,19 +111,12 @@ fn assert_balances(
 fn the_paper_sphere_with_high_friction_is_held_inside_the_cones_with_margin() {
     let contacts = paper_contacts();
     let p = OptimiseParams::default();
-    let d = optimise(
+    let d = balanced(
         &contacts,
         ContactModel::PointWithFriction,
         &fr(1.5),
         &gravity_load(),
         &p,
-    )
-    .unwrap();
-    assert_balances(
-        &contacts,
-        ContactModel::PointWithFriction,
-        &d,
-        &gravity_load(),
     );
     for c in &d.intensities {
         assert!(inside(c, 1.5 * 0.9, 0.0, 0.0), "{c:?}");
@@ -144,19 +148,12 @@ fn the_paper_sphere_with_low_friction_is_held_by_squeezing() {
     assert!((t / n - 1.3).abs() < 0.05, "W⁺ ratio {}", t / n);
 
     let p = OptimiseParams::default();
-    let d = optimise(
+    let d = balanced(
         &contacts,
         ContactModel::PointWithFriction,
         &fr(0.3),
         &gravity_load(),
         &p,
-    )
-    .unwrap();
-    assert_balances(
-        &contacts,
-        ContactModel::PointWithFriction,
-        &d,
-        &gravity_load(),
     );
     for c in &d.intensities {
         assert!(inside(c, 0.3 * 0.9, 0.0, 0.0), "{c:?}");
@@ -166,15 +163,13 @@ fn the_paper_sphere_with_low_friction_is_held_by_squeezing() {
     let total0: Real = c0.iter().map(|c| c[2]).sum();
     assert!(total > total0);
 
-    let d = optimise(
+    balanced(
         &contacts,
         ContactModel::Frictionless,
         &fr(0.0),
         &gravity_load(),
         &p,
-    )
-    .unwrap();
-    assert_balances(&contacts, ContactModel::Frictionless, &d, &gravity_load());
+    );
 }
 
 #[test]
@@ -187,8 +182,7 @@ fn an_antipodal_pair_on_the_equator_squeezes_enough_to_hold_one_kilogram() {
     let p = OptimiseParams::default();
     let mu = 0.5;
     for model in [ContactModel::PointWithFriction, ContactModel::SoftFinger] {
-        let d = optimise(&contacts, model, &fr(mu), &gravity_load(), &p).unwrap();
-        assert_balances(&contacts, model, &d, &gravity_load());
+        let d = balanced(&contacts, model, &fr(mu), &gravity_load(), &p);
         let least = STANDARD_GRAVITY / (2.0 * mu * (1.0 - p.margin));
         for c in &d.intensities {
             assert!(c[2] >= least * (1.0 - 1e-6), "normal {} < {least}", c[2]);
@@ -209,15 +203,13 @@ fn a_minimum_normal_force_is_respected() {
         margin: 0.1,
         min_normal: 5.0,
     };
-    let d = optimise(
+    let d = balanced(
         &contacts,
         ContactModel::SoftFinger,
         &fr(1.0),
         &gravity_load(),
         &p,
-    )
-    .unwrap();
-    assert_balances(&contacts, ContactModel::SoftFinger, &d, &gravity_load());
+    );
     for c in &d.intensities {
         assert!(inside(c, 0.9, 0.0045, 5.0), "{c:?}");
     }

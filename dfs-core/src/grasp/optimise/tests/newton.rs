@@ -133,21 +133,7 @@ fn the_optimised_distribution_does_not_depend_on_the_unit_of_length() {
     };
     let mut answers = Vec::new();
     for s in [1.0, 1000.0] {
-        let contacts: Vec<_> = paper_contacts()
-            .iter()
-            .map(|c| ContactFrame {
-                p_b: c.p_b * s,
-                rot_b: c.rot_b,
-            })
-            .collect();
-        let friction = Friction {
-            mu: 0.6,
-            mu_torsion: 0.005 * s,
-        };
-        let mut l = load;
-        for k in 3..6 {
-            l[k] *= s;
-        }
+        let (contacts, friction, l) = paper_grasp_in_unit(s, 0.6, &load);
         let model = ContactModel::SoftFinger;
         let mut solver = ForceSolver::new(&contacts, model, &friction, &params, None).unwrap();
         let mut fast = vec![Intensity::zeros(); 4];
