@@ -13,7 +13,7 @@ use std::sync::OnceLock;
 use dfs_core::hand::{HandModel, HandSpec, BUILTIN_HANDS};
 use dfs_core::replay::ReplayReport;
 
-use super::catalog::{BlobRef, ExclusiveBlobGuard, NewHand, NewReplay};
+use super::catalog::{BlobRef, ExclusiveBlobGuard, NewHand, NewReplayRow};
 use super::error::StoreError;
 use super::types::{Hand, HandSummary, Replay};
 use super::{blob, StagedBlob, Store};
@@ -258,14 +258,15 @@ impl Store {
             self.publish(&blob.rel).await?;
             self.inner
                 .catalog
-                .insert_replay(NewReplay {
+                .insert_replay(NewReplayRow {
                     skill_id,
                     hand,
                     success: report.success,
                     failure_reason: report.failure_reason.map(|r| r.name()),
-                    report_json: &report_json,
-                    blob: &blob,
+                    report: &report_json,
+                    sha256: &blob.sha256,
                     size_bytes: size,
+                    blob_path: &blob.rel,
                 })
                 .await
         }

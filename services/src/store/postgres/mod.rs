@@ -31,7 +31,7 @@ use store_postgres::{NewHandRow, NewReplayRow, NewSessionRow, SessionListing, MI
 
 use super::catalog::{
     BlobGuard, BlobRef, Catalog, CheckedSkill, DeletedSession, ExclusiveBlobGuard, IndexedSkill,
-    NewHand, NewJob, NewReplay, NewSession, Replacement, SettleRow,
+    NewHand, NewJob, NewSession, Replacement, SettleRow,
 };
 use super::jobs::JobClaim;
 use super::query::{SessionFilter, SkillFilter};
@@ -343,23 +343,11 @@ impl Catalog for PgCatalog {
             .transpose()
     }
 
-    async fn insert_replay(&self, r: NewReplay<'_>) -> Result<Option<Replay>, StoreError> {
-        store_postgres::insert_replay(
-            &self.pool,
-            NewReplayRow {
-                skill_id: r.skill_id,
-                hand: r.hand,
-                success: r.success,
-                failure_reason: r.failure_reason,
-                report: r.report_json,
-                sha256: &r.blob.sha256,
-                size_bytes: r.size_bytes,
-                blob_path: &r.blob.rel,
-            },
-        )
-        .await?
-        .map(Replay::try_from)
-        .transpose()
+    async fn insert_replay(&self, r: NewReplayRow<'_>) -> Result<Option<Replay>, StoreError> {
+        store_postgres::insert_replay(&self.pool, r)
+            .await?
+            .map(Replay::try_from)
+            .transpose()
     }
 
     async fn replay(&self, id: i64) -> Result<Option<Replay>, StoreError> {
