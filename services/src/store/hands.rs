@@ -207,14 +207,13 @@ impl Store {
         mcap: Vec<u8>,
     ) -> Result<Replay, StoreError> {
         let guard = self.inner.blob_lock.read().await;
-        let dir = self.inner.dir.clone();
         let size = mcap.len() as i64;
-        let (sha256, rel) = tokio::task::spawn_blocking(move || {
-            let sha = blob::sha256_hex(&mcap);
-            blob::write_atomic(&dir, &sha, &mcap).map(|rel| (sha, rel))
-        })
-        .await
-        .map_err(|e| StoreError::Corrupt(format!("blob writer task failed: {e}")))??;
+        let (sha256, rel) = self
+            .write_blob(move |dir| {
+                let sha = blob::sha256_hex(&mcap);
+                blob::write_atomic(dir, &sha, &mcap).map(|rel| (sha, rel))
+            })
+            .await?;
         self.insert_replay_row(skill_id, hand, report, (sha256, size, rel), guard)
             .await
     }
@@ -230,11 +229,8 @@ impl Store {
         mcap: StagedBlob,
     ) -> Result<Replay, StoreError> {
         let guard = self.inner.blob_lock.read().await;
-        let dir = self.inner.dir.clone();
         let (sha256, size) = (mcap.sha256().to_owned(), mcap.len() as i64);
-        let rel = tokio::task::spawn_blocking(move || mcap.commit(&dir))
-            .await
-            .map_err(|e| StoreError::Corrupt(format!("blob writer task failed: {e}")))??;
+        let rel = self.write_blob(move |dir| mcap.commit(dir)).await?;
         self.insert_replay_row(skill_id, hand, report, (sha256, size, rel), guard)
             .await
     }
