@@ -407,7 +407,8 @@ pub async fn hand<'e>(e: impl PgExecutor<'e>, name: &str) -> Result<Option<HandR
     .await
 }
 
-/// The columns of a new replay row.
+/// The columns of a new replay row: what both backends insert (services' catalog takes it
+/// as it is).
 #[derive(Debug, Clone, Copy)]
 pub struct NewReplayRow<'a> {
     /// The replayed skill.

@@ -158,8 +158,8 @@ pub struct IndexedSkillRow {
 }
 
 /// A stored skill as reprocessing compares it with a new one: its id and the columns a
-/// skill is identified by.
-#[derive(Debug, Clone, sqlx::FromRow)]
+/// skill is identified by. Equality compares every column, the id included.
+#[derive(Debug, Clone, PartialEq, sqlx::FromRow)]
 pub struct StoredSkillRow {
     /// Column `id`.
     pub id: i64,

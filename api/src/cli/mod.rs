@@ -222,14 +222,8 @@ pub(crate) fn no_data_base(data: &std::path::Path) -> String {
 /// (`contacts[0].position: invalid length 2, ...`).
 pub fn parse_json<T: serde::de::DeserializeOwned>(text: &str) -> Result<T, String> {
     let de = &mut serde_json::Deserializer::from_str(text);
-    let value = serde_path_to_error::deserialize(&mut *de).map_err(|e| {
-        let path = e.path().to_string();
-        if path == "." {
-            e.inner().to_string()
-        } else {
-            format!("{path}: {}", e.inner())
-        }
-    })?;
+    let value = serde_path_to_error::deserialize(&mut *de)
+        .map_err(|e| crate::http::extract::path_error(&e))?;
     // Anything after the value (a second object, stray text) is refused, as over HTTP.
     de.end().map_err(|e| e.to_string())?;
     Ok(value)

@@ -102,14 +102,7 @@ impl<T: DeserializeOwned> FromRequest<AppState> for Json<T> {
             .map_err(|e| Problem::bad_request(format!("malformed JSON: {e}")))?;
         serde_path_to_error::deserialize(value)
             .map(Json)
-            .map_err(|e| {
-                let path = e.path().to_string();
-                if path == "." {
-                    Problem::unprocessable(e.inner().to_string())
-                } else {
-                    Problem::unprocessable(format!("{path}: {}", e.inner()))
-                }
-            })
+            .map_err(|e| Problem::unprocessable(path_error(&e)))
     }
 }
 
@@ -206,14 +199,8 @@ pub(crate) async fn stream_body(
 /// (`scenario.object: duplicate key "mass"`). One pass, as parsing into a `Value` is.
 pub(crate) fn parse_json_unique_keys(bytes: &[u8]) -> Result<serde_json::Value, String> {
     let mut de = serde_json::Deserializer::from_slice(bytes);
-    let value = serde_path_to_error::deserialize::<_, UniqueKeys>(&mut de).map_err(|e| {
-        let path = e.path().to_string();
-        if path == "." {
-            e.inner().to_string()
-        } else {
-            format!("{path}: {}", e.inner())
-        }
-    })?;
+    let value =
+        serde_path_to_error::deserialize::<_, UniqueKeys>(&mut de).map_err(|e| path_error(&e))?;
     de.end().map_err(|e| e.to_string())?;
     Ok(value.0)
 }
@@ -281,6 +268,17 @@ impl<'de> serde::de::Visitor<'de> for UniqueKeysVisitor {
             object.insert(key, v);
         }
         Ok(serde_json::Value::Object(object))
+    }
+}
+
+/// A deserialisation error as `path: reason`, or `reason` alone when it is about the whole
+/// value (its path is `.`): how a JSON body's and a command's JSON file's errors are told.
+pub(crate) fn path_error<E: std::fmt::Display>(e: &serde_path_to_error::Error<E>) -> String {
+    let path = e.path().to_string();
+    if path == "." {
+        e.inner().to_string()
+    } else {
+        format!("{path}: {}", e.inner())
     }
 }
 

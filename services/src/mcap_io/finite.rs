@@ -275,49 +275,29 @@ fn compound<'a>(checker: &'a mut Checker, variant: Option<&'static str>) -> Comp
     }
 }
 
-impl ser::SerializeSeq for Compound<'_> {
-    type Ok = ();
-    type Error = CheckError;
-    fn serialize_element<T: Serialize + ?Sized>(&mut self, value: &T) -> Result<(), CheckError> {
-        self.element(value)
-    }
-    fn end(self) -> Result<(), CheckError> {
-        self.finish()
-    }
+/// The serde compound traits whose elements are positional (sequences and tuples): each element
+/// is checked under its index, and `end` closes the compound. One body for the four traits.
+macro_rules! positional_compound {
+    ($($trait:ident :: $method:ident),+ $(,)?) => {$(
+        impl ser::$trait for Compound<'_> {
+            type Ok = ();
+            type Error = CheckError;
+            fn $method<T: Serialize + ?Sized>(&mut self, value: &T) -> Result<(), CheckError> {
+                self.element(value)
+            }
+            fn end(self) -> Result<(), CheckError> {
+                self.finish()
+            }
+        }
+    )+};
 }
 
-impl ser::SerializeTuple for Compound<'_> {
-    type Ok = ();
-    type Error = CheckError;
-    fn serialize_element<T: Serialize + ?Sized>(&mut self, value: &T) -> Result<(), CheckError> {
-        self.element(value)
-    }
-    fn end(self) -> Result<(), CheckError> {
-        self.finish()
-    }
-}
-
-impl ser::SerializeTupleStruct for Compound<'_> {
-    type Ok = ();
-    type Error = CheckError;
-    fn serialize_field<T: Serialize + ?Sized>(&mut self, value: &T) -> Result<(), CheckError> {
-        self.element(value)
-    }
-    fn end(self) -> Result<(), CheckError> {
-        self.finish()
-    }
-}
-
-impl ser::SerializeTupleVariant for Compound<'_> {
-    type Ok = ();
-    type Error = CheckError;
-    fn serialize_field<T: Serialize + ?Sized>(&mut self, value: &T) -> Result<(), CheckError> {
-        self.element(value)
-    }
-    fn end(self) -> Result<(), CheckError> {
-        self.finish()
-    }
-}
+positional_compound!(
+    SerializeSeq::serialize_element,
+    SerializeTuple::serialize_element,
+    SerializeTupleStruct::serialize_field,
+    SerializeTupleVariant::serialize_field,
+);
 
 impl ser::SerializeMap for Compound<'_> {
     type Ok = ();
@@ -339,35 +319,28 @@ impl ser::SerializeMap for Compound<'_> {
     }
 }
 
-impl ser::SerializeStruct for Compound<'_> {
-    type Ok = ();
-    type Error = CheckError;
-    fn serialize_field<T: Serialize + ?Sized>(
-        &mut self,
-        key: &'static str,
-        value: &T,
-    ) -> Result<(), CheckError> {
-        self.checker.nested(Segment::Field(key), value)
-    }
-    fn end(self) -> Result<(), CheckError> {
-        self.finish()
-    }
+/// The serde compound traits whose fields are named (structs and struct variants): each field is
+/// checked under its name. One body for the two traits.
+macro_rules! named_compound {
+    ($($trait:ident),+ $(,)?) => {$(
+        impl ser::$trait for Compound<'_> {
+            type Ok = ();
+            type Error = CheckError;
+            fn serialize_field<T: Serialize + ?Sized>(
+                &mut self,
+                key: &'static str,
+                value: &T,
+            ) -> Result<(), CheckError> {
+                self.checker.nested(Segment::Field(key), value)
+            }
+            fn end(self) -> Result<(), CheckError> {
+                self.finish()
+            }
+        }
+    )+};
 }
 
-impl ser::SerializeStructVariant for Compound<'_> {
-    type Ok = ();
-    type Error = CheckError;
-    fn serialize_field<T: Serialize + ?Sized>(
-        &mut self,
-        key: &'static str,
-        value: &T,
-    ) -> Result<(), CheckError> {
-        self.checker.nested(Segment::Field(key), value)
-    }
-    fn end(self) -> Result<(), CheckError> {
-        self.finish()
-    }
-}
+named_compound!(SerializeStruct, SerializeStructVariant);
 
 #[cfg(test)]
 mod tests {

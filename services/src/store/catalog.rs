@@ -24,6 +24,7 @@ use super::types::{
     StaleSession, FEATURE_DIM,
 };
 use crate::assist::features::TEMPLATE_DIM;
+pub(crate) use store_postgres::NewReplayRow;
 
 /// A skill checked for storing ([`super::validate_skill`]): the skill and its feature vector.
 #[derive(Debug, Clone, PartialEq)]
@@ -135,25 +136,6 @@ impl NewHand<'_> {
             torque_limit_max,
         })
     }
-}
-
-/// A replay whose blob is written: the row [`Catalog::insert_replay`] writes.
-#[derive(Debug, Clone, Copy)]
-pub(crate) struct NewReplay<'a> {
-    /// The replayed skill.
-    pub skill_id: i64,
-    /// The hand's name.
-    pub hand: &'a str,
-    /// Whether the object was held.
-    pub success: bool,
-    /// Why not, by name.
-    pub failure_reason: Option<&'static str>,
-    /// The report as JSON.
-    pub report_json: &'a str,
-    /// The replay's blob.
-    pub blob: &'a BlobRef,
-    /// Size of the blob, bytes.
-    pub size_bytes: i64,
 }
 
 /// A job to insert ([`Catalog::insert_job`]).
@@ -301,7 +283,7 @@ pub(crate) trait Catalog: Send + Sync + std::fmt::Debug {
     async fn hand(&self, name: &str) -> Result<Option<Hand>, StoreError>;
 
     /// Stores a replay of an existing skill; `None` when the skill is gone.
-    async fn insert_replay(&self, replay: NewReplay<'_>) -> Result<Option<Replay>, StoreError>;
+    async fn insert_replay(&self, replay: NewReplayRow<'_>) -> Result<Option<Replay>, StoreError>;
 
     /// One replay.
     async fn replay(&self, id: i64) -> Result<Option<Replay>, StoreError>;

@@ -13,7 +13,7 @@ use std::sync::OnceLock;
 use dfs_core::hand::{HandModel, HandSpec, BUILTIN_HANDS};
 use dfs_core::replay::ReplayReport;
 
-use super::catalog::{BlobRef, ExclusiveBlobGuard, NewHand, NewReplay};
+use super::catalog::{BlobRef, ExclusiveBlobGuard, NewHand, NewReplayRow};
 use super::error::StoreError;
 use super::types::{Hand, HandSummary, Replay};
 use super::{blob, StagedBlob, Store};
@@ -207,14 +207,13 @@ impl Store {
         mcap: Vec<u8>,
     ) -> Result<Replay, StoreError> {
         let guard = self.inner.blob_lock.read().await;
-        let dir = self.inner.dir.clone();
         let size = mcap.len() as i64;
-        let (sha256, rel) = tokio::task::spawn_blocking(move || {
-            let sha = blob::sha256_hex(&mcap);
-            blob::write_atomic(&dir, &sha, &mcap).map(|rel| (sha, rel))
-        })
-        .await
-        .map_err(|e| StoreError::Corrupt(format!("blob writer task failed: {e}")))??;
+        let (sha256, rel) = self
+            .write_blob(move |dir| {
+                let sha = blob::sha256_hex(&mcap);
+                blob::write_atomic(dir, &sha, &mcap).map(|rel| (sha, rel))
+            })
+            .await?;
         self.insert_replay_row(skill_id, hand, report, (sha256, size, rel), guard)
             .await
     }
@@ -230,11 +229,8 @@ impl Store {
         mcap: StagedBlob,
     ) -> Result<Replay, StoreError> {
         let guard = self.inner.blob_lock.read().await;
-        let dir = self.inner.dir.clone();
         let (sha256, size) = (mcap.sha256().to_owned(), mcap.len() as i64);
-        let rel = tokio::task::spawn_blocking(move || mcap.commit(&dir))
-            .await
-            .map_err(|e| StoreError::Corrupt(format!("blob writer task failed: {e}")))??;
+        let rel = self.write_blob(move |dir| mcap.commit(dir)).await?;
         self.insert_replay_row(skill_id, hand, report, (sha256, size, rel), guard)
             .await
     }
@@ -258,14 +254,15 @@ impl Store {
             self.publish(&blob.rel).await?;
             self.inner
                 .catalog
-                .insert_replay(NewReplay {
+                .insert_replay(NewReplayRow {
                     skill_id,
                     hand,
                     success: report.success,
                     failure_reason: report.failure_reason.map(|r| r.name()),
-                    report_json: &report_json,
-                    blob: &blob,
+                    report: &report_json,
+                    sha256: &blob.sha256,
                     size_bytes: size,
+                    blob_path: &blob.rel,
                 })
                 .await
         }

@@ -128,6 +128,18 @@ impl Store {
         self.inner.catalog.stored_session(sha256).await
     }
 
+    /// Runs `write` (a blob write into the data directory, blocking) on a blocking thread: how
+    /// every session and replay blob is written.
+    pub(super) async fn write_blob<T: Send + 'static>(
+        &self,
+        write: impl FnOnce(&std::path::Path) -> Result<T, StoreError> + Send + 'static,
+    ) -> Result<T, StoreError> {
+        let dir = self.inner.dir.clone();
+        tokio::task::spawn_blocking(move || write(&dir))
+            .await
+            .map_err(|e| StoreError::Corrupt(format!("blob writer task failed: {e}")))?
+    }
+
     /// Stores a session: its MCAP bytes as a content-addressed blob, its metadata and skills.
     ///
     /// Idempotent: bytes already stored (same SHA-256) return the existing session with
@@ -152,12 +164,11 @@ impl Store {
         }
 
         let _guard = self.inner.blob_lock.read().await;
-        let dir = self.inner.dir.clone();
         let sha = sha256.clone();
         let size = bytes.len() as i64;
-        let rel = tokio::task::spawn_blocking(move || blob::write_atomic(&dir, &sha, &bytes))
-            .await
-            .map_err(|e| StoreError::Corrupt(format!("blob writer task failed: {e}")))??;
+        let rel = self
+            .write_blob(move |dir| blob::write_atomic(dir, &sha, &bytes))
+            .await?;
         self.publish_and_insert_session(&sha256, size, &rel, meta, checked, duration_ns)
             .await
     }
@@ -182,11 +193,8 @@ impl Store {
             return Ok(found);
         }
         let _guard = self.inner.blob_lock.read().await;
-        let dir = self.inner.dir.clone();
         let size = staged.len() as i64;
-        let rel = tokio::task::spawn_blocking(move || staged.commit(&dir))
-            .await
-            .map_err(|e| StoreError::Corrupt(format!("blob writer task failed: {e}")))??;
+        let rel = self.write_blob(move |dir| staged.commit(dir)).await?;
         self.publish_and_insert_session(&sha256, size, &rel, meta, checked, duration_ns)
             .await
     }
@@ -323,12 +331,11 @@ impl Store {
         for (bytes, meta, skills) in batch {
             let checked = checked_skills(skills)?;
             let sha256 = blob::sha256_hex(&bytes);
-            let dir = self.inner.dir.clone();
             let sha = sha256.clone();
             let size = bytes.len() as i64;
-            let rel = tokio::task::spawn_blocking(move || blob::write_atomic(&dir, &sha, &bytes))
-                .await
-                .map_err(|e| StoreError::Corrupt(format!("blob writer task failed: {e}")))??;
+            let rel = self
+                .write_blob(move |dir| blob::write_atomic(dir, &sha, &bytes))
+                .await?;
             self.publish(&rel).await?;
             let duration_ns = i64::try_from(meta.duration_ns).unwrap_or(i64::MAX);
             prepared.push((sha256, size, rel, meta, checked, duration_ns));

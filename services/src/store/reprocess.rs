@@ -4,79 +4,97 @@
 
 use dfs_core::names::Named;
 
-use super::catalog::{BlobRef, CheckedSkill, Replacement};
-use super::rows::{feature_to_blob, StoredSkillRow};
+use super::catalog::{BlobRef, CheckedSkill, ReplacedRows, Replacement};
+use super::rows::{feature_to_blob, session_version, StoredSkillRow};
 use super::types::{NewSkill, ReplacedSkills, StaleSession};
 use super::{blob, validate_skill, Store, StoreError};
 
 /// A stored skill in the form its row holds it, or a new skill in the form it would be stored:
-/// two skills are the same when these are equal (the numbers as numbers, stored exactly as
-/// REALs and always finite; the JSON columns as the text stored).
-#[derive(Debug, PartialEq)]
-pub(crate) struct StoredForm {
-    pub object_shape: String,
-    pub object_name: Option<String>,
-    pub object_mass: f64,
-    pub mu: f64,
-    pub contact_count: i64,
-    pub contact_model: String,
-    pub grasp_type: String,
-    pub quality: f64,
-    pub volume: f64,
-    pub duration_s: f64,
-    pub start_ns: i64,
-    pub end_ns: i64,
-    pub phase_durations: String,
-    pub feature: Vec<u8>,
-    pub params: String,
+/// the row of the reprocessing query ([`StoredSkillRow`]) with its id left 0, so that two skills
+/// are the same when these are equal (the numbers as numbers, stored exactly as REALs and
+/// always finite; the JSON columns as the text stored).
+pub(crate) type StoredForm = StoredSkillRow;
+
+/// The new skills of a replacement in stored form, computed before its transaction begins.
+pub(crate) fn new_forms(skills: &[CheckedSkill]) -> Result<Vec<StoredForm>, StoreError> {
+    skills.iter().map(stored_form).collect()
 }
 
-impl StoredForm {
-    /// A stored skill's row as its id and its stored form.
-    pub(crate) fn of_row(r: StoredSkillRow) -> (i64, StoredForm) {
-        (
-            r.id,
-            StoredForm {
-                object_shape: r.object_shape,
-                object_name: r.object_name,
-                object_mass: r.object_mass,
-                mu: r.mu,
-                contact_count: r.contact_count,
-                contact_model: r.contact_model,
-                grasp_type: r.grasp_type,
-                quality: r.quality,
-                volume: r.volume,
-                duration_s: r.duration_s,
-                start_ns: r.start_ns,
-                end_ns: r.end_ns,
-                phase_durations: r.phase_durations,
-                feature: r.feature,
-                params: r.params,
-            },
-        )
-    }
+/// Which stored skills a replacement keeps, removes and adds: the stored rows of the session
+/// (`old`, as the backend's query read them) against the new skills in stored form (`new`).
+/// One step of both backends' `replace_session_skills`.
+pub(crate) fn plan_rows(old: Vec<StoredSkillRow>, new: &[StoredForm]) -> Plan {
+    // A stored row as its id and its stored form.
+    let old: Vec<(i64, StoredForm)> = old
+        .into_iter()
+        .map(|r| (r.id, StoredSkillRow { id: 0, ..r }))
+        .collect();
+    plan(&old, new)
+}
 
-    /// What a catalog writes for the checked skill `c`.
-    pub(crate) fn of_new(c: &CheckedSkill) -> Result<Self, StoreError> {
-        let s = &c.skill;
-        Ok(StoredForm {
-            object_shape: s.object_shape.name().to_owned(),
-            object_name: s.object_name.clone(),
-            object_mass: s.object_mass,
-            mu: s.mu,
-            contact_count: s.contact_count,
-            contact_model: s.contact_model.name().to_owned(),
-            grasp_type: s.grasp_type.clone(),
-            quality: s.quality,
-            volume: s.volume,
-            duration_s: s.duration_s,
-            start_ns: s.start_ns,
-            end_ns: s.end_ns,
-            phase_durations: serde_json::to_string(&s.phase_durations)?,
-            feature: feature_to_blob(&c.feature),
-            params: serde_json::to_string(&s.params)?,
+/// The checks on the session version a replacement reads under its lock: `None` when the
+/// session is already at `version` or newer (nothing to do), else its version. A version that
+/// does not convert is [`StoreError::Corrupt`].
+pub(crate) fn version_to_replace(
+    session_id: i64,
+    stored: i64,
+    version: u32,
+) -> Result<Option<u32>, StoreError> {
+    let from = session_version(session_id, stored)?;
+    Ok((from < version).then_some(from))
+}
+
+/// Refuses a deletion of the removed skills that deleted another number of rows than asked.
+pub(crate) fn check_deleted(session_id: i64, done: u64, removed: &[i64]) -> Result<(), StoreError> {
+    if done != removed.len() as u64 {
+        return Err(StoreError::Corrupt(format!(
+            "session {session_id}: deleted {done} of its {} replaced skills",
+            removed.len()
+        )));
+    }
+    Ok(())
+}
+
+impl Plan {
+    /// What the replacement did, once the added skills were inserted with ids `added_ids` (in
+    /// the order of `self.added`) and the removed replays' blobs were `replay_blobs`.
+    pub(crate) fn done(
+        self,
+        from_version: u32,
+        added_ids: Vec<i64>,
+        replay_blobs: Vec<BlobRef>,
+    ) -> Replacement {
+        Replacement::Done(ReplacedRows {
+            from_version,
+            kept: self.kept,
+            removed: self.removed,
+            added: added_ids.into_iter().zip(self.added).collect(),
+            replay_blobs,
         })
     }
+}
+
+/// What a catalog writes for the checked skill `c`, in stored form.
+fn stored_form(c: &CheckedSkill) -> Result<StoredForm, StoreError> {
+    let s = &c.skill;
+    Ok(StoredForm {
+        id: 0,
+        object_shape: s.object_shape.name().to_owned(),
+        object_name: s.object_name.clone(),
+        object_mass: s.object_mass,
+        mu: s.mu,
+        contact_count: s.contact_count,
+        contact_model: s.contact_model.name().to_owned(),
+        grasp_type: s.grasp_type.clone(),
+        quality: s.quality,
+        volume: s.volume,
+        duration_s: s.duration_s,
+        start_ns: s.start_ns,
+        end_ns: s.end_ns,
+        phase_durations: serde_json::to_string(&s.phase_durations)?,
+        feature: feature_to_blob(&c.feature),
+        params: serde_json::to_string(&s.params)?,
+    })
 }
 
 /// Which stored skills a replacement keeps, removes, and which new skills it adds.
@@ -92,7 +110,7 @@ pub(crate) struct Plan {
 
 /// Matches the new skills (`new`, in stored form) with the stored ones (`old`: id and stored
 /// form): each new skill keeps the first unclaimed identical stored skill, if any.
-pub(crate) fn plan(old: &[(i64, StoredForm)], new: &[StoredForm]) -> Plan {
+fn plan(old: &[(i64, StoredForm)], new: &[StoredForm]) -> Plan {
     let mut claimed = vec![false; old.len()];
     let mut kept = Vec::new();
     let mut added = Vec::new();

@@ -172,18 +172,9 @@ pub const CONTACT_TIPS: [&str; 4] = ["thumb", "index", "middle", "ring"];
 /// `icms bench tick --scene fingertips --describe` for the MuJoCo peer.
 #[derive(Debug, Clone, Serialize)]
 pub struct HeldScene {
-    /// Scene name.
-    pub scene: &'static str,
-    /// Tick (s).
-    pub dt: Real,
-    /// Gravity (world, m/s²).
-    pub gravity: [Real; 3],
-    /// The hand model.
-    pub hand: &'static str,
-    /// Hand base (forearm) pose in the world: position (m) and unit quaternion (w, x, y, z).
-    pub base_position: [Real; 3],
-    /// Orientation of the hand base (w, x, y, z).
-    pub base_quaternion: [Real; 4],
+    /// The scene's name, tick, gravity and hand base.
+    #[serde(flatten)]
+    pub frame: SceneFrame,
     /// The ball: radius (m).
     pub ball_radius: Real,
     /// The ball's mass (kg).
@@ -194,11 +185,55 @@ pub struct HeldScene {
     pub ball_position: [Real; 3],
     /// The fingertips that touch it at the start.
     pub contact_tips: Vec<&'static str>,
+    /// How the operator holds it.
+    #[serde(flatten)]
+    pub grip: HeldGrip,
+}
+
+/// What both described scenes start with: the name, the DFS's tick and gravity, and where
+/// the hand base is.
+#[derive(Debug, Clone, Serialize)]
+pub struct SceneFrame {
+    /// Scene name.
+    pub scene: &'static str,
+    /// Tick (s).
+    pub dt: Real,
+    /// Gravity (world, m/s²).
+    pub gravity: [Real; 3],
+    /// The hand model.
+    pub hand: &'static str,
+    /// Hand base (forearm) position in the world (m).
+    pub base_position: [Real; 3],
+    /// Orientation of the hand base (w, x, y, z).
+    pub base_quaternion: [Real; 4],
+}
+
+impl SceneFrame {
+    /// Scene `scene` of the glove10 hand with DFS parameters `params` and hand base `base`.
+    fn glove10(scene: &'static str, params: &DfsParams, base: &Isometry) -> Self {
+        let quat = base.rotation.quaternion();
+        SceneFrame {
+            scene,
+            dt: params.dt,
+            gravity: params.gravity.into(),
+            hand: "glove10",
+            base_position: base.translation.vector.into(),
+            base_quaternion: [quat.w, quat.i, quat.j, quat.k],
+        }
+    }
+}
+
+/// What both described scenes end with: how the operator holds the object, a PD grip about a
+/// set posture whose strength swings.
+#[derive(Debug, Clone, Serialize)]
+pub struct HeldGrip {
     /// DOF names, in θ order.
     pub dofs: Vec<String>,
-    /// The set posture θ_set (rad); also the start.
+    /// The set posture θ_set (rad); also the start (`power-grasp`: where the fingers came to
+    /// rest).
     pub q: Vec<Real>,
-    /// Feed-forward torques τ_ff (N·m).
+    /// Feed-forward torques τ_ff (N·m) (`power-grasp`: the closing torques, scaled by the
+    /// grip).
     pub tau_ff: Vec<Real>,
     /// Joint stiffness K_p (N·m/rad).
     pub kp: Vec<Real>,
@@ -302,26 +337,22 @@ fn fingertips() -> Result<Held, CliError> {
     )?;
     let start = ObjectState::at_rest(Isometry::translation(centre_w.x, centre_w.y, centre_w.z));
     let dfs = Dfs::new(hand.clone(), object, start, params)?;
-    let quat = base.rotation.quaternion();
     let scene = HeldScene {
-        scene: "fingertips",
-        dt: params.dt,
-        gravity: params.gravity.into(),
-        hand: "glove10",
-        base_position: base.translation.vector.into(),
-        base_quaternion: [quat.w, quat.i, quat.j, quat.k],
+        frame: SceneFrame::glove10("fingertips", &params, &base),
         ball_radius: BALL_RADIUS,
         ball_mass: BALL_MASS,
         ball_mu: BALL_MU,
         ball_position: centre_w.coords.into(),
         contact_tips: CONTACT_TIPS.to_vec(),
-        dofs: hand.dof_names.clone(),
-        q,
-        tau_ff,
-        kp,
-        kd,
-        grip_swing: GRIP_SWING,
-        grip_period_s: GRIP_PERIOD_S,
+        grip: HeldGrip {
+            dofs: hand.dof_names.clone(),
+            q,
+            tau_ff,
+            kp,
+            kd,
+            grip_swing: GRIP_SWING,
+            grip_period_s: GRIP_PERIOD_S,
+        },
     };
     Ok(Held { scene, dfs, base })
 }
@@ -550,18 +581,9 @@ fn feed_forward_torques(
 /// peer.
 #[derive(Debug, Clone, Serialize)]
 pub struct PowerGraspScene {
-    /// Scene name.
-    pub scene: &'static str,
-    /// Tick (s).
-    pub dt: Real,
-    /// Gravity (world, m/s²).
-    pub gravity: [Real; 3],
-    /// The hand model.
-    pub hand: &'static str,
-    /// Hand base (forearm) position in the world (m).
-    pub base_position: [Real; 3],
-    /// Orientation of the hand base (w, x, y, z).
-    pub base_quaternion: [Real; 4],
+    /// The scene's name, tick, gravity and hand base.
+    #[serde(flatten)]
+    pub frame: SceneFrame,
     /// The cylinder's radius (m).
     pub cylinder_radius: Real,
     /// Half its length (m), along its z axis.
@@ -580,20 +602,9 @@ pub struct PowerGraspScene {
     pub body_damping: Real,
     /// The contacts (shape names, fingertips as `tip_<name>`) pressing once settled.
     pub contacts: Vec<String>,
-    /// DOF names, in θ order.
-    pub dofs: Vec<String>,
-    /// The set posture θ_set (rad): where the fingers came to rest; also the start.
-    pub q: Vec<Real>,
-    /// The closing torques τ_close (N·m), scaled by the grip.
-    pub tau_ff: Vec<Real>,
-    /// Joint stiffness K_p (N·m/rad).
-    pub kp: Vec<Real>,
-    /// Joint damping K_d (N·m·s/rad).
-    pub kd: Vec<Real>,
-    /// Relative swing of the grip.
-    pub grip_swing: Real,
-    /// Period of the grip's swing (s).
-    pub grip_period_s: Real,
+    /// How the operator holds it.
+    #[serde(flatten)]
+    pub grip: HeldGrip,
 }
 
 /// A scene's description for the MuJoCo peer (`--describe`).
@@ -631,14 +642,9 @@ fn power_grasp_scene() -> Result<PowerGraspScene, CliError> {
             .map(|k| format!("tip_{}", hand.fingertips[k].name)),
     );
     let cyl = out.object.pose;
-    let (bq, cq) = (g.base.rotation.quaternion(), cyl.rotation.quaternion());
+    let cq = cyl.rotation.quaternion();
     Ok(PowerGraspScene {
-        scene: "power-grasp",
-        dt: p.dt,
-        gravity: p.gravity.into(),
-        hand: "glove10",
-        base_position: g.base.translation.vector.into(),
-        base_quaternion: [bq.w, bq.i, bq.j, bq.k],
+        frame: SceneFrame::glove10("power-grasp", &p, &g.base),
         cylinder_radius: dfs_core::fixtures::CYLINDER_RADIUS,
         cylinder_half_height: dfs_core::fixtures::CYLINDER_HALF_HEIGHT,
         cylinder_mass: dfs_core::fixtures::CYLINDER_MASS,
@@ -648,13 +654,15 @@ fn power_grasp_scene() -> Result<PowerGraspScene, CliError> {
         body_stiffness: p.body_stiffness,
         body_damping: p.body_damping,
         contacts,
-        dofs: hand.dof_names.clone(),
-        q: g.grip.set[..g.grip.n].to_vec(),
-        tau_ff: g.grip.close[..g.grip.n].to_vec(),
-        kp: g.grip.kp[..g.grip.n].to_vec(),
-        kd: g.grip.kd[..g.grip.n].to_vec(),
-        grip_swing: GRIP_SWING,
-        grip_period_s: GRIP_PERIOD_S,
+        grip: HeldGrip {
+            dofs: hand.dof_names.clone(),
+            q: g.grip.set[..g.grip.n].to_vec(),
+            tau_ff: g.grip.close[..g.grip.n].to_vec(),
+            kp: g.grip.kp[..g.grip.n].to_vec(),
+            kd: g.grip.kd[..g.grip.n].to_vec(),
+            grip_swing: GRIP_SWING,
+            grip_period_s: GRIP_PERIOD_S,
+        },
     })
 }
 
@@ -674,7 +682,8 @@ struct Samples {
 
 /// Runs the operator of `held` in the closed loop for `ticks` ticks and keeps its samples.
 fn closed_loop(held: &Held, ticks: usize) -> Result<Samples, CliError> {
-    let s = &held.scene;
+    let s = &held.scene.grip;
+    let dt = held.scene.frame.dt;
     let n = s.q.len();
     let hand = held.dfs.hand();
     let range = held.dfs.params().torque_range;
@@ -689,7 +698,7 @@ fn closed_loop(held: &Held, ticks: usize) -> Result<Samples, CliError> {
         end: *dfs.object_state(),
     };
     for t in 0..ticks {
-        let time = t as Real * s.dt;
+        let time = t as Real * dt;
         let grip = 1.0 + s.grip_swing * (std::f64::consts::TAU * time / s.grip_period_s).sin();
         for d in 0..n {
             let lim = hand.torque_limit[d] * range;

@@ -42,14 +42,7 @@ pub(super) fn unpack_chunk(
     reuse: Option<Vec<u8>>,
 ) -> Result<ChunkContent> {
     let corrupt = |detail: String| RecordingError::Corrupt { offset, detail };
-    if header.uncompressed_size > limits.max_record_bytes {
-        return Err(RecordingError::RecordTooLong {
-            offset,
-            opcode: op::CHUNK,
-            len: header.uncompressed_size,
-            limit: limits.max_record_bytes,
-        });
-    }
+    limits.check_record_len(offset, op::CHUNK, header.uncompressed_size)?;
     let size = header.uncompressed_size as usize;
     let data = match header.compression.as_str() {
         "" => {
@@ -221,14 +214,7 @@ pub(super) fn next_chunk_record(
     }
     let opcode = rest[0];
     let len = u64::from_le_bytes(rest[1..9].try_into().expect("8 bytes"));
-    if len > limits.max_record_bytes {
-        return Err(RecordingError::RecordTooLong {
-            offset,
-            opcode,
-            len,
-            limit: limits.max_record_bytes,
-        });
-    }
+    limits.check_record_len(offset, opcode, len)?;
     let available = (rest.len() - OPCODE_LEN_SIZE as usize) as u64;
     if len > available {
         return Err(corrupt(format!(

@@ -121,6 +121,20 @@ impl ReadLimits {
         }
     }
 
+    /// Refuses a record (or a chunk's decompressed content) of opcode `opcode` at `offset`
+    /// that claims `len` bytes, more than [`Self::max_record_bytes`].
+    pub(super) fn check_record_len(&self, offset: u64, opcode: u8, len: u64) -> Result<()> {
+        if len > self.max_record_bytes {
+            return Err(RecordingError::RecordTooLong {
+                offset,
+                opcode,
+                len,
+                limit: self.max_record_bytes,
+            });
+        }
+        Ok(())
+    }
+
     /// Most bytes a file of `input_len` bytes may decompress to: `max_expansion × input_len +
     /// expansion_allowance`, and never more than `max_total_message_bytes`. The readers apply
     /// it with the length of what they read (the bytes given, the file's size), whatever

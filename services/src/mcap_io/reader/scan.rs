@@ -207,14 +207,7 @@ fn read_record<R: Read>(
             });
         }
     }
-    if len > limits.max_record_bytes {
-        return Err(RecordingError::RecordTooLong {
-            offset,
-            opcode,
-            len,
-            limit: limits.max_record_bytes,
-        });
-    }
+    limits.check_record_len(offset, opcode, len)?;
     record.clear();
     if total_len.is_some() {
         // Its length is within what the input holds (checked above) and the record

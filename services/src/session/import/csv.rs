@@ -101,12 +101,7 @@ fn parse_header<'a>(
             format!("the first column must be time_s, found {:?}", columns[0]),
         ));
     }
-    let dof_index: HashMap<&str, usize> = hand
-        .dof_names
-        .iter()
-        .enumerate()
-        .map(|(i, s)| (s.as_str(), i))
-        .collect();
+    let dof_index = dof_index(hand);
     let mut mapping = Vec::with_capacity(columns.len() - 1);
     let mut seen = Seen {
         angle: vec![false; n],
@@ -150,6 +145,16 @@ fn parse_header<'a>(
 
 /// What the column named `col` holds, by the DOFs' indices by name; `None` for an unknown
 /// name. A DOF's own name first (a DOF may be called `tau_x` or `wrist_x`).
+/// The index of each of `hand`'s DOFs by its name: how an imported file's joint columns or
+/// names are matched with the hand's.
+pub(super) fn dof_index(hand: &HandModel) -> HashMap<&str, usize> {
+    hand.dof_names
+        .iter()
+        .enumerate()
+        .map(|(i, s)| (s.as_str(), i))
+        .collect()
+}
+
 fn column_of(col: &str, dof_index: &HashMap<&str, usize>) -> Option<Column> {
     if let Some(&d) = dof_index.get(col) {
         Some(Column::Angle(d))

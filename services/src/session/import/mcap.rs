@@ -2,14 +2,13 @@
 //! `foxglove.PoseInFrame` or `foxglove.FrameTransforms` (see the parent module's docs), in
 //! protobuf (as the Foxglove SDK writes them) or JSON.
 
-use std::collections::HashMap;
 use std::path::Path;
 
 use dfs_core::hand::HandModel;
 use dfs_core::math::{Isometry, Vector};
 use serde::de::DeserializeOwned;
 
-use super::csv::unit_quaternion;
+use super::csv::{dof_index, unit_quaternion};
 use super::{invalid, GloveRecording, WristInput, WristTrack, MAX_RECORDING_NS};
 use crate::error::Result;
 use crate::foxglove::{
@@ -199,12 +198,7 @@ fn joints_recording(
     hand: &HandModel,
 ) -> Result<GloveRecording> {
     let n = hand.dof();
-    let dof_index: HashMap<&str, usize> = hand
-        .dof_names
-        .iter()
-        .enumerate()
-        .map(|(i, s)| (s.as_str(), i))
-        .collect();
+    let dof_index = dof_index(hand);
     // Torques if the first message gives an effort for every joint.
     let torques = messages
         .first()

@@ -142,14 +142,7 @@ impl SessionRecorder {
         register_channels(&mut writer, info)?;
         let hand_scene = HandScene::create(&mut writer, hand, info.hand_urdf.as_deref())?;
 
-        let frames = HandFrames {
-            dof: hand.dof(),
-            n_tips: hand.fingertips.len(),
-            n_shapes: hand.contact_shapes.len(),
-            links: hand.links.len(),
-            root: hand.root,
-            joints: hand.joints.iter().map(|j| (j.parent, j.child)).collect(),
-        };
+        let frames = HandFrames::of(hand);
         let scene = SceneObjects::new(object, info.scene.as_ref());
         let serialiser = Serialiser {
             hand: frames.clone(),

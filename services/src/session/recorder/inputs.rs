@@ -123,3 +123,17 @@ pub(super) struct HandFrames {
     /// Per joint: (parent link, child link).
     pub(super) joints: Vec<(usize, usize)>,
 }
+
+impl HandFrames {
+    /// The structure of `hand`.
+    pub(super) fn of(hand: &dfs_core::hand::HandModel) -> Self {
+        HandFrames {
+            dof: hand.dof(),
+            n_tips: hand.fingertips.len(),
+            n_shapes: hand.contact_shapes.len(),
+            links: hand.links.len(),
+            root: hand.root,
+            joints: hand.joints.iter().map(|j| (j.parent, j.child)).collect(),
+        }
+    }
+}

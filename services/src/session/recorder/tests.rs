@@ -179,14 +179,7 @@ fn raw_messages_are_canonical(sim: &mut Simulation, scene: Option<&Scene>) {
         m
     }
     let hand = sim.dfs().hand().clone();
-    let frames = HandFrames {
-        dof: hand.dof(),
-        n_tips: hand.fingertips.len(),
-        n_shapes: hand.contact_shapes.len(),
-        links: hand.links.len(),
-        root: hand.root,
-        joints: hand.joints.iter().map(|j| (j.parent, j.child)).collect(),
-    };
+    let frames = HandFrames::of(&hand);
     let mut m = Messages::new(&hand, &SceneObjects::new(sim.dfs().object(), scene));
     let mut batch = Batch::default();
     let mut touching = 0;

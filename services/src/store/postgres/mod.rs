@@ -31,12 +31,12 @@ use store_postgres::{NewHandRow, NewReplayRow, NewSessionRow, SessionListing, MI
 
 use super::catalog::{
     BlobGuard, BlobRef, Catalog, CheckedSkill, DeletedSession, ExclusiveBlobGuard, IndexedSkill,
-    NewHand, NewJob, NewReplay, NewSession, ReplacedRows, Replacement, SettleRow,
+    NewHand, NewJob, NewSession, Replacement, SettleRow,
 };
 use super::jobs::JobClaim;
 use super::query::{SessionFilter, SkillFilter};
-use super::reprocess::{plan, StoredForm};
-use super::rows::{approach_to_blob, convert, session_version};
+use super::reprocess::{check_deleted, new_forms, plan_rows, version_to_replace};
+use super::rows::{approach_to_blob, convert};
 use super::skill_insert::insert_skills;
 use super::types::{
     Hand, HandSummary, IngestOutcome, Replay, SessionRecord, SkillRecord, StaleSession,
@@ -343,23 +343,11 @@ impl Catalog for PgCatalog {
             .transpose()
     }
 
-    async fn insert_replay(&self, r: NewReplay<'_>) -> Result<Option<Replay>, StoreError> {
-        store_postgres::insert_replay(
-            &self.pool,
-            NewReplayRow {
-                skill_id: r.skill_id,
-                hand: r.hand,
-                success: r.success,
-                failure_reason: r.failure_reason,
-                report: r.report_json,
-                sha256: &r.blob.sha256,
-                size_bytes: r.size_bytes,
-                blob_path: &r.blob.rel,
-            },
-        )
-        .await?
-        .map(Replay::try_from)
-        .transpose()
+    async fn insert_replay(&self, r: NewReplayRow<'_>) -> Result<Option<Replay>, StoreError> {
+        store_postgres::insert_replay(&self.pool, r)
+            .await?
+            .map(Replay::try_from)
+            .transpose()
     }
 
     async fn replay(&self, id: i64) -> Result<Option<Replay>, StoreError> {
@@ -404,10 +392,7 @@ impl Catalog for PgCatalog {
         version: u32,
         skills: &[CheckedSkill],
     ) -> Result<Replacement, StoreError> {
-        let new_forms = skills
-            .iter()
-            .map(StoredForm::of_new)
-            .collect::<Result<Vec<_>, _>>()?;
+        let new_forms = new_forms(skills)?;
         let mut tx = self.pool.begin().await?;
         // The session row locked (FOR UPDATE) until the commit: a concurrent replacement of
         // the same session waits, then sees the version this one wrote.
@@ -416,17 +401,12 @@ impl Catalog for PgCatalog {
             tx.rollback().await?;
             return Ok(Replacement::SessionNotFound);
         };
-        let from_version = session_version(session_id, from)?;
-        if from_version >= version {
+        let Some(from_version) = version_to_replace(session_id, from, version)? else {
             tx.rollback().await?;
             return Ok(Replacement::UpToDate);
-        }
-        let old: Vec<(i64, StoredForm)> = store_postgres::stored_skills_of(&mut tx, session_id)
-            .await?
-            .into_iter()
-            .map(StoredForm::of_row)
-            .collect();
-        let plan = plan(&old, &new_forms);
+        };
+        let old = store_postgres::stored_skills_of(&mut tx, session_id).await?;
+        let plan = plan_rows(old, &new_forms);
         for &(id, i) in &plan.kept {
             let approach = skills[i].skill.approach.as_deref().map(approach_to_blob);
             store_postgres::set_approach(&mut tx, id, approach.as_deref()).await?;
@@ -439,24 +419,13 @@ impl Catalog for PgCatalog {
                 .map(blob)
                 .collect();
             let done = store_postgres::delete_skills(&mut tx, &plan.removed).await?;
-            if done != plan.removed.len() as u64 {
-                return Err(StoreError::Corrupt(format!(
-                    "session {session_id}: deleted {done} of its {} replaced skills",
-                    plan.removed.len()
-                )));
-            }
+            check_deleted(session_id, done, &plan.removed)?;
         }
         let added = plan.added.iter().map(|&i| &skills[i]);
         let added_ids = insert_skills::<Postgres>(&mut tx, session_id, added).await?;
         store_postgres::set_segmentation_version(&mut tx, session_id, i64::from(version)).await?;
         tx.commit().await?;
-        Ok(Replacement::Done(ReplacedRows {
-            from_version,
-            kept: plan.kept,
-            removed: plan.removed,
-            added: added_ids.into_iter().zip(plan.added).collect(),
-            replay_blobs,
-        }))
+        Ok(plan.done(from_version, added_ids, replay_blobs))
     }
 
     async fn synchronous_setting(&self) -> Result<i64, StoreError> {

@@ -2,7 +2,7 @@
 
 use sqlx::SqlitePool;
 
-use crate::store::catalog::{NewHand, NewReplay};
+use crate::store::catalog::{NewHand, NewReplayRow};
 use crate::store::rows::{convert, HandRow, HandSummaryRow, ReplayRow};
 use crate::store::types::{Hand, HandSummary, Replay};
 use crate::store::StoreError;
@@ -60,7 +60,7 @@ pub(super) async fn hand(pool: &SqlitePool, name: &str) -> Result<Option<Hand>, 
 /// Stores a replay of skill `r.skill_id` if that skill exists.
 pub(super) async fn insert_replay(
     pool: &SqlitePool,
-    r: NewReplay<'_>,
+    r: NewReplayRow<'_>,
 ) -> Result<Option<Replay>, StoreError> {
     sqlx::query_as!(
         ReplayRow,
@@ -75,10 +75,10 @@ pub(super) async fn insert_replay(
         r.hand,
         r.success,
         r.failure_reason,
-        r.report_json,
-        r.blob.sha256,
+        r.report,
+        r.sha256,
         r.size_bytes,
-        r.blob.rel,
+        r.blob_path,
     )
     .fetch_optional(pool)
     .await?

@@ -27,7 +27,7 @@ use sqlx::{Connection as _, SqliteConnection};
 
 use super::catalog::{
     BlobGuard, BlobRef, Catalog, CheckedSkill, DeletedSession, ExclusiveBlobGuard, IndexedSkill,
-    NewHand, NewJob, NewReplay, NewSession, Replacement, SettleRow,
+    NewHand, NewJob, NewReplayRow, NewSession, Replacement, SettleRow,
 };
 use super::jobs::JobClaim;
 use super::query::{SessionFilter, SkillFilter};
@@ -256,7 +256,7 @@ impl Catalog for SqliteCatalog {
         hands::hand(&self.pool, name).await
     }
 
-    async fn insert_replay(&self, replay: NewReplay<'_>) -> Result<Option<Replay>, StoreError> {
+    async fn insert_replay(&self, replay: NewReplayRow<'_>) -> Result<Option<Replay>, StoreError> {
         hands::insert_replay(&self.pool, replay).await
     }
 

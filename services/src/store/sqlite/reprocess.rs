@@ -3,11 +3,9 @@
 
 use sqlx::{Sqlite, SqlitePool};
 
-use crate::store::catalog::{BlobRef, CheckedSkill, ReplacedRows, Replacement};
-use crate::store::reprocess::{plan, StoredForm};
-use crate::store::rows::{
-    approach_to_blob, convert, session_version, StaleSessionRow, StoredSkillRow,
-};
+use crate::store::catalog::{BlobRef, CheckedSkill, Replacement};
+use crate::store::reprocess::{check_deleted, new_forms, plan_rows, version_to_replace};
+use crate::store::rows::{approach_to_blob, convert, StaleSessionRow, StoredSkillRow};
 use crate::store::skill_insert::insert_skills;
 use crate::store::types::StaleSession;
 use crate::store::StoreError;
@@ -51,10 +49,7 @@ pub(super) async fn replace(
     version: u32,
     skills: &[CheckedSkill],
 ) -> Result<Replacement, StoreError> {
-    let new_forms = skills
-        .iter()
-        .map(StoredForm::of_new)
-        .collect::<Result<Vec<_>, _>>()?;
+    let new_forms = new_forms(skills)?;
     // IMMEDIATE: the write lock from the start (a deferred transaction that reads first cannot
     // write after another connection's commit).
     let mut tx = pool.begin_with("BEGIN IMMEDIATE").await?;
@@ -68,13 +63,12 @@ pub(super) async fn replace(
         tx.rollback().await?;
         return Ok(Replacement::SessionNotFound);
     };
-    let from_version = session_version(session_id, from)?;
-    if from_version >= version {
+    let Some(from_version) = version_to_replace(session_id, from, version)? else {
         tx.rollback().await?;
         return Ok(Replacement::UpToDate);
-    }
+    };
 
-    let old: Vec<(i64, StoredForm)> = sqlx::query_as!(
+    let old = sqlx::query_as!(
         StoredSkillRow,
         r#"SELECT id AS "id!", object_shape, object_name, object_mass, mu, contact_count,
                contact_model, grasp_type, quality, volume, duration_s, start_ns, end_ns,
@@ -83,11 +77,8 @@ pub(super) async fn replace(
         session_id
     )
     .fetch_all(&mut *tx)
-    .await?
-    .into_iter()
-    .map(StoredForm::of_row)
-    .collect();
-    let plan = plan(&old, &new_forms);
+    .await?;
+    let plan = plan_rows(old, &new_forms);
 
     // A kept skill takes the new approach template (derived data, not the skill's identity:
     // a skill stored before templates were gets one without losing its id).
@@ -114,13 +105,7 @@ pub(super) async fn replace(
         )
         .execute(&mut *tx)
         .await?;
-        if done.rows_affected() != plan.removed.len() as u64 {
-            return Err(StoreError::Corrupt(format!(
-                "session {session_id}: deleted {} of its {} replaced skills",
-                done.rows_affected(),
-                plan.removed.len()
-            )));
-        }
+        check_deleted(session_id, done.rows_affected(), &plan.removed)?;
     }
     let added = plan.added.iter().map(|&i| &skills[i]);
     let added_ids = insert_skills::<Sqlite>(&mut tx, session_id, added).await?;
@@ -133,11 +118,5 @@ pub(super) async fn replace(
     .execute(&mut *tx)
     .await?;
     tx.commit().await?;
-    Ok(Replacement::Done(ReplacedRows {
-        from_version,
-        kept: plan.kept,
-        removed: plan.removed,
-        added: added_ids.into_iter().zip(plan.added).collect(),
-        replay_blobs,
-    }))
+    Ok(plan.done(from_version, added_ids, replay_blobs))
 }
