@@ -14,8 +14,7 @@
 //! cylinder instead (whole-hand contact, the glove closing on it in the loop).
 #![allow(missing_docs)]
 
-use dfs_core::dfs::GloveSample;
-use dfs_core::fixtures::{glove10_holding_paper_sphere, HeldSphere};
+use dfs_core::fixtures::{glove10_holding_paper_sphere, FrozenSample};
 use std::hint::black_box;
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
@@ -34,22 +33,12 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
 
 /// The frozen sample (module documentation).
 fn frozen(ticks: usize) -> Result<(), Box<dyn std::error::Error>> {
-    let HeldSphere {
-        mut dfs,
-        q,
-        tau,
-        base,
-    } = glove10_holding_paper_sphere()?;
-    let start = *dfs.object_state();
-    let sample = GloveSample {
-        q: &q,
-        tau: &tau,
-        base,
-    };
+    let held = glove10_holding_paper_sphere()?;
+    let frozen = FrozenSample::of(&held);
+    let mut dfs = held.dfs;
     let mut contacts = 0;
     for _ in 0..ticks {
-        dfs.set_object_state(start);
-        contacts += black_box(dfs.step(black_box(&sample))?).n_contacts;
+        contacts += black_box(frozen.tick(&mut dfs)?).n_contacts;
     }
     println!("{ticks} ticks, {contacts} contacts in all");
     Ok(())

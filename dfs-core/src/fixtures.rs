@@ -27,6 +27,41 @@ pub struct HeldSphere {
     pub base: Isometry,
 }
 
+/// The frozen sample of the tick benchmarks (`icms bench tick --scene frozen`, the criterion
+/// bench `dfs_tick_glove10_paper_sphere_4_contacts`, `examples/tick_count.rs`): a
+/// [`HeldSphere`]'s glove sample, given every tick with the sphere first put back where it
+/// was placed, so that every tick does the same four-contact work.
+#[derive(Debug, Clone)]
+pub struct FrozenSample {
+    q: Vec<Real>,
+    tau: Vec<Real>,
+    base: Isometry,
+    start: ObjectState,
+}
+
+impl FrozenSample {
+    /// `held`'s glove sample and its sphere's state now.
+    pub fn of(held: &HeldSphere) -> FrozenSample {
+        FrozenSample {
+            q: held.q.clone(),
+            tau: held.tau.clone(),
+            base: held.base,
+            start: *held.dfs.object_state(),
+        }
+    }
+
+    /// One frozen tick of `dfs` (the sphere put back, then [`Dfs::step`] with the sample,
+    /// behind [`std::hint::black_box`] so that the tick is not optimised away); its output.
+    pub fn tick<'d>(&self, dfs: &'d mut Dfs) -> Result<&'d crate::dfs::TickOutput> {
+        dfs.set_object_state(self.start);
+        dfs.step(std::hint::black_box(&GloveSample {
+            q: &self.q,
+            tau: &self.tau,
+            base: self.base,
+        }))
+    }
+}
+
 /// glove10 holding the paper's sphere (1 kg, r = 0.1 m) on four fingertips (index, middle,
 /// ring, little), each pushing 3 N along its inward normal through operator torques
 /// `τ = Σ Jᵀ f` (μ = 1.5 as in §3.4). Returns the DFS and the glove sample (θ, τ, base) as a

@@ -51,7 +51,7 @@
 use super::super::CliError;
 use dfs_core::contact::{ContactModel, Friction};
 use dfs_core::dfs::{Dfs, DfsParams, GloveSample};
-use dfs_core::fixtures::{glove10_holding_paper_sphere, HeldSphere};
+use dfs_core::fixtures::{glove10_holding_paper_sphere, FrozenSample};
 use dfs_core::hand::{HandModel, Kinematics};
 use dfs_core::math::{Isometry, Real, Rotation, Vector};
 use dfs_core::object::{ObjectState, RigidObject, Shape};
@@ -902,21 +902,11 @@ fn bench_replay(
 /// The benchmark before issue 21: glove10 and the paper's sphere, one frozen sample, the
 /// object reset every tick.
 fn bench_frozen(batch: usize, batches: usize) -> Result<TickBench, CliError> {
-    let HeldSphere {
-        mut dfs,
-        q,
-        tau,
-        base,
-    } = glove10_holding_paper_sphere()?;
-    let start = *dfs.object_state();
-    let sample = GloveSample {
-        q: &q,
-        tau: &tau,
-        base,
-    };
+    let held = glove10_holding_paper_sphere()?;
+    let frozen = FrozenSample::of(&held);
+    let mut dfs = held.dfs;
     let tick = |dfs: &mut Dfs| -> Result<(), CliError> {
-        dfs.set_object_state(start);
-        black_box(dfs.step(black_box(&sample))?);
+        black_box(frozen.tick(dfs)?);
         Ok(())
     };
     let warmup = batch * batches / 10;
