@@ -430,12 +430,16 @@ fn golden(prefer: Real, f: impl Fn(Real) -> Real) -> Real {
 /// itself inside the box.
 fn clamp_to_box(box_in_b: &Isometry, h: &Vector, p: &Vector) -> Vector {
     let local = box_in_b.inverse_transform_point(&Point::from(*p)).coords;
-    let c = Vector::new(
-        local.x.clamp(-h.x, h.x),
-        local.y.clamp(-h.y, h.y),
-        local.z.clamp(-h.z, h.z),
-    );
-    (box_in_b * Point::from(c)).coords
+    (box_in_b * Point::from(clamp_local(h, &local))).coords
+}
+
+/// The point of the box of half extents `h` nearest `p`, both in the box's frame.
+fn clamp_local(h: &Vector, p: &Vector) -> Vector {
+    Vector::new(
+        p.x.clamp(-h.x, h.x),
+        p.y.clamp(-h.y, h.y),
+        p.z.clamp(-h.z, h.z),
+    )
 }
 
 /// The parameter `s ∈ [0, 1]` of the point of the segment `p0 + d s` nearest the box of half
@@ -468,12 +472,8 @@ fn segment_nearest_box(p0: &Vector, d: &Vector, h: &Vector) -> Real {
     let cuts = &mut cuts[..n];
     cuts.sort_unstable_by(Real::total_cmp);
     let f2 = |s: Real| {
-        let mut sum = 0.0;
-        for i in 0..3 {
-            let out = ((p0[i] + d[i] * s).abs() - h[i]).max(0.0);
-            sum += out * out;
-        }
-        sum
+        let p = p0 + d * s;
+        (p - clamp_local(h, &p)).norm_squared()
     };
     // The piece [a, b]'s quadratic `qa s² + qb s + qc`: the coordinates outside the box at its
     // middle are outside over all of it.
@@ -515,23 +515,12 @@ fn segment_nearest_box(p0: &Vector, d: &Vector, h: &Vector) -> Real {
     let level = best.sqrt() + LINE_CONTACT_DEPTH;
     let level2 = level * level;
     // Where the piece [a, b]'s quadratic meets the level: the root nearer `a` (`lower`) or `b`.
+    // Asked only of a piece with an end above the level, so a coordinate is outside the box
+    // over it and `qa > 0`.
     let root = |a: Real, b: Real, lower: bool| {
         let (qa, qb, qc) = piece(a, b);
-        let c = qc - level2;
-        let s = if qa > 0.0 {
-            let disc = (qb * qb - 4.0 * qa * c).max(0.0).sqrt();
-            if lower {
-                (-qb - disc) / (2.0 * qa)
-            } else {
-                (-qb + disc) / (2.0 * qa)
-            }
-        } else if qb != 0.0 {
-            -c / qb
-        } else if lower {
-            a
-        } else {
-            b
-        };
+        let disc = (qb * qb - 4.0 * qa * (qc - level2)).max(0.0).sqrt();
+        let s = (if lower { -qb - disc } else { -qb + disc }) / (2.0 * qa);
         s.clamp(a, b)
     };
     // The near-least part is one interval about `best_s` (convexity): its ends are in the
@@ -566,12 +555,7 @@ fn box_contact(shape: &Shape, box_in_b: &Isometry, h: &Vector) -> ShapeContact {
             let p0 = rot_inv * (Vector::new(0.0, 0.0, -half_height) - box_in_b.translation.vector);
             let d = rot_inv * Vector::new(0.0, 0.0, 2.0 * half_height);
             let s = segment_nearest_box(&p0, &d, h);
-            let p = p0 + d * s;
-            let local = Vector::new(
-                p.x.clamp(-h.x, h.x),
-                p.y.clamp(-h.y, h.y),
-                p.z.clamp(-h.z, h.z),
-            );
+            let local = clamp_local(h, &(p0 + d * s));
             ball(shape, &(box_in_b * Point::from(local)).coords, 0.0)
         }
         Shape::Box { .. } => {
@@ -809,8 +793,7 @@ mod tests {
             prop_assume!(d.norm() > 0.005);
             let dist = |s: Real| {
                 let p = p0 + d * s;
-                (p - Vector::new(p.x.clamp(-h.x, h.x), p.y.clamp(-h.y, h.y), p.z.clamp(-h.z, h.z)))
-                    .norm()
+                (p - clamp_local(&h, &p)).norm()
             };
             let exact = segment_nearest_box(&p0, &d, &h);
             let searched = golden(0.5, dist);

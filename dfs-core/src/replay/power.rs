@@ -47,16 +47,16 @@
 //!    margin for the object at rest refuses the replay (`torque_limit`); one they cannot carry
 //!    with the margin along the motion is a warning and the replay runs at grip 1.
 //! 5. **Trials.** The six best-ranked wraps are tried in the DFS, in order, as the replay itself
-//!    would run them, through the held motion up to 10 s into it (the whole of the built-in
-//!    skills'; a long skill costs no more to plan): the first that keeps the object within the
+//!    would run them, through the held motion up to 10 s into it (the built-in scenarios' held
+//!    motions, lift to the end of placing, are 3-5 s; a long skill costs no more to plan): the first that keeps the object within the
 //!    report's success bounds that far is the plan; if none does, the one that followed the
 //!    reference longest, whose replay then reports how it failed. The force optimiser of fingertip grasps
 //!    ([`crate::grasp::optimise`]) is not used: a wrap's fingers push with one level each, not
 //!    with planned force vectors, and its contacts move as the fingers wrap further (the DFS
 //!    finds them every tick).
 //!
-//! A trial costs at most the simulation up to 10 s into the held motion (the built-in skills'
-//! whole motion, 5-8 s of simulated time), so planning a power grasp takes up to six of them.
+//! A trial costs at most the simulation up to 10 s into the held motion (for the built-in
+//! skills, the whole replay but the release), so planning a power grasp takes up to six of them.
 
 use super::base_pose::ROLLS;
 use super::plan::Plan;
@@ -81,8 +81,8 @@ const MIN_GRIP: Real = 0.3;
 /// Where the palm's contact point is placed along the palm toward the fingers from the palm
 /// shapes' centre (m): nearer the fingers, they reach farther around the object.
 const SHIFTS: [Real; 4] = [0.0, 0.015, 0.03, 0.045];
-/// How far into the held motion a trial runs at most (s): the whole of the built-in skills' (a
-/// wrap that held the first 2 s could still let the object go later: Allegro's wrap of the
+/// How far into the held motion a trial runs at most (s): the whole of the built-in skills'
+/// (their held motions, lift to the end of placing, are 3-5 s; a wrap that held the first 2 s could still let the object go later: Allegro's wrap of the
 /// simulated operator's cylinder did at 4.4 s, by how a contact point a micrometre away
 /// happened to fall), and no more for a skill an hour long.
 const TRIAL_HELD_S: Real = 10.0;
