@@ -87,18 +87,20 @@ pub struct RecogniserParams {
     /// A grasp is over when no fingertip has touched an object this long (ns). Default 300 ms.
     pub release_ns: u64,
     /// Work of the grasp stage's grasp quality per observation period ([`QualityJob::advance`]'s
-    /// units, of about 0.15 µs). Default 5000 (about 0.75 ms of the 10 ms period, in slices):
-    /// the quality of two to five fingertips (40-100 primitive wrenches, 5 000-15 000 units)
-    /// or of a power grasp's eight to ten contacts (160-200 primitives) done in about 5 periods
-    /// on average, so that the verdict of a power grasp, whose second contact comes late, is
-    /// said within 1 s of the first touch (`icms bench recognition`, 2026-11-27: 1500 units
-    /// took 26 periods and said power grasps' verdicts at 1.02-1.52 s, nearest by 1 s 50 %;
-    /// 5000 and more, 62 %).
+    /// units, of about 0.1 µs). Default 10 000 (about 1 ms of the 10 ms period, in slices,
+    /// during the few periods a quality takes), so that the verdict of a power grasp (eight to
+    /// ten contacts, 160-200 primitive wrenches), whose second contact comes late, is said
+    /// within 1 s of the first touch (`icms bench recognition`, 2026-11-27: 1500 units took 26
+    /// periods and said power grasps' verdicts at 1.02-1.52 s, nearest by 1 s 50 %; 5000 and
+    /// more, 62 %). Since a slice stops as soon as its units are spent (before, it ended only
+    /// between two rounds of the hull and did more than its units), 10 000 does what 5 000 did
+    /// then: on the bench's sessions every grasp-stage verdict is the same, said as early or
+    /// one or two periods earlier (with 5 000 now, four to eight periods later).
     pub grasp_budget: usize,
     /// The most of [`RecogniserParams::grasp_budget`] one call ([`Recogniser::observe`] or
-    /// [`Recogniser::work`]) does. Default 150 (20-30 µs): an observation arriving waits for
-    /// one slice at most. A slice ends between two rounds of the hull (a point made a vertex),
-    /// so one round larger than it (up to about 230 µs in six dimensions) is done whole.
+    /// [`Recogniser::work`]) does. Default 150 (15-20 µs, 40 µs at most): an observation
+    /// arriving waits for one slice at most. A slice stops as soon as its units are spent,
+    /// in the middle of a round of the hull if need be.
     pub grasp_slice: usize,
     /// Whether the grasp stage computes the grasp quality of the contacts so far and compares
     /// it (feature dimensions 3 and 4). Default true. Without it a grasp-stage decision costs
@@ -119,7 +121,7 @@ impl Default for RecogniserParams {
             grasp_stage_ns: 800_000_000,
             grasp_open_set_distance: 1.0,
             release_ns: 300_000_000,
-            grasp_budget: 5000,
+            grasp_budget: 10_000,
             grasp_slice: 150,
             grasp_quality: true,
         }
