@@ -165,7 +165,8 @@ pub struct OpenSetScore {
 }
 
 /// Cost of recognition per call: each observation ([`Recogniser::observe`]), and each slice of
-/// the grasp stage's work the live assistant does between two ([`Recogniser::work`]).
+/// work the live assistant does between two ([`Recogniser::work`]: an observation's decisions,
+/// the grasp stage's quality) that did some.
 #[derive(Debug, Clone, Serialize)]
 pub struct Cost {
     /// Stored skills in the index.
