@@ -448,7 +448,7 @@ fn run_recognition(json: bool, train: u64, test: u64, stored: usize) -> Result<(
     } else {
         let c = r.cost.as_ref();
         println!(
-            "recognition over {} held-out sessions ({:?} stored): target and kind named 200 ms before first contact {:.0} %, median decision at {:.0} % of the reach ({:.0} ms before contact); nearest stored skill named by 1 s after contact {:.0} % (exact knowledge of what is known then: {:.0} %); kind left out: unknown {:.0} %, stored as new {:.0} %; cost per call (an observation, or a slice of work between two) with {} skills: mean {:.2} µs, p99 {:.2} µs, max {:.0} µs (least of {} runs per call: mean {:.2} µs, p99 {:.2} µs, max {:.0} µs); an approach decision mean {:.0} µs (max {:.0} µs); a grasp-stage call mean {:.0} µs (max {:.0} µs), {:.1} observation periods per grasp-stage decision",
+            "recognition over {} held-out sessions ({:?} stored): target and kind named 200 ms before first contact {:.0} %, median decision at {:.0} % of the reach ({:.0} ms before contact); nearest stored skill named by 1 s after contact {:.0} % (exact knowledge of what is known then: {:.0} %); kind left out: unknown {:.0} %, stored as new {:.0} %; cost per call (an observation, or a slice of work between two) with {} skills: mean {:.2} µs, p99 {:.2} µs, max {:.0} µs (least of {} runs per call: mean {:.2} µs, p99 {:.2} µs, max {:.0} µs); an approach-decision call mean {:.0} µs (max {:.0} µs), a decision's calls together {:.0} µs; a grasp-stage call mean {:.0} µs (max {:.0} µs), {:.1} observation periods per grasp-stage decision",
             r.sessions.len(), r.stored_per_kind, 100.0 * r.anticipated_fraction,
             100.0 * r.median_decided_fraction, r.median_lead_ms,
             100.0 * r.nearest_fraction, 100.0 * r.nearest_bound_fraction,
@@ -461,6 +461,7 @@ fn run_recognition(json: bool, train: u64, test: u64, stored: usize) -> Result<(
             c.map_or(0.0, |c| c.least_max_us),
             c.map_or(0.0, |c| c.approach_decision_mean_us),
             c.map_or(0.0, |c| c.approach_decision_max_us),
+            c.map_or(0.0, |c| c.approach_decision_total_us),
             c.map_or(0.0, |c| c.grasp_step_mean_us),
             c.map_or(0.0, |c| c.grasp_step_max_us),
             c.map_or(0.0, |c| c.grasp_steps_per_decision)

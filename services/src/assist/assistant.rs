@@ -247,6 +247,8 @@ struct Worker {
     robot: Option<Robot>,
     /// A skill was tried on the robot (once per session).
     tried: bool,
+    /// The recogniser's verdicts said so far.
+    verdicts_said: usize,
     events: std::sync::mpsc::Sender<AssistEvent>,
     dropped: Arc<AtomicU64>,
     said_dropped: u64,
@@ -265,6 +267,7 @@ impl Worker {
             apply: setup.apply,
             robot: None,
             tried: false,
+            verdicts_said: 0,
             events,
             dropped,
             said_dropped: 0,
@@ -296,15 +299,8 @@ impl Worker {
                 }));
                 self.said_dropped = dropped;
             }
-            let verdicts = self.recogniser.observe(&obs).to_vec();
-            for v in verdicts {
-                let start = matches!(v, Verdict::Recognised { .. }) && !self.tried;
-                let skill = v.skill().map(|c| c.skill_id);
-                self.say(AssistEvent::Verdict(v));
-                if let (true, Some(skill_id)) = (start, skill) {
-                    self.start_robot(skill_id, obs.t_ns);
-                }
-            }
+            self.recogniser.observe(&obs);
+            self.say_verdicts();
             let change = self.phase.push(&PhaseObservation {
                 t_ns: obs.t_ns,
                 base: obs.base,
@@ -312,8 +308,13 @@ impl Worker {
             });
             self.step_robot(&obs, change.map(|c| c.phase));
             // The rest of this period's recognition work, a slice at a time while no
-            // observation waits (an arriving one waits for one slice at most).
+            // observation waits (an arriving one waits for one slice at most), and the
+            // decisions of this observation whatever waits (they come before the next's).
             while self.recogniser.work() {
+                self.say_verdicts();
+                if self.recogniser.busy() {
+                    continue;
+                }
                 match rx.try_recv() {
                     Ok(obs) => {
                         next = Some(obs);
@@ -323,6 +324,7 @@ impl Worker {
                     Err(TryRecvError::Disconnected) => break,
                 }
             }
+            self.say_verdicts();
         }
         self.report_robot(last_ns);
         AssistSummary {
@@ -330,6 +332,21 @@ impl Worker {
             dropped: self.dropped.load(Ordering::Relaxed),
             decisions: self.recogniser.decisions(),
             robot_report: self.robot_report,
+        }
+    }
+
+    /// Says the recogniser's verdicts not said yet; the first that recognises a skill starts
+    /// the robot (once per session), at the verdict's time.
+    fn say_verdicts(&mut self) {
+        while let Some(v) = self.recogniser.verdicts().get(self.verdicts_said).cloned() {
+            self.verdicts_said += 1;
+            let start = matches!(v, Verdict::Recognised { .. }) && !self.tried;
+            let skill = v.skill().map(|c| c.skill_id);
+            let t_ns = v.session_ns();
+            self.say(AssistEvent::Verdict(v));
+            if let (true, Some(skill_id)) = (start, skill) {
+                self.start_robot(skill_id, t_ns);
+            }
         }
     }
 

@@ -165,7 +165,8 @@ pub struct OpenSetScore {
 }
 
 /// Cost of recognition per call: each observation ([`Recogniser::observe`]), and each slice of
-/// the grasp stage's work the live assistant does between two ([`Recogniser::work`]).
+/// work the live assistant does between two ([`Recogniser::work`]: an observation's decisions,
+/// the grasp stage's quality) that did some.
 #[derive(Debug, Clone, Serialize)]
 pub struct Cost {
     /// Stored skills in the index.
@@ -180,11 +181,14 @@ pub struct Cost {
     pub p99_us: f64,
     /// Slowest (µs).
     pub max_us: f64,
-    /// Mean time of an observation that decided at the approach stage (compared the reach
-    /// with the stored skills' templates) (µs).
+    /// Mean time of a call that worked on an approach-stage decision (the observation that
+    /// began it, comparing the reach with the stored skills' templates, or a slice of that
+    /// comparison after it) (µs).
     pub approach_decision_mean_us: f64,
     /// The slowest of those (µs).
     pub approach_decision_max_us: f64,
+    /// Mean time of an approach-stage decision, all its calls together (µs).
+    pub approach_decision_total_us: f64,
     /// Mean time of a call that worked on a grasp-stage decision (a slice of the grasp quality
     /// of the contacts so far, or the comparison with the stored skills' features) (µs).
     pub grasp_step_mean_us: f64,
@@ -458,6 +462,7 @@ fn measure_cost(
     let mut least = Vec::new();
     let mut approach_times = Vec::new();
     let mut grasp_times = Vec::new();
+    let mut approach_decisions = 0;
     let mut grasp_decisions = 0;
     let mut grasp_periods = 0;
     for r in held {
@@ -472,6 +477,7 @@ fn measure_cost(
         least.extend(low);
         approach_times.extend(d.approach);
         grasp_times.extend(d.grasp);
+        approach_decisions += d.approach_decisions;
         grasp_decisions += d.grasp_decisions;
         grasp_periods += d.grasp_periods;
     }
@@ -484,6 +490,8 @@ fn measure_cost(
         max_us: max(&times),
         approach_decision_mean_us: mean(&approach_times),
         approach_decision_max_us: max(&approach_times),
+        approach_decision_total_us: approach_times.iter().sum::<f64>()
+            / approach_decisions.max(1) as f64,
         grasp_step_mean_us: mean(&grasp_times),
         grasp_step_max_us: max(&grasp_times),
         grasp_decisions,
@@ -560,8 +568,10 @@ fn summarise(
 /// The times (µs) of the observations that decided, by stage, and the grasp-stage decisions.
 #[derive(Debug, Default)]
 struct DecisionTimes {
+    /// Calls that worked on an approach-stage or a grasp-stage decision (µs).
     approach: Vec<f64>,
     grasp: Vec<f64>,
+    approach_decisions: usize,
     grasp_decisions: usize,
     /// Observation periods in which a grasp-stage decision was worked on.
     grasp_periods: usize,
@@ -579,31 +589,37 @@ fn run(
     let mut times = Vec::with_capacity(r.observations.len());
     let mut decided = DecisionTimes::default();
     for o in &r.observations {
-        let before = (rec.decisions(), rec.grasp_steps(), rec.grasp_decisions());
-        let t = Instant::now();
-        rec.observe(o);
-        let us = t.elapsed().as_secs_f64() * 1e6;
-        times.push(us);
-        decided.grasp_decisions += (rec.grasp_decisions() - before.2) as usize;
-        if rec.grasp_steps() > before.1 {
-            decided.grasp.push(us);
-        } else if rec.decisions() > before.0 {
-            decided.approach.push(us);
-        }
+        let period = (rec.grasp_steps(), rec.decisions(), rec.grasp_decisions());
+        let mut first = true;
         loop {
-            let steps = rec.grasp_steps();
+            let steps = (rec.approach_steps(), rec.grasp_steps());
             let t = Instant::now();
-            let more = rec.work();
+            let more = if first {
+                rec.observe(o);
+                true
+            } else {
+                rec.work()
+            };
             let us = t.elapsed().as_secs_f64() * 1e6;
-            if rec.grasp_steps() > steps {
+            let (approach, grasp) = (rec.approach_steps() > steps.0, rec.grasp_steps() > steps.1);
+            // Every observation, and the slices of work after it that did some.
+            if first || approach || grasp {
                 times.push(us);
+            }
+            if approach {
+                decided.approach.push(us);
+            } else if grasp {
                 decided.grasp.push(us);
             }
+            first = false;
             if !more {
                 break;
             }
         }
-        decided.grasp_periods += usize::from(rec.grasp_steps() > before.1);
+        let grasp_decisions = (rec.grasp_decisions() - period.2) as usize;
+        decided.grasp_decisions += grasp_decisions;
+        decided.approach_decisions += (rec.decisions() - period.1) as usize - grasp_decisions;
+        decided.grasp_periods += usize::from(rec.grasp_steps() > period.0);
     }
     (rec.verdicts().to_vec(), times, decided)
 }

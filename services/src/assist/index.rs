@@ -66,13 +66,84 @@ pub struct Ranked {
     pub distance: f32,
 }
 
-/// Reusable buffers of a ranking (sized to the index once, then no allocation).
+/// Reusable buffers of a ranking (sized to the index once, then no allocation), and where a
+/// ranking done a part at a time is ([`RecognitionIndex::go_on`]).
 #[derive(Debug, Default)]
 pub struct Scratch {
     sum: Vec<f32>,
     count: Vec<f32>,
     order: Vec<Ranked>,
+    /// The ranking begun: what it compares.
+    query: Query,
+    /// Where it is.
+    step: RankStep,
 }
+
+impl Scratch {
+    /// The skills ranked, nearest first, once [`RecognitionIndex::go_on`] said the ranking is
+    /// done.
+    pub fn ranked(&self) -> &[Ranked] {
+        &self.order
+    }
+}
+
+/// What a ranking compares.
+#[derive(Debug, Default, Clone, Copy)]
+enum Query {
+    /// None begun.
+    #[default]
+    None,
+    /// Templates ([`RecognitionIndex::rank_templates`]): the query scaled, the rows of its
+    /// shape.
+    Templates {
+        scaled: [f32; TEMPLATE_DIM],
+        top: usize,
+        min_compared: usize,
+        lo: usize,
+        hi: usize,
+    },
+    /// Features ([`RecognitionIndex::rank_features`]) over `dims[..n_dims]`, the shapes' rows
+    /// (bound, first row, end) nearest first.
+    Features {
+        query: [f32; FEATURE_DIM],
+        dims: [usize; FEATURE_DIM],
+        n_dims: usize,
+        top: usize,
+        groups: [(f32, usize, usize); 4],
+    },
+}
+
+/// Where a ranking is: a pass and its cursor (rows from the first of the range scanned).
+#[derive(Debug, Default, Clone, Copy)]
+enum RankStep {
+    /// Done (or none begun).
+    #[default]
+    Done,
+    /// Summing template column `col` (columns before it done): rows before `at` added.
+    TemplateSum { col: usize, at: usize },
+    /// Taking the rows before `at` into the ranking.
+    TemplateCollect { at: usize },
+    /// Feature group `group` (in the order of `Query::Features::groups`) to begin.
+    FeatureGroup { group: usize },
+    /// Summing the group's dimension `dims[d]`: rows before `at` added.
+    FeatureSum { group: usize, d: usize, at: usize },
+    /// Taking the group's rows before `at` into the ranking.
+    FeatureCollect { group: usize, at: usize },
+}
+
+/// A ranking's work ([`RecognitionIndex::go_on`]), in values read: a unit (about 0.1 µs, the
+/// grasp quality's, with the columns not in cache) is this many values of a column added.
+const VALUES_PER_UNIT: usize = 64;
+
+/// What taking a row into the ranking costs, in values.
+const COLLECT: usize = 2;
+
+/// Rows a step of a ranking's pass goes over.
+const CHUNK: usize = 256;
+
+/// Up to this `top`, the nearest are kept as the rows come ([`offer`]); above, all are kept
+/// and the nearest selected at the end of each pass, in one step.
+const OFFER_TOP: usize = 64;
 
 impl RecognitionIndex {
     /// An index of `skills`.
@@ -264,45 +335,38 @@ impl RecognitionIndex {
         min_compared: usize,
         scratch: &'s mut Scratch,
     ) -> &'s [Ranked] {
+        self.begin_templates(query, top, min_compared, scratch);
+        let mut unlimited = usize::MAX;
+        while !self.go_on(scratch, &mut unlimited) {}
+        &scratch.order
+    }
+
+    /// Begins [`Self::rank_templates`] in `scratch`, to be done a part at a time
+    /// ([`Self::go_on`]).
+    pub fn begin_templates(
+        &self,
+        query: &[f32; TEMPLATE_DIM],
+        top: usize,
+        min_compared: usize,
+        scratch: &mut Scratch,
+    ) {
         // Only the rows of the query's shape (contiguous, see `insert`).
         let shape = shape_code(query);
         let lo = self.shapes.partition_point(|&c| c < shape);
         let hi = self.shapes.partition_point(|&c| c <= shape);
-        let n = hi - lo;
+        scratch.query = Query::Templates {
+            scaled: std::array::from_fn(|j| query[j] / TEMPLATE_SCALE[j]),
+            top,
+            min_compared,
+            lo,
+            hi,
+        };
         scratch.sum.clear();
-        scratch.sum.resize(n, 0.0);
+        scratch.sum.resize(hi - lo, 0.0);
         scratch.count.clear();
-        scratch.count.resize(n, 0.0);
-        for (j, col) in self.template_cols.iter().enumerate() {
-            let q = query[j] / TEMPLATE_SCALE[j];
-            if q.is_nan() {
-                continue;
-            }
-            for ((s, c), &v) in scratch
-                .sum
-                .iter_mut()
-                .zip(&mut scratch.count)
-                .zip(&col[lo..hi])
-            {
-                let d = v - q;
-                let d2 = d * d;
-                // NaN (not seen in the stored skill) adds nothing and does not count.
-                let seen = !d2.is_nan();
-                *s += if seen { d2 } else { 0.0 };
-                *c += seen as u8 as f32;
-            }
-        }
-        let min = min_compared as f32;
+        scratch.count.resize(hi - lo, 0.0);
         scratch.order.clear();
-        for (k, (&s, &c)) in scratch.sum.iter().zip(&scratch.count).enumerate() {
-            if c >= min && c > 0.0 {
-                scratch.order.push(Ranked {
-                    row: lo + k,
-                    distance: s / c,
-                });
-            }
-        }
-        select_top(&mut scratch.order, top)
+        scratch.step = RankStep::TemplateSum { col: 0, at: 0 };
     }
 
     /// The `top` skills whose features are nearest `query` over `dims` (Euclidean, as
@@ -314,6 +378,25 @@ impl RecognitionIndex {
         top: usize,
         scratch: &'s mut Scratch,
     ) -> &'s [Ranked] {
+        self.begin_features(query, dims, top, scratch);
+        let mut unlimited = usize::MAX;
+        while !self.go_on(scratch, &mut unlimited) {}
+        &scratch.order
+    }
+
+    /// Begins [`Self::rank_features`] in `scratch`, to be done a part at a time
+    /// ([`Self::go_on`]). At most [`FEATURE_DIM`] dimensions are compared.
+    pub fn begin_features(
+        &self,
+        query: &[f32; FEATURE_DIM],
+        dims: &[usize],
+        top: usize,
+        scratch: &mut Scratch,
+    ) {
+        let n_dims = dims.len().min(FEATURE_DIM);
+        let mut kept = [0usize; FEATURE_DIM];
+        kept[..n_dims].copy_from_slice(&dims[..n_dims]);
+        let dims = &kept[..n_dims];
         // Shape by shape (rows are grouped by shape), nearest group first: a group none of
         // whose rows can be nearer than the `top`-th found so far is passed over. Its bound
         // (the distance to the box of its rows' values) is at most any row's distance, term
@@ -335,39 +418,256 @@ impl RecognitionIndex {
             *g = (lb.sqrt(), lo, hi);
         }
         groups.sort_by(|a, b| a.0.total_cmp(&b.0));
+        scratch.query = Query::Features {
+            query: *query,
+            dims: kept,
+            n_dims,
+            top,
+            groups,
+        };
         scratch.order.clear();
-        for &(bound, lo, hi) in &groups {
-            if lo == hi {
-                continue;
-            }
-            let kth = if top > 0 && scratch.order.len() >= top {
-                scratch.order[top - 1].distance
-            } else {
-                f32::INFINITY
-            };
-            // NaN bounds compare false: such a group is scanned.
-            if bound > kth {
-                continue;
-            }
-            scratch.sum.clear();
-            scratch.sum.resize(hi - lo, 0.0);
-            for &j in dims {
-                let q = query[j];
-                for (s, &v) in scratch.sum.iter_mut().zip(&self.feature_cols[j][lo..hi]) {
-                    let d = v - q;
-                    *s += d * d;
+        scratch.step = RankStep::FeatureGroup { group: 0 };
+    }
+
+    /// Goes on with the ranking begun in `scratch` ([`Self::begin_templates`],
+    /// [`Self::begin_features`]) for about `budget` units of work (of about 0.1 µs: 64 values
+    /// of a column compared; at least one step of 256 rows), takes what it spent off
+    /// `budget`, and stops as soon as it is spent; whether the ranking is done
+    /// ([`Scratch::ranked`] then). The same operations in the same
+    /// order as in one call, so the same rows and distances. The index must not change
+    /// meanwhile.
+    pub fn go_on(&self, scratch: &mut Scratch, budget: &mut usize) -> bool {
+        let limit = budget.saturating_mul(VALUES_PER_UNIT);
+        let mut spent = 0usize;
+        let done = self.rank_step(scratch, limit, &mut spent);
+        *budget = budget.saturating_sub(spent.div_ceil(VALUES_PER_UNIT));
+        done
+    }
+
+    /// [`Self::go_on`] with the work counted in values (`limit`, `spent`).
+    fn rank_step(&self, scratch: &mut Scratch, limit: usize, spent: &mut usize) -> bool {
+        let Scratch {
+            sum,
+            count,
+            order,
+            query,
+            step,
+        } = scratch;
+        loop {
+            let used_up = *spent > 0 && *spent >= limit;
+            match (*step, &*query) {
+                (RankStep::Done, _) | (_, Query::None) => {
+                    *step = RankStep::Done;
+                    return true;
+                }
+                (RankStep::TemplateSum { col, at }, Query::Templates { scaled, lo, hi, .. }) => {
+                    let n = hi - lo;
+                    if col == TEMPLATE_DIM {
+                        *step = RankStep::TemplateCollect { at: 0 };
+                        continue;
+                    }
+                    let q = scaled[col];
+                    if q.is_nan() || at == n {
+                        *step = RankStep::TemplateSum {
+                            col: col + 1,
+                            at: 0,
+                        };
+                        continue;
+                    }
+                    if used_up {
+                        return false;
+                    }
+                    let end = (at + CHUNK).min(n);
+                    let values = &self.template_cols[col][lo + at..lo + end];
+                    for ((s, c), &v) in sum[at..end].iter_mut().zip(&mut count[at..end]).zip(values)
+                    {
+                        let d = v - q;
+                        let d2 = d * d;
+                        // NaN (not seen in the stored skill) adds nothing and does not count.
+                        let seen = !d2.is_nan();
+                        *s += if seen { d2 } else { 0.0 };
+                        *c += seen as u8 as f32;
+                    }
+                    *spent += end - at;
+                    *step = RankStep::TemplateSum { col, at: end };
+                }
+                (
+                    RankStep::TemplateCollect { at },
+                    &Query::Templates {
+                        top,
+                        min_compared,
+                        lo,
+                        hi,
+                        ..
+                    },
+                ) => {
+                    let n = hi - lo;
+                    if at == n {
+                        if top > OFFER_TOP {
+                            select_top(order, top);
+                        }
+                        *step = RankStep::Done;
+                        continue;
+                    }
+                    if used_up {
+                        return false;
+                    }
+                    let end = (at + CHUNK).min(n);
+                    let min = min_compared as f32;
+                    for k in at..end {
+                        let (s, c) = (sum[k], count[k]);
+                        if c >= min && c > 0.0 {
+                            keep_ranked(
+                                order,
+                                top,
+                                Ranked {
+                                    row: lo + k,
+                                    distance: s / c,
+                                },
+                            );
+                        }
+                    }
+                    *spent += COLLECT * (end - at);
+                    *step = RankStep::TemplateCollect { at: end };
+                }
+                (RankStep::FeatureGroup { group }, &Query::Features { top, groups, .. }) => {
+                    let Some(&(bound, lo, hi)) = groups.get(group) else {
+                        *step = RankStep::Done;
+                        continue;
+                    };
+                    let next = RankStep::FeatureGroup { group: group + 1 };
+                    if lo == hi {
+                        *step = next;
+                        continue;
+                    }
+                    let kth = if top > 0 && order.len() >= top {
+                        order[top - 1].distance
+                    } else {
+                        f32::INFINITY
+                    };
+                    // NaN bounds compare false: such a group is scanned.
+                    if bound > kth {
+                        *step = next;
+                        continue;
+                    }
+                    if used_up {
+                        return false;
+                    }
+                    sum.clear();
+                    sum.resize(hi - lo, 0.0);
+                    *spent += (hi - lo) / 4;
+                    *step = RankStep::FeatureSum { group, d: 0, at: 0 };
+                }
+                (
+                    RankStep::FeatureSum { group, d, at },
+                    Query::Features {
+                        query,
+                        dims,
+                        n_dims,
+                        groups,
+                        ..
+                    },
+                ) => {
+                    let (_, lo, hi) = groups[group];
+                    let n = hi - lo;
+                    if d == *n_dims {
+                        *step = RankStep::FeatureCollect { group, at: 0 };
+                        continue;
+                    }
+                    if at == n {
+                        *step = RankStep::FeatureSum {
+                            group,
+                            d: d + 1,
+                            at: 0,
+                        };
+                        continue;
+                    }
+                    if used_up {
+                        return false;
+                    }
+                    let end = (at + CHUNK).min(n);
+                    let j = dims[d];
+                    let q = query[j];
+                    for (s, &v) in sum[at..end]
+                        .iter_mut()
+                        .zip(&self.feature_cols[j][lo + at..lo + end])
+                    {
+                        let diff = v - q;
+                        *s += diff * diff;
+                    }
+                    *spent += end - at;
+                    *step = RankStep::FeatureSum { group, d, at: end };
+                }
+                (RankStep::FeatureCollect { group, at }, &Query::Features { top, groups, .. }) => {
+                    let (_, lo, hi) = groups[group];
+                    let n = hi - lo;
+                    if at == n {
+                        if top > OFFER_TOP {
+                            select_top(order, top);
+                        }
+                        *step = RankStep::FeatureGroup { group: group + 1 };
+                        continue;
+                    }
+                    if used_up {
+                        return false;
+                    }
+                    let end = (at + CHUNK).min(n);
+                    for (k, &s) in sum.iter().enumerate().take(end).skip(at) {
+                        keep_ranked(
+                            order,
+                            top,
+                            Ranked {
+                                row: lo + k,
+                                distance: s.sqrt(),
+                            },
+                        );
+                    }
+                    *spent += COLLECT * (end - at);
+                    *step = RankStep::FeatureCollect { group, at: end };
+                }
+                // A step of the other kind of ranking: none begun.
+                _ => {
+                    *step = RankStep::Done;
+                    return true;
                 }
             }
-            scratch
-                .order
-                .extend(scratch.sum.iter().enumerate().map(|(k, &s)| Ranked {
-                    row: lo + k,
-                    distance: s.sqrt(),
-                }));
-            select_top(&mut scratch.order, top);
         }
-        select_top(&mut scratch.order, top)
     }
+}
+
+/// Takes a ranked row into `order`: kept as it comes among the `top` nearest ([`offer`]), or,
+/// for a `top` above [`OFFER_TOP`], appended (the pass selects the nearest at its end).
+#[inline]
+fn keep_ranked(order: &mut Vec<Ranked>, top: usize, x: Ranked) {
+    if top > OFFER_TOP {
+        order.push(x);
+    } else {
+        offer(order, top, x);
+    }
+}
+
+/// Offers `x` to `order`, the `top` nearest offered so far, sorted ([`nearer`]): what
+/// [`select_top`] keeps of all of them.
+#[inline]
+fn offer(order: &mut Vec<Ranked>, top: usize, x: Ranked) {
+    if order.len() >= top {
+        match order.last() {
+            Some(last) if nearer(&x, last).is_lt() => {
+                order.pop();
+            }
+            _ => return,
+        }
+    }
+    let at = order.partition_point(|y| nearer(y, &x).is_lt());
+    order.insert(at, x);
+}
+
+/// Nearer first, ties by row: a total order, so that the `top` nearest are one set in one
+/// order however they are found.
+fn nearer(a: &Ranked, b: &Ranked) -> std::cmp::Ordering {
+    a.distance
+        .total_cmp(&b.distance)
+        .then_with(|| a.row.cmp(&b.row))
 }
 
 /// Widens `bounds` to hold `feature` (a NaN value makes its dimension unbounded).
@@ -386,20 +686,15 @@ fn shape_code(template: &[f32; TEMPLATE_DIM]) -> u8 {
     (0..3u8).find(|&k| template[k as usize] > 0.5).unwrap_or(3)
 }
 
-/// Keeps the `top` nearest of `order` (ties by row), sorted.
+/// Keeps the `top` nearest of `order` ([`nearer`]), sorted.
 fn select_top(order: &mut Vec<Ranked>, top: usize) -> &[Ranked] {
-    let cmp = |a: &Ranked, b: &Ranked| {
-        a.distance
-            .total_cmp(&b.distance)
-            .then_with(|| a.row.cmp(&b.row))
-    };
     if order.len() > top && top > 0 {
-        order.select_nth_unstable_by(top - 1, cmp);
+        order.select_nth_unstable_by(top - 1, nearer);
         order.truncate(top);
     } else if top == 0 {
         order.clear();
     }
-    order.sort_unstable_by(cmp);
+    order.sort_unstable_by(nearer);
     order
 }
 
@@ -486,7 +781,7 @@ mod tests {
         proptest!(ProptestConfig::with_cases(200), |(
             rows in prop::collection::vec(row, 0..60),
             query in (0usize..4, prop::array::uniform16(-2.0f32..2.0)),
-            top in 0usize..8,
+            top in prop_oneof![0usize..8, 60usize..70],
             remove in prop::collection::vec(0i64..60, 0..5),
             all_dims in any::<bool>(),
         )| {
@@ -542,6 +837,150 @@ mod tests {
                 prop_assert!(g.distance.to_bits() == w.distance.to_bits()
                     || (g.distance.is_nan() && w.distance.is_nan()));
             }
+        });
+    }
+
+    /// An index of `rows` (shape code, 24 values of a template after its shape, 16 of a
+    /// feature), half put at once and half inserted, then `remove`d.
+    fn random_index(rows: &[(usize, Vec<f32>, Vec<f32>)], remove: &[i64]) -> RecognitionIndex {
+        let stored = |id: usize, (shape, t, f): &(usize, Vec<f32>, Vec<f32>)| StoredTemplate {
+            skill_id: id as i64,
+            kind: format!("k{}", (shape + id) % 5),
+            object_name: None,
+            template: template(*shape, t),
+            feature: std::array::from_fn(|j| f[j]),
+        };
+        let (half, rest) = rows.split_at(rows.len() / 2);
+        let mut index = RecognitionIndex::new(half.iter().enumerate().map(|(i, r)| stored(i, r)));
+        for (i, r) in rest.iter().enumerate() {
+            index.insert(stored(half.len() + i, r));
+        }
+        index.remove(remove);
+        index
+    }
+
+    /// A template of shape code `shape` with `values` (scaled) after its one-hot values.
+    fn template(shape: usize, values: &[f32]) -> [f32; TEMPLATE_DIM] {
+        let mut t = [0.0f32; TEMPLATE_DIM];
+        if shape < 3 {
+            t[shape] = 1.0;
+        }
+        for (j, v) in t.iter_mut().enumerate().skip(3) {
+            *v = values[j - 3] * TEMPLATE_SCALE[j];
+        }
+        t
+    }
+
+    /// Random rows for [`random_index`]: values in ±3 or NaN.
+    fn rows(
+        n: std::ops::Range<usize>,
+    ) -> impl proptest::strategy::Strategy<Value = Vec<(usize, Vec<f32>, Vec<f32>)>> {
+        use proptest::prelude::*;
+        let value = || prop_oneof![1 => Just(f32::NAN), 6 => -3.0f32..3.0];
+        let row = (
+            0usize..4,
+            prop::collection::vec(value(), 24),
+            prop::collection::vec(value(), FEATURE_DIM),
+        );
+        prop::collection::vec(row, n)
+    }
+
+    /// The template ranking gives the rows and distances of a plain pass over every row of
+    /// the query's shape, on random indexes with NaN values on either side, for every `top`
+    /// and `min_compared`.
+    #[test]
+    fn template_ranking_is_the_full_scans() {
+        use proptest::prelude::*;
+        let full = |index: &RecognitionIndex, q: &[f32; TEMPLATE_DIM], top, min: usize| {
+            let mut all = Vec::new();
+            for row in 0..index.len() {
+                if index.shapes[row] != shape_code(q) {
+                    continue;
+                }
+                let (mut s, mut c) = (0.0f32, 0.0f32);
+                for j in 0..TEMPLATE_DIM {
+                    let d = index.template_cols[j][row] - q[j] / TEMPLATE_SCALE[j];
+                    if !(d * d).is_nan() {
+                        s += d * d;
+                        c += 1.0;
+                    }
+                }
+                if c >= min as f32 && c > 0.0 {
+                    all.push(Ranked {
+                        row,
+                        distance: s / c,
+                    });
+                }
+            }
+            select_top(&mut all, top).to_vec()
+        };
+        proptest!(ProptestConfig::with_cases(100), |(
+            rows in rows(0..900),
+            query in (0usize..4, prop::collection::vec(prop_oneof![Just(f32::NAN), -3.0f32..3.0], 24)),
+            top in prop_oneof![0usize..20, 60usize..300],
+            min in 0usize..12,
+            remove in prop::collection::vec(0i64..900, 0..5),
+        )| {
+            let index = random_index(&rows, &remove);
+            let q = template(query.0, &query.1);
+            let mut scratch = Scratch::default();
+            let got = index.rank_templates(&q, top, min, &mut scratch).to_vec();
+            let want = full(&index, &q, top, min);
+            prop_assert_eq!(got.len(), want.len());
+            for (g, w) in got.iter().zip(&want) {
+                prop_assert_eq!(g.row, w.row);
+                prop_assert_eq!(g.distance.to_bits(), w.distance.to_bits());
+            }
+        });
+    }
+
+    /// A ranking done a part at a time ([`RecognitionIndex::go_on`] with a few units a call)
+    /// is the one done in one call, rows and distances, and takes as many calls as its work
+    /// asks.
+    #[test]
+    fn a_ranking_in_parts_is_the_ranking_in_one_call() {
+        use proptest::prelude::*;
+        proptest!(ProptestConfig::with_cases(100), |(
+            rows in rows(0..900),
+            shape in 0usize..4,
+            values in prop::collection::vec(-3.0f32..3.0, 24),
+            top in prop_oneof![0usize..20, 60usize..300],
+            budget in 1usize..40,
+            all_dims in any::<bool>(),
+        )| {
+            let index = random_index(&rows, &[]);
+            let same = |a: &[Ranked], b: &[Ranked]| {
+                a.len() == b.len()
+                    && a.iter().zip(b).all(|(x, y)| {
+                        x.row == y.row && x.distance.to_bits() == y.distance.to_bits()
+                    })
+            };
+            let q = template(shape, &values);
+            let whole = index.rank_templates(&q, top, 3, &mut Scratch::default()).to_vec();
+            let mut scratch = Scratch::default();
+            index.begin_templates(&q, top, 3, &mut scratch);
+            let mut calls = 1;
+            while !index.go_on(&mut scratch, &mut { budget }) {
+                calls += 1;
+            }
+            prop_assert!(same(scratch.ranked(), &whole));
+            // 27 columns of the shape's rows and a pass taking them: that many calls at least.
+            let n = (0..index.len()).filter(|&r| index.shapes[r] == shape_code(&q)).count();
+            prop_assert!(calls >= n * 26 / (budget * VALUES_PER_UNIT + CHUNK), "{} calls", calls);
+
+            let mut fq = [0.0f32; FEATURE_DIM];
+            for (j, v) in fq.iter_mut().enumerate() {
+                *v = values[j];
+            }
+            let dims: Vec<usize> = if all_dims {
+                (0..FEATURE_DIM).collect()
+            } else {
+                GRASP_STAGE_DIMS.to_vec()
+            };
+            let whole = index.rank_features(&fq, &dims, top, &mut Scratch::default()).to_vec();
+            index.begin_features(&fq, &dims, top, &mut scratch);
+            while !index.go_on(&mut scratch, &mut { budget }) {}
+            prop_assert!(same(scratch.ranked(), &whole));
         });
     }
 

@@ -41,6 +41,15 @@
 //! ranked at the observation after it is done; the verdict carries the time it is said, a few
 //! observations after the decision began (the contacts it describes are those up to then). The
 //! held force line of each shape is computed once, when the recogniser is made.
+//!
+//! A comparison with the stored skills (an approach decision's with their templates, the
+//! grasp stage's with their features) reads a few hundred kB of columns with 10 000 stored
+//! skills: 50-100 µs when they are not in the cache. It is done a part at a time too
+//! ([`RecognitionIndex::go_on`], slices of [`RecogniserParams::grasp_slice`] units), in
+//! [`Recogniser::observe`] and the [`Recogniser::work`] calls after it, which say its verdict
+//! with the observation's time. What an observation decides is finished, in order, before
+//! anything of the next ([`Recogniser::busy`]): the verdicts are those of one call per
+//! observation.
 
 use std::sync::Arc;
 
@@ -87,18 +96,21 @@ pub struct RecogniserParams {
     /// A grasp is over when no fingertip has touched an object this long (ns). Default 300 ms.
     pub release_ns: u64,
     /// Work of the grasp stage's grasp quality per observation period ([`QualityJob::advance`]'s
-    /// units, of about 0.15 µs). Default 5000 (about 0.75 ms of the 10 ms period, in slices):
-    /// the quality of two to five fingertips (40-100 primitive wrenches, 5 000-15 000 units)
-    /// or of a power grasp's eight to ten contacts (160-200 primitives) done in about 5 periods
-    /// on average, so that the verdict of a power grasp, whose second contact comes late, is
-    /// said within 1 s of the first touch (`icms bench recognition`, 2026-11-27: 1500 units
-    /// took 26 periods and said power grasps' verdicts at 1.02-1.52 s, nearest by 1 s 50 %;
-    /// 5000 and more, 62 %).
+    /// units, of about 0.1 µs). Default 10 000 (about 1 ms of the 10 ms period, in slices,
+    /// during the few periods a quality takes), so that the verdict of a power grasp (eight to
+    /// ten contacts, 160-200 primitive wrenches), whose second contact comes late, is said
+    /// within 1 s of the first touch (`icms bench recognition`, 2026-11-27: 1500 units took 26
+    /// periods and said power grasps' verdicts at 1.02-1.52 s, nearest by 1 s 50 %; 5000 and
+    /// more, 62 %). Since a slice stops as soon as its units are spent (before, it ended only
+    /// between two rounds of the hull and did more than its units), 10 000 does what 5 000 did
+    /// then: on the bench's sessions every grasp-stage verdict is the same, said as early or
+    /// one or two periods earlier (with 5 000 now, four to eight periods later).
     pub grasp_budget: usize,
     /// The most of [`RecogniserParams::grasp_budget`] one call ([`Recogniser::observe`] or
-    /// [`Recogniser::work`]) does. Default 150 (20-30 µs): an observation arriving waits for
-    /// one slice at most. A slice ends between two rounds of the hull (a point made a vertex),
-    /// so one round larger than it (up to about 230 µs in six dimensions) is done whole.
+    /// [`Recogniser::work`]) does, and the most of a comparison with the stored skills.
+    /// Default 150 (15-20 µs, 40 µs at most): an observation arriving waits for one slice at
+    /// most. A slice stops as soon as its units are spent, in the middle of a round of the
+    /// hull if need be.
     pub grasp_slice: usize,
     /// Whether the grasp stage computes the grasp quality of the contacts so far and compares
     /// it (feature dimensions 3 and 4). Default true. Without it a grasp-stage decision costs
@@ -119,7 +131,7 @@ impl Default for RecogniserParams {
             grasp_stage_ns: 800_000_000,
             grasp_open_set_distance: 1.0,
             release_ns: 300_000_000,
-            grasp_budget: 5000,
+            grasp_budget: 10_000,
             grasp_slice: 150,
             grasp_quality: true,
         }
@@ -245,6 +257,29 @@ struct PendingGrasp {
     job: Option<QualityJob>,
 }
 
+/// What an observation leaves to do when [`Recogniser::observe`] returns: its decisions, in
+/// the order one call would take them, for [`Recogniser::work`] to go on with.
+#[derive(Debug)]
+struct Unfinished {
+    obs: Observation,
+    /// The approach-stage decisions it takes, in order: the object and whether its best guess
+    /// is said at any confidence (a checkpoint crossed, the contact onset).
+    approach: [Option<(usize, bool)>; 2],
+    phase: Phase,
+}
+
+/// Where an [`Unfinished`] observation is.
+#[derive(Debug, Clone, Copy)]
+enum Phase {
+    /// Approach decision `k` (its ranking begun or not).
+    Approach { k: usize, begun: bool },
+    /// The grasp followed: the grasp stage's step (a slice of its quality, or its decision
+    /// begun) to do.
+    Grasp,
+    /// The grasp-stage decision on `object`: its ranking under way.
+    GraspDecision { object: usize },
+}
+
 /// The recogniser of one stream. See the module docs.
 #[derive(Debug)]
 pub struct Recogniser {
@@ -256,16 +291,19 @@ pub struct Recogniser {
     said: Option<(usize, Option<u32>)>,
     grasp: Option<GraspTrack>,
     pending: Option<PendingGrasp>,
+    /// What the last observation left to do.
+    unfinished: Option<Unfinished>,
     /// What is left of this observation period's [`RecogniserParams::grasp_budget`].
     allowance: usize,
     last_touch_ns: Option<u64>,
     scratch: Scratch,
     /// Per shape (sphere, box, cylinder): [`RecognitionIndex::held_force_line`].
     held_lines: [Option<(f32, f32)>; 3],
-    /// Decisions taken (template or feature comparisons), of them at the grasp stage,
-    /// observations that worked on a grasp-stage decision, and the verdicts.
+    /// Decisions taken (template or feature comparisons), of them at the grasp stage, calls
+    /// that worked on an approach-stage and a grasp-stage decision, and the verdicts.
     decisions: u64,
     grasp_decisions: u64,
+    approach_steps: u64,
     grasp_steps: u64,
     verdicts: Vec<Verdict>,
 }
@@ -291,12 +329,14 @@ impl Recogniser {
             said: None,
             grasp: None,
             pending: None,
+            unfinished: None,
             allowance: 0,
             last_touch_ns: None,
             scratch: Scratch::default(),
             held_lines,
             decisions: 0,
             grasp_decisions: 0,
+            approach_steps: 0,
             grasp_steps: 0,
             verdicts: Vec::new(),
         }
@@ -328,9 +368,25 @@ impl Recogniser {
         self.grasp_steps
     }
 
-    /// Takes one observation; returns the verdicts it led to (usually none).
+    /// Calls ([`Recogniser::observe`] or [`Recogniser::work`]) that worked on an
+    /// approach-stage decision (began it, or a slice of its comparison with the stored skills).
+    pub fn approach_steps(&self) -> u64 {
+        self.approach_steps
+    }
+
+    /// Whether the last observation's decisions are still under way ([`Recogniser::work`]
+    /// goes on with them; the next observation finishes them first).
+    pub fn busy(&self) -> bool {
+        self.unfinished.is_some()
+    }
+
+    /// Takes one observation; returns the verdicts it led to in this call (usually none; a
+    /// decision's comparison with the stored skills may go on in [`Recogniser::work`] calls,
+    /// which say its verdict, with this observation's time). What the previous observation
+    /// left unfinished is finished first, whole.
     pub fn observe(&mut self, obs: &Observation) -> &[Verdict] {
         let before = self.verdicts.len();
+        while !self.resume(usize::MAX) {}
         let hand = obs.hand();
         let n = self.builders.len().min(obs.n_objects);
         let mut crossed: Option<(usize, usize)> = None;
@@ -345,31 +401,145 @@ impl Recogniser {
                 _ => {}
             }
         }
+        let mut approach = [None; 2];
         if let Some((i, k)) = crossed {
             if k >= self.params.decide_from && self.is_near(i) {
-                self.decide_approach(i, obs.t_ns, k + 1 == CHECKPOINTS_M.len());
+                approach[0] = Some((i, k + 1 == CHECKPOINTS_M.len()));
             }
         }
         if let Some(i) = onset {
-            self.decide_approach(i, obs.t_ns, true);
+            approach[1] = Some((i, true));
         }
-        self.track_grasp(obs);
-        self.allowance = self.params.grasp_budget;
-        self.advance_grasp(obs.t_ns);
+        self.unfinished = Some(Unfinished {
+            obs: *obs,
+            approach,
+            phase: Phase::Approach { k: 0, begun: false },
+        });
+        self.resume(self.params.grasp_slice.max(1));
         &self.verdicts[before..]
     }
 
-    /// Does one more slice of the grasp-stage decision under way (its grasp quality) if this
-    /// observation period's budget allows; true while there is more of it for this period.
-    /// Call it between observations (see the module docs): it says no verdict (the stored
-    /// skills are compared at the next observation).
+    /// Does one more slice of work: of the last observation's decisions while they are under
+    /// way, else of the grasp-stage decision's grasp quality if this observation period's
+    /// budget allows; true while there is more of either for this period. Call it between
+    /// observations (see the module docs).
     pub fn work(&mut self) -> bool {
-        match &self.pending {
-            Some(PendingGrasp { job: Some(_), .. }) if self.allowance > 0 => {}
-            _ => return false,
+        if self.unfinished.is_some() {
+            self.resume(self.params.grasp_slice.max(1));
+        } else {
+            match &self.pending {
+                Some(PendingGrasp { job: Some(_), .. }) if self.allowance > 0 => {}
+                _ => return false,
+            }
+            self.advance_quality();
         }
-        self.advance_quality();
-        self.allowance > 0 && matches!(self.pending, Some(PendingGrasp { job: Some(_), .. }))
+        self.unfinished.is_some()
+            || (self.allowance > 0
+                && matches!(self.pending, Some(PendingGrasp { job: Some(_), .. })))
+    }
+
+    /// Goes on with what the last observation left ([`Unfinished`]) for about `budget`
+    /// units of the stored skills' comparisons ([`RecognitionIndex::go_on`]'s), in the order
+    /// one call would have done it; whether all of it is done. The grasp stage's slice of its
+    /// grasp quality waits for a call that has compared nothing.
+    fn resume(&mut self, mut budget: usize) -> bool {
+        let index = Arc::clone(&self.index);
+        // Whether this call compared with the stored skills for an approach-stage or a
+        // grasp-stage decision.
+        let (mut approach_step, mut grasp_step) = (false, false);
+        while let Some(u) = &mut self.unfinished {
+            let t_ns = u.obs.t_ns;
+            match u.phase {
+                Phase::Approach { k, begun } if k < u.approach.len() => {
+                    let Some((i, last)) = u.approach[k] else {
+                        u.phase = Phase::Approach {
+                            k: k + 1,
+                            begun: false,
+                        };
+                        continue;
+                    };
+                    if !begun {
+                        // The grasp's own stage decides from here on.
+                        let next = if self.grasp.is_some_and(|g| g.decided) {
+                            Phase::Approach {
+                                k: k + 1,
+                                begun: false,
+                            }
+                        } else {
+                            Phase::Approach { k, begun: true }
+                        };
+                        u.phase = next;
+                        if let Phase::Approach { begun: true, .. } = next {
+                            self.decisions += 1;
+                            let template: [f32; TEMPLATE_DIM] = *self.builders[i].template();
+                            index.begin_templates(
+                                &template,
+                                self.params.top_k,
+                                MIN_COMPARED,
+                                &mut self.scratch,
+                            );
+                        }
+                        continue;
+                    }
+                    if budget == 0 {
+                        return false;
+                    }
+                    if !approach_step {
+                        self.approach_steps += 1;
+                        approach_step = true;
+                    }
+                    if !index.go_on(&mut self.scratch, &mut budget) {
+                        return false;
+                    }
+                    u.phase = Phase::Approach {
+                        k: k + 1,
+                        begun: false,
+                    };
+                    self.decide_approach(i, t_ns, last);
+                }
+                Phase::Approach { .. } => {
+                    let obs = u.obs;
+                    u.phase = Phase::Grasp;
+                    self.track_grasp(&obs);
+                    self.allowance = self.params.grasp_budget;
+                }
+                Phase::Grasp => {
+                    let Some(p) = &self.pending else {
+                        self.unfinished = None;
+                        break;
+                    };
+                    if p.job.is_some() {
+                        if approach_step || grasp_step {
+                            return false;
+                        }
+                        self.advance_quality();
+                        self.unfinished = None;
+                        break;
+                    }
+                    let (i, query) = (p.object, p.query);
+                    self.pending = None;
+                    self.begin_grasp_decision(i, query);
+                    if let Some(u) = &mut self.unfinished {
+                        u.phase = Phase::GraspDecision { object: i };
+                    }
+                }
+                Phase::GraspDecision { object } => {
+                    if budget == 0 {
+                        return false;
+                    }
+                    if !grasp_step {
+                        self.grasp_steps += 1;
+                        grasp_step = true;
+                    }
+                    if !index.go_on(&mut self.scratch, &mut budget) {
+                        return false;
+                    }
+                    self.unfinished = None;
+                    self.decide_grasp(object, t_ns);
+                }
+            }
+        }
+        true
     }
 
     /// Whether object `i` is among the nearest to the hand.
@@ -382,18 +552,13 @@ impl Recogniser {
         self.builders[i].distance_m() <= nearest + self.params.near_margin_m
     }
 
-    /// An approach-stage decision on object `i`; `last` says it at any confidence.
+    /// An approach-stage decision on object `i`, its template ranked against the stored
+    /// skills' ([`RecognitionIndex::begin_templates`], in `self.scratch`); `last` says it at
+    /// any confidence.
     fn decide_approach(&mut self, i: usize, t_ns: u64, last: bool) {
-        if self.grasp.is_some_and(|g| g.decided) {
-            return;
-        }
-        self.decisions += 1;
-        let template: [f32; TEMPLATE_DIM] = *self.builders[i].template();
         let p = self.params;
         let index = Arc::clone(&self.index);
-        let ranked = index
-            .rank_templates(&template, p.top_k, MIN_COMPARED, &mut self.scratch)
-            .to_vec();
+        let ranked = self.scratch.ranked().to_vec();
         let object = self.objects[i].name.clone();
         let Some(best) = ranked.first().copied() else {
             self.say(i, None, || Verdict::Unknown {
@@ -531,20 +696,6 @@ impl Recogniser {
         }
     }
 
-    /// Goes on with the grasp-stage decision under way, if any: a slice of its grasp quality,
-    /// or, the observation after it is done, the comparison with the stored skills.
-    fn advance_grasp(&mut self, t_ns: u64) {
-        let Some(p) = &self.pending else { return };
-        if p.job.is_some() {
-            self.advance_quality();
-            return;
-        }
-        self.grasp_steps += 1;
-        let (i, query) = (p.object, p.query);
-        self.pending = None;
-        self.decide_grasp(i, query, t_ns);
-    }
-
     /// One slice of the pending grasp quality: at most [`RecogniserParams::grasp_slice`] of
     /// what is left of the period's budget (the whole of an unlimited one).
     fn advance_quality(&mut self) {
@@ -566,8 +717,9 @@ impl Recogniser {
         p.job = None;
     }
 
-    /// The grasp-stage decision on object `i`, its quality known.
-    fn decide_grasp(&mut self, i: usize, mut query: [f32; FEATURE_DIM], t_ns: u64) {
+    /// Begins the grasp-stage decision on object `i`, its quality known: the ranking of the
+    /// stored skills' features against `query` (in `self.scratch`).
+    fn begin_grasp_decision(&mut self, i: usize, mut query: [f32; FEATURE_DIM]) {
         self.decisions += 1;
         self.grasp_decisions += 1;
         let index = Arc::clone(&self.index);
@@ -597,9 +749,13 @@ impl Recogniser {
                 n_dims += 1;
             }
         }
-        let ranked = index
-            .rank_features(&query, &dims[..n_dims], 4, &mut self.scratch)
-            .to_vec();
+        index.begin_features(&query, &dims[..n_dims], 4, &mut self.scratch);
+    }
+
+    /// The grasp-stage decision on object `i`, its ranking done.
+    fn decide_grasp(&mut self, i: usize, t_ns: u64) {
+        let index = Arc::clone(&self.index);
+        let ranked = self.scratch.ranked().to_vec();
         let object = self.objects[i].name.clone();
         let candidate = |r: &super::index::Ranked| Candidate {
             skill_id: index.skill_id(r.row),

@@ -380,15 +380,23 @@ fn dist(f: &Plane, p: &P) -> f64 {
     f.n.dot(p) - f.d
 }
 
-/// A hull being built: the state between two rounds, so that a build can be done a part at
-/// a time ([`Build::advance`]) with the same operations in the same order as in one go.
+/// A hull being built: the state between two calls of [`Build::advance`], which may fall in
+/// the middle of choosing the initial simplex or of a round ([`Step`]), so that a build can be
+/// done a part at a time with the same operations in the same order as in one go.
 pub(super) struct Build {
     tol: f64,
+    /// A point strictly inside: the initial simplex's centroid, once it is chosen.
     interior: P,
     /// What a backward-stable computation of a hyperplane may leave at its vertices.
     exact: f64,
-    /// Rounds done.
+    /// Rounds begun.
     round: u32,
+    /// Where the build is.
+    step: Step,
+    /// The initial simplex while it is chosen.
+    simplex: Simplex,
+    /// The point the current round makes a vertex.
+    point: usize,
     buffers: Buffers,
     /// A round's visible facets, horizon ridges and new facets (in the order of the horizon
     /// ridges they were built on): kept to reuse their memory.
@@ -399,38 +407,103 @@ pub(super) struct Build {
     checks: Option<Checks>,
 }
 
-impl Build {
+/// Where a [`Build`] is: a phase and the cursor of its loop. A call of [`Build::advance`]
+/// stops between two steps of a loop (a point looked at, a facet searched or made, a point
+/// moved) and the next call goes on from the cursor.
+#[derive(Clone, Copy)]
+enum Step {
+    /// Choosing the initial simplex's vertices: a pass over the points per vertex, the
+    /// points before `next` looked at in this one.
+    Choose { next: usize },
+    /// Putting the points before `next` in the initial simplex's outside sets done.
+    Assign { next: usize },
+    /// Between two rounds (the initial simplex built).
+    Between,
+    /// The round's visibility search: `visible[..searched]` searched.
+    Visible { searched: usize },
+    /// The round's new facets on `horizon[..made]` made.
+    Facets { made: usize },
+    /// The new facets of `horizon[..paired]` paired with their neighbours.
+    Pair { paired: usize },
+    /// The outside points of the visible facets: `visible[..taken]`'s lists taken off their
+    /// facets, those before `next` (the next point of the last list taken, or NONE) moved.
+    Move { taken: usize, next: u32 },
+}
+
+/// The initial simplex while it is chosen: greedily the points farthest from the affine hull
+/// of those chosen (the first the farthest from the centroid).
+struct Simplex {
+    centroid: P,
+    /// The vertices chosen, and an orthonormal basis of their affine hull's directions from
+    /// the first.
+    chosen: Vec<usize>,
+    basis: Vec<P>,
+    /// In the current pass, the farthest point so far: its index, its distance, and its
+    /// offset from the affine hull of the chosen.
+    best: Option<(usize, f64, P)>,
+}
+
+/// What the steps of [`Build::advance`] cost, in sixteenths of a unit (a unit is about 0.1 µs
+/// on the project's machine; measured with `icms bench recognition` on power grasps' hulls,
+/// 160-200 primitives, BENCHMARKS.md issue 20, 2026-11-27).
+mod cost {
+    /// A unit.
+    pub const UNIT: usize = 16;
+    /// A point looked at in a pass choosing a vertex of the initial simplex, and more per
+    /// vertex chosen before (its offset from their affine hull).
+    pub const CHOOSE: usize = 1;
+    pub const CHOOSE_PER_VERTEX: usize = 2;
+    /// The initial simplex's facets (and the points' largest norm).
+    pub const SIMPLEX: usize = 16 * UNIT;
+    /// A point put in an outside set of the initial simplex (or found inside it).
+    pub const ASSIGN: usize = 3;
+    /// A stale entry of the work heap.
+    pub const STALE: usize = UNIT;
+    /// A visible facet searched (its neighbours' heights).
+    pub const VISIBLE: usize = UNIT;
+    /// A new facet made: turned about its ridge, and more if computed from its vertices.
+    pub const NEW: usize = UNIT / 2;
+    pub const PLANE: usize = 2 * UNIT;
+    /// A new facet paired, and each step of its walks.
+    pub const PAIR: usize = UNIT / 2;
+    pub const WALK: usize = UNIT / 8;
+    /// An outside point moved, and each of its heights computed.
+    pub const MOVE: usize = UNIT / 4;
+    pub const HEIGHT: usize = 1;
+}
+
+impl Buffers {
     /// Puts point `i`, `dist` above facet `f`, into `f`'s outside set.
     fn add_outside(&mut self, f: usize, i: usize, dist: f64) {
-        let o = &mut self.buffers.outside[f];
+        let o = &mut self.outside[f];
         if o.first == NONE || dist > o.far_dist {
             o.far = i as u32;
             o.far_dist = dist;
-            self.buffers.work.push((dist.to_bits(), f as u32));
+            self.work.push((dist.to_bits(), f as u32));
         }
-        self.buffers.next[i] = o.first;
+        self.next[i] = o.first;
         o.first = i as u32;
     }
 
     /// Stores a new facet, in a free slot if there is one; its index.
     fn add_facet(&mut self, topo: Topo, plane: Plane) -> Result<usize, HullError> {
-        Ok(match self.buffers.free.pop() {
+        Ok(match self.free.pop() {
             Some(id) => {
                 let id = id as usize;
-                self.buffers.topo[id] = topo;
-                self.buffers.planes[id] = plane;
-                self.buffers.outside[id] = NO_OUTSIDE;
+                self.topo[id] = topo;
+                self.planes[id] = plane;
+                self.outside[id] = NO_OUTSIDE;
                 id
             }
             None => {
-                if self.buffers.topo.len() >= NONE as usize {
+                if self.topo.len() >= NONE as usize {
                     return Err(HullError::Numerical("too many facets"));
                 }
-                self.buffers.topo.push(topo);
-                self.buffers.planes.push(plane);
-                self.buffers.outside.push(NO_OUTSIDE);
-                self.buffers.above.push(0.0);
-                self.buffers.topo.len() - 1
+                self.topo.push(topo);
+                self.planes.push(plane);
+                self.outside.push(NO_OUTSIDE);
+                self.above.push(0.0);
+                self.topo.len() - 1
             }
         })
     }
@@ -454,9 +527,9 @@ pub(super) fn build(pts: &[P], tol: f64) -> Result<Hull, HullError> {
     finish(b, pts)
 }
 
-/// Starts the convex hull of `pts` (tolerance `tol` for "outside"): the initial simplex, and
-/// the other points in its facets' outside sets. [`Build::advance`] goes on from there,
-/// [`finish`] ends it.
+/// Starts the convex hull of `pts` (tolerance `tol` for "outside"). [`Build::advance`] goes
+/// on from there (the initial simplex, the other points in its facets' outside sets, then the
+/// rounds), [`finish`] ends it.
 pub(super) fn start(pts: &[P], tol: f64) -> Result<Build, HullError> {
     let npts = pts.len();
     if npts < D + 1 {
@@ -465,88 +538,25 @@ pub(super) fn start(pts: &[P], tol: f64) -> Result<Build, HullError> {
     if npts >= NONE as usize {
         return Err(HullError::Numerical("too many points"));
     }
-    // Initial simplex: greedily the points farthest from the affine hull of those chosen.
-    let centroid = pts.iter().sum::<P>() / npts as f64;
-    let i0 = (0..npts)
-        .max_by(|&a, &b| {
-            (pts[a] - centroid)
-                .norm()
-                .total_cmp(&(pts[b] - centroid).norm())
-        })
-        .ok_or(HullError::Flat)?;
-    let mut chosen = vec![i0];
-    let mut basis: Vec<P> = Vec::new();
-    let residual = |p: &P, basis: &[P]| {
-        let mut r = p - pts[i0];
-        for _ in 0..2 {
-            for b in basis {
-                r -= b * b.dot(&r);
-            }
-        }
-        r
-    };
-    for _ in 0..D {
-        let (best, r) = (0..npts)
-            .map(|i| (i, residual(&pts[i], &basis)))
-            .max_by(|a, b| a.1.norm().total_cmp(&b.1.norm()))
-            .ok_or(HullError::Flat)?;
-        let rn = r.norm();
-        if rn <= tol {
-            return Err(HullError::Flat);
-        }
-        basis.push(r / rn);
-        chosen.push(best);
-    }
-    let interior = chosen.iter().map(|&i| pts[i]).sum::<P>() / (D + 1) as f64;
-    let size = pts.iter().fold(0.0_f64, |m, p| m.max(p.norm()));
-    // What a backward-stable computation of a hyperplane may leave at its vertices.
-    let exact = 16.0 * f64::EPSILON * size;
-    let mut b = Build {
+    Ok(Build {
         tol,
-        interior,
-        exact,
+        interior: P::zeros(),
+        exact: 0.0,
         round: 0,
+        step: Step::Choose { next: 0 },
+        simplex: Simplex {
+            centroid: pts.iter().sum::<P>() / npts as f64,
+            chosen: Vec::with_capacity(D + 1),
+            basis: Vec::with_capacity(D),
+            best: None,
+        },
+        point: 0,
         visible: Vec::new(),
         horizon: Vec::new(),
         new: Vec::new(),
         checks: None,
         buffers: Buffers::take_spare(npts),
-    };
-    for k in 0..=D {
-        let mut t = Topo {
-            nb: [0; D],
-            v: [0; D],
-            back: [0; D],
-            alive: true,
-            seen: 0,
-        };
-        let mut j = 0;
-        for (m, &c) in chosen.iter().enumerate() {
-            if m != k {
-                // The facet omitting chosen[m] shares all but chosen[m]; in it, chosen[k]
-                // comes at k or, after the omitted chosen[m], at k − 1.
-                t.v[j] = c as u32;
-                t.nb[j] = m as u32;
-                t.back[j] = if k < m { k as u8 } else { (k - 1) as u8 };
-                j += 1;
-            }
-        }
-        let pl =
-            plane(pts, &t.v, &interior).ok_or(HullError::Numerical("degenerate simplex facet"))?;
-        b.add_facet(t, pl)?;
-    }
-    for (i, p) in pts.iter().enumerate() {
-        if chosen.contains(&i) {
-            continue;
-        }
-        if let Some((f, d)) = (0..=D)
-            .map(|f| (f, dist(&b.buffers.planes[f], p)))
-            .find(|&(_, d)| d > tol)
-        {
-            b.add_outside(f, i, d);
-        }
-    }
-    Ok(b)
+    })
 }
 
 /// Work done and allowed in one call of [`Build::advance`] or [`Build::check`].
@@ -574,40 +584,211 @@ enum Next {
 }
 
 impl Build {
-    /// Goes on with the build, a round (a point made a vertex) at a time, until rounds
-    /// costing `budget` or more units are done (two per facet removed or made, one per
-    /// outside point moved, and so on: see `add_vertex`; at least one round, and the
-    /// call may end among the stale entries of the work heap before a round); whether the
-    /// hull is complete ([`Build::check`] it then). The rounds are those of a build in one go.
+    /// Goes on with the build for about `budget` units of work (at least one step; module
+    /// `cost` says what each costs: a visible facet searched one unit, a new facet made half
+    /// of one, an outside point moved a quarter and a sixteenth per height computed, ...), and
+    /// stops as soon as they are spent, wherever it is: choosing the initial simplex (a point at a time), in a round (a
+    /// point made a vertex: a facet searched, made or paired, a point moved at a time), or
+    /// among the stale entries of the work heap; whether the hull is complete ([`Build::check`]
+    /// it then). The operations are those of a build in one go, in the same order.
     pub(super) fn advance(&mut self, pts: &[P], budget: usize) -> Result<bool, HullError> {
         let npts = pts.len();
         let mut budget = Budget {
             spent: 0,
-            limit: budget,
+            limit: budget.saturating_mul(cost::UNIT),
         };
-        // Each round turns one outside point, the farthest above any facet, into a vertex:
-        // at most npts rounds.
         loop {
-            if budget.used_up() {
-                return Ok(false);
+            match self.step {
+                Step::Choose { mut next } => {
+                    if !self.choose(pts, &mut next, &mut budget)? {
+                        self.step = Step::Choose { next };
+                        return Ok(false);
+                    }
+                    self.step = if self.simplex.chosen.len() == D + 1 {
+                        self.build_simplex(pts)?;
+                        budget.spent += cost::SIMPLEX;
+                        Step::Assign { next: 0 }
+                    } else {
+                        Step::Choose { next: 0 }
+                    };
+                }
+                Step::Assign { mut next } => {
+                    if !self.assign(pts, &mut next, &mut budget) {
+                        self.step = Step::Assign { next };
+                        return Ok(false);
+                    }
+                    self.step = Step::Between;
+                }
+                Step::Between => {
+                    if budget.used_up() {
+                        return Ok(false);
+                    }
+                    // Each round turns one outside point, the farthest above any facet, into
+                    // a vertex: at most npts rounds.
+                    let round = self.round + 1;
+                    if round > npts as u32 + 1 {
+                        return Err(HullError::Numerical("too many rounds"));
+                    }
+                    let fi = match self.farthest(&mut budget) {
+                        Next::Facet(f) => f,
+                        Next::Done => return Ok(true),
+                        Next::Paused => return Ok(false),
+                    };
+                    self.round = round;
+                    self.begin_round(pts, fi);
+                    self.step = Step::Visible { searched: 0 };
+                }
+                Step::Visible { mut searched } => {
+                    if !self.find_visible(pts, &mut searched, &mut budget)? {
+                        self.step = Step::Visible { searched };
+                        return Ok(false);
+                    }
+                    self.step = Step::Facets { made: 0 };
+                }
+                Step::Facets { mut made } => {
+                    if !self.make_facets(pts, &mut made, &mut budget)? {
+                        self.step = Step::Facets { made };
+                        return Ok(false);
+                    }
+                    self.step = Step::Pair { paired: 0 };
+                }
+                Step::Pair { mut paired } => {
+                    let done = pair_new_facets(
+                        &mut self.buffers.topo,
+                        &self.horizon,
+                        &self.new,
+                        self.visible.len(),
+                        self.round,
+                        &mut paired,
+                        &mut budget,
+                    )?;
+                    if !done {
+                        self.step = Step::Pair { paired };
+                        return Ok(false);
+                    }
+                    self.step = Step::Move {
+                        taken: 0,
+                        next: NONE,
+                    };
+                }
+                Step::Move {
+                    mut taken,
+                    mut next,
+                } => {
+                    if !self.move_outside(pts, &mut taken, &mut next, &mut budget) {
+                        self.step = Step::Move { taken, next };
+                        return Ok(false);
+                    }
+                    self.buffers
+                        .free
+                        .extend(self.visible.iter().map(|&f| f as u32));
+                    self.step = Step::Between;
+                }
             }
-            let round = self.round + 1;
-            if round > npts as u32 + 1 {
-                return Err(HullError::Numerical("too many rounds"));
-            }
-            let fi = match self.farthest(&mut budget) {
-                Next::Facet(f) => f,
-                Next::Done => return Ok(true),
-                Next::Paused => return Ok(false),
-            };
-            self.round = round;
-            budget.spent += self.add_vertex(pts, fi)?;
         }
     }
 
+    /// A pass choosing the next vertex of the initial simplex, from point `next` on, as far
+    /// as the budget goes; whether the pass is done (the vertex chosen then).
+    fn choose(
+        &mut self,
+        pts: &[P],
+        next: &mut usize,
+        budget: &mut Budget,
+    ) -> Result<bool, HullError> {
+        let s = &mut self.simplex;
+        let per_point = cost::CHOOSE + cost::CHOOSE_PER_VERTEX * s.chosen.len();
+        while *next < pts.len() {
+            if budget.used_up() {
+                return Ok(false);
+            }
+            let i = *next;
+            *next += 1;
+            budget.spent += per_point;
+            let r = match s.chosen.first() {
+                None => pts[i] - s.centroid,
+                Some(&i0) => residual(&pts[i], &pts[i0], &s.basis),
+            };
+            let norm = r.norm();
+            // As `Iterator::max_by`: the last of equals.
+            if s.best
+                .is_none_or(|(_, best, _)| best.total_cmp(&norm) != std::cmp::Ordering::Greater)
+            {
+                s.best = Some((i, norm, r));
+            }
+        }
+        let (best, rn, r) = s.best.take().ok_or(HullError::Flat)?;
+        if !s.chosen.is_empty() {
+            if rn <= self.tol {
+                return Err(HullError::Flat);
+            }
+            s.basis.push(r / rn);
+        }
+        s.chosen.push(best);
+        Ok(true)
+    }
+
+    /// The initial simplex's facets, its centroid the interior point.
+    fn build_simplex(&mut self, pts: &[P]) -> Result<(), HullError> {
+        let chosen = &self.simplex.chosen;
+        let interior = chosen.iter().map(|&i| pts[i]).sum::<P>() / (D + 1) as f64;
+        let size = pts.iter().fold(0.0_f64, |m, p| m.max(p.norm()));
+        self.interior = interior;
+        self.exact = 16.0 * f64::EPSILON * size;
+        for k in 0..=D {
+            let mut t = Topo {
+                nb: [0; D],
+                v: [0; D],
+                back: [0; D],
+                alive: true,
+                seen: 0,
+            };
+            let mut j = 0;
+            for (m, &c) in chosen.iter().enumerate() {
+                if m != k {
+                    // The facet omitting chosen[m] shares all but chosen[m]; in it, chosen[k]
+                    // comes at k or, after the omitted chosen[m], at k − 1.
+                    t.v[j] = c as u32;
+                    t.nb[j] = m as u32;
+                    t.back[j] = if k < m { k as u8 } else { (k - 1) as u8 };
+                    j += 1;
+                }
+            }
+            let pl = plane(pts, &t.v, &interior)
+                .ok_or(HullError::Numerical("degenerate simplex facet"))?;
+            self.buffers.add_facet(t, pl)?;
+        }
+        Ok(())
+    }
+
+    /// Puts the points from `next` on that are not vertices in the outside set of the first
+    /// facet of the initial simplex they are above, as far as the budget goes; whether all
+    /// are.
+    fn assign(&mut self, pts: &[P], next: &mut usize, budget: &mut Budget) -> bool {
+        while *next < pts.len() {
+            if budget.used_up() {
+                return false;
+            }
+            let i = *next;
+            *next += 1;
+            budget.spent += cost::ASSIGN;
+            if self.simplex.chosen.contains(&i) {
+                continue;
+            }
+            let p = &pts[i];
+            if let Some((f, d)) = (0..=D)
+                .map(|f| (f, dist(&self.buffers.planes[f], p)))
+                .find(|&(_, d)| d > self.tol)
+            {
+                self.buffers.add_outside(f, i, d);
+            }
+        }
+        true
+    }
+
     /// The facet with the farthest outside point; entries of removed facets or of outside
-    /// sets that changed are skipped (a unit each, so that a call may stop among them: taking
-    /// them changes nothing else).
+    /// sets that changed are skipped (so that a call may stop among them: taking them changes
+    /// nothing else).
     #[inline]
     fn farthest(&mut self, budget: &mut Budget) -> Next {
         loop {
@@ -620,7 +801,7 @@ impl Build {
                     {
                         return Next::Facet(f);
                     }
-                    budget.spent += 3;
+                    budget.spent += cost::STALE;
                     if budget.spent >= budget.limit {
                         return Next::Paused;
                     }
@@ -629,102 +810,92 @@ impl Build {
         }
     }
 
-    /// The round `self.round`: makes the farthest outside point of facet `fi` a vertex,
-    /// replacing the facets it sees by new ones through it; what the round cost.
-    #[inline]
-    fn add_vertex(&mut self, pts: &[P], fi: usize) -> Result<usize, HullError> {
-        let mut visible = std::mem::take(&mut self.visible);
-        let mut horizon = std::mem::take(&mut self.horizon);
-        let mut new = std::mem::take(&mut self.new);
+    /// Begins the round `self.round`: the farthest outside point of facet `fi` is to become a
+    /// vertex; `fi`, which sees it, is the first visible facet.
+    fn begin_round(&mut self, pts: &[P], fi: usize) {
         let pi = self.buffers.outside[fi].far as usize;
-        let p = pts[pi];
-        self.find_visible(fi, &p, &mut visible, &mut horizon)?;
-        self.make_facets(pts, pi, &horizon, &mut new)?;
-        let walked = pair_new_facets(
-            &mut self.buffers.topo,
-            &horizon,
-            &new,
-            visible.len(),
-            self.round,
-        )?;
-        let moved = self.move_outside(pts, pi, &visible, &new);
-        self.buffers.free.extend(visible.iter().map(|&f| f as u32));
-        // Units of about 0.1 µs on the project's machine: a facet removed or made (a new
-        // hyperplane, its adjacency) costs two, an outside point moved one, as do four steps
-        // of the walks that pair the new facets (and, in `farthest`, a stale entry of the work
-        // heap three).
-        let cost = 2 * (visible.len() + new.len()) + moved + walked / 4;
-        self.visible = visible;
-        self.horizon = horizon;
-        self.new = new;
-        Ok(cost)
+        self.point = pi;
+        self.visible.clear();
+        self.horizon.clear();
+        self.new.clear();
+        self.visible.push(fi);
+        let t = &mut self.buffers.topo[fi];
+        t.alive = false;
+        t.seen = self.round;
+        self.buffers.above[fi] = dist(&self.buffers.planes[fi], &pts[pi]);
     }
 
-    /// Visible facets: connected to `fi`, with `p` strictly outside (removed, in `visible`);
-    /// and the horizon ridges between them and the hidden ones (in `horizon`).
+    /// The visibility search of the round's point from `visible[searched]` on, as far as the
+    /// budget goes: the facets connected to the first with the point strictly outside
+    /// (removed, in `visible`), and the horizon ridges between them and the hidden ones (in
+    /// `horizon`); whether it is done.
     #[inline]
     fn find_visible(
         &mut self,
-        fi: usize,
-        p: &P,
-        visible: &mut Vec<usize>,
-        horizon: &mut Vec<Ridge>,
-    ) -> Result<(), HullError> {
+        pts: &[P],
+        searched: &mut usize,
+        budget: &mut Budget,
+    ) -> Result<bool, HullError> {
         let (tol, round) = (self.tol, self.round);
-        visible.clear();
-        horizon.clear();
-        visible.push(fi);
-        self.buffers.topo[fi].alive = false;
-        self.buffers.topo[fi].seen = round;
-        self.buffers.above[fi] = dist(&self.buffers.planes[fi], p);
-        let mut s = 0;
-        while s < visible.len() {
-            let f = visible[s];
-            s += 1;
+        let p = pts[self.point];
+        let b = &mut self.buffers;
+        while *searched < self.visible.len() {
+            if budget.used_up() {
+                return Ok(false);
+            }
+            let f = self.visible[*searched];
+            *searched += 1;
+            budget.spent += cost::VISIBLE;
             for j in 0..D {
-                let g = self.buffers.topo[f].nb[j] as usize;
-                let tg = &mut self.buffers.topo[g];
+                let g = b.topo[f].nb[j] as usize;
+                let tg = &mut b.topo[g];
                 if tg.seen != round {
                     tg.seen = round;
-                    let above = dist(&self.buffers.planes[g], p);
-                    self.buffers.above[g] = above;
+                    let above = dist(&b.planes[g], &p);
+                    b.above[g] = above;
                     if above > tol {
                         tg.alive = false;
-                        visible.push(g);
+                        self.visible.push(g);
                     }
                 }
                 if tg.alive {
-                    let slot = self.buffers.topo[f].back[j];
-                    if self.buffers.topo[g].nb[slot as usize] as usize != f {
+                    let slot = b.topo[f].back[j];
+                    if b.topo[g].nb[slot as usize] as usize != f {
                         return Err(HullError::Numerical("broken adjacency"));
                     }
-                    horizon.push(Ridge { f, j, g, slot });
+                    self.horizon.push(Ridge { f, j, g, slot });
                 }
             }
         }
-        if horizon.is_empty() {
+        if self.horizon.is_empty() {
             return Err(HullError::Numerical("horizon is not closed"));
         }
-        Ok(())
+        Ok(true)
     }
 
-    /// A new facet on each horizon ridge, through point `pi` (in `new`, in the order of the
-    /// ridges), adjacent to the hidden facet across the ridge; the removed facet's side of the
-    /// ridge points at it too.
+    /// A new facet on each horizon ridge from `horizon[made]` on, as far as the budget goes,
+    /// through the round's point (in `new`, in the order of the ridges), adjacent to the
+    /// hidden facet across the ridge; the removed facet's side of the ridge points at it too.
+    /// Whether all are made.
     #[inline]
     fn make_facets(
         &mut self,
         pts: &[P],
-        pi: usize,
-        horizon: &[Ridge],
-        new: &mut Vec<usize>,
-    ) -> Result<(), HullError> {
-        let (interior, exact) = (self.interior, self.exact);
-        new.clear();
-        for r in horizon {
+        made: &mut usize,
+        budget: &mut Budget,
+    ) -> Result<bool, HullError> {
+        let (interior, exact, pi) = (self.interior, self.exact, self.point);
+        let b = &mut self.buffers;
+        while *made < self.horizon.len() {
+            if budget.used_up() {
+                return Ok(false);
+            }
+            let r = self.horizon[*made];
+            *made += 1;
+            budget.spent += cost::NEW;
             let mut t = Topo {
                 nb: [NONE; D],
-                v: self.buffers.topo[r.f].v,
+                v: b.topo[r.f].v,
                 back: [0; D],
                 alive: true,
                 seen: 0,
@@ -732,69 +903,108 @@ impl Build {
             t.v[r.j] = pi as u32;
             t.nb[r.j] = r.g as u32;
             t.back[r.j] = r.slot;
-            let (pf, pg) = (&self.buffers.planes[r.f], &self.buffers.planes[r.g]);
-            let (af, ag) = (self.buffers.above[r.f], self.buffers.above[r.g]);
+            let (pf, pg) = (&b.planes[r.f], &b.planes[r.g]);
+            let (af, ag) = (b.above[r.f], b.above[r.g]);
             let pl = match turn(pts, &t.v, (pf, af), (pg, ag), &interior, exact) {
                 Some(pl) => pl,
-                None => plane(pts, &t.v, &interior)
-                    .ok_or(HullError::Numerical("degenerate new facet"))?,
+                None => {
+                    budget.spent += cost::PLANE;
+                    plane(pts, &t.v, &interior)
+                        .ok_or(HullError::Numerical("degenerate new facet"))?
+                }
             };
             if pl.d - pl.n.dot(&interior) <= 0.0 {
                 return Err(HullError::Numerical("interior point on a facet"));
             }
-            let id = self.add_facet(t, pl)?;
-            let tg = &mut self.buffers.topo[r.g];
+            let id = b.add_facet(t, pl)?;
+            let tg = &mut b.topo[r.g];
             tg.nb[r.slot as usize] = id as u32;
             tg.back[r.slot as usize] = r.j as u8;
-            let tf = &mut self.buffers.topo[r.f];
+            let tf = &mut b.topo[r.f];
             tf.nb[r.j] = id as u32;
             tf.back[r.j] = NEW;
-            new.push(id);
+            self.new.push(id);
         }
-        Ok(())
+        Ok(true)
     }
 
     /// The visible facets' outside points go to the first new facet they are above (those on
-    /// their own horizon ridges first), or are inside; how many were moved.
+    /// their own horizon ridges first), or are inside: the lists of `visible[..taken]` are
+    /// taken off their facets, `next` is the next point of the last one (NONE: done). As far
+    /// as the budget goes; whether all are moved.
     #[inline]
-    fn move_outside(&mut self, pts: &[P], pi: usize, visible: &[usize], new: &[usize]) -> usize {
-        let tol = self.tol;
-        let mut moved = 0usize;
-        for &f in visible {
-            let mut q = self.buffers.outside[f].first;
-            self.buffers.outside[f].first = NONE;
-            while q != NONE {
-                let qi = q as usize;
-                q = self.buffers.next[qi];
-                moved += 1;
-                if qi == pi {
-                    continue;
-                }
-                let pq = &pts[qi];
-                let tf = &self.buffers.topo[f];
-                let planes = &self.buffers.planes;
-                let above = |g: usize| {
-                    let d = dist(&planes[g], pq);
-                    (d > tol).then_some((g, d))
+    fn move_outside(
+        &mut self,
+        pts: &[P],
+        taken: &mut usize,
+        next: &mut u32,
+        budget: &mut Budget,
+    ) -> bool {
+        let (tol, pi) = (self.tol, self.point);
+        let b = &mut self.buffers;
+        loop {
+            if *next == NONE {
+                let Some(&f) = self.visible.get(*taken) else {
+                    return true;
                 };
-                let to = (0..D)
-                    .filter(|&j| tf.back[j] == NEW)
-                    .find_map(|j| above(tf.nb[j] as usize))
-                    .or_else(|| new.iter().copied().find_map(above));
-                if let Some((g, d)) = to {
-                    self.add_outside(g, qi, d);
+                *taken += 1;
+                *next = b.outside[f].first;
+                b.outside[f].first = NONE;
+                continue;
+            }
+            if budget.used_up() {
+                return false;
+            }
+            let f = self.visible[*taken - 1];
+            let qi = *next as usize;
+            *next = b.next[qi];
+            budget.spent += cost::MOVE;
+            if qi == pi {
+                continue;
+            }
+            let pq = &pts[qi];
+            let tf = &b.topo[f];
+            let mut heights = 0;
+            let mut to = None;
+            // Its own facet's new neighbours first, then all the new facets.
+            let own = (0..D)
+                .filter(|&j| tf.back[j] == NEW)
+                .map(|j| tf.nb[j] as usize);
+            for g in own.chain(self.new.iter().copied()) {
+                heights += 1;
+                let d = dist(&b.planes[g], pq);
+                if d > tol {
+                    to = Some((g, d));
+                    break;
                 }
             }
+            budget.spent += cost::HEIGHT * heights;
+            if let Some((g, d)) = to {
+                b.add_outside(g, qi, d);
+            }
         }
-        moved
     }
 }
 
+/// A point's offset from the affine hull through `origin` spanned by the orthonormal `basis`
+/// (projected out twice, for the rounding of the first).
+#[inline]
+fn residual(p: &P, origin: &P, basis: &[P]) -> P {
+    let mut r = p - origin;
+    for _ in 0..2 {
+        for b in basis {
+            r -= b * b.dot(&r);
+        }
+    }
+    r
+}
+
 /// Pairs up the new facets (`new`, built on the ridges of `horizon`) across the ridges through
-/// the new point; how many steps the walks took. The new facet on ridge (f, j) shares with its
-/// neighbour opposite v[k] the 4 vertices S of f other than v[j] and v[k]: turning about S
-/// through the round's visible facets (`n_visible` of them) from f, across the ridge opposite
-/// v[k], leads to the next horizon ridge about S, whose new facet it is.
+/// the new point, from `horizon[paired]` on, as far as the budget goes; whether all are paired.
+/// The new facet on ridge (f, j) shares with its neighbour opposite v[k] the 4 vertices S of f
+/// other than v[j] and v[k]: turning about S through the round's visible facets (`n_visible`
+/// of them) from f, across the ridge opposite v[k], leads to the next horizon ridge about S,
+/// whose new facet it is.
 #[inline]
 fn pair_new_facets(
     topo: &mut [Topo],
@@ -802,9 +1012,16 @@ fn pair_new_facets(
     new: &[usize],
     n_visible: usize,
     round: u32,
-) -> Result<usize, HullError> {
-    let mut walked = 0usize;
-    for (r, &id) in horizon.iter().zip(new) {
+    paired: &mut usize,
+    budget: &mut Budget,
+) -> Result<bool, HullError> {
+    while *paired < horizon.len() {
+        if budget.used_up() {
+            return Ok(false);
+        }
+        let (r, id) = (horizon[*paired], new[*paired]);
+        *paired += 1;
+        let mut walked = 0usize;
         for k in 0..D {
             if k == r.j || topo[id].nb[k] != NONE {
                 continue;
@@ -847,8 +1064,9 @@ fn pair_new_facets(
             topo[m].nb[slot] = id as u32;
             topo[m].back[slot] = k as u8;
         }
+        budget.spent += cost::PAIR + cost::WALK * walked;
     }
-    Ok(walked)
+    Ok(true)
 }
 
 /// Checks the result and measures the facets in one go ([`Build::check`], then
@@ -867,8 +1085,9 @@ struct Checks {
     /// The largest point norm, and what f32 rounding may leave of n · x.
     r: f64,
     slack: f64,
-    /// The live facets, in the order of their slots.
+    /// The live facets, in the order of their slots, once all `listed`.
     live: Vec<usize>,
+    listed: usize,
     /// Of them, how many have their adjacency checked, their points checked, and are
     /// measured.
     adjacent: usize,
@@ -898,10 +1117,14 @@ impl Build {
         let checks = match &mut self.checks {
             Some(c) => c,
             None => {
-                budget.spent += self.buffers.topo.len() / 16 + npts / 4;
-                self.checks.insert(Checks::new(pts, &self.buffers.topo))
+                budget.spent += npts / 4;
+                self.checks
+                    .insert(Checks::new(pts, self.buffers.topo.len()))
             }
         };
+        if !checks.list(&self.buffers.topo, &mut budget) {
+            return Ok(false);
+        }
         if !checks.adjacency(&self.buffers.topo, &mut budget)? {
             return Ok(false);
         }
@@ -924,7 +1147,7 @@ impl Checks {
     /// n · x is within 9 u r of its value (u = 2⁻²⁴, r the largest point norm: the rounding
     /// of n, x, the products and their sum), so a facet all of whose points are below its
     /// limit less that in f32 passes; any other is checked again in f64.
-    fn new(pts: &[P], topo: &[Topo]) -> Checks {
+    fn new(pts: &[P], slots: usize) -> Checks {
         let npts = pts.len();
         let r = pts.iter().fold(0.0_f64, |m, p| m.max(p.norm()));
         let slack = 9.0 * 2f64.powi(-24) * r;
@@ -935,19 +1158,38 @@ impl Checks {
             }
         }
         let cols32: Vec<f32> = cols.iter().map(|&x| x as f32).collect();
-        let live: Vec<usize> = (0..topo.len()).filter(|&i| topo[i].alive).collect();
         Checks {
             cols,
             cols32,
             r,
             slack,
-            live,
+            live: Vec::with_capacity(slots),
+            listed: 0,
             adjacent: 0,
             checked: 0,
             measured: 0,
             volume: 0.0,
             min_offset: f64::INFINITY,
         }
+    }
+
+    /// Lists the live facets (a unit per sixteen slots: a cache line each), as far as the
+    /// budget goes; whether all are listed.
+    fn list(&mut self, topo: &[Topo], budget: &mut Budget) -> bool {
+        while self.listed < topo.len() {
+            if budget.used_up() {
+                return false;
+            }
+            let end = (self.listed + 4).min(topo.len());
+            for (i, t) in topo.iter().enumerate().take(end).skip(self.listed) {
+                if t.alive {
+                    self.live.push(i);
+                }
+            }
+            self.listed = end;
+            budget.spent += 1;
+        }
+        true
     }
 
     /// Checks the live facets' adjacency (a unit per four facets), as far as the budget goes;
@@ -1098,7 +1340,7 @@ impl Build {
     pub(super) fn metrics(&self) -> Option<(f64, f64)> {
         self.checks
             .as_ref()
-            .filter(|c| c.measured >= c.live.len())
+            .filter(|c| c.listed >= self.buffers.topo.len() && c.measured >= c.live.len())
             .map(|c| (c.volume / 720.0, c.min_offset))
     }
 
@@ -1254,6 +1496,42 @@ mod tests {
                 (a, b) => proptest::prop_assert!(false, "{:?} vs {:?}", a.err(), b.err()),
             }
         }
+    }
+
+    #[test]
+    fn a_build_a_unit_at_a_time_stops_in_every_phase_and_is_the_build_in_one_go() {
+        // 120 points spread in six dimensions (a fixed xorshift sequence): rounds that see
+        // many facets.
+        let mut x = 0x2545_f491_4f6c_dd1d_u64;
+        let mut next = || {
+            x ^= x << 13;
+            x ^= x >> 7;
+            x ^= x << 17;
+            (x >> 11) as f64 / (1u64 << 53) as f64 * 2.0 - 1.0
+        };
+        let pts: Vec<P> = (0..120).map(|_| P::from_fn(|_, _| next())).collect();
+        let whole = build(&pts, 1e-9).unwrap();
+        let mut b = start(&pts, 1e-9).unwrap();
+        let mut stopped = Vec::new();
+        let mut calls = 0;
+        while !b.advance(&pts, 1).unwrap() {
+            calls += 1;
+            let here = std::mem::discriminant(&b.step);
+            if !stopped.contains(&here) {
+                stopped.push(here);
+            }
+        }
+        // Choose, Assign, Between, Visible, Facets, Pair and Move.
+        assert_eq!(stopped.len(), 7, "{calls} calls");
+        let mut checks = 0;
+        while !b.check(&pts, 1).unwrap() {
+            checks += 1;
+        }
+        assert!(checks > 10, "{checks}");
+        let parts = b.into_hull();
+        assert_eq!(parts.volume().to_bits(), whole.volume().to_bits());
+        let bits = |h: &Hull| -> Vec<u64> { h.facets().map(|f| f.d.to_bits()).collect() };
+        assert_eq!(bits(&parts), bits(&whole));
     }
 
     #[test]
