@@ -81,10 +81,7 @@ fn record(
         .iter()
         .find(|s| target.is_none() || s.object_name == target)
         .map(|s| {
-            let approach = s
-                .approach
-                .as_deref()
-                .and_then(|a| <[f32; TEMPLATE_DIM]>::try_from(a).ok());
+            let approach = s.approach.as_deref().and_then(super::features::template_of);
             let feature =
                 <[f32; FEATURE_DIM]>::try_from(s.feature.as_slice()).unwrap_or([0.0; FEATURE_DIM]);
             (approach, feature)

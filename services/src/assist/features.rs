@@ -40,8 +40,30 @@ pub const OBJECT_DIMS: usize = 6;
 /// Index of the contact-onset value in a template.
 pub const ONSET_DIM: usize = OBJECT_DIMS + CHECKPOINTS_M.len() * CHECKPOINT_DIMS;
 
+/// Index of the grip value in a template: the normal force of the whole hand on the object
+/// per its weight, [`GRIP_AT_NS`] after the first fingertip touched it.
+pub const GRIP_DIM: usize = ONSET_DIM + 1;
+
+/// Index of the scene value in a template: how many objects the scene has (the grasp's
+/// context: what a grasp does next, how long it holds and where it carries, goes with the
+/// scene it is done in).
+pub const SCENE_DIM: usize = GRIP_DIM + 1;
+
 /// Length of an approach template.
-pub const TEMPLATE_DIM: usize = ONSET_DIM + 1;
+pub const TEMPLATE_DIM: usize = SCENE_DIM + 1;
+
+/// Length of the templates stored before the grip and the scene were added (segmentation
+/// version 2): read back with both not seen (NaN), [`template_of`].
+pub const TEMPLATE_DIM_V2: usize = GRIP_DIM;
+
+/// How long after the first fingertip touched the object the grip is taken (ns): 800 ms,
+/// when the recogniser's grasp stage decides ([`super::recognise::RecogniserParams`]'s
+/// default `grasp_stage_ns`), so that a stored skill's grip and a live grasp's are the same
+/// measurement.
+pub const GRIP_AT_NS: u64 = 800_000_000;
+
+/// Standard gravity (m/s²), for the weight the grip is divided by.
+const GRAVITY: f64 = 9.81;
 
 /// How long after the first fingertip touched the object the onset counts touching fingertips
 /// (ns): 100 ms.
@@ -67,8 +89,24 @@ pub const TEMPLATE_SCALE: [f32; TEMPLATE_DIM] = {
         k += 1;
     }
     s[ONSET_DIM] = 0.75; // fingertips at onset
+    s[GRIP_DIM] = 1.5; // grip per weight
+    s[SCENE_DIM] = 2.0; // objects in the scene
     s
 };
+
+/// A template from its stored values: [`TEMPLATE_DIM`] of them, or [`TEMPLATE_DIM_V2`] (a
+/// template stored before the grip and the scene were added: both not seen); `None` for any
+/// other length.
+pub fn template_of(values: &[f32]) -> Option<[f32; TEMPLATE_DIM]> {
+    let mut t = [f32::NAN; TEMPLATE_DIM];
+    match values.len() {
+        TEMPLATE_DIM | TEMPLATE_DIM_V2 => {
+            t[..values.len()].copy_from_slice(values);
+            Some(t)
+        }
+        _ => None,
+    }
+}
 
 /// Names of the template's values, for documents and `--json` output.
 pub fn template_dimensions() -> Vec<String> {
@@ -91,6 +129,11 @@ pub fn template_dimensions() -> Vec<String> {
         v.push(format!("pointing at {cm} cm"));
     }
     v.push("fingertips touching at onset".to_owned());
+    v.push(format!(
+        "grip: normal force of the hand on the object per its weight, {} s after the first touch",
+        GRIP_AT_NS as f64 * 1e-9
+    ));
+    v.push("objects in the scene".to_owned());
     v
 }
 
@@ -380,6 +423,9 @@ pub struct TemplateBuilder {
     distance_m: f64,
     first_touch_ns: Option<u64>,
     onset_done: bool,
+    /// The object's weight (N; NaN when its mass is not known).
+    weight: f64,
+    grip_done: bool,
 }
 
 /// What one observation did to a [`TemplateBuilder`].
@@ -395,10 +441,12 @@ pub enum Progress {
 }
 
 impl TemplateBuilder {
-    /// A template for object `object` (index in the scene) described by `info`, nothing seen.
-    pub fn new(object: usize, info: &ObjectInfo) -> TemplateBuilder {
+    /// A template for object `object` (index in the scene) described by `info`, in a scene
+    /// of `scene_objects` objects, nothing seen.
+    pub fn new(object: usize, info: &ObjectInfo, scene_objects: usize) -> TemplateBuilder {
         let mut values = [f32::NAN; TEMPLATE_DIM];
         values[..OBJECT_DIMS].copy_from_slice(&info.descriptor());
+        values[SCENE_DIM] = scene_objects as f32;
         TemplateBuilder {
             object,
             values,
@@ -407,6 +455,8 @@ impl TemplateBuilder {
             distance_m: f64::INFINITY,
             first_touch_ns: None,
             onset_done: false,
+            weight: info.mass * GRAVITY,
+            grip_done: false,
         }
     }
 
@@ -445,14 +495,31 @@ impl TemplateBuilder {
             }
         }
         let touching = obs.touching(self.object);
-        match self.first_touch_ns {
-            None if touching > 0 => self.first_touch_ns = Some(obs.t_ns),
-            Some(t0) if !self.onset_done && obs.t_ns >= t0 + ONSET_WINDOW_NS => {
-                self.values[ONSET_DIM] = touching as f32;
-                self.onset_done = true;
-                progress = Progress::Onset;
+        let Some(t0) = self.first_touch_ns else {
+            if touching > 0 {
+                self.first_touch_ns = Some(obs.t_ns);
             }
-            _ => {}
+            return progress;
+        };
+        if !self.onset_done && obs.t_ns >= t0 + ONSET_WINDOW_NS {
+            self.values[ONSET_DIM] = touching as f32;
+            self.onset_done = true;
+            progress = Progress::Onset;
+        }
+        if !self.grip_done && obs.t_ns >= t0 + GRIP_AT_NS {
+            let normal: f64 = obs.touch[..obs.n_tips]
+                .iter()
+                .chain(&obs.body[..obs.n_body])
+                .flatten()
+                .filter(|t| t.object == self.object)
+                .map(|t| t.normal_force)
+                .sum();
+            self.values[GRIP_DIM] = if self.weight > 0.0 {
+                finite_or_nan(normal / self.weight)
+            } else {
+                f32::NAN
+            };
+            self.grip_done = true;
         }
         progress
     }
@@ -471,6 +538,11 @@ impl TemplateBuilder {
     /// The contact onset has been recorded.
     pub fn onset_done(&self) -> bool {
         self.onset_done
+    }
+
+    /// The contact onset and the grip have been recorded: the template is complete.
+    pub fn done(&self) -> bool {
+        self.onset_done && self.grip_done
     }
 
     /// The template so far (NaN where nothing was seen yet).
@@ -511,8 +583,11 @@ mod tests {
     fn checkpoints_are_filled_once_in_order_as_the_hand_comes_in() {
         let info = ball();
         let pose = Isometry::translation(0.0, 0.0, 0.04);
-        let mut b = TemplateBuilder::new(0, &info);
-        assert!(b.template()[OBJECT_DIMS..].iter().all(|v| v.is_nan()));
+        let mut b = TemplateBuilder::new(0, &info, 1);
+        assert!(b.template()[OBJECT_DIMS..SCENE_DIM]
+            .iter()
+            .all(|v| v.is_nan()));
+        assert_eq!(b.template()[SCENE_DIM], 1.0);
         // From 0.25 m above the surface down to it, the aperture opening with distance.
         let mut reached = Vec::new();
         for i in 0..=250 {
@@ -549,7 +624,7 @@ mod tests {
             mu_torsion: 0.0,
         };
         let pose = Isometry::translation(0.3, 0.0, 0.04);
-        let mut b = TemplateBuilder::new(0, &info);
+        let mut b = TemplateBuilder::new(0, &info, 1);
         let far = obs_at(Vector::new(0.3, 0.3, 0.1), 0.08, &[pose]);
         assert_eq!(b.observe(&far, &far.hand(), &info.shape), Progress::None);
         let near = obs_at(Vector::new(0.3, 0.045, 0.06), 0.07, &[pose]);
@@ -567,7 +642,7 @@ mod tests {
     fn the_onset_counts_fingertips_touching_after_the_window() {
         let info = ball();
         let pose = Isometry::translation(0.0, 0.0, 0.04);
-        let mut b = TemplateBuilder::new(0, &info);
+        let mut b = TemplateBuilder::new(0, &info, 1);
         let touch = TipTouch {
             object: 0,
             p_b: Vector::x() * 0.04,
@@ -586,5 +661,56 @@ mod tests {
         }
         assert_eq!(b.first_touch_ns(), Some(10_000_000));
         assert_eq!(b.template()[ONSET_DIM], 2.0);
+    }
+
+    #[test]
+    fn the_grip_is_the_hands_normal_force_on_the_object_per_weight_after_its_delay() {
+        let info = ball();
+        let pose = Isometry::translation(0.0, 0.0, 0.04);
+        let mut b = TemplateBuilder::new(0, &info, 1);
+        let touch = |object, normal_force| TipTouch {
+            object,
+            p_b: Vector::x() * 0.04,
+            normal_b: -Vector::x(),
+            in_contact: true,
+            normal_force,
+        };
+        let t0 = 50_000_000;
+        let mut times: Vec<u64> = (0..100).map(|k| t0 + k * 10_000_000).collect();
+        times.push(t0 + GRIP_AT_NS + 5_000_000);
+        for t in times {
+            let mut o = obs_at(Vector::new(0.0, 0.0, 0.04), 0.08, &[pose]);
+            o.t_ns = t;
+            // Two fingertips and the palm on the ball, a third fingertip on another object:
+            // only the ball's count, and they change with time (the grip taken is the one at
+            // the delay, not before).
+            let f = (t - t0) as f64 * 1e-9;
+            o.touch[0] = Some(touch(0, 1.0 + f));
+            o.touch[1] = Some(touch(0, 2.0 + f));
+            o.touch[2] = Some(touch(1, 100.0));
+            o.n_tips = 3;
+            o.n_body = 1;
+            o.body[0] = Some(touch(0, 0.5));
+            b.observe(&o, &o.hand(), &info.shape);
+            assert_eq!(b.done(), t >= t0 + GRIP_AT_NS, "{t}");
+            if t < t0 + GRIP_AT_NS {
+                assert!(b.template()[GRIP_DIM].is_nan());
+            }
+        }
+        // At the first observation 0.8 s after the touch: 1.8 + 2.8 + 0.5 N on 0.3 kg.
+        let expected = (1.8 + 2.8 + 0.5) / (0.3 * GRAVITY);
+        assert!((f64::from(b.template()[GRIP_DIM]) - expected).abs() < 1e-5);
+    }
+
+    #[test]
+    fn a_template_stored_without_the_grip_and_the_scene_reads_back_with_them_not_seen() {
+        let old: Vec<f32> = (0..TEMPLATE_DIM_V2).map(|k| k as f32).collect();
+        let t = template_of(&old).unwrap();
+        assert_eq!(&t[..GRIP_DIM], old.as_slice());
+        assert!(t[GRIP_DIM].is_nan() && t[SCENE_DIM].is_nan());
+        let new: Vec<f32> = (0..TEMPLATE_DIM).map(|k| k as f32).collect();
+        assert_eq!(template_of(&new).unwrap().as_slice(), new.as_slice());
+        assert!(template_of(&new[..5]).is_none());
+        assert!(template_of(&[0.0; TEMPLATE_DIM + 1]).is_none());
     }
 }

@@ -11,7 +11,7 @@ use std::collections::BTreeMap;
 
 use crate::store::FEATURE_DIM;
 
-use super::features::{TEMPLATE_DIM, TEMPLATE_SCALE};
+use super::features::{GRIP_DIM, SCENE_DIM, TEMPLATE_DIM, TEMPLATE_SCALE};
 
 /// One stored skill as recognition needs it.
 #[derive(Debug, Clone, PartialEq)]
@@ -33,6 +33,10 @@ pub struct StoredTemplate {
 /// quality on them. What the grasp does next (hold time, lift, transport, rotation) and its
 /// mean held force are not known yet.
 pub const GRASP_STAGE_DIMS: [usize; 11] = [0, 1, 2, 3, 4, 10, 11, 12, 13, 14, 15];
+
+/// Dimensions of the feature vector that say what a grasp does after it closes: hold time,
+/// lift, transport, rotation of the object.
+pub const NEXT_DIMS: [usize; 4] = [6, 7, 8, 9];
 
 /// The stored skills, in columns, their rows grouped by object shape. Ids need not be sorted.
 #[derive(Debug, Clone, Default)]
@@ -284,6 +288,13 @@ impl RecognitionIndex {
         std::array::from_fn(|j| self.feature_cols[j][row])
     }
 
+    /// The number of objects in the scene a row's skill was done in (its template's
+    /// [`SCENE_DIM`]), if stored.
+    pub fn scene_objects(&self, row: usize) -> Option<usize> {
+        let v = self.template_cols.get(SCENE_DIM)?[row] * TEMPLATE_SCALE[SCENE_DIM];
+        (v.is_finite() && v >= 0.0).then(|| v.round() as usize)
+    }
+
     /// The held force per weight (feature dimension 5) of the stored skills of an object
     /// shape (feature dimensions 13-15 equal to `shape`) as a line in 1/μ (dimension 1),
     /// `(a, b)` of `a + b / μ` by least squares; `None` with fewer than three such skills or
@@ -313,6 +324,33 @@ impl RecognitionIndex {
         let b = (n * sxy - sx * sy) / det;
         let a = (sy - b * sx) / n;
         Some((a as f32, b as f32))
+    }
+
+    /// The held force per weight (feature dimension 5) of the stored skills of an object
+    /// shape (feature dimensions 13-15 equal to `shape`) and grasp type (`power`: more than
+    /// three contacts, dimension 2) as a multiple of their grip (the template's grip value,
+    /// [`GRIP_DIM`]): the median of the ratios, `None` without a stored skill with both.
+    /// Allocates: called when a recogniser is made.
+    pub fn held_per_grip(&self, shape: [f32; 3], power: bool) -> Option<f32> {
+        let grips = self.template_cols.get(GRIP_DIM)?;
+        let mut ratios: Vec<f32> = (0..self.len())
+            .filter(|&row| {
+                (0..3).all(|k| self.feature_cols[13 + k][row] == shape[k])
+                    && (self.feature_cols[2][row] > 3.0) == power
+            })
+            .map(|row| self.feature_cols[5][row] / (grips[row] * TEMPLATE_SCALE[GRIP_DIM]))
+            .filter(|r| r.is_finite() && *r > 0.0)
+            .collect();
+        if ratios.is_empty() {
+            return None;
+        }
+        ratios.sort_by(f32::total_cmp);
+        let n = ratios.len();
+        Some(if n % 2 == 1 {
+            ratios[n / 2]
+        } else {
+            0.5 * (ratios[n / 2 - 1] + ratios[n / 2])
+        })
     }
 
     /// Skills per kind.
@@ -840,7 +878,7 @@ mod tests {
         });
     }
 
-    /// An index of `rows` (shape code, 24 values of a template after its shape, 16 of a
+    /// An index of `rows` (shape code, the values of a template after its shape, 16 of a
     /// feature), half put at once and half inserted, then `remove`d.
     fn random_index(rows: &[(usize, Vec<f32>, Vec<f32>)], remove: &[i64]) -> RecognitionIndex {
         let stored = |id: usize, (shape, t, f): &(usize, Vec<f32>, Vec<f32>)| StoredTemplate {
@@ -879,7 +917,7 @@ mod tests {
         let value = || prop_oneof![1 => Just(f32::NAN), 6 => -3.0f32..3.0];
         let row = (
             0usize..4,
-            prop::collection::vec(value(), 24),
+            prop::collection::vec(value(), TEMPLATE_DIM - 3),
             prop::collection::vec(value(), FEATURE_DIM),
         );
         prop::collection::vec(row, n)
@@ -916,7 +954,7 @@ mod tests {
         };
         proptest!(ProptestConfig::with_cases(100), |(
             rows in rows(0..900),
-            query in (0usize..4, prop::collection::vec(prop_oneof![Just(f32::NAN), -3.0f32..3.0], 24)),
+            query in (0usize..4, prop::collection::vec(prop_oneof![Just(f32::NAN), -3.0f32..3.0], TEMPLATE_DIM - 3)),
             top in prop_oneof![0usize..20, 60usize..300],
             min in 0usize..12,
             remove in prop::collection::vec(0i64..900, 0..5),
@@ -943,7 +981,7 @@ mod tests {
         proptest!(ProptestConfig::with_cases(100), |(
             rows in rows(0..900),
             shape in 0usize..4,
-            values in prop::collection::vec(-3.0f32..3.0, 24),
+            values in prop::collection::vec(-3.0f32..3.0, TEMPLATE_DIM - 3),
             top in prop_oneof![0usize..20, 60usize..300],
             budget in 1usize..40,
             all_dims in any::<bool>(),
@@ -1024,5 +1062,60 @@ mod tests {
             assert_eq!(got, want, "shape {shape}");
         }
         assert_eq!(index.feature(index.row_of(1).unwrap()), [2.0; FEATURE_DIM]);
+    }
+
+    /// A stored pinch or power grasp of a sphere or a box: its held force per weight `held`,
+    /// its template's grip `grip` (NaN: not stored) in a scene of `scene` objects.
+    fn grasp(
+        id: i64,
+        sphere: bool,
+        contacts: f32,
+        held: f32,
+        grip: f32,
+        scene: f32,
+    ) -> StoredTemplate {
+        let mut template = [f32::NAN; TEMPLATE_DIM];
+        template[0] = f32::from(u8::from(sphere));
+        template[1] = f32::from(u8::from(!sphere));
+        template[2] = 0.0;
+        template[GRIP_DIM] = grip;
+        template[SCENE_DIM] = scene;
+        let mut feature = [0.0; FEATURE_DIM];
+        feature[2] = contacts;
+        feature[5] = held;
+        feature[13] = template[0];
+        feature[14] = template[1];
+        StoredTemplate {
+            skill_id: id,
+            kind: "k".into(),
+            object_name: None,
+            template,
+            feature,
+        }
+    }
+
+    #[test]
+    fn the_held_force_per_grip_is_the_median_ratio_of_the_shapes_grasps_of_the_type() {
+        let index = RecognitionIndex::new([
+            grasp(1, true, 2.0, 3.0, 4.0, 1.0),
+            grasp(2, true, 2.0, 3.0, 5.0, 1.0),
+            grasp(3, true, 2.0, 1.0, 10.0, 3.0),
+            grasp(4, true, 2.0, 9.0, f32::NAN, 1.0),
+            grasp(5, true, 7.0, 6.0, 8.0, 1.0),
+            grasp(6, false, 2.0, 2.0, 4.0, f32::NAN),
+            grasp(7, false, 2.0, 3.0, 4.0, 1.0),
+        ]);
+        let sphere = [1.0, 0.0, 0.0];
+        // Sphere pinches: 0.75, 0.6 and 0.1 (the one without a grip left out): 0.6.
+        assert!((index.held_per_grip(sphere, false).unwrap() - 0.6).abs() < 1e-6);
+        // Sphere power grasps (more than three contacts): the one, 0.75.
+        assert!((index.held_per_grip(sphere, true).unwrap() - 0.75).abs() < 1e-6);
+        // Box pinches: 0.5 and 0.75, the middle of the two.
+        let boxed = [0.0, 1.0, 0.0];
+        assert!((index.held_per_grip(boxed, false).unwrap() - 0.625).abs() < 1e-6);
+        assert_eq!(index.held_per_grip(boxed, true), None);
+        assert_eq!(index.held_per_grip([0.0, 0.0, 1.0], false), None);
+        let scene = |id| index.scene_objects(index.row_of(id).unwrap());
+        assert_eq!((scene(1), scene(3), scene(6)), (Some(1), Some(3), None));
     }
 }

@@ -27,7 +27,7 @@ use crate::session::{
 };
 
 use super::features::{
-    ObjectInfo, Observation, TemplateBuilder, TipTouch, ONSET_WINDOW_NS, TEMPLATE_DIM,
+    ObjectInfo, Observation, TemplateBuilder, TipTouch, GRIP_AT_NS, ONSET_WINDOW_NS, TEMPLATE_DIM,
 };
 
 /// Observations are made every this much session time (ns): 10 ms, 100 Hz. The hand moves at
@@ -311,18 +311,20 @@ pub fn approach_templates(
                 (objects.len() == 1).then_some(0),
             )?;
             Some(Track {
-                builder: TemplateBuilder::new(i, &objects[i]),
+                builder: TemplateBuilder::new(i, &objects[i], objects.len()),
                 start_ns: s.phases.first()?.start_ns,
-                // The template ends at the contact onset: the fingers close on the object in
-                // `grasp` (the first phase in contact ends it), so the file is read no further
-                // than the end of the last grasp's `grasp` phase and the onset window.
+                // The template ends with the grip, GRIP_AT_NS after the first touch: the
+                // fingers close on the object in `grasp` (the first phase in contact ends it),
+                // so the file is read no further than the end of the last grasp's `grasp`
+                // phase and that delay.
                 end_ns: s
                     .phases
                     .iter()
                     .find(|p| p.phase == dfs_core::scenario::Phase::Grasp)
                     .or(s.phases.last())?
                     .end_ns
-                    + ONSET_WINDOW_NS,
+                    + ONSET_WINDOW_NS.max(GRIP_AT_NS)
+                    + OBSERVATION_PERIOD_NS,
             })
         })
         .collect();
@@ -331,7 +333,7 @@ pub fn approach_templates(
     let observer = Observer::new(hand, |obs: &Observation| {
         let hand_view = obs.hand();
         for t in tracks.iter_mut().flatten() {
-            if obs.t_ns < t.start_ns || obs.t_ns > t.end_ns || t.builder.onset_done() {
+            if obs.t_ns < t.start_ns || obs.t_ns > t.end_ns || t.builder.done() {
                 continue;
             }
             let shape = shapes[t.builder.object()];

@@ -25,9 +25,12 @@
 //! contacts touch it (fingertips, and with whole-hand contact the palm and phalanges, which a
 //! stored skill counts among its contacts as well), the *grasp stage* compares what is known
 //! of the grasp by then (object, contacts, grasp quality: [`GRASP_STAGE_DIMS`] of the feature
-//! vector `similar` uses) with the stored skills' features, and names the stored skill
-//! nearest to it. When nothing of the hand has touched for [`RecogniserParams::release_ns`],
-//! the grasp is over and the next reach begins.
+//! vector `similar` uses, and the held force per weight: the grip then times the ratio the
+//! stored grasps of the shape and grasp type keep, [`RecognitionIndex::held_per_grip`]) with
+//! the stored skills' features, takes the [`GRASP_CANDIDATES`] nearest, orders them by what
+//! the stored grasps done in a scene like this one do next ([`NEXT_DIMS`]: hold time, lift,
+//! transport, rotation, not seen yet) and names the first. When nothing of the hand has
+//! touched for [`RecogniserParams::release_ns`], the grasp is over and the next reach begins.
 //!
 //! # Cost per call
 //!
@@ -40,7 +43,7 @@
 //! right after each observation, so both come to the same verdicts). The stored skills are
 //! ranked at the observation after it is done; the verdict carries the time it is said, a few
 //! observations after the decision began (the contacts it describes are those up to then). The
-//! held force line of each shape is computed once, when the recogniser is made.
+//! held force line and ratio of each shape are computed once, when the recogniser is made.
 //!
 //! A comparison with the stored skills (an approach decision's with their templates, the
 //! grasp stage's with their features) reads a few hundred kB of columns with 10 000 stored
@@ -63,9 +66,10 @@ use serde::{Deserialize, Serialize};
 use crate::store::FEATURE_DIM;
 
 use super::features::{
-    ObjectInfo, Observation, Progress, TemplateBuilder, CHECKPOINTS_M, TEMPLATE_DIM,
+    ObjectInfo, Observation, Progress, TemplateBuilder, CHECKPOINTS_M, GRIP_AT_NS, GRIP_DIM,
+    TEMPLATE_DIM,
 };
-use super::index::{RecognitionIndex, Scratch, GRASP_STAGE_DIMS};
+use super::index::{Ranked, RecognitionIndex, Scratch, GRASP_STAGE_DIMS, NEXT_DIMS};
 
 /// Tuning of the recogniser. The defaults were set on `icms bench recognition`'s training
 /// sessions (seeds apart from its held-out ones).
@@ -88,7 +92,8 @@ pub struct RecogniserParams {
     pub near_margin_m: f64,
     /// The grasp stage decides this long after a fingertip first touched the object (ns), once
     /// two touch it: late enough to see the fingers settle, early enough to say it within a
-    /// second of the first touch. Default 800 ms.
+    /// second of the first touch. Default 800 ms, when the templates take the grip
+    /// ([`GRIP_AT_NS`]); a decision earlier than that predicts the held force from μ.
     pub grasp_stage_ns: u64,
     /// Above this feature distance the grasp stage says `unknown` when the approach gave no
     /// verdict. Default 1.
@@ -128,7 +133,7 @@ impl Default for RecogniserParams {
             top_k: 16,
             temperature: 1.0,
             near_margin_m: 0.03,
-            grasp_stage_ns: 800_000_000,
+            grasp_stage_ns: GRIP_AT_NS,
             grasp_open_set_distance: 1.0,
             release_ns: 300_000_000,
             grasp_budget: 10_000,
@@ -255,6 +260,8 @@ struct PendingGrasp {
     /// The grasp quality of the contacts, while it is computed (`None`: no contact, or it
     /// failed: its dimensions stay 0).
     job: Option<QualityJob>,
+    /// The grip on the object (the template's, [`GRIP_DIM`]; NaN when not taken).
+    grip: f32,
 }
 
 /// What an observation leaves to do when [`Recogniser::observe`] returns: its decisions, in
@@ -299,6 +306,9 @@ pub struct Recogniser {
     scratch: Scratch,
     /// Per shape (sphere, box, cylinder): [`RecognitionIndex::held_force_line`].
     held_lines: [Option<(f32, f32)>; 3],
+    /// Per shape (sphere, box, cylinder) and grasp type (precision, power):
+    /// [`RecognitionIndex::held_per_grip`].
+    held_per_grip: [[Option<f32>; 2]; 3],
     /// Decisions taken (template or feature comparisons), of them at the grasp stage, calls
     /// that worked on an approach-stage and a grasp-stage decision, and the verdicts.
     decisions: u64,
@@ -321,6 +331,11 @@ impl Recogniser {
             shape[k] = 1.0;
             index.held_force_line(shape)
         });
+        let held_per_grip = std::array::from_fn(|k| {
+            let mut shape = [0.0f32; 3];
+            shape[k] = 1.0;
+            [false, true].map(|power| index.held_per_grip(shape, power))
+        });
         Recogniser {
             index,
             objects,
@@ -334,6 +349,7 @@ impl Recogniser {
             last_touch_ns: None,
             scratch: Scratch::default(),
             held_lines,
+            held_per_grip,
             decisions: 0,
             grasp_decisions: 0,
             approach_steps: 0,
@@ -516,9 +532,9 @@ impl Recogniser {
                         self.unfinished = None;
                         break;
                     }
-                    let (i, query) = (p.object, p.query);
+                    let (i, query, grip) = (p.object, p.query, p.grip);
                     self.pending = None;
-                    self.begin_grasp_decision(i, query);
+                    self.begin_grasp_decision(i, query, grip);
                     if let Some(u) = &mut self.unfinished {
                         u.phase = Phase::GraspDecision { object: i };
                     }
@@ -692,6 +708,7 @@ impl Recogniser {
                 object: g.object,
                 query,
                 job,
+                grip: self.builders[g.object].template()[GRIP_DIM],
             });
         }
     }
@@ -717,16 +734,18 @@ impl Recogniser {
         p.job = None;
     }
 
-    /// Begins the grasp-stage decision on object `i`, its quality known: the ranking of the
-    /// stored skills' features against `query` (in `self.scratch`).
-    fn begin_grasp_decision(&mut self, i: usize, mut query: [f32; FEATURE_DIM]) {
+    /// Begins the grasp-stage decision on object `i`, its quality known and `grip` taken
+    /// (NaN if not): the ranking of the stored skills' features against `query` (in
+    /// `self.scratch`).
+    fn begin_grasp_decision(&mut self, i: usize, mut query: [f32; FEATURE_DIM], grip: f32) {
         self.decisions += 1;
         self.grasp_decisions += 1;
         let index = Arc::clone(&self.index);
-        // The held force per weight (dimension 5) is not seen yet (the grip peaks at lift-off
-        // and relaxes after; measured over the first tenths of a second it made the nearest
-        // skill right less often): it is predicted from μ as the stored grasps of the shape
-        // hold theirs.
+        // The held force per weight (dimension 5) is the mean over the whole held part, not
+        // seen yet (the grip peaks at lift-off and relaxes after): it is the grip taken now
+        // times the ratio the stored grasps of the shape and grasp type keep between the two
+        // (a person grips alike in every grasp of one kind), or without stored grips,
+        // predicted from μ as the stored grasps of the shape hold theirs.
         let mut dims = [0usize; GRASP_STAGE_DIMS.len() + 1];
         let mut n_dims = 0;
         for &d in &GRASP_STAGE_DIMS {
@@ -734,6 +753,16 @@ impl Recogniser {
                 dims[n_dims] = d;
                 n_dims += 1;
             }
+        }
+        let shape =
+            (0..3).find(|&k| (0..3).all(|j| query[13 + j] == if j == k { 1.0 } else { 0.0 }));
+        let ratio = shape.and_then(|k| self.held_per_grip[k][usize::from(query[2] > 3.0)]);
+        if let Some(ratio) = ratio.filter(|_| grip.is_finite()) {
+            query[5] = grip * ratio;
+            dims[n_dims] = 5;
+            n_dims += 1;
+            index.begin_features(&query, &dims[..n_dims], GRASP_CANDIDATES, &mut self.scratch);
+            return;
         }
         let mu = self.objects[i].mu as f32;
         let line = match (0..3).find(|&k| query[13 + k] == 1.0) {
@@ -749,13 +778,17 @@ impl Recogniser {
                 n_dims += 1;
             }
         }
-        index.begin_features(&query, &dims[..n_dims], 4, &mut self.scratch);
+        index.begin_features(&query, &dims[..n_dims], GRASP_CANDIDATES, &mut self.scratch);
     }
 
-    /// The grasp-stage decision on object `i`, its ranking done.
+    /// The grasp-stage decision on object `i`, its ranking done: the nearest
+    /// [`GRASP_CANDIDATES`] on what is known, ordered by what they will do next
+    /// ([`by_what_comes_next`]), the first four said.
     fn decide_grasp(&mut self, i: usize, t_ns: u64) {
         let index = Arc::clone(&self.index);
-        let ranked = self.scratch.ranked().to_vec();
+        let mut ranked = self.scratch.ranked().to_vec();
+        by_what_comes_next(&index, &mut ranked, self.objects.len());
+        ranked.truncate(4);
         let object = self.objects[i].name.clone();
         let candidate = |r: &super::index::Ranked| Candidate {
             skill_id: index.skill_id(r.row),
@@ -792,11 +825,51 @@ impl Recogniser {
     }
 }
 
+/// Stored skills the grasp stage ranks on what is known of the grasp; the nearest of them by
+/// what it will do next is named.
+pub const GRASP_CANDIDATES: usize = 8;
+
+/// Orders `ranked` (the nearest stored skills on the dimensions known at the grasp stage,
+/// their distances over those) by the whole feature vector, what the grasp does next (hold
+/// time, lift, transport, rotation: [`NEXT_DIMS`], not seen yet) taken as the mean of the
+/// candidates' stored in a scene of as many objects as this one (`scene_objects`): what a
+/// grasp does after it closes goes with the task, and the task with the scene. Without such a
+/// candidate (or a stored scene) the order stays.
+fn by_what_comes_next(index: &RecognitionIndex, ranked: &mut [Ranked], scene_objects: usize) {
+    let mut next = [0.0f32; NEXT_DIMS.len()];
+    let mut n = 0usize;
+    for r in ranked.iter() {
+        if index.scene_objects(r.row) == Some(scene_objects) {
+            let f = index.feature(r.row);
+            for (v, &d) in next.iter_mut().zip(&NEXT_DIMS) {
+                *v += f[d];
+            }
+            n += 1;
+        }
+    }
+    if n == 0 {
+        return;
+    }
+    for v in &mut next {
+        *v /= n as f32;
+    }
+    for r in ranked.iter_mut() {
+        let f = index.feature(r.row);
+        let more: f32 = next
+            .iter()
+            .zip(&NEXT_DIMS)
+            .map(|(v, &d)| (f[d] - v).powi(2))
+            .sum();
+        r.distance = (r.distance * r.distance + more).sqrt();
+    }
+    ranked.sort_by(|a, b| a.distance.total_cmp(&b.distance));
+}
+
 fn fresh_builders(objects: &[ObjectInfo]) -> Vec<TemplateBuilder> {
     objects
         .iter()
         .enumerate()
-        .map(|(i, o)| TemplateBuilder::new(i, o))
+        .map(|(i, o)| TemplateBuilder::new(i, o, objects.len()))
         .collect()
 }
 
@@ -949,4 +1022,82 @@ fn vote(
     let kind = index.kind_index(best.row);
     let share = shares.iter().find(|s| s.0 == kind).map_or(0.0, |s| s.1);
     (kind, share, shares)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::assist::features::SCENE_DIM;
+    use crate::assist::index::StoredTemplate;
+
+    /// A stored sphere pinch of scene size `scene` that holds for `hold` s and carries `carry`
+    /// m, its other dimensions `known`.
+    fn skill(id: i64, scene: f32, known: f32, hold: f32, carry: f32) -> StoredTemplate {
+        let mut template = [f32::NAN; TEMPLATE_DIM];
+        template[..3].copy_from_slice(&[1.0, 0.0, 0.0]);
+        template[SCENE_DIM] = scene;
+        let mut feature = [known; FEATURE_DIM];
+        feature[6..10].copy_from_slice(&[hold, 0.0, carry, 0.0]);
+        feature[13..].copy_from_slice(&[1.0, 0.0, 0.0]);
+        StoredTemplate {
+            skill_id: id,
+            kind: "sphere/pinch".into(),
+            object_name: None,
+            template,
+            feature,
+        }
+    }
+
+    #[test]
+    fn the_candidates_are_ordered_by_what_grasps_in_scenes_like_this_one_do_next() {
+        // Twins on what is known (1 and 3, 2 and 4): 1 and 2 were done alone on the table,
+        // holding 2 s; 3 and 4 among three objects, holding 1 s and carrying 0.3 m.
+        let index = RecognitionIndex::new([
+            skill(1, 1.0, 0.5, 2.0, 0.0),
+            skill(2, 1.0, 0.6, 2.0, 0.0),
+            skill(3, 3.0, 0.5, 1.0, 0.3),
+            skill(4, 3.0, 0.6, 1.0, 0.3),
+        ]);
+        let row = |id| index.row_of(id).unwrap();
+        // As the known dimensions rank them: 1 and 3 at 0.1, 2 and 4 at 0.2.
+        let ranked = || {
+            vec![
+                Ranked {
+                    row: row(1),
+                    distance: 0.1,
+                },
+                Ranked {
+                    row: row(3),
+                    distance: 0.1,
+                },
+                Ranked {
+                    row: row(2),
+                    distance: 0.2,
+                },
+                Ranked {
+                    row: row(4),
+                    distance: 0.2,
+                },
+            ]
+        };
+        let ids = |r: &[Ranked]| r.iter().map(|x| index.skill_id(x.row)).collect::<Vec<_>>();
+        let mut among_three = ranked();
+        by_what_comes_next(&index, &mut among_three, 3);
+        assert_eq!(ids(&among_three), [3, 4, 1, 2]);
+        // The ones of the scene's kind keep their known distance; the others add what they do
+        // differently (1 s of hold, 0.3 m of carrying).
+        assert!((among_three[0].distance - 0.1).abs() < 1e-6);
+        let off = (0.1f32 * 0.1 + 1.0 + 0.09).sqrt();
+        assert!(
+            (among_three[2].distance - off).abs() < 1e-6,
+            "{among_three:?}"
+        );
+        let mut alone = ranked();
+        by_what_comes_next(&index, &mut alone, 1);
+        assert_eq!(ids(&alone), [1, 2, 3, 4]);
+        // No candidate of a scene of two: the order on what is known stays.
+        let mut two = ranked();
+        by_what_comes_next(&index, &mut two, 2);
+        assert_eq!(two, ranked());
+    }
 }

@@ -103,8 +103,9 @@ use stream::PassOne;
 /// History: 1, the segmentation of issue 18 when versions began to be recorded; 2, the
 /// approach templates recognition compares (issue 20, `crate::assist`), computed at ingest
 /// with the skills (a skill that comes out the same keeps its id and replays and gets its
-/// template).
-pub const SEGMENTATION_VERSION: u32 = 2;
+/// template); 3, the templates take the grip 0.8 s after the first touch (the grasp stage's
+/// held-force estimate; templates of version 2 are read without it until reprocessed).
+pub const SEGMENTATION_VERSION: u32 = 3;
 
 /// Tuning of [`segment`]. The defaults suit human-speed grasping at any sample rate ≥ 100 Hz.
 #[derive(Debug, Clone, Copy, PartialEq)]

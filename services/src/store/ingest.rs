@@ -7,7 +7,7 @@ use super::catalog::{CheckedSkill, NewSession};
 use super::{
     blob, IngestOutcome, NewSkill, SessionMeta, StagedBlob, Store, StoreError, FEATURE_DIM,
 };
-use crate::assist::features::TEMPLATE_DIM;
+use crate::assist::features::{template_of, TEMPLATE_DIM, TEMPLATE_DIM_V2};
 use crate::assist::index::StoredTemplate;
 use crate::segmentation::SEGMENTATION_VERSION;
 use dfs_core::names::Named;
@@ -20,9 +20,7 @@ pub(super) fn new_template(id: i64, c: &CheckedSkill) -> StoredTemplate {
         s.object_shape.name(),
         &s.grasp_type,
         s.object_name.clone(),
-        s.approach
-            .as_deref()
-            .and_then(|a| <[f32; TEMPLATE_DIM]>::try_from(a).ok()),
+        s.approach.as_deref().and_then(template_of),
         c.feature,
     )
 }
@@ -112,9 +110,9 @@ pub(super) fn validate_skill(i: usize, s: &NewSkill) -> Result<[f32; FEATURE_DIM
         )));
     }
     if let Some(a) = &s.approach {
-        if a.len() != TEMPLATE_DIM || a.iter().any(|x| x.is_infinite()) {
+        if template_of(a).is_none() || a.iter().any(|x| x.is_infinite()) {
             return Err(StoreError::InvalidInput(format!(
-                "{}: needs {TEMPLATE_DIM} values, finite or NaN (not seen); got {}",
+                "{}: needs {TEMPLATE_DIM} values ({TEMPLATE_DIM_V2} as segmentation version 2 stored them), finite or NaN (not seen); got {}",
                 ctx("approach"),
                 a.len()
             )));
@@ -238,10 +236,7 @@ impl Store {
         let mut scratch = crate::assist::index::Scratch::default();
         for CheckedSkill { skill: s, feature } in &mut checked {
             if s.matched_skill_id.is_none() {
-                let approach = s
-                    .approach
-                    .as_deref()
-                    .and_then(|a| <[f32; TEMPLATE_DIM]>::try_from(a).ok());
+                let approach = s.approach.as_deref().and_then(template_of);
                 s.matched_skill_id = crate::assist::recognise::link_completed(
                     &recognition,
                     approach.as_ref(),

@@ -12,7 +12,7 @@ use dfs_core::replay::FailureReason;
 use super::catalog::IndexedSkill;
 use super::error::StoreError;
 use super::types::{HandSummary, Replay, SessionRecord, SkillRecord, StaleSession, FEATURE_DIM};
-use crate::assist::features::TEMPLATE_DIM;
+use crate::assist::features::{TEMPLATE_DIM, TEMPLATE_DIM_V2};
 
 pub(crate) use store_postgres::rows::{
     HandRow, HandSummaryRow, IndexedSkillRow, JobRow, ReplayRow, SessionRow, SkillRow,
@@ -55,7 +55,19 @@ pub(crate) fn approach_from_blob(
     id: i64,
     bytes: Option<&[u8]>,
 ) -> Result<Option<[f32; TEMPLATE_DIM]>, StoreError> {
-    bytes.map(|b| floats(id, "approach", b)).transpose()
+    // A template stored by segmentation version 2 lacks the grip and the scene: read with
+    // them not seen.
+    bytes
+        .map(|b| match b.len() / 4 {
+            TEMPLATE_DIM_V2 => {
+                let old: [f32; TEMPLATE_DIM_V2] = floats(id, "approach", b)?;
+                let mut t = [f32::NAN; TEMPLATE_DIM];
+                t[..TEMPLATE_DIM_V2].copy_from_slice(&old);
+                Ok(t)
+            }
+            _ => floats(id, "approach", b),
+        })
+        .transpose()
 }
 
 /// The name in the TEXT column `column` of skill `id`'s row as a value of `T` (a shape, a

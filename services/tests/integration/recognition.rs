@@ -51,6 +51,37 @@ fn grasps_are_anticipated_and_an_absent_kind_is_unknown_and_learned() {
     assert!(e.stored_as_new_fraction >= 0.9, "{report}");
 }
 
+/// Within 1 s of the touch the grasp stage names the stored skill nearest the completed grasp
+/// (by the whole feature vector, as `similar`), although the held force and what the grasp does
+/// next are not seen yet: the held force is the grip then times the ratio the stored grasps of
+/// the kind keep, and what comes next is that of the stored grasps done in a scene like this
+/// one. The data base holds twins: a ball grasped alone (held 2 s) and the same ball among
+/// three objects (held 1 s, `table-three` of the same seed), which only the scene tells apart.
+/// (22 of these 24 named; predicting the held force from μ and leaving out what comes next,
+/// as before, named 18.)
+#[test]
+fn the_nearest_stored_skill_is_named_within_a_second_of_the_touch() {
+    let kinds = ["sphere-lift", "table-three", "box-pinch-lift"];
+    let e = evaluated(
+        variants(&kinds, 1..=3),
+        variants(&kinds, 1000..=1007),
+        RecogniserParams::default(),
+    );
+    let report = serde_json::to_string_pretty(&e.sessions).unwrap();
+    assert_eq!(e.sessions.len(), 24);
+    for s in &e.sessions {
+        eprintln!(
+            "{} {}: nearest {:?}, named by 1 s: {}",
+            s.scenario, s.seed, s.nearest_skill_id, s.nearest_named
+        );
+    }
+    assert!(
+        e.nearest_fraction >= 0.9,
+        "{}: {report}",
+        e.nearest_fraction
+    );
+}
+
 /// Ingest builds the approach templates from the messages segmentation's first pass kept; a
 /// session too long for the kept budget reads its file again. Both give the templates a plain
 /// second read of the file gives (a scene of three objects, so the target is looked up too).

@@ -636,8 +636,70 @@ async fn skills_stored_before_templates_get_them_from_reprocessing_and_keep_thei
     store.integrity_check().await.unwrap();
 }
 
+/// Templates stored by segmentation version 2 (two values shorter: before the grip and the
+/// scene were added) read back with those not seen, still take part in approach
+/// recognition, and get the whole template again from a reprocessing, keeping their ids.
+async fn templates_stored_without_the_grip_read_back_and_get_it_from_reprocessing(
+    backend: Backend,
+) {
+    use services::assist::features::{GRIP_DIM, SCENE_DIM, TEMPLATE_DIM, TEMPLATE_DIM_V2};
+    let tmp = tempfile::tempdir().unwrap();
+    let data = tmp.path().join("data");
+    let store = backend.open(&data).await;
+    let bytes = simulate(tmp.path(), "box-pinch-lift", 2, None);
+    let o = ingest_bytes(&store, bytes, "box.mcap".into())
+        .await
+        .unwrap();
+    let id = o.skill_ids[0];
+    let fresh = store.get_skill(id).await.unwrap().approach.unwrap();
+    assert_eq!(fresh.len(), TEMPLATE_DIM);
+    assert!(fresh[GRIP_DIM].is_some_and(|g| g > 1.0), "{fresh:?}");
+    assert_eq!(fresh[SCENE_DIM], Some(1.0));
+    store.close().await;
+    let cut = format!(
+        "UPDATE skills SET approach = substr(approach, 1, {})",
+        TEMPLATE_DIM_V2 * 4
+    );
+    backend
+        .sql(
+            &data,
+            &[
+                (cut.as_str(), None),
+                ("UPDATE sessions SET segmentation_version = 2", None),
+            ],
+        )
+        .await;
+
+    let store = backend.open(&data).await;
+    let old = store.get_skill(id).await.unwrap().approach.unwrap();
+    assert_eq!(old.len(), TEMPLATE_DIM);
+    assert_eq!(old[..GRIP_DIM], fresh[..GRIP_DIM]);
+    assert_eq!((old[GRIP_DIM], old[SCENE_DIM]), (None, None));
+    let template: [f32; TEMPLATE_DIM] = std::array::from_fn(|j| fresh[j].unwrap_or(f32::NAN));
+    let mut scratch = services::assist::index::Scratch::default();
+    let min = services::assist::recognise::MIN_COMPARED;
+    let index = store.recognition_index();
+    let ranked = index
+        .rank_templates(&template, 4, min, &mut scratch)
+        .to_vec();
+    assert_eq!(ranked.len(), 1, "compared without the grip and the scene");
+    assert_eq!(index.skill_id(ranked[0].row), id);
+
+    let (r, _) = run(&store).await;
+    assert_eq!((r.sessions_stale, r.sessions_reprocessed), (1, 1));
+    assert_eq!((r.skills_kept, r.skills_added), (1, 0));
+    let after = store.get_skill(id).await.unwrap();
+    assert_eq!(
+        after.approach.as_ref(),
+        Some(&fresh),
+        "the whole template again"
+    );
+    store.integrity_check().await.unwrap();
+}
+
 backend_tests!(
     reprocessing_keeps_unchanged_skills_replaces_changed_ones_and_runs_once,
+    templates_stored_without_the_grip_read_back_and_get_it_from_reprocessing,
     a_session_that_fails_is_reported_keeps_its_skills_and_the_others_go_on,
     a_stopped_run_leaves_whole_sessions_and_the_next_run_finishes,
     replacing_skills_is_all_or_nothing_and_only_for_older_versions,
