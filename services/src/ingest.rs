@@ -81,7 +81,8 @@ pub fn analyse_source(
         extra: extra_of(m, head.live.as_ref()),
     };
     // What recognition needs of each grasp: its approach template, from the kept messages (or
-    // the file once more, for a long session) up to the last grasp's contact onset.
+    // the file once more, for a long session) up to the last grasp's grip, 0.8 s after its
+    // first touch.
     let templates = approach_templates(source, Some(&kept), m, &seg.skills, None)?;
     drop(kept);
     let skills = seg

@@ -78,12 +78,13 @@ pub struct SkillBody {
     /// The full hand-independent parameters, as `icms segment --json` prints them.
     #[schema(value_type = Object)]
     pub params: serde_json::Value,
-    /// The approach template early recognition compares (28 values: the object, then the
+    /// The approach template early recognition compares (29 values: the object, then the
     /// hand's aperture, spread, elevation and pointing at 20, 12, 8, 5 and 3 cm from the
-    /// object's surface, then the fingertips touching at contact onset, then the grip: the
-    /// hand's normal force on the object per its weight 0.8 s after the first touch; `null`
-    /// where the reach did not show one, and the grip of a template computed before it was
-    /// added). Absent when not computed (run `icms reprocess`).
+    /// object's surface, then the fingertips touching at contact onset, the grip (the hand's
+    /// normal force on the object per its weight 0.8 s after the first touch) and the number of
+    /// objects in the scene; `null` where the reach did not show one, and for the last two in a
+    /// template computed before they were added: run `icms reprocess`). Absent when not
+    /// computed (run `icms reprocess`).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub approach: Option<Vec<Option<f32>>>,
     /// The stored skill this one matched when it was stored (on-line learning linked it);

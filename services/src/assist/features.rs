@@ -14,7 +14,10 @@
 //!   elevation of the grasp centre seen from the object's centre (z of the unit direction:
 //!   1 from above, 0 from the side) and the direction the hand points (z of the unit direction
 //!   from the wrist to the grasp centre: −1 pointing down);
-//! - the contact onset: fingertips touching the object [`ONSET_WINDOW_NS`] after the first did.
+//! - the contact onset: fingertips touching the object [`ONSET_WINDOW_NS`] after the first did;
+//! - the grip: the normal force of the whole hand on the object per its weight [`GRIP_AT_NS`]
+//!   after the first touch (what the grasp stage estimates the held force from);
+//! - the number of objects in the scene (the grasp's context).
 //!
 //! The grasp centre is the centroid of the fingertips. A value not seen (a reach that began
 //! inside a checkpoint, a session without contact) is NaN and left out of comparisons.
@@ -474,6 +477,10 @@ impl TemplateBuilder {
         let mut progress = Progress::None;
         if d.is_finite() {
             self.distance_m = d;
+        }
+        // The reach ends at the first touch: what the hand does after (closing, a regrasp)
+        // records no checkpoint, although the grip is taken later.
+        if d.is_finite() && self.first_touch_ns.is_none() {
             if !self.seen {
                 self.seen = true;
                 for (armed, cp) in self.armed.iter_mut().zip(CHECKPOINTS_M) {
@@ -676,9 +683,7 @@ mod tests {
             normal_force,
         };
         let t0 = 50_000_000;
-        let mut times: Vec<u64> = (0..100).map(|k| t0 + k * 10_000_000).collect();
-        times.push(t0 + GRIP_AT_NS + 5_000_000);
-        for t in times {
+        for t in (0..100).map(|k| t0 + k * 10_000_000) {
             let mut o = obs_at(Vector::new(0.0, 0.0, 0.04), 0.08, &[pose]);
             o.t_ns = t;
             // Two fingertips and the palm on the ball, a third fingertip on another object:

@@ -1002,7 +1002,8 @@ mod tests {
                 calls += 1;
             }
             prop_assert!(same(scratch.ranked(), &whole));
-            // 27 columns of the shape's rows and a pass taking them: that many calls at least.
+            // The columns of the shape's rows (26 at least) and a pass taking them: that many
+            // calls at least.
             let n = (0..index.len()).filter(|&r| index.shapes[r] == shape_code(&q)).count();
             prop_assert!(calls >= n * 26 / (budget * VALUES_PER_UNIT + CHUNK), "{} calls", calls);
 

@@ -4,7 +4,8 @@
 //!
 //! - [`features`]: what the assistant sees of a tick ([`features::Observation`]), and the
 //!   *approach template* of a grasp: the object, then the hand's aperture and pose as it comes
-//!   within fixed distances of the object's surface, and how many fingertips touch first.
+//!   within fixed distances of the object's surface, how many fingertips touch first, the
+//!   grip 0.8 s after the touch, and how many objects the scene has.
 //!   Stored skills carry theirs (computed at ingest); the stream's are built as it comes.
 //! - [`index`]: the stored skills' templates and features, scanned per decision.
 //! - [`recognise`]: the on-line recogniser: `recognised` / `unknown` events from the stream.

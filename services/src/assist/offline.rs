@@ -269,11 +269,11 @@ pub const APPROACH_TOPICS: DecodeTopics = DecodeTopics {
 
 /// The approach template of each of a session's skills (see
 /// [`super::features`]), in the skills' order: built from the skill's first phase to
-/// [`ONSET_WINDOW_NS`] after its first touch, on the object it grasped. `None` for every skill
+/// [`GRIP_AT_NS`] after its first touch (the grip), on the object it grasped. `None` for every skill
 /// when the session's hand is not built in and `hand` is not given, or its objects are not
 /// described. Reads the messages `kept` by segmentation's first pass if they hold the joint
 /// angles, contacts and object states ([`APPROACH_TOPICS`]); otherwise the file once more, up
-/// to the last skill's onset.
+/// to the last skill's grip.
 pub fn approach_templates(
     source: &SessionSource<'_>,
     kept: Option<&KeptMessages>,

@@ -161,7 +161,8 @@ pub struct Candidate {
     /// Its kind (`box/precision-2vf`).
     pub kind: String,
     /// Its distance to what was seen (see [`RecognitionIndex::rank_templates`] and
-    /// [`RecognitionIndex::rank_features`]).
+    /// [`RecognitionIndex::rank_features`]: at the grasp stage, over the dimensions known
+    /// then).
     pub distance: f32,
     /// Its kind's share of the vote (approach stage; 0 at the grasp stage).
     pub confidence: f32,
@@ -181,7 +182,8 @@ pub enum Verdict {
         object: String,
         /// The skill.
         skill: Candidate,
-        /// The best skills of the other kinds (approach), or the next nearest (grasp).
+        /// The best skills of the other kinds (approach), or the next nearest (grasp: in the
+        /// order of what they do next, [`GRASP_CANDIDATES`]).
         runners_up: Vec<Candidate>,
     },
     /// Nothing stored fits: the grasp will be learned.
@@ -309,6 +311,8 @@ pub struct Recogniser {
     /// Per shape (sphere, box, cylinder) and grasp type (precision, power):
     /// [`RecognitionIndex::held_per_grip`].
     held_per_grip: [[Option<f32>; 2]; 3],
+    /// The query of the grasp-stage decision under way.
+    grasp_query: Option<[f32; FEATURE_DIM]>,
     /// Decisions taken (template or feature comparisons), of them at the grasp stage, calls
     /// that worked on an approach-stage and a grasp-stage decision, and the verdicts.
     decisions: u64,
@@ -350,6 +354,7 @@ impl Recogniser {
             scratch: Scratch::default(),
             held_lines,
             held_per_grip,
+            grasp_query: None,
             decisions: 0,
             grasp_decisions: 0,
             approach_steps: 0,
@@ -761,6 +766,7 @@ impl Recogniser {
             query[5] = grip * ratio;
             dims[n_dims] = 5;
             n_dims += 1;
+            self.grasp_query = Some(query);
             index.begin_features(&query, &dims[..n_dims], GRASP_CANDIDATES, &mut self.scratch);
             return;
         }
@@ -778,6 +784,7 @@ impl Recogniser {
                 n_dims += 1;
             }
         }
+        self.grasp_query = Some(query);
         index.begin_features(&query, &dims[..n_dims], GRASP_CANDIDATES, &mut self.scratch);
     }
 
@@ -787,7 +794,12 @@ impl Recogniser {
     fn decide_grasp(&mut self, i: usize, t_ns: u64) {
         let index = Arc::clone(&self.index);
         let mut ranked = self.scratch.ranked().to_vec();
-        by_what_comes_next(&index, &mut ranked, self.objects.len());
+        // Whether anything stored fits is judged on what is known (the nearest on it), before
+        // the order by what comes next.
+        let best_known = ranked.first().map(|r| r.distance);
+        if let Some(query) = self.grasp_query.take() {
+            by_what_comes_next(&index, &mut ranked, &query, self.objects.len());
+        }
         ranked.truncate(4);
         let object = self.objects[i].name.clone();
         let candidate = |r: &super::index::Ranked| Candidate {
@@ -798,11 +810,10 @@ impl Recogniser {
         };
         let approach_unknown = self.said == Some((i, None));
         let approach_said = self.said.is_some_and(|s| s.0 == i);
-        let unknown = match ranked.first() {
+        let unknown = match best_known {
             None => true,
             Some(best) => {
-                approach_unknown
-                    || (!approach_said && best.distance > self.params.grasp_open_set_distance)
+                approach_unknown || (!approach_said && best > self.params.grasp_open_set_distance)
             }
         };
         let verdict = if unknown {
@@ -830,17 +841,26 @@ impl Recogniser {
 pub const GRASP_CANDIDATES: usize = 8;
 
 /// Orders `ranked` (the nearest stored skills on the dimensions known at the grasp stage,
-/// their distances over those) by the whole feature vector, what the grasp does next (hold
-/// time, lift, transport, rotation: [`NEXT_DIMS`], not seen yet) taken as the mean of the
-/// candidates' stored in a scene of as many objects as this one (`scene_objects`): what a
-/// grasp does after it closes goes with the task, and the task with the scene. Without such a
-/// candidate (or a stored scene) the order stays.
-fn by_what_comes_next(index: &RecognitionIndex, ranked: &mut [Ranked], scene_objects: usize) {
+/// their distances over those) by the whole feature vector: what the grasp does next (hold
+/// time, lift, transport, rotation: [`NEXT_DIMS`], not seen yet) is taken as the mean of the
+/// candidates *like it*, of the query's shape and grasp type (`query`'s dimensions 13-15, and
+/// more than three contacts or not) stored in a scene of as many objects as this one
+/// (`scene_objects`): what a grasp does after it closes goes with the task, and the task with
+/// the scene. Each candidate's distance stays the one on what is known (the order alone
+/// changes); without a candidate like it the order stays.
+fn by_what_comes_next(
+    index: &RecognitionIndex,
+    ranked: &mut [Ranked],
+    query: &[f32; FEATURE_DIM],
+    scene_objects: usize,
+) {
+    let like =
+        |f: &[f32; FEATURE_DIM]| f[13..16] == query[13..16] && (f[2] > 3.0) == (query[2] > 3.0);
     let mut next = [0.0f32; NEXT_DIMS.len()];
     let mut n = 0usize;
     for r in ranked.iter() {
-        if index.scene_objects(r.row) == Some(scene_objects) {
-            let f = index.feature(r.row);
+        let f = index.feature(r.row);
+        if like(&f) && index.scene_objects(r.row) == Some(scene_objects) {
             for (v, &d) in next.iter_mut().zip(&NEXT_DIMS) {
                 *v += f[d];
             }
@@ -853,16 +873,17 @@ fn by_what_comes_next(index: &RecognitionIndex, ranked: &mut [Ranked], scene_obj
     for v in &mut next {
         *v /= n as f32;
     }
-    for r in ranked.iter_mut() {
+    // The squared distance over the whole vector (a stable sort: ties keep their order).
+    let whole = |r: &Ranked| {
         let f = index.feature(r.row);
         let more: f32 = next
             .iter()
             .zip(&NEXT_DIMS)
             .map(|(v, &d)| (f[d] - v).powi(2))
             .sum();
-        r.distance = (r.distance * r.distance + more).sqrt();
-    }
-    ranked.sort_by(|a, b| a.distance.total_cmp(&b.distance));
+        r.distance * r.distance + more
+    };
+    ranked.sort_by(|a, b| whole(a).total_cmp(&whole(b)));
 }
 
 fn fresh_builders(objects: &[ObjectInfo]) -> Vec<TemplateBuilder> {
@@ -950,7 +971,8 @@ fn finite_f32(v: f64) -> f32 {
 }
 
 /// Values a stored template and a query must have in common to be compared in an approach
-/// decision: the object and one checkpoint (a skill without a template is left out).
+/// decision: the object and one checkpoint (a skill without a template is left out; the
+/// scene's value, which both have, counts among them).
 pub const MIN_COMPARED: usize = super::features::OBJECT_DIMS + super::features::CHECKPOINT_DIMS;
 
 /// On-line learning's decision for a completed grasp: the stored skill it matched, or `None`
@@ -1030,18 +1052,32 @@ mod tests {
     use crate::assist::features::SCENE_DIM;
     use crate::assist::index::StoredTemplate;
 
-    /// A stored sphere pinch of scene size `scene` that holds for `hold` s and carries `carry`
-    /// m, its other dimensions `known`.
-    fn skill(id: i64, scene: f32, known: f32, hold: f32, carry: f32) -> StoredTemplate {
+    /// A stored pinch (two contacts) of a sphere, or of a box with `boxed`, done in a scene of
+    /// `scene` objects, that holds for `hold` s and carries `carry` m, its other dimensions
+    /// `known`.
+    fn skill(
+        id: i64,
+        boxed: bool,
+        scene: f32,
+        known: f32,
+        hold: f32,
+        carry: f32,
+    ) -> StoredTemplate {
+        let shape = if boxed {
+            [0.0, 1.0, 0.0]
+        } else {
+            [1.0, 0.0, 0.0]
+        };
         let mut template = [f32::NAN; TEMPLATE_DIM];
-        template[..3].copy_from_slice(&[1.0, 0.0, 0.0]);
+        template[..3].copy_from_slice(&shape);
         template[SCENE_DIM] = scene;
         let mut feature = [known; FEATURE_DIM];
+        feature[2] = 2.0;
         feature[6..10].copy_from_slice(&[hold, 0.0, carry, 0.0]);
-        feature[13..].copy_from_slice(&[1.0, 0.0, 0.0]);
+        feature[13..].copy_from_slice(&shape);
         StoredTemplate {
             skill_id: id,
-            kind: "sphere/pinch".into(),
+            kind: "pinch".into(),
             object_name: None,
             template,
             feature,
@@ -1049,55 +1085,51 @@ mod tests {
     }
 
     #[test]
-    fn the_candidates_are_ordered_by_what_grasps_in_scenes_like_this_one_do_next() {
-        // Twins on what is known (1 and 3, 2 and 4): 1 and 2 were done alone on the table,
-        // holding 2 s; 3 and 4 among three objects, holding 1 s and carrying 0.3 m.
+    fn the_candidates_are_ordered_by_what_grasps_like_this_one_in_like_scenes_do_next() {
+        // Sphere twins on what is known (1 and 3, 2 and 4): 1 and 2 were done alone on the
+        // table, holding 2 and 2.2 s; 3 and 4 among three objects, holding 1 s and carrying 0.3
+        // m. Box pinches done alone, holding 1 s (5, 6), are no grasps like a sphere's: they
+        // take no part in what comes next.
         let index = RecognitionIndex::new([
-            skill(1, 1.0, 0.5, 2.0, 0.0),
-            skill(2, 1.0, 0.6, 2.0, 0.0),
-            skill(3, 3.0, 0.5, 1.0, 0.3),
-            skill(4, 3.0, 0.6, 1.0, 0.3),
+            skill(1, false, 1.0, 0.5, 2.0, 0.0),
+            skill(2, false, 1.0, 0.6, 2.2, 0.0),
+            skill(3, false, 3.0, 0.5, 1.0, 0.3),
+            skill(4, false, 3.0, 0.6, 1.0, 0.3),
+            skill(5, true, 1.0, 0.5, 1.0, 0.0),
+            skill(6, true, 1.0, 0.5, 1.0, 0.0),
         ]);
+        let query = index.feature(index.row_of(1).unwrap());
         let row = |id| index.row_of(id).unwrap();
-        // As the known dimensions rank them: 1 and 3 at 0.1, 2 and 4 at 0.2.
+        // As the known dimensions rank them: 1 and 3 at 0.1, 2 and 4 at 0.2, the boxes after.
         let ranked = || {
-            vec![
-                Ranked {
-                    row: row(1),
-                    distance: 0.1,
-                },
-                Ranked {
-                    row: row(3),
-                    distance: 0.1,
-                },
-                Ranked {
-                    row: row(2),
-                    distance: 0.2,
-                },
-                Ranked {
-                    row: row(4),
-                    distance: 0.2,
-                },
-            ]
+            [(1, 0.1), (3, 0.1), (2, 0.2), (4, 0.2), (5, 2.0), (6, 2.0)]
+                .map(|(id, distance)| Ranked {
+                    row: row(id),
+                    distance,
+                })
+                .to_vec()
         };
         let ids = |r: &[Ranked]| r.iter().map(|x| index.skill_id(x.row)).collect::<Vec<_>>();
         let mut among_three = ranked();
-        by_what_comes_next(&index, &mut among_three, 3);
-        assert_eq!(ids(&among_three), [3, 4, 1, 2]);
-        // The ones of the scene's kind keep their known distance; the others add what they do
-        // differently (1 s of hold, 0.3 m of carrying).
-        assert!((among_three[0].distance - 0.1).abs() < 1e-6);
-        let off = (0.1f32 * 0.1 + 1.0 + 0.09).sqrt();
-        assert!(
-            (among_three[2].distance - off).abs() < 1e-6,
-            "{among_three:?}"
-        );
+        by_what_comes_next(&index, &mut among_three, &query, 3);
+        assert_eq!(ids(&among_three), [3, 4, 1, 2, 5, 6]);
+        // The distances stay those on what is known (the order alone changes).
+        let mut distances: Vec<f32> = among_three.iter().map(|r| r.distance).collect();
+        distances.sort_by(f32::total_cmp);
+        assert_eq!(distances, [0.1, 0.1, 0.2, 0.2, 2.0, 2.0]);
+        // Alone: the sphere grasps done alone hold 2.1 s on the mean; the boxes' 1 s does not
+        // count (with them the mean would be 1.55 s, halfway between the twins).
         let mut alone = ranked();
-        by_what_comes_next(&index, &mut alone, 1);
-        assert_eq!(ids(&alone), [1, 2, 3, 4]);
-        // No candidate of a scene of two: the order on what is known stays.
+        by_what_comes_next(&index, &mut alone, &query, 1);
+        assert_eq!(ids(&alone), [1, 2, 3, 4, 5, 6]);
+        let mut boxes_first = ranked();
+        boxes_first.swap(0, 4);
+        boxes_first.swap(1, 5);
+        by_what_comes_next(&index, &mut boxes_first, &query, 1);
+        assert_eq!(ids(&boxes_first)[..2], [1, 2]);
+        // No candidate like it in a scene of two: the order on what is known stays.
         let mut two = ranked();
-        by_what_comes_next(&index, &mut two, 2);
+        by_what_comes_next(&index, &mut two, &query, 2);
         assert_eq!(two, ranked());
     }
 }

@@ -104,7 +104,8 @@ use stream::PassOne;
 /// approach templates recognition compares (issue 20, `crate::assist`), computed at ingest
 /// with the skills (a skill that comes out the same keeps its id and replays and gets its
 /// template); 3, the templates take the grip 0.8 s after the first touch (the grasp stage's
-/// held-force estimate; templates of version 2 are read without it until reprocessed).
+/// held-force estimate) and the scene's number of objects (templates of version 2 are read
+/// without them until reprocessed).
 pub const SEGMENTATION_VERSION: u32 = 3;
 
 /// Tuning of [`segment`]. The defaults suit human-speed grasping at any sample rate ≥ 100 Hz.

@@ -7,7 +7,7 @@ use super::catalog::{CheckedSkill, NewSession};
 use super::{
     blob, IngestOutcome, NewSkill, SessionMeta, StagedBlob, Store, StoreError, FEATURE_DIM,
 };
-use crate::assist::features::{template_of, TEMPLATE_DIM, TEMPLATE_DIM_V2};
+use crate::assist::features::{template_of, TEMPLATE_DIM};
 use crate::assist::index::StoredTemplate;
 use crate::segmentation::SEGMENTATION_VERSION;
 use dfs_core::names::Named;
@@ -110,9 +110,11 @@ pub(super) fn validate_skill(i: usize, s: &NewSkill) -> Result<[f32; FEATURE_DIM
         )));
     }
     if let Some(a) = &s.approach {
-        if template_of(a).is_none() || a.iter().any(|x| x.is_infinite()) {
+        // Exactly the current template: one of segmentation version 2 (read back from old
+        // rows) is not written again, as `icms reprocess` would not come back to it.
+        if a.len() != TEMPLATE_DIM || a.iter().any(|x| x.is_infinite()) {
             return Err(StoreError::InvalidInput(format!(
-                "{}: needs {TEMPLATE_DIM} values ({TEMPLATE_DIM_V2} as segmentation version 2 stored them), finite or NaN (not seen); got {}",
+                "{}: needs {TEMPLATE_DIM} values, finite or NaN (not seen); got {}",
                 ctx("approach"),
                 a.len()
             )));

@@ -684,6 +684,10 @@ async fn templates_stored_without_the_grip_read_back_and_get_it_from_reprocessin
         .to_vec();
     assert_eq!(ranked.len(), 1, "compared without the grip and the scene");
     assert_eq!(index.skill_id(ranked[0].row), id);
+    assert_eq!(
+        ranked[0].distance, 0.0,
+        "the values it has are the template's"
+    );
 
     let (r, _) = run(&store).await;
     assert_eq!((r.sessions_stale, r.sessions_reprocessed), (1, 1));
