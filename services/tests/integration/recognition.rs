@@ -57,8 +57,8 @@ fn grasps_are_anticipated_and_an_absent_kind_is_unknown_and_learned() {
 /// the kind keep, and what comes next is that of the stored grasps done in a scene like this
 /// one. The data base holds twins: a ball grasped alone (held 2 s) and the same ball among
 /// three objects (held 1 s, `table-three` of the same seed), which only the scene tells apart.
-/// (22 of these 24 named; predicting the held force from μ and leaving out what comes next,
-/// as before, named 18.)
+/// (All 24 named; predicting the held force from μ and leaving out what comes next, as before,
+/// named 18.)
 #[test]
 fn the_nearest_stored_skill_is_named_within_a_second_of_the_touch() {
     let kinds = ["sphere-lift", "table-three", "box-pinch-lift"];
