@@ -571,11 +571,16 @@ async fn a_data_base_from_before_versions_is_migrated_to_version_0_and_brought_u
     store.integrity_check().await.unwrap();
 }
 
-/// Issue 20: skills stored before approach templates existed (version 1, `approach` NULL, as
-/// migration 0005 leaves them) get theirs from a reprocessing, keeping their ids; until then
-/// they take no part in approach recognition.
-async fn skills_stored_before_templates_get_them_from_reprocessing_and_keep_their_ids(
+/// A `box-pinch-lift` session ingested into a data directory of its own (under the returned
+/// temporary directory): the data directory, the store, its one skill's id and template.
+async fn one_stored_box_grasp(
     backend: Backend,
+) -> (
+    tempfile::TempDir,
+    std::path::PathBuf,
+    Store,
+    i64,
+    Vec<Option<f32>>,
 ) {
     let tmp = tempfile::tempdir().unwrap();
     let data = tmp.path().join("data");
@@ -586,8 +591,18 @@ async fn skills_stored_before_templates_get_them_from_reprocessing_and_keep_thei
         .unwrap();
     assert_eq!(o.skill_ids.len(), 1);
     let id = o.skill_ids[0];
-    let fresh = store.get_skill(id).await.unwrap().approach.unwrap();
-    assert_eq!(fresh.len(), services::assist::features::TEMPLATE_DIM);
+    let template = store.get_skill(id).await.unwrap().approach.unwrap();
+    assert_eq!(template.len(), services::assist::features::TEMPLATE_DIM);
+    (tmp, data, store, id, template)
+}
+
+/// Issue 20: skills stored before approach templates existed (version 1, `approach` NULL, as
+/// migration 0005 leaves them) get theirs from a reprocessing, keeping their ids; until then
+/// they take no part in approach recognition.
+async fn skills_stored_before_templates_get_them_from_reprocessing_and_keep_their_ids(
+    backend: Backend,
+) {
+    let (_tmp, data, store, id, fresh) = one_stored_box_grasp(backend).await;
     assert!(fresh.iter().flatten().count() > 10, "{fresh:?}");
     store.close().await;
     backend
@@ -643,16 +658,7 @@ async fn templates_stored_without_the_grip_read_back_and_get_it_from_reprocessin
     backend: Backend,
 ) {
     use services::assist::features::{GRIP_DIM, SCENE_DIM, TEMPLATE_DIM, TEMPLATE_DIM_V2};
-    let tmp = tempfile::tempdir().unwrap();
-    let data = tmp.path().join("data");
-    let store = backend.open(&data).await;
-    let bytes = simulate(tmp.path(), "box-pinch-lift", 2, None);
-    let o = ingest_bytes(&store, bytes, "box.mcap".into())
-        .await
-        .unwrap();
-    let id = o.skill_ids[0];
-    let fresh = store.get_skill(id).await.unwrap().approach.unwrap();
-    assert_eq!(fresh.len(), TEMPLATE_DIM);
+    let (_tmp, data, store, id, fresh) = one_stored_box_grasp(backend).await;
     assert!(fresh[GRIP_DIM].is_some_and(|g| g > 1.0), "{fresh:?}");
     assert_eq!(fresh[SCENE_DIM], Some(1.0));
     store.close().await;
