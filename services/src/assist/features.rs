@@ -411,9 +411,9 @@ pub const REARM_M: f64 = 0.005;
 
 /// Builds the approach template of a reach for one object, an observation at a time (see the
 /// module docs). A checkpoint records the hand when the grasp centre crosses it inward, and
-/// again at the next inward crossing after going back out past it by [`REARM_M`]; a
-/// checkpoint the first observation is already inside of records nothing until then.
-/// Allocation-free.
+/// again at the next inward crossing after going back out past it by [`REARM_M`] before the
+/// first touch; a checkpoint the first observation is already inside of records nothing until
+/// then. Checkpoints are recorded up to the contact onset, the grip after it. Allocation-free.
 #[derive(Debug, Clone, Copy)]
 pub struct TemplateBuilder {
     object: usize,
@@ -478,9 +478,10 @@ impl TemplateBuilder {
         if d.is_finite() {
             self.distance_m = d;
         }
-        // The reach ends at the first touch: what the hand does after (closing, a regrasp)
-        // records no checkpoint, although the grip is taken later.
-        if d.is_finite() && self.first_touch_ns.is_none() {
+        // The reach ends at the contact onset (a checkpoint still crossed then records, as it
+        // always did); what the hand does after (closing, lifting, a regrasp) records none,
+        // although the grip is taken later, and nothing re-arms after the first touch.
+        if d.is_finite() && !self.onset_done {
             if !self.seen {
                 self.seen = true;
                 for (armed, cp) in self.armed.iter_mut().zip(CHECKPOINTS_M) {
@@ -496,7 +497,7 @@ impl TemplateBuilder {
                     self.values[b + 3] = finite_or_nan(hand.pointing);
                     self.armed[k] = false;
                     progress = Progress::Checkpoint(k);
-                } else if !self.armed[k] && d > cp + REARM_M {
+                } else if !self.armed[k] && d > cp + REARM_M && self.first_touch_ns.is_none() {
                     self.armed[k] = true;
                 }
             }
@@ -705,6 +706,45 @@ mod tests {
         // At the first observation 0.8 s after the touch: 1.8 + 2.8 + 0.5 N on 0.3 kg.
         let expected = (1.8 + 2.8 + 0.5) / (0.3 * GRAVITY);
         assert!((f64::from(b.template()[GRIP_DIM]) - expected).abs() < 1e-5);
+    }
+
+    #[test]
+    fn checkpoints_record_up_to_the_onset_and_none_after() {
+        let info = ball();
+        let pose = Isometry::translation(0.0, 0.0, 0.04);
+        let mut b = TemplateBuilder::new(0, &info, 1);
+        let touch = TipTouch {
+            object: 0,
+            p_b: Vector::x() * 0.04,
+            normal_b: -Vector::x(),
+            in_contact: true,
+            normal_force: 1.0,
+        };
+        // (ms, distance of the grasp centre to the surface, aperture, touching): a fingertip
+        // brushes the ball at 4 cm, the centre crosses 3 cm within the onset window, then the
+        // hand backs off to 10 cm and comes in again after the onset.
+        let path = [
+            (0u64, 0.25, 0.10, false),
+            (100, 0.04, 0.09, true),
+            (150, 0.025, 0.08, true),
+            (300, 0.10, 0.12, true),
+            (400, 0.02, 0.05, true),
+        ];
+        let mut crossed = Vec::new();
+        for (t_ms, d, aperture, touching) in path {
+            let mut o = obs_at(Vector::new(0.0, 0.0, 0.08 + d), aperture, &[pose]);
+            o.t_ns = t_ms * 1_000_000;
+            if touching {
+                o.touch[0] = Some(touch);
+            }
+            if let Progress::Checkpoint(k) = b.observe(&o, &o.hand(), &info.shape) {
+                crossed.push((t_ms, k));
+            }
+        }
+        // 20 to 5 cm at the first touch, 3 cm in the window; nothing after the onset.
+        assert_eq!(crossed, [(100, 3), (150, 4)]);
+        let at = |k: usize| b.template()[OBJECT_DIMS + k * CHECKPOINT_DIMS];
+        assert!((at(3) - 0.09).abs() < 1e-6 && (at(4) - 0.08).abs() < 1e-6);
     }
 
     #[test]

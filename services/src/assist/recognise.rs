@@ -28,8 +28,9 @@
 //! vector `similar` uses, and the held force per weight: the grip then times the ratio the
 //! stored grasps of the shape and grasp type keep, [`RecognitionIndex::held_per_grip`]) with
 //! the stored skills' features, takes the [`GRASP_CANDIDATES`] nearest, orders them by what
-//! the stored grasps done in a scene like this one do next ([`NEXT_DIMS`]: hold time, lift,
-//! transport, rotation, not seen yet) and names the first. When nothing of the hand has
+//! the stored grasps like it (shape, grasp type) done in a scene like this one do next
+//! ([`NEXT_DIMS`]: hold time, lift, transport, rotation, not seen yet) and names the first;
+//! whether anything fits (`unknown`) is judged on the nearest on what is known. When nothing of the hand has
 //! touched for [`RecogniserParams::release_ns`], the grasp is over and the next reach begins.
 //!
 //! # Cost per call
@@ -759,30 +760,25 @@ impl Recogniser {
                 n_dims += 1;
             }
         }
+        // The query's shape, when it is one of the three.
         let shape =
             (0..3).find(|&k| (0..3).all(|j| query[13 + j] == if j == k { 1.0 } else { 0.0 }));
         let ratio = shape.and_then(|k| self.held_per_grip[k][usize::from(query[2] > 3.0)]);
-        if let Some(ratio) = ratio.filter(|_| grip.is_finite()) {
-            query[5] = grip * ratio;
+        let held = match ratio.filter(|_| grip.is_finite()) {
+            Some(ratio) => Some(grip * ratio),
+            None => {
+                let mu = self.objects[i].mu as f32;
+                let line = match shape {
+                    Some(k) => self.held_lines[k],
+                    None => index.held_force_line([query[13], query[14], query[15]]),
+                };
+                line.filter(|_| mu > 0.05).map(|(a, b)| a + b / mu)
+            }
+        };
+        if let Some(held) = held {
+            query[5] = held;
             dims[n_dims] = 5;
             n_dims += 1;
-            self.grasp_query = Some(query);
-            index.begin_features(&query, &dims[..n_dims], GRASP_CANDIDATES, &mut self.scratch);
-            return;
-        }
-        let mu = self.objects[i].mu as f32;
-        let line = match (0..3).find(|&k| query[13 + k] == 1.0) {
-            Some(k) if (0..3).all(|j| query[13 + j] == if j == k { 1.0 } else { 0.0 }) => {
-                self.held_lines[k]
-            }
-            _ => index.held_force_line([query[13], query[14], query[15]]),
-        };
-        if let Some((a, b)) = line {
-            if mu > 0.05 {
-                query[5] = a + b / mu;
-                dims[n_dims] = 5;
-                n_dims += 1;
-            }
         }
         self.grasp_query = Some(query);
         index.begin_features(&query, &dims[..n_dims], GRASP_CANDIDATES, &mut self.scratch);
@@ -794,9 +790,9 @@ impl Recogniser {
     fn decide_grasp(&mut self, i: usize, t_ns: u64) {
         let index = Arc::clone(&self.index);
         let mut ranked = self.scratch.ranked().to_vec();
-        // Whether anything stored fits is judged on what is known (the nearest on it), before
-        // the order by what comes next.
-        let best_known = ranked.first().map(|r| r.distance);
+        // Whether anything stored fits is judged on what is known (the nearest on it, which an
+        // `unknown` names), before the order by what comes next.
+        let nearest_known = ranked.first().copied();
         if let Some(query) = self.grasp_query.take() {
             by_what_comes_next(&index, &mut ranked, &query, self.objects.len());
         }
@@ -810,10 +806,11 @@ impl Recogniser {
         };
         let approach_unknown = self.said == Some((i, None));
         let approach_said = self.said.is_some_and(|s| s.0 == i);
-        let unknown = match best_known {
+        let unknown = match nearest_known {
             None => true,
             Some(best) => {
-                approach_unknown || (!approach_said && best > self.params.grasp_open_set_distance)
+                approach_unknown
+                    || (!approach_said && best.distance > self.params.grasp_open_set_distance)
             }
         };
         let verdict = if unknown {
@@ -821,7 +818,7 @@ impl Recogniser {
                 session_ns: t_ns,
                 stage: Stage::Grasp,
                 object,
-                nearest: ranked.first().map(candidate),
+                nearest: nearest_known.as_ref().map(candidate),
             }
         } else {
             Verdict::Recognised {
@@ -846,8 +843,9 @@ pub const GRASP_CANDIDATES: usize = 8;
 /// candidates *like it*, of the query's shape and grasp type (`query`'s dimensions 13-15, and
 /// more than three contacts or not) stored in a scene of as many objects as this one
 /// (`scene_objects`): what a grasp does after it closes goes with the task, and the task with
-/// the scene. Each candidate's distance stays the one on what is known (the order alone
-/// changes); without a candidate like it the order stays.
+/// the scene. Candidates not like it come after those like it, whatever they do next. Each
+/// candidate's distance stays the one on what is known (the order alone changes); without a
+/// candidate like it the order stays.
 fn by_what_comes_next(
     index: &RecognitionIndex,
     ranked: &mut [Ranked],
@@ -873,17 +871,21 @@ fn by_what_comes_next(
     for v in &mut next {
         *v /= n as f32;
     }
-    // The squared distance over the whole vector (a stable sort: ties keep their order).
-    let whole = |r: &Ranked| {
+    // Unlike ones last, then the squared distance over the whole vector (a stable sort: ties
+    // keep their order).
+    let key = |r: &Ranked| {
         let f = index.feature(r.row);
         let more: f32 = next
             .iter()
             .zip(&NEXT_DIMS)
             .map(|(v, &d)| (f[d] - v).powi(2))
             .sum();
-        r.distance * r.distance + more
+        (!like(&f), r.distance * r.distance + more)
     };
-    ranked.sort_by(|a, b| whole(a).total_cmp(&whole(b)));
+    ranked.sort_by(|a, b| {
+        let (ka, kb) = (key(a), key(b));
+        ka.0.cmp(&kb.0).then(ka.1.total_cmp(&kb.1))
+    });
 }
 
 fn fresh_builders(objects: &[ObjectInfo]) -> Vec<TemplateBuilder> {
@@ -1097,31 +1099,42 @@ mod tests {
             skill(4, false, 3.0, 0.6, 1.0, 0.3),
             skill(5, true, 1.0, 0.5, 1.0, 0.0),
             skill(6, true, 1.0, 0.5, 1.0, 0.0),
+            // A box pinch among three objects doing just what the sphere grasps there do.
+            skill(7, true, 3.0, 0.5, 1.0, 0.3),
         ]);
         let query = index.feature(index.row_of(1).unwrap());
         let row = |id| index.row_of(id).unwrap();
         // As the known dimensions rank them: 1 and 3 at 0.1, 2 and 4 at 0.2, the boxes after.
         let ranked = || {
-            [(1, 0.1), (3, 0.1), (2, 0.2), (4, 0.2), (5, 2.0), (6, 2.0)]
-                .map(|(id, distance)| Ranked {
-                    row: row(id),
-                    distance,
-                })
-                .to_vec()
+            [
+                (1, 0.1),
+                (3, 0.1),
+                (7, 0.15),
+                (2, 0.2),
+                (4, 0.2),
+                (5, 2.0),
+                (6, 2.0),
+            ]
+            .map(|(id, distance)| Ranked {
+                row: row(id),
+                distance,
+            })
+            .to_vec()
         };
         let ids = |r: &[Ranked]| r.iter().map(|x| index.skill_id(x.row)).collect::<Vec<_>>();
         let mut among_three = ranked();
         by_what_comes_next(&index, &mut among_three, &query, 3);
-        assert_eq!(ids(&among_three), [3, 4, 1, 2, 5, 6]);
+        // The box that does the same comes after every sphere grasp, however near.
+        assert_eq!(ids(&among_three), [3, 4, 1, 2, 7, 5, 6]);
         // The distances stay those on what is known (the order alone changes).
         let mut distances: Vec<f32> = among_three.iter().map(|r| r.distance).collect();
         distances.sort_by(f32::total_cmp);
-        assert_eq!(distances, [0.1, 0.1, 0.2, 0.2, 2.0, 2.0]);
+        assert_eq!(distances, [0.1, 0.1, 0.15, 0.2, 0.2, 2.0, 2.0]);
         // Alone: the sphere grasps done alone hold 2.1 s on the mean; the boxes' 1 s does not
         // count (with them the mean would be 1.55 s, halfway between the twins).
         let mut alone = ranked();
         by_what_comes_next(&index, &mut alone, &query, 1);
-        assert_eq!(ids(&alone), [1, 2, 3, 4, 5, 6]);
+        assert_eq!(ids(&alone), [1, 2, 3, 4, 7, 5, 6]);
         let mut boxes_first = ranked();
         boxes_first.swap(0, 4);
         boxes_first.swap(1, 5);
