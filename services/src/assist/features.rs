@@ -576,6 +576,17 @@ mod tests {
         o
     }
 
+    /// A fingertip pushing 1 N on the side of [`ball`].
+    fn pad_on_the_ball() -> TipTouch {
+        TipTouch {
+            object: 0,
+            p_b: Vector::x() * 0.04,
+            normal_b: -Vector::x(),
+            in_contact: true,
+            normal_force: 1.0,
+        }
+    }
+
     /// The built-in scenarios' 4 cm ball.
     fn ball() -> ObjectInfo {
         ObjectInfo {
@@ -651,13 +662,7 @@ mod tests {
         let info = ball();
         let pose = Isometry::translation(0.0, 0.0, 0.04);
         let mut b = TemplateBuilder::new(0, &info, 1);
-        let touch = TipTouch {
-            object: 0,
-            p_b: Vector::x() * 0.04,
-            normal_b: -Vector::x(),
-            in_contact: true,
-            normal_force: 1.0,
-        };
+        let touch = pad_on_the_ball();
         for (t_ms, n) in [(0u64, 0usize), (10, 1), (60, 2), (110, 2), (120, 2)] {
             let mut o = obs_at(Vector::new(0.0, 0.0, 0.04), 0.08, &[pose]);
             o.t_ns = t_ms * 1_000_000;
@@ -713,13 +718,7 @@ mod tests {
         let info = ball();
         let pose = Isometry::translation(0.0, 0.0, 0.04);
         let mut b = TemplateBuilder::new(0, &info, 1);
-        let touch = TipTouch {
-            object: 0,
-            p_b: Vector::x() * 0.04,
-            normal_b: -Vector::x(),
-            in_contact: true,
-            normal_force: 1.0,
-        };
+        let touch = pad_on_the_ball();
         // (ms, distance of the grasp centre to the surface, aperture, touching): a fingertip
         // brushes the ball at 4 cm, the centre crosses 3 cm within the onset window, then the
         // hand backs off to 10 cm and comes in again after the onset.

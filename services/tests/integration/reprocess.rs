@@ -596,6 +596,16 @@ async fn one_stored_box_grasp(
     (tmp, data, store, id, template)
 }
 
+/// A reprocessing of the one stale session of `store` keeps its one skill `id` and gives it
+/// the whole template `fresh` (again).
+async fn reprocessing_keeps_the_skill_and_gives_it(store: &Store, id: i64, fresh: &[Option<f32>]) {
+    let (r, _) = run(store).await;
+    assert_eq!((r.sessions_stale, r.sessions_reprocessed), (1, 1));
+    assert_eq!((r.skills_kept, r.skills_added), (1, 0));
+    let after = store.get_skill(id).await.unwrap();
+    assert_eq!(after.approach.as_deref(), Some(fresh), "the whole template");
+}
+
 /// Issue 20: skills stored before approach templates existed (version 1, `approach` NULL, as
 /// migration 0005 leaves them) get theirs from a reprocessing, keeping their ids; until then
 /// they take no part in approach recognition.
@@ -633,15 +643,7 @@ async fn skills_stored_before_templates_get_them_from_reprocessing_and_keep_thei
         "a skill without a template is not compared"
     );
 
-    let (r, _) = run(&store).await;
-    assert_eq!((r.sessions_stale, r.sessions_reprocessed), (1, 1));
-    assert_eq!((r.skills_kept, r.skills_added), (1, 0));
-    let after = store.get_skill(id).await.unwrap();
-    assert_eq!(
-        after.approach.as_ref(),
-        Some(&fresh),
-        "the same template again"
-    );
+    reprocessing_keeps_the_skill_and_gives_it(&store, id, &fresh).await;
     let index = store.recognition_index();
     let ranked = index
         .rank_templates(&template, 4, min, &mut scratch)
@@ -695,15 +697,7 @@ async fn templates_stored_without_the_grip_read_back_and_get_it_from_reprocessin
         "the values it has are the template's"
     );
 
-    let (r, _) = run(&store).await;
-    assert_eq!((r.sessions_stale, r.sessions_reprocessed), (1, 1));
-    assert_eq!((r.skills_kept, r.skills_added), (1, 0));
-    let after = store.get_skill(id).await.unwrap();
-    assert_eq!(
-        after.approach.as_ref(),
-        Some(&fresh),
-        "the whole template again"
-    );
+    reprocessing_keeps_the_skill_and_gives_it(&store, id, &fresh).await;
     store.integrity_check().await.unwrap();
 }
 
